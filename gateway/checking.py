@@ -1,0 +1,143 @@
+"""``ncgate check``: parse and check programs against the configuration they will run under.
+
+Which config: ``--config`` when given; otherwise an ``ncgate.toml`` beside the file (the
+convention of the examples); otherwise the built-in default with the file's own folder as
+storage device MP0, so that the programs it EXEs are looked for beside it.
+
+Which process runs a program, for the checks that need it (a process waiting for itself, …):
+``--process`` when given; otherwise what the programs say -- the config's main program runs in
+process 1, and ``(EXE,n,NAME)`` with a constant n runs NAME in process n.  The main program is
+read for that even when it is not among the files checked.
+"""
+
+from __future__ import annotations
+
+import glob
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from config import Config, StorageConfig, load_config
+from interpreter.checker import CheckContext, Limits, check_program
+from interpreter.diagnostics import Diagnostic
+from interpreter.nodes import Exe, Num
+from interpreter.parser import Program, program_name
+from interpreter.storage import PROGRAM_SUFFIXES, Storage
+
+CONFIG_BESIDE = "ncgate.toml"
+
+
+class UsageError(Exception):
+    """Bad command-line input (exit status 2)."""
+
+
+@dataclass(frozen=True, slots=True)
+class FileReport:
+    path: Path
+    diagnostics: tuple[Diagnostic, ...]
+
+    @property
+    def errors(self) -> int:
+        return sum(1 for d in self.diagnostics if d.is_error)
+
+    @property
+    def warnings(self) -> int:
+        return len(self.diagnostics) - self.errors
+
+
+def storage_of(config: Config) -> Storage:
+    return Storage(config.nc.storage.devices, config.nc.storage.default)
+
+
+def check_context(config: Config, storage: Storage, runs_in: Iterable[int]) -> CheckContext:
+    return CheckContext(
+        processes=config.nc.processes,
+        external=config.nc.external,
+        runs_in=frozenset(runs_in),
+        limits=Limits(config.nc.e_params, config.plc.syvars, config.plc.sa_bits,
+                      config.plc.k_bytes),
+        find_program=lambda name, device: storage.find(name, device) is not None,
+        has_device=storage.has_device,
+    )
+
+
+def expand(arguments: Sequence[str]) -> list[Path]:
+    """Files, directories (their programs) and globs, in a stable order."""
+    out: list[Path] = []
+    for arg in arguments:
+        matches = sorted(glob.glob(arg, recursive=True)) if glob.has_magic(arg) else [arg]
+        if not matches:
+            raise UsageError(f"no file matches {arg}")
+        for match in matches:
+            path = Path(match)
+            if path.is_dir():
+                out.extend(sorted(p for p in path.iterdir() if p.is_file()
+                                  and p.suffix.lower() in PROGRAM_SUFFIXES[1:]))
+            elif path.is_file():
+                out.append(path)
+            else:
+                raise UsageError(f"no such file: {arg}")
+    return out
+
+
+def config_for(path: Path, explicit: Config | None) -> Config:
+    if explicit is not None:
+        return explicit
+    beside = path.parent / CONFIG_BESIDE
+    if beside.is_file():
+        return load_config(beside)
+    default = load_config(None)
+    folder = path.parent.resolve()
+    return replace(default, nc=replace(default.nc, storage=StorageConfig({"MP0": folder}, "MP0")))
+
+
+def process_assignments(programs: Iterable[Program], main: str) -> dict[str, set[int]]:
+    """Program name (upper case) -> the processes the programs start it in."""
+    runs: dict[str, set[int]] = defaultdict(set)
+    runs[main.upper()].add(1)
+    for program in programs:
+        blocks, _ = program.parse_all()
+        for block in blocks:
+            if block is None:
+                continue
+            for item in block.items:
+                if isinstance(item, Exe) and isinstance(item.process, Num):
+                    runs[item.program.upper()].add(int(item.process.value))
+    return runs
+
+
+def check_files(
+    files: Sequence[Path], config: Config | None = None, process: int | None = None
+) -> list[FileReport]:
+    """Check files; those sharing a config are checked together (process inference)."""
+    groups: dict[Path | None, list[Path]] = defaultdict(list)
+    for path in files:
+        groups[None if config is not None else path.parent.resolve()].append(path)
+    reports: dict[Path, FileReport] = {}
+    for folder, paths in groups.items():
+        cfg = config if folder is None or config is not None else config_for(paths[0], None)
+        assert cfg is not None
+        storage = storage_of(cfg)
+        programs = {p: Program.from_path(p) for p in paths}
+        known = {program.name.upper() for program in programs.values()}
+        context_programs = list(programs.values())
+        main_path = storage.find(cfg.nc.main)
+        if main_path is not None and program_name(main_path).upper() not in known:
+            context_programs.append(Program.from_path(main_path))
+        runs = process_assignments(context_programs, cfg.nc.main)
+        for path, program in programs.items():
+            runs_in = {process} if process is not None else runs.get(program.name.upper(), set())
+            diagnostics = check_program(program, check_context(cfg, storage, runs_in))
+            reports[path] = FileReport(path, tuple(diagnostics))
+    return [reports[p] for p in files]
+
+
+def storage_files(config: Config) -> list[Path]:
+    """Every program on every configured device (what ``ncgate check`` with no file checks)."""
+    out: list[Path] = []
+    for folder in config.nc.storage.devices.values():
+        if folder.is_dir():
+            out.extend(sorted(p for p in folder.iterdir() if p.is_file()
+                              and p.suffix.lower() in PROGRAM_SUFFIXES[1:]))
+    return out

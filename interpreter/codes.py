@@ -1,0 +1,120 @@
+"""The one table of stable diagnostic and alarm codes.
+
+Tests and users match on these codes (and on positions), never on message prose: a code, once
+published, keeps its meaning.  Check-time diagnostics are ``NCnnn`` (errors) and ``NWnnn``
+(warnings); runtime alarms are numbered ``AL<n>`` and their number is what the fieldbus status
+registers carry.
+
+Must not import anything from ``plc`` or ``gateway``.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class Severity(enum.Enum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+class DiagnosticCode(enum.Enum):
+    """Check-time diagnostics (spec 1.6). The value is ``(code, severity, summary)``."""
+
+    # -- syntax (the parser) --------------------------------------------------------------
+    UNEXPECTED_CHARACTER = ("NC001", Severity.ERROR, "a character that starts no item")
+    UNEXPECTED_TOKEN = ("NC002", Severity.ERROR, "an item where the syntax does not allow it")
+    WORD_WITHOUT_VALUE = ("NC003", Severity.ERROR, "an address letter with no value (GXY)")
+    UNKNOWN_CODE = ("NC004", Severity.ERROR, "a three-letter code that is not in the language")
+    MISSING_COMPARISON = ("NC006", Severity.ERROR, "a WAI condition without = # > <")
+    UNTERMINATED_STRING = ("NC010", Severity.ERROR, "a label or text without its closing quote")
+    MISSING_CLOSE_PAREN = ("NC012", Severity.ERROR, "a code without its closing ')'")
+    # -- semantics (the checker) ----------------------------------------------------------
+    PROCESS_OUT_OF_RANGE = ("NC020", Severity.ERROR, "a process number that is not configured")
+    WAIT_FOR_SELF = ("NC021", Severity.ERROR, "(WAI,n) on the process's own number")
+    EXE_ON_SELF = ("NC022", Severity.ERROR, "(EXE,n,…) on the process's own number")
+    EXE_ON_EXTERNAL = ("NC023", Severity.ERROR, "(EXE,n,…) on an external process")
+    SND_TO_SELF = ("NC024", Severity.ERROR, "(SND,n) to the process's own number")
+    COMPARE_BIT_ORDER = ("NC030", Severity.ERROR, "> or < on a bit variable")
+    INDEX_OUT_OF_RANGE = ("NC031", Severity.ERROR, "a constant index outside the configured size")
+    WRITE_TO_PLC_PACKET = ("NC032", Severity.ERROR, "a program writing SA or SK (PLC-owned)")
+    BIT_VALUE = ("NC033", Severity.ERROR, "a bit compared with a value other than 0 or 1")
+    UNKNOWN_LABEL = ("NC040", Severity.ERROR, "a jump to a label the program does not define")
+    DUPLICATE_LABEL = ("NC041", Severity.ERROR, "a label defined twice")
+    UNBALANCED_REPEAT = ("NC042", Severity.ERROR, "RPT without ERP, or ERP without RPT")
+    PROGRAM_NOT_FOUND = ("NC050", Severity.ERROR, "EXE of a program missing from its device")
+    UNKNOWN_DEVICE = ("NC051", Severity.ERROR, "EXE naming a storage device not configured")
+    # -- warnings -------------------------------------------------------------------------
+    SYVAR_WITHOUT_INDEX = ("NW001", Severity.WARNING, "SYVAR with no index reads SYVAR0")
+    UNMODELLED_CODE = ("NW002", Severity.WARNING, "an NC-110 code the simulator keeps inert")
+    CONDITION_NEVER_HOLDS = ("NW003", Severity.WARNING, "a WAI value outside the variable's range")
+
+    @property
+    def code(self) -> str:
+        return self.value[0]
+
+    @property
+    def severity(self) -> Severity:
+        return self.value[1]
+
+    @property
+    def summary(self) -> str:
+        return self.value[2]
+
+
+class AlarmCode(enum.IntEnum):
+    """Runtime alarms (spec 2.6). The number is the fieldbus alarm code."""
+
+    DIVISION_BY_ZERO = 101
+    INDEX_OUT_OF_RANGE = 102
+    VALUE_OUT_OF_RANGE = 103
+    BAD_ARGUMENT = 104
+    PROCESS_OUT_OF_RANGE = 110
+    SND_TO_IDLE = 111
+    EXE_ON_SELF = 112
+    EXE_ON_EXTERNAL = 113
+    WAIT_FOR_SELF = 114
+    PROGRAM_NOT_FOUND = 120
+    PROGRAM_INVALID = 121
+    UNKNOWN_LABEL = 122
+    REPEAT_MISMATCH = 123
+    NO_FEED = 130
+    DEADLOCK = 140
+    ORPHAN_WAIT = 141
+    STALL = 142
+    WAIT_TIMEOUT = 143
+
+    @property
+    def label(self) -> str:
+        return f"AL{int(self)}"
+
+
+# Codes of the NC-110 language that the simulator parses but does not model (spec 1.5).
+UNMODELLED_CODES: frozenset[str] = frozenset(
+    {
+        "UAO", "UOT", "UIO", "URT", "MIR", "UCG", "SCF", "RQO", "RQU", "SPG", "DSP",
+        "DLO", "EPP", "RQP", "UCV", "TMR", "GTO", "CLS", "CLD", "SOL", "PRO", "ISO",
+    }
+)
+# Codes the language models, for "did you mean" suggestions.
+MODELLED_CODES: frozenset[str] = frozenset(
+    {"EXE", "REL", "WAI", "SND", "BNC", "BEQ", "BNE", "BGT", "BGE", "BLT", "BLE", "RPT", "ERP",
+     "DLY", "DIS"}
+)
+
+
+def codes_markdown() -> str:
+    """The table of codes as Markdown (``docs/diagnostics.md`` is this, kept in sync by a test)."""
+    lines = [
+        "# Diagnostic and alarm codes",
+        "",
+        "Generated from `interpreter/codes.py` (the one table); tests assert on these codes and on",
+        "positions, never on message text. A published code keeps its meaning.",
+        "",
+        "| code | severity | what |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {c.code} | {c.severity.value} | {c.summary} |" for c in DiagnosticCode]
+    lines += ["", "## Runtime alarms", "", "| code | name |", "|---|---|"]
+    lines += [f"| {a.label} | {a.name.lower().replace('_', ' ')} |" for a in AlarmCode]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,94 @@
+"""Diagnostics and the package's exceptions (spec 1.6).
+
+A diagnostic renders as ``file:line:col: error CODE: message``, then the source line and a
+caret under the column, like a compiler.  Must not import ``plc`` or ``gateway``.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from interpreter.codes import DiagnosticCode, Severity
+from interpreter.nodes import Span
+
+
+@dataclass(frozen=True, slots=True)
+class Diagnostic:
+    code: DiagnosticCode
+    message: str
+    span: Span
+    source_line: str
+
+    @property
+    def severity(self) -> Severity:
+        return self.code.severity
+
+    @property
+    def is_error(self) -> bool:
+        return self.code.severity is Severity.ERROR
+
+    def render(self) -> str:
+        span = self.span
+        # Tabs are shown as one space each so that the caret stays under its column.
+        shown = self.source_line.replace("\t", " ")
+        caret = " " * (max(span.column, 1) - 1) + "^"
+        return (
+            f"{span.file}:{span.line}:{span.column}: {self.severity.value} {self.code.code}: "
+            f"{self.message}\n  {shown}\n  {caret}"
+        )
+
+    def __str__(self) -> str:
+        return self.render()
+
+
+def render_all(diagnostics: Iterable[Diagnostic]) -> str:
+    return "\n".join(d.render() for d in diagnostics)
+
+
+def did_you_mean(word: str, candidates: Iterable[str]) -> str | None:
+    """The closest candidate to a misspelt name, or None when nothing is close."""
+    pool = list(candidates)
+    upper = {c.upper(): c for c in pool}
+    found = difflib.get_close_matches(word.upper(), list(upper), n=1, cutoff=0.5)
+    if found:
+        return upper[found[0]]
+    # A transposition of two letters scores low with difflib on short words (SDN/SND).
+    for cand in pool:
+        if len(cand) == len(word) and sorted(cand.upper()) == sorted(word.upper()):
+            return cand
+    return None
+
+
+class InterpreterError(Exception):
+    """Root of the interpreter's exceptions."""
+
+
+class ProgramError(InterpreterError):
+    """A program that cannot start: it carries every diagnostic found."""
+
+    def __init__(self, diagnostics: Sequence[Diagnostic]) -> None:
+        self.diagnostics = tuple(diagnostics)
+        super().__init__(render_all(self.diagnostics))
+
+
+class ProgramSyntaxError(ProgramError, SyntaxError):
+    """A program with syntax or check-time errors (also a :class:`SyntaxError`)."""
+
+    def __init__(self, diagnostics: Sequence[Diagnostic]) -> None:
+        ProgramError.__init__(self, diagnostics)
+        first = self.diagnostics[0] if self.diagnostics else None
+        self.msg = first.message if first else "invalid program"
+        if first is not None:
+            self.filename = first.span.file
+            self.lineno = first.span.line
+            self.offset = first.span.column
+            self.text = first.source_line
+
+    def __str__(self) -> str:
+        return render_all(self.diagnostics)
+
+
+class ProgramNotFoundError(InterpreterError, FileNotFoundError):
+    """A program name that no storage device holds."""

@@ -1,0 +1,603 @@
+"""The part-program parser: one lark LALR grammar, one line (block) at a time.
+
+Speed without a second parser
+-----------------------------
+Every terminal of ``grammar/nc110.lark`` treats a run of digits the same whatever its length
+or value, so the token boundaries of a line -- and therefore the LALR parse -- depend only on
+the line with each digit run collapsed to ``0`` (its *shape*).  ``N10G1X12.5F300`` and
+``N20G1X7.25F1200`` share one shape.  The first line of a shape is parsed by lark; the parse
+tree is compiled into a *recipe* that rebuilds the typed AST from the digit runs of any line of
+that shape.  Lark stays the only parser (every shape goes through it); the recipe only replays
+its result.  A line whose shape does not parse is parsed again as written, so diagnostics
+always come from lark on the real text.
+
+Programs are parsed lazily: :class:`Program` pre-scans the text for labels with one regular
+expression and parses a block only when it is asked for (:meth:`Program.block`).
+
+Must not import ``plc`` or ``gateway``.
+"""
+
+from __future__ import annotations
+
+import gc
+import re
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from functools import cache
+from importlib import resources
+from itertools import accumulate
+from pathlib import Path
+from typing import Any, Final
+
+from lark import Lark, Token, Tree
+from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+
+from interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
+from interpreter.diagnostics import Diagnostic, ProgramSyntaxError, did_you_mean
+from interpreter.nodes import (
+    Assign,
+    Binary,
+    Block,
+    Branch,
+    BranchOp,
+    Call,
+    CompareOp,
+    Display,
+    Dwell,
+    EndRepeat,
+    Exe,
+    InertCode,
+    Item,
+    Jump,
+    Num,
+    Rel,
+    Repeat,
+    Snd,
+    Span,
+    Unary,
+    VarKind,
+    VarRef,
+    View,
+    WaitCond,
+    WaitProc,
+    Word,
+)
+
+WORD_LETTERS: Final = frozenset("ABCDFGHIJKLMOPQRSTUVWXYZ")
+
+
+@cache
+def lark_parser() -> Lark:
+    """The LALR parser of one block (built once per process)."""
+    grammar = resources.files("interpreter").joinpath("grammar/nc110.lark").read_text("utf-8")
+    return Lark(grammar, parser="lalr", lexer="contextual", maybe_placeholders=False)
+
+
+class LineError(Exception):
+    """A block that does not parse; carries its diagnostic."""
+
+    def __init__(self, diagnostic: Diagnostic) -> None:
+        super().__init__(diagnostic.render())
+        self.diagnostic = diagnostic
+
+
+# ---- building nodes from tokens ---------------------------------------------------------
+# A token during a build is (type, text, column).  Callbacks get the children of a rule.
+
+Tok = tuple[str, str, int]
+Child = Any  # a Tok or a node built by a callback
+_Ctx = tuple[str, int, str]  # file, line number, source text
+
+
+_new_tuple = tuple.__new__
+
+
+def _span(ctx: _Ctx, col: int) -> Span:
+    # tuple.__new__ skips the NamedTuple's Python-level __new__: one Span per node adds up.
+    return _new_tuple(Span, (ctx[0], ctx[1], col))
+
+
+def _error(ctx: _Ctx, col: int, code: DiagnosticCode, message: str) -> LineError:
+    return LineError(Diagnostic(code, message, _span(ctx, col), ctx[2]))
+
+
+def _var_from_token(tok: Tok, ctx: _Ctx) -> VarRef:
+    kind_name, text, col = tok
+    span = _span(ctx, col)
+    upper = text.upper()
+    if kind_name == "EPARAM":
+        return VarRef(VarKind.E, int(upper[1:]), View.REAL, span)
+    if kind_name == "SYVAR":
+        digits = upper[5:]
+        return VarRef(VarKind.SYVAR, int(digits or 0), View.INT16, span, not digits)
+    kind = VarKind.SA if kind_name == "SAVAR" else VarKind.SK
+    index_text, _, suffix = upper[2:].partition(".")
+    if suffix == "IN":
+        view = View.INT16
+    elif suffix == "BY" or kind is VarKind.SK:
+        view = View.BYTE
+    else:
+        view = View.BIT
+    return VarRef(kind, int(index_text), view, span)
+
+
+def _cb_start(ch: list[Child], ctx: _Ctx) -> Block:
+    deleted = False
+    label = number = comment = None
+    synced = False
+    items: list[Item] = []
+    for c in ch:
+        if type(c) is tuple:
+            kind = c[0]
+            if kind == "NWORD":
+                number = int(c[1][1:])
+            elif kind == "SLASH":
+                deleted = True
+            elif kind == "STRING":
+                label = c[1][1:-1]
+            elif kind == "HASH":
+                synced = True
+            else:  # COMMENT
+                comment = c[1][1:].strip()
+        else:
+            items.append(c)
+    return Block(_span(ctx, 1), deleted, label, number, synced, tuple(items), comment)
+
+
+def _cb_word(ch: list[Child], ctx: _Ctx) -> Word:
+    _, text, col = ch[0]
+    if text[1] in "eE":
+        return _e_word(text[0].upper(), text[1:], col, ctx)
+    return _number_word(text[0].upper(), text[1:], col, ctx)
+
+
+# The builders call these two directly: a word's letter and kind are the same in every line
+# of a shape, so only the value text varies.
+def _number_word(letter: str, value: str, col: int, ctx: _Ctx) -> Word:
+    return Word(letter, float(value), value, _new_tuple(Span, (ctx[0], ctx[1], col)))
+
+
+def _e_word(letter: str, value: str, col: int, ctx: _Ctx) -> Word:
+    var = VarRef(VarKind.E, int(value[1:]), View.REAL, _span(ctx, col + 1))
+    return Word(letter, var, value, _span(ctx, col))
+
+
+def _cb_var(ch: list[Child], ctx: _Ctx) -> VarRef:
+    return _var_from_token(ch[0], ctx)
+
+
+def _cb_assign(ch: list[Child], ctx: _Ctx) -> Assign:
+    target: VarRef = ch[0]
+    return Assign(target, ch[2], target.span)
+
+
+def _cb_exe(ch: list[Child], ctx: _Ctx) -> Exe:
+    device = ch[7][1].upper() if len(ch) > 7 else None
+    return Exe(ch[3], ch[5][1], device, _span(ctx, ch[0][2]))
+
+
+def _cb_rel(ch: list[Child], ctx: _Ctx) -> Rel:
+    return Rel(_span(ctx, ch[0][2]))
+
+
+def _cb_wai_proc(ch: list[Child], ctx: _Ctx) -> WaitProc:
+    return WaitProc(ch[3], _span(ctx, ch[0][2]))
+
+
+def _cb_wai_cond(ch: list[Child], ctx: _Ctx) -> WaitCond:
+    return WaitCond(ch[3], CompareOp(ch[4][1]), ch[5], _span(ctx, ch[0][2]))
+
+
+def _cb_snd(ch: list[Child], ctx: _Ctx) -> Snd:
+    return Snd(ch[3], _span(ctx, ch[0][2]))
+
+
+def _cb_bnc(ch: list[Child], ctx: _Ctx) -> Jump:
+    return Jump(ch[3][1], _span(ctx, ch[0][2]))
+
+
+def _cb_bcond(ch: list[Child], ctx: _Ctx) -> Branch:
+    return Branch(BranchOp(ch[1][1].upper()), ch[3], ch[5], ch[7][1], _span(ctx, ch[0][2]))
+
+
+def _cb_rpt(ch: list[Child], ctx: _Ctx) -> Repeat:
+    return Repeat(ch[3], _span(ctx, ch[0][2]))
+
+
+def _cb_erp(ch: list[Child], ctx: _Ctx) -> EndRepeat:
+    return EndRepeat(_span(ctx, ch[0][2]))
+
+
+def _cb_dly(ch: list[Child], ctx: _Ctx) -> Dwell:
+    return Dwell(ch[3], _span(ctx, ch[0][2]))
+
+
+def _cb_dis(ch: list[Child], ctx: _Ctx) -> Display:
+    args = tuple(c for c in ch[5:-1] if type(c) is not tuple)
+    return Display(ch[3][1][1:-1], args, _span(ctx, ch[0][2]))
+
+
+def _cb_other_code(ch: list[Child], ctx: _Ctx) -> InertCode:
+    _, name, col = ch[1]
+    code = name.upper()
+    if code not in UNMODELLED_CODES:
+        hint = did_you_mean(code, sorted(MODELLED_CODES | UNMODELLED_CODES))
+        suffix = f" (did you mean {hint}?)" if hint else ""
+        raise _error(ctx, col, DiagnosticCode.UNKNOWN_CODE,
+                     f"({name} is not a code of the language{suffix}")
+    raw: list[str] = []
+    expect_value = False
+    for c in ch[2:-1]:
+        if c[0] == "COMMA":
+            if expect_value:
+                raw.append("")
+            expect_value = True
+        else:
+            raw.append(c[1].strip())
+            expect_value = False
+    if expect_value:
+        raw.append("")
+    return InertCode(code, tuple(raw), _span(ctx, ch[0][2]))
+
+
+def _cb_number(ch: list[Child], ctx: _Ctx) -> Num:
+    return Num(float(ch[0][1]), _span(ctx, ch[0][2]))
+
+
+def _cb_neg_number(ch: list[Child], ctx: _Ctx) -> Num:
+    return Num(-float(ch[1][1]), _span(ctx, ch[0][2]))
+
+
+def _cb_number_plus(ch: list[Child], ctx: _Ctx) -> Num:
+    return Num(float(ch[1][1]), _span(ctx, ch[0][2]))
+
+
+def _cb_binop(ch: list[Child], ctx: _Ctx) -> Binary:
+    left = ch[0]
+    return Binary(ch[1][1], left, ch[2], left.span)
+
+
+def _cb_neg(ch: list[Child], ctx: _Ctx) -> Unary:
+    return Unary("-", ch[1], _span(ctx, ch[0][2]))
+
+
+def _cb_pos(ch: list[Child], ctx: _Ctx) -> Unary:
+    return Unary("+", ch[1], _span(ctx, ch[0][2]))
+
+
+def _cb_call(ch: list[Child], ctx: _Ctx) -> Call:
+    return Call(ch[0][1].upper(), ch[2], _span(ctx, ch[0][2]))
+
+
+def _cb_paren(ch: list[Child], ctx: _Ctx) -> Child:
+    return ch[1]
+
+
+_CALLBACKS: Final[dict[str, Callable[[list[Child], _Ctx], Any]]] = {
+    "start": _cb_start,
+    "word": _cb_word,
+    "var": _cb_var,
+    "eparam": _cb_var,
+    "assign": _cb_assign,
+    "exe": _cb_exe,
+    "rel": _cb_rel,
+    "wai_proc": _cb_wai_proc,
+    "wai_cond": _cb_wai_cond,
+    "snd": _cb_snd,
+    "bnc": _cb_bnc,
+    "bcond": _cb_bcond,
+    "rpt": _cb_rpt,
+    "erp": _cb_erp,
+    "dly": _cb_dly,
+    "dis": _cb_dis,
+    "other_code": _cb_other_code,
+    "const_int": _cb_number,
+    "number": _cb_number,
+    "neg_number": _cb_neg_number,
+    "number_plus": _cb_number_plus,
+    "binop": _cb_binop,
+    "neg": _cb_neg,
+    "pos": _cb_pos,
+    "call": _cb_call,
+    "paren": _cb_paren,
+}
+
+# ---- builders: a compiled parse of one shape ----------------------------------------------
+# The lark tree of a shape is turned into the source of one Python function that rebuilds the
+# same tree from the digit runs of any line of that shape, calling the callbacks above.  A token
+# becomes ``(type, text, column)``: its text is the shape's text with the runs spliced back in,
+# its column the shape's column shifted by the lengths of the runs before it.
+
+Builder = Callable[[Sequence[str], Sequence[int], _Ctx], Any]
+_CALLBACK_NAMES: Final = {cb: f"_cb_{name}" for name, cb in _CALLBACKS.items()}
+
+
+def _token_parts(token: Token, shape: str, split: bool, skip: int = 0) -> tuple[str, str]:
+    """Source of the token's text (less its first ``skip`` characters) and of its column."""
+    pos = token.start_pos or 0
+    if not split:
+        return repr(token.value[skip:]), str(pos + 1)
+    pieces = token.value.split("0")
+    pieces[0] = pieces[0][skip:]
+    k = shape.count("0", 0, pos)
+    text = " + ".join(
+        part for i, piece in enumerate(pieces)
+        for part in ((repr(piece),) if i == 0 else (f"runs[{k + i - 1}]", repr(piece)))
+        if part != "''"
+    ) or "''"
+    # Each run of n digits stood as one "0" in the shape: shift by the runs before the token.
+    col = f"{pos + 1 - k} + lens[{k}]" if k else str(pos + 1)
+    return text, col
+
+
+def _tree_source(tree: Tree[Token] | Token, shape: str, split: bool) -> str:
+    if isinstance(tree, Token):
+        text, col = _token_parts(tree, shape, split)
+        return f"({tree.type!r}, {text}, {col})"
+    rule = tree.data if isinstance(tree.data, str) else tree.data.value
+    if rule == "start":
+        return _start_source(tree, shape, split)
+    if rule == "word":  # the commonest node: no child list, no token tuple
+        token = tree.children[0]
+        assert isinstance(token, Token)
+        value, col = _token_parts(token, shape, split, skip=1)
+        make = "_e_word" if token.value[1] in "eE" else "_number_word"
+        return f"{make}({token.value[0].upper()!r}, {value}, {col}, ctx)"
+    children = ", ".join(_tree_source(c, shape, split) for c in tree.children)
+    return f"{_CALLBACK_NAMES[_CALLBACKS[rule]]}([{children}], ctx)"
+
+
+def _start_source(tree: Tree[Token], shape: str, split: bool) -> str:
+    """The Block of a shape, built in one call: its prefix and items are known statically."""
+    fields = {"deleted": "False", "label": "None", "number": "None", "synced": "False",
+              "comment": "None"}
+    items: list[str] = []
+    for child in tree.children:
+        if not isinstance(child, Token):
+            items.append(_tree_source(child, shape, split))
+            continue
+        text, _ = _token_parts(child, shape, split)
+        if child.type == "NWORD":
+            fields["number"] = f"int(({text})[1:])"
+        elif child.type == "SLASH":
+            fields["deleted"] = "True"
+        elif child.type == "STRING":
+            fields["label"] = f"({text})[1:-1]"
+        elif child.type == "HASH":
+            fields["synced"] = "True"
+        else:  # COMMENT
+            fields["comment"] = f"({text})[1:].strip()"
+    tail = "," if len(items) == 1 else ""
+    return (f"_Block(_span(ctx, 1), {fields['deleted']}, {fields['label']}, "
+            f"{fields['number']}, {fields['synced']}, ({', '.join(items)}{tail}), "
+            f"{fields['comment']})")
+
+
+def _compile(tree: Tree[Token], shape: str, split: bool) -> Builder:
+    source = f"def build(runs, lens, ctx):\n    return {_tree_source(tree, shape, split)}\n"
+    namespace: dict[str, Any] = {name: cb for cb, name in _CALLBACK_NAMES.items()}
+    namespace.update(_number_word=_number_word, _e_word=_e_word, _Block=Block, _span=_span)
+    exec(compile(source, f"<shape {shape!r}>", "exec"), namespace)
+    builder: Builder = namespace["build"]
+    return builder
+
+
+def _failed(runs: Sequence[str], lens: Sequence[int], ctx: _Ctx) -> Any:
+    return _parse_as_written(ctx[2], ctx)
+
+
+def parse_block_uncached(text: str, file: str = "<string>", line: int = 1) -> Block:
+    """Parse one line with lark as written, bypassing the shape cache (for tests, debugging)."""
+    ctx = (file, line, text)
+    try:
+        tree = lark_parser().parse(text)
+    except UnexpectedInput as exc:
+        raise LineError(_diagnose(exc, ctx)) from None
+    block: Block = _compile(tree, text, split=False)((), _NO_RUNS, ctx)
+    return block
+
+
+_DIGIT_RUNS: Final = re.compile(r"(\d+)")
+_SHAPES: dict[str, Builder] = {}
+_SHAPES_MAX: Final = 100_000
+
+
+def parse_block(text: str, file: str = "<string>", line: int = 1) -> Block:
+    """Parse one line into a :class:`Block`; raise :class:`LineError` if it does not parse."""
+    parts = _DIGIT_RUNS.split(text)
+    shape = "0".join(parts[0::2])
+    builder = _SHAPES.get(shape)
+    if builder is None:
+        builder = _learn(shape)
+    runs = parts[1::2]
+    lens = list(accumulate(map(len, runs), initial=0)) if runs else _NO_RUNS
+    block: Block = builder(runs, lens, (file, line, text))
+    return block
+
+
+_NO_RUNS: Final = (0,)
+
+
+def _learn(shape: str) -> Builder:
+    try:
+        tree = lark_parser().parse(shape)
+    except UnexpectedInput:
+        builder: Builder = _failed
+    else:
+        builder = _compile(tree, shape, split=True)
+    if len(_SHAPES) >= _SHAPES_MAX:
+        _SHAPES.clear()
+    _SHAPES[shape] = builder
+    return builder
+
+
+def _parse_as_written(text: str, ctx: _Ctx) -> Block:
+    try:
+        tree = lark_parser().parse(text)
+    except UnexpectedInput as exc:
+        raise LineError(_diagnose(exc, ctx)) from None
+    # Not reached while the shape invariant holds; parse the line on its own terms if not.
+    block: Block = _compile(tree, text, split=False)((), _NO_RUNS, ctx)
+    return block
+
+
+# ---- turning lark's errors into diagnostics ------------------------------------------------
+
+_TERMINAL_NAMES: Final = {
+    "RPAR": "')'", "LPAR": "'('", "COMMA": "','", "EQ": "'='", "HASH": "'#'", "GT": "'>'",
+    "LT": "'<'", "PLUS": "'+'", "MINUS": "'-'", "STAR": "'*'", "SLASH": "'/'",
+    "NAME": "a name", "INT": "a number", "NUMBER": "a number", "EPARAM": "an E parameter",
+    "SYVAR": "SYVAR", "SAVAR": "an SA variable", "SKVAR": "an SK variable", "WORD": "a word",
+    "NWORD": "an N number", "STRING": "a quoted text", "FUNC": "a function", "RAW": "a value",
+    "COMMENT": "a comment", "$END": "the end of the block", "BCOND": "a branch code",
+}
+_LAST_VAR: Final = re.compile(r"(SYVAR\d*|S[AK]\d+(?:\.(?:BY|IN))?)\s*$", re.IGNORECASE)
+_OPEN_CODE: Final = re.compile(r"\(\s*([A-Za-z]*)")
+
+
+def _describe(terminal: str) -> str:
+    return _TERMINAL_NAMES.get(terminal, terminal)
+
+
+def _diagnose(exc: UnexpectedInput, ctx: _Ctx) -> Diagnostic:
+    text = ctx[2]
+    end_col = len(text.rstrip(" \t\r")) + 1
+    if isinstance(exc, UnexpectedCharacters):
+        col = exc.column if isinstance(exc.column, int) and exc.column > 0 else end_col
+        char = exc.char
+        if char == '"':
+            code, message = DiagnosticCode.UNTERMINATED_STRING, "text without its closing '\"'"
+        elif char.upper() in WORD_LETTERS and "WORD" in exc.allowed:
+            code, message = DiagnosticCode.WORD_WITHOUT_VALUE, f"{char.upper()} needs a value"
+        else:
+            code, message = DiagnosticCode.UNEXPECTED_CHARACTER, f"unexpected character {char!r}"
+        return Diagnostic(code, message, _span(ctx, col), text)
+    assert isinstance(exc, UnexpectedToken)
+    token = exc.token
+    expected = set(exc.expected)
+    at_end = token.type == "$END"
+    col = end_col if at_end or not token.column else token.column
+    value = str(token.value)
+    if not at_end and value[:1].upper() in WORD_LETTERS and "WORD" in expected:
+        # The root lexer took a letter with no value (GXY) for a name.
+        return Diagnostic(DiagnosticCode.WORD_WITHOUT_VALUE, f"{value[0].upper()} needs a value",
+                          _span(ctx, col), text)
+    if not at_end and value.startswith('"') and value.count('"') == 1:
+        return Diagnostic(DiagnosticCode.UNTERMINATED_STRING, "text without its closing '\"'",
+                          _span(ctx, col), text)
+    if "RPAR" in expected and (at_end or token.type == "COMMENT"):
+        pos = col - 1
+        opened = [m for m in _OPEN_CODE.finditer(text, 0, pos)]
+        code_name = opened[-1].group(1).upper() if opened else ""
+        return Diagnostic(DiagnosticCode.MISSING_CLOSE_PAREN,
+                          f"expected ')' to close ({code_name}", _span(ctx, col), text)
+    if {"EQ", "GT", "LT", "HASH"} <= expected:
+        found = _LAST_VAR.search(text, 0, col - 1)
+        if found:
+            return Diagnostic(
+                DiagnosticCode.MISSING_COMPARISON,
+                f"a comparison (= > < #) is missing after {found.group(1).upper()}",
+                _span(ctx, col), text,
+            )
+    shown = "the end of the block" if at_end else repr(str(token.value))
+    wanted = ", ".join(sorted({_describe(t) for t in expected}))
+    return Diagnostic(DiagnosticCode.UNEXPECTED_TOKEN, f"unexpected {shown}; expected {wanted}",
+                      _span(ctx, col), text)
+
+
+# ---- programs ------------------------------------------------------------------------------
+
+_LABELS: Final = re.compile(r'^[ \t]*(?:/[ \t]*)?"([^"\n]*)"', re.MULTILINE)
+
+
+class Program:
+    """A program's text, parsed block by block on demand.
+
+    ``labels`` maps an upper-cased label to the 0-based index of its line; it comes from a
+    fast pre-scan, so a decoder can jump before the blocks in between were ever parsed.
+    """
+
+    __slots__ = ("_blocks", "file", "label_lines", "labels", "lines", "name")
+
+    def __init__(self, name: str, file: str, text: str) -> None:
+        self.name = name
+        self.file = file
+        lines = text.split("\n")
+        if lines and lines[-1] == "":
+            lines.pop()
+        self.lines: list[str] = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+        self.labels: dict[str, int] = {}
+        self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
+        line_no, last = 0, 0
+        for m in _LABELS.finditer(text):
+            line_no += text.count("\n", last, m.start())
+            last = m.start()
+            self.label_lines.append((m.group(1), line_no))
+            self.labels.setdefault(m.group(1).upper(), line_no)
+        self._blocks: list[Block | None] = [None] * len(self.lines)
+
+    @classmethod
+    def from_path(cls, path: Path | str, display: str | None = None) -> Program:
+        p = Path(path)
+        text = p.read_text(encoding="utf-8")
+        return cls(program_name(p), display if display is not None else str(path), text)
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+    def block(self, index: int) -> Block:
+        """The block on 0-based line ``index``; raises :class:`ProgramSyntaxError`."""
+        block = self._blocks[index]
+        if block is None:
+            try:
+                block = parse_block(self.lines[index], self.file, index + 1)
+            except LineError as exc:
+                raise ProgramSyntaxError([exc.diagnostic]) from None
+            self._blocks[index] = block
+        return block
+
+    def parse_all(self) -> tuple[list[Block | None], list[Diagnostic]]:
+        """Every block (None where a line does not parse) and every syntax diagnostic."""
+        diagnostics: list[Diagnostic] = []
+        blocks = self._blocks
+        file = self.file
+        with gc_paused():
+            for i, text in enumerate(self.lines):
+                if blocks[i] is None:
+                    try:
+                        blocks[i] = parse_block(text, file, i + 1)
+                    except LineError as exc:
+                        diagnostics.append(exc.diagnostic)
+        return blocks, diagnostics
+
+    def iter_blocks(self) -> Iterator[tuple[int, Block]]:
+        for i in range(len(self.lines)):
+            yield i, self.block(i)
+
+
+@contextmanager
+def gc_paused() -> Iterator[None]:
+    """Pause the cyclic collector while a bulk parse allocates.
+
+    A parse keeps every node alive, so each collection the allocations trigger scans the whole
+    growing tree for nothing (nodes hold no reference cycles): on CPython 3.11 that tripled the
+    cost of parsing a large program.  Reference counting still frees everything as usual.
+    Nested uses are fine: only the outermost one re-enables the collector.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            # Promote what the parse built straight to the oldest generation (freeze then
+            # unfreeze: two list splices), so the first young collection after this does not
+            # traverse the whole new tree once more.  Full collections still see it.
+            gc.freeze()
+            gc.unfreeze()
+            gc.enable()
+
+
+def program_name(path: Path) -> str:
+    """Program name = file name without its extension (spec 1.1)."""
+    return path.stem if path.suffix.lower() in (".nc", ".txt") else path.name

@@ -1,0 +1,3 @@
+N1(EXE,2,SUB)
+N2(SND,2)
+N3M30

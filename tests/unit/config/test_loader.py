@@ -1,0 +1,108 @@
+"""The config loader (spec 4.2): defaults, validation naming file and dotted key, overrides."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from config import ConfigError, SndPolicy, load_config
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "gateway.toml"
+    path.write_text(text)
+    return path
+
+
+def test_builtin_default_matches_the_spec() -> None:
+    cfg = load_config(None)
+    assert cfg.source is None
+    assert (cfg.nc.processes, cfg.nc.lookahead, cfg.nc.snd, cfg.nc.main) == (
+        5, 16, SndPolicy.RENDEZVOUS, "PROG91")
+    assert (cfg.plc.sa_bits, cfg.plc.k_bytes, cfg.plc.syvars, cfg.plc.scan_ms) == (
+        1024, 512, 256, 10)
+    assert (cfg.modbus.host, cfg.modbus.port, cfg.modbus.unit_ids) == ("127.0.0.1", 5020, (1,))
+    assert (cfg.canopen.interface, cfg.canopen.channel, cfg.canopen.node_id) == (
+        "virtual", "ncgate", 16)
+    programs = cfg.nc.storage.devices["MP0"]
+    assert {p.name for p in programs.glob("*.nc")} == {"PROG91.nc", "PROG92.nc", "PROG93.nc"}
+
+
+def test_empty_file_gives_defaults_with_storage_beside_it(tmp_path: Path) -> None:
+    cfg = load_config(write(tmp_path, ""))
+    assert cfg.nc.processes == 5
+    assert cfg.nc.storage.devices == {"MP0": tmp_path.resolve()}
+    assert cfg.source == tmp_path / "gateway.toml"
+
+
+def test_relative_storage_and_external_processes(tmp_path: Path) -> None:
+    cfg = load_config(write(tmp_path, """
+[nc]
+processes = 4
+snd = "latched"
+[nc.storage]
+MP0 = "progs"
+MP2 = "/abs/where"
+default = "mp2"
+[[nc.process]]
+number = 3
+external = true
+[[nc.process]]
+number = 2
+"""))
+    assert cfg.nc.storage.devices["MP0"] == (tmp_path / "progs").resolve()
+    assert cfg.nc.storage.default == "MP2"
+    assert cfg.nc.external == {3}
+    assert [p.number for p in cfg.nc.process] == [2, 3]
+    assert cfg.nc.snd is SndPolicy.LATCHED
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[modbus]\nport = 70000", "modbus.port: expected an integer 1..65535, got 70000"),
+        ("[modbus]\nprot = 1", "modbus.prot: unknown key"),
+        ("[nope]\na = 1", "nope: unknown key"),
+        ("[nc]\nprocesses = 17", "nc.processes: expected an integer 1..16, got 17"),
+        ("[nc]\nprocesses = true", "nc.processes: expected an integer 1..16, got True"),
+        ('[nc]\nsnd = "eager"', 'nc.snd: expected "rendezvous" or "latched", got \'eager\''),
+        ("[nc]\ntime_scale = 0", "nc.time_scale: expected a number > 0, got 0"),
+        ('[nc]\nsync_reads = "yes"', "nc.sync_reads: expected true or false, got 'yes'"),
+        ('[nc.storage]\nMP0 = "a"\ndefault = "MP1"', "nc.storage.default: names 'MP1'"),
+        ('[nc.storage]\nMP4 = "a"', "nc.storage.MP4: unknown key"),
+        ("[[nc.process]]\nnumber = 9", "nc.process[0].number: expected an integer 1..5, got 9"),
+        ("[[nc.process]]\nexternal = true", "nc.process[0].number: missing"),
+        ("[[nc.process]]\nnumber = 2\n[[nc.process]]\nnumber = 2",
+         "nc.process[1].number: process 2 is configured twice"),
+        ("[[nc.process]]\nnumber = 1\nexternal = true", "nc.process[0].external: process 1"),
+        ("[plc]\nsa_bits = 1001", "plc.sa_bits: expected a multiple of 8, got 1001"),
+        ("[modbus]\nunit_ids = []", "modbus.unit_ids: expected a non-empty list"),
+        ("[canopen]\nnode_id = 128", "canopen.node_id: expected an integer 1..127, got 128"),
+        ("nc = 3", "nc: expected a table, got 3"),
+    ],
+)
+def test_bad_values_name_file_and_dotted_key(tmp_path: Path, text: str, message: str) -> None:
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert str(caught.value).startswith(f"{path}: ")
+    assert message in str(caught.value)
+
+
+def test_toml_syntax_error_names_the_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "[nc\nprocesses = 3")
+    with pytest.raises(ConfigError, match=rf"^{path}: .*line 1"):
+        load_config(path)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="no such file"):
+        load_config(tmp_path / "absent.toml")
+
+
+def test_overrides_by_dotted_key_are_validated_too() -> None:
+    cfg = load_config(None, overrides={"modbus.port": 0, "nc.processes": 3})
+    assert cfg.modbus.port == 0 and cfg.nc.processes == 3
+    with pytest.raises(ConfigError, match=r"<built-in default>: nc.lookahead"):
+        load_config(None, overrides={"nc.lookahead": -1})

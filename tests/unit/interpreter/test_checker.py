@@ -1,0 +1,120 @@
+"""Check-time errors and warnings (spec 1.3, 1.5, 1.6): code and position of each."""
+
+from __future__ import annotations
+
+import pytest
+
+from interpreter.checker import CheckContext, Limits, check_program
+from interpreter.codes import DiagnosticCode as C
+from interpreter.parser import Program
+
+
+def diagnose(text: str, **context: object) -> list[tuple[C, int, int]]:
+    program = Program("P", "p.nc", text)
+    ctx = CheckContext(**context)  # type: ignore[arg-type]
+    return [(d.code, d.span.line, d.span.column) for d in check_program(program, ctx)]
+
+
+def test_clean_program_has_no_diagnostic() -> None:
+    text = '"START"\nN1(EXE,2,PROG92)\nN2G1X1F100\nN3(WAI,SA10=1)\nN4(BNC,START)\n'
+    assert diagnose(text, runs_in=frozenset({1})) == []
+
+
+def test_process_numbers_out_of_range() -> None:
+    text = "N1(EXE,9,P)\nN2(WAI,0)\nN3(SND,6)\nN4(WAI,E1)\nN5(SND,5)\n"
+    assert diagnose(text) == [
+        (C.PROCESS_OUT_OF_RANGE, 1, 8), (C.PROCESS_OUT_OF_RANGE, 2, 8),
+        (C.PROCESS_OUT_OF_RANGE, 3, 8),
+    ]
+    assert diagnose("N5(SND,7)", processes=8) == []
+
+
+def test_own_process_rules_only_where_the_process_is_known() -> None:
+    text = "N5(WAI,1)\nN6(SND,1)\nN7(EXE,1,P)\n"
+    assert diagnose(text) == []
+    assert diagnose(text, runs_in=frozenset({1})) == [
+        (C.WAIT_FOR_SELF, 1, 8), (C.SND_TO_SELF, 2, 8), (C.EXE_ON_SELF, 3, 8)]
+    assert diagnose(text, runs_in=frozenset({2})) == []
+
+
+def test_exe_on_external_process() -> None:
+    assert diagnose("N1(EXE,3,P)", external=frozenset({3})) == [(C.EXE_ON_EXTERNAL, 1, 8)]
+
+
+def test_comparisons_on_bits() -> None:
+    text = "N1(WAI,SA10>0)\nN2(WAI,SA10<1)\nN3(WAI,SA10#0)\nN4(WAI,SA10=2)\nN5(WAI,SA1.BY>3)\n"
+    assert diagnose(text) == [
+        (C.COMPARE_BIT_ORDER, 1, 8), (C.COMPARE_BIT_ORDER, 2, 8), (C.BIT_VALUE, 4, 13)]
+
+
+def test_value_a_variable_can_never_hold_is_a_warning() -> None:
+    assert diagnose("N1(WAI,SK2=300)\nN2(WAI,SYVAR1=40000)\nN3(WAI,SK2.IN=300)") == [
+        (C.CONDITION_NEVER_HOLDS, 1, 12), (C.CONDITION_NEVER_HOLDS, 2, 15)]
+
+
+@pytest.mark.parametrize(
+    ("text", "column"),
+    [
+        ("E1000=1", 1), ("E1=E1000", 4), ("SYVAR256=1", 1), ("(WAI,SA1024=1)", 6),
+        ("(WAI,SA128.BY=1)", 6), ("(WAI,SA127.IN=1)", 6), ("(WAI,SK512=1)", 6),
+        ("(WAI,SK511.IN=1)", 6), ("G1XE1000", 4), ("(BGT,E1,SYVAR300,L)", 9),
+    ],
+)
+def test_constant_indexes_out_of_range(text: str, column: int) -> None:
+    found = diagnose(f'"L"\n{text}')
+    assert (C.INDEX_OUT_OF_RANGE, 2, column) in found
+    assert all(code is not C.INDEX_OUT_OF_RANGE or line == 2 for code, line, _ in found)
+
+
+def test_limits_follow_the_config() -> None:
+    limits = Limits(e_params=10, syvars=4, sa_bits=16, k_bytes=4)
+    assert diagnose("E9=SYVAR3\n(WAI,SA15=1)\n(WAI,SK2.IN=1)", limits=limits) == []
+    assert diagnose("E10=SYVAR4\n(WAI,SA2.BY=1)\n(WAI,SK3.IN=1)", limits=limits) == [
+        (C.INDEX_OUT_OF_RANGE, 1, 1), (C.INDEX_OUT_OF_RANGE, 1, 5),
+        (C.INDEX_OUT_OF_RANGE, 2, 6), (C.INDEX_OUT_OF_RANGE, 3, 6)]
+
+
+def test_programs_do_not_write_plc_packets() -> None:
+    assert diagnose("SA10=1\nSK2=3\nSK2.IN=E1") == [
+        (C.WRITE_TO_PLC_PACKET, 1, 1), (C.WRITE_TO_PLC_PACKET, 2, 1),
+        (C.WRITE_TO_PLC_PACKET, 3, 1)]
+
+
+def test_unknown_label_with_suggestion_and_duplicates() -> None:
+    program = Program("P", "p.nc", '"START"\nN1(BNC,STRAT)\nN2(BEQ,1,1,ZZZ)\n"START"\n')
+    found = check_program(program, CheckContext())
+    assert [(d.code, d.span.line, d.span.column) for d in found] == [
+        (C.UNKNOWN_LABEL, 2, 3), (C.UNKNOWN_LABEL, 3, 3), (C.DUPLICATE_LABEL, 4, 1)]
+    assert found[0].message == 'label "STRAT" is not defined (did you mean "START"?)'
+    assert found[1].message == 'label "ZZZ" is not defined'
+
+
+def test_labels_match_case_insensitively() -> None:
+    assert diagnose('"Start"\n(BNC,START)') == []
+
+
+def test_unbalanced_repeats() -> None:
+    assert diagnose("(RPT,2)\n(RPT,3)\n(ERP)\n(ERP)\n") == []
+    assert diagnose("(ERP)\n(RPT,2)\n(RPT,2)\n(ERP)\n") == [
+        (C.UNBALANCED_REPEAT, 1, 1), (C.UNBALANCED_REPEAT, 2, 1)]
+
+
+def test_exe_program_and_device_must_exist_when_storage_is_known() -> None:
+    ctx = {
+        "find_program": lambda name, device: name.upper() == "PROG92",
+        "has_device": lambda device: (device or "MP0") in {"MP0", "MP1"},
+    }
+    assert diagnose("(EXE,2,prog92)", **ctx) == []
+    assert diagnose("(EXE,2,PROG99)\n(EXE,2,PROG92/MP3)", **ctx) == [
+        (C.PROGRAM_NOT_FOUND, 1, 1), (C.UNKNOWN_DEVICE, 2, 1)]
+
+
+def test_warnings_for_implicit_syvar_and_unmodelled_codes() -> None:
+    found = diagnose("(WAI,SYVAR>5)\n(MIR,X)\n")
+    assert found == [(C.SYVAR_WITHOUT_INDEX, 1, 6), (C.UNMODELLED_CODE, 2, 1)]
+
+
+def test_all_errors_of_a_file_in_source_order() -> None:
+    text = "N1(WAI,SA10>0)\nN2GXY\nN3(EXE,9,P)\nN4(WAI,SA12=1\n"
+    assert [code for code, _, _ in diagnose(text)] == [
+        C.COMPARE_BIT_ORDER, C.WORD_WITHOUT_VALUE, C.PROCESS_OUT_OF_RANGE, C.MISSING_CLOSE_PAREN]
