@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 from config import ConfigError, load_config
 from gateway.checking import UsageError, check_files, expand, storage_files
-from interpreter.diagnostics import InterpreterError
+from interpreter.diagnostics import InterpreterError, ProgramError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -35,6 +35,21 @@ def build_parser() -> argparse.ArgumentParser:
                        help="the process the files run in (default: inferred from the main "
                        "program and EXE codes)")
     check.add_argument("-q", "--quiet", action="store_true", help="no summary line")
+
+    sim = commands.add_parser(
+        "sim", help="closed simulation on the virtual clock",
+        description="Run MAIN in process 1 on the virtual clock, the script playing the PLC; "
+        "print a summary table. Exit 0 when every program ended normally (or --until was "
+        "reached with no alarm), 1 on an alarm, deadlock or stall, 2 on usage, config or "
+        "program errors.",
+    )
+    sim.add_argument("main", nargs="?", metavar="MAIN",
+                     help="the main program (default: the config's nc.main)")
+    sim.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML)")
+    sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
+    sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
+    sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
     return parser
 
 
@@ -47,10 +62,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "check":
             return _check(args)
+        if args.command == "sim":
+            return _sim(args)
     except (UsageError, ConfigError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except (InterpreterError, OSError) as exc:
+    except ProgramError as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_USAGE
+    except (InterpreterError, OSError, ValueError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
     parser.error(f"unknown command {args.command}")
@@ -77,6 +97,27 @@ def _check(args: argparse.Namespace) -> int:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
     return EXIT_FAILED if errors else EXIT_OK
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from config.script import load_script
+    from gateway.gantt import write_gantt
+    from gateway.sim import report, run_sim, write_trace
+
+    if args.until is not None and args.until < 0:
+        raise UsageError("--until: expected a time >= 0")
+    config = load_config(args.config)
+    script = load_script(args.script)
+    result = run_sim(config, args.main or config.nc.main, script, args.until)
+    report(result, sys.stdout)
+    if args.trace:
+        with open(args.trace, "w", encoding="utf-8") as out:
+            write_trace(result, out)
+    if args.gantt:
+        with open(args.gantt, "w", encoding="utf-8") as out:
+            write_gantt(result.events, result.runtime.config.nc.processes, out,
+                        external=result.runtime.config.nc.external)
+    return result.exit_status
 
 
 def entry_point() -> None:

@@ -1,0 +1,114 @@
+"""The scripted PLC of ``ncgate sim`` (spec 4.3), loaded and validated.
+
+```toml
+[[write]]                 # at a simulated time
+at = 2.5
+set = "SA10=1"
+[[write]]                 # when a condition becomes true, after a delay
+when = "SYVAR1=10"
+after = 0.1
+set = "SK250=8"
+[[snd]]                   # an SND from an external process
+when = "P3 WAIT_PROC"
+from = 4
+to = 3
+```
+
+Conditions and assignments stay text here; the gateway parses them with the interpreter's
+grammar.  Each entry fires once: ``at`` a time, or ``after`` seconds (default 0) past the first
+moment its ``when`` holds.  Errors name the file and the dotted key (``write[1].set``).
+Stdlib only.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from config.loader import ConfigError
+
+
+@dataclass(frozen=True, slots=True)
+class ScriptEntry:
+    key: str  # "write[0]", for messages
+    at: float | None
+    when: str | None
+    after: float
+    set: str | None = None  # write: "SA10=1"
+    sender: int | None = None  # snd: from
+    target: int | None = None  # snd: to
+
+
+@dataclass(frozen=True, slots=True)
+class Script:
+    file: str
+    entries: tuple[ScriptEntry, ...]
+
+
+def load_script(path: str | Path | None) -> Script:
+    if path is None:
+        return Script("<no script>", ())
+    source = Path(path)
+    try:
+        raw = tomllib.loads(source.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{source}: no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: {exc}") from exc
+    file = str(source)
+
+    def fail(key: str, message: str) -> ConfigError:
+        return ConfigError(f"{file}: {key}: {message}")
+
+    for name in raw:
+        if name not in ("write", "snd"):
+            raise fail(name, "unknown key (expected [[write]] or [[snd]])")
+    entries: list[ScriptEntry] = []
+    for section in ("write", "snd"):
+        tables = raw.get(section, [])
+        if not isinstance(tables, list):
+            raise fail(section, f"expected an array of tables ([[{section}]])")
+        for i, table in enumerate(tables):
+            key = f"{section}[{i}]"
+            entries.append(_entry(table, key, section, fail))
+    return Script(file, tuple(entries))
+
+
+def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
+    if not isinstance(table, dict):
+        raise fail(key, "expected a table")
+    known = {"at", "when", "after"} | ({"set"} if section == "write" else {"from", "to"})
+    for name in table:
+        if name not in known:
+            raise fail(f"{key}.{name}", "unknown key")
+    at, when = table.get("at"), table.get("when")
+    if (at is None) == (when is None):
+        raise fail(key, "give exactly one of 'at' and 'when'")
+    if at is not None and (isinstance(at, bool) or not isinstance(at, int | float) or at < 0):
+        raise fail(f"{key}.at", f"expected a time in seconds >= 0, got {at!r}")
+    if when is not None and (not isinstance(when, str) or not when.strip()):
+        raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P3 WAIT_PROC\", "
+                   f"got {when!r}")
+    after = table.get("after", 0)
+    if isinstance(after, bool) or not isinstance(after, int | float) or after < 0:
+        raise fail(f"{key}.after", f"expected a delay in seconds >= 0, got {after!r}")
+    if at is not None and "after" in table:
+        raise fail(f"{key}.after", "only with 'when'")
+    if section == "write":
+        value = table.get("set")
+        if not isinstance(value, str) or "=" not in value:
+            raise fail(f"{key}.set", f"expected an assignment such as \"SA10=1\", got {value!r}")
+        return ScriptEntry(key, _f(at), when, float(after), set=value)
+    ends = []
+    for name in ("from", "to"):
+        value = table.get(name)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise fail(f"{key}.{name}", f"expected a process number, got {value!r}")
+        ends.append(value)
+    return ScriptEntry(key, _f(at), when, float(after), sender=ends[0], target=ends[1])
+
+
+def _f(value: Any) -> float | None:
+    return None if value is None else float(value)

@@ -1,0 +1,149 @@
+"""The timeline picture of a trace (``ncgate sim --gantt``, spec 4.4), as SVG.
+
+One lane per process, coloured by state (derived from the trace's start/wait/resume/end/alarm
+events), an arrow for every SND from the sender's lane to the target's, a mark on the PLC lane
+for every write by the PLC, the fieldbus or the script, and a time axis in seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from html import escape
+from typing import TextIO
+
+from interpreter.trace import Event
+
+COLOURS = {
+    "RUNNING": "#4caf50", "WAIT_PROC": "#ff9800", "WAIT_COND": "#2196f3",
+    "WAIT_SND": "#e91e63", "WAIT_EXE": "#9c27b0", "ALARM": "#d32f2f",
+}
+LABELS = {"RUNNING": "running", "WAIT_PROC": "WAI,n", "WAIT_COND": "WAI,cond",
+          "WAIT_SND": "SND waits", "WAIT_EXE": "EXE waits", "ALARM": "alarm"}
+_ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT_EXE"}
+
+LEFT, RIGHT, TOP, LANE, GAP = 150, 30, 50, 34, 14
+
+
+def state_intervals(events: Iterable[Event], processes: int
+                    ) -> tuple[dict[int, list[tuple[float, float, str, str]]], float]:
+    """Per process: (start, end, state, label) intervals; and the end time."""
+    current: dict[int, tuple[float, str, str]] = {}
+    out: dict[int, list[tuple[float, float, str, str]]] = {k: [] for k in
+                                                           range(1, processes + 1)}
+    end_t = 0.0
+
+    def close(proc: int, t: float) -> None:
+        if proc in current:
+            start, state, label = current.pop(proc)
+            if t > start or state == "ALARM":
+                out[proc].append((start, t, state, label))
+
+    for e in events:
+        t, proc, kind = e["t"], e["proc"], e["event"]
+        end_t = max(end_t, t)
+        if proc not in out:
+            continue
+        if kind == "start":
+            close(proc, t)
+            current[proc] = (t, "RUNNING", str(e["prog"]))
+        elif kind == "wait":
+            on_kind = next(iter(e["on"]))
+            close(proc, t)
+            target = e["on"][on_kind]
+            label = f"N{e['n']} " if e.get("n") is not None else ""
+            label += e["on"]["cond"] if on_kind == "cond" else f"{on_kind} P{target}"
+            current[proc] = (t, _ON[on_kind], label)
+        elif kind == "resume" and proc in current:
+            close(proc, t)
+            current[proc] = (t, "RUNNING", "")
+        elif kind == "end":
+            close(proc, t)
+        elif kind == "alarm":
+            close(proc, t)
+            current[proc] = (t, "ALARM", str(e.get("code", "")))
+    end_t = max(end_t, 1e-6)
+    for proc in list(current):
+        close(proc, end_t)
+    return out, end_t
+
+
+def _ticks(end_t: float) -> list[float]:
+    raw = end_t / 10
+    magnitude = 10 ** math.floor(math.log10(raw)) if raw > 0 else 1
+    step = next(m * magnitude for m in (1, 2, 5, 10) if m * magnitude >= raw)
+    return [i * step for i in range(int(end_t / step) + 1)]
+
+
+def write_gantt(events: Sequence[Event], processes: int, out: TextIO,
+                external: Iterable[int] = (), width: int = 1000) -> None:
+    lanes, end_t = state_intervals(events, processes)
+    external = set(external)
+    plot_w = width - LEFT - RIGHT
+    plc_y = TOP
+    lane_y = {k: TOP + (LANE + GAP) * k for k in range(1, processes + 1)}
+    height = TOP + (LANE + GAP) * (processes + 1) + 70
+
+    def x(t: float) -> float:
+        return LEFT + plot_w * t / end_t
+
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+        f'font-family="sans-serif" font-size="12">',
+        '<defs><marker id="arrow" markerWidth="8" markerHeight="8" refX="7" refY="4" '
+        'orient="auto"><path d="M0,0 L8,4 L0,8 z" fill="#222"/></marker></defs>',
+        f'<rect width="{width}" height="{height}" fill="white"/>',
+        f'<text x="{LEFT}" y="22" font-size="15" font-weight="bold">ncgate timeline '
+        f'({end_t:.3f} s simulated)</text>',
+    ]
+    axis_y = TOP + (LANE + GAP) * (processes + 1) - GAP + 6
+    for t in _ticks(end_t):
+        parts.append(f'<line x1="{x(t):.1f}" y1="{TOP - 6}" x2="{x(t):.1f}" y2="{axis_y}" '
+                     'stroke="#ddd"/>')
+        parts.append(f'<text x="{x(t):.1f}" y="{axis_y + 14}" text-anchor="middle">'
+                     f'{t:g}</text>')
+    parts.append(f'<text x="{LEFT + plot_w / 2}" y="{axis_y + 30}" text-anchor="middle">'
+                 'time (s)</text>')
+    parts.append(f'<text x="10" y="{plc_y + LANE / 2 + 4}">PLC / fieldbus</text>')
+    parts.append(f'<rect x="{LEFT}" y="{plc_y}" width="{plot_w}" height="{LANE}" '
+                 'fill="#f5f5f5" stroke="#ccc"/>')
+    for k, y in lane_y.items():
+        name = f"P{k}" + (" (external)" if k in external else "")
+        parts.append(f'<text x="10" y="{y + LANE / 2 + 4}">{name}</text>')
+        parts.append(f'<rect x="{LEFT}" y="{y}" width="{plot_w}" height="{LANE}" '
+                     'fill="#fafafa" stroke="#ccc"/>')
+        for start, stop, state, label in lanes[k]:
+            w = max(x(stop) - x(start), 2.0)
+            title = f"{state} {start:.3f}-{stop:.3f} s {label}".strip()
+            parts.append(f'<rect x="{x(start):.1f}" y="{y + 3}" width="{w:.1f}" '
+                         f'height="{LANE - 6}" fill="{COLOURS[state]}"><title>{escape(title)}'
+                         f'</title></rect>')
+            if label and w > 7 * len(label):
+                parts.append(f'<text x="{x(start) + 4:.1f}" y="{y + LANE / 2 + 4}" '
+                             f'fill="white">{escape(label)}</text>')
+    for e in events:
+        if e["event"] == "snd" and e["to"] in lane_y and e["proc"] in lane_y:
+            y1 = lane_y[e["proc"]] + LANE / 2
+            y2 = lane_y[e["to"]] + (3 if lane_y[e["to"]] > y1 else LANE - 3)
+            parts.append(f'<line x1="{x(e["t"]):.1f}" y1="{y1:.1f}" x2="{x(e["t"]) + 6:.1f}" '
+                         f'y2="{y2:.1f}" stroke="#222" stroke-width="1.5" '
+                         f'marker-end="url(#arrow)"><title>SND P{e["proc"]} -&gt; '
+                         f'P{e["to"]} at {e["t"]:.3f} s</title></line>')
+        elif e["event"] == "write" and e["proc"] == 0:
+            cx = x(e["t"])
+            parts.append(f'<path d="M{cx - 5:.1f},{plc_y + 8} L{cx + 5:.1f},{plc_y + 8} '
+                         f'L{cx:.1f},{plc_y + 20} z" fill="#3f51b5"><title>'
+                         f'{escape(str(e["who"]))}: {escape(str(e["var"]))}={e["value"]} at '
+                         f'{e["t"]:.3f} s</title></path>')
+            parts.append(f'<text x="{cx + 7:.1f}" y="{plc_y + 28}" font-size="10">'
+                         f'{escape(str(e["var"]))}={e["value"]}</text>')
+    legend_y = height - 22
+    lx = LEFT
+    for state, colour in COLOURS.items():
+        parts.append(f'<rect x="{lx}" y="{legend_y - 10}" width="12" height="12" '
+                     f'fill="{colour}"/><text x="{lx + 16}" y="{legend_y}">{LABELS[state]}'
+                     '</text>')
+        lx += 120
+    parts.append(f'<text x="{lx}" y="{legend_y}">→ SND   ▼ PLC write</text>')
+    parts.append("</svg>")
+    out.write("\n".join(parts) + "\n")

@@ -1,0 +1,39 @@
+"""The program store: finds programs on the storage devices and checks them before they run.
+
+It is the interpreter's :class:`~interpreter.ports.ProgramLoader`.  A program is parsed and
+checked (for the process it will run in) once per file version; a program with errors never
+starts -- the loader raises with every diagnostic, and the runtime turns that into an alarm of
+the calling process.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from config import Config
+from gateway.checking import check_context, storage_of
+from interpreter.checker import check_program
+from interpreter.diagnostics import ProgramSyntaxError
+from interpreter.parser import Program
+
+
+class ProgramStore:
+    def __init__(self, config: Config) -> None:
+        self.config = config
+        self.storage = storage_of(config)
+        self._cache: dict[tuple[Path, int, int, int], Program] = {}
+
+    def load(self, name: str, device: str | None, process: int) -> Program:
+        path = self.storage.locate(name, device)
+        stat = path.stat()
+        key = (path, stat.st_mtime_ns, stat.st_size, process)
+        program = self._cache.get(key)
+        if program is None:
+            program = Program.from_path(path, display=path.name)
+            diagnostics = check_program(
+                program, check_context(self.config, self.storage, {process}))
+            errors = [d for d in diagnostics if d.is_error]
+            if errors:
+                raise ProgramSyntaxError(errors)
+            self._cache[key] = program
+        return program

@@ -1,0 +1,193 @@
+"""``ncgate sim``: a closed simulation on the virtual clock (spec 4.1, 2.5, 4.3).
+
+MAIN runs in process 1; the script plays the PLC; the run ends when every process is idle,
+at ``--until``, or with a stall (nothing runnable, no timer, no scripted input left).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TextIO
+
+from config import Config, ConfigError
+from config.script import Script, ScriptEntry
+from gateway.wiring import Runtime, build_runtime, parse_assignment, parse_condition
+from interpreter.runtime import ProcessState, run_virtual
+from interpreter.trace import Event, write_jsonl
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+@dataclass
+class SimResult:
+    outcome: str  # "idle", "until", "stall", "alarm"
+    exit_status: int
+    runtime: Runtime
+
+    @property
+    def events(self) -> list[Event]:
+        return self.runtime.trace.events
+
+
+class ScriptPlayer:
+    """Feeds the script's writes and SNDs into the runtime at their times."""
+
+    def __init__(self, runtime: Runtime, script: Script) -> None:
+        self.runtime = runtime
+        self.script = script
+        self._state_watch: list[tuple[int, ProcessState, ScriptEntry]] = []
+        for entry in script.entries:
+            self._validate(entry)
+        runtime.engine.state_listeners.append(self._on_state)
+
+    def _fail(self, entry: ScriptEntry, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.script.file}: {entry.key}.{key}: {message}")
+
+    def _validate(self, entry: ScriptEntry) -> None:
+        config = self.runtime.config
+        if entry.set is not None:
+            try:
+                (area, index, view), value = parse_assignment(entry.set)
+                self.runtime.image.check(area, index, view, value)
+            except ValueError as exc:
+                raise self._fail(entry, "set", str(exc)) from None
+        if entry.sender is not None:
+            if entry.sender not in config.nc.external:
+                raise self._fail(entry, "from", f"process {entry.sender} is not external "
+                                 "(declare it with [[nc.process]] external = true)")
+            if not 1 <= (entry.target or 0) <= config.nc.processes:
+                raise self._fail(entry, "to", f"process {entry.target} is not configured")
+        if entry.when is not None:
+            self._parse_when(entry)
+
+    def _parse_when(self, entry: ScriptEntry) -> tuple[str, object]:
+        text = entry.when or ""
+        words = text.split()
+        if len(words) == 2 and words[0][:1].upper() == "P" and words[0][1:].isdigit():
+            state_name = words[1].upper()
+            if state_name not in ProcessState.__members__:
+                names = ", ".join(ProcessState.__members__)
+                raise self._fail(entry, "when", f"unknown state {words[1]!r} ({names})")
+            number = int(words[0][1:])
+            if not 1 <= number <= self.runtime.config.nc.processes:
+                raise self._fail(entry, "when", f"process {number} is not configured")
+            return "state", (number, ProcessState[state_name])
+        try:
+            return "cond", parse_condition(text)
+        except ValueError as exc:
+            raise self._fail(entry, "when", str(exc)) from None
+
+    def arm(self) -> None:
+        engine = self.runtime.engine
+        for entry in self.script.entries:
+            if entry.at is not None:
+                engine.call_at(entry.at, lambda e=entry: self._fire(e))
+                continue
+            kind, what = self._parse_when(entry)
+            if kind == "state":
+                number, state = what  # type: ignore[misc]
+                self._state_watch.append((number, state, entry))
+                if engine.processes[number].state is state:
+                    self._triggered(entry)
+            else:
+                (area, index, view), op, value = what  # type: ignore[misc]
+                handle = self.runtime.image.wait(area, index, view, op, value,
+                                                 lambda e=entry: self._triggered(e))
+                if handle is None:
+                    self._triggered(entry)
+
+    def _on_state(self, process: object, old: ProcessState) -> None:
+        number = process.number  # type: ignore[attr-defined]
+        state = process.state  # type: ignore[attr-defined]
+        for watch in list(self._state_watch):
+            if watch[0] == number and watch[1] is state:
+                self._state_watch.remove(watch)
+                self._triggered(watch[2])
+
+    def _triggered(self, entry: ScriptEntry) -> None:
+        engine = self.runtime.engine
+        engine.call_at(engine.now + entry.after, lambda: self._fire(entry))
+
+    def _fire(self, entry: ScriptEntry) -> None:
+        if entry.set is not None:
+            (area, index, view), value = parse_assignment(entry.set)
+            self.runtime.image.write([(area, index, view, value)], "script")
+        else:
+            assert entry.sender is not None and entry.target is not None
+            try:
+                self.runtime.engine.external_snd(entry.sender, entry.target)
+            except ValueError as exc:
+                self.runtime.engine.trace.record(
+                    self.runtime.engine.now, "hazard", entry.sender, None,
+                    {"message": f"script {entry.key}: {exc}"})
+
+
+def run_sim(config: Config, main: str, script: Script, until: float | None = None) -> SimResult:
+    """Run a closed simulation; raises ProgramError/ProgramNotFoundError if MAIN cannot start."""
+    runtime = build_runtime(config, closed=True)
+    player = ScriptPlayer(runtime, script)
+    engine = runtime.engine
+    engine.start(main, 1, by="operator")
+    player.arm()
+    outcome = run_virtual(engine, until)
+    engine.finish_stats()
+    if outcome == "blocked":
+        blocked = engine.blocked()
+        engine.trace.record(engine.now, "stall", 0, None, {"blocked": blocked})
+        return SimResult("stall", EXIT_FAILED, runtime)
+    if any(p.stats.alarms for p in engine.processes.values()):
+        return SimResult("alarm", EXIT_FAILED, runtime)
+    return SimResult(outcome, EXIT_OK, runtime)
+
+
+def summary_table(result: SimResult) -> str:
+    engine = result.runtime.engine
+    header = ("proc", "programs", "blocks", "running s", "waiting s", "moving s", "snd sent",
+              "snd recv", "alarms", "state")
+    rows: list[Sequence[str]] = [header]
+    for p in engine.processes.values():
+        s = p.stats
+        state = p.state.name + (" (external)" if p.external else "")
+        rows.append((f"P{p.number}", str(s.programs), str(s.blocks), f"{s.running_s:.3f}",
+                     f"{s.waiting_s:.3f}", f"{s.moving_s:.3f}", str(s.snd_sent),
+                     str(s.snd_received), str(s.alarms), state))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
+    out = io.StringIO()
+    for i, row in enumerate(rows):
+        out.write("  ".join(c.rjust(w) if j else c.ljust(w)
+                            for j, (c, w) in enumerate(zip(row, widths, strict=True))).rstrip())
+        out.write("\n")
+        if i == 0:
+            out.write("  ".join("-" * w for w in widths) + "\n")
+    return out.getvalue()
+
+
+def report(result: SimResult, out: TextIO) -> None:
+    engine = result.runtime.engine
+    for event in result.events:
+        if event["event"] in ("alarm", "stall", "deadlock"):
+            out.write(_describe(event) + "\n")
+    out.write(summary_table(result))
+    verdict = {"idle": "every program ended", "until": "stopped at --until",
+               "stall": "stall", "alarm": "ended with alarms"}[result.outcome]
+    out.write(f"simulated {engine.now:.3f} s: {verdict}\n")
+
+
+def _describe(event: Event) -> str:
+    t = f"{event['t']:.3f}"
+    if event["event"] == "alarm":
+        where = f" {event['prog']}:{event['line']}" if event.get("prog") else ""
+        return f"[{t}] P{event['proc']} alarm {event['code']}{where}: {event['message']}"
+    if event["event"] == "deadlock":
+        return f"[{t}] {event['message']}"
+    lines = [f"[{t}] stall: every process is blocked and nothing can change"]
+    for b in event["blocked"]:
+        n = f" N{b['n']}" if b["n"] is not None else ""
+        lines.append(f"    P{b['proc']} {b['prog']}:{b['line']}{n} {b['reason']}")
+    return "\n".join(lines)
+
+
+def write_trace(result: SimResult, out: TextIO) -> None:
+    write_jsonl(result.events, out)

@@ -1,0 +1,114 @@
+"""Builds the runtime from a config: the image, the program store, the engine, and the
+conversions between the config's and the interpreter's names for things."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from config import Config, SndPolicy
+from gateway.programs import ProgramStore
+from interpreter.evaluate import RuntimeAlarm, compile_expr
+from interpreter.nodes import Assign, VarKind, VarRef, WaitCond
+from interpreter.parser import LineError, parse_block
+from interpreter.runtime import Engine, RuntimeSettings
+from interpreter.runtime import SndPolicy as RuntimeSndPolicy
+from interpreter.trace import Trace
+from plc.image import Change, IOImage
+
+
+def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
+    nc = config.nc
+    return RuntimeSettings(
+        processes=nc.processes,
+        external=nc.external,
+        lookahead=nc.lookahead,
+        snd=RuntimeSndPolicy.LATCHED if nc.snd is SndPolicy.LATCHED
+        else RuntimeSndPolicy.RENDEZVOUS,
+        sync_reads=nc.sync_reads,
+        rapid_mm_min=nc.rapid_mm_min,
+        tool_change_s=nc.tool_change_s,
+        wait_timeout_s=nc.wait_timeout_s,
+        e_params=nc.e_params,
+        optional_skip=nc.optional_skip,
+        main=nc.main,
+        closed=closed,
+    )
+
+
+@dataclass
+class Runtime:
+    config: Config
+    image: IOImage
+    store: ProgramStore
+    engine: Engine
+    trace: Trace
+
+
+def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> Runtime:
+    image = IOImage(config.plc.sa_bits, config.plc.k_bytes, config.plc.syvars)
+    store = ProgramStore(config)
+    trace = trace if trace is not None else Trace()
+    engine = Engine(runtime_settings(config, closed), image, store, trace)
+
+    def on_write(changes: list[Change] | tuple[Change, ...], writer: str) -> None:
+        for change in changes:
+            engine.note_write(variable_name(change.area, change.index, change.view),
+                              change.value, writer)
+
+    image.subscribe(on_write)  # type: ignore[arg-type]
+    return Runtime(config, image, store, engine, trace)
+
+
+def variable_name(area: str, index: int, view: str) -> str:
+    if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
+        return f"{area}{index}"
+    return f"{area}{index}.{view}"
+
+
+ImageVar = tuple[str, int, str]
+
+
+def _image_var(var: VarRef) -> ImageVar:
+    return (var.kind.value, var.index, var.view.value)
+
+
+def parse_condition(text: str) -> tuple[ImageVar, str, int]:
+    """``"SYVAR1=10"`` -> (("SYVAR", 1, "IN"), "=", 10).  Raises ValueError with a reason."""
+    try:
+        block = parse_block(f"(WAI,{text})", "<condition>", 1)
+    except LineError as exc:
+        raise ValueError(exc.diagnostic.message) from None
+    (item,) = block.items
+    if not isinstance(item, WaitCond):
+        raise ValueError(f"{text!r} is not a condition on SA, SK or SYVAR")
+    try:
+        value = compile_expr(item.value)([], _no_read)
+    except (RuntimeAlarm, IndexError):
+        raise ValueError("the value must be a constant") from None
+    if value != int(value):
+        raise ValueError(f"{value:g} is not a whole number")
+    return _image_var(item.var), item.op.value, int(value)
+
+
+def parse_assignment(text: str) -> tuple[ImageVar, int]:
+    """``"SA10=1"`` -> (("SA", 10, "bit"), 1).  Raises ValueError with a reason."""
+    try:
+        block = parse_block(text, "<assignment>", 1)
+    except LineError as exc:
+        raise ValueError(exc.diagnostic.message) from None
+    if len(block.items) != 1 or not isinstance(block.items[0], Assign):
+        raise ValueError(f"{text!r} is not an assignment such as SA10=1")
+    item = block.items[0]
+    if item.target.kind is VarKind.E:
+        raise ValueError("E parameters belong to a process, not to the image")
+    try:
+        value = compile_expr(item.expr)([], _no_read)
+    except (RuntimeAlarm, IndexError):
+        raise ValueError("the value must be a constant") from None
+    if value != int(value):
+        raise ValueError(f"{value:g} is not a whole number")
+    return _image_var(item.target), int(value)
+
+
+def _no_read(area: str, index: int, view: str) -> int:
+    raise IndexError("no image here")

@@ -1,0 +1,91 @@
+"""Motion planning: how long a block's motion takes (spec 2.4).
+
+G0 at the rapid rate, G1/G2/G3 at the modal feed (mm/min), arcs by their true length from
+I/J/K (or R) in the active plane, with a helical component along the third axis.  G90/G91
+absolute/incremental, G17/G18/G19 planes.  Positions are in mm.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from interpreter.codes import AlarmCode
+from interpreter.evaluate import RuntimeAlarm
+
+AXES = "XYZUVWABC"
+AXIS_INDEX = {a: i for i, a in enumerate(AXES)}
+PLANES = {17: (0, 1, 2, "I", "J"), 18: (2, 0, 1, "K", "I"), 19: (1, 2, 0, "J", "K")}
+
+
+@dataclass(slots=True)
+class Modal:
+    motion: int = 0  # 0 1 2 3
+    feed_mm_min: float | None = None
+    absolute: bool = True
+    plane: int = 17
+    tool: str = ""
+    position: list[float] = field(default_factory=lambda: [0.0] * len(AXES))
+
+
+@dataclass(frozen=True, slots=True)
+class Move:
+    start: tuple[float, ...]
+    end: tuple[float, ...]
+    length_mm: float
+    duration_s: float
+
+
+def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
+              rapid_mm_min: float) -> Move | None:
+    """The move a block's axis words make from the modal state (updates the position)."""
+    start = tuple(modal.position)
+    end = list(start)
+    for letter, value in axes.items():
+        i = AXIS_INDEX[letter]
+        end[i] = value if modal.absolute else start[i] + value
+    is_arc = modal.motion in (2, 3) and (arc or axes)
+    if not axes and not is_arc:
+        return None
+    if modal.motion in (2, 3):
+        length = _arc_length(modal, start, end, arc)
+    else:
+        length = math.dist(start[:6], end[:6]) or math.dist(start[6:], end[6:])
+    if modal.motion == 0:
+        rate = rapid_mm_min
+    else:
+        if not modal.feed_mm_min:
+            raise RuntimeAlarm(AlarmCode.NO_FEED,
+                               f"G{modal.motion} move with no feed (F) programmed")
+        rate = modal.feed_mm_min
+    modal.position = end
+    return Move(start, tuple(end), length, length / rate * 60.0)
+
+
+def _arc_length(modal: Modal, start: tuple[float, ...], end: list[float],
+                arc: dict[str, float]) -> float:
+    a, b, c, ia, ib = PLANES[modal.plane]
+    sa, sb, ea, eb = start[a], start[b], end[a], end[b]
+    helix = end[c] - start[c]
+    clockwise = modal.motion == 2
+    if "R" in arc:
+        radius = abs(arc["R"])
+        chord = math.hypot(ea - sa, eb - sb)
+        if radius == 0 or chord > 2 * radius + 1e-9:
+            raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT,
+                               f"arc radius {arc['R']:g} cannot reach the end point")
+        sweep = 2 * math.asin(min(1.0, chord / (2 * radius)))
+        if arc["R"] < 0:
+            sweep = 2 * math.pi - sweep
+    else:
+        ca, cb = sa + arc.get(ia, 0.0), sb + arc.get(ib, 0.0)
+        radius = math.hypot(sa - ca, sb - cb)
+        if radius == 0:
+            raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, "arc with no radius (I/J/K missing)")
+        a0 = math.atan2(sb - cb, sa - ca)
+        a1 = math.atan2(eb - cb, ea - ca)
+        sweep = (a0 - a1) if clockwise else (a1 - a0)
+        sweep %= 2 * math.pi
+        if sweep < 1e-12:  # end on start: a full circle
+            sweep = 2 * math.pi
+    return math.hypot(radius * sweep, helix)

@@ -1,0 +1,280 @@
+"""The I/O image the soft PLC owns (spec 3.1): SA bits, K bytes, SYVARs.
+
+A variable is named by its area (``"SA"``, ``"SK"``, ``"SYVAR"``), an index and a view
+(``"bit"``, ``"BY"``, ``"IN"``; spec 1.3).  Writes name their writer and are applied atomically:
+every value of a request is validated, then stored, and only then are waits woken.  Waits are
+indexed by the storage they look at (a bit, a byte, a SYVAR), so a write evaluates only the
+waits on what it changed and its cost does not grow with the number of waits elsewhere.
+
+The image lives on one thread (the asyncio loop in the gateway); it does no locking.  Stdlib
+only: the interpreter reaches it through its own protocol, the gateway wires them together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+AREAS: Final = ("SA", "SK", "SYVAR")
+VIEWS: Final = ("bit", "BY", "IN")
+
+OPS: Final[dict[str, Callable[[int, int], bool]]] = {
+    "=": lambda a, b: a == b,
+    "#": lambda a, b: a != b,
+    ">": lambda a, b: a > b,
+    "<": lambda a, b: a < b,
+}
+
+
+class PlcError(Exception):
+    """Root of the soft PLC's exceptions."""
+
+
+class ImageAddressError(PlcError, IndexError):
+    """A variable outside the image (area, index or view)."""
+
+
+class ImageValueError(PlcError, ValueError):
+    """A value the variable's type cannot hold (never wrapped silently)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Change:
+    """One stored value: what a listener of the image is told."""
+
+    area: str
+    index: int
+    view: str
+    value: int
+    old: int
+
+
+Listener = Callable[[Sequence[Change], str], None]
+_Key = tuple[str, int]  # ("SA", byte) / ("SAb", bit) / ("SK", byte) / ("SYVAR", n)
+
+
+class Wait:
+    """A registered condition; :meth:`cancel` removes it."""
+
+    __slots__ = ("_image", "area", "index", "keys", "on_true", "op", "value", "view")
+
+    def __init__(self, image: IOImage, area: str, index: int, view: str, op: str, value: int,
+                 keys: tuple[_Key, ...], on_true: Callable[[], None]) -> None:
+        self._image = image
+        self.area, self.index, self.view, self.op, self.value = area, index, view, op, value
+        self.keys = keys
+        self.on_true = on_true
+
+    def holds(self) -> bool:
+        return OPS[self.op](self._image.read(self.area, self.index, self.view), self.value)
+
+    def cancel(self) -> None:
+        self._image._unregister(self)
+
+
+class IOImage:
+    """SA packet (bits), K packet (bytes) and SYVARs (int16), with writers and waits."""
+
+    def __init__(self, sa_bits: int = 1024, k_bytes: int = 512, syvars: int = 256) -> None:
+        if sa_bits % 8:
+            raise ValueError("sa_bits must be a multiple of 8")
+        self.sa = bytearray(sa_bits // 8)
+        self.k = bytearray(k_bytes)
+        self.syvar = [0] * syvars
+        self._waits: dict[_Key, set[Wait]] = {}
+        self._writers: dict[_Key, tuple[int, str]] = {}  # key -> (write number, writer)
+        self._listeners: list[Listener] = []
+        self.generation = 0  # +1 on every write that changed something
+        self._write_number = 0
+
+    @property
+    def sa_bits(self) -> int:
+        return len(self.sa) * 8
+
+    # -- reading --------------------------------------------------------------------------
+
+    def read(self, area: str, index: int, view: str) -> int:
+        """The value of a variable (raises :class:`ImageAddressError` outside the image)."""
+        if area == "SYVAR":
+            if 0 <= index < len(self.syvar):
+                return self.syvar[index]
+        else:
+            data = self.sa if area == "SA" else self.k if area == "SK" else None
+            if data is not None:
+                if view == "bit" and area == "SA":
+                    if 0 <= index < len(data) * 8:
+                        return (data[index >> 3] >> (index & 7)) & 1
+                elif view == "BY":
+                    if 0 <= index < len(data):
+                        return data[index]
+                elif view == "IN" and 0 <= index < len(data) - 1:
+                    word = data[index] | data[index + 1] << 8
+                    return word - 0x10000 if word & 0x8000 else word
+        raise ImageAddressError(f"{_name(area, index, view)} is outside the image")
+
+    def last_writer(self, area: str, index: int, view: str) -> str | None:
+        """Who last wrote any part of the variable (a bit's byte, a byte's bits, …)."""
+        found = [self._writers[k] for k in self._related_keys(area, index, view)
+                 if k in self._writers]
+        return max(found)[1] if found else None
+
+    # -- writing --------------------------------------------------------------------------
+
+    def check(self, area: str, index: int, view: str, value: int) -> None:
+        """Raise if the write could not be stored; stores nothing."""
+        self.read(area, index, view)  # the address
+        low, high = value_range(area, view)
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise ImageValueError(
+                f"{_name(area, index, view)} holds {low}..{high}, not {value!r}")
+
+    def write(self, changes: Iterable[tuple[str, int, str, int]], writer: str) -> list[Change]:
+        """Store every value, then wake the waits they satisfy.  All or nothing.
+
+        Returns what actually changed (a value written again unchanged is not a change, but
+        it does record the writer).
+        """
+        items = list(changes)
+        for area, index, view, value in items:
+            self.check(area, index, view, value)
+        done: list[Change] = []
+        touched: set[_Key] = set()
+        self._write_number += 1
+        stamp = (self._write_number, writer)
+        for area, index, view, value in items:
+            old = self.read(area, index, view)
+            keys = self._store(area, index, view, value, old)
+            for key in self._keys(area, index, view):
+                self._writers[key] = stamp
+            if keys:
+                touched.update(keys)
+                done.append(Change(area, index, view, value, old))
+        if done:
+            self.generation += 1
+            # Listeners (the trace) hear of the write before any wait it satisfies is woken,
+            # so that cause comes before effect in everything they record.
+            for listener in list(self._listeners):
+                listener(done, writer)
+            self._wake(touched)
+        return done
+
+    def _store(self, area: str, index: int, view: str, value: int, old: int) -> list[_Key]:
+        """Store one value; the keys whose storage changed."""
+        if value == old:
+            return []
+        if area == "SYVAR":
+            self.syvar[index] = value
+            return [("SYVAR", index)]
+        data = self.sa if area == "SA" else self.k
+        if view == "bit":
+            byte = index >> 3
+            data[byte] ^= 1 << (index & 7)
+            return [("SA", byte), ("SAb", index)]
+        if view == "BY":
+            before = data[index]
+            data[index] = value
+            return self._byte_keys(area, index, before ^ value)
+        word = value & 0xFFFF
+        lo_before, hi_before = data[index], data[index + 1]
+        data[index], data[index + 1] = word & 0xFF, word >> 8
+        return (self._byte_keys(area, index, lo_before ^ data[index])
+                + self._byte_keys(area, index + 1, hi_before ^ data[index + 1]))
+
+    @staticmethod
+    def _byte_keys(area: str, byte: int, flipped: int) -> list[_Key]:
+        if not flipped:
+            return []
+        keys: list[_Key] = [(area, byte)]
+        if area == "SA":
+            base = byte * 8
+            keys.extend(("SAb", base + bit) for bit in range(8) if flipped >> bit & 1)
+        return keys
+
+    # -- waiting --------------------------------------------------------------------------
+
+    def wait(self, area: str, index: int, view: str, op: str, value: int,
+             on_true: Callable[[], None]) -> Wait | None:
+        """Level-triggered: None if the condition holds now, else a registered :class:`Wait`.
+
+        ``on_true`` is called once, from inside the write that makes the condition true,
+        after every value of that write is stored; the wait is then already removed.
+        """
+        if op not in OPS:
+            raise ValueError(f"unknown comparison {op!r}")
+        if OPS[op](self.read(area, index, view), value):
+            return None
+        keys = tuple(self._keys(area, index, view))
+        wait = Wait(self, area, index, view, op, value, keys, on_true)
+        for key in keys:
+            self._waits.setdefault(key, set()).add(wait)
+        return wait
+
+    def _unregister(self, wait: Wait) -> None:
+        for key in wait.keys:
+            bucket = self._waits.get(key)
+            if bucket is not None:
+                bucket.discard(wait)
+                if not bucket:
+                    del self._waits[key]
+
+    def _wake(self, touched: set[_Key]) -> None:
+        candidates: list[Wait] = []
+        seen: set[int] = set()
+        for key in touched:
+            for wait in self._waits.get(key, ()):
+                if id(wait) not in seen:
+                    seen.add(id(wait))
+                    candidates.append(wait)
+        # Wake in registration-independent, deterministic order.
+        candidates.sort(key=lambda w: (AREAS.index(w.area), w.index, VIEWS.index(w.view)))
+        ready = [w for w in candidates if w.holds()]
+        for wait in ready:
+            self._unregister(wait)
+        for wait in ready:
+            wait.on_true()
+
+    @property
+    def wait_count(self) -> int:
+        return len({id(w) for bucket in self._waits.values() for w in bucket})
+
+    def subscribe(self, listener: Listener) -> Callable[[], None]:
+        """Call ``listener(changes, writer)`` after every write that changed something."""
+        self._listeners.append(listener)
+        return lambda: self._listeners.remove(listener)
+
+    def _keys(self, area: str, index: int, view: str) -> list[_Key]:
+        if area == "SYVAR":
+            return [("SYVAR", index)]
+        if view == "bit":
+            return [("SAb", index)]
+        if view == "BY":
+            return [(area, index)]
+        return [(area, index), (area, index + 1)]
+
+    def _related_keys(self, area: str, index: int, view: str) -> list[_Key]:
+        if area == "SA" and view == "bit":
+            return [("SAb", index), ("SA", index >> 3)]
+        keys = self._keys(area, index, view)
+        if area == "SA":
+            keys += [("SAb", k[1] * 8 + b) for k in list(keys) for b in range(8)]
+        return keys
+
+    # -- snapshots (tests, status) -----------------------------------------------------------
+
+    def snapshot(self) -> tuple[bytes, bytes, tuple[int, ...]]:
+        return bytes(self.sa), bytes(self.k), tuple(self.syvar)
+
+
+def value_range(area: str, view: str) -> tuple[int, int]:
+    if area == "SYVAR" or view == "IN":
+        return -32768, 32767
+    if view == "bit":
+        return 0, 1
+    return 0, 255
+
+
+def _name(area: str, index: int, view: str) -> str:
+    if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
+        return f"{area}{index}"
+    return f"{area}{index}.{view}"
