@@ -6,6 +6,7 @@ at ``--until``, or with a stall (nothing runnable, no timer, no scripted input l
 
 from __future__ import annotations
 
+import functools
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -13,8 +14,8 @@ from typing import TextIO
 
 from config import Config, ConfigError
 from config.script import Script, ScriptEntry
-from gateway.wiring import Runtime, build_runtime, parse_assignment, parse_condition
-from interpreter.runtime import ProcessState, run_virtual
+from gateway.wiring import ImageVar, Runtime, build_runtime, parse_assignment, parse_condition
+from interpreter.runtime import Process, ProcessState, run_virtual
 from interpreter.trace import Event, write_jsonl
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -31,13 +32,26 @@ class SimResult:
         return self.runtime.trace.events
 
 
+@dataclass(frozen=True, slots=True)
+class StateTrigger:
+    process: int
+    state: ProcessState
+
+
+@dataclass(frozen=True, slots=True)
+class CondTrigger:
+    var: ImageVar
+    op: str
+    value: int
+
+
 class ScriptPlayer:
     """Feeds the script's writes and SNDs into the runtime at their times."""
 
     def __init__(self, runtime: Runtime, script: Script) -> None:
         self.runtime = runtime
         self.script = script
-        self._state_watch: list[tuple[int, ProcessState, ScriptEntry]] = []
+        self._state_watch: list[tuple[StateTrigger, ScriptEntry]] = []
         for entry in script.entries:
             self._validate(entry)
         runtime.engine.state_listeners.append(self._on_state)
@@ -62,7 +76,7 @@ class ScriptPlayer:
         if entry.when is not None:
             self._parse_when(entry)
 
-    def _parse_when(self, entry: ScriptEntry) -> tuple[str, object]:
+    def _parse_when(self, entry: ScriptEntry) -> StateTrigger | CondTrigger:
         text = entry.when or ""
         words = text.split()
         if len(words) == 2 and words[0][:1].upper() == "P" and words[0][1:].isdigit():
@@ -73,42 +87,41 @@ class ScriptPlayer:
             number = int(words[0][1:])
             if not 1 <= number <= self.runtime.config.nc.processes:
                 raise self._fail(entry, "when", f"process {number} is not configured")
-            return "state", (number, ProcessState[state_name])
+            return StateTrigger(number, ProcessState[state_name])
         try:
-            return "cond", parse_condition(text)
+            var, op, value = parse_condition(text)
         except ValueError as exc:
             raise self._fail(entry, "when", str(exc)) from None
+        return CondTrigger(var, op, value)
 
     def arm(self) -> None:
         engine = self.runtime.engine
         for entry in self.script.entries:
             if entry.at is not None:
-                engine.call_at(entry.at, lambda e=entry: self._fire(e))
+                engine.call_at(entry.at, functools.partial(self._fire, entry))
                 continue
-            kind, what = self._parse_when(entry)
-            if kind == "state":
-                number, state = what  # type: ignore[misc]
-                self._state_watch.append((number, state, entry))
-                if engine.processes[number].state is state:
+            trigger = self._parse_when(entry)
+            if isinstance(trigger, StateTrigger):
+                self._state_watch.append((trigger, entry))
+                if engine.processes[trigger.process].state is trigger.state:
                     self._triggered(entry)
             else:
-                (area, index, view), op, value = what  # type: ignore[misc]
-                handle = self.runtime.image.wait(area, index, view, op, value,
-                                                 lambda e=entry: self._triggered(e))
+                area, index, view = trigger.var
+                handle = self.runtime.image.wait(area, index, view, trigger.op, trigger.value,
+                                                 functools.partial(self._triggered, entry))
                 if handle is None:
                     self._triggered(entry)
 
-    def _on_state(self, process: object, old: ProcessState) -> None:
-        number = process.number  # type: ignore[attr-defined]
-        state = process.state  # type: ignore[attr-defined]
+    def _on_state(self, process: Process, old: ProcessState) -> None:
         for watch in list(self._state_watch):
-            if watch[0] == number and watch[1] is state:
+            trigger, entry = watch
+            if trigger.process == process.number and trigger.state is process.state:
                 self._state_watch.remove(watch)
-                self._triggered(watch[2])
+                self._triggered(entry)
 
     def _triggered(self, entry: ScriptEntry) -> None:
         engine = self.runtime.engine
-        engine.call_at(engine.now + entry.after, lambda: self._fire(entry))
+        engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry))
 
     def _fire(self, entry: ScriptEntry) -> None:
         if entry.set is not None:

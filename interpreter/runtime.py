@@ -305,7 +305,9 @@ class Engine:
         self._running = False
         self._proc_waiters: dict[tuple[int, int], Process] = {}  # (waited-for, waiter)
         self._snd_pending: dict[tuple[int, int], Process] = {}  # (sender, target)
-        self._tokens: dict[tuple[int, int], int] = {}  # latched SNDs: (sender, target) -> n
+        # Latched SNDs not yet taken: (sender, target) -> where each was sent from (None: by
+        # the fieldbus), oldest first.
+        self._tokens: dict[tuple[int, int], deque[Where | None]] = {}
         self._exe_waiters: dict[int, deque[tuple[Process, Program, str]]] = {}
         self._loaded: dict[int, LoadedProgram] = {}
         self._writer_proc: Process | None = None
@@ -407,7 +409,7 @@ class Engine:
             self._end_wait_proc(t, sender)
         else:
             # An external sender cannot be made to wait: latch it, and say it is a race.
-            self._tokens[(sender, target)] = self._tokens.get((sender, target), 0) + 1
+            self._tokens.setdefault((sender, target), deque()).append(None)
             self._emit("hazard", sender, None,
                        message=f"SND from external P{sender} to P{target} before P{target} "
                        f"waits for it: latched")
@@ -683,9 +685,14 @@ class Engine:
         """Queue items (the decoder's pending ones first); NEXT, or WAIT_RETRY if full."""
         if p.pending is None:
             p.pending = items
-        capacity = max(self.settings.lookahead, 1)
+        lookahead = self.settings.lookahead
         pending = p.pending
-        while pending and len(p.queue) < capacity:
+        while pending:
+            # The queue holds the items waiting behind the one the interpolator executes;
+            # lookahead 0: the next item only when the interpolator is done with the last.
+            waiting = len(p.queue) - (1 if p.int_item is not None else 0)
+            if (not lookahead and p.queue) or (lookahead and waiting >= lookahead):
+                break
             p.queue.append(pending.pop(0))
             self._interp_run(p)
         if pending:
@@ -881,11 +888,12 @@ class Engine:
             self._deliver_snd(pending, p, wait)
             self._finish_wait(pending, wait, p.number)
             return True
-        if self._tokens.get((n, p.number)):
-            self._tokens[(n, p.number)] -= 1
-            if not self._tokens[(n, p.number)]:
+        tokens = self._tokens.get((n, p.number))
+        if tokens:
+            sent_from = tokens.popleft()
+            if not tokens:
                 del self._tokens[(n, p.number)]
-            self._deliver_snd(sender, p, None, external=sender.external)
+            self._deliver_snd(sender, p, None, where=sent_from, external=sent_from is None)
             return True
         wait = WaitRecord(WaitKind.PROC, n, code, where, self.now, stage)
         self._proc_waiters[(n, p.number)] = p
@@ -913,7 +921,7 @@ class Engine:
             self._end_wait_proc(target, p.number)
             return True
         if self.settings.snd is SndPolicy.LATCHED:
-            self._tokens[(p.number, n)] = self._tokens.get((p.number, n), 0) + 1
+            self._tokens.setdefault((p.number, n), deque()).append(where)
             self._emit("hazard", p.number, where,
                        message=f"SND to P{n} before P{n} waits for P{p.number}: on the real "
                        f"control this ordering is a race")

@@ -132,13 +132,14 @@ class IOImage:
     def write(self, changes: Iterable[tuple[str, int, str, int]], writer: str) -> list[Change]:
         """Store every value, then wake the waits they satisfy.  All or nothing.
 
-        Returns what actually changed (a value written again unchanged is not a change, but
-        it does record the writer).
+        Returns what actually changed.  Listeners hear every value written, changed or not
+        (a program writing SYVAR1=0 twice wrote twice); only changes wake waits.
         """
         items = list(changes)
         for area, index, view, value in items:
             self.check(area, index, view, value)
         done: list[Change] = []
+        written: list[Change] = []
         touched: set[_Key] = set()
         self._write_number += 1
         stamp = (self._write_number, writer)
@@ -147,15 +148,18 @@ class IOImage:
             keys = self._store(area, index, view, value, old)
             for key in self._keys(area, index, view):
                 self._writers[key] = stamp
+            change = Change(area, index, view, value, old)
+            written.append(change)
             if keys:
                 touched.update(keys)
-                done.append(Change(area, index, view, value, old))
+                done.append(change)
         if done:
             self.generation += 1
-            # Listeners (the trace) hear of the write before any wait it satisfies is woken,
-            # so that cause comes before effect in everything they record.
-            for listener in list(self._listeners):
-                listener(done, writer)
+        # Listeners (the trace) hear of the write before any wait it satisfies is woken,
+        # so that cause comes before effect in everything they record.
+        for listener in list(self._listeners):
+            listener(written, writer)
+        if touched:
             self._wake(touched)
         return done
 
@@ -239,7 +243,7 @@ class IOImage:
         return len({id(w) for bucket in self._waits.values() for w in bucket})
 
     def subscribe(self, listener: Listener) -> Callable[[], None]:
-        """Call ``listener(changes, writer)`` after every write that changed something."""
+        """Call ``listener(values, writer)`` after every write, before waits are woken."""
         self._listeners.append(listener)
         return lambda: self._listeners.remove(listener)
 

@@ -1,0 +1,78 @@
+"""A small harness for engine tests: programs from strings, the real image, the virtual clock."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from interpreter.checker import CheckContext, check_program
+from interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
+from interpreter.parser import Program
+from interpreter.runtime import Engine, RuntimeSettings, run_virtual
+from interpreter.trace import Event, Trace
+from plc.image import IOImage
+
+
+class DictLoader:
+    def __init__(self, programs: dict[str, str], processes: int, external: frozenset[int]):
+        self.programs = {name.upper(): (name, text) for name, text in programs.items()}
+        self.processes = processes
+        self.external = external
+
+    def load(self, name: str, device: str | None, process: int) -> Program:
+        found = self.programs.get(name.upper())
+        if found is None:
+            raise ProgramNotFoundError(f"program {name} is not on MP0")
+        real_name, text = found
+        program = Program(real_name, f"{real_name}.nc", text)
+        errors = [d for d in check_program(program, CheckContext(
+            processes=self.processes, external=self.external, runs_in=frozenset({process}),
+            find_program=lambda n, d: n.upper() in self.programs)) if d.is_error]
+        if errors:
+            raise ProgramSyntaxError(errors)
+        return program
+
+
+@dataclass
+class Sim:
+    engine: Engine
+    image: IOImage
+    outcome: str = ""
+    trace: Trace = field(default_factory=Trace)
+
+    def events(self, *kinds: str) -> list[Event]:
+        return [e for e in self.engine.trace.events if not kinds or e["event"] in kinds]
+
+    def first(self, kind: str, **match: Any) -> Event:
+        for e in self.events(kind):
+            if all(e.get(k) == v for k, v in match.items()):
+                return e
+        raise AssertionError(f"no {kind} event with {match}: {self.events()}")
+
+    def run(self, until: float | None = None) -> str:
+        self.outcome = run_virtual(self.engine, until)
+        return self.outcome
+
+
+def make_sim(programs: dict[str, str], **settings: Any) -> Sim:
+    settings.setdefault("processes", 5)
+    rs = RuntimeSettings(**settings)
+    image = IOImage()
+    engine = Engine(rs, image, DictLoader(programs, rs.processes, rs.external))
+    image.subscribe(lambda changes, who: [
+        engine.note_write(_name(c.area, c.index, c.view), c.value, who) for c in changes])
+    return Sim(engine, image)
+
+
+def _name(area: str, index: int, view: str) -> str:
+    if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
+        return f"{area}{index}"
+    return f"{area}{index}.{view}"
+
+
+def simulate(programs: dict[str, str], main: str = "A", until: float | None = None,
+             **settings: Any) -> Sim:
+    sim = make_sim(programs, **settings)
+    sim.engine.start(main)
+    sim.run(until)
+    return sim

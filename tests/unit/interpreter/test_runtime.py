@@ -1,0 +1,312 @@
+"""The runtime's rules (spec 2.2-2.6), each shown on a minimal program pair."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from interpreter.codes import AlarmCode
+from interpreter.runtime import ProcessState, SndPolicy, WaitKind
+
+from ...helpers import simulate
+
+
+def test_early_snd_blocks_the_sender_under_rendezvous() -> None:
+    # P2 waits for P1 only after a 1 s dwell, in motion order (#): P1's SND comes early.
+    programs = {"A": "N1(EXE,2,B)\nN2(SND,2)\nN3M30\n", "B": "N1(DLY,1)\nN2#(WAI,1)\nN3(REL)\n"}
+    sim = simulate(programs)
+    assert sim.outcome == "idle"
+    wait = sim.first("wait", proc=1)
+    assert (wait["t"], wait["n"], wait["on"]) == (0.0, 2, {"snd": 2})
+    snd = sim.first("snd", proc=1)
+    assert (snd["t"], snd["to"], snd["n"]) == (1.0, 2, 2)
+    resume = sim.first("resume", proc=1)
+    assert (resume["t"], resume["by"]) == (1.0, 2)
+    assert sim.events("hazard") == []
+
+
+def test_early_snd_leaves_a_token_and_a_hazard_under_latched() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2(SND,2)\nN3M30\n", "B": "N1(DLY,1)\nN2#(WAI,1)\nN3(REL)\n"}
+    sim = simulate(programs, snd=SndPolicy.LATCHED)
+    assert sim.outcome == "idle"
+    hazard = sim.first("hazard", proc=1)
+    assert (hazard["t"], hazard["n"]) == (0.0, 2)
+    assert [e for e in sim.events("wait") if e["proc"] == 1] == []  # never blocked
+    assert sim.first("end", proc=1)["t"] == 0.0
+    snd = sim.first("snd", proc=1)  # delivered when P2's WAI takes the token
+    assert (snd["t"], snd["to"]) == (1.0, 2)
+    assert [e for e in sim.events("wait") if e["proc"] == 2] == []
+
+
+@pytest.mark.parametrize(("code", "t_snd"), [("N3(SND,2)", 0.0), ("N3#(SND,2)", 1.0)])
+def test_hash_snd_fires_after_the_motion_above_it(code: str, t_snd: float) -> None:
+    programs = {"A": f"N1(EXE,2,B)\nN2G1X10F600\n{code}\nN4M30\n", "B": "N1(WAI,1)\nN2(REL)\n"}
+    sim = simulate(programs)
+    assert sim.first("snd", proc=1)["t"] == t_snd
+    if t_snd:  # P2 waited for it
+        assert sim.first("resume", proc=2)["t"] == t_snd
+
+
+def test_plain_code_after_a_hash_block_can_act_before_it() -> None:
+    # The hazard of spec 2.4: N4's plain SND acts at decode time, before N3's # SND.
+    programs = {"A": "N1(EXE,2,B)\nN2G1X10F600\nN3#(SND,2)\nN4(SND,3)\nN5M30\n",
+                "B": "N1(WAI,1)\nN2(REL)\n", "C": "N1(WAI,1)\nN2(REL)\n"}
+    programs["A"] = "N0(EXE,3,C)\n" + programs["A"]
+    sim = simulate(programs)
+    sends = [(e["to"], e["t"]) for e in sim.events("snd")]
+    assert sends == [(3, 0.0), (2, 1.0)]
+
+
+def test_interpolator_wait_is_the_state_the_machine_feels() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2G1X10F600\nN3#(WAI,2)\nN4G1X0\nN5M30\n",
+                "B": "N1(DLY,5)\nN2#(SND,1)\nN3(REL)\n"}
+    sim = simulate(programs, until=2.0)
+    status = sim.engine.status(1)
+    assert status.state is ProcessState.WAIT_PROC
+    assert status.wait is not None and status.wait.stage == "interpolator"
+    assert status.wait.where[1:] == (3, 3) and status.wait_kind is WaitKind.PROC
+    assert sim.engine.status(2).state is ProcessState.DWELL
+    sim.run()
+    assert sim.first("resume", proc=1)["t"] == 5.0
+    assert sim.first("end", proc=1)["t"] == 6.0
+
+
+def test_deadlock_on_a_wai_cycle_names_every_member() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2(WAI,2)\nN3M30\n", "B": "N7(WAI,1)\nN8(REL)\n"}
+    sim = simulate(programs)
+    (event,) = sim.events("deadlock")
+    assert event["message"] == "deadlock: P2 B.nc:1 N7 (WAI,1) -> P1 A.nc:2 N2 (WAI,2) -> P2"
+    assert [c["proc"] for c in event["cycle"]] == [2, 1]
+    alarms = sim.events("alarm")
+    assert {(a["proc"], a["code"]) for a in alarms} == {(1, "AL140"), (2, "AL140")}
+    assert all(a["message"] == event["message"] for a in alarms)
+    assert sim.engine.status(1).state is ProcessState.ALARM
+
+
+def test_crossing_snds_deadlock_under_rendezvous_only() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2(SND,2)\nN3(WAI,2)\nN4M30\n",
+                "B": "N1(SND,1)\nN2(WAI,1)\nN3(REL)\n"}
+    sim = simulate(programs)
+    (event,) = sim.events("deadlock")
+    assert event["message"] == "deadlock: P2 B.nc:1 N1 (SND,1) -> P1 A.nc:2 N2 (SND,2) -> P2"
+    latched = simulate(programs, snd=SndPolicy.LATCHED)
+    assert latched.outcome == "idle" and latched.events("deadlock") == []
+    assert len(latched.events("hazard")) >= 1
+
+
+def test_deadlock_found_when_the_motion_of_a_member_ends() -> None:
+    # P1 waits in its decoder while still moving: no deadlock until its motion is done.
+    programs = {"A": "N1(EXE,2,B)\nN2G1X10F600\nN3(WAI,2)\nN4M30\n", "B": "N1(WAI,1)\nN2(REL)\n"}
+    sim = simulate(programs)
+    (event,) = sim.events("deadlock")
+    assert event["t"] == 1.0
+
+
+def test_orphan_wait_is_reported() -> None:
+    sim = simulate({"A": "N1G1X1F60\nN2(WAI,3)\nN3M30\n"})
+    (alarm,) = sim.events("alarm")
+    assert alarm["code"] == "AL141" and alarm["proc"] == 1 and alarm["n"] == 2
+    assert alarm["message"].startswith("orphan wait: P1 A.nc:2 N2 (WAI,3) waits for P3")
+
+
+def test_wait_on_an_idle_process_that_another_will_start_is_no_orphan() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2(WAI,3)\nN3M30\n", "B": "N1(DLY,1)\nN2#(EXE,3,C)\nN3(REL)\n",
+                "C": "N1(SND,1)\nN2(REL)\n"}
+    sim = simulate(programs)
+    assert sim.outcome == "idle" and sim.events("alarm") == []
+    assert sim.first("resume", proc=1) == {**sim.first("resume", proc=1), "t": 1.0, "by": 3}
+
+
+def test_stall_when_nothing_can_change() -> None:
+    sim = simulate({"A": "N1(WAI,SA10=1)\nN2M30\n"})
+    assert sim.outcome == "blocked"
+    assert [b["proc"] for b in sim.engine.blocked()] == [1]
+    assert "(WAI,SA10=1) waits for SA10=1 (now 0)" in sim.engine.blocked()[0]["reason"]
+
+
+def test_exe_waits_for_a_busy_process_then_starts_it() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2(EXE,2,C)\nN3M30\n", "B": "N1(DLY,2)\nN2(REL)\n",
+                "C": "N1(REL)\n"}
+    sim = simulate(programs)
+    wait = sim.first("wait", proc=1)
+    assert (wait["t"], wait["on"]) == (0.0, {"exe": 2})
+    starts = [(e["t"], e["proc"], e["prog"], e["by"]) for e in sim.events("start")]
+    assert starts == [(0.0, 1, "A", "operator"), (0.0, 2, "B", 1), (2.0, 2, "C", 1)]
+    assert sim.first("resume", proc=1)["by"] == 2
+
+
+@pytest.mark.parametrize(
+    ("programs", "code", "line"),
+    [
+        ({"A": "N1E1=0\nN2E2=5/E1\n"}, AlarmCode.DIVISION_BY_ZERO, 2),
+        ({"A": "N1E1=9\nN2(SND,E1)\n"}, AlarmCode.PROCESS_OUT_OF_RANGE, 2),
+        ({"A": "N1(SND,2)\n"}, AlarmCode.SND_TO_IDLE, 1),
+        ({"A": "N1(EXE,2,BAD)\n", "BAD": "N1GXY\n"}, AlarmCode.PROGRAM_INVALID, 1),
+        ({"A": "N1G1X10\n"}, AlarmCode.NO_FEED, 1),
+        ({"A": "N1E1=40000\nN2SYVAR1=E1\n"}, AlarmCode.VALUE_OUT_OF_RANGE, 2),
+        ({"A": "N1E1=1\nN2(EXE,E1,A)\n"}, AlarmCode.EXE_ON_SELF, 2),
+        ({"A": "N1E1=2.5\nN2(WAI,E1)\n"}, AlarmCode.BAD_ARGUMENT, 2),
+    ],
+)
+def test_runtime_errors_become_alarms_with_positions(programs: dict[str, str], code: AlarmCode,
+                                                     line: int) -> None:
+    sim = simulate(programs)
+    (alarm,) = sim.events("alarm")
+    assert (alarm["code"], alarm["proc"], alarm["line"]) == (code.label, 1, line)
+    assert sim.engine.status(1).alarm_code == int(code)
+
+
+def test_program_gone_from_storage_at_exe_time_is_an_alarm_of_the_caller() -> None:
+    from ...helpers import make_sim
+
+    sim = make_sim({"A": "N1(DLY,1)\nN2#(EXE,2,GONE)\n", "GONE": "N1(REL)\n"})
+    sim.engine.start("A")
+    del sim.engine.loader.programs["GONE"]  # type: ignore[attr-defined]
+    sim.run()
+    (alarm,) = sim.events("alarm")
+    assert (alarm["code"], alarm["proc"], alarm["line"], alarm["t"]) == ("AL120", 1, 2, 1.0)
+    assert alarm["message"] == "program GONE is not on MP0"
+
+
+def test_snd_to_an_idle_process_message() -> None:
+    sim = simulate({"A": "N1(SND,2)\n"})
+    assert sim.events("alarm")[0]["message"] == "SND to process 2, which runs no program"
+
+
+@pytest.mark.parametrize(
+    ("text", "seconds"),
+    [
+        ("N1G1X100F6000\n", 1.0),
+        ("N1G0X1000\n", 6.0),
+        ("N1G1X3Y4F300\n", 1.0),  # 5 mm at 300 mm/min
+        ("N1G91G1X10F600\nN2X10\n", 2.0),  # incremental
+        ("N1G1X10F600\nN2G2X10Y0I-5J0\n", 1.0 + (2 * math.pi * 5) / 600 * 60),  # full circle
+        ("N1G1X10F600\nN2G3X0Y10I-10J0\n", 1.0 + (math.pi / 2 * 10) / 10),  # quarter circle
+        ("N1G1X10F600\nN2G2X0Y10R-10\n", 1.0 + (1.5 * math.pi * 10) / 10),  # 3/4 circle by R
+        ("N1G1X10F600\nN2G3X0Y10I-10J0Z10\n",
+         1.0 + math.hypot(math.pi / 2 * 10, 10) / 10),  # helix
+        ("N1T1.1M6\n", 2.0),
+        ("N1(DLY,0.5)\nN2(DLY,E1+0.25)\n", 0.75),
+        ("N1M3S1000\n", 0.0),
+    ],
+)
+def test_motion_timing(text: str, seconds: float) -> None:
+    sim = simulate({"A": text})
+    assert sim.outcome == "idle"
+    assert sim.first("end", proc=1)["t"] == pytest.approx(seconds, abs=1e-6)
+
+
+def test_lookahead_bounds_the_decoder() -> None:
+    program = {"A": "N1(EXE,2,B)\nN2G1X10F600\nN3X20\nN4X30\nN5(SND,2)\nN6M30\n",
+               "B": "N1(WAI,1)\nN2(REL)\n"}
+    times = {la: simulate(program, lookahead=la).first("snd", proc=1)["t"] for la in (0, 1, 2, 16)}
+    # lookahead 0: each item finishes before the next block; 1: N4 waits for N2's end.
+    assert times == {0: 3.0, 1: 1.0, 2: 0.0, 16: 0.0}
+
+
+def test_sync_reads_wait_for_the_motion_queue() -> None:
+    programs = {"A": "N1G1X10F600\nN2SYVAR2=SYVAR1\nN3M30\n"}
+    for sync, expected in ((False, 0), (True, 7)):
+        sim = simulate_with_write(programs, sync_reads=sync)
+        assert sim.first("write", var="SYVAR2")["value"] == expected
+
+
+def simulate_with_write(programs: dict[str, str], **settings: object):  # type: ignore[no-untyped-def]
+    from ...helpers import make_sim
+
+    sim = make_sim(programs, **settings)
+    sim.engine.call_at(0.5, lambda: sim.image.write([("SYVAR", 1, "IN", 7)], "plc"))
+    sim.engine.start("A")
+    sim.run()
+    return sim
+
+
+def test_wait_timeout_raises_an_alarm_with_the_why_record() -> None:
+    sim = simulate({"A": "N1(WAI,SK3=1)\nN2M30\n"}, wait_timeout_s=2.5)
+    (alarm,) = sim.events("alarm")
+    assert (alarm["t"], alarm["code"]) == (2.5, "AL143")
+    assert "P1 A.nc:1 N1 (WAI,SK3=1) waits for SK3=1 (now 0)" in alarm["message"]
+
+
+def test_why_record_names_value_and_last_writer() -> None:
+    from ...helpers import make_sim
+
+    sim = make_sim({"A": "N1(WAI,SYVAR4>9)\nN2M30\n"})
+    sim.image.write([("SYVAR", 4, "IN", 3)], "modbus 127.0.0.1:51512")
+    sim.engine.start("A")
+    sim.run()
+    wait = sim.engine.status(1).wait
+    assert wait is not None
+    assert (wait.kind, wait.cond, wait.value, wait.writer) == (
+        WaitKind.COND, "SYVAR4>9", 3, "modbus 127.0.0.1:51512")
+    assert wait.where == ("A.nc", 1, 1)
+    sim.image.write([("SYVAR", 4, "IN", 10)], "plc")
+    sim.run()
+    assert sim.outcome == "idle" and sim.first("resume", proc=1)["by"] == "cond"
+
+
+def test_external_process_snd_and_mailbox() -> None:
+    from ...helpers import make_sim
+
+    sim = make_sim({"A": "N1(SND,4)\nN2(WAI,4)\nN3M30\n"}, external=frozenset({4}))
+    sim.engine.start("A")
+    sim.run()
+    assert sim.first("snd", proc=1)["to"] == 4  # published, never blocks
+    assert sim.engine.status(1).state is ProcessState.WAIT_PROC
+    sim.engine.external_snd(4, 1)
+    sim.run()
+    assert sim.first("resume", proc=1)["by"] == 4 and sim.outcome == "idle"
+    with pytest.raises(ValueError, match="not external"):
+        sim.engine.external_snd(2, 1)
+
+
+def test_e_parameters_are_per_process_syvars_shared() -> None:
+    programs = {"A": "N1E1=5\nN2SYVAR1=E1\nN3(EXE,2,B)\nN4M30\n", "B": "N1SYVAR2=E1+SYVAR1\n"}
+    sim = simulate(programs)
+    assert sim.first("write", var="SYVAR2")["value"] == 5  # B's E1 is 0, SYVAR1 is 5
+
+
+def test_assignment_rounds_half_away_from_zero() -> None:
+    sim = simulate({"A": "N1E8=10.3+20.7\nN2SYVAR2=E8\nN3SYVAR3=-2.5\nN4SYVAR4=2.5\n"})
+    values = [e["value"] for e in sim.events("write")]
+    assert values == [31, -3, 3]
+
+
+def test_repeat_and_branches() -> None:
+    text = ('N1E1=0\n"TOP"\nN2(RPT,3)\nN3(RPT,2)\nN4E1=E1+1\nN5(ERP)\nN6(ERP)\n'
+            "N7(BLT,E1,12,TOP)\nN8SYVAR1=E1\nN9(BNC,END)\nN10SYVAR1=99\n\"END\"\nN11M30\n")
+    sim = simulate({"A": text})
+    assert [e["value"] for e in sim.events("write")] == [12]
+
+
+def test_alarm_stops_motion_and_reset_clears_everything() -> None:
+    programs = {"A": "N1(EXE,2,B)\nN2G1X100F600\nN3E1=1/0\n", "B": "N1(WAI,1)\nN2(REL)\n"}
+    sim = simulate(programs, lookahead=0)
+    assert sim.engine.status(1).state is ProcessState.ALARM
+    assert sim.outcome == "blocked"  # P2 waits for P1, which is in ALARM
+    sim.engine.reset()
+    assert all(sim.engine.status(k).state is ProcessState.IDLE for k in range(1, 6))
+    assert [e["how"] for e in sim.events("end")] == ["reset", "reset"]
+    sim.engine.start("A")  # it can run again
+    assert sim.engine.status(1).state is ProcessState.RUNNING
+
+
+def test_feed_hold_pauses_motion() -> None:
+    from ...helpers import make_sim
+
+    sim = make_sim({"A": "N1G1X100F6000\nN2M30\n"})  # 1 s
+    sim.engine.start("A")
+    sim.engine.call_at(0.25, lambda: sim.engine.hold(True))
+    sim.engine.call_at(2.25, lambda: sim.engine.hold(False))
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(3.0)
+    position = sim.engine.status(1).position
+    assert position[0] == pytest.approx(100.0)
+
+
+def test_blocks_counter_and_programs_run() -> None:
+    sim = simulate({"A": "; comment\nN1G1X1F60\n\nN2(RPT,3)\nN3E1=E1+1\nN4(ERP)\nN5M30\n"})
+    stats = sim.engine.processes[1].stats
+    assert stats.blocks == 1 + 1 + 3 * 2 + 1  # N1, N2, 3x(N3, N4), N5
+    assert stats.programs == 1
