@@ -27,9 +27,10 @@ import enum
 import functools
 import heapq
 import itertools
+import operator
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Final
 
 from interpreter.codes import AlarmCode
@@ -40,6 +41,7 @@ from interpreter.motion import AXES, Modal, Move, plan_move
 from interpreter.nodes import (
     Assign,
     Branch,
+    BranchOp,
     Display,
     Dwell,
     EndRepeat,
@@ -57,7 +59,7 @@ from interpreter.nodes import (
     WaitProc,
     Word,
 )
-from interpreter.parser import Program
+from interpreter.parser import Program, gc_paused
 from interpreter.ports import Cancellable, ImagePort, ProgramLoader
 from interpreter.trace import Trace
 
@@ -90,6 +92,9 @@ _STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                          WaitKind.COND: ProcessState.WAIT_COND,
                          WaitKind.SND: ProcessState.WAIT_SND,
                          WaitKind.EXE: ProcessState.WAIT_EXE}
+
+
+_ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
 
 
 class SndPolicy(enum.Enum):
@@ -134,7 +139,6 @@ class WaitRecord:
     writer: str | None = None
     handle: Cancellable | None = None
     timeout: _Timer | None = None
-    resume: Callable[[Any], None] = field(default=lambda by: None)
 
     def describe(self, proc: int) -> str:
         file, line, n = self.where
@@ -295,6 +299,7 @@ class Engine:
         self.loader = loader
         self.trace = trace if trace is not None else Trace()
         self.now = 0.0
+        self._wait_timeout_s = settings.wait_timeout_s
         self.processes = {
             k: Process(k, k in settings.external, settings.e_params)
             for k in range(1, settings.processes + 1)
@@ -621,35 +626,42 @@ class Engine:
     def _run_decoder(self, p: Process) -> None:
         loaded = p.loaded
         assert loaded is not None
-        lines = len(loaded.blocks)
+        blocks = loaded.blocks
+        lines = len(blocks)
         budget = self.settings.slice_blocks
         skip_deleted = self.settings.optional_skip
+        stats = p.stats
         try:
             while True:
                 block = p.block
                 if block is None:
-                    if p.pc >= lines:
+                    pc = p.pc
+                    if pc >= lines:
                         self._decoder_end(p, "eof", (loaded.file, lines, None))
                         return
-                    block = loaded.blocks[p.pc]
-                    if block is None:
-                        block = self._compile(loaded, p.pc)
-                    if skip_deleted and loaded.program.block(p.pc).deleted:
+                    block = blocks[pc] or self._compile(loaded, pc)
+                    if skip_deleted and loaded.program.block(pc).deleted:
                         p.pc += 1
                         continue
                     if block.counted:
-                        p.stats.blocks += 1
+                        stats.blocks += 1
                     p.block = block
-                    p.op_i = 0
+                    i = 0
+                else:
+                    i = p.op_i
                 ops = block.ops
-                while p.op_i < len(ops):
-                    result = ops[p.op_i](p)
+                count = len(ops)
+                # The op index lives in a local; p.op_i is written only when the decoder stops
+                # (ops never read it).
+                while i < count:
+                    result = ops[i](p)
                     if result == NEXT:
-                        p.op_i += 1
+                        i += 1
                     elif result == WAIT_NEXT:
-                        p.op_i += 1
+                        p.op_i = i + 1
                         return
                     elif result == WAIT_RETRY:
+                        p.op_i = i
                         return
                     elif result == JUMP:
                         break
@@ -840,11 +852,10 @@ class Engine:
         if wait.kind is WaitKind.COND:
             on = {"cond": wait.cond, "value": _json_number(wait.value)}
         else:
-            on = {{WaitKind.PROC: "proc", WaitKind.SND: "snd",
-                   WaitKind.EXE: "exe"}[wait.kind]: wait.target}
+            on = {_ON_KEY[wait.kind]: wait.target}
         self._emit("wait", p.number, wait.where, on=on)
-        if self.settings.wait_timeout_s > 0:
-            wait.timeout = self._schedule(self.settings.wait_timeout_s,
+        if self._wait_timeout_s:
+            wait.timeout = self._schedule(self._wait_timeout_s,
                                           lambda: self._wait_timed_out(p, wait))
         self._update_state(p)
 
@@ -1105,6 +1116,14 @@ class Engine:
     def _check_deadlock(self, start: Process) -> None:
         if not self._stuck(start):
             return
+        # Most waits are on a process that can still move: no cycle through it.
+        stuck = self._stuck
+        procs = self.processes
+        if not ((start.dec_wait is not None and start.dec_wait.target
+                 and stuck(procs[start.dec_wait.target]))
+                or (start.int_wait is not None and start.int_wait.target
+                    and stuck(procs[start.int_wait.target]))):
+            return
         path: list[tuple[Process, WaitRecord]] = []
         on_path: set[int] = set()
 
@@ -1213,6 +1232,9 @@ class _BlockCompiler:
     # ---- evaluation helpers (decode time) ---------------------------------------------
 
     def _int_arg(self, expr: Expr, what: str) -> Callable[[Process], int]:
+        if isinstance(expr, Num) and expr.value == int(expr.value):
+            constant = int(expr.value)
+            return lambda p: constant
         fn = compile_expr(expr)
         read = self.engine.image.read
 
@@ -1268,9 +1290,17 @@ class _BlockCompiler:
         return cond
 
     def _wait_op(self, item: WaitProc | WaitCond) -> Op:
-        action = self._wait_action(item)
         engine = self.engine
         where = self.where
+        if isinstance(item, WaitProc):  # the hot path of a SND/WAI exchange: no dispatch
+            n = self._int_arg(item.process, "process number")
+            code = format_item(item)
+            wai_proc = engine._wai_proc
+
+            def wait_proc(p: Process) -> int:
+                return NEXT if wai_proc(p, "decoder", n(p), code, where) else WAIT_NEXT
+            return wait_proc
+        action = self._wait_action(item)
 
         def wait(p: Process) -> int:
             if engine._sync_action(p, "decoder", action(p), where):
@@ -1403,7 +1433,15 @@ class _BlockCompiler:
         engine = self.engine
         where = self.where
         labels = self.loaded.program.labels
-        if isinstance(item, Snd | Exe | Display):
+        if isinstance(item, Snd):  # the hot path of a SND/WAI exchange: no dispatch
+            n = self._int_arg(item.process, "process number")
+            text = format_item(item)
+            snd = engine._snd
+
+            def send(p: Process) -> int:
+                return NEXT if snd(p, "decoder", n(p), text, where) else WAIT_NEXT
+            return send
+        if isinstance(item, Exe | Display):
             action = self._code_action(item)
 
             def code(p: Process) -> int:
@@ -1416,18 +1454,24 @@ class _BlockCompiler:
             label = item.label
             if isinstance(item, Branch):
                 left, right = compile_expr(item.left), compile_expr(item.right)
-                holds = item.op.holds
+                holds = _BRANCH_TESTS[item.op]
             read = engine.image.read
 
             def jump(p: Process) -> int:
-                if isinstance(item, Branch) and not holds(left(p.E, read), right(p.E, read)):
-                    return NEXT
                 if target is None:
                     raise RuntimeAlarm(AlarmCode.UNKNOWN_LABEL, f'label "{label}" is not defined')
                 p.pc = target
                 p.block = None
                 return JUMP
-            return jump
+
+            if isinstance(item, Jump):
+                return jump
+
+            def branch(p: Process) -> int:
+                if holds(left(p.E, read), right(p.E, read)):
+                    return jump(p)
+                return NEXT
+            return branch
         if isinstance(item, Repeat):
             count = self._int_arg(item.count, "repeat count")
             index = self.index
@@ -1455,6 +1499,12 @@ class _BlockCompiler:
         return end_repeat
 
 
+_BRANCH_TESTS: Final[dict[BranchOp, Callable[[float, float], bool]]] = {
+    BranchOp.EQ: operator.eq, BranchOp.NE: operator.ne, BranchOp.GT: operator.gt,
+    BranchOp.GE: operator.ge, BranchOp.LT: operator.lt, BranchOp.LE: operator.le,
+}
+
+
 def _int16(value: float, name: str) -> int:
     stored = round_half_away(value)
     if not -32768 <= stored <= 32767:
@@ -1469,7 +1519,16 @@ def run_virtual(engine: Engine, until: float | None = None,
 
     Returns ``"idle"``, ``"until"`` or ``"blocked"`` (nothing runnable and no timer left
     while a process still has a program: the caller reports a stall).
+
+    The cyclic collector is paused meanwhile (see :func:`interpreter.parser.gc_paused`): a
+    simulation is a bounded batch job whose trace only grows.
     """
+    with gc_paused():
+        return _run_virtual(engine, until, before_time)
+
+
+def _run_virtual(engine: Engine, until: float | None,
+                 before_time: Callable[[float], None] | None) -> str:
     engine.run_until_blocked()
     while True:
         if engine.all_idle and not engine.has_runnable:

@@ -4,6 +4,10 @@ Events are dicts with ``seq``, ``t`` (simulated seconds, rounded to 6 decimals),
 ``proc`` and, where a block is involved, ``prog``, ``line``, ``n``; then the event's own
 fields.  :func:`to_jsonl` renders one event as a JSON line with a fixed key order and ``t``
 printed with exactly six decimals, so that two runs of one scenario give byte-identical files.
+
+Recording is on the hot path of every SND and WAI, so an event is kept as a compact tuple and
+turned into its dict only when someone reads :attr:`Trace.events` (or a listener is
+subscribed, which gets the dict at once).
 """
 
 from __future__ import annotations
@@ -13,38 +17,55 @@ from collections.abc import Callable, Iterable
 from typing import Any, TextIO
 
 Event = dict[str, Any]
+Where = tuple[str, int, int | None]
+_Raw = tuple[int, float, str, int, Where | None, dict[str, Any]]
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3).
 COUNTED = frozenset({"start", "end", "wait", "resume", "snd", "alarm"})
+
+
+def _as_dict(raw: _Raw) -> Event:
+    seq, t, event, proc, where, fields = raw
+    if where is None:
+        return {"seq": seq, "t": round(t, 6), "event": event, "proc": proc, **fields}
+    return {"seq": seq, "t": round(t, 6), "event": event, "proc": proc, "prog": where[0],
+            "line": where[1], "n": where[2], **fields}
 
 
 class Trace:
     """Collects events; listeners see each event as it is recorded."""
 
     def __init__(self, keep: bool = True) -> None:
-        self.events: list[Event] = []
         self.keep = keep
         self.seq = 0
         self.counter = 0  # the fieldbus event counter
+        self._raw: list[_Raw] = []
+        self._dicts: list[Event] = []
         self._listeners: list[Callable[[Event], None]] = []
+
+    @property
+    def events(self) -> list[Event]:
+        """Every event recorded so far, as dicts (built on first read)."""
+        done = len(self._dicts)
+        if done < len(self._raw):
+            self._dicts.extend(_as_dict(raw) for raw in self._raw[done:])
+        return self._dicts
 
     def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]:
         self._listeners.append(listener)
         return lambda: self._listeners.remove(listener)
 
-    def record(self, t: float, event: str, proc: int, where: tuple[str, int, int | None] | None,
-               fields: dict[str, Any]) -> Event:
+    def record(self, t: float, event: str, proc: int, where: Where | None,
+               fields: dict[str, Any]) -> None:
         self.seq += 1
-        entry: Event = {"seq": self.seq, "t": round(t, 6), "event": event, "proc": proc}
-        if where is not None:
-            entry["prog"], entry["line"], entry["n"] = where
-        entry.update(fields)
+        raw = (self.seq, t, event, proc, where, fields)
         if event in COUNTED:
             self.counter = (self.counter + 1) & 0xFFFFFFFF
         if self.keep:
-            self.events.append(entry)
-        for listener in self._listeners:
-            listener(entry)
-        return entry
+            self._raw.append(raw)
+        if self._listeners:
+            entry = _as_dict(raw)
+            for listener in self._listeners:
+                listener(entry)
 
 
 def to_jsonl(event: Event) -> str:
