@@ -14,6 +14,7 @@ from config.loader import (
     SndPolicy,
     StorageConfig,
     default_config_path,
+    default_script_path,
     load_config,
 )
 
@@ -28,5 +29,6 @@ __all__ = [
     "SndPolicy",
     "StorageConfig",
     "default_config_path",
+    "default_script_path",
     "load_config",
 ]

@@ -108,6 +108,11 @@ def default_config_path() -> Path:
     return Path(str(resources.files("config").joinpath("default.toml")))
 
 
+def default_script_path() -> Path:
+    """The PLC script of the built-in default (the manual's SA10 for PROG92's N40)."""
+    return Path(str(resources.files("config").joinpath("default_script.toml")))
+
+
 def load_config(
     path: str | Path | None = None, overrides: Mapping[str, Any] | None = None
 ) -> Config:

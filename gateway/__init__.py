@@ -1,9 +1,11 @@
 """ncgate's composition root and fieldbus adapters.
 
 ``gateway`` wires the packages together: it may import ``plc``, ``interpreter`` and
-``config``; none of them imports ``gateway``.
+``config``; none of them imports ``gateway``.  The public API (spec 4.5):
+``from gateway import Gateway, load_config``.
 """
 
 from config import load_config
+from gateway.app import Gateway, GatewayError, ProcessAlarmError, WaitIdleTimeout
 
-__all__ = ["load_config"]
+__all__ = ["Gateway", "GatewayError", "ProcessAlarmError", "WaitIdleTimeout", "load_config"]

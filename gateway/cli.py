@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from config import ConfigError, load_config
+from config import ConfigError, default_script_path, load_config
 from gateway.checking import UsageError, check_files, expand, storage_files
 from interpreter.diagnostics import InterpreterError, ProgramError
 
@@ -46,7 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("main", nargs="?", metavar="MAIN",
                      help="the main program (default: the config's nc.main)")
     sim.add_argument("--config", metavar="C", help="config file (default: built-in)")
-    sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML)")
+    sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML); "
+                     "default: none, or the built-in one with the built-in config")
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
     sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
@@ -107,7 +108,8 @@ def _sim(args: argparse.Namespace) -> int:
     if args.until is not None and args.until < 0:
         raise UsageError("--until: expected a time >= 0")
     config = load_config(args.config)
-    script = load_script(args.script)
+    # The built-in config comes with its PLC script; a user's config with none unless given.
+    script = load_script(args.script if args.script or args.config else default_script_path())
     result = run_sim(config, args.main or config.nc.main, script, args.until)
     report(result, sys.stdout)
     if args.trace:

@@ -17,6 +17,7 @@ from config.script import Script, ScriptEntry
 from gateway.wiring import ImageVar, Runtime, build_runtime, parse_assignment, parse_condition
 from interpreter.runtime import Process, ProcessState, run_virtual
 from interpreter.trace import Event, write_jsonl
+from plc.image import PlcError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -65,7 +66,7 @@ class ScriptPlayer:
             try:
                 (area, index, view), value = parse_assignment(entry.set)
                 self.runtime.image.check(area, index, view, value)
-            except ValueError as exc:
+            except (ValueError, PlcError) as exc:
                 raise self._fail(entry, "set", str(exc)) from None
         if entry.sender is not None:
             if entry.sender not in config.nc.external:
@@ -90,7 +91,8 @@ class ScriptPlayer:
             return StateTrigger(number, ProcessState[state_name])
         try:
             var, op, value = parse_condition(text)
-        except ValueError as exc:
+            self.runtime.image.read(*var)
+        except (ValueError, PlcError) as exc:
             raise self._fail(entry, "when", str(exc)) from None
         return CondTrigger(var, op, value)
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from config import Config, SndPolicy
 from gateway.programs import ProgramStore
 from interpreter.evaluate import RuntimeAlarm, compile_expr
-from interpreter.nodes import Assign, VarKind, VarRef, WaitCond
+from interpreter.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
 from interpreter.parser import LineError, parse_block
 from interpreter.runtime import Engine, RuntimeSettings
 from interpreter.runtime import SndPolicy as RuntimeSndPolicy
@@ -81,6 +81,8 @@ def parse_condition(text: str) -> tuple[ImageVar, str, int]:
     (item,) = block.items
     if not isinstance(item, WaitCond):
         raise ValueError(f"{text!r} is not a condition on SA, SK or SYVAR")
+    if item.var.view is View.BIT and item.op in (CompareOp.GT, CompareOp.LT):
+        raise ValueError(f"{item.var.name} is a bit, only = and # compare it")
     try:
         value = compile_expr(item.value)([], _no_read)
     except (RuntimeAlarm, IndexError):

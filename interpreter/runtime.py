@@ -443,16 +443,20 @@ class Engine:
 
     def advance_to(self, t: float) -> None:
         """Let time pass to ``t``: fire the timers due, then run what became runnable."""
-        if t > self.now:
-            self.now = t
         timers = self._timers
-        while timers and timers[0][0] <= self.now:
-            _, _, timer = heapq.heappop(timers)
+        while timers and timers[0][0] <= t:
+            due, _, timer = heapq.heappop(timers)
             callback = timer.callback
             if callback is not None:
+                # What a timer causes happens at its time, even if the wall clock that drives
+                # the engine got round to it a little later.
+                if due > self.now:
+                    self.now = due
                 timer.callback = None
                 callback()
                 self.run_until_blocked()
+        if t > self.now:
+            self.now = t
         self.run_until_blocked()
 
     def call_at(self, t: float, callback: Callable[[], None]) -> Cancellable:

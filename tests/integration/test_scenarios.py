@@ -214,9 +214,11 @@ def test_stall_report_names_the_blocked(tmp_path: Path,
     assert "P1 A.nc:1 N7 (WAI,SA10=1) waits for SA10=1 (now 0)" in out
 
 
-def test_builtin_default_simulates_with_no_files() -> None:
-    # `ncgate sim PROG91` works on a fresh install; with no PLC script nobody sets SA10, so
-    # the closed simulation stalls at P2's N40 -- and says so.
+def test_builtin_default_simulates_with_no_files(capsys: pytest.CaptureFixture[str]) -> None:
+    # `ncgate sim PROG91` works on a fresh install: the built-in config brings its PLC script.
+    assert main(["sim", "PROG91"]) == 0
+    assert "every program ended" in capsys.readouterr().out
+    # Without a PLC nobody sets SA10: the closed simulation stalls at P2's N40, and says so.
     result = run_sim(load_config(None), "PROG91", load_script(None))
     assert result.outcome == "stall"
     (stall,) = [e for e in result.events if e["event"] == "stall"]

@@ -1,0 +1,241 @@
+"""The gateway in a Python program or a test (spec 4.5): the soft PLC's image, the processes
+on the wall clock, and (in later issues) the Modbus server and the CANopen node.
+
+    from gateway import Gateway, load_config
+    async with Gateway(load_config(None)) as gw:
+        await gw.start("PROG91")
+        await gw.wait_state(2, "WAIT_COND")
+        gw.write("SA10", 1)                    # as a PLC would
+        await gw.wait_idle(timeout_s=30)
+        events = gw.trace
+
+The engine is driven by :class:`WallClockDriver`: an engine timer becomes one ``call_at`` on
+the loop; a write from outside wakes its waits at once and schedules a run with
+``call_soon`` -- event-driven, no polling between a write and the wake.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from types import TracebackType
+from typing import Any
+
+from config import Config, load_config
+from gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
+from interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
+from interpreter.trace import Event
+
+
+class GatewayError(Exception):
+    """Root of the gateway's exceptions."""
+
+
+class WaitIdleTimeout(GatewayError, TimeoutError):
+    """``wait_idle``/``wait_state`` ran out of time; the message has the why-records."""
+
+
+class ProcessAlarmError(GatewayError, RuntimeError):
+    """Every process stopped, some in ALARM: the message has the alarms."""
+
+
+class WallClockDriver:
+    """Runs an :class:`Engine` on the asyncio loop's clock, ``time_scale`` times faster."""
+
+    def __init__(self, engine: Engine, time_scale: float,
+                 loop: asyncio.AbstractEventLoop) -> None:
+        self.engine = engine
+        self.scale = time_scale
+        self.loop = loop
+        self.t0 = loop.time()
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+        self._soon: asyncio.Handle | None = None
+        self.changed = asyncio.Event()
+        engine.on_kick = self.kick
+        engine.on_timer = lambda t: self.kick()
+
+    def now(self) -> float:
+        """Simulated seconds since the driver started."""
+        return (self.loop.time() - self.t0) * self.scale
+
+    def kick(self) -> None:
+        if self._soon is None:
+            self._soon = self.loop.call_soon(self._run)
+
+    def _run(self, due: float = 0.0) -> None:
+        self._soon = None
+        self._timer = None if due else self._timer
+        # A loop timer may fire a hair early: never let time run backwards past what is due.
+        self.engine.advance_to(max(self.now(), due))
+        self._arm()
+        self.changed.set()
+
+    def _arm(self) -> None:
+        t = self.engine.next_timer()
+        if t is None:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            return
+        if self._timer is not None and self._timer_at == t:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = t
+        self._timer = self.loop.call_at(self.t0 + t / self.scale, self._run, t)
+
+    def close(self) -> None:
+        for handle in (self._timer, self._soon):
+            if handle is not None:
+                handle.cancel()
+        self.engine.on_kick = None
+        self.engine.on_timer = None
+
+
+class Gateway:
+    """Soft PLC + processes (+ fieldbus servers in later issues), as an async context."""
+
+    def __init__(self, config: Config | None = None) -> None:
+        self.config = config if config is not None else load_config(None)
+        self._runtime: Runtime | None = None
+        self._driver: WallClockDriver | None = None
+
+    async def __aenter__(self) -> Gateway:
+        runtime = build_runtime(self.config, closed=False)
+        driver = WallClockDriver(runtime.engine, self.config.nc.time_scale,
+                                 asyncio.get_running_loop())
+        runtime.engine.state_listeners.append(self._on_state)
+        self._runtime, self._driver = runtime, driver
+        if self.config.nc.autostart:
+            await self.start()
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None,
+                        exc: BaseException | None, tb: TracebackType | None) -> None:
+        if self._driver is not None:
+            self._driver.close()
+        self._driver = None
+
+    # -- what is inside -------------------------------------------------------------------
+
+    @property
+    def runtime(self) -> Runtime:
+        if self._runtime is None:
+            raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+        return self._runtime
+
+    @property
+    def engine(self) -> Engine:
+        return self.runtime.engine
+
+    @property
+    def trace(self) -> list[Event]:
+        """The events of spec 4.4, as dicts."""
+        return self.runtime.trace.events
+
+    def status(self, process: int) -> ProcessStatus:
+        return self.engine.status(process)
+
+    # -- acting as the operator and as a PLC -----------------------------------------------
+
+    def _sync_clock(self) -> None:
+        assert self._driver is not None
+        self.engine.set_time(self._driver.now())
+
+    def _settle(self) -> None:
+        """Run what an outside input made runnable, at the input's time."""
+        assert self._driver is not None
+        self.engine.run_until_blocked()
+        self._driver.kick()
+
+    async def start(self, name: str | None = None, process: int = 1) -> None:
+        """The operator's SPG: start NAME (default: the config's main) in a process."""
+        name = name or self.config.nc.main
+        # Load (parse and check) before reading the clock: the program starts when it is ready.
+        self.runtime.store.load(name, None, process)
+        self._sync_clock()
+        self.engine.start(name, process)
+        self._settle()
+
+    def write(self, var: str, value: int, who: str = "api") -> None:
+        """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``) as ``who``."""
+        (area, index, view), number = parse_assignment(f"{var}={value}")
+        self._sync_clock()
+        self.runtime.image.write([(area, index, view, number)], who)
+        self._settle()
+
+    def read(self, var: str) -> int:
+        (area, index, view), _ = parse_assignment(f"{var}=0")
+        return self.runtime.image.read(area, index, view)
+
+    def send(self, sender: int, target: int) -> None:
+        """An SND in the name of external process ``sender``."""
+        self._sync_clock()
+        self.engine.external_snd(sender, target)
+        self._settle()
+
+    def command(self, word: int) -> None:
+        """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
+        self._sync_clock()
+        if word == 1:
+            self.engine.cycle_start()
+        elif word == 2:
+            self.engine.hold(True)
+        elif word == 3:
+            self.engine.reset()
+        else:
+            raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
+        self._settle()
+
+    # -- waiting ------------------------------------------------------------------------------
+
+    def _on_state(self, process: Process, old: ProcessState) -> None:
+        if self._driver is not None:
+            self._driver.changed.set()
+
+    async def _until(self, done: Any, timeout_s: float, what: str) -> None:
+        assert self._driver is not None
+        changed = self._driver.changed
+        try:
+            async with asyncio.timeout(timeout_s):
+                while not done():
+                    changed.clear()
+                    await changed.wait()
+        except TimeoutError:
+            raise WaitIdleTimeout(f"{what} not reached in {timeout_s:g} s\n"
+                                  + self.describe_blocked()) from None
+
+    async def wait_idle(self, timeout_s: float = 30.0) -> None:
+        """Until every process is IDLE; raises with the why-records or the alarms."""
+        engine = self.engine
+
+        def idle() -> bool:
+            alarms = [p for p in engine.processes.values() if p.alarm is not None]
+            if alarms and all(p.loaded is None or p.alarm is not None
+                              for p in engine.processes.values()):
+                raise ProcessAlarmError("\n".join(
+                    f"P{p.number} {p.alarm[1]}" for p in alarms if p.alarm))
+            return engine.all_idle and not engine.has_runnable
+
+        await self._until(idle, timeout_s, "every process IDLE")
+
+    async def wait_state(self, process: int, state: str | ProcessState,
+                         timeout_s: float = 30.0) -> None:
+        """Until process ``process`` is in ``state`` (e.g. ``"WAIT_COND"``)."""
+        wanted = state if isinstance(state, ProcessState) else ProcessState[state.upper()]
+        await self._until(lambda: self.engine.processes[process].state is wanted, timeout_s,
+                          f"P{process} {wanted.name}")
+
+    def describe_blocked(self) -> str:
+        lines = []
+        for b in self.engine.blocked():
+            n = f" N{b['n']}" if b["n"] is not None else ""
+            lines.append(f"P{b['proc']} {b['prog']}:{b['line']}{n} {b['reason']}")
+        for p in self.engine.processes.values():
+            if p.alarm is not None:
+                lines.append(f"P{p.number} ALARM AL{p.alarm[0]}: {p.alarm[1]}")
+        return "\n".join(lines) or "no process is blocked"
+
+
+__all__ = ["Gateway", "GatewayError", "ProcessAlarmError", "WaitIdleTimeout",
+           "WallClockDriver", "variable_name"]

@@ -1,0 +1,99 @@
+"""The Python API of spec 4.5, in-process on the wall clock (scaled up to keep tests fast)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
+
+from ..conftest import EXAMPLES
+
+
+def fast(folder: Path, scale: float = 2000.0, **overrides: object):  # type: ignore[no-untyped-def]
+    return load_config(folder / "ncgate.toml", overrides={"nc.time_scale": scale, **overrides})
+
+
+async def test_scheme3_with_the_test_playing_the_plc() -> None:
+    async with Gateway(fast(EXAMPLES / "scheme3")) as gw:
+        await gw.start("PROG91")
+        await gw.wait_state(2, "WAIT_COND", timeout_s=10)
+        status = gw.status(2)
+        assert status.wait is not None and status.wait.cond == "SA10=1" and status.n == 40
+        gw.write("SA10", 1, who="test PLC")
+        await gw.wait_idle(timeout_s=20)
+        events = gw.trace
+    write = next(i for i, e in enumerate(events) if e["event"] == "write" and e["var"] == "SA10")
+    resume = next(i for i, e in enumerate(events) if e["event"] == "resume" and e["proc"] == 2
+                  and e["n"] == 40)
+    assert events[write]["who"] == "test PLC" and write < resume
+    assert events[resume]["by"] == "cond"
+    ends = [(e["proc"], e["how"]) for e in events if e["event"] == "end"]
+    assert sorted(ends) == [(1, "M30"), (2, "REL"), (2, "REL"), (3, "REL"), (3, "REL")]
+
+
+async def test_a_write_wakes_its_wait_at_once(tmp_path: Path) -> None:
+    # No polling between a write and the wake: the resume happens inside the write, at the
+    # same instant on the gateway's clock (time scale 1).
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
+    (tmp_path / "A.nc").write_text("N1(WAI,SK7=3)\nN2M30\n")
+    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        gw.write("SK7", 3, who="test PLC")
+        assert gw.status(1).state.name == "IDLE"  # resumed and ended, before any await
+        await gw.wait_idle(timeout_s=5)
+        write, resume = (next(e for e in gw.trace if e["event"] == kind)
+                         for kind in ("write", "resume"))
+    assert resume["t"] == write["t"] and resume["seq"] == write["seq"] + 1
+
+
+async def test_wait_idle_times_out_with_the_why_records() -> None:
+    async with Gateway(fast(EXAMPLES / "scheme3")) as gw:
+        await gw.start("PROG91")
+        with pytest.raises(WaitIdleTimeout) as caught:
+            await gw.wait_idle(timeout_s=0.3)
+    assert "P2 PROG92.nc:8 N40 (WAI,SA10=1) waits for SA10=1 (now 0)" in str(caught.value)
+
+
+async def test_wait_idle_raises_on_alarms(tmp_path: Path) -> None:
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 100.0\n')
+    (tmp_path / "A.nc").write_text("N1G1X10F600\nN2E1=1/0\n")
+    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+        await gw.start()
+        with pytest.raises(ProcessAlarmError, match="P1 division by zero"):
+            await gw.wait_idle(timeout_s=5)
+
+
+async def test_command_word_and_external_snd(tmp_path: Path) -> None:
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\ntime_scale = 50.0\n[[nc.process]]\nnumber = 4\nexternal = true\n')
+    (tmp_path / "A.nc").write_text("N1G1X100F600\nN2(WAI,4)\nN3M30\n")
+    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+        gw.command(1)  # cycle start: main in process 1
+        # Its decoder reaches (WAI,4) at once, while the move of N1 goes on.
+        await gw.wait_state(1, "WAIT_PROC", timeout_s=5)
+        assert gw.status(1).motion_active
+        gw.command(2)  # feed hold
+        await gw.wait_state(1, "HOLD", timeout_s=5)
+        assert gw.status(1).held
+        gw.command(1)  # cycle start again: resume after the hold
+        await gw.wait_state(1, "WAIT_PROC", timeout_s=5)
+        gw.send(4, 1)
+        await gw.wait_idle(timeout_s=5)
+        starts = [e["by"] for e in gw.trace if e["event"] == "start"]
+        assert starts == ["fieldbus"]
+        assert [e["by"] for e in gw.trace if e["event"] == "resume"] == [4]
+
+
+async def test_timing_follows_time_scale(tmp_path: Path) -> None:
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 20.0\n')
+    (tmp_path / "A.nc").write_text("N1(DLY,4)\nN2M30\n")  # 4 s at 20x: 0.2 s of wall time
+    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+        await gw.start()
+        await gw.wait_idle(timeout_s=5)
+        (start,) = [e for e in gw.trace if e["event"] == "start"]
+        (end,) = [e for e in gw.trace if e["event"] == "end"]
+    # The dwell ends at its timer's own time, however late the loop got round to it.
+    assert end["t"] - start["t"] == pytest.approx(4.0, abs=2e-6)
