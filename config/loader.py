@@ -57,6 +57,7 @@ class NcConfig:
     e_params: int = 1000
     stall_s: float = 60.0
     optional_skip: bool = False
+    lazy_parse: bool = False  # start programs before they are parsed whole (spec 1.6: off)
     storage: StorageConfig = field(default_factory=StorageConfig)
     process: tuple[ProcessConfig, ...] = ()
 
@@ -207,7 +208,7 @@ class _Reader:
         t = self.table(raw, "nc", {
             "processes", "lookahead", "snd", "sync_reads", "time_scale", "wait_timeout_s",
             "rapid_mm_min", "tool_change_s", "main", "autostart", "e_params", "stall_s",
-            "optional_skip", "storage", "process",
+            "optional_skip", "lazy_parse", "storage", "process",
         })
         processes = self.int_(t, "processes", "nc.processes", d.processes, 1, MAX_PROCESSES)
         snd_raw = t.get("snd", d.snd.value)
@@ -235,6 +236,7 @@ class _Reader:
             e_params=self.int_(t, "e_params", "nc.e_params", d.e_params, 1, 100_000),
             stall_s=self.float_(t, "stall_s", "nc.stall_s", d.stall_s, 0, positive=True),
             optional_skip=self.bool_(t, "optional_skip", "nc.optional_skip", d.optional_skip),
+            lazy_parse=self.bool_(t, "lazy_parse", "nc.lazy_parse", d.lazy_parse),
             storage=self.storage(t.get("storage")),
             process=self.processes(t.get("process"), processes),
         )

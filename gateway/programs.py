@@ -30,6 +30,10 @@ class ProgramStore:
         program = self._cache.get(key)
         if program is None:
             program = Program.from_path(path, display=path.name)
+            if self.config.nc.lazy_parse:
+                # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
+                self._cache[key] = program
+                return program
             diagnostics = check_program(
                 program, check_context(self.config, self.storage, {process}))
             errors = [d for d in diagnostics if d.is_error]

@@ -28,13 +28,14 @@ import functools
 import heapq
 import itertools
 import operator
+import re
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
 from interpreter.codes import AlarmCode
-from interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from interpreter.diagnostics import ProgramError, ProgramNotFoundError, ProgramSyntaxError
 from interpreter.evaluate import RuntimeAlarm, compile_expr, reads_image, round_half_away
 from interpreter.formatter import format_item
 from interpreter.motion import AXES, Modal, Move, plan_move
@@ -94,6 +95,7 @@ _STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                          WaitKind.EXE: ProcessState.WAIT_EXE}
 
 
+_EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)", re.IGNORECASE)
 _ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
 
 
@@ -286,7 +288,9 @@ class Process:
     def where(self) -> Where:
         if self.block is not None:
             return self.block.where
-        return (self.loaded.file if self.loaded else "", 0, None)
+        if self.loaded is not None:  # between blocks: the line the decoder is at
+            return (self.loaded.file, min(self.pc + 1, len(self.loaded.blocks)), None)
+        return ("", 0, None)
 
 
 class Engine:
@@ -533,15 +537,15 @@ class Engine:
         key = id(program)
         lp = self._loaded.get(key)
         if lp is None or lp.program is not program:
+            # Which processes this program may start (orphan-wait detection), from the text:
+            # a program that is parsed lazily must not be parsed whole here.
             targets: set[int] = set()
             dynamic = False
-            for i in range(len(program)):
-                for item in program.block(i).items:
-                    if isinstance(item, Exe):
-                        if isinstance(item.process, Num):
-                            targets.add(int(item.process.value))
-                        else:
-                            dynamic = True
+            for m in _EXE_ARG.finditer("\n".join(program.lines)):
+                if m.group(1).isdigit():
+                    targets.add(int(m.group(1)))
+                else:
+                    dynamic = True
             file = program.file.replace("\\", "/").rsplit("/", 1)[-1]
             lp = LoadedProgram(program, file, [None] * len(program), frozenset(targets), dynamic)
             self._loaded[key] = lp
@@ -688,7 +692,12 @@ class Engine:
         self._interp_run(p)
 
     def _compile(self, loaded: LoadedProgram, index: int) -> CompiledBlock:
-        block = loaded.program.block(index)
+        try:
+            block = loaded.program.block(index)
+        except ProgramSyntaxError as exc:  # only with lazy parsing: checked programs parse
+            d = exc.diagnostics[0]
+            raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID,
+                               f"{d.span}: {d.code.code}: {d.message}") from None
         where: Where = (loaded.file, index + 1, block.number)
         ops = _BlockCompiler(self, loaded, index, where).compile(block)
         compiled = CompiledBlock(tuple(ops), where, bool(block.items) or block.number is not None)

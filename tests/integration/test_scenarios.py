@@ -223,3 +223,30 @@ def test_builtin_default_simulates_with_no_files(capsys: pytest.CaptureFixture[s
     assert result.outcome == "stall"
     (stall,) = [e for e in result.events if e["event"] == "stall"]
     assert {(b["proc"], b["n"]) for b in stall["blocked"]} >= {(2, 40)}
+
+
+def test_lazy_parse_starts_a_huge_program_without_parsing_it(tmp_path: Path) -> None:
+    # 200,000 blocks, the last one bad: with nc.lazy_parse the decoder starts at once and
+    # only the blocks it reaches are parsed; the bad block is an alarm when it is reached.
+    body = "".join(f"N{i}G1X{i % 50}F6000\n" for i in range(200_000))
+    (tmp_path / "BIG.nc").write_text("N1(WAI,SA1=1)\n" + body + "N9GXY\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "BIG"\nlazy_parse = true\n')
+    config = load_config(tmp_path / "ncgate.toml")
+    result = run_sim(config, "BIG", load_script(None), until=0.0)
+    program = next(iter(result.runtime.store._cache.values()))
+    parsed = sum(1 for b in program._blocks if b is not None)
+    assert parsed <= 2  # N1 and nothing past the wait
+    assert result.events[-1]["event"] == "stall"
+    # Without lazy parsing the bad block stops the program before it starts.
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "BIG"\n')
+    with pytest.raises(Exception, match="G needs a value"):
+        run_sim(load_config(tmp_path / "ncgate.toml"), "BIG", load_script(None))
+
+
+def test_lazy_parse_bad_block_is_an_alarm_where_it_stands(tmp_path: Path) -> None:
+    (tmp_path / "A.nc").write_text("N1G1X10F600\nN2GXY\nN3M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\nlazy_parse = true\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "A", load_script(None))
+    (alarm,) = [e for e in result.events if e["event"] == "alarm"]
+    assert (alarm["code"], alarm["line"], alarm["t"]) == ("AL121", 2, 0.0)
+    assert "A.nc:2:3: NC003: G needs a value" in alarm["message"]
