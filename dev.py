@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """One entry point for a fresh machine: sets up .venv, then runs what you ask.
 
-    python3 dev.py run     # the gateway's main job on its built-in defaults
+    python3 dev.py run     # the gateway on its built-in defaults (Ctrl-C stops it)
     python3 dev.py test    # the whole test suite
     python3 dev.py lint    # ruff + mypy (strict on the packages)
     python3 dev.py bench   # the benchmarks under bench/
@@ -53,7 +53,7 @@ def main(argv: list[str]) -> int:
     if what == "setup":
         return 0
     if what == "run":
-        return run(str(BIN / "ncgate"), "check", *rest)
+        return run(str(BIN / "ncgate"), "run", *rest)
     if what == "test":
         return run(str(PY), "-m", "pytest", *rest)
     if what == "lint":

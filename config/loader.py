@@ -11,6 +11,7 @@ Stdlib only.
 from __future__ import annotations
 
 import enum
+import ipaddress
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -76,6 +77,7 @@ class PlcConfig:
 
 @dataclass(frozen=True, slots=True)
 class ModbusConfig:
+    enabled: bool = True
     host: str = "127.0.0.1"
     port: int = 5020
     unit_ids: tuple[int, ...] = (1,)
@@ -292,7 +294,7 @@ class _Reader:
 
     def modbus(self, raw: Any) -> ModbusConfig:
         d = ModbusConfig()
-        t = self.table(raw, "modbus", {"host", "port", "unit_ids", "max_clients",
+        t = self.table(raw, "modbus", {"enabled", "host", "port", "unit_ids", "max_clients",
                                        "idle_timeout_s", "read_only", "allow"})
         unit_ids = t.get("unit_ids", list(d.unit_ids))
         if not isinstance(unit_ids, list) or not unit_ids or not all(
@@ -303,7 +305,14 @@ class _Reader:
         allow = t.get("allow", [])
         if not isinstance(allow, list) or not all(isinstance(a, str) for a in allow):
             raise self.fail("modbus.allow", f"expected a list of IP addresses, got {allow!r}")
+        for i, entry in enumerate(allow):
+            try:
+                ipaddress.ip_network(entry, strict=False)
+            except ValueError:
+                raise self.fail(f"modbus.allow[{i}]",
+                                f"expected an IP address or network, got {entry!r}") from None
         return ModbusConfig(
+            enabled=self.bool_(t, "enabled", "modbus.enabled", d.enabled),
             host=self.str_(t, "host", "modbus.host", d.host),
             # 0 asks the system for a free port (tests, the Python API); not shown as a bound.
             port=0 if t.get("port") == 0 and not isinstance(t.get("port"), bool)

@@ -17,13 +17,17 @@ the loop; a write from outside wakes its waits at once and schedules a run with
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Sequence
 from types import TracebackType
 from typing import Any
 
 from config import Config, load_config
+from gateway.modbus_map import ModbusMap
+from gateway.modbus_server import ModbusServer
 from gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
 from interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
 from interpreter.trace import Event
+from plc.image import IOImage
 
 
 class GatewayError(Exception):
@@ -97,8 +101,11 @@ class Gateway:
 
     def __init__(self, config: Config | None = None) -> None:
         self.config = config if config is not None else load_config(None)
+        self.map = ModbusMap(self.config)
         self._runtime: Runtime | None = None
         self._driver: WallClockDriver | None = None
+        self._modbus: ModbusServer | None = None
+        self._modbus_address: tuple[str, int] | None = None
 
     async def __aenter__(self) -> Gateway:
         runtime = build_runtime(self.config, closed=False)
@@ -106,15 +113,36 @@ class Gateway:
                                  asyncio.get_running_loop())
         runtime.engine.state_listeners.append(self._on_state)
         self._runtime, self._driver = runtime, driver
-        if self.config.nc.autostart:
-            await self.start()
+        try:
+            if self.config.modbus.enabled:
+                self._modbus = ModbusServer(self.config.modbus, self.map, self)
+                self._modbus_address = await self._modbus.start()
+            if self.config.nc.autostart:
+                await self.start()
+        except BaseException:
+            await self.__aexit__(None, None, None)
+            raise
         return self
 
     async def __aexit__(self, exc_type: type[BaseException] | None,
                         exc: BaseException | None, tb: TracebackType | None) -> None:
+        if self._modbus is not None:
+            await self._modbus.close()
+            self._modbus = None
         if self._driver is not None:
             self._driver.close()
         self._driver = None
+
+    @property
+    def modbus_address(self) -> tuple[str, int]:
+        """(host, port) the Modbus server listens on (port 0 in the config: a free one)."""
+        if self._modbus_address is None:
+            raise GatewayError("the Modbus server is not running (modbus.enabled = false?)")
+        return self._modbus_address
+
+    @property
+    def modbus_server(self) -> ModbusServer | None:
+        return self._modbus
 
     # -- what is inside -------------------------------------------------------------------
 
@@ -127,6 +155,10 @@ class Gateway:
     @property
     def engine(self) -> Engine:
         return self.runtime.engine
+
+    @property
+    def image(self) -> IOImage:
+        return self.runtime.image
 
     @property
     def trace(self) -> list[Event]:
@@ -162,6 +194,12 @@ class Gateway:
         (area, index, view), number = parse_assignment(f"{var}={value}")
         self._sync_clock()
         self.runtime.image.write([(area, index, view, number)], who)
+        self._settle()
+
+    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None:
+        """Write several image variables at once (one fieldbus request), then settle."""
+        self._sync_clock()
+        self.runtime.image.write(changes, who)
         self._settle()
 
     def read(self, var: str) -> int:

@@ -51,6 +51,20 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
     sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
+
+    run = commands.add_parser(
+        "run", help="run the gateway (Modbus TCP) until SIGINT/SIGTERM",
+        description="The soft PLC, the processes on the wall clock and the Modbus TCP server, "
+        "until SIGINT or SIGTERM (clean shutdown, exit 0).",
+    )
+    run.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    run.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+
+    map_ = commands.add_parser("map", help="print the Modbus map in force",
+                               description="The Modbus map in force, with 0-based and 1-based "
+                               "(0xxxx/1xxxx/3xxxx/4xxxx) addresses, types and access.")
+    map_.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    map_.add_argument("--format", choices=("md", "csv", "json"), default="md")
     return parser
 
 
@@ -65,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _check(args)
         if args.command == "sim":
             return _sim(args)
+        if args.command == "run":
+            return _run(args)
+        if args.command == "map":
+            return _map(args)
     except (UsageError, ConfigError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -120,6 +138,26 @@ def _sim(args: argparse.Namespace) -> int:
             write_gantt(result.events, result.runtime.config.nc.processes, out,
                         external=result.runtime.config.nc.external)
     return result.exit_status
+
+
+def _run(args: argparse.Namespace) -> int:
+    import asyncio
+    import logging
+
+    from gateway.serve import serve
+
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    config = load_config(args.config)
+    asyncio.run(serve(config))
+    return EXIT_OK
+
+
+def _map(args: argparse.Namespace) -> int:
+    from gateway.modbus_map import ModbusMap
+
+    sys.stdout.write(ModbusMap(load_config(args.config)).render(args.format))
+    return EXIT_OK
 
 
 def entry_point() -> None:

@@ -10,9 +10,12 @@ from gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
 
 from ..conftest import EXAMPLES
 
+FREE_PORT = {"modbus.port": 0}
+
 
 def fast(folder: Path, scale: float = 2000.0, **overrides: object):  # type: ignore[no-untyped-def]
-    return load_config(folder / "ncgate.toml", overrides={"nc.time_scale": scale, **overrides})
+    return load_config(folder / "ncgate.toml",
+                       overrides={"nc.time_scale": scale, "modbus.port": 0, **overrides})
 
 
 async def test_scheme3_with_the_test_playing_the_plc() -> None:
@@ -38,7 +41,7 @@ async def test_a_write_wakes_its_wait_at_once(tmp_path: Path) -> None:
     # same instant on the gateway's clock (time scale 1).
     (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
     (tmp_path / "A.nc").write_text("N1(WAI,SK7=3)\nN2M30\n")
-    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
         await gw.start()
         await gw.wait_state(1, "WAIT_COND", timeout_s=5)
         gw.write("SK7", 3, who="test PLC")
@@ -60,7 +63,7 @@ async def test_wait_idle_times_out_with_the_why_records() -> None:
 async def test_wait_idle_raises_on_alarms(tmp_path: Path) -> None:
     (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 100.0\n')
     (tmp_path / "A.nc").write_text("N1G1X10F600\nN2E1=1/0\n")
-    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
         await gw.start()
         with pytest.raises(ProcessAlarmError, match="P1 division by zero"):
             await gw.wait_idle(timeout_s=5)
@@ -70,7 +73,7 @@ async def test_command_word_and_external_snd(tmp_path: Path) -> None:
     (tmp_path / "ncgate.toml").write_text(
         '[nc]\nmain = "A"\ntime_scale = 50.0\n[[nc.process]]\nnumber = 4\nexternal = true\n')
     (tmp_path / "A.nc").write_text("N1G1X100F600\nN2(WAI,4)\nN3M30\n")
-    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
         gw.command(1)  # cycle start: main in process 1
         # Its decoder reaches (WAI,4) at once, while the move of N1 goes on.
         await gw.wait_state(1, "WAIT_PROC", timeout_s=5)
@@ -90,7 +93,7 @@ async def test_command_word_and_external_snd(tmp_path: Path) -> None:
 async def test_timing_follows_time_scale(tmp_path: Path) -> None:
     (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 20.0\n')
     (tmp_path / "A.nc").write_text("N1(DLY,4)\nN2M30\n")  # 4 s at 20x: 0.2 s of wall time
-    async with Gateway(load_config(tmp_path / "ncgate.toml")) as gw:
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
         await gw.start()
         await gw.wait_idle(timeout_s=5)
         (start,) = [e for e in gw.trace if e["event"] == "start"]

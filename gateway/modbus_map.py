@@ -1,0 +1,369 @@
+"""The Modbus map (spec 3.2): which address is what, and reading and writing it.
+
+Protocol-free: it works on the four Modbus tables with 0-based addresses and returns values or
+a Modbus exception code; ``gateway.modbus_server`` does the wire.  Every write of one request
+is validated whole and then applied with one image write (spec 3.1: atomic, named writer).
+
+Decisions where the spec is silent (docs/decisions.md): a process's block of discrete inputs
+is 16 wide and of input registers 20 wide; the addresses a block does not use read 0, so a
+dashboard can read all processes in one request.  The command word and the SND mailbox read 0.
+"""
+
+from __future__ import annotations
+
+import csv
+import enum
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from config import Config
+from interpreter.runtime import Engine, ProcessState, WaitKind
+from plc.image import IOImage
+
+MAP_VERSION = 1
+
+# Exception codes (Modbus application protocol, 7)
+ILLEGAL_FUNCTION = 0x01
+ILLEGAL_ADDRESS = 0x02
+ILLEGAL_VALUE = 0x03
+DEVICE_FAILURE = 0x04
+TARGET_NO_RESPONSE = 0x0B
+
+
+class Table(enum.Enum):
+    COILS = "coils"
+    DISCRETE_INPUTS = "discrete inputs"
+    HOLDING = "holding registers"
+    INPUT = "input registers"
+
+    @property
+    def prefix(self) -> int:
+        """The leading digit of the 1-based numbers people type into HMIs."""
+        return {Table.COILS: 0, Table.DISCRETE_INPUTS: 1, Table.INPUT: 3, Table.HOLDING: 4}[self]
+
+
+class Kind(enum.Enum):
+    SA_BITS = "SA bits"
+    PROCESS_FLAGS = "process flags"
+    K_BYTES = "K bytes"
+    SYVARS = "SYVARs"
+    SA_BYTES = "SA bytes"
+    COMMAND = "command"
+    MAILBOX = "SND mailbox"
+    INFO = "gateway info"
+    PROCESS_STATUS = "process status"
+
+
+@dataclass(frozen=True, slots=True)
+class Region:
+    table: Table
+    start: int
+    count: int
+    kind: Kind
+    access: str  # "rw", "r", "w"
+    type: str  # "bit", "uint8", "int16", "uint16", "u32+i32 record", …
+    content: str
+
+    @property
+    def end(self) -> int:
+        return self.start + self.count
+
+    def hmi(self, address: int) -> str:
+        """The 1-based 5/6-digit number of an address (e.g. holding 0 -> 400001)."""
+        number = address + 1
+        width = 5 if number <= 9999 else 6
+        return f"{self.table.prefix}{number:0{width - 1}d}"
+
+
+class Backend(Protocol):
+    """What the map acts on (the Gateway)."""
+
+    @property
+    def image(self) -> IOImage: ...
+
+    @property
+    def engine(self) -> Engine: ...
+
+    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
+
+    def command(self, word: int) -> None: ...
+
+    def send(self, sender: int, target: int) -> None: ...
+
+
+class ModbusError(Exception):
+    """A request the map refuses: carries the exception code to answer."""
+
+    def __init__(self, code: int, why: str = "") -> None:
+        super().__init__(why or f"exception {code:#04x}")
+        self.code = code
+
+
+PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")
+PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait target",
+                     "alarm code", "SNDs sent (hi)", "SNDs sent (lo)", "SNDs received (hi)",
+                     "SNDs received (lo)", "blocks executed (hi)", "blocks executed (lo)",
+                     "X µm (hi)", "X µm (lo)", "Y µm (hi)", "Y µm (lo)", "Z µm (hi)",
+                     "Z µm (lo)")
+_WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
+            ProcessState.WAIT_EXE}
+
+
+class ModbusMap:
+    """The map in force for a config."""
+
+    K_BASE, SYVAR_BASE, SA_BYTE_BASE, COMMAND, MAILBOX = 0, 1000, 1500, 2000, 2001
+    STATUS_BASE, STATUS_STRIDE, FLAGS_STRIDE = 100, 20, 16
+
+    def __init__(self, config: Config) -> None:
+        self.config = config
+        plc, processes = config.plc, config.nc.processes
+        sa_bytes = plc.sa_bits // 8
+        read_only = config.modbus.read_only
+        rw = "r" if read_only else "rw"
+        self.regions = [
+            Region(Table.COILS, 0, plc.sa_bits, Kind.SA_BITS, rw, "bit", "SA bit n"),
+            Region(Table.DISCRETE_INPUTS, 0, self.FLAGS_STRIDE * processes,
+                   Kind.PROCESS_FLAGS, "r", "bit",
+                   "process k at 16(k-1)+0..5: " + ", ".join(PROCESS_FLAGS)
+                   + "; +6..15 read 0"),
+            Region(Table.HOLDING, self.K_BASE, plc.k_bytes, Kind.K_BYTES, rw, "uint8",
+                   "K byte n (0..255)"),
+            Region(Table.HOLDING, self.SYVAR_BASE, plc.syvars, Kind.SYVARS, rw, "int16",
+                   "SYVAR n"),
+            Region(Table.HOLDING, self.SA_BYTE_BASE, sa_bytes, Kind.SA_BYTES, rw, "uint8",
+                   "SA byte n (bits 8n..8n+7, the same bits as the coils)"),
+            Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, "r" if read_only else "w",
+                   "uint16", "command: 1 cycle start, 2 feed hold, 3 reset (reads 0)"),
+            Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, "r" if read_only else "w",
+                   "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
+            Region(Table.INPUT, 0, 8, Kind.INFO, "r", "uint16",
+                   "0 map version, 1 process count, 2-3 event counter (u32), "
+                   "4-7 last SND: sender, target, block N, event number (low 16 bits)"),
+            Region(Table.INPUT, self.STATUS_BASE, self.STATUS_STRIDE * processes,
+                   Kind.PROCESS_STATUS, "r", "record",
+                   "process k at 100+20(k-1)+0..17: " + ", ".join(PROCESS_REGISTERS)
+                   + "; +18..19 read 0"),
+        ]
+        self._check_overlaps()
+
+    def _check_overlaps(self) -> None:
+        for i, a in enumerate(self.regions):
+            for b in self.regions[i + 1:]:
+                if a.table is b.table and a.start < b.end and b.start < a.end:
+                    raise ValueError(f"Modbus map: {a.kind.value} ({a.start}..{a.end - 1}) "
+                                     f"overlaps {b.kind.value} ({b.start}..{b.end - 1}); "
+                                     "reduce the image sizes in [plc]")
+
+    def region(self, table: Table, address: int, count: int) -> Region:
+        """The one region holding the whole range, or ModbusError(02)."""
+        for r in self.regions:
+            if r.table is table and r.start <= address and address + count <= r.end:
+                return r
+        raise ModbusError(ILLEGAL_ADDRESS, f"{table.value} {address}..{address + count - 1} "
+                          "is not wholly mapped")
+
+    def segments(self, table: Table, address: int, count: int) -> list[tuple[Region, int, int]]:
+        """The range cut at region borders: (region, address, count) pieces; ModbusError(02)
+        unless every address is mapped.  Adjacent regions may be read (or written) together."""
+        out = []
+        end = address + count
+        while address < end:
+            for r in self.regions:
+                if r.table is table and r.start <= address < r.end:
+                    n = min(end, r.end) - address
+                    out.append((r, address, n))
+                    address += n
+                    break
+            else:
+                raise ModbusError(ILLEGAL_ADDRESS, f"{table.value} address {address} is not "
+                                  "mapped")
+        return out
+
+    # -- reading ------------------------------------------------------------------------------
+
+    def read_bits(self, backend: Backend, table: Table, address: int, count: int) -> list[bool]:
+        region = self.region(table, address, count)
+        if region.kind is Kind.SA_BITS:
+            sa = backend.image.sa
+            return [bool(sa[i >> 3] >> (i & 7) & 1) for i in range(address, address + count)]
+        engine = backend.engine
+        out = []
+        for a in range(address, address + count):
+            k, bit = divmod(a, self.FLAGS_STRIDE)
+            out.append(bit < len(PROCESS_FLAGS) and _flag(engine, k + 1, bit))
+        return out
+
+    def read_registers(self, backend: Backend, table: Table, address: int,
+                       count: int) -> list[int]:
+        pieces = self.segments(table, address, count)
+        if len(pieces) == 1:
+            return self._read_region(backend, *pieces[0])
+        out: list[int] = []
+        for piece in pieces:
+            out += self._read_region(backend, *piece)
+        return out
+
+    def _read_region(self, backend: Backend, region: Region, address: int,
+                     count: int) -> list[int]:
+        image = backend.image
+        first = address - region.start
+        kind = region.kind
+        if kind is Kind.K_BYTES:
+            return list(image.k[first:first + count])
+        if kind is Kind.SA_BYTES:
+            return list(image.sa[first:first + count])
+        if kind is Kind.SYVARS:
+            return [v & 0xFFFF for v in image.syvar[first:first + count]]
+        if kind in (Kind.COMMAND, Kind.MAILBOX):
+            return [0] * count
+        if kind is Kind.INFO:
+            return self._info(backend.engine)[first:first + count]
+        return self._status_registers(backend.engine, address, count)
+
+    def _info(self, engine: Engine) -> list[int]:
+        counter = engine.trace.counter
+        sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
+        return [MAP_VERSION, len(engine.processes), counter >> 16 & 0xFFFF, counter & 0xFFFF,
+                sender, target, n & 0xFFFF, number & 0xFFFF]
+
+    def _status_registers(self, engine: Engine, address: int, count: int) -> list[int]:
+        cache: dict[int, list[int]] = {}
+        out = []
+        for a in range(address, address + count):
+            k, offset = divmod(a - self.STATUS_BASE, self.STATUS_STRIDE)
+            if k not in cache:
+                cache[k] = process_registers(engine, k + 1)
+            out.append(cache[k][offset] if offset < len(PROCESS_REGISTERS) else 0)
+        return out
+
+    # -- writing ------------------------------------------------------------------------------
+
+    def write_bits(self, backend: Backend, address: int, values: Sequence[bool],
+                   who: str) -> None:
+        region = self.region(Table.COILS, address, len(values))  # one region: the coils
+        if "w" not in region.access:
+            raise ModbusError(ILLEGAL_ADDRESS, "read-only")
+        backend.apply_writes([("SA", address + i, "bit", int(v)) for i, v in enumerate(values)],
+                             who)
+
+    def _image_changes(self, address: int, values: Sequence[int]
+                       ) -> list[tuple[str, int, str, int]] | tuple[Region, int]:
+        """The image writes of a holding-register write, validated whole; or the one action
+        region (command, mailbox) it addresses with the offset into it."""
+        pieces = self.segments(Table.HOLDING, address, len(values))
+        changes: list[tuple[str, int, str, int]] = []
+        for region, start, count in pieces:
+            if "w" not in region.access:
+                raise ModbusError(ILLEGAL_ADDRESS, f"{region.kind.value} is read-only")
+            kind = region.kind
+            if kind in (Kind.COMMAND, Kind.MAILBOX):
+                if len(pieces) > 1:
+                    raise ModbusError(ILLEGAL_ADDRESS, f"the {kind.value} must be written on "
+                                      "its own")
+                return region, start - region.start
+            first = start - region.start
+            chunk = values[start - address:start - address + count]
+            if kind is Kind.SYVARS:
+                changes += [("SYVAR", first + i, "IN", v - 0x10000 if v & 0x8000 else v)
+                            for i, v in enumerate(chunk)]
+                continue
+            if any(v > 255 for v in chunk):
+                raise ModbusError(ILLEGAL_VALUE, f"{kind.value} hold 0..255")
+            area = "SK" if kind is Kind.K_BYTES else "SA"
+            changes += [(area, first + i, "BY", v) for i, v in enumerate(chunk)]
+        return changes
+
+    def write_registers(self, backend: Backend, address: int, values: Sequence[int],
+                        who: str) -> None:
+        count = len(values)
+        planned = self._image_changes(address, values)
+        if isinstance(planned, list):
+            backend.apply_writes(planned, who)
+            return
+        region, offset = planned
+        kind = region.kind
+        if kind is Kind.COMMAND:
+            (word,) = values
+            if word not in (1, 2, 3):
+                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset")
+            backend.command(word)
+        else:  # the mailbox: sender and target in one write
+            if count != 2 or offset != 0:
+                raise ModbusError(ILLEGAL_ADDRESS, "the mailbox takes sender and target in one "
+                                  "FC16 at 2001..2002")
+            sender, target = values
+            external = self.config.nc.external
+            if sender not in external or not 1 <= target <= self.config.nc.processes:
+                raise ModbusError(ILLEGAL_VALUE, f"SND from {sender} to {target}: the sender "
+                                  "must be an external process, the target a configured one")
+            try:
+                backend.send(sender, target)
+            except ValueError as exc:  # e.g. the target runs no program
+                raise ModbusError(DEVICE_FAILURE, str(exc)) from None
+
+    def check_register_values(self, address: int, values: Sequence[int]) -> None:
+        """Validate a write without doing it (FC23 checks its write before anything happens;
+        FC22 its computed value).  Commands and the mailbox are checked when done."""
+        self._image_changes(address, values)
+
+    # -- for people: `ncgate map` -------------------------------------------------------------
+
+    def rows(self) -> list[dict[str, object]]:
+        return [{
+            "table": r.table.value, "start": r.start, "end": r.end - 1, "count": r.count,
+            "hmi_start": r.hmi(r.start), "hmi_end": r.hmi(r.end - 1), "type": r.type,
+            "access": {"rw": "read/write", "r": "read", "w": "write"}[r.access],
+            "content": r.content,
+        } for r in self.regions]
+
+    def render(self, fmt: str) -> str:
+        rows = self.rows()
+        if fmt == "json":
+            return json.dumps({"map_version": MAP_VERSION, "unit_ids": list(
+                self.config.modbus.unit_ids), "regions": rows}, indent=2) + "\n"
+        if fmt == "csv":
+            out = io.StringIO()
+            writer = csv.DictWriter(out, fieldnames=list(rows[0]), lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+            return out.getvalue()
+        lines = [
+            f"# Modbus map (version {MAP_VERSION}), unit ids "
+            f"{', '.join(map(str, self.config.modbus.unit_ids))}",
+            "",
+            "Addresses are 0-based protocol addresses; HMI numbers are the 1-based "
+            "0xxxx/1xxxx/3xxxx/4xxxx form. 32-bit values are two registers, high word first.",
+            "",
+            "| table | address | HMI | type | access | content |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [f"| {r['table']} | {r['start']}..{r['end']} | {r['hmi_start']}..{r['hmi_end']}"
+                  f" | {r['type']} | {r['access']} | {r['content']} |" for r in rows]
+        return "\n".join(lines) + "\n"
+
+
+def _flag(engine: Engine, k: int, bit: int) -> bool:
+    p = engine.processes[k]
+    state = p.state
+    return (p.loaded is not None, state in (ProcessState.RUNNING, ProcessState.DWELL),
+            state in _WAITING, state is ProcessState.ALARM,
+            p.int_timer is not None or p.int_remaining is not None, p.held)[bit]
+
+
+def process_registers(engine: Engine, k: int) -> list[int]:
+    s = engine.status(k)
+    wait = s.wait
+    regs = [int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF,
+            int(wait.kind if wait else WaitKind.NONE), wait.target if wait else 0,
+            s.alarm_code & 0xFFFF]
+    for value in (s.snd_sent, s.snd_received, s.blocks):
+        regs += [value >> 16 & 0xFFFF, value & 0xFFFF]
+    for mm in s.position[:3]:
+        um = round(mm * 1000) & 0xFFFFFFFF
+        regs += [um >> 16, um & 0xFFFF]
+    return regs
+

@@ -1,0 +1,325 @@
+"""The Modbus TCP server (spec 3.2): our transport and framing, pymodbus's PDU codec.
+
+pymodbus 3.16.1 on its own answers only the first of several requests in one TCP segment,
+wedges a connection after an MBAP with a bad protocol id or length, answers 01 where 03 is due
+(its request decoders raise on a bad quantity and the server cannot tell that from garbage),
+accepts FC5 values other than 0x0000/0xFF00, and has no client limit or idle timeout.  So this
+module owns the layer where those are decided:
+
+- the transport: one ``asyncio.Protocol`` per connection; at most ``max_clients``, the rest
+  closed at once; an allow-list; an idle connection closed after ``idle_timeout_s``; a partial
+  frame must complete within 5 s.  No sleeps anywhere, least of all on an error path;
+- the MBAP framer: any number of requests per segment, a request split over any number of
+  segments, each answered in order with its own transaction id; a protocol id other than 0 or
+  a length outside 2..254 closes that connection (and only that one);
+- the validation of each PDU, in libmodbus's order: function code (01), then length, quantity
+  and byte count (03), then the address range (02), then values (03);
+
+and uses pymodbus where it serves: its request classes decode a PDU that passed validation,
+its response classes encode the answers.  The map itself lives in ``gateway.modbus_map``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import logging
+import struct
+from collections.abc import Callable
+from typing import Any, Final, cast
+
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu.bit_message import (
+    ReadCoilsResponse,
+    ReadDiscreteInputsResponse,
+    WriteMultipleCoilsResponse,
+    WriteSingleCoilResponse,
+)
+from pymodbus.pdu.decoders import DecodePDU
+from pymodbus.pdu.register_message import (
+    MaskWriteRegisterResponse,
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersResponse,
+    ReadWriteMultipleRegistersResponse,
+    WriteMultipleRegistersResponse,
+    WriteSingleRegisterResponse,
+)
+
+from config import ModbusConfig
+from gateway.modbus_map import (
+    DEVICE_FAILURE,
+    ILLEGAL_FUNCTION,
+    ILLEGAL_VALUE,
+    TARGET_NO_RESPONSE,
+    Backend,
+    ModbusError,
+    ModbusMap,
+    Table,
+)
+
+log = logging.getLogger("ncgate.modbus")
+
+PARTIAL_FRAME_TIMEOUT_S: Final = 5.0
+_MBAP = struct.Struct(">HHHB")
+# Function code -> (fixed PDU length or None, max quantity); spec 3.2.
+_READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
+SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23})
+
+
+def validate(pdu: bytes) -> None:
+    """Length, quantity and byte count of a request PDU (exception 01 or 03)."""
+    fc = pdu[0]
+    n = len(pdu)
+    if fc not in SERVED:
+        raise ModbusError(ILLEGAL_FUNCTION, f"function code {fc} is not served")
+    if fc in _READ_LIMITS:
+        if n != 5:
+            raise ModbusError(ILLEGAL_VALUE, "length")
+        quantity = pdu[3] << 8 | pdu[4]
+        if not 1 <= quantity <= _READ_LIMITS[fc]:
+            raise ModbusError(ILLEGAL_VALUE, f"quantity {quantity}")
+    elif fc in (5, 6):
+        if n != 5:
+            raise ModbusError(ILLEGAL_VALUE, "length")
+    elif fc in (15, 16):
+        if n < 6:
+            raise ModbusError(ILLEGAL_VALUE, "length")
+        quantity = pdu[3] << 8 | pdu[4]
+        limit, per = (1968, None) if fc == 15 else (123, 2)
+        if not 1 <= quantity <= limit:
+            raise ModbusError(ILLEGAL_VALUE, f"quantity {quantity}")
+        expected = (quantity + 7) // 8 if per is None else quantity * 2
+        if pdu[5] != expected or n != 6 + expected:
+            raise ModbusError(ILLEGAL_VALUE, "byte count")
+    elif fc == 22:
+        if n != 7:
+            raise ModbusError(ILLEGAL_VALUE, "length")
+    else:  # 23
+        if n < 10:
+            raise ModbusError(ILLEGAL_VALUE, "length")
+        read_quantity = pdu[3] << 8 | pdu[4]
+        write_quantity = pdu[7] << 8 | pdu[8]
+        if not 1 <= read_quantity <= 125 or not 1 <= write_quantity <= 121:
+            raise ModbusError(ILLEGAL_VALUE, "quantity")
+        if pdu[9] != write_quantity * 2 or n != 10 + write_quantity * 2:
+            raise ModbusError(ILLEGAL_VALUE, "byte count")
+
+
+def exception_pdu(fc: int, code: int) -> bytes:
+    response = ExceptionResponse(fc & 0x7F, code)
+    return bytes((response.function_code,)) + response.encode()
+
+
+def _pdu(response: ModbusPDU) -> bytes:
+    return bytes((response.function_code,)) + response.encode()
+
+
+class RequestHandler:
+    """Answers one request PDU against the map."""
+
+    def __init__(self, mmap: ModbusMap, backend: Backend, unit_ids: frozenset[int]) -> None:
+        self.map = mmap
+        self.backend = backend
+        self.unit_ids = unit_ids
+        self.decoder = DecodePDU(is_server=True)
+        self.served = 0
+
+    def handle(self, unit: int, pdu: bytes, who: str) -> bytes:
+        fc = pdu[0]
+        self.served += 1
+        if unit not in self.unit_ids:
+            return exception_pdu(fc, TARGET_NO_RESPONSE)
+        try:
+            validate(pdu)
+            request = self.decoder.decode(pdu)
+            if request is None:  # not reached: validation accepts only what decodes
+                raise ModbusError(ILLEGAL_VALUE, "undecodable")
+            return self._execute(fc, request, pdu, who)
+        except ModbusError as exc:
+            return exception_pdu(fc, exc.code)
+        except Exception:  # a bug of ours must not take the connection down
+            log.exception("modbus: request %s from %s failed", pdu.hex(), who)
+            return exception_pdu(fc, DEVICE_FAILURE)
+
+    def _execute(self, fc: int, request: Any, pdu: bytes, who: str) -> bytes:
+        m, backend = self.map, self.backend
+        if fc == 1:
+            bits = m.read_bits(backend, Table.COILS, request.address, request.count)
+            return _pdu(ReadCoilsResponse(bits=bits))
+        if fc == 2:
+            bits = m.read_bits(backend, Table.DISCRETE_INPUTS, request.address, request.count)
+            return _pdu(ReadDiscreteInputsResponse(bits=bits))
+        if fc == 3:
+            regs = m.read_registers(backend, Table.HOLDING, request.address, request.count)
+            return _pdu(ReadHoldingRegistersResponse(registers=regs))
+        if fc == 4:
+            regs = m.read_registers(backend, Table.INPUT, request.address, request.count)
+            return _pdu(ReadInputRegistersResponse(registers=regs))
+        if fc == 5:
+            m.region(Table.COILS, request.address, 1)  # the address first (libmodbus)
+            raw = pdu[3:5]  # pymodbus keeps only bool(value): check the bytes themselves
+            if raw not in (b"\x00\x00", b"\xff\x00"):
+                raise ModbusError(ILLEGAL_VALUE, "FC5 value must be 0x0000 or 0xFF00")
+            m.write_bits(backend, request.address, [raw == b"\xff\x00"], who)
+            return _pdu(WriteSingleCoilResponse(address=request.address, bits=[raw != b"\0\0"]))
+        if fc == 6:
+            m.write_registers(backend, request.address, list(request.registers), who)
+            return _pdu(WriteSingleRegisterResponse(address=request.address,
+                                                    registers=list(request.registers)))
+        if fc == 15:
+            m.write_bits(backend, request.address, list(request.bits), who)
+            return _pdu(WriteMultipleCoilsResponse(address=request.address,
+                                                   count=request.count))
+        if fc == 16:
+            m.write_registers(backend, request.address, list(request.registers), who)
+            return _pdu(WriteMultipleRegistersResponse(address=request.address,
+                                                       count=request.count))
+        if fc == 22:
+            (current,) = m.read_registers(backend, Table.HOLDING, request.address, 1)
+            value = (current & request.and_mask) | (request.or_mask & ~request.and_mask & 0xFFFF)
+            m.check_register_values(request.address, [value])
+            m.write_registers(backend, request.address, [value], who)
+            return _pdu(MaskWriteRegisterResponse(address=request.address,
+                                                  and_mask=request.and_mask,
+                                                  or_mask=request.or_mask))
+        # 23: both ranges are checked before anything is written; the write comes first
+        values = list(request.write_registers)
+        m.region(Table.HOLDING, request.read_address, request.read_count)
+        m.check_register_values(request.write_address, values)
+        m.write_registers(backend, request.write_address, values, who)
+        regs = m.read_registers(backend, Table.HOLDING, request.read_address,
+                                request.read_count)
+        return _pdu(ReadWriteMultipleRegistersResponse(registers=regs))
+
+
+class _Connection(asyncio.Protocol):
+    def __init__(self, server: ModbusServer) -> None:
+        self.server = server
+        self.buffer = bytearray()
+        self.transport: asyncio.Transport | None = None
+        self.who = "modbus ?"
+        self.loop = asyncio.get_running_loop()
+        self.last_activity = self.loop.time()
+        self.partial_since: float | None = None
+        self.timer: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.Transport, transport)
+        peer = transport.get_extra_info("peername") or ("?", 0)
+        self.who = f"modbus {peer[0]}:{peer[1]}"
+        server = self.server
+        if len(server.connections) >= server.config.max_clients:
+            log.warning("%s refused: %d clients already (max_clients)", self.who,
+                        len(server.connections))
+            self.transport.abort()
+            return
+        if not server.allowed(peer[0]):
+            log.warning("%s refused: not in the allow-list", self.who)
+            self.transport.abort()
+            return
+        server.connections.add(self)
+        log.info("%s connected (%d clients)", self.who, len(server.connections))
+        self._arm(self.server.config.idle_timeout_s)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self in self.server.connections:
+            self.server.connections.discard(self)
+            log.info("%s disconnected", self.who)
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
+
+    def close(self, why: str) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            log.info("%s closed: %s", self.who, why)
+            self.transport.abort()
+
+    def data_received(self, data: bytes) -> None:
+        self.last_activity = self.loop.time()
+        buffer = self.buffer
+        buffer += data
+        handle = self.server.handler.handle
+        out: list[bytes] = []
+        while len(buffer) >= 7:
+            tid, protocol, length, unit = _MBAP.unpack_from(buffer)
+            if protocol != 0 or not 2 <= length <= 254:
+                if out:
+                    self._send(out)
+                self.close(f"bad MBAP header (protocol id {protocol}, length {length})")
+                return
+            end = 6 + length
+            if len(buffer) < end:
+                break
+            pdu = bytes(buffer[7:end])
+            del buffer[:end]
+            answer = handle(unit, pdu, self.who)
+            out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
+        if out:
+            self._send(out)
+        if not buffer:
+            self.partial_since = None
+        elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
+            self.partial_since = self.last_activity
+            if self.timer is not None:
+                self.timer.cancel()
+            self._arm(min(PARTIAL_FRAME_TIMEOUT_S, self.server.config.idle_timeout_s))
+
+    def _send(self, answers: list[bytes]) -> None:
+        assert self.transport is not None
+        self.transport.write(answers[0] if len(answers) == 1 else b"".join(answers))
+
+    def _arm(self, delay: float) -> None:
+        self.timer = self.loop.call_later(delay, self._check_timeouts)
+
+    def _check_timeouts(self) -> None:
+        self.timer = None
+        if self.transport is None or self.transport.is_closing():
+            return
+        now = self.loop.time()
+        idle = self.server.config.idle_timeout_s
+        if self.partial_since is not None and now - self.partial_since >= PARTIAL_FRAME_TIMEOUT_S:
+            self.close(f"partial frame not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
+            return
+        if now - self.last_activity >= idle:
+            self.close(f"idle for {idle:g} s")
+            return
+        next_check = self.last_activity + idle - now
+        if self.partial_since is not None:
+            next_check = min(next_check, self.partial_since + PARTIAL_FRAME_TIMEOUT_S - now)
+        self._arm(max(next_check, 0.001))
+
+
+class ModbusServer:
+    """The listening socket and its connections."""
+
+    def __init__(self, config: ModbusConfig, mmap: ModbusMap, backend: Backend) -> None:
+        self.config = config
+        self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids))
+        self.connections: set[_Connection] = set()
+        self._server: asyncio.Server | None = None
+        self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
+
+    def allowed(self, host: str) -> bool:
+        if not self._allow:
+            return True
+        try:
+            address = ipaddress.ip_address(host)
+        except ValueError:
+            return False
+        return any(address in net for net in self._allow)
+
+    async def start(self) -> tuple[str, int]:
+        loop = asyncio.get_running_loop()
+        factory: Callable[[], asyncio.Protocol] = lambda: _Connection(self)  # noqa: E731
+        self._server = await loop.create_server(factory, self.config.host, self.config.port,
+                                                reuse_address=True)
+        host, port = self._server.sockets[0].getsockname()[:2]
+        return host, port
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            for connection in list(self.connections):
+                connection.close("server shutting down")
+            await self._server.wait_closed()
+            self._server = None

@@ -1,0 +1,170 @@
+"""A virtual PLC over Modbus TCP, for integration tests (spec 4.5).
+
+It speaks the map in force (``gateway.modbus_map``) through pymodbus's client, so a test
+plays the PLC with the real protocol:
+
+    plc = VirtualPLC("127.0.0.1", port, config)
+    await plc.connect()
+    await plc.wait_state(2, "WAIT_COND")     # process 2 waits at N40 ...
+    await plc.set("SA10", 1)                 # ... for the PLC to set SA10
+    snd = await plc.next_snd()               # the next SND the gateway reports
+
+A Modbus client learns of changes only by reading: the ``wait_*`` helpers poll the status
+registers every ``poll_s`` until the state is there or ``timeout_s`` runs out.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+
+from pymodbus.client import AsyncModbusTcpClient
+
+from config import Config
+from gateway.modbus_map import ModbusMap
+from gateway.wiring import parse_assignment
+from interpreter.runtime import ProcessState
+
+
+class VirtualPLCError(Exception):
+    """A Modbus exception answered, or a wait that ran out of time."""
+
+
+@dataclass(frozen=True, slots=True)
+class SndSeen:
+    sender: int
+    target: int
+    n: int  # the N number of the SND block (0 when none)
+    event: int  # low 16 bits of its event number
+
+
+class VirtualPLC:
+    def __init__(self, host: str, port: int, config: Config, unit: int | None = None,
+                 poll_s: float = 0.005) -> None:
+        self.map = ModbusMap(config)
+        self.config = config
+        self.unit = unit if unit is not None else config.modbus.unit_ids[0]
+        self.poll_s = poll_s
+        self.client = AsyncModbusTcpClient(host, port=port, retries=0)
+        self._last_event: int | None = None
+
+    async def connect(self) -> None:
+        if not await self.client.connect():
+            raise VirtualPLCError("cannot connect to the gateway")
+        _, _, _, _, _, _, _, event = await self._input(0, 8)
+        self._last_event = event
+
+    def close(self) -> None:
+        self.client.close()
+
+    async def __aenter__(self) -> VirtualPLC:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- raw access -----------------------------------------------------------------------
+
+    @staticmethod
+    def _check(response: object) -> None:
+        if response.isError():  # type: ignore[attr-defined]
+            raise VirtualPLCError(f"the gateway answered {response}")
+
+    async def _input(self, address: int, count: int) -> list[int]:
+        r = await self.client.read_input_registers(address, count=count, device_id=self.unit)
+        self._check(r)
+        return list(r.registers)
+
+    async def _holding(self, address: int, count: int) -> list[int]:
+        r = await self.client.read_holding_registers(address, count=count, device_id=self.unit)
+        self._check(r)
+        return list(r.registers)
+
+    async def _write(self, address: int, values: list[int]) -> None:
+        r = await self.client.write_registers(address, values, device_id=self.unit)
+        self._check(r)
+
+    # -- the image --------------------------------------------------------------------------
+
+    async def set(self, var: str, value: int) -> None:
+        """Write SA10 (a coil), SA1.BY, SK250, SK2.IN, SYVAR1 … as the PLC."""
+        (area, index, view), number = parse_assignment(f"{var}={value}")
+        m = self.map
+        if area == "SA" and view == "bit":
+            r = await self.client.write_coil(index, bool(number), device_id=self.unit)
+            self._check(r)
+        elif area == "SYVAR":
+            await self._write(m.SYVAR_BASE + index, [number & 0xFFFF])
+        else:
+            base = m.K_BASE if area == "SK" else m.SA_BYTE_BASE
+            if view == "BY":
+                await self._write(base + index, [number])
+            else:  # .IN: two bytes, little-endian, in one request
+                word = number & 0xFFFF
+                await self._write(base + index, [word & 0xFF, word >> 8])
+
+    async def get(self, var: str) -> int:
+        (area, index, view), _ = parse_assignment(f"{var}=0")
+        m = self.map
+        if area == "SA" and view == "bit":
+            r = await self.client.read_coils(index, count=1, device_id=self.unit)
+            self._check(r)
+            return int(r.bits[0])
+        if area == "SYVAR":
+            (v,) = await self._holding(m.SYVAR_BASE + index, 1)
+            return v - 0x10000 if v & 0x8000 else v
+        base = m.K_BASE if area == "SK" else m.SA_BYTE_BASE
+        if view == "BY":
+            (v,) = await self._holding(base + index, 1)
+            return v
+        lo, hi = await self._holding(base + index, 2)
+        word = lo | hi << 8
+        return word - 0x10000 if word & 0x8000 else word
+
+    # -- processes ----------------------------------------------------------------------------
+
+    async def status(self, process: int) -> list[int]:
+        base = self.map.STATUS_BASE + self.map.STATUS_STRIDE * (process - 1)
+        return await self._input(base, 18)
+
+    async def state(self, process: int) -> ProcessState:
+        return ProcessState((await self.status(process))[0])
+
+    async def wait_state(self, process: int, state: str | ProcessState,
+                         timeout_s: float = 10.0) -> None:
+        wanted = state if isinstance(state, ProcessState) else ProcessState[state.upper()]
+        try:
+            async with asyncio.timeout(timeout_s):
+                # A Modbus client learns only by reading: poll.
+                while await self.state(process) is not wanted:  # noqa: ASYNC110
+                    await asyncio.sleep(self.poll_s)
+        except TimeoutError:
+            now = await self.state(process)
+            raise VirtualPLCError(f"P{process} not {wanted.name} in {timeout_s:g} s "
+                                  f"(it is {now.name})") from None
+
+    async def command(self, word: int) -> None:
+        """1 cycle start, 2 feed hold, 3 reset."""
+        await self._write(self.map.COMMAND, [word])
+
+    async def send(self, sender: int, target: int) -> None:
+        """An SND in the name of external process ``sender`` (the mailbox)."""
+        await self._write(self.map.MAILBOX, [sender, target])
+
+    async def event_counter(self) -> int:
+        hi, lo = await self._input(2, 2)
+        return hi << 16 | lo
+
+    async def next_snd(self, timeout_s: float = 10.0) -> SndSeen:
+        """The next SND the gateway reports after the last one this client saw."""
+        try:
+            async with asyncio.timeout(timeout_s):
+                while True:
+                    sender, target, n, event = await self._input(4, 4)
+                    if event != self._last_event and (sender or target):
+                        self._last_event = event
+                        return SndSeen(sender, target, n, event)
+                    await asyncio.sleep(self.poll_s)
+        except TimeoutError:
+            raise VirtualPLCError(f"no new SND in {timeout_s:g} s") from None

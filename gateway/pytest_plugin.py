@@ -1,0 +1,56 @@
+"""The ncgate pytest plugin (entry point ``pytest11``): a gateway and a virtual PLC as fixtures.
+
+In your tests::
+
+    async def test_p2_waits_for_the_plc(ncgate_gateway, virtual_plc):
+        await ncgate_gateway.start("PROG91")
+        await virtual_plc.wait_state(2, "WAIT_COND")
+        await virtual_plc.set("SA10", 1)
+        await ncgate_gateway.wait_idle(timeout_s=60)
+
+The gateway runs the config of the ``ncgate_config`` fixture -- the built-in default on a free
+port unless you override it in your conftest.py, e.g.::
+
+    @pytest.fixture
+    def ncgate_config():
+        return ncgate_test_config("cell/ncgate.toml", **{"nc.time_scale": 50.0})
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import pytest_asyncio
+
+from config import Config, load_config
+from gateway.app import Gateway
+from gateway.modbus_testkit import VirtualPLC
+
+
+def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Config:
+    """A config for a test: the file (None: built-in) with Modbus on a free port."""
+    return load_config(path, overrides={"modbus.port": 0, **overrides})
+
+
+@pytest.fixture
+def ncgate_config() -> Config:
+    """Override in your conftest.py to run your own cell."""
+    return ncgate_test_config()
+
+
+@pytest_asyncio.fixture
+async def ncgate_gateway(ncgate_config: Config) -> AsyncIterator[Gateway]:
+    """A running gateway (soft PLC, processes, Modbus TCP on a free loopback port)."""
+    async with Gateway(ncgate_config) as gateway:
+        yield gateway
+
+
+@pytest_asyncio.fixture
+async def virtual_plc(ncgate_gateway: Gateway) -> AsyncIterator[VirtualPLC]:
+    """A Modbus client connected to ``ncgate_gateway``, with PLC helpers."""
+    host, port = ncgate_gateway.modbus_address
+    async with VirtualPLC(host, port, ncgate_gateway.config) as plc:
+        yield plc
