@@ -17,7 +17,7 @@ the loop; a write from outside wakes its waits at once and schedules a run with
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from types import TracebackType
 from typing import Any
 
@@ -99,8 +99,11 @@ class WallClockDriver:
 class Gateway:
     """Soft PLC + processes (+ fieldbus servers in later issues), as an async context."""
 
-    def __init__(self, config: Config | None = None) -> None:
+    def __init__(self, config: Config | None = None,
+                 listeners: Sequence[Callable[[Event], None]] = ()) -> None:
+        """``listeners`` hear every trace event from the start (before an autostart)."""
         self.config = config if config is not None else load_config(None)
+        self._listeners = tuple(listeners)
         self.map = ModbusMap(self.config)
         self._runtime: Runtime | None = None
         self._driver: WallClockDriver | None = None
@@ -112,6 +115,8 @@ class Gateway:
         driver = WallClockDriver(runtime.engine, self.config.nc.time_scale,
                                  asyncio.get_running_loop())
         runtime.engine.state_listeners.append(self._on_state)
+        for listener in self._listeners:
+            runtime.trace.subscribe(listener)
         self._runtime, self._driver = runtime, driver
         try:
             if self.config.modbus.enabled:

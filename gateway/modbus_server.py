@@ -225,6 +225,9 @@ class _Connection(asyncio.Protocol):
         if self in self.server.connections:
             self.server.connections.discard(self)
             log.info("%s disconnected", self.who)
+            self.server.connections_changed.set()
+            if not self.server.connections:
+                self.server.all_closed.set()
         if self.timer is not None:
             self.timer.cancel()
             self.timer = None
@@ -296,6 +299,8 @@ class ModbusServer:
         self.config = config
         self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids))
         self.connections: set[_Connection] = set()
+        self.all_closed = asyncio.Event()
+        self.connections_changed = asyncio.Event()  # set when a connection goes
         self._server: asyncio.Server | None = None
         self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
 
@@ -308,6 +313,12 @@ class ModbusServer:
             return False
         return any(address in net for net in self._allow)
 
+    async def wait_connections(self, at_most: int) -> None:
+        """Until at most ``at_most`` connections are open."""
+        while len(self.connections) > at_most:
+            self.connections_changed.clear()
+            await self.connections_changed.wait()
+
     async def start(self) -> tuple[str, int]:
         loop = asyncio.get_running_loop()
         factory: Callable[[], asyncio.Protocol] = lambda: _Connection(self)  # noqa: E731
@@ -319,7 +330,10 @@ class ModbusServer:
     async def close(self) -> None:
         if self._server is not None:
             self._server.close()
-            for connection in list(self.connections):
-                connection.close("server shutting down")
+            if self.connections:
+                self.all_closed.clear()
+                for connection in list(self.connections):
+                    connection.close("server shutting down")
+                await self.all_closed.wait()  # every connection_lost has run
             await self._server.wait_closed()
             self._server = None

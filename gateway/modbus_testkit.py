@@ -157,7 +157,12 @@ class VirtualPLC:
         return hi << 16 | lo
 
     async def next_snd(self, timeout_s: float = 10.0) -> SndSeen:
-        """The next SND the gateway reports after the last one this client saw."""
+        """The next SND the gateway reports after the last one this client saw.
+
+        The map holds only the last SND: when several happen between two polls (plain SNDs at
+        decode time often come in bursts), this is the latest of them.  The per-process SND
+        counters (``status``) count every one.
+        """
         try:
             async with asyncio.timeout(timeout_s):
                 while True:

@@ -44,16 +44,15 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
         with suppress(NotImplementedError, RuntimeError):  # not on every platform or thread
             loop.add_signal_handler(sig, stop.set)
             installed.append(sig)
+
+    def on_event(event: Event) -> None:
+        line = describe(event)
+        if line is not None:
+            (log.warning if event["event"] in ("alarm", "deadlock", "stall", "hazard")
+             else log.info)(line)
+
     try:
-        async with Gateway(config) as gw:
-
-            def on_event(event: Event) -> None:
-                line = describe(event)
-                if line is not None:
-                    (log.warning if event["event"] in ("alarm", "deadlock", "stall", "hazard")
-                     else log.info)(line)
-
-            unsubscribe = gw.runtime.trace.subscribe(on_event)
+        async with Gateway(config, listeners=[on_event]) as gw:
             source = str(config.source) if config.source else "built-in default"
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,
@@ -64,7 +63,6 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
                          ",".join(map(str, config.modbus.unit_ids)), config.modbus.max_clients)
             await stop.wait()
             log.info("stopping")
-            unsubscribe()
     finally:
         for sig in installed:
             loop.remove_signal_handler(sig)

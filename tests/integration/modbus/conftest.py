@@ -41,5 +41,6 @@ def cell(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def ncgate_config(cell: Path) -> Config:
-    return ncgate_test_config(cell / "ncgate.toml")
+def ncgate_config(cell: Path, request: pytest.FixtureRequest) -> Config:
+    overrides = getattr(request, "param", {})
+    return ncgate_test_config(cell / "ncgate.toml", **overrides)

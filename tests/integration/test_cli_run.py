@@ -1,0 +1,85 @@
+"""`ncgate run` as a user runs it: a real process, real TCP, a signal to stop it."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+from pymodbus.client import AsyncModbusTcpClient
+
+from gateway.cli import main
+
+from ..conftest import EXAMPLES
+
+
+async def start_run(config: Path) -> tuple[asyncio.subprocess.Process, int, list[str]]:
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "gateway", "run", "--config", str(config),
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    async with asyncio.timeout(20):
+        while True:
+            line = (await proc.stdout.readline()).decode()
+            assert line, "ncgate run ended early:\n" + "".join(lines)
+            lines.append(line)
+            found = re.search(r"Modbus TCP on [\d.]+:(\d+)", line)
+            if found:
+                return proc, int(found.group(1)), lines
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int) -> None:
+    config = tmp_path / "ncgate.toml"
+    folder = EXAMPLES / "scheme3"
+    config.write_text(f'[nc]\nautostart = true\ntime_scale = 100.0\n[nc.storage]\n'
+                      f'MP0 = "{folder}"\n[modbus]\nport = 0\n')
+    proc, port, lines = await start_run(config)
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    assert await client.connect()
+    r = await client.read_input_registers(0, count=2, device_id=1)
+    assert r.registers == [1, 5]
+    client.close()
+    proc.send_signal(sig)
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines) + rest
+    assert code == 0, log
+    assert "P1 starts PROG91 (by operator)" in log
+    assert "connected" in log and "stopped" in log
+    assert "Traceback" not in log and "Task was destroyed" not in log
+
+
+def test_map_formats(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["map", "--format", "json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    rows = {(r["table"], r["start"]): r for r in data["regions"]}
+    assert rows[("holding registers", 0)]["hmi_start"] == "40001"
+    assert rows[("holding registers", 1000)]["end"] == 1255
+    assert rows[("input registers", 100)]["hmi_start"] == "30101"
+    assert rows[("coils", 0)]["hmi_end"] == "01024"
+    assert rows[("holding registers", 2000)]["access"] == "write"
+    assert main(["map", "--format", "csv"]) == 0
+    csv_lines = capsys.readouterr().out.splitlines()
+    assert csv_lines[0].startswith("table,start,end,count,hmi_start")
+    assert len(csv_lines) == 1 + len(data["regions"])
+    assert main(["map"]) == 0
+    assert "| holding registers | 1500..1627 | 41501..41628 |" in capsys.readouterr().out
+
+
+def test_map_follows_the_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "c.toml"
+    config.write_text("[nc]\nprocesses = 2\n[plc]\nsa_bits = 64\nsyvars = 10\n"
+                      "[modbus]\nread_only = true\n")
+    assert main(["map", "--config", str(config), "--format", "json"]) == 0
+    rows = {(r["table"], r["start"]): r for r in json.loads(capsys.readouterr().out)["regions"]}
+    assert rows[("coils", 0)]["count"] == 64 and rows[("coils", 0)]["access"] == "read"
+    assert rows[("holding registers", 1000)]["count"] == 10
+    assert rows[("input registers", 100)]["count"] == 40
