@@ -75,6 +75,21 @@ class PlcConfig:
     scan_ms: int = 10
 
 
+MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusMapConfig:
+    """Where the movable regions of the map start, and which are read-only (spec 3.2)."""
+
+    k_bytes: int = 0  # holding registers
+    syvars: int = 1000
+    sa_bytes: int = 1500
+    command: int = 2000  # the SND mailbox follows at command+1, command+2
+    status: int = 100  # input registers: the per-process status blocks
+    read_only: frozenset[str] = frozenset()
+
+
 @dataclass(frozen=True, slots=True)
 class ModbusConfig:
     enabled: bool = True
@@ -85,6 +100,7 @@ class ModbusConfig:
     idle_timeout_s: float = 60.0
     read_only: bool = False
     allow: tuple[str, ...] = ()  # client IP allow-list; empty: everyone
+    map: ModbusMapConfig = field(default_factory=ModbusMapConfig)
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,10 +213,11 @@ class _Reader:
 
     def config(self, raw: dict[str, Any], source: Path | None) -> Config:
         top = self.table(raw, "", {"nc", "plc", "modbus", "canopen"})
+        nc, plc = self.nc(top.get("nc")), self.plc(top.get("plc"))
         return Config(
-            nc=self.nc(top.get("nc")),
-            plc=self.plc(top.get("plc")),
-            modbus=self.modbus(top.get("modbus")),
+            nc=nc,
+            plc=plc,
+            modbus=self.modbus(top.get("modbus"), nc, plc),
             canopen=self.canopen(top.get("canopen")),
             source=source,
         )
@@ -292,10 +309,37 @@ class _Reader:
             scan_ms=self.int_(t, "scan_ms", "plc.scan_ms", d.scan_ms, 1, 60_000),
         )
 
-    def modbus(self, raw: Any) -> ModbusConfig:
+    def modbus_map(self, raw: Any, nc: NcConfig, plc: PlcConfig) -> ModbusMapConfig:
+        d = ModbusMapConfig()
+        t = self.table(raw, "modbus.map", {"k_bytes", "syvars", "sa_bytes", "command",
+                                           "status", "read_only"})
+        bases = {name: self.int_(t, name, f"modbus.map.{name}", getattr(d, name), 0, 65535)
+                 for name in ("k_bytes", "syvars", "sa_bytes", "command", "status")}
+        read_only = t.get("read_only", [])
+        if not isinstance(read_only, list) or any(r not in MAP_REGIONS for r in read_only):
+            raise self.fail("modbus.map.read_only",
+                            f"expected a list of {', '.join(MAP_REGIONS)}, got {read_only!r}")
+        holding = [("k_bytes", bases["k_bytes"], plc.k_bytes),
+                   ("syvars", bases["syvars"], plc.syvars),
+                   ("sa_bytes", bases["sa_bytes"], plc.sa_bits // 8),
+                   ("command", bases["command"], 3)]
+        status = [("status", bases["status"], 20 * nc.processes), ("info", 0, 8)]
+        for regions in (holding, status):
+            for i, (name, start, count) in enumerate(regions):
+                if start + count > 65536:
+                    raise self.fail(f"modbus.map.{name}", f"{start}..{start + count - 1} runs "
+                                    "past address 65535")
+                for other, o_start, o_count in regions[i + 1:]:
+                    if start < o_start + o_count and o_start < start + count:
+                        raise self.fail(f"modbus.map.{name}",
+                                        f"{name} ({start}..{start + count - 1}) overlaps "
+                                        f"{other} ({o_start}..{o_start + o_count - 1})")
+        return ModbusMapConfig(**bases, read_only=frozenset(read_only))
+
+    def modbus(self, raw: Any, nc: NcConfig, plc: PlcConfig) -> ModbusConfig:
         d = ModbusConfig()
         t = self.table(raw, "modbus", {"enabled", "host", "port", "unit_ids", "max_clients",
-                                       "idle_timeout_s", "read_only", "allow"})
+                                       "idle_timeout_s", "read_only", "allow", "map"})
         unit_ids = t.get("unit_ids", list(d.unit_ids))
         if not isinstance(unit_ids, list) or not unit_ids or not all(
             isinstance(u, int) and not isinstance(u, bool) and 0 <= u <= 255 for u in unit_ids
@@ -324,6 +368,7 @@ class _Reader:
                                        d.idle_timeout_s, 0, positive=True),
             read_only=self.bool_(t, "read_only", "modbus.read_only", d.read_only),
             allow=tuple(allow),
+            map=self.modbus_map(t.get("map"), nc, plc),
         )
 
     def canopen(self, raw: Any) -> CanopenConfig:

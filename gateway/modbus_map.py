@@ -115,37 +115,47 @@ _WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SN
 class ModbusMap:
     """The map in force for a config."""
 
-    K_BASE, SYVAR_BASE, SA_BYTE_BASE, COMMAND, MAILBOX = 0, 1000, 1500, 2000, 2001
-    STATUS_BASE, STATUS_STRIDE, FLAGS_STRIDE = 100, 20, 16
+    STATUS_STRIDE, FLAGS_STRIDE = 20, 16
 
     def __init__(self, config: Config) -> None:
         self.config = config
         plc, processes = config.plc, config.nc.processes
+        layout = config.modbus.map
+        self.K_BASE, self.SYVAR_BASE, self.SA_BYTE_BASE = (
+            layout.k_bytes, layout.syvars, layout.sa_bytes)
+        self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
+        self.STATUS_BASE = layout.status
         sa_bytes = plc.sa_bits // 8
-        read_only = config.modbus.read_only
-        rw = "r" if read_only else "rw"
+        every = config.modbus.read_only
+
+        def access(name: str, normal: str) -> str:
+            return "r" if every or name in layout.read_only else normal
+
         self.regions = [
-            Region(Table.COILS, 0, plc.sa_bits, Kind.SA_BITS, rw, "bit", "SA bit n"),
+            Region(Table.COILS, 0, plc.sa_bits, Kind.SA_BITS, access("sa_bits", "rw"), "bit",
+                   "SA bit n"),
             Region(Table.DISCRETE_INPUTS, 0, self.FLAGS_STRIDE * processes,
                    Kind.PROCESS_FLAGS, "r", "bit",
                    "process k at 16(k-1)+0..5: " + ", ".join(PROCESS_FLAGS)
                    + "; +6..15 read 0"),
-            Region(Table.HOLDING, self.K_BASE, plc.k_bytes, Kind.K_BYTES, rw, "uint8",
-                   "K byte n (0..255)"),
-            Region(Table.HOLDING, self.SYVAR_BASE, plc.syvars, Kind.SYVARS, rw, "int16",
-                   "SYVAR n"),
-            Region(Table.HOLDING, self.SA_BYTE_BASE, sa_bytes, Kind.SA_BYTES, rw, "uint8",
+            Region(Table.HOLDING, self.K_BASE, plc.k_bytes, Kind.K_BYTES,
+                   access("k_bytes", "rw"), "uint8", "K byte n (0..255)"),
+            Region(Table.HOLDING, self.SYVAR_BASE, plc.syvars, Kind.SYVARS,
+                   access("syvars", "rw"), "int16", "SYVAR n"),
+            Region(Table.HOLDING, self.SA_BYTE_BASE, sa_bytes, Kind.SA_BYTES,
+                   access("sa_bytes", "rw"), "uint8",
                    "SA byte n (bits 8n..8n+7, the same bits as the coils)"),
-            Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, "r" if read_only else "w",
+            Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, access("command", "w"),
                    "uint16", "command: 1 cycle start, 2 feed hold, 3 reset (reads 0)"),
-            Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, "r" if read_only else "w",
+            Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
             Region(Table.INPUT, 0, 8, Kind.INFO, "r", "uint16",
                    "0 map version, 1 process count, 2-3 event counter (u32), "
                    "4-7 last SND: sender, target, block N, event number (low 16 bits)"),
             Region(Table.INPUT, self.STATUS_BASE, self.STATUS_STRIDE * processes,
                    Kind.PROCESS_STATUS, "r", "record",
-                   "process k at 100+20(k-1)+0..17: " + ", ".join(PROCESS_REGISTERS)
+                   f"process k at {self.STATUS_BASE}+20(k-1)+0..17: "
+                   + ", ".join(PROCESS_REGISTERS)
                    + "; +18..19 read 0"),
         ]
         self._check_overlaps()
@@ -294,7 +304,7 @@ class ModbusMap:
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:
                 raise ModbusError(ILLEGAL_ADDRESS, "the mailbox takes sender and target in one "
-                                  "FC16 at 2001..2002")
+                                  f"FC16 at {self.MAILBOX}..{self.MAILBOX + 1}")
             sender, target = values
             external = self.config.nc.external
             if sender not in external or not 1 <= target <= self.config.nc.processes:

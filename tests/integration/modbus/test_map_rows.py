@@ -108,3 +108,24 @@ async def test_second_unit_id_is_served_and_others_are_not(ncgate_gateway: Gatew
         assert r.isError() and r.exception_code == 0x0B
     finally:
         client.close()
+
+
+MOVED = {"modbus.map": {"syvars": 3000, "status": 500, "command": 4000,
+                        "read_only": ["k_bytes"]}}
+
+
+@pytest.mark.parametrize("ncgate_config", [MOVED], indirect=True)
+async def test_regions_move_and_become_read_only(ncgate_gateway: Gateway,
+                                                 virtual_plc: VirtualPLC) -> None:
+    client = virtual_plc.client
+    await virtual_plc.set("SYVAR2", 1234)  # the kit follows the map in force
+    assert ncgate_gateway.image.read("SYVAR", 2, "IN") == 1234
+    assert (await client.read_holding_registers(3002, count=1, device_id=1)).registers == [1234]
+    r = await client.read_holding_registers(1000, count=1, device_id=1)
+    assert r.isError() and r.exception_code == 2  # nothing at the old place
+    r = await client.write_register(5, 1, device_id=1)  # K bytes: read-only here
+    assert r.isError() and r.exception_code == 2
+    assert ncgate_gateway.image.read("SK", 5, "BY") == 0
+    await virtual_plc.command(1)  # the command word at 4000
+    await virtual_plc.wait_state(1, "WAIT_COND")  # the status blocks at 500
+    assert (await client.read_input_registers(500, count=1, device_id=1)).registers == [3]
