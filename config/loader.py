@@ -214,11 +214,22 @@ class _Reader:
     def config(self, raw: dict[str, Any], source: Path | None) -> Config:
         top = self.table(raw, "", {"nc", "plc", "modbus", "canopen"})
         nc, plc = self.nc(top.get("nc")), self.plc(top.get("plc"))
+        canopen = self.canopen(top.get("canopen"))
+        if canopen.enabled:
+            # The dictionary's shape (spec 3.3): 0x2000 is one ARRAY of at most 254 entries,
+            # 0x2100+j (128 K bytes each) must stay below 0x2200.
+            if plc.sa_bits > 254 * 8:
+                raise self.fail("plc.sa_bits", f"the CANopen object 0x2000 holds at most 254 "
+                                f"SA bytes (2032 bits), got {plc.sa_bits} bits; lower it or "
+                                "set canopen.enabled = false")
+            if plc.k_bytes > 128 * 256:
+                raise self.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at "
+                                f"most 32768 K bytes, got {plc.k_bytes}")
         return Config(
             nc=nc,
             plc=plc,
             modbus=self.modbus(top.get("modbus"), nc, plc),
-            canopen=self.canopen(top.get("canopen")),
+            canopen=canopen,
             source=source,
         )
 

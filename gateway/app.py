@@ -22,6 +22,7 @@ from types import TracebackType
 from typing import Any
 
 from config import Config, load_config
+from gateway.canopen_node import CanopenNode
 from gateway.modbus_map import ModbusMap
 from gateway.modbus_server import ModbusServer
 from gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
@@ -109,6 +110,7 @@ class Gateway:
         self._driver: WallClockDriver | None = None
         self._modbus: ModbusServer | None = None
         self._modbus_address: tuple[str, int] | None = None
+        self._canopen: CanopenNode | None = None
 
     async def __aenter__(self) -> Gateway:
         runtime = build_runtime(self.config, closed=False)
@@ -122,6 +124,9 @@ class Gateway:
             if self.config.modbus.enabled:
                 self._modbus = ModbusServer(self.config.modbus, self.map, self)
                 self._modbus_address = await self._modbus.start()
+            if self.config.canopen.enabled:
+                self._canopen = CanopenNode(self.config, self)
+                self._canopen.start()
             if self.config.nc.autostart:
                 await self.start()
         except BaseException:
@@ -134,6 +139,9 @@ class Gateway:
         if self._modbus is not None:
             await self._modbus.close()
             self._modbus = None
+        if self._canopen is not None:
+            self._canopen.close()
+            self._canopen = None
         if self._driver is not None:
             self._driver.close()
         self._driver = None
@@ -148,6 +156,10 @@ class Gateway:
     @property
     def modbus_server(self) -> ModbusServer | None:
         return self._modbus
+
+    @property
+    def canopen_node(self) -> CanopenNode | None:
+        return self._canopen
 
     # -- what is inside -------------------------------------------------------------------
 

@@ -65,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
                                "(0xxxx/1xxxx/3xxxx/4xxxx) addresses, types and access.")
     map_.add_argument("--config", metavar="C", help="config file (default: built-in)")
     map_.add_argument("--format", choices=("md", "csv", "json"), default="md")
+
+    eds = commands.add_parser("eds", help="write the CANopen node's EDS file",
+                              description="Write the node's EDS (CiA 306) for your CANopen "
+                              "configuration tool.")
+    eds.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    eds.add_argument("-o", "--output", metavar="FILE", required=True, help="the .eds file")
     return parser
 
 
@@ -83,6 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run(args)
         if args.command == "map":
             return _map(args)
+        if args.command == "eds":
+            return _eds(args)
     except (UsageError, ConfigError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -157,6 +165,14 @@ def _map(args: argparse.Namespace) -> int:
     from gateway.modbus_map import ModbusMap
 
     sys.stdout.write(ModbusMap(load_config(args.config)).render(args.format))
+    return EXIT_OK
+
+
+def _eds(args: argparse.Namespace) -> int:
+    from gateway.canopen_dictionary import write_eds
+
+    write_eds(load_config(args.config), args.output)
+    print(f"wrote {args.output}", file=sys.stderr)
     return EXIT_OK
 
 

@@ -18,6 +18,7 @@ port unless you override it in your conftest.py, e.g.::
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -31,8 +32,14 @@ from gateway.modbus_testkit import VirtualPLC
 
 
 def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Config:
-    """A config for a test: the file (None: built-in) with Modbus on a free port."""
-    return load_config(path, overrides={"modbus.port": 0, **overrides})
+    """A config for a test: the file (None: built-in) with Modbus on a free port and the
+    CANopen node on a virtual CAN channel of its own (so tests never hear each other)."""
+    channel = f"ncgate-test-{next(_channels)}"
+    return load_config(path, overrides={"modbus.port": 0, "canopen.channel": channel,
+                                        **overrides})
+
+
+_channels = itertools.count(1)
 
 
 @pytest.fixture
