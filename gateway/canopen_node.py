@@ -95,8 +95,10 @@ class _SdoServer(SdoServer):
         with self._lock:
             command = data[0]
             ccs = command & 0xE0
-            if ccs == 0x00 and not self._segmented:  # a segment with no transfer open
-                self.abort(ABORT_COMMAND)
+            # canopen aborts these with the index of the last transfer (None before the first
+            # one, which fails): answer them here with the request's own index.
+            if ccs in (0xE0, 0xC0) or (ccs == 0x00 and not self._segmented):
+                self._refuse(data, ABORT_COMMAND)  # no such command, or no transfer open
                 return
             super().on_request(can_id, data, timestamp)
             if ccs == 0x20:  # initiate download: segmented unless expedited
@@ -112,6 +114,10 @@ class _SdoServer(SdoServer):
                 self._timer = threading.Timer(SEGMENTED_TIMEOUT_S, self._expire)
                 self._timer.daemon = True
                 self._timer.start()
+
+    def _refuse(self, request: bytes | bytearray, code: int) -> None:
+        index, subindex = struct.unpack_from("<HB", bytes(request).ljust(4, b"\0"), 1)
+        self.send_response(struct.pack("<BHBL", 0x80, index, subindex, code))
 
     def _expire(self) -> None:
         with self._lock:
@@ -140,10 +146,16 @@ class _Node(canopen.LocalNode):
             raise SdoAbortedError(0x06020000)
         obj = self.object_dictionary[index]
         if not isinstance(obj, ODVariable):
-            if subindex not in obj:
+            # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
+            # ones the dictionary defines exist here.
+            if subindex not in obj.subindices:
                 raise SdoAbortedError(0x06090011)
             obj = obj[subindex]
         return obj
+
+    def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
+        self._object(index, subindex)  # 0x06020000 / 0x06090011 before any callback
+        return super().get_data(index, subindex, check_readable)
 
     def set_data(self, index: int, subindex: int, data: bytes,
                  check_writable: bool = False) -> None:
@@ -412,7 +424,9 @@ class CanopenNode:
                 self._alarmed = False
                 self.node.emcy.reset(0)
         elif kind == "snd" and self.operational:
-            self._tpdo2_queue.append(bytes(_pack_last_snd(self.backend.engine)))
+            record = struct.pack("<LBBH", self.backend.engine.trace.counter, event["proc"],
+                                 event["to"], (event.get("n") or 0) & 0xFFFF)
+            self._tpdo2_queue.append(record)
             self._tpdo_ready(2)
 
     def _tpdo_ready(self, n: int) -> None:
@@ -455,9 +469,4 @@ class CanopenNode:
 def _last_snd(engine: Engine) -> tuple[int, int, int, int]:
     sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
     return number & 0xFFFFFFFF, sender, target, n & 0xFFFF
-
-
-def _pack_last_snd(engine: Engine) -> bytes:
-    number, sender, target, n = _last_snd(engine)
-    return struct.pack("<LBBH", number, sender, target, n)
 

@@ -320,7 +320,8 @@ class Engine:
         self._exe_waiters: dict[int, deque[tuple[Process, Program, str]]] = {}
         self._loaded: dict[int, LoadedProgram] = {}
         self._writer_proc: Process | None = None
-        self.last_snd: tuple[int, int, int, int] | None = None  # sender, target, N, event no.
+        # The last SND delivered: sender, target, N, its number on the event counter.
+        self.last_snd: tuple[int, int, int, int] | None = None
         # Hooks for drivers and the gateway.
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
@@ -964,9 +965,11 @@ class Engine:
             where = sender.where
         sender.stats.snd_sent += 1
         target.stats.snd_received += 1
-        self._emit("snd", sender.number, where, to=target.number)
         n = where[2] if where is not None and where[2] is not None else 0
-        self.last_snd = (sender.number, target.number, n, self.trace.seq)
+        # Recorded before the event, so that whoever hears it reads this SND; its number is
+        # the value the event counter takes with it.
+        self.last_snd = (sender.number, target.number, n, (self.trace.counter + 1) & 0xFFFFFFFF)
+        self._emit("snd", sender.number, where, to=target.number)
 
     # ---- WAI,var op value --------------------------------------------------------------
 
