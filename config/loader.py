@@ -112,6 +112,11 @@ class CanopenConfig:
     node_id: int = 16
     nmt_autostart: bool = False
     heartbeat_ms: int = 1000
+    # A python-can-remote hub on loopback, so that a master in another process can reach the
+    # node on a machine without SocketCAN (`interface = "remote"`, channel ws://host:port/).
+    hub: bool = False
+    hub_host: str = "127.0.0.1"
+    hub_port: int = 54701
 
 
 @dataclass(frozen=True, slots=True)
@@ -385,7 +390,8 @@ class _Reader:
     def canopen(self, raw: Any) -> CanopenConfig:
         d = CanopenConfig()
         t = self.table(raw, "canopen", {"enabled", "interface", "channel", "bitrate",
-                                        "node_id", "nmt_autostart", "heartbeat_ms"})
+                                        "node_id", "nmt_autostart", "heartbeat_ms", "hub",
+                                        "hub_host", "hub_port"})
         return CanopenConfig(
             enabled=self.bool_(t, "enabled", "canopen.enabled", d.enabled),
             interface=self.str_(t, "interface", "canopen.interface", d.interface),
@@ -396,4 +402,7 @@ class _Reader:
                                      d.nmt_autostart),
             heartbeat_ms=self.int_(t, "heartbeat_ms", "canopen.heartbeat_ms", d.heartbeat_ms, 0,
                                    65535),
+            hub=self.bool_(t, "hub", "canopen.hub", d.hub),
+            hub_host=self.str_(t, "hub_host", "canopen.hub_host", d.hub_host),
+            hub_port=self.int_(t, "hub_port", "canopen.hub_port", d.hub_port, 0, 65535),
         )

@@ -177,3 +177,32 @@ def build_dictionary(config: Config) -> ObjectDictionary:
         ("Block N", UNSIGNED16, "ro", None),
     ]))
     return od
+
+
+_TYPE_NAMES = {UNSIGNED8: "UNSIGNED8", UNSIGNED16: "UNSIGNED16", UNSIGNED32: "UNSIGNED32",
+               INTEGER16: "INTEGER16"}
+
+
+def dictionary_rows(config: Config) -> list[dict[str, object]]:
+    """The dictionary for people (``ncgate map``): one row per object, arrays folded."""
+    od = build_dictionary(config)
+    rows: list[dict[str, object]] = []
+    for index in sorted(od):
+        obj = od[index]
+        if isinstance(obj, ODVariable):
+            members = [obj]
+        elif isinstance(obj, ODArray):
+            first, last = obj.subindices[1], obj.subindices[max(obj.subindices)]
+            rows.append({"index": f"0x{index:04X}", "sub": f"1..{last.subindex}",
+                         "name": obj.name,
+                         "type": f"ARRAY of {_TYPE_NAMES.get(first.data_type or 0, '?')}",
+                         "access": first.access_type, "default": first.default})
+            continue
+        else:
+            members = [obj.subindices[s] for s in sorted(obj.subindices) if s]
+        for m in members:
+            rows.append({"index": f"0x{index:04X}", "sub": str(m.subindex),
+                         "name": m.name if isinstance(obj, ODVariable) else f"{obj.name}: {m.name}",
+                         "type": _TYPE_NAMES.get(m.data_type or 0, "?"), "access": m.access_type,
+                         "default": m.default})
+    return rows

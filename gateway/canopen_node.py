@@ -2,8 +2,11 @@
 does not do by itself.
 
 canopen runs its SDO server, NMT and PDO callbacks on python-can's receive thread.  Nothing
-here touches the image or the processes from that thread: every access is handed to the
-asyncio loop and its result (or abort code) awaited there (:meth:`CanopenNode._on_loop`).
+here touches the image or the processes from that thread: writes and status reads are handed
+to the asyncio loop and their result (or abort code) awaited (:meth:`CanopenNode._on_loop`);
+image reads use an immutable snapshot that the loop publishes after every write, once all of
+the write's values are stored (so never half a request), which keeps SDO reads of the image
+prompt however busy the loop is.
 
 What this module adds to ``canopen.LocalNode``:
 
@@ -30,6 +33,7 @@ from collections.abc import Callable
 from typing import Protocol, TypeVar
 
 import canopen
+from can_remote import RemoteServer
 from canopen.objectdictionary import ODRecord, ODVariable
 from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
 from canopen.sdo.exceptions import SdoAbortedError
@@ -154,8 +158,22 @@ class _Node(canopen.LocalNode):
         return obj
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
-        self._object(index, subindex)  # 0x06020000 / 0x06090011 before any callback
-        return super().get_data(index, subindex, check_readable)
+        # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
+        # which (ODArray has no __contains__) sorts every sub-index on every access.
+        obj = self._object(index, subindex)
+        if check_readable and not obj.readable:
+            raise SdoAbortedError(0x06010001)
+        for callback in self._read_callbacks:
+            result = callback(index=index, subindex=subindex, od=obj)
+            if result is not None:
+                return obj.encode_raw(result)
+        stored = self.data_store.get(index, {}).get(subindex)
+        if stored is not None:
+            return stored
+        for value in (obj.value, obj.default):
+            if value is not None:
+                return obj.encode_raw(value)
+        raise SdoAbortedError(0x060A0023)  # resource not available
 
     def set_data(self, index: int, subindex: int, data: bytes,
                  check_writable: bool = False) -> None:
@@ -195,6 +213,16 @@ class CanopenNode:
         self._tpdo_timer: dict[int, asyncio.TimerHandle] = {}
         self._alarmed = False
         self._rpdo_cobs: dict[int, int] = {}  # RPDO number -> subscribed COB-ID
+        self._hub: RemoteServer | None = None
+        # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
+        # the CAN thread.  A tuple of immutable values, swapped in one assignment.
+        self._view: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())
+        # RPDO writes handed to the loop (counted by the CAN thread) and done (by the loop):
+        # while one is on its way, an SDO read goes through the loop too, behind it, so that
+        # what the bus said first is seen first.
+        self._rpdo_handed = 0
+        self._rpdo_done = 0
+        self.hub_address: tuple[str, int] | None = None
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -211,11 +239,35 @@ class CanopenNode:
         engine = self.backend.engine
         engine.state_listeners.append(self._on_state)
         engine.trace.subscribe(self._on_event)
+        self._publish()
+        self._unsubscribe_image = self.backend.image.subscribe(lambda values, who:
+                                                               self._publish())
         self._boot()
         log.info("CANopen node %d on %s/%s (%s)", self.node_id, cfg.interface, cfg.channel,
                  self.node.nmt.state)
+        if cfg.hub:
+            self._start_hub()
+
+    def _start_hub(self) -> None:
+        """Serve our bus to other processes: each websocket client of the hub gets a bus of
+        its own on our interface and channel (python-can-remote)."""
+        cfg = self.config.canopen
+        hub = RemoteServer(host=cfg.hub_host, port=cfg.hub_port, interface=cfg.interface,
+                           channel=cfg.channel, bitrate=cfg.bitrate)
+        thread = threading.Thread(target=hub.serve_forever, name="ncgate can-remote hub",
+                                  daemon=True)
+        thread.start()
+        self._hub = hub
+        host, port = hub.server_address[:2]
+        self.hub_address = (str(host), int(port))
+        log.info("CANopen hub for other processes: interface 'remote', channel "
+                 "'ws://%s:%d/'", host, port)
 
     def close(self) -> None:
+        if self._hub is not None:
+            self._hub.shutdown()
+            self._hub.server_close()
+            self._hub = None
         for handle in self._tpdo_timer.values():
             handle.cancel()
         self.node.nmt.stop_heartbeat()
@@ -223,6 +275,7 @@ class CanopenNode:
         engine = self.backend.engine
         if self._on_state in engine.state_listeners:
             engine.state_listeners.remove(self._on_state)
+        self._unsubscribe_image()
         self.network.disconnect()
 
     def _boot(self) -> None:
@@ -286,24 +339,35 @@ class CanopenNode:
 
     # -- SDO: the live image and status -------------------------------------------------------
 
+    def _publish(self) -> None:
+        image = self.backend.image
+        self._view = (bytes(image.sa), bytes(image.k), tuple(image.syvar))
+
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
         if index == 0x1001:
             return self._on_loop(self._error_register)
         if index < 0x2000 or subindex == 0:
             return None  # the dictionary's own value (stored or default)
+        if index < COMMAND and self._rpdo_done == self._rpdo_handed:
+            return self._image_value(index, subindex)  # the snapshot, from this thread
         return self._on_loop(lambda: self._read(index, subindex))
+
+    def _image_value(self, index: int, subindex: int) -> int:
+        sa, k, syvar = self._view
+        if index == SA_BYTES:
+            return sa[subindex - 1]
+        if index < SYVAR_BASE:
+            return k[(index - K_BASE) * CHUNK + subindex - 1]
+        return syvar[(index - SYVAR_BASE) * CHUNK + subindex - 1]
 
     def _error_register(self) -> int:
         return int(any(p.alarm is not None for p in self.backend.engine.processes.values()))
 
     def _read(self, index: int, subindex: int) -> int:
-        image, engine = self.backend.image, self.backend.engine
-        if index == SA_BYTES:
-            return image.sa[subindex - 1]
-        if K_BASE <= index < SYVAR_BASE:
-            return image.k[(index - K_BASE) * CHUNK + subindex - 1]
-        if SYVAR_BASE <= index < COMMAND:
-            return image.syvar[(index - SYVAR_BASE) * CHUNK + subindex - 1]
+        """Any manufacturer object, on the loop."""
+        engine = self.backend.engine
+        if index < COMMAND:
+            return self._image_value(index, subindex)
         if STATUS_BASE <= index < LAST_SND:
             s = engine.status(index - STATUS_BASE + 1)
             return [int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF, int(s.wait_kind),
@@ -397,7 +461,15 @@ class CanopenNode:
             return
         changes = [(area, i, "BY", b) for i, b in enumerate(bytes(data[:8]))]
         who = f"canopen 0x{can_id:03X}"
-        self._call_soon(lambda: self.backend.apply_writes(changes, who))
+
+        def apply() -> None:
+            try:
+                self.backend.apply_writes(changes, who)
+            finally:
+                self._rpdo_done += 1
+
+        self._rpdo_handed += 1
+        self._call_soon(apply)
 
     def _on_state(self, process: Process | None, old: ProcessState) -> None:
         if not self.operational:

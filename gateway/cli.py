@@ -65,6 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
                                "(0xxxx/1xxxx/3xxxx/4xxxx) addresses, types and access.")
     map_.add_argument("--config", metavar="C", help="config file (default: built-in)")
     map_.add_argument("--format", choices=("md", "csv", "json"), default="md")
+    map_.add_argument("--bus", choices=("modbus", "canopen"),
+                      help="only this bus (CSV holds one table: default modbus)")
 
     eds = commands.add_parser("eds", help="write the CANopen node's EDS file",
                               description="Write the node's EDS (CiA 306) for your CANopen "
@@ -162,9 +164,39 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
+    import csv
+    import json
+
+    from gateway.canopen_dictionary import dictionary_rows
     from gateway.modbus_map import ModbusMap
 
-    sys.stdout.write(ModbusMap(load_config(args.config)).render(args.format))
+    config = load_config(args.config)
+    buses = [args.bus] if args.bus else (["modbus"] if args.format == "csv" else
+                                         ["modbus", "canopen"])
+    rows = dictionary_rows(config) if "canopen" in buses else []
+    if args.format == "json":
+        data = json.loads(ModbusMap(config).render("json")) if "modbus" in buses else {}
+        if rows:
+            data["canopen"] = {"node_id": config.canopen.node_id, "objects": rows}
+        sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    elif args.format == "csv":
+        if buses == ["canopen"]:
+            writer = csv.DictWriter(sys.stdout, fieldnames=list(rows[0]), lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+        else:
+            sys.stdout.write(ModbusMap(config).render("csv"))
+    else:
+        if "modbus" in buses:
+            sys.stdout.write(ModbusMap(config).render("md"))
+        if rows:
+            sys.stdout.write(f"\n# CANopen dictionary (node {config.canopen.node_id})\n\n"
+                             "| index | sub | name | type | access | default |\n"
+                             "|---|---|---|---|---|---|\n")
+            for r in rows:
+                default = "" if r["default"] is None else r["default"]
+                sys.stdout.write(f"| {r['index']} | {r['sub']} | {r['name']} | {r['type']} | "
+                                 f"{r['access']} | {default} |\n")
     return EXIT_OK
 
 

@@ -8,8 +8,9 @@ In your tests::
         await virtual_plc.set("SA10", 1)
         await ncgate_gateway.wait_idle(timeout_s=60)
 
-The gateway runs the config of the ``ncgate_config`` fixture -- the built-in default on a free
-port unless you override it in your conftest.py, e.g.::
+``canopen_master`` is a canopen master on the gateway's CAN bus (``upload``, ``download``,
+``next_frame``, ``nmt``).  The gateway runs the config of the ``ncgate_config`` fixture --
+the built-in default on a free port unless you override it in your conftest.py, e.g.::
 
     @pytest.fixture
     def ncgate_config():
@@ -19,7 +20,7 @@ port unless you override it in your conftest.py, e.g.::
 from __future__ import annotations
 
 import itertools
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,7 @@ import pytest_asyncio
 
 from config import Config, load_config
 from gateway.app import Gateway
+from gateway.canopen_testkit import CanopenMaster
 from gateway.modbus_testkit import VirtualPLC
 
 
@@ -53,6 +55,16 @@ async def ncgate_gateway(ncgate_config: Config) -> AsyncIterator[Gateway]:
     """A running gateway (soft PLC, processes, Modbus TCP on a free loopback port)."""
     async with Gateway(ncgate_config) as gateway:
         yield gateway
+
+
+@pytest.fixture
+def canopen_master(ncgate_gateway: Gateway) -> Iterator[CanopenMaster]:
+    """A canopen master on the gateway's CAN bus, hearing TPDO1, TPDO2 and EMCY."""
+    node_id = ncgate_gateway.config.canopen.node_id
+    master = CanopenMaster(ncgate_gateway.config,
+                           listen=(0x180 + node_id, 0x280 + node_id, 0x80 + node_id))
+    yield master
+    master.close()
 
 
 @pytest_asyncio.fixture

@@ -83,3 +83,20 @@ def test_map_follows_the_config(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert rows[("coils", 0)]["count"] == 64 and rows[("coils", 0)]["access"] == "read"
     assert rows[("holding registers", 1000)]["count"] == 10
     assert rows[("input registers", 100)]["count"] == 40
+
+
+def test_map_shows_the_canopen_dictionary(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["map", "--format", "json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    objects = {(o["index"], o["sub"]): o for o in data["canopen"]["objects"]}
+    assert data["canopen"]["node_id"] == 16
+    assert objects[("0x2000", "1..128")]["type"] == "ARRAY of UNSIGNED8"
+    assert objects[("0x2201", "1..128")]["type"] == "ARRAY of INTEGER16"  # SYVAR 128..255
+    assert ("0x2202", "1..128") not in objects  # 256 SYVARs: two objects
+    assert objects[("0x2400", "1")]["access"] == "wo"
+    assert objects[("0x2504", "1")]["access"] == "ro"  # process 5
+    assert objects[("0x1017", "0")]["default"] == 1000
+    assert main(["map", "--bus", "canopen", "--format", "csv"]) == 0
+    assert capsys.readouterr().out.startswith("index,sub,name,type,access,default\n0x1000,0,")
+    assert main(["map"]) == 0
+    assert "# CANopen dictionary (node 16)" in capsys.readouterr().out
