@@ -157,3 +157,18 @@ def test_eds_round_trip(tmp_path: Path, ncgate_config: Config) -> None:
     for index in ours:
         assert described(theirs[index]) == described(ours[index]), hex(index)
     assert 0x2102 in theirs and len(theirs[0x2102].subindices) == 1 + 300 - 256
+
+
+async def test_reset_node_boots_again_in_pre_operational(gw: Gateway, master: Master) -> None:
+    assert await master.next(0x710) == b"\x00"
+    master.nmt(0x01)
+    assert await master.next(0x190) == bytes(4)
+    await master.download(0x1800, 3, struct.pack("<H", 30))
+    master.nmt(0x81)  # reset node
+    assert await master.next(0x710) == b"\x00"  # boot-up again
+    node = gw.canopen_node
+    assert node is not None and node.node.nmt.state == "PRE-OPERATIONAL"
+    assert await master.upload(0x1800, 3) == struct.pack("<H", 0)  # default inhibit time
+    await gw.start("BAD", process=3)  # a state change: no TPDO1 in PRE-OPERATIONAL ...
+    assert (await master.upload(0x2502, 1)) == u8(8)
+    assert master.frames[0x190].empty()  # ... and the SDO answer came after the change

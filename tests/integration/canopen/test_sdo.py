@@ -121,3 +121,45 @@ async def test_abandoned_segmented_transfer_times_out(gw: Gateway, master: Maste
 async def test_segmented_download_completes(gw: Gateway, master: Master) -> None:
     await master.download(0x2200, 1, i16(-3), force_segment=True)
     assert gw.image.read("SYVAR", 0, "IN") == -3
+
+
+async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
+    """Upload every readable sub-index of the manufacturer area and download every writable
+    one, checking each against the image or the process status."""
+    od = master.node.object_dictionary
+    checked = 0
+    for index in sorted(i for i in od if 0x2000 <= i < 0x3000):
+        obj = od[index]
+        for sub in sorted(obj.subindices):
+            var = obj.subindices[sub]
+            if sub == 0:
+                assert await master.upload(index, 0) == u8(len(obj.subindices) - 1)
+                continue
+            size = len(var) // 8
+            if var.access_type == "rw":  # image objects: write a distinct value, read it back
+                value = (index * 7 + sub) % 100 + 1
+                if index >= 0x2200:
+                    value = -value
+                await master.download(index, sub, value.to_bytes(size, "little", signed=True))
+                area, at = (("SA", sub - 1) if index == 0x2000 else
+                            ("SK", (index - 0x2100) * 128 + sub - 1) if index < 0x2200 else
+                            ("SYVAR", (index - 0x2200) * 128 + sub - 1))
+                view = "IN" if area == "SYVAR" else "BY"
+                assert gw.image.read(area, at, view) == value, (hex(index), sub)
+                assert await master.upload(index, sub) == value.to_bytes(size, "little",
+                                                                         signed=True)
+            elif var.access_type == "ro":  # status and last SND
+                data = await master.upload(index, sub)
+                assert len(data) == size
+                if 0x2500 <= index < 0x2600:
+                    status = gw.status(index - 0x2500 + 1)
+                    expected = [int(status.state), status.n or 0, status.line,
+                                int(status.wait_kind), status.wait_target, status.alarm_code,
+                                status.snd_sent, status.snd_received][sub - 1]
+                    assert int.from_bytes(data, "little") == expected
+            else:  # write-only: the command record
+                with pytest.raises(SdoAbortedError) as caught:
+                    await master.upload(index, sub)
+                assert caught.value.code == 0x06010001
+            checked += 1
+    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4
