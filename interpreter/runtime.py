@@ -96,6 +96,8 @@ _STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
 
 
 _EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)", re.IGNORECASE)
+_RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD})
+_WAITING_STATES: Final = frozenset(_STATE_OF_WAIT.values())
 _ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
 
 
@@ -302,6 +304,7 @@ class Engine:
         self.image = image
         self.loader = loader
         self.trace = trace if trace is not None else Trace()
+        self._record = self.trace.record  # bound once: every SND and WAI records
         self.now = 0.0
         self._wait_timeout_s = settings.wait_timeout_s
         self.processes = {
@@ -580,7 +583,7 @@ class Engine:
         return timer
 
     def _emit(self, event: str, proc: int, where: Where | None, **fields: Any) -> None:
-        self.trace.record(self.now, event, proc, where, fields)
+        self._record(self.now, event, proc, where, fields)
 
     # ---- state --------------------------------------------------------------------------
 
@@ -603,9 +606,9 @@ class Engine:
     def _account(self, p: Process) -> None:
         spent = self.now - p.state_since
         if spent > 0:
-            if p.state in (ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD):
+            if p.state in _RUNNING_STATES:
                 p.stats.running_s += spent
-            elif p.state in _STATE_OF_WAIT.values():
+            elif p.state in _WAITING_STATES:
                 p.stats.waiting_s += spent
         p.state_since = self.now
 
@@ -614,8 +617,9 @@ class Engine:
         if state is not p.state:
             self._account(p)
             old, p.state = p.state, state
-            for listener in list(self.state_listeners):
-                listener(p, old)
+            if self.state_listeners:  # copied: a listener may unsubscribe
+                for listener in list(self.state_listeners):
+                    listener(p, old)
 
     def _position(self, p: Process) -> tuple[float, ...]:
         item = p.int_item
@@ -1305,17 +1309,23 @@ class _BlockCompiler:
             return ("waic", (area, index, view, op, int(value), text))
         return cond
 
+    def _exchange_op(self, item: WaitProc | Snd,
+                     method: Callable[[Process, str, int, str, Where], bool]) -> Op:
+        """(WAI,n) and (SND,n): the hot path of a SND/WAI exchange, no action tuple and no
+        dispatch between the op and the engine."""
+        n = self._int_arg(item.process, "process number")
+        code = format_item(item)
+        where = self.where
+
+        def exchange(p: Process) -> int:
+            return NEXT if method(p, "decoder", n(p), code, where) else WAIT_NEXT
+        return exchange
+
     def _wait_op(self, item: WaitProc | WaitCond) -> Op:
         engine = self.engine
         where = self.where
-        if isinstance(item, WaitProc):  # the hot path of a SND/WAI exchange: no dispatch
-            n = self._int_arg(item.process, "process number")
-            code = format_item(item)
-            wai_proc = engine._wai_proc
-
-            def wait_proc(p: Process) -> int:
-                return NEXT if wai_proc(p, "decoder", n(p), code, where) else WAIT_NEXT
-            return wait_proc
+        if isinstance(item, WaitProc):
+            return self._exchange_op(item, engine._wai_proc)
         action = self._wait_action(item)
 
         def wait(p: Process) -> int:
@@ -1449,14 +1459,8 @@ class _BlockCompiler:
         engine = self.engine
         where = self.where
         labels = self.loaded.program.labels
-        if isinstance(item, Snd):  # the hot path of a SND/WAI exchange: no dispatch
-            n = self._int_arg(item.process, "process number")
-            text = format_item(item)
-            snd = engine._snd
-
-            def send(p: Process) -> int:
-                return NEXT if snd(p, "decoder", n(p), text, where) else WAIT_NEXT
-            return send
+        if isinstance(item, Snd):
+            return self._exchange_op(item, engine._snd)
         if isinstance(item, Exe | Display):
             action = self._code_action(item)
 

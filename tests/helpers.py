@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from interpreter.checker import CheckContext, check_program
@@ -76,3 +77,11 @@ def simulate(programs: dict[str, str], main: str = "A", until: float | None = No
     sim.engine.start(main)
     sim.run(until)
     return sim
+
+
+def write_cell(folder: Path, config_text: str, programs: dict[str, str]) -> Path:
+    """A cell on disk: ncgate.toml and its programs (NAME.nc) in one folder."""
+    (folder / "ncgate.toml").write_text(config_text)
+    for name, text in programs.items():
+        (folder / f"{name}.nc").write_text(text)
+    return folder

@@ -22,6 +22,8 @@ from gateway import Gateway
 from gateway.canopen_dictionary import build_dictionary
 from gateway.pytest_plugin import ncgate_test_config
 
+from ...helpers import write_cell
+
 CELL = """
 [nc]
 processes = 4
@@ -44,10 +46,7 @@ PROGRAMS = {
 
 @pytest.fixture
 def cell(tmp_path: Path) -> Path:
-    (tmp_path / "ncgate.toml").write_text(CELL)
-    for name, text in PROGRAMS.items():
-        (tmp_path / f"{name}.nc").write_text(text)
-    return tmp_path
+    return write_cell(tmp_path, CELL, PROGRAMS)
 
 
 @pytest.fixture

@@ -9,6 +9,8 @@ import pytest
 from config import Config
 from gateway.pytest_plugin import ncgate_test_config
 
+from ...helpers import write_cell
+
 CELL = """
 [nc]
 processes = 4
@@ -34,10 +36,7 @@ PROGRAMS = {
 
 @pytest.fixture
 def cell(tmp_path: Path) -> Path:
-    (tmp_path / "ncgate.toml").write_text(CELL)
-    for name, text in PROGRAMS.items():
-        (tmp_path / f"{name}.nc").write_text(text)
-    return tmp_path
+    return write_cell(tmp_path, CELL, PROGRAMS)
 
 
 @pytest.fixture
