@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
 import subprocess
 import sys
 import venv
@@ -41,7 +42,17 @@ def ensure_venv() -> None:
 
 
 def run(*cmd: str) -> int:
-    return subprocess.run(cmd, cwd=ROOT).returncode
+    """Run a command in the foreground; Ctrl-C is the child's to handle (as in a shell).
+
+    SIGINT is ignored here only after the child has started, so the child keeps Python's
+    default handler (pytest stops cleanly, `ncgate run` shuts down and exits 0).
+    """
+    child = subprocess.Popen(cmd, cwd=ROOT)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return child.wait()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def main(argv: list[str]) -> int:

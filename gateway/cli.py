@@ -158,6 +158,9 @@ def _run(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if not args.verbose:  # the libraries' own step-by-step logging is for --verbose
+        for library in ("canopen", "can", "pymodbus"):
+            logging.getLogger(library).setLevel(logging.WARNING)
     config = load_config(args.config)
     asyncio.run(serve(config))
     return EXIT_OK
