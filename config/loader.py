@@ -142,16 +142,21 @@ def load_config(
 ) -> Config:
     """Load a config file (None: the built-in default), then apply dotted-key overrides."""
     source = Path(path) if path is not None else default_config_path()
-    try:
-        raw = tomllib.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{source}: no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: {exc}") from exc
+    raw = read_toml(source)
     for dotted, value in (overrides or {}).items():
         _set_dotted(raw, dotted, value)
     reader = _Reader(str(source) if path is not None else "<built-in default>", source.parent)
     return reader.config(raw, source if path is not None else None)
+
+
+def read_toml(source: Path) -> dict[str, Any]:
+    """A TOML file as a table; a missing or malformed file is a ConfigError naming it."""
+    try:
+        return tomllib.loads(source.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{source}: no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: {exc}") from exc
 
 
 def _set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:

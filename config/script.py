@@ -22,12 +22,11 @@ Stdlib only.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from config.loader import ConfigError
+from config.loader import ConfigError, read_toml
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,12 +50,7 @@ def load_script(path: str | Path | None) -> Script:
     if path is None:
         return Script("<no script>", ())
     source = Path(path)
-    try:
-        raw = tomllib.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{source}: no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: {exc}") from exc
+    raw = read_toml(source)
     file = str(source)
 
     def fail(key: str, message: str) -> ConfigError:

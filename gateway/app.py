@@ -209,9 +209,7 @@ class Gateway:
     def write(self, var: str, value: int, who: str = "api") -> None:
         """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``) as ``who``."""
         (area, index, view), number = parse_assignment(f"{var}={value}")
-        self._sync_clock()
-        self.runtime.image.write([(area, index, view, number)], who)
-        self._settle()
+        self.apply_writes([(area, index, view, number)], who)
 
     def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None:
         """Write several image variables at once (one fieldbus request), then settle."""

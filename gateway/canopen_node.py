@@ -30,7 +30,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Protocol, TypeVar
+from typing import TypeVar
 
 import canopen
 from can_remote import RemoteServer
@@ -51,9 +51,9 @@ from gateway.canopen_dictionary import (
     SYVAR_BASE,
     build_dictionary,
 )
+from gateway.wiring import Backend
 from interpreter.runtime import Engine, Process, ProcessState
 from interpreter.trace import Event
-from plc.image import IOImage
 
 log = logging.getLogger("ncgate.canopen")
 
@@ -67,20 +67,6 @@ EMCY_SOFTWARE = 0x6200
 NMT_OPERATIONAL, NMT_STOPPED, NMT_PRE_OPERATIONAL = 5, 4, 127
 
 T = TypeVar("T")
-
-
-class Backend(Protocol):
-    @property
-    def image(self) -> IOImage: ...
-
-    @property
-    def engine(self) -> Engine: ...
-
-    def apply_writes(self, changes: list[tuple[str, int, str, int]], who: str) -> None: ...
-
-    def command(self, word: int) -> None: ...
-
-    def send(self, sender: int, target: int) -> None: ...
 
 
 class _SdoServer(SdoServer):
@@ -213,6 +199,8 @@ class CanopenNode:
         self._tpdo_timer: dict[int, asyncio.TimerHandle] = {}
         self._alarmed = False
         self._rpdo_cobs: dict[int, int] = {}  # RPDO number -> subscribed COB-ID
+        self._rpdo_callbacks: dict[int, Callable[[int, bytearray, float], None]] = {
+            1: self._on_rpdo1, 2: self._on_rpdo2}
         self._hub: RemoteServer | None = None
         # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
@@ -442,10 +430,6 @@ class CanopenNode:
             if not cob & 0x80000000:
                 self.network.subscribe(cob & 0x7FF, self._rpdo_callbacks[n])
             self._rpdo_cobs[n] = cob
-
-    @property
-    def _rpdo_callbacks(self) -> dict[int, Callable[[int, bytearray, float], None]]:
-        return {1: self._on_rpdo1, 2: self._on_rpdo2}
 
     def _on_rpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
         self._on_rpdo("SA", can_id, data)

@@ -115,9 +115,8 @@ def check_files(
     for path in files:
         groups[None if config is not None else path.parent.resolve()].append(path)
     reports: dict[Path, FileReport] = {}
-    for folder, paths in groups.items():
-        cfg = config if folder is None or config is not None else config_for(paths[0], None)
-        assert cfg is not None
+    for paths in groups.values():
+        cfg = config if config is not None else config_for(paths[0], None)
         storage = storage_of(cfg)
         programs = {p: Program.from_path(p) for p in paths}
         known = {program.name.upper() for program in programs.values()}

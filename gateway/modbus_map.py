@@ -17,11 +17,10 @@ import io
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 from config import Config
+from gateway.wiring import Backend
 from interpreter.runtime import Engine, ProcessState, WaitKind
-from plc.image import IOImage
 
 MAP_VERSION = 1
 
@@ -76,22 +75,6 @@ class Region:
         number = address + 1
         width = 5 if number <= 9999 else 6
         return f"{self.table.prefix}{number:0{width - 1}d}"
-
-
-class Backend(Protocol):
-    """What the map acts on (the Gateway)."""
-
-    @property
-    def image(self) -> IOImage: ...
-
-    @property
-    def engine(self) -> Engine: ...
-
-    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
-
-    def command(self, word: int) -> None: ...
-
-    def send(self, sender: int, target: int) -> None: ...
 
 
 class ModbusError(Exception):
@@ -158,15 +141,8 @@ class ModbusMap:
                    + ", ".join(PROCESS_REGISTERS)
                    + "; +18..19 read 0"),
         ]
-        self._check_overlaps()
-
-    def _check_overlaps(self) -> None:
-        for i, a in enumerate(self.regions):
-            for b in self.regions[i + 1:]:
-                if a.table is b.table and a.start < b.end and b.start < a.end:
-                    raise ValueError(f"Modbus map: {a.kind.value} ({a.start}..{a.end - 1}) "
-                                     f"overlaps {b.kind.value} ({b.start}..{b.end - 1}); "
-                                     "reduce the image sizes in [plc]")
+        # No overlap check here: the config loader refuses overlapping regions and names the
+        # key (modbus.map.*), and a Config comes from the loader.
 
     def region(self, table: Table, address: int, count: int) -> Region:
         """The one region holding the whole range, or ModbusError(02)."""
@@ -361,7 +337,7 @@ def _flag(engine: Engine, k: int, bit: int) -> bool:
     state = p.state
     return (p.loaded is not None, state in (ProcessState.RUNNING, ProcessState.DWELL),
             state in _WAITING, state is ProcessState.ALARM,
-            p.int_timer is not None or p.int_remaining is not None, p.held)[bit]
+            p.motion_active, p.held)[bit]
 
 
 def process_registers(engine: Engine, k: int) -> list[int]:

@@ -51,11 +51,11 @@ from gateway.modbus_map import (
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
     TARGET_NO_RESPONSE,
-    Backend,
     ModbusError,
     ModbusMap,
     Table,
 )
+from gateway.wiring import Backend
 
 log = logging.getLogger("ncgate.modbus")
 

@@ -3,7 +3,9 @@ conversions between the config's and the interpreter's names for things."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 from config import Config, SndPolicy
 from gateway.programs import ProgramStore
@@ -63,6 +65,23 @@ def variable_name(area: str, index: int, view: str) -> str:
     if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
         return f"{area}{index}"
     return f"{area}{index}.{view}"
+
+
+class Backend(Protocol):
+    """What the fieldbus adapters act on (the Gateway): the image and processes, read on the
+    loop, and the three ways a fieldbus changes them."""
+
+    @property
+    def image(self) -> IOImage: ...
+
+    @property
+    def engine(self) -> Engine: ...
+
+    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
+
+    def command(self, word: int) -> None: ...
+
+    def send(self, sender: int, target: int) -> None: ...
 
 
 ImageVar = tuple[str, int, str]

@@ -47,7 +47,6 @@ from interpreter.nodes import (
     EndRepeat,
     Exe,
     InertCode,
-    Item,
     Jump,
     Num,
     Rel,
@@ -119,36 +118,6 @@ def _var_from_token(tok: Tok, ctx: _Ctx) -> VarRef:
     else:
         view = View.BIT
     return VarRef(kind, int(index_text), view, span)
-
-
-def _cb_start(ch: list[Child], ctx: _Ctx) -> Block:
-    deleted = False
-    label = number = comment = None
-    synced = False
-    items: list[Item] = []
-    for c in ch:
-        if type(c) is tuple:
-            kind = c[0]
-            if kind == "NWORD":
-                number = int(c[1][1:])
-            elif kind == "SLASH":
-                deleted = True
-            elif kind == "STRING":
-                label = c[1][1:-1]
-            elif kind == "HASH":
-                synced = True
-            else:  # COMMENT
-                comment = c[1][1:].strip()
-        else:
-            items.append(c)
-    return Block(_span(ctx, 1), deleted, label, number, synced, tuple(items), comment)
-
-
-def _cb_word(ch: list[Child], ctx: _Ctx) -> Word:
-    _, text, col = ch[0]
-    if text[1] in "eE":
-        return _e_word(text[0].upper(), text[1:], col, ctx)
-    return _number_word(text[0].upper(), text[1:], col, ctx)
 
 
 # The builders call these two directly: a word's letter and kind are the same in every line
@@ -274,8 +243,8 @@ def _cb_paren(ch: list[Child], ctx: _Ctx) -> Child:
 
 
 _CALLBACKS: Final[dict[str, Callable[[list[Child], _Ctx], Any]]] = {
-    "start": _cb_start,
-    "word": _cb_word,
+    # "start" and "word" have no callback: the builders construct them directly
+    # (_start_source, _number_word, _e_word).
     "var": _cb_var,
     "eparam": _cb_var,
     "assign": _cb_assign,
@@ -570,9 +539,6 @@ class Program:
                         diagnostics.append(exc.diagnostic)
         return blocks, diagnostics
 
-    def iter_blocks(self) -> Iterator[tuple[int, Block]]:
-        for i in range(len(self.lines)):
-            yield i, self.block(i)
 
 
 @contextmanager

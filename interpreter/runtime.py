@@ -287,6 +287,11 @@ class Process:
         self.sync_i = 0
 
     @property
+    def motion_active(self) -> bool:
+        """A timed queue item under way (or paused by a feed hold): spec 2.4's flag."""
+        return self.int_timer is not None or self.int_remaining is not None
+
+    @property
     def where(self) -> Where:
         if self.block is not None:
             return self.block.where
@@ -512,7 +517,7 @@ class Engine:
             alarm_code=alarm_code, alarm_message=alarm_message,
             snd_sent=p.stats.snd_sent, snd_received=p.stats.snd_received,
             blocks=p.stats.blocks, position=self._position(p),
-            motion_active=p.int_timer is not None or p.int_remaining is not None,
+            motion_active=p.motion_active,
             held=p.held,
         )
 
