@@ -6,8 +6,9 @@
     python3 dev.py lint    # ruff + mypy (strict on the packages)
     python3 dev.py bench   # the benchmarks under bench/
 
-Only Python >= 3.11 and pip are needed: the virtual environment and every dependency (pinned
-in pyproject.toml) are installed on first use, and again whenever pyproject.toml changes.
+Only Python >= 3.11 and pip are needed: the virtual environment and every dependency (at the
+exact versions of constraints.txt) are installed on first use, and again whenever
+pyproject.toml or constraints.txt changes.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ VENV = ROOT / ".venv"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 PY = BIN / "python"
 STAMP = VENV / ".ncgate-installed"
+INSTALL_INPUTS = ("pyproject.toml", "constraints.txt")
 
 
 def ensure_venv() -> None:
@@ -33,12 +35,30 @@ def ensure_venv() -> None:
     if not PY.exists():
         print("dev.py: creating .venv", flush=True)
         venv.EnvBuilder(with_pip=True).create(VENV)
-    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
-    if not STAMP.exists() or STAMP.read_text() != digest:
-        print("dev.py: installing ncgate and its pinned dependencies into .venv", flush=True)
-        pip = [str(PY), "-m", "pip", "install", "--disable-pip-version-check", "-q"]
+    digest = hashlib.sha256(b"".join((ROOT / name).read_bytes() for name in INSTALL_INPUTS))
+    if not STAMP.exists() or STAMP.read_text() != digest.hexdigest():
+        print("dev.py: installing ncgate and its locked dependencies into .venv", flush=True)
+        pip = [str(PY), "-m", "pip", "install", "--disable-pip-version-check", "-q",
+               "-c", str(ROOT / "constraints.txt")]
         subprocess.run([*pip, "-e", f"{ROOT}[test,dev]"], check=True)
-        STAMP.write_text(digest)
+        STAMP.write_text(digest.hexdigest())
+
+
+def typecheck_tree() -> Path:
+    """build/typecheck/ncgate: links that lay the packages out as they install.
+
+    setuptools maps ncgate.gateway to gateway/ (and so on) through package-dir; mypy cannot
+    follow that mapping, so it reads the package through these links instead.
+    """
+    tree = ROOT / "build" / "typecheck" / "ncgate"
+    tree.mkdir(parents=True, exist_ok=True)
+    links = {name: ROOT / "ncgate" / name for name in ("__init__.py", "errors.py", "py.typed")}
+    links.update({name: ROOT / name for name in ("config", "plc", "interpreter", "gateway")})
+    for name, target in links.items():
+        link = tree / name
+        if not link.is_symlink():
+            link.symlink_to(target)
+    return tree.parent
 
 
 def run(*cmd: str) -> int:
@@ -68,7 +88,9 @@ def main(argv: list[str]) -> int:
     if what == "test":
         return run(str(PY), "-m", "pytest", *rest)
     if what == "lint":
-        return run(str(PY), "-m", "ruff", "check", ".") or run(str(PY), "-m", "mypy")
+        os.environ["MYPYPATH"] = str(typecheck_tree())
+        return run(str(PY), "-m", "ruff", "check", ".") or run(str(PY), "-m", "mypy", "-p",
+                                                               "ncgate")
     status = 0
     for script in sorted((ROOT / "bench").glob("*.py")):
         print(f"== {script.name}", flush=True)

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import canopen
 
-from config import load_config
-from gateway import Gateway
-from gateway.canopen_dictionary import build_dictionary
+from ncgate.config import load_config
+from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.dictionary import build_dictionary
 
 ROUNDS, TRIPS, SAMPLES = 3, 2000, 2000
 

@@ -31,7 +31,7 @@ ROUNDS = 3
 # -- the servers, each in a child process ----------------------------------------------------
 
 async def serve_gateway() -> None:
-    from gateway import Gateway, load_config
+    from ncgate.gateway import Gateway, load_config
 
     async with Gateway(load_config(None, overrides={"modbus.port": 0})) as gw:
         print(gw.modbus_address[1], flush=True)
@@ -111,8 +111,8 @@ LOOP = '"L"\nN1(WAI,SA10=1)\nN2(WAI,SK3=0)\nN3(WAI,SA10=0)\nN4(WAI,SK3=1)\nN5(BN
 
 
 async def latency() -> None:
-    from gateway import Gateway, load_config
-    from gateway.modbus_server import _Connection
+    from ncgate.gateway import Gateway, load_config
+    from ncgate.gateway.modbus.server import _Connection
 
     folder = Path(tempfile.mkdtemp())
     (folder / "LOOP.nc").write_text(LOOP)
@@ -185,7 +185,7 @@ def memory() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         config = Path(tmp) / "ncgate.toml"
         config.write_text("[modbus]\nport = 0\n")  # the default config, on a free port
-        run = subprocess.Popen([sys.executable, "-m", "gateway", "run", "--config", str(config)],
+        run = subprocess.Popen([sys.executable, "-m", "ncgate", "run", "--config", str(config)],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         assert run.stdout is not None
         port = 0

@@ -18,9 +18,9 @@ import random
 import re
 import time
 
-from interpreter import parser as parser_module
-from interpreter.checker import CheckContext, check_program
-from interpreter.parser import Program
+from ncgate.interpreter import parser as parser_module
+from ncgate.interpreter.checker import CheckContext, check_program
+from ncgate.interpreter.parser import Program
 
 TOKEN = re.compile(
     r'(?P<number>\d+\.?\d*|\.\d+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<string>"[^"\n]*")'

@@ -19,12 +19,12 @@ import gc
 import time
 from collections.abc import Callable
 
-from interpreter.checker import CheckContext, check_program
-from interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
-from interpreter.parser import Program
-from interpreter.runtime import Engine, RuntimeSettings, run_virtual
-from interpreter.trace import Trace
-from plc.image import IOImage
+from ncgate.interpreter.checker import CheckContext, check_program
+from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
+from ncgate.interpreter.parser import Program
+from ncgate.interpreter.runtime import Engine, RuntimeSettings, run_virtual
+from ncgate.interpreter.trace import Trace
+from ncgate.plc.image import IOImage
 
 
 class Loader:

@@ -3,7 +3,7 @@
 Stdlib only; imports nothing from the other packages.
 """
 
-from config.loader import (
+from ncgate.config.loader import (
     CanopenConfig,
     Config,
     ConfigError,

@@ -19,10 +19,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ncgate.errors import NcgateError
+
 MAX_PROCESSES = 16
 
 
-class ConfigError(ValueError):
+class ConfigError(NcgateError, ValueError):
     """A configuration that cannot be used: the message names the file and the dotted key."""
 
 
@@ -129,12 +131,12 @@ class Config:
 
 
 def default_config_path() -> Path:
-    return Path(str(resources.files("config").joinpath("default.toml")))
+    return Path(str(resources.files("ncgate.config").joinpath("default.toml")))
 
 
 def default_script_path() -> Path:
     """The PLC script of the built-in default (the manual's SA10 for PROG92's N40)."""
-    return Path(str(resources.files("config").joinpath("default_script.toml")))
+    return Path(str(resources.files("ncgate.config").joinpath("default_script.toml")))
 
 
 def load_config(

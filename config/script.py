@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from config.loader import ConfigError, read_toml
+from ncgate.config.loader import ConfigError, read_toml
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,7 +5,7 @@
 ``from gateway import Gateway, load_config``.
 """
 
-from config import load_config
-from gateway.app import Gateway, GatewayError, ProcessAlarmError, WaitIdleTimeout
+from ncgate.config import load_config
+from ncgate.gateway.app import Gateway, GatewayError, ProcessAlarmError, WaitIdleTimeout
 
 __all__ = ["Gateway", "GatewayError", "ProcessAlarmError", "WaitIdleTimeout", "load_config"]

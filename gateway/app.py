@@ -1,7 +1,7 @@
 """The gateway in a Python program or a test (spec 4.5): the soft PLC's image, the processes
 on the wall clock, and (in later issues) the Modbus server and the CANopen node.
 
-    from gateway import Gateway, load_config
+    from ncgate.gateway import Gateway, load_config
     async with Gateway(load_config(None)) as gw:
         await gw.start("PROG91")
         await gw.wait_state(2, "WAIT_COND")
@@ -21,26 +21,15 @@ from collections.abc import Callable, Sequence
 from types import TracebackType
 from typing import Any
 
-from config import Config, load_config
-from gateway.canopen_node import CanopenNode
-from gateway.modbus_map import ModbusMap
-from gateway.modbus_server import ModbusServer
-from gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
-from interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
-from interpreter.trace import Event
-from plc.image import IOImage
-
-
-class GatewayError(Exception):
-    """Root of the gateway's exceptions."""
-
-
-class WaitIdleTimeout(GatewayError, TimeoutError):
-    """``wait_idle``/``wait_state`` ran out of time; the message has the why-records."""
-
-
-class ProcessAlarmError(GatewayError, RuntimeError):
-    """Every process stopped, some in ALARM: the message has the alarms."""
+from ncgate.config import Config, load_config
+from ncgate.gateway.canopen.node import CanopenNode
+from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
+from ncgate.gateway.modbus.map import ModbusMap
+from ncgate.gateway.modbus.server import ModbusServer
+from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
+from ncgate.interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
+from ncgate.interpreter.trace import Event
+from ncgate.plc.image import IOImage
 
 
 class WallClockDriver:

@@ -8,13 +8,30 @@ the calling process.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
-from config import Config
-from gateway.checking import check_context, storage_of
-from interpreter.checker import check_program
-from interpreter.diagnostics import ProgramSyntaxError
-from interpreter.parser import Program
+from ncgate.config import Config
+from ncgate.interpreter.checker import CheckContext, Limits, check_program
+from ncgate.interpreter.diagnostics import ProgramSyntaxError
+from ncgate.interpreter.parser import Program
+from ncgate.interpreter.storage import Storage
+
+
+def storage_of(config: Config) -> Storage:
+    return Storage(config.nc.storage.devices, config.nc.storage.default)
+
+
+def check_context(config: Config, storage: Storage, runs_in: Iterable[int]) -> CheckContext:
+    return CheckContext(
+        processes=config.nc.processes,
+        external=config.nc.external,
+        runs_in=frozenset(runs_in),
+        limits=Limits(config.nc.e_params, config.plc.syvars, config.plc.sa_bits,
+                      config.plc.k_bytes),
+        find_program=lambda name, device: storage.find(name, device) is not None,
+        has_device=storage.has_device,
+    )
 
 
 class ProgramStore:

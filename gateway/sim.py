@@ -12,12 +12,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TextIO
 
-from config import Config, ConfigError
-from config.script import Script, ScriptEntry
-from gateway.wiring import ImageVar, Runtime, build_runtime, parse_assignment, parse_condition
-from interpreter.runtime import Process, ProcessState, run_virtual
-from interpreter.trace import Event, write_jsonl
-from plc.image import PlcError
+from ncgate.config import Config, ConfigError
+from ncgate.config.script import Script, ScriptEntry
+from ncgate.gateway.wiring import (
+    ImageVar,
+    Runtime,
+    build_runtime,
+    parse_assignment,
+    parse_condition,
+)
+from ncgate.interpreter.runtime import Process, ProcessState, run_virtual
+from ncgate.interpreter.trace import Event, write_jsonl
+from ncgate.plc.image import PlcError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 

@@ -7,15 +7,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from config import Config, SndPolicy
-from gateway.programs import ProgramStore
-from interpreter.evaluate import RuntimeAlarm, compile_expr
-from interpreter.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
-from interpreter.parser import LineError, parse_block
-from interpreter.runtime import Engine, RuntimeSettings
-from interpreter.runtime import SndPolicy as RuntimeSndPolicy
-from interpreter.trace import Trace
-from plc.image import Change, IOImage
+from ncgate.config import Config, SndPolicy
+from ncgate.gateway.programs import ProgramStore
+from ncgate.interpreter.evaluate import RuntimeAlarm, compile_expr
+from ncgate.interpreter.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
+from ncgate.interpreter.parser import LineError, parse_block
+from ncgate.interpreter.runtime import Engine, RuntimeSettings
+from ncgate.interpreter.runtime import SndPolicy as RuntimeSndPolicy
+from ncgate.interpreter.trace import Trace
+from ncgate.plc.image import Change, IOImage
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:

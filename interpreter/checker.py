@@ -15,9 +15,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from interpreter.codes import DiagnosticCode
-from interpreter.diagnostics import Diagnostic, did_you_mean
-from interpreter.nodes import (
+from ncgate.interpreter.codes import DiagnosticCode
+from ncgate.interpreter.diagnostics import Diagnostic, did_you_mean
+from ncgate.interpreter.nodes import (
     Assign,
     Binary,
     Block,
@@ -44,7 +44,7 @@ from interpreter.nodes import (
     Word,
     value_object,
 )
-from interpreter.parser import Program, gc_paused
+from ncgate.interpreter.parser import Program, gc_paused
 
 
 @value_object

@@ -10,8 +10,9 @@ import difflib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from interpreter.codes import DiagnosticCode, Severity
-from interpreter.nodes import Span
+from ncgate.errors import NcgateError
+from ncgate.interpreter.codes import DiagnosticCode, Severity
+from ncgate.interpreter.nodes import Span
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,7 +62,7 @@ def did_you_mean(word: str, candidates: Iterable[str]) -> str | None:
     return None
 
 
-class InterpreterError(Exception):
+class InterpreterError(NcgateError):
     """Root of the interpreter's exceptions."""
 
 

@@ -12,9 +12,9 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from interpreter.codes import AlarmCode
-from interpreter.diagnostics import InterpreterError
-from interpreter.nodes import Binary, Call, Expr, Num, Unary, VarKind, VarRef
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import InterpreterError
+from ncgate.interpreter.nodes import Binary, Call, Expr, Num, Unary, VarKind, VarRef
 
 Reader = Callable[[str, int, str], int]
 Evaluator = Callable[[list[float], Reader], float]

@@ -6,7 +6,7 @@ parser produces.  Must not import ``plc`` or ``gateway``.
 
 from __future__ import annotations
 
-from interpreter.nodes import (
+from ncgate.interpreter.nodes import (
     Assign,
     Binary,
     Block,

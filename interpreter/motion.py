@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from interpreter.codes import AlarmCode
-from interpreter.evaluate import RuntimeAlarm
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.evaluate import RuntimeAlarm
 
 AXES = "XYZUVWABC"
 AXIS_INDEX = {a: i for i, a in enumerate(AXES)}

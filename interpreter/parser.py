@@ -32,9 +32,14 @@ from typing import Any, Final
 from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
-from interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
-from interpreter.diagnostics import Diagnostic, ProgramSyntaxError, did_you_mean
-from interpreter.nodes import (
+from ncgate.interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
+from ncgate.interpreter.diagnostics import (
+    Diagnostic,
+    InterpreterError,
+    ProgramSyntaxError,
+    did_you_mean,
+)
+from ncgate.interpreter.nodes import (
     Assign,
     Binary,
     Block,
@@ -68,11 +73,12 @@ WORD_LETTERS: Final = frozenset("ABCDFGHIJKLMOPQRSTUVWXYZ")
 @cache
 def lark_parser() -> Lark:
     """The LALR parser of one block (built once per process)."""
-    grammar = resources.files("interpreter").joinpath("grammar/nc110.lark").read_text("utf-8")
-    return Lark(grammar, parser="lalr", lexer="contextual", maybe_placeholders=False)
+    grammar = resources.files("ncgate.interpreter").joinpath("grammar/nc110.lark")
+    return Lark(grammar.read_text("utf-8"), parser="lalr", lexer="contextual",
+                maybe_placeholders=False)
 
 
-class LineError(Exception):
+class LineError(InterpreterError):
     """A block that does not parse; carries its diagnostic."""
 
     def __init__(self, diagnostic: Diagnostic) -> None:

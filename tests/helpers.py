@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from interpreter.checker import CheckContext, check_program
-from interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
-from interpreter.parser import Program
-from interpreter.runtime import Engine, RuntimeSettings, run_virtual
-from interpreter.trace import Event, Trace
-from plc.image import IOImage
+from ncgate.interpreter.checker import CheckContext, check_program
+from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
+from ncgate.interpreter.parser import Program
+from ncgate.interpreter.runtime import Engine, RuntimeSettings, run_virtual
+from ncgate.interpreter.trace import Event, Trace
+from ncgate.plc.image import IOImage
 
 
 class DictLoader:

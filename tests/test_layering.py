@@ -1,9 +1,12 @@
 """The dependency rules of STYLE.md, checked on the source: they fail when a rule breaks.
 
-- interpreter: stdlib + lark; never plc, gateway or config.
-- plc: stdlib only.
-- config: stdlib only.
-- only gateway/modbus*.py imports pymodbus; only gateway/canopen*.py imports canopen or can.
+- everything is imported as ``ncgate.…``: no top-level ``config``, ``plc``, ``gateway`` or
+  ``interpreter`` (they install as sub-packages of ``ncgate``);
+- interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config;
+- plc, config: stdlib (+ ``ncgate.errors``);
+- inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
+  ``canopen/`` (and the test kit's CANopen master) imports canopen or can; the CLI and the test
+  kit are leaves that nothing else in the gateway imports.
 """
 
 from __future__ import annotations
@@ -17,54 +20,102 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 STDLIB = set(sys.stdlib_module_names)
+# Source folder -> the package it installs as (pyproject.toml's package-dir).
+PACKAGES = {"ncgate": "ncgate", "config": "ncgate.config", "plc": "ncgate.plc",
+            "interpreter": "ncgate.interpreter", "gateway": "ncgate.gateway"}
+GENERIC = {"config", "plc", "gateway", "interpreter"}
 
 
-def imports_of(path: Path) -> set[str]:
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = [PACKAGES[rel.parts[0]], *rel.parts[1:]]
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imports_of(path: Path, module: str | None = None) -> set[str]:
+    """The full names a file imports (relative imports resolved against ``module``)."""
     tree = ast.parse(path.read_text(), str(path))
+    package = (module or "").rsplit(".", 1)[0] if path.name != "__init__.py" else module or ""
     found: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            found.update(alias.name.split(".")[0] for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            found.add(node.module.split(".")[0])
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            found.add(base)
     return found
 
 
-def modules(package: str) -> list[Path]:
-    return sorted((ROOT / package).rglob("*.py"))
+def sources(folder: str) -> list[Path]:
+    return sorted((ROOT / folder).rglob("*.py"))
 
 
-ALLOWED = {
-    "interpreter": STDLIB | {"interpreter", "lark"},
-    "plc": STDLIB | {"plc"},
-    "config": STDLIB | {"config"},
+def allowed(name: str, prefixes: set[str]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+RULES = {
+    "interpreter": STDLIB | {"lark", "ncgate.interpreter", "ncgate.errors"},
+    "plc": STDLIB | {"ncgate.plc", "ncgate.errors"},
+    "config": STDLIB | {"ncgate.config", "ncgate.errors"},
 }
 
 
-@pytest.mark.parametrize("package", sorted(ALLOWED))
-def test_package_imports_only_what_it_may(package: str) -> None:
+@pytest.mark.parametrize("folder", sorted(RULES))
+def test_package_imports_only_what_it_may(folder: str) -> None:
     offenders = {
         f"{path.relative_to(ROOT)}: {name}"
-        for path in modules(package)
-        for name in imports_of(path) - ALLOWED[package]
+        for path in sources(folder)
+        for name in imports_of(path, module_name(path))
+        if not (allowed(name, RULES[folder]) or name.split(".")[0] in STDLIB)
     }
     assert not offenders
 
 
+def test_nothing_imports_the_generic_top_level_names() -> None:
+    offenders = {
+        f"{path.relative_to(ROOT)}: {name}"
+        for folder in (*PACKAGES, "tests", "bench", "examples")
+        for path in sources(folder)
+        for name in imports_of(path)
+        if name.split(".")[0] in GENERIC
+    }
+    assert not offenders
+
+
+def gateway_modules() -> dict[str, set[str]]:
+    return {module_name(p): imports_of(p, module_name(p)) for p in sources("gateway")}
+
+
 def test_fieldbus_libraries_stay_in_their_adapters() -> None:
-    for path in [p for pkg in ("gateway", "plc", "interpreter", "config") for p in modules(pkg)]:
-        names = imports_of(path)
-        if "pymodbus" in names:
-            assert path.parent.name == "gateway" and path.name.startswith("modbus"), path
-        if names & {"canopen", "can"}:
-            assert path.parent.name == "gateway" and path.name.startswith("canopen"), path
+    kit = "ncgate.gateway.testing"
+    for module, names in gateway_modules().items():
+        tops = {n.split(".")[0] for n in names}
+        if "pymodbus" in tops:
+            assert module.startswith("ncgate.gateway.modbus.") or module == f"{kit}.modbus_kit"
+        if tops & {"canopen", "can", "can_remote"}:
+            assert (module.startswith("ncgate.gateway.canopen.")
+                    or module == f"{kit}.canopen_kit"), module
+
+
+def test_the_cli_and_the_test_kit_are_leaves() -> None:
+    for module, names in gateway_modules().items():
+        for leaf in ("ncgate.gateway.cli", "ncgate.gateway.testing"):
+            if not module.startswith(leaf):
+                assert not any(allowed(n, {leaf}) for n in names), (module, leaf)
 
 
 def test_importing_the_interpreter_loads_no_other_package() -> None:
     code = (
-        "import sys, interpreter.parser, interpreter.checker, interpreter.formatter;"
-        "bad = [m for m in ('plc', 'gateway', 'config', 'pymodbus', 'canopen', 'can')"
-        " if m in sys.modules]; print(bad); sys.exit(1 if bad else 0)"
+        "import sys, ncgate.interpreter.parser, ncgate.interpreter.checker,"
+        " ncgate.interpreter.formatter, ncgate.interpreter.runtime;"
+        "bad = [m for m in ('ncgate.plc', 'ncgate.gateway', 'ncgate.config', 'pymodbus',"
+        " 'canopen', 'can') if m in sys.modules]; print(bad); sys.exit(1 if bad else 0)"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           cwd=ROOT, check=False)
@@ -73,5 +124,8 @@ def test_importing_the_interpreter_loads_no_other_package() -> None:
 
 def test_the_rule_checker_sees_a_violation(tmp_path: Path) -> None:
     bad = tmp_path / "bad.py"
-    bad.write_text("from gateway import cli\nimport plc.image as image\n")
-    assert imports_of(bad) - ALLOWED["interpreter"] == {"gateway", "plc"}
+    bad.write_text("from ncgate.gateway import cli\nimport ncgate.plc.image as image\n"
+                   "from config import load_config\nfrom ..plc import image\n")
+    names = imports_of(bad, "ncgate.interpreter.bad")
+    assert {n for n in names if not allowed(n, RULES["interpreter"])} == {
+        "ncgate.gateway", "ncgate.plc.image", "config", "ncgate.plc"}

@@ -1,4 +1,4 @@
-"""`ncgate check` on the manual's runnable examples (shared/examples) and on our corpus."""
+"""`ncgate check` on the manual's runnable examples (examples/) and on our corpus."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from gateway.checking import check_files
-from gateway.cli import main
-from interpreter.codes import DiagnosticCode as C
+from ncgate.gateway.cli.check import check_files
+from ncgate.gateway.cli.main import main
+from ncgate.interpreter.codes import DiagnosticCode as C
 
 from ..conftest import EXAMPLES, PROGRAMS
 
@@ -80,7 +80,7 @@ def test_cli_without_files_checks_the_builtin_programs() -> None:
 
 def test_module_entry_point_runs() -> None:
     done = subprocess.run(
-        [sys.executable, "-m", "gateway", "check", str(EXAMPLES / "errors" / "missing_paren.nc")],
+        [sys.executable, "-m", "ncgate", "check", str(EXAMPLES / "errors" / "missing_paren.nc")],
         capture_output=True, text=True, check=False,
     )
     assert done.returncode == 1

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
+from ncgate.gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
 
 from ..conftest import EXAMPLES
 

@@ -15,9 +15,9 @@ from typing import Any
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from config import load_config
-from config.script import load_script
-from gateway.sim import run_sim
+from ncgate.config import load_config
+from ncgate.config.script import load_script
+from ncgate.gateway.sim import run_sim
 
 from ..conftest import EXAMPLES
 

@@ -1,4 +1,4 @@
-"""Every scenario of shared/examples under `ncgate sim`, checked on the trace against what its
+"""Every scenario of examples/ under `ncgate sim`, checked on the trace against what its
 README row says (order of events, who resumed whom, simulated times the spec fixes)."""
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
-from config import load_config
-from config.script import load_script
-from gateway.cli import main
-from gateway.sim import SimResult, run_sim, write_trace
+from ncgate.config import load_config
+from ncgate.config.script import load_script
+from ncgate.gateway.cli.main import main
+from ncgate.gateway.sim import SimResult, run_sim, write_trace
 
 from ..conftest import EXAMPLES
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from gateway import Gateway
-from gateway.modbus_testkit import VirtualPLC
-from gateway.pytest_plugin import ncgate_test_config
+from ncgate.gateway import Gateway
+from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
 from ..conftest import EXAMPLES
 

@@ -17,10 +17,10 @@ import canopen
 import pytest
 import pytest_asyncio
 
-from config import Config
-from gateway import Gateway
-from gateway.canopen_dictionary import build_dictionary
-from gateway.pytest_plugin import ncgate_test_config
+from ncgate.config import Config
+from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.dictionary import build_dictionary
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
 from ...helpers import write_cell
 

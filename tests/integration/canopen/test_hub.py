@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from gateway import Gateway
+from ncgate.gateway import Gateway
 
 MASTER = """
 import json, sys, canopen
@@ -46,7 +46,7 @@ async def test_master_in_a_child_process(gw: Gateway) -> None:
 
 
 async def test_plugin_master_fixture(ncgate_gateway: Gateway, canopen_master: object) -> None:
-    from gateway.canopen_testkit import CanopenMaster
+    from ncgate.gateway.testing.canopen_kit import CanopenMaster
 
     assert isinstance(canopen_master, CanopenMaster)
     canopen_master.nmt(0x01)

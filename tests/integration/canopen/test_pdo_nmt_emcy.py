@@ -12,10 +12,10 @@ from pathlib import Path
 import canopen
 import pytest
 
-from config import Config
-from gateway import Gateway
-from gateway.canopen_dictionary import build_dictionary
-from gateway.cli import main
+from ncgate.config import Config
+from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.dictionary import build_dictionary
+from ncgate.gateway.cli.main import main
 
 from .conftest import Master, u8
 
@@ -142,7 +142,7 @@ def test_eds_round_trip(tmp_path: Path, ncgate_config: Config) -> None:
     cfg_file = tmp_path / "cfg.toml"
     cfg_file.write_text("[nc]\nprocesses = 3\n[plc]\nk_bytes = 300\nsyvars = 130\n")
     assert main(["eds", "--config", str(cfg_file), "-o", str(out)]) == 0
-    from config import load_config
+    from ncgate.config import load_config
 
     ours = build_dictionary(load_config(cfg_file))
     theirs = canopen.import_od(str(out), 16)

@@ -7,7 +7,7 @@ import struct
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from gateway import Gateway
+from ncgate.gateway import Gateway
 
 from .conftest import Master, abort_code, i16, u8, u16
 

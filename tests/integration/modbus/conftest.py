@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from config import Config
-from gateway.pytest_plugin import ncgate_test_config
+from ncgate.config import Config
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
 from ...helpers import write_cell
 

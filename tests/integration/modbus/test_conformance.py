@@ -10,8 +10,8 @@ from collections.abc import AsyncIterator
 import pytest
 import pytest_asyncio
 
-from gateway import Gateway
-from gateway.modbus_map import ModbusMap, Table
+from ncgate.gateway import Gateway
+from ncgate.gateway.modbus.map import ModbusMap, Table
 
 from .rawclient import Raw, mbap, pdu
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import random
 import struct
 
-from gateway import Gateway
+from ncgate.gateway import Gateway
 
 from .rawclient import Raw, mbap
 

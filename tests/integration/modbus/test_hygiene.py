@@ -7,8 +7,8 @@ import asyncio
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-import gateway.modbus_server as modbus_server
-from gateway import Gateway
+import ncgate.gateway.modbus.server as modbus_server
+from ncgate.gateway import Gateway
 
 from .rawclient import Raw, mbap, pdu
 

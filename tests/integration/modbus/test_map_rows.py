@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from gateway import Gateway
-from gateway.modbus_testkit import VirtualPLC, VirtualPLCError
-from interpreter.runtime import ProcessState
+from ncgate.gateway import Gateway
+from ncgate.gateway.testing.modbus_kit import VirtualPLC, VirtualPLCError
+from ncgate.interpreter.runtime import ProcessState
 
 
 async def test_cell_runs_with_the_test_playing_plc_and_external_process(

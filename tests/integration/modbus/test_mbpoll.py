@@ -13,7 +13,7 @@ import shutil
 
 import pytest
 
-from gateway import Gateway
+from ncgate.gateway import Gateway
 
 if shutil.which("mbpoll") is None:
     if os.environ.get("CI"):

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from config import ConfigError, SndPolicy, load_config
+from ncgate.config import ConfigError, SndPolicy, load_config
 
 
 def write(tmp_path: Path, text: str) -> Path:

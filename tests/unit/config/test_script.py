@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from config import ConfigError, load_config
-from config.script import load_script
-from gateway.sim import ScriptPlayer
-from gateway.wiring import build_runtime
+from ncgate.config import ConfigError, load_config
+from ncgate.config.script import load_script
+from ncgate.gateway.sim import ScriptPlayer
+from ncgate.gateway.wiring import build_runtime
 
 
 def write(tmp_path: Path, text: str) -> Path:

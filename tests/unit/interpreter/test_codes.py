@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from interpreter.codes import AlarmCode, DiagnosticCode, Severity, codes_markdown
+from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity, codes_markdown
 
 from ...conftest import ROOT
 

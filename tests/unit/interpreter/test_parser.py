@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from interpreter.codes import DiagnosticCode
-from interpreter.nodes import (
+from ncgate.interpreter.codes import DiagnosticCode
+from ncgate.interpreter.nodes import (
     Assign,
     Binary,
     Branch,
@@ -31,7 +31,7 @@ from interpreter.nodes import (
     WaitProc,
     Word,
 )
-from interpreter.parser import LineError, Program, parse_block
+from ncgate.interpreter.parser import LineError, Program, parse_block
 
 
 def test_words_run_together_with_columns() -> None:

@@ -9,9 +9,9 @@ from typing import Any
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from interpreter.formatter import format_block
-from interpreter.nodes import Span, VarRef, Word
-from interpreter.parser import WORD_LETTERS, LineError, parse_block, parse_block_uncached
+from ncgate.interpreter.formatter import format_block
+from ncgate.interpreter.nodes import Span, VarRef, Word
+from ncgate.interpreter.parser import WORD_LETTERS, LineError, parse_block, parse_block_uncached
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from interpreter.codes import AlarmCode
-from interpreter.runtime import ProcessState, SndPolicy, WaitKind
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.runtime import ProcessState, SndPolicy, WaitKind
 
 from ...helpers import simulate
 

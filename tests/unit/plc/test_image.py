@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from plc.image import ImageAddressError, ImageValueError, IOImage
+from ncgate.plc.image import ImageAddressError, ImageValueError, IOImage
 
 
 def test_views_of_sa_and_k() -> None:

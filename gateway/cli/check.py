@@ -18,18 +18,18 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from config import Config, StorageConfig, load_config
-from interpreter.checker import CheckContext, Limits, check_program
-from interpreter.diagnostics import Diagnostic
-from interpreter.nodes import Exe, Num
-from interpreter.parser import Program, program_name
-from interpreter.storage import PROGRAM_SUFFIXES, Storage
+from ncgate.config import Config, StorageConfig, load_config
+from ncgate.gateway.errors import UsageError
+from ncgate.gateway.programs import check_context, storage_of
+from ncgate.interpreter.checker import check_program
+from ncgate.interpreter.diagnostics import Diagnostic
+from ncgate.interpreter.nodes import Exe, Num
+from ncgate.interpreter.parser import Program, program_name
+from ncgate.interpreter.storage import PROGRAM_SUFFIXES
 
 CONFIG_BESIDE = "ncgate.toml"
 
 
-class UsageError(Exception):
-    """Bad command-line input (exit status 2)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,22 +44,6 @@ class FileReport:
     @property
     def warnings(self) -> int:
         return len(self.diagnostics) - self.errors
-
-
-def storage_of(config: Config) -> Storage:
-    return Storage(config.nc.storage.devices, config.nc.storage.default)
-
-
-def check_context(config: Config, storage: Storage, runs_in: Iterable[int]) -> CheckContext:
-    return CheckContext(
-        processes=config.nc.processes,
-        external=config.nc.external,
-        runs_in=frozenset(runs_in),
-        limits=Limits(config.nc.e_params, config.plc.syvars, config.plc.sa_bits,
-                      config.plc.k_bytes),
-        find_program=lambda name, device: storage.find(name, device) is not None,
-        has_device=storage.has_device,
-    )
 
 
 def expand(arguments: Sequence[str]) -> list[Path]:

@@ -45,17 +45,17 @@ from pymodbus.pdu.register_message import (
     WriteSingleRegisterResponse,
 )
 
-from config import ModbusConfig
-from gateway.modbus_map import (
+from ncgate.config import ModbusConfig
+from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.modbus.map import (
     DEVICE_FAILURE,
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
     TARGET_NO_RESPONSE,
-    ModbusError,
     ModbusMap,
     Table,
 )
-from gateway.wiring import Backend
+from ncgate.gateway.wiring import Backend
 
 log = logging.getLogger("ncgate.modbus")
 

@@ -18,8 +18,8 @@ import queue
 
 import canopen
 
-from config import Config
-from gateway.canopen_dictionary import build_dictionary
+from ncgate.config import Config
+from ncgate.gateway.canopen.dictionary import build_dictionary
 
 
 class CanopenMaster:

@@ -11,9 +11,9 @@ import logging
 import signal
 from contextlib import suppress
 
-from config import Config
-from gateway.app import Gateway
-from interpreter.trace import Event
+from ncgate.config import Config
+from ncgate.gateway.app import Gateway
+from ncgate.interpreter.trace import Event
 
 log = logging.getLogger("ncgate")
 

@@ -18,9 +18,10 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from config import Config
-from gateway.wiring import Backend
-from interpreter.runtime import Engine, ProcessState, WaitKind
+from ncgate.config import Config
+from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.wiring import Backend
+from ncgate.interpreter.runtime import Engine, ProcessState, WaitKind
 
 MAP_VERSION = 1
 
@@ -77,12 +78,6 @@ class Region:
         return f"{self.table.prefix}{number:0{width - 1}d}"
 
 
-class ModbusError(Exception):
-    """A request the map refuses: carries the exception code to answer."""
-
-    def __init__(self, code: int, why: str = "") -> None:
-        super().__init__(why or f"exception {code:#04x}")
-        self.code = code
 
 
 PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")

@@ -39,8 +39,8 @@ from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
 from canopen.sdo.exceptions import SdoAbortedError
 from canopen.sdo.server import SdoServer
 
-from config import Config
-from gateway.canopen_dictionary import (
+from ncgate.config import Config
+from ncgate.gateway.canopen.dictionary import (
     CHUNK,
     COMMAND,
     K_BASE,
@@ -51,9 +51,9 @@ from gateway.canopen_dictionary import (
     SYVAR_BASE,
     build_dictionary,
 )
-from gateway.wiring import Backend
-from interpreter.runtime import Engine, Process, ProcessState
-from interpreter.trace import Event
+from ncgate.gateway.wiring import Backend
+from ncgate.interpreter.runtime import Engine, Process, ProcessState
+from ncgate.interpreter.trace import Event
 
 log = logging.getLogger("ncgate.canopen")
 

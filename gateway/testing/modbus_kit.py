@@ -20,14 +20,11 @@ from dataclasses import dataclass
 
 from pymodbus.client import AsyncModbusTcpClient
 
-from config import Config
-from gateway.modbus_map import ModbusMap
-from gateway.wiring import parse_assignment
-from interpreter.runtime import ProcessState
-
-
-class VirtualPLCError(Exception):
-    """A Modbus exception answered, or a wait that ran out of time."""
+from ncgate.config import Config
+from ncgate.gateway.errors import VirtualPLCError
+from ncgate.gateway.modbus.map import ModbusMap
+from ncgate.gateway.wiring import parse_assignment
+from ncgate.interpreter.runtime import ProcessState
 
 
 @dataclass(frozen=True, slots=True)

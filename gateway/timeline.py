@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from html import escape
 from typing import TextIO
 
-from interpreter.trace import Event
+from ncgate.interpreter.trace import Event
 
 COLOURS = {
     "RUNNING": "#4caf50", "WAIT_PROC": "#ff9800", "WAIT_COND": "#2196f3",

@@ -6,9 +6,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from config import ConfigError, default_script_path, load_config
-from gateway.checking import UsageError, check_files, expand, storage_files
-from interpreter.diagnostics import InterpreterError, ProgramError
+from ncgate import __version__
+from ncgate.config import ConfigError, default_script_path, load_config
+from ncgate.gateway.cli.check import check_files, expand, storage_files
+from ncgate.gateway.errors import UsageError
+from ncgate.gateway.examples import examples, examples_folder, find_example
+from ncgate.interpreter.diagnostics import InterpreterError, ProgramError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -21,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Modbus/CAN I/O gateway and PLC-logic co-simulator for multi-process CNC "
         "part programs.",
     )
+    parser.add_argument("--version", action="version", version=f"ncgate {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     check = commands.add_parser(
         "check", help="parse and check part programs",
@@ -31,6 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="program files, directories or globs")
     check.add_argument("--config", metavar="C", help="config file (default: ncgate.toml "
                        "beside each file, else the built-in default)")
+    check.add_argument("--example", metavar="NAME", help="check the programs of an installed "
+                       "example (see 'ncgate examples')")
     check.add_argument("--process", type=int, metavar="N",
                        help="the process the files run in (default: inferred from the main "
                        "program and EXE codes)")
@@ -46,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("main", nargs="?", metavar="MAIN",
                      help="the main program (default: the config's nc.main)")
     sim.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    sim.add_argument("--example", metavar="NAME", help="run an installed example: its config, "
+                     "its script and its main program (see 'ncgate examples')")
     sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML); "
                      "default: none, or the built-in one with the built-in config")
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
@@ -67,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     map_.add_argument("--format", choices=("md", "csv", "json"), default="md")
     map_.add_argument("--bus", choices=("modbus", "canopen"),
                       help="only this bus (CSV holds one table: default modbus)")
+
+    commands.add_parser("examples", help="list the installed examples",
+                        description="The manual's examples installed with ncgate: name, main "
+                        "program, what happens, and the folder they are in.")
 
     eds = commands.add_parser("eds", help="write the CANopen node's EDS file",
                               description="Write the node's EDS (CiA 306) for your CANopen "
@@ -93,6 +105,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _map(args)
         if args.command == "eds":
             return _eds(args)
+        if args.command == "examples":
+            return _examples()
     except (UsageError, ConfigError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -107,6 +121,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
+    if args.example:
+        if args.config or args.files:
+            raise UsageError("--example goes without --config and FILE")
+        example = find_example(args.example)
+        args.files = [str(example.folder)]
     config = load_config(args.config) if args.config else None
     files = expand(args.files) if args.files else storage_files(config or load_config(None))
     if not files:
@@ -129,12 +148,22 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _sim(args: argparse.Namespace) -> int:
-    from config.script import load_script
-    from gateway.gantt import write_gantt
-    from gateway.sim import report, run_sim, write_trace
+    from ncgate.config.script import load_script
+    from ncgate.gateway.sim import report, run_sim, write_trace
+    from ncgate.gateway.timeline import write_gantt
 
     if args.until is not None and args.until < 0:
         raise UsageError("--until: expected a time >= 0")
+    if args.example:
+        if args.config:
+            raise UsageError("--example goes without --config")
+        example = find_example(args.example)
+        if example.main is None:
+            raise UsageError(f"the {example.name} example has no program to run: "
+                             f"ncgate check --example {example.name}")
+        args.config = str(example.config)
+        args.script = args.script or (str(example.script) if example.script else None)
+        args.main = args.main or example.main
     config = load_config(args.config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
@@ -154,7 +183,7 @@ def _run(args: argparse.Namespace) -> int:
     import asyncio
     import logging
 
-    from gateway.serve import serve
+    from ncgate.gateway.cli.serve import serve
 
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -170,8 +199,8 @@ def _map(args: argparse.Namespace) -> int:
     import csv
     import json
 
-    from gateway.canopen_dictionary import dictionary_rows
-    from gateway.modbus_map import ModbusMap
+    from ncgate.gateway.canopen.dictionary import dictionary_rows
+    from ncgate.gateway.modbus.map import ModbusMap
 
     config = load_config(args.config)
     buses = [args.bus] if args.bus else (["modbus"] if args.format == "csv" else
@@ -204,10 +233,18 @@ def _map(args: argparse.Namespace) -> int:
 
 
 def _eds(args: argparse.Namespace) -> int:
-    from gateway.canopen_dictionary import write_eds
+    from ncgate.gateway.canopen.dictionary import write_eds
 
     write_eds(load_config(args.config), args.output)
     print(f"wrote {args.output}", file=sys.stderr)
+    return EXIT_OK
+
+
+def _examples() -> int:
+    for example in examples():
+        main = example.main or "-"
+        print(f"{example.name:<12} {main:<8} {example.summary}")
+    print(f"installed in {examples_folder()}", file=sys.stderr)
     return EXIT_OK
 
 

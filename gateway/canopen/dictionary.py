@@ -21,7 +21,7 @@ from canopen.objectdictionary import (
 )
 from canopen.objectdictionary.datatypes import INTEGER16, UNSIGNED8, UNSIGNED16, UNSIGNED32
 
-from config import Config
+from ncgate.config import Config
 
 VENDOR_ID = 0x00000000  # no CiA vendor id assigned; tools show the product name instead
 PRODUCT_CODE = 0x4E434754  # "NCGT"

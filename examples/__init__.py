@@ -1,0 +1,1 @@
+"""The runnable examples, installed with ncgate as package data (``ncgate examples``)."""

@@ -1,0 +1,36 @@
+"""The gateway's exceptions: one root, :class:`GatewayError`, under ncgate's own
+(:mod:`ncgate.errors` draws the whole tree)."""
+
+from __future__ import annotations
+
+from ncgate.errors import NcgateError
+
+
+class GatewayError(NcgateError):
+    """Root of the gateway's exceptions."""
+
+
+class UsageError(GatewayError, ValueError):
+    """Bad command-line input (exit status 2)."""
+
+
+class WaitIdleTimeout(GatewayError, TimeoutError):
+    """``wait_idle``/``wait_state`` ran out of time; the message has the why-records."""
+
+
+class ProcessAlarmError(GatewayError, RuntimeError):
+    """Every process stopped, some in ALARM: the message has the alarms."""
+
+
+class ModbusError(GatewayError):
+    """A request the map refuses: carries the exception code to answer."""
+
+    def __init__(self, code: int, why: str = "") -> None:
+        super().__init__(why or f"exception {code:#04x}")
+        self.code = code
+
+
+class VirtualPLCError(GatewayError, AssertionError):
+    """The test kit's client got a Modbus exception answer, or a wait ran out of time.
+
+    An AssertionError too, so that pytest reports it as a failed expectation of the test."""

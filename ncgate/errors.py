@@ -1,0 +1,29 @@
+"""The root of every exception ncgate raises.
+
+Each package has one root of its own under it, which also subclasses the fitting builtin
+(STYLE.md, as lark and python-can do), so callers can catch as narrowly as they like::
+
+    NcgateError
+    ├── ConfigError (ValueError)                  ncgate.config: file + dotted key
+    ├── PlcError                                  ncgate.plc: the I/O image
+    │   ├── ImageAddressError (IndexError)
+    │   └── ImageValueError (ValueError)
+    ├── InterpreterError                          ncgate.interpreter
+    │   ├── ProgramError → ProgramSyntaxError (SyntaxError): diagnostics with spans
+    │   ├── ProgramNotFoundError (FileNotFoundError)
+    │   └── RuntimeAlarm: an alarm of a process (code + message), never leaves the engine
+    └── GatewayError                              ncgate.gateway
+        ├── UsageError (ValueError): bad command-line input, exit status 2
+        ├── WaitIdleTimeout (TimeoutError)
+        ├── ProcessAlarmError (RuntimeError)
+        ├── ModbusError: a request answered with an exception code
+        └── VirtualPLCError (AssertionError): the test kit's client got an exception answer
+
+Imports nothing: every package may import it.
+"""
+
+from __future__ import annotations
+
+
+class NcgateError(Exception):
+    """Root of ncgate's exceptions."""
