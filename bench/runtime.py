@@ -22,7 +22,8 @@ from collections.abc import Callable
 from ncgate.interpreter.checker import CheckContext, check_program
 from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
 from ncgate.interpreter.parser import Program
-from ncgate.interpreter.runtime import Engine, RuntimeSettings, run_virtual
+from ncgate.interpreter.runtime import Engine, run_virtual
+from ncgate.interpreter.settings import RuntimeSettings
 from ncgate.interpreter.trace import Trace
 from ncgate.plc.image import IOImage
 

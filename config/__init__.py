@@ -1,6 +1,7 @@
 """Configuration: the schema, the TOML loader, the built-in default config and its programs.
 
-Stdlib only; imports nothing from the other packages.
+Stdlib only; of the other packages it imports only the interpreter's leaf module of settings
+(``ncgate.interpreter.settings``), whose choices (the SND policy) the config names.
 """
 
 from ncgate.config.loader import (
@@ -12,12 +13,13 @@ from ncgate.config.loader import (
     NcConfig,
     PlcConfig,
     ProcessConfig,
-    SndPolicy,
     StorageConfig,
+    TraceConfig,
     default_config_path,
     default_script_path,
     load_config,
 )
+from ncgate.interpreter.settings import SndPolicy
 
 __all__ = [
     "CanopenConfig",
@@ -30,6 +32,7 @@ __all__ = [
     "ProcessConfig",
     "SndPolicy",
     "StorageConfig",
+    "TraceConfig",
     "default_config_path",
     "default_script_path",
     "load_config",

@@ -1,68 +1,187 @@
 """The configuration schema (spec 4.2) and its TOML loader.
 
-A config loads into frozen dataclasses.  Every value is validated on load; an unknown key or a
-bad value raises :class:`ConfigError` naming the file and the dotted key, e.g.
-``gateway.toml: modbus.port: expected an integer 1..65535, got 70000``.  Relative storage
-paths are resolved against the config file's folder.
+A config loads into frozen dataclasses, and the dataclasses are the schema: each key is a field
+made with :func:`setting`, which carries its bounds and its one-line doc.  The reader walks the
+fields, so a key is spelled once -- in its dataclass -- and the table of keys in
+``docs/config.md`` is generated from the same fields (a test keeps it in sync).
 
-Stdlib only.
+Every value is validated on load; an unknown key or a bad value raises :class:`ConfigError`
+naming the file and the dotted key, e.g. ``gateway.toml: modbus.port: expected an integer
+1..65535, got 70000``.  Relative paths are resolved against the config file's folder.
+
+Stdlib only, and the interpreter's leaf module of settings (the SND policy is defined there).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import ipaddress
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from ncgate.errors import NcgateError
+from ncgate.interpreter.settings import SndPolicy
 
 MAX_PROCESSES = 16
+STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
+DEFAULT_MODBUS_PORT = 5020
+MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
 
 
 class ConfigError(NcgateError, ValueError):
     """A configuration that cannot be used: the message names the file and the dotted key."""
 
 
-class SndPolicy(enum.Enum):
-    RENDEZVOUS = "rendezvous"  # SND completes only when the target waits for the sender
-    LATCHED = "latched"  # SND never blocks; a token per sender->target pair (TwinCAT-style)
+# A custom reader of one key: (reader, the table, the dotted key, the values read so far in
+# this table) -> the value.
+Parse = Callable[["_Reader", dict[str, Any], str, dict[str, Any]], Any]
+
+
+def setting(default: Any = None, doc: str = "", *, lo: float | None = None,
+            hi: float | None = None, positive: bool = False, parse: Parse | None = None,
+            factory: Callable[[], Any] | None = None) -> Any:
+    """A config key: its default, its doc line, its bounds (or a parser of its own)."""
+    metadata = {"doc": doc, "lo": lo, "hi": hi, "positive": positive, "parse": parse}
+    if factory is not None:
+        return field(default_factory=factory, metadata=metadata)
+    return field(default=default, metadata=metadata)
+
+
+# ---- custom keys ---------------------------------------------------------------------------
+
+
+def _storage_devices(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    base = key.rsplit(".", 1)[0]
+    devices: dict[str, Path] = {}
+    for name in STORAGE_DEVICES:
+        if name in t:
+            folder = r.str_(t[name], f"{base}.{name}")
+            devices[name] = (r.base / folder).resolve()
+    return devices or {"MP0": r.base.resolve()}
+
+
+def _storage_default(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
+    devices = done["devices"]
+    default = r.str_(t.get("default", next(iter(devices))), key)
+    if default.upper() not in devices:
+        raise r.fail(key, f"names {default!r}, which is not one of {', '.join(devices)}")
+    return default.upper()
+
+
+def _processes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw, count = t.get("process"), done["processes"]
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise r.fail(key, "expected an array of tables ([[nc.process]])")
+    out: dict[int, ProcessConfig] = {}
+    for i, entry in enumerate(raw):
+        item = f"{key}[{i}]"
+        if isinstance(entry, dict) and "number" not in entry:
+            raise r.fail(f"{item}.number", "missing")
+        process = r.section(ProcessConfig, entry, item, hi={"number": count})
+        if process.number in out:
+            raise r.fail(f"{item}.number", f"process {process.number} is configured twice")
+        if process.number == 1 and process.external:
+            raise r.fail(f"{item}.external", "process 1 runs the main program: it cannot be "
+                         "external")
+        out[process.number] = process
+    return tuple(out[n] for n in sorted(out))
+
+
+def _port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
+    value = t.get("port", DEFAULT_MODBUS_PORT)
+    if value == 0 and not isinstance(value, bool):
+        return 0  # 0 asks the system for a free port (tests, the Python API)
+    return r.int_(value, key, 1, 65535)
+
+
+def _unit_ids(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    unit_ids = t.get("unit_ids", [1])
+    if not isinstance(unit_ids, list) or not unit_ids or not all(
+        isinstance(u, int) and not isinstance(u, bool) and 0 <= u <= 255 for u in unit_ids
+    ):
+        raise r.fail(key, f"expected a non-empty list of integers 0..255, got {unit_ids!r}")
+    return tuple(unit_ids)
+
+
+def _allow(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    allow = t.get("allow", [])
+    if not isinstance(allow, list) or not all(isinstance(a, str) for a in allow):
+        raise r.fail(key, f"expected a list of IP addresses, got {allow!r}")
+    for i, entry in enumerate(allow):
+        try:
+            ipaddress.ip_network(entry, strict=False)
+        except ValueError:
+            raise r.fail(f"{key}[{i}]", f"expected an IP address or network, got "
+                         f"{entry!r}") from None
+    return tuple(allow)
+
+
+def _read_only_regions(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    read_only = t.get("read_only", [])
+    if not isinstance(read_only, list) or any(x not in MAP_REGIONS for x in read_only):
+        raise r.fail(key, f"expected a list of {', '.join(MAP_REGIONS)}, got {read_only!r}")
+    return frozenset(read_only)
+
+
+def _optional_path(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    name = key.rsplit(".", 1)[1]
+    if name not in t:
+        return None
+    return (r.base / r.str_(t[name], key)).resolve()
+
+
+# ---- the schema ----------------------------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
 class ProcessConfig:
-    number: int
-    external: bool = False
+    number: int = setting(0, "the process (1..nc.processes)", lo=1)
+    external: bool = setting(False, "runs no part program: a PLC plays it over the fieldbus")
 
 
 @dataclass(frozen=True, slots=True)
 class StorageConfig:
-    devices: Mapping[str, Path] = field(default_factory=dict)  # MP0..MP3 -> folder
-    default: str = "MP0"
+    devices: Mapping[str, Path] = setting(
+        doc="MP0..MP3: the folder of each storage device, relative to the config file "
+        "(default: MP0 = the config file's folder)", parse=_storage_devices, factory=dict)
+    default: str = setting("MP0", "the device of a program named without /MPx",
+                           parse=_storage_default)
+
+    KEYS = (*STORAGE_DEVICES, "default")  # what [nc.storage] may hold
 
 
 @dataclass(frozen=True, slots=True)
 class NcConfig:
-    processes: int = 5
-    lookahead: int = 16
-    snd: SndPolicy = SndPolicy.RENDEZVOUS
-    sync_reads: bool = False
-    time_scale: float = 1.0
-    wait_timeout_s: float = 0.0
-    rapid_mm_min: float = 10000.0
-    tool_change_s: float = 2.0
-    main: str = "PROG91"
-    autostart: bool = False
-    e_params: int = 1000
-    stall_s: float = 60.0
-    optional_skip: bool = False
-    lazy_parse: bool = False  # start programs before they are parsed whole (spec 1.6: off)
-    storage: StorageConfig = field(default_factory=StorageConfig)
-    process: tuple[ProcessConfig, ...] = ()
+    processes: int = setting(5, "how many processes (channels)", lo=1, hi=MAX_PROCESSES)
+    lookahead: int = setting(16, "motion-queue items the decoder may run ahead (0: none)",
+                             lo=0, hi=100_000)
+    snd: SndPolicy = setting(SndPolicy.RENDEZVOUS, "an SND waits for its target to wait "
+                             "(rendezvous) or leaves a token (latched)")
+    sync_reads: bool = setting(False, "a read of SA/SK/SYVAR waits for the motion queue to empty")
+    time_scale: float = setting(1.0, "run: simulated seconds per wall-clock second", lo=0,
+                                positive=True)
+    wait_timeout_s: float = setting(0.0, "a wait longer than this is an alarm (0: off)", lo=0)
+    stall_s: float = setting(60.0, "run: report a stall when every process with a program has "
+                             "been blocked this long with the image unchanged", lo=0,
+                             positive=True)
+    rapid_mm_min: float = setting(10000.0, "G0 feed", lo=0, positive=True)
+    tool_change_s: float = setting(2.0, "duration of M6", lo=0)
+    main: str = setting("PROG91", "the main program of process 1 (the operator's SPG)")
+    autostart: bool = setting(False, "run: start main at once (else on cycle start)")
+    e_params: int = setting(1000, "E parameters per process (E0..)", lo=1, hi=100_000)
+    optional_skip: bool = setting(False, "skip blocks that start with /")
+    lazy_parse: bool = setting(False, "start a program before it is parsed whole; a bad block "
+                               "is an alarm when reached")
+    storage: StorageConfig = setting(doc="[nc.storage]", factory=StorageConfig)
+    process: tuple[ProcessConfig, ...] = setting((), "[[nc.process]]: per-process settings",
+                                                 parse=_processes)
 
     @property
     def external(self) -> frozenset[int]:
@@ -71,63 +190,78 @@ class NcConfig:
 
 @dataclass(frozen=True, slots=True)
 class PlcConfig:
-    sa_bits: int = 1024
-    k_bytes: int = 512
-    syvars: int = 256
-    scan_ms: int = 10
-
-
-MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
+    sa_bits: int = setting(1024, "bits of the SA packet (a multiple of 8)", lo=8, hi=65536)
+    k_bytes: int = setting(512, "bytes of the K packet", lo=2, hi=65536)
+    syvars: int = setting(256, "SYVARs (16-bit signed)", lo=1, hi=32768)
+    scan_ms: int = setting(10, "the PLC scan period (PLC logic)", lo=1, hi=60_000)
 
 
 @dataclass(frozen=True, slots=True)
 class ModbusMapConfig:
     """Where the movable regions of the map start, and which are read-only (spec 3.2)."""
 
-    k_bytes: int = 0  # holding registers
-    syvars: int = 1000
-    sa_bytes: int = 1500
-    command: int = 2000  # the SND mailbox follows at command+1, command+2
-    status: int = 100  # input registers: the per-process status blocks
-    read_only: frozenset[str] = frozenset()
+    k_bytes: int = setting(0, "holding base of the K bytes", lo=0, hi=65535)
+    syvars: int = setting(1000, "holding base of the SYVARs", lo=0, hi=65535)
+    sa_bytes: int = setting(1500, "holding base of the SA bytes", lo=0, hi=65535)
+    command: int = setting(2000, "holding address of the command word; the SND mailbox "
+                           "follows at +1, +2", lo=0, hi=65535)
+    status: int = setting(100, "input base of the per-process status blocks", lo=0, hi=65535)
+    read_only: frozenset[str] = setting(frozenset(), "regions clients may not write: "
+                                        + ", ".join(MAP_REGIONS), parse=_read_only_regions)
 
 
 @dataclass(frozen=True, slots=True)
 class ModbusConfig:
-    enabled: bool = True
-    host: str = "127.0.0.1"
-    port: int = 5020
-    unit_ids: tuple[int, ...] = (1,)
-    max_clients: int = 16
-    idle_timeout_s: float = 60.0
-    read_only: bool = False
-    allow: tuple[str, ...] = ()  # client IP allow-list; empty: everyone
-    map: ModbusMapConfig = field(default_factory=ModbusMapConfig)
+    enabled: bool = setting(True, "serve Modbus TCP")
+    host: str = setting("127.0.0.1", "the address to listen on")
+    port: int = setting(DEFAULT_MODBUS_PORT, "the port (0: a free one, for tests)", parse=_port)
+    unit_ids: tuple[int, ...] = setting((1,), "unit ids answered", parse=_unit_ids)
+    max_clients: int = setting(16, "connections at once", lo=1, hi=10_000)
+    idle_timeout_s: float = setting(60.0, "close a connection silent this long", lo=0,
+                                    positive=True)
+    read_only: bool = setting(False, "refuse every write")
+    allow: tuple[str, ...] = setting((), "client addresses or networks allowed (empty: all)",
+                                     parse=_allow)
+    map: ModbusMapConfig = setting(doc="[modbus.map]", factory=ModbusMapConfig)
 
 
 @dataclass(frozen=True, slots=True)
 class CanopenConfig:
-    enabled: bool = True
-    interface: str = "virtual"
-    channel: str = "ncgate"
-    bitrate: int = 500000
-    node_id: int = 16
-    nmt_autostart: bool = False
-    heartbeat_ms: int = 1000
+    enabled: bool = setting(True, "run the CANopen node")
+    interface: str = setting("virtual", "python-can interface (virtual, socketcan, ...)")
+    channel: str = setting("ncgate", "python-can channel")
+    bitrate: int = setting(500000, "bit/s", lo=10_000, hi=1_000_000)
+    node_id: int = setting(16, "the node id", lo=1, hi=127)
+    nmt_autostart: bool = setting(False, "go OPERATIONAL after boot-up without an NMT start")
+    heartbeat_ms: int = setting(1000, "heartbeat producer period (0: off)", lo=0, hi=65535)
     # A python-can-remote hub on loopback, so that a master in another process can reach the
     # node on a machine without SocketCAN (`interface = "remote"`, channel ws://host:port/).
-    hub: bool = False
-    hub_host: str = "127.0.0.1"
-    hub_port: int = 54701
+    hub: bool = setting(False, "host a python-can-remote hub for masters in other processes")
+    hub_host: str = setting("127.0.0.1", "the hub's address")
+    hub_port: int = setting(54701, "the hub's port", lo=0, hi=65535)
+
+
+@dataclass(frozen=True, slots=True)
+class TraceConfig:
+    """What ``ncgate run`` keeps of the trace: memory stays flat however long it runs."""
+
+    ring: int = setting(10_000, "run: events kept in memory (Gateway.trace)", lo=0,
+                        hi=10_000_000)
+    file: Path | None = setting(None, "run: write every event here as JSON Lines "
+                                "(also --trace FILE)", parse=_optional_path)
+    max_mb: float = setting(100.0, "rotate the file when it reaches this size", lo=0,
+                            positive=True)
+    backups: int = setting(3, "rotated files kept (FILE.1 .. FILE.n; 0: none)", lo=0, hi=1000)
 
 
 @dataclass(frozen=True, slots=True)
 class Config:
-    nc: NcConfig = field(default_factory=NcConfig)
-    plc: PlcConfig = field(default_factory=PlcConfig)
-    modbus: ModbusConfig = field(default_factory=ModbusConfig)
-    canopen: CanopenConfig = field(default_factory=CanopenConfig)
-    source: Path | None = None  # the file it came from (None: built-in default)
+    nc: NcConfig = setting(doc="[nc]", factory=NcConfig)
+    plc: PlcConfig = setting(doc="[plc]", factory=PlcConfig)
+    modbus: ModbusConfig = setting(doc="[modbus]", factory=ModbusConfig)
+    canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
+    trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
+    source: Path | None = None  # the file it came from (None: built-in default); not a key
 
 
 def default_config_path() -> Path:
@@ -148,7 +282,9 @@ def load_config(
     for dotted, value in (overrides or {}).items():
         _set_dotted(raw, dotted, value)
     reader = _Reader(str(source) if path is not None else "<built-in default>", source.parent)
-    return reader.config(raw, source if path is not None else None)
+    config: Config = reader.section(Config, raw, "")
+    _check_config(reader, config)
+    return dataclasses.replace(config, source=source if path is not None else None)
 
 
 def read_toml(source: Path) -> dict[str, Any]:
@@ -161,12 +297,43 @@ def read_toml(source: Path) -> dict[str, Any]:
         raise ConfigError(f"{source}: {exc}") from exc
 
 
+def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
+    """Every key of a section and its sub-sections: (dotted key, default, doc)."""
+    out: list[tuple[str, Any, str]] = []
+    for f in _fields(cls):
+        dotted = f"{prefix}.{f.name}" if prefix else f.name
+        nested = _section_type(f)
+        if nested is not None:
+            out.extend(keys(nested, dotted))
+            continue
+        if cls is NcConfig and f.name == "process":
+            out.extend(keys(ProcessConfig, f"{dotted}[]"))
+            continue
+        if cls is StorageConfig and f.name == "devices":
+            dotted = f"{prefix}.MP0 .. MP3"
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        out.append((dotted, default, f.metadata.get("doc", "")))
+    return out
+
+
 def _set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:
     *parents, last = dotted.split(".")
     table = raw
     for name in parents:
         table = table.setdefault(name, {})
     table[last] = value
+
+
+def _fields(cls: type) -> list[dataclasses.Field[Any]]:
+    return [f for f in dataclasses.fields(cls) if f.name != "source"]
+
+
+_SECTIONS: dict[str, type] = {}  # field type name -> section dataclass (filled below)
+
+
+def _section_type(f: dataclasses.Field[Any]) -> type | None:
+    return _SECTIONS.get(str(f.type))
 
 
 class _Reader:
@@ -179,7 +346,27 @@ class _Reader:
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self.file}: {key}: {message}")
 
-    def table(self, raw: Any, key: str, known: set[str]) -> dict[str, Any]:
+    def section(self, cls: type, raw: Any, key: str,
+                hi: Mapping[str, int] | None = None) -> Any:
+        """A dataclass of the schema, read from its table (``hi``: bounds known only now)."""
+        known = {f.name for f in _fields(cls)} if cls is not StorageConfig else set(
+            StorageConfig.KEYS)
+        t = self._table(raw, key, known)
+        values: dict[str, Any] = {}
+        for f in _fields(cls):
+            dotted = f"{key}.{f.name}" if key else f.name
+            nested = _section_type(f)
+            meta = f.metadata
+            if meta.get("parse") is not None:
+                values[f.name] = meta["parse"](self, t, dotted, values)
+            elif nested is not None:
+                values[f.name] = self.section(nested, t.get(f.name), dotted)
+            else:
+                values[f.name] = self._value(f, t.get(f.name, f.default), dotted,
+                                             (hi or {}).get(f.name, meta.get("hi")))
+        return _CHECKS.get(cls, _no_check)(self, cls(**values), key)
+
+    def _table(self, raw: Any, key: str, known: set[str]) -> dict[str, Any]:
         if raw is None:
             return {}
         if not isinstance(raw, dict):
@@ -189,227 +376,91 @@ class _Reader:
                 raise self.fail(f"{key}.{name}" if key else name, "unknown key")
         return raw
 
-    def int_(self, t: dict[str, Any], key: str, dotted: str, default: int, lo: int,
-             hi: int | None = None) -> int:
-        value = t.get(key, default)
+    def _value(self, f: dataclasses.Field[Any], value: Any, key: str, hi: Any) -> Any:
+        default, meta = f.default, f.metadata
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise self.fail(key, f"expected true or false, got {value!r}")
+            return value
+        if isinstance(default, int):
+            return self.int_(value, key, meta["lo"], hi)
+        if isinstance(default, float):
+            return self.float_(value, key, meta["lo"], meta["positive"])
+        if isinstance(default, str):
+            return self.str_(value, key)
+        if isinstance(default, enum.Enum):
+            choices = type(default)
+            try:
+                return choices(value.value if isinstance(value, choices) else value)
+            except ValueError:
+                names = " or ".join(f'"{c.value}"' for c in choices)
+                raise self.fail(key, f"expected {names}, got {value!r}") from None
+        raise AssertionError(f"{key}: no reader for {f.type}")  # a schema without a parser
+
+    def int_(self, value: Any, key: str, lo: Any, hi: Any = None) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
             hi is not None and value > hi
         ):
             bounds = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-            raise self.fail(dotted, f"expected an integer {bounds}, got {value!r}")
+            raise self.fail(key, f"expected an integer {bounds}, got {value!r}")
         return value
 
-    def float_(self, t: dict[str, Any], key: str, dotted: str, default: float, lo: float,
-               positive: bool = False) -> float:
-        value = t.get(key, default)
+    def float_(self, value: Any, key: str, lo: float, positive: bool) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float) or value < lo or (
             positive and value <= 0
         ):
             what = "a number > 0" if positive else f"a number >= {lo:g}"
-            raise self.fail(dotted, f"expected {what}, got {value!r}")
+            raise self.fail(key, f"expected {what}, got {value!r}")
         return float(value)
 
-    def bool_(self, t: dict[str, Any], key: str, dotted: str, default: bool) -> bool:
-        value = t.get(key, default)
-        if not isinstance(value, bool):
-            raise self.fail(dotted, f"expected true or false, got {value!r}")
-        return value
-
-    def str_(self, t: dict[str, Any], key: str, dotted: str, default: str) -> str:
-        value = t.get(key, default)
+    def str_(self, value: Any, key: str) -> str:
         if not isinstance(value, str) or not value:
-            raise self.fail(dotted, f"expected a non-empty string, got {value!r}")
+            raise self.fail(key, f"expected a non-empty string, got {value!r}")
         return value
 
-    # -- sections -----------------------------------------------------------------------------
 
-    def config(self, raw: dict[str, Any], source: Path | None) -> Config:
-        top = self.table(raw, "", {"nc", "plc", "modbus", "canopen"})
-        nc, plc = self.nc(top.get("nc")), self.plc(top.get("plc"))
-        canopen = self.canopen(top.get("canopen"))
-        if canopen.enabled:
-            # The dictionary's shape (spec 3.3): 0x2000 is one ARRAY of at most 254 entries,
-            # 0x2100+j (128 K bytes each) must stay below 0x2200.
-            if plc.sa_bits > 254 * 8:
-                raise self.fail("plc.sa_bits", f"the CANopen object 0x2000 holds at most 254 "
-                                f"SA bytes (2032 bits), got {plc.sa_bits} bits; lower it or "
-                                "set canopen.enabled = false")
-            if plc.k_bytes > 128 * 256:
-                raise self.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at "
-                                f"most 32768 K bytes, got {plc.k_bytes}")
-        return Config(
-            nc=nc,
-            plc=plc,
-            modbus=self.modbus(top.get("modbus"), nc, plc),
-            canopen=canopen,
-            source=source,
-        )
+# ---- checks across keys ----------------------------------------------------------------------
 
-    def nc(self, raw: Any) -> NcConfig:
-        d = NcConfig()
-        t = self.table(raw, "nc", {
-            "processes", "lookahead", "snd", "sync_reads", "time_scale", "wait_timeout_s",
-            "rapid_mm_min", "tool_change_s", "main", "autostart", "e_params", "stall_s",
-            "optional_skip", "lazy_parse", "storage", "process",
-        })
-        processes = self.int_(t, "processes", "nc.processes", d.processes, 1, MAX_PROCESSES)
-        snd_raw = t.get("snd", d.snd.value)
-        try:
-            snd = SndPolicy(snd_raw)
-        except ValueError:
-            raise self.fail(
-                "nc.snd", f'expected "rendezvous" or "latched", got {snd_raw!r}'
-            ) from None
-        return NcConfig(
-            processes=processes,
-            lookahead=self.int_(t, "lookahead", "nc.lookahead", d.lookahead, 0, 100_000),
-            snd=snd,
-            sync_reads=self.bool_(t, "sync_reads", "nc.sync_reads", d.sync_reads),
-            time_scale=self.float_(t, "time_scale", "nc.time_scale", d.time_scale, 0,
-                                   positive=True),
-            wait_timeout_s=self.float_(t, "wait_timeout_s", "nc.wait_timeout_s",
-                                       d.wait_timeout_s, 0),
-            rapid_mm_min=self.float_(t, "rapid_mm_min", "nc.rapid_mm_min", d.rapid_mm_min, 0,
-                                     positive=True),
-            tool_change_s=self.float_(t, "tool_change_s", "nc.tool_change_s",
-                                      d.tool_change_s, 0),
-            main=self.str_(t, "main", "nc.main", d.main),
-            autostart=self.bool_(t, "autostart", "nc.autostart", d.autostart),
-            e_params=self.int_(t, "e_params", "nc.e_params", d.e_params, 1, 100_000),
-            stall_s=self.float_(t, "stall_s", "nc.stall_s", d.stall_s, 0, positive=True),
-            optional_skip=self.bool_(t, "optional_skip", "nc.optional_skip", d.optional_skip),
-            lazy_parse=self.bool_(t, "lazy_parse", "nc.lazy_parse", d.lazy_parse),
-            storage=self.storage(t.get("storage")),
-            process=self.processes(t.get("process"), processes),
-        )
 
-    def storage(self, raw: Any) -> StorageConfig:
-        t = self.table(raw, "nc.storage", {"MP0", "MP1", "MP2", "MP3", "default"})
-        devices: dict[str, Path] = {}
-        for name in ("MP0", "MP1", "MP2", "MP3"):
-            if name in t:
-                folder = self.str_(t, name, f"nc.storage.{name}", "")
-                devices[name] = (self.base / folder).resolve()
-        if not devices:
-            devices["MP0"] = self.base.resolve()
-        default = self.str_(t, "default", "nc.storage.default", next(iter(devices)))
-        if default.upper() not in devices:
-            raise self.fail("nc.storage.default",
-                            f"names {default!r}, which is not one of {', '.join(devices)}")
-        return StorageConfig(devices=devices, default=default.upper())
+def _no_check(r: _Reader, value: Any, key: str) -> Any:
+    return value
 
-    def processes(self, raw: Any, count: int) -> tuple[ProcessConfig, ...]:
-        if raw is None:
-            return ()
-        if not isinstance(raw, list):
-            raise self.fail("nc.process", "expected an array of tables ([[nc.process]])")
-        out: dict[int, ProcessConfig] = {}
-        for i, entry in enumerate(raw):
-            key = f"nc.process[{i}]"
-            t = self.table(entry, key, {"number", "external"})
-            if "number" not in t:
-                raise self.fail(f"{key}.number", "missing")
-            number = self.int_(t, "number", f"{key}.number", 0, 1, count)
-            if number in out:
-                raise self.fail(f"{key}.number", f"process {number} is configured twice")
-            if number == 1 and t.get("external"):
-                raise self.fail(f"{key}.external", "process 1 runs the main program: "
-                                "it cannot be external")
-            out[number] = ProcessConfig(number, self.bool_(t, "external", f"{key}.external",
-                                                           False))
-        return tuple(out[n] for n in sorted(out))
 
-    def plc(self, raw: Any) -> PlcConfig:
-        d = PlcConfig()
-        t = self.table(raw, "plc", {"sa_bits", "k_bytes", "syvars", "scan_ms"})
-        sa_bits = self.int_(t, "sa_bits", "plc.sa_bits", d.sa_bits, 8, 65536)
-        if sa_bits % 8:
-            raise self.fail("plc.sa_bits", f"expected a multiple of 8, got {sa_bits}")
-        return PlcConfig(
-            sa_bits=sa_bits,
-            k_bytes=self.int_(t, "k_bytes", "plc.k_bytes", d.k_bytes, 2, 65536),
-            syvars=self.int_(t, "syvars", "plc.syvars", d.syvars, 1, 32768),
-            scan_ms=self.int_(t, "scan_ms", "plc.scan_ms", d.scan_ms, 1, 60_000),
-        )
+def _check_plc(r: _Reader, plc: PlcConfig, key: str) -> PlcConfig:
+    if plc.sa_bits % 8:
+        raise r.fail(f"{key}.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
+    return plc
 
-    def modbus_map(self, raw: Any, nc: NcConfig, plc: PlcConfig) -> ModbusMapConfig:
-        d = ModbusMapConfig()
-        t = self.table(raw, "modbus.map", {"k_bytes", "syvars", "sa_bytes", "command",
-                                           "status", "read_only"})
-        bases = {name: self.int_(t, name, f"modbus.map.{name}", getattr(d, name), 0, 65535)
-                 for name in ("k_bytes", "syvars", "sa_bytes", "command", "status")}
-        read_only = t.get("read_only", [])
-        if not isinstance(read_only, list) or any(r not in MAP_REGIONS for r in read_only):
-            raise self.fail("modbus.map.read_only",
-                            f"expected a list of {', '.join(MAP_REGIONS)}, got {read_only!r}")
-        holding = [("k_bytes", bases["k_bytes"], plc.k_bytes),
-                   ("syvars", bases["syvars"], plc.syvars),
-                   ("sa_bytes", bases["sa_bytes"], plc.sa_bits // 8),
-                   ("command", bases["command"], 3)]
-        status = [("status", bases["status"], 20 * nc.processes), ("info", 0, 8)]
-        for regions in (holding, status):
-            for i, (name, start, count) in enumerate(regions):
-                if start + count > 65536:
-                    raise self.fail(f"modbus.map.{name}", f"{start}..{start + count - 1} runs "
-                                    "past address 65535")
-                for other, o_start, o_count in regions[i + 1:]:
-                    if start < o_start + o_count and o_start < start + count:
-                        raise self.fail(f"modbus.map.{name}",
-                                        f"{name} ({start}..{start + count - 1}) overlaps "
-                                        f"{other} ({o_start}..{o_start + o_count - 1})")
-        return ModbusMapConfig(**bases, read_only=frozenset(read_only))
 
-    def modbus(self, raw: Any, nc: NcConfig, plc: PlcConfig) -> ModbusConfig:
-        d = ModbusConfig()
-        t = self.table(raw, "modbus", {"enabled", "host", "port", "unit_ids", "max_clients",
-                                       "idle_timeout_s", "read_only", "allow", "map"})
-        unit_ids = t.get("unit_ids", list(d.unit_ids))
-        if not isinstance(unit_ids, list) or not unit_ids or not all(
-            isinstance(u, int) and not isinstance(u, bool) and 0 <= u <= 255 for u in unit_ids
-        ):
-            raise self.fail("modbus.unit_ids",
-                            f"expected a non-empty list of integers 0..255, got {unit_ids!r}")
-        allow = t.get("allow", [])
-        if not isinstance(allow, list) or not all(isinstance(a, str) for a in allow):
-            raise self.fail("modbus.allow", f"expected a list of IP addresses, got {allow!r}")
-        for i, entry in enumerate(allow):
-            try:
-                ipaddress.ip_network(entry, strict=False)
-            except ValueError:
-                raise self.fail(f"modbus.allow[{i}]",
-                                f"expected an IP address or network, got {entry!r}") from None
-        return ModbusConfig(
-            enabled=self.bool_(t, "enabled", "modbus.enabled", d.enabled),
-            host=self.str_(t, "host", "modbus.host", d.host),
-            # 0 asks the system for a free port (tests, the Python API); not shown as a bound.
-            port=0 if t.get("port") == 0 and not isinstance(t.get("port"), bool)
-            else self.int_(t, "port", "modbus.port", d.port, 1, 65535),
-            unit_ids=tuple(unit_ids),
-            max_clients=self.int_(t, "max_clients", "modbus.max_clients", d.max_clients, 1,
-                                  10_000),
-            idle_timeout_s=self.float_(t, "idle_timeout_s", "modbus.idle_timeout_s",
-                                       d.idle_timeout_s, 0, positive=True),
-            read_only=self.bool_(t, "read_only", "modbus.read_only", d.read_only),
-            allow=tuple(allow),
-            map=self.modbus_map(t.get("map"), nc, plc),
-        )
+def _check_config(r: _Reader, config: Config) -> None:
+    nc, plc, canopen = config.nc, config.plc, config.canopen
+    if canopen.enabled:
+        # The dictionary's shape (spec 3.3): 0x2000 is one ARRAY of at most 254 entries,
+        # 0x2100+j (128 K bytes each) must stay below 0x2200.
+        if plc.sa_bits > 254 * 8:
+            raise r.fail("plc.sa_bits", f"the CANopen object 0x2000 holds at most 254 SA bytes "
+                         f"(2032 bits), got {plc.sa_bits} bits; lower it or set "
+                         "canopen.enabled = false")
+        if plc.k_bytes > 128 * 256:
+            raise r.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at most 32768 "
+                         f"K bytes, got {plc.k_bytes}")
+    m = config.modbus.map
+    holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
+               ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
+    status = [("status", m.status, 20 * nc.processes), ("info", 0, 8)]
+    for regions in (holding, status):
+        for i, (name, start, count) in enumerate(regions):
+            if start + count > 65536:
+                raise r.fail(f"modbus.map.{name}", f"{start}..{start + count - 1} runs past "
+                             "address 65535")
+            for other, o_start, o_count in regions[i + 1:]:
+                if start < o_start + o_count and o_start < start + count:
+                    raise r.fail(f"modbus.map.{name}",
+                                 f"{name} ({start}..{start + count - 1}) overlaps "
+                                 f"{other} ({o_start}..{o_start + o_count - 1})")
 
-    def canopen(self, raw: Any) -> CanopenConfig:
-        d = CanopenConfig()
-        t = self.table(raw, "canopen", {"enabled", "interface", "channel", "bitrate",
-                                        "node_id", "nmt_autostart", "heartbeat_ms", "hub",
-                                        "hub_host", "hub_port"})
-        return CanopenConfig(
-            enabled=self.bool_(t, "enabled", "canopen.enabled", d.enabled),
-            interface=self.str_(t, "interface", "canopen.interface", d.interface),
-            channel=self.str_(t, "channel", "canopen.channel", d.channel),
-            bitrate=self.int_(t, "bitrate", "canopen.bitrate", d.bitrate, 10_000, 1_000_000),
-            node_id=self.int_(t, "node_id", "canopen.node_id", d.node_id, 1, 127),
-            nmt_autostart=self.bool_(t, "nmt_autostart", "canopen.nmt_autostart",
-                                     d.nmt_autostart),
-            heartbeat_ms=self.int_(t, "heartbeat_ms", "canopen.heartbeat_ms", d.heartbeat_ms, 0,
-                                   65535),
-            hub=self.bool_(t, "hub", "canopen.hub", d.hub),
-            hub_host=self.str_(t, "hub_host", "canopen.hub_host", d.hub_host),
-            hub_port=self.int_(t, "hub_port", "canopen.hub_port", d.hub_port, 0, 65535),
-        )
+
+_CHECKS: dict[type, Callable[[_Reader, Any, str], Any]] = {PlcConfig: _check_plc}
+_SECTIONS.update({cls.__name__: cls for cls in (
+    StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusConfig, CanopenConfig,
+    TraceConfig)})

@@ -26,9 +26,10 @@ from ncgate.gateway.canopen.node import CanopenNode
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
+from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
 from ncgate.interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
-from ncgate.interpreter.trace import Event
+from ncgate.interpreter.trace import Event, Trace
 from ncgate.plc.image import IOImage
 
 
@@ -100,11 +101,20 @@ class Gateway:
         self._modbus: ModbusServer | None = None
         self._modbus_address: tuple[str, int] | None = None
         self._canopen: CanopenNode | None = None
+        self._trace_file: TraceFile | None = None
 
     async def __aenter__(self) -> Gateway:
-        runtime = build_runtime(self.config, closed=False)
-        driver = WallClockDriver(runtime.engine, self.config.nc.time_scale,
-                                 asyncio.get_running_loop())
+        loop = asyncio.get_running_loop()
+        # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
+        # for) every event.
+        trace = Trace(keep=self.config.trace.ring)
+        t = self.config.trace
+        if t.file is not None:
+            self._trace_file = TraceFile(t.file, int(t.max_mb * 1_000_000), t.backups,
+                                         loop=loop)
+            trace.subscribe(self._trace_file.write)
+        runtime = build_runtime(self.config, closed=False, trace=trace)
+        driver = WallClockDriver(runtime.engine, self.config.nc.time_scale, loop)
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
             runtime.trace.subscribe(listener)
@@ -134,6 +144,9 @@ class Gateway:
         if self._driver is not None:
             self._driver.close()
         self._driver = None
+        if self._trace_file is not None:
+            self._trace_file.close()
+            self._trace_file = None
 
     @property
     def modbus_address(self) -> tuple[str, int]:
@@ -168,7 +181,7 @@ class Gateway:
 
     @property
     def trace(self) -> list[Event]:
-        """The events of spec 4.4, as dicts."""
+        """The latest events of spec 4.4 (at most ``trace.ring`` of them), as dicts."""
         return self.runtime.trace.events
 
     def status(self, process: int) -> ProcessStatus:

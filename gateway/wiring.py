@@ -3,38 +3,27 @@ conversions between the config's and the interpreter's names for things."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from ncgate.config import Config, SndPolicy
+from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore
 from ncgate.interpreter.evaluate import RuntimeAlarm, compile_expr
 from ncgate.interpreter.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
 from ncgate.interpreter.parser import LineError, parse_block
-from ncgate.interpreter.runtime import Engine, RuntimeSettings
-from ncgate.interpreter.runtime import SndPolicy as RuntimeSndPolicy
+from ncgate.interpreter.runtime import Engine
+from ncgate.interpreter.settings import RuntimeSettings
 from ncgate.interpreter.trace import Trace
 from ncgate.plc.image import Change, IOImage
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
+    """The engine's settings: every one of them that ``[nc]`` holds, by the same name."""
     nc = config.nc
-    return RuntimeSettings(
-        processes=nc.processes,
-        external=nc.external,
-        lookahead=nc.lookahead,
-        snd=RuntimeSndPolicy.LATCHED if nc.snd is SndPolicy.LATCHED
-        else RuntimeSndPolicy.RENDEZVOUS,
-        sync_reads=nc.sync_reads,
-        rapid_mm_min=nc.rapid_mm_min,
-        tool_change_s=nc.tool_change_s,
-        wait_timeout_s=nc.wait_timeout_s,
-        e_params=nc.e_params,
-        optional_skip=nc.optional_skip,
-        main=nc.main,
-        closed=closed,
-    )
+    names = {f.name for f in dataclasses.fields(RuntimeSettings)} & set(dir(nc))
+    return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed)
 
 
 @dataclass

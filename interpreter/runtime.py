@@ -62,6 +62,7 @@ from ncgate.interpreter.nodes import (
 )
 from ncgate.interpreter.parser import Program, gc_paused
 from ncgate.interpreter.ports import Cancellable, ImagePort, ProgramLoader
+from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
 from ncgate.interpreter.trace import Trace
 
 
@@ -99,30 +100,6 @@ _EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)", re.IGNORECASE)
 _RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD})
 _WAITING_STATES: Final = frozenset(_STATE_OF_WAIT.values())
 _ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
-
-
-class SndPolicy(enum.Enum):
-    RENDEZVOUS = "rendezvous"
-    LATCHED = "latched"
-
-
-@dataclass(frozen=True, slots=True)
-class RuntimeSettings:
-    processes: int = 5
-    external: frozenset[int] = frozenset()
-    lookahead: int = 16
-    snd: SndPolicy = SndPolicy.RENDEZVOUS
-    sync_reads: bool = False
-    rapid_mm_min: float = 10000.0
-    tool_change_s: float = 2.0
-    wait_timeout_s: float = 0.0
-    e_params: int = 1000
-    optional_skip: bool = False
-    main: str | None = None
-    # Closed simulation: nothing outside can start a program (orphan-wait detection).
-    closed: bool = True
-    # Blocks one process decodes before the others get a turn (a loop with no motion).
-    slice_blocks: int = 10_000
 
 
 Where = tuple[str, int, int | None]  # program file, line, N

@@ -8,11 +8,17 @@ printed with exactly six decimals, so that two runs of one scenario give byte-id
 Recording is on the hot path of every SND and WAI, so an event is kept as a compact tuple and
 turned into its dict only when someone reads :attr:`Trace.events` (or a listener is
 subscribed, which gets the dict at once).
+
+How much is kept is the owner's choice: everything (``ncgate sim``, a bounded batch run that
+writes its trace at the end), or only the latest ``keep`` events (``ncgate run``, which runs
+for a shift: memory must not grow with the number of events; listeners -- the trace file, the
+log -- see every one).
 """
 
 from __future__ import annotations
 
 import json
+from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TextIO
 
@@ -32,22 +38,31 @@ def _as_dict(raw: _Raw) -> Event:
 
 
 class Trace:
-    """Collects events; listeners see each event as it is recorded."""
+    """Collects events; listeners see each event as it is recorded.
 
-    def __init__(self, keep: bool = True) -> None:
+    ``keep=None`` keeps every event; ``keep=n`` only the latest n (a ring).
+    """
+
+    def __init__(self, keep: int | None = None) -> None:
+        if keep is not None and keep < 0:
+            raise ValueError(f"keep: expected None or a count >= 0, got {keep}")
         self.keep = keep
         self.seq = 0
         self.counter = 0  # the fieldbus event counter
-        self._raw: list[_Raw] = []
-        self._dicts: list[Event] = []
+        self._ring: deque[_Raw] = deque(maxlen=keep)  # keep=n
+        self._all: list[_Raw] = []  # keep=None
+        self._dicts: list[Event] = []  # cached dicts of _all
+        self._append = self._ring.append if keep is not None else self._all.append
         self._listeners: list[Callable[[Event], None]] = []
 
     @property
     def events(self) -> list[Event]:
-        """Every event recorded so far, as dicts (built on first read)."""
+        """The events kept (every one, or the latest ``keep``), as dicts in event order."""
+        if self.keep is not None:
+            return [_as_dict(raw) for raw in self._ring]
         done = len(self._dicts)
-        if done < len(self._raw):
-            self._dicts.extend(_as_dict(raw) for raw in self._raw[done:])
+        if done < len(self._all):
+            self._dicts.extend(_as_dict(raw) for raw in self._all[done:])
         return self._dicts
 
     def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]:
@@ -60,8 +75,7 @@ class Trace:
         raw = (self.seq, t, event, proc, where, fields)
         if event in COUNTED:
             self.counter = (self.counter + 1) & 0xFFFFFFFF
-        if self.keep:
-            self._raw.append(raw)
+        self._append(raw)
         if self._listeners:
             entry = _as_dict(raw)
             for listener in self._listeners:

@@ -9,7 +9,8 @@ from typing import Any
 from ncgate.interpreter.checker import CheckContext, check_program
 from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
 from ncgate.interpreter.parser import Program
-from ncgate.interpreter.runtime import Engine, RuntimeSettings, run_virtual
+from ncgate.interpreter.runtime import Engine, run_virtual
+from ncgate.interpreter.settings import RuntimeSettings
 from ncgate.interpreter.trace import Event, Trace
 from ncgate.plc.image import IOImage
 

@@ -3,7 +3,7 @@
 - everything is imported as ``ncgate.…``: no top-level ``config``, ``plc``, ``gateway`` or
   ``interpreter`` (they install as sub-packages of ``ncgate``);
 - interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config;
-- plc, config: stdlib (+ ``ncgate.errors``);
+- plc: stdlib (+ ``ncgate.errors``); config: the same and ``ncgate.interpreter.settings``;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can; the CLI and the test
   kit are leaves that nothing else in the gateway imports.
@@ -62,7 +62,8 @@ def allowed(name: str, prefixes: set[str]) -> bool:
 RULES = {
     "interpreter": STDLIB | {"lark", "ncgate.interpreter", "ncgate.errors"},
     "plc": STDLIB | {"ncgate.plc", "ncgate.errors"},
-    "config": STDLIB | {"ncgate.config", "ncgate.errors"},
+    # The config names the engine's choices (the SND policy), defined once in its leaf module.
+    "config": STDLIB | {"ncgate.config", "ncgate.errors", "ncgate.interpreter.settings"},
 }
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from ncgate import __version__
 from ncgate.config import ConfigError, default_script_path, load_config
@@ -66,6 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
         "until SIGINT or SIGTERM (clean shutdown, exit 0).",
     )
     run.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    run.add_argument("--trace", metavar="T.jsonl", help="write every event as JSON Lines, "
+                     "rotated at trace.max_mb (default: none; memory keeps trace.ring events)")
     run.add_argument("-v", "--verbose", action="store_true", help="debug logging")
 
     map_ = commands.add_parser("map", help="print the Modbus map in force",
@@ -190,7 +193,8 @@ def _run(args: argparse.Namespace) -> int:
     if not args.verbose:  # the libraries' own step-by-step logging is for --verbose
         for library in ("canopen", "can", "pymodbus"):
             logging.getLogger(library).setLevel(logging.WARNING)
-    config = load_config(args.config)
+    overrides = {"trace.file": str(Path(args.trace).resolve())} if args.trace else {}
+    config = load_config(args.config, overrides=overrides)
     asyncio.run(serve(config))
     return EXIT_OK
 

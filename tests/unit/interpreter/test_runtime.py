@@ -7,7 +7,8 @@ import math
 import pytest
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.runtime import ProcessState, SndPolicy, WaitKind
+from ncgate.interpreter.runtime import ProcessState, WaitKind
+from ncgate.interpreter.settings import SndPolicy
 
 from ...helpers import simulate
 

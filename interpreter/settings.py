@@ -1,0 +1,38 @@
+"""What the engine is told by its owner: :class:`RuntimeSettings` and the choices in it.
+
+A leaf module (stdlib only): ``ncgate.config`` reads the user's TOML into these same types, so a
+choice such as :class:`SndPolicy` is defined here once.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class SndPolicy(enum.Enum):
+    """What an SND does when its target does not wait for it yet (spec 2.2.4)."""
+
+    RENDEZVOUS = "rendezvous"  # the sender waits (WAIT_SND) until the target waits for it
+    LATCHED = "latched"  # never blocks: a token per sender->target pair (TwinCAT-style)
+
+
+@dataclass(frozen=True, slots=True)
+class RuntimeSettings:
+    """The engine's settings; the names are those of ``[nc]`` in the config."""
+
+    processes: int = 5
+    external: frozenset[int] = frozenset()
+    lookahead: int = 16
+    snd: SndPolicy = SndPolicy.RENDEZVOUS
+    sync_reads: bool = False
+    rapid_mm_min: float = 10000.0
+    tool_change_s: float = 2.0
+    wait_timeout_s: float = 0.0
+    e_params: int = 1000
+    optional_skip: bool = False
+    main: str | None = None
+    # Closed simulation: nothing outside can start a program (orphan-wait detection).
+    closed: bool = True
+    # Blocks one process decodes before the others get a turn (a loop with no motion).
+    slice_blocks: int = 10_000
