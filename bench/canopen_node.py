@@ -132,7 +132,7 @@ def snd_to_tpdo2() -> None:
 
         def hook(gw: Gateway) -> None:
             gw.runtime.trace.subscribe(
-                lambda e: sent.append(time.perf_counter()) if e["event"] == "snd" else None)
+                lambda e: sent.append(time.perf_counter()) if e.kind == "snd" else None)
         gateway.call(hook)
         node.sdo.download(0x2400, 2, bytes([4]))  # the mailbox's sender: P4
         gateway.call(lambda gw: gw.start())

@@ -129,7 +129,7 @@ async def latency() -> None:
     try:
         async with Gateway(load_config(folder / "ncgate.toml"),
                            listeners=[lambda e: resumes.append(time.perf_counter())
-                                      if e["event"] == "resume" else None]) as gw:
+                                      if e.kind == "resume" else None]) as gw:
             await gw.start()
             reader, writer = await asyncio.open_connection(*gw.modbus_address)
             e2e: list[float] = []

@@ -19,8 +19,8 @@ import re
 import time
 
 from ncgate.interpreter import parser as parser_module
-from ncgate.interpreter.checker import CheckContext, check_program
-from ncgate.interpreter.parser import Program
+from ncgate.interpreter.nc110.checker import CheckContext, check_program
+from ncgate.interpreter.nc110.parser import Program
 
 TOKEN = re.compile(
     r'(?P<number>\d+\.?\d*|\.\d+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<string>"[^"\n]*")'

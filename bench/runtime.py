@@ -19,12 +19,13 @@ import gc
 import time
 from collections.abc import Callable
 
-from ncgate.interpreter.checker import CheckContext, check_program
 from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
-from ncgate.interpreter.parser import Program
-from ncgate.interpreter.runtime import Engine, run_virtual
+from ncgate.interpreter.engine import Engine, run_virtual
+from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.nc110.checker import CheckContext, check_program
+from ncgate.interpreter.nc110.compiler import NC110
+from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.settings import RuntimeSettings
-from ncgate.interpreter.trace import Trace
 from ncgate.plc.image import IOImage
 
 
@@ -45,7 +46,7 @@ class Loader:
 
 def simulate(programs: dict[str, str], **settings: object) -> tuple[Engine, float, float]:
     engine = Engine(RuntimeSettings(**settings), IOImage(), Loader(programs),  # type: ignore[arg-type]
-                    Trace())
+                    NC110(), Trace())
     gc.collect()
     wall, cpu = time.perf_counter(), time.process_time()
     engine.start("MAIN")
@@ -189,11 +190,11 @@ def write_cost(registered: int) -> float:
     image = IOImage(sa_bits=1024, k_bytes=8192, syvars=8192)
     for i in range(registered):
         if i % 2:
-            image.wait("SK", 1 + i // 2, "BY", "=", 1, lambda: None)
+            image.wait("SK", 1 + i // 2, "BY", lambda v: v == 1, lambda: None)
         else:
-            image.wait("SYVAR", 1 + i // 2, "IN", "=", 1, lambda: None)
+            image.wait("SYVAR", 1 + i // 2, "IN", lambda v: v == 1, lambda: None)
     # One more wait, on the variable being written: each write looks at it and finds it false.
-    image.wait("SK", 0, "BY", "=", 255, lambda: None)
+    image.wait("SK", 0, "BY", lambda v: v == 255, lambda: None)
     assert image.wait_count == registered + 1
     write = image.write
     gc.collect()

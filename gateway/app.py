@@ -28,8 +28,9 @@ from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
-from ncgate.interpreter.runtime import Engine, Process, ProcessState, ProcessStatus
-from ncgate.interpreter.trace import Event, Trace
+from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
+from ncgate.interpreter.engine.events import Event
+from ncgate.interpreter.engine.trace import EventDict, Trace
 from ncgate.plc.image import IOImage
 
 
@@ -180,7 +181,7 @@ class Gateway:
         return self.runtime.image
 
     @property
-    def trace(self) -> list[Event]:
+    def trace(self) -> list[EventDict]:
         """The latest events of spec 4.4 (at most ``trace.ring`` of them), as dicts."""
         return self.runtime.trace.events
 
@@ -284,8 +285,8 @@ class Gateway:
     def describe_blocked(self) -> str:
         lines = []
         for b in self.engine.blocked():
-            n = f" N{b['n']}" if b["n"] is not None else ""
-            lines.append(f"P{b['proc']} {b['prog']}:{b['line']}{n} {b['reason']}")
+            n = f" N{b.n}" if b.n is not None else ""
+            lines.append(f"P{b.proc} {b.prog}:{b.line}{n} {b.reason}")
         for p in self.engine.processes.values():
             if p.alarm is not None:
                 lines.append(f"P{p.number} ALARM AL{p.alarm[0]}: {p.alarm[1]}")

@@ -12,9 +12,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ncgate.config import Config
-from ncgate.interpreter.checker import CheckContext, Limits, check_program
 from ncgate.interpreter.diagnostics import ProgramSyntaxError
-from ncgate.interpreter.parser import Program
+from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
+from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.storage import Storage
 
 

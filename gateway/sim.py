@@ -21,8 +21,9 @@ from ncgate.gateway.wiring import (
     parse_assignment,
     parse_condition,
 )
-from ncgate.interpreter.runtime import Process, ProcessState, run_virtual
-from ncgate.interpreter.trace import Event, write_jsonl
+from ncgate.interpreter.engine import Process, ProcessState, run_virtual
+from ncgate.interpreter.engine.trace import EventDict, write_jsonl
+from ncgate.interpreter.nc110.nodes import CompareOp
 from ncgate.plc.image import PlcError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -35,7 +36,7 @@ class SimResult:
     runtime: Runtime
 
     @property
-    def events(self) -> list[Event]:
+    def events(self) -> list[EventDict]:
         return self.runtime.trace.events
 
 
@@ -115,7 +116,8 @@ class ScriptPlayer:
                     self._triggered(entry)
             else:
                 area, index, view = trigger.var
-                handle = self.runtime.image.wait(area, index, view, trigger.op, trigger.value,
+                handle = self.runtime.image.wait(area, index, view,
+                                                 CompareOp(trigger.op).against(trigger.value),
                                                  functools.partial(self._triggered, entry))
                 if handle is None:
                     self._triggered(entry)
@@ -140,9 +142,7 @@ class ScriptPlayer:
             try:
                 self.runtime.engine.external_snd(entry.sender, entry.target)
             except ValueError as exc:
-                self.runtime.engine.trace.record(
-                    self.runtime.engine.now, "hazard", entry.sender, None,
-                    {"message": f"script {entry.key}: {exc}"})
+                self.runtime.engine.note_hazard(entry.sender, f"script {entry.key}: {exc}")
 
 
 def run_sim(config: Config, main: str, script: Script, until: float | None = None) -> SimResult:
@@ -155,8 +155,7 @@ def run_sim(config: Config, main: str, script: Script, until: float | None = Non
     outcome = run_virtual(engine, until)
     engine.finish_stats()
     if outcome == "blocked":
-        blocked = engine.blocked()
-        engine.trace.record(engine.now, "stall", 0, None, {"blocked": blocked})
+        engine.record_stall()
         return SimResult("stall", EXIT_FAILED, runtime)
     if any(p.stats.alarms for p in engine.processes.values()):
         return SimResult("alarm", EXIT_FAILED, runtime)
@@ -196,7 +195,7 @@ def report(result: SimResult, out: TextIO) -> None:
     out.write(f"simulated {engine.now:.3f} s: {verdict}\n")
 
 
-def _describe(event: Event) -> str:
+def _describe(event: EventDict) -> str:
     t = f"{event['t']:.3f}"
     if event["event"] == "alarm":
         where = f" {event['prog']}:{event['line']}" if event.get("prog") else ""

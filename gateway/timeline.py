@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from html import escape
 from typing import TextIO
 
-from ncgate.interpreter.trace import Event
+from ncgate.interpreter.engine.trace import EventDict
 
 COLOURS = {
     "RUNNING": "#4caf50", "WAIT_PROC": "#ff9800", "WAIT_COND": "#2196f3",
@@ -25,7 +25,7 @@ _ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT
 LEFT, RIGHT, TOP, LANE, GAP = 150, 30, 50, 34, 14
 
 
-def state_intervals(events: Iterable[Event], processes: int
+def state_intervals(events: Iterable[EventDict], processes: int
                     ) -> tuple[dict[int, list[tuple[float, float, str, str]]], float]:
     """Per process: (start, end, state, label) intervals; and the end time."""
     current: dict[int, tuple[float, str, str]] = {}
@@ -75,7 +75,7 @@ def _ticks(end_t: float) -> list[float]:
     return [i * step for i in range(int(end_t / step) + 1)]
 
 
-def write_gantt(events: Sequence[Event], processes: int, out: TextIO,
+def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                 external: Iterable[int] = (), width: int = 1000) -> None:
     lanes, end_t = state_intervals(events, processes)
     external = set(external)

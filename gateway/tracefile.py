@@ -17,7 +17,8 @@ import asyncio
 import os
 from pathlib import Path
 
-from ncgate.interpreter.trace import Event, to_jsonl
+from ncgate.interpreter.engine.events import Event, as_dict
+from ncgate.interpreter.engine.trace import to_jsonl
 
 
 class TraceFile:
@@ -41,7 +42,7 @@ class TraceFile:
         return os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
 
     def write(self, event: Event) -> None:
-        line = to_jsonl(event) + "\n"
+        line = to_jsonl(as_dict(event)) + "\n"
         self._pending.append(line)
         self._pending_bytes += len(line)  # ASCII-mostly: bytes are counted exactly on flush
         if self._pending_bytes >= 1 << 16:

@@ -10,12 +10,14 @@ from typing import Protocol
 
 from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore
-from ncgate.interpreter.evaluate import RuntimeAlarm, compile_expr
-from ncgate.interpreter.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
-from ncgate.interpreter.parser import LineError, parse_block
-from ncgate.interpreter.runtime import Engine
+from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.engine import Engine
+from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.nc110.compiler import NC110
+from ncgate.interpreter.nc110.evaluate import compile_expr
+from ncgate.interpreter.nc110.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
+from ncgate.interpreter.nc110.parser import LineError, parse_block
 from ncgate.interpreter.settings import RuntimeSettings
-from ncgate.interpreter.trace import Trace
 from ncgate.plc.image import Change, IOImage
 
 
@@ -39,7 +41,7 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     image = IOImage(config.plc.sa_bits, config.plc.k_bytes, config.plc.syvars)
     store = ProgramStore(config)
     trace = trace if trace is not None else Trace()
-    engine = Engine(runtime_settings(config, closed), image, store, trace)
+    engine = Engine(runtime_settings(config, closed), image, store, NC110(), trace)
 
     def on_write(changes: list[Change] | tuple[Change, ...], writer: str) -> None:
         for change in changes:

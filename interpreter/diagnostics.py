@@ -11,8 +11,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from ncgate.errors import NcgateError
-from ncgate.interpreter.codes import DiagnosticCode, Severity
-from ncgate.interpreter.nodes import Span
+from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity
+from ncgate.interpreter.nc110.nodes import Span
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,3 +93,12 @@ class ProgramSyntaxError(ProgramError, SyntaxError):
 
 class ProgramNotFoundError(InterpreterError, FileNotFoundError):
     """A program name that no storage device holds."""
+
+
+class RuntimeAlarm(InterpreterError):
+    """A runtime error in a process (spec 2.6): it becomes an alarm with a stable code."""
+
+    def __init__(self, code: AlarmCode, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message

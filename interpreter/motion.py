@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.evaluate import RuntimeAlarm
+from ncgate.interpreter.diagnostics import RuntimeAlarm
 
 AXES = "XYZUVWABC"
 AXIS_INDEX = {a: i for i, a in enumerate(AXES)}

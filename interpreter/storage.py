@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from ncgate.interpreter.diagnostics import ProgramNotFoundError
-from ncgate.interpreter.parser import program_name
+from ncgate.interpreter.nc110.parser import program_name
 
 PROGRAM_SUFFIXES = ("", ".nc", ".txt")
 

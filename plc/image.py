@@ -21,14 +21,6 @@ from ncgate.errors import NcgateError
 AREAS: Final = ("SA", "SK", "SYVAR")
 VIEWS: Final = ("bit", "BY", "IN")
 
-OPS: Final[dict[str, Callable[[int, int], bool]]] = {
-    "=": lambda a, b: a == b,
-    "#": lambda a, b: a != b,
-    ">": lambda a, b: a > b,
-    "<": lambda a, b: a < b,
-}
-
-
 class PlcError(NcgateError):
     """Root of the soft PLC's exceptions."""
 
@@ -53,23 +45,24 @@ class Change:
 
 
 Listener = Callable[[Sequence[Change], str], None]
+Predicate = Callable[[int], bool]  # a wait's condition on the variable's current value
 _Key = tuple[str, int]  # ("SA", byte) / ("SAb", bit) / ("SK", byte) / ("SYVAR", n)
 
 
 class Wait:
     """A registered condition; :meth:`cancel` removes it."""
 
-    __slots__ = ("_image", "area", "index", "keys", "on_true", "op", "value", "view")
+    __slots__ = ("_image", "area", "index", "keys", "on_true", "test", "view")
 
-    def __init__(self, image: IOImage, area: str, index: int, view: str, op: str, value: int,
+    def __init__(self, image: IOImage, area: str, index: int, view: str, test: Predicate,
                  keys: tuple[_Key, ...], on_true: Callable[[], None]) -> None:
         self._image = image
-        self.area, self.index, self.view, self.op, self.value = area, index, view, op, value
+        self.area, self.index, self.view, self.test = area, index, view, test
         self.keys = keys
         self.on_true = on_true
 
     def holds(self) -> bool:
-        return OPS[self.op](self._image.read(self.area, self.index, self.view), self.value)
+        return self.test(self._image.read(self.area, self.index, self.view))
 
     def cancel(self) -> None:
         self._image._unregister(self)
@@ -199,19 +192,19 @@ class IOImage:
 
     # -- waiting --------------------------------------------------------------------------
 
-    def wait(self, area: str, index: int, view: str, op: str, value: int,
+    def wait(self, area: str, index: int, view: str, test: Predicate,
              on_true: Callable[[], None]) -> Wait | None:
-        """Level-triggered: None if the condition holds now, else a registered :class:`Wait`.
+        """Level-triggered: None if ``test(value)`` holds now, else a registered :class:`Wait`.
+
+        The test is the caller's (the interpreter's comparison): the image knows no operators.
 
         ``on_true`` is called once, from inside the write that makes the condition true,
         after every value of that write is stored; the wait is then already removed.
         """
-        if op not in OPS:
-            raise ValueError(f"unknown comparison {op!r}")
-        if OPS[op](self.read(area, index, view), value):
+        if test(self.read(area, index, view)):
             return None
         keys = tuple(self._keys(area, index, view))
-        wait = Wait(self, area, index, view, op, value, keys, on_true)
+        wait = Wait(self, area, index, view, test, keys, on_true)
         for key in keys:
             self._waits.setdefault(key, set()).add(wait)
         return wait

@@ -6,12 +6,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ncgate.interpreter.checker import CheckContext, check_program
 from ncgate.interpreter.diagnostics import ProgramNotFoundError, ProgramSyntaxError
-from ncgate.interpreter.parser import Program
-from ncgate.interpreter.runtime import Engine, run_virtual
+from ncgate.interpreter.engine import Engine, run_virtual
+from ncgate.interpreter.engine.trace import Event, Trace
+from ncgate.interpreter.nc110.checker import CheckContext, check_program
+from ncgate.interpreter.nc110.compiler import NC110
+from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.settings import RuntimeSettings
-from ncgate.interpreter.trace import Event, Trace
 from ncgate.plc.image import IOImage
 
 
@@ -60,7 +61,7 @@ def make_sim(programs: dict[str, str], **settings: Any) -> Sim:
     settings.setdefault("processes", 5)
     rs = RuntimeSettings(**settings)
     image = IOImage()
-    engine = Engine(rs, image, DictLoader(programs, rs.processes, rs.external))
+    engine = Engine(rs, image, DictLoader(programs, rs.processes, rs.external), NC110())
     image.subscribe(lambda changes, who: [
         engine.note_write(_name(c.area, c.index, c.view), c.value, who) for c in changes])
     return Sim(engine, image)

@@ -2,7 +2,8 @@
 
 - everything is imported as ``ncgate.…``: no top-level ``config``, ``plc``, ``gateway`` or
   ``interpreter`` (they install as sub-packages of ``ncgate``);
-- interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config;
+- interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config; its engine
+  imports no dialect's front end;
 - plc: stdlib (+ ``ncgate.errors``); config: the same and ``ncgate.interpreter.settings``;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can; the CLI and the test
@@ -111,10 +112,19 @@ def test_the_cli_and_the_test_kit_are_leaves() -> None:
                 assert not any(allowed(n, {leaf}) for n in names), (module, leaf)
 
 
+def test_the_engine_knows_no_dialect() -> None:
+    """A dialect's front end talks to the engine through engine.ports: the engine imports no
+    front end, so a new dialect is a new folder beside nc110/."""
+    for path in sources("interpreter/engine"):
+        names = imports_of(path, module_name(path))
+        assert not any(allowed(n, {"ncgate.interpreter.nc110"}) for n in names), path
+
+
 def test_importing_the_interpreter_loads_no_other_package() -> None:
     code = (
-        "import sys, ncgate.interpreter.parser, ncgate.interpreter.checker,"
-        " ncgate.interpreter.formatter, ncgate.interpreter.runtime;"
+        "import sys, ncgate.interpreter.nc110.parser, ncgate.interpreter.nc110.checker,"
+        " ncgate.interpreter.nc110.formatter, ncgate.interpreter.nc110.compiler,"
+        " ncgate.interpreter.engine;"
         "bad = [m for m in ('ncgate.plc', 'ncgate.gateway', 'ncgate.config', 'pymodbus',"
         " 'canopen', 'can') if m in sys.modules]; print(bad); sys.exit(1 if bad else 0)"
     )

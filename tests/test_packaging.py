@@ -40,7 +40,8 @@ def test_the_wheel_holds_one_top_level_package_with_its_data(wheel: Path) -> Non
     names = zipfile.ZipFile(wheel).namelist()
     assert {n.split("/")[0] for n in names} == {"ncgate", f"ncgate-{ncgate.__version__}.dist-info"}
     for needed in ("ncgate/gateway/cli/main.py", "ncgate/config/default.toml",
-                   "ncgate/config/programs/PROG91.nc", "ncgate/interpreter/grammar/nc110.lark",
+                   "ncgate/config/programs/PROG91.nc",
+                   "ncgate/interpreter/nc110/grammar/nc110.lark",
                    "ncgate/examples/scheme3/PROG91.nc", "ncgate/examples/scheme3/script.toml",
                    "ncgate/examples/errors/README.md", "ncgate/py.typed"):
         assert needed in names

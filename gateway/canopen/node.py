@@ -52,8 +52,9 @@ from ncgate.gateway.canopen.dictionary import (
     build_dictionary,
 )
 from ncgate.gateway.wiring import Backend
-from ncgate.interpreter.runtime import Engine, Process, ProcessState
-from ncgate.interpreter.trace import Event
+from ncgate.interpreter.engine import Engine, Process, ProcessState
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.events import Event
 
 log = logging.getLogger("ncgate.canopen")
 
@@ -467,21 +468,20 @@ class CanopenNode:
         self._tpdo_ready(1)
 
     def _on_event(self, event: Event) -> None:
-        kind = event["event"]
-        if kind == "alarm":
+        if isinstance(event, ev.Alarm):
             self._alarmed = True
-            proc, code = event["proc"], int(str(event["code"]).removeprefix("AL"))
             register = self._error_register()
             self.node.emcy.send(EMCY_SOFTWARE, register,
-                                struct.pack("<BH2x", proc & 0xFF, code & 0xFFFF))
-        elif kind == "end" and event.get("how") == "reset" and self._alarmed:
+                                struct.pack("<BH2x", event.proc & 0xFF, int(event.code) & 0xFFFF))
+        elif isinstance(event, ev.End) and event.how == "reset" and self._alarmed:
             # A reset clears the alarms one process at a time: when none is left, say so.
             if self._error_register() == 0:
                 self._alarmed = False
                 self.node.emcy.reset(0)
-        elif kind == "snd" and self.operational:
-            record = struct.pack("<LBBH", self.backend.engine.trace.counter, event["proc"],
-                                 event["to"], (event.get("n") or 0) & 0xFFFF)
+        elif isinstance(event, ev.Snd) and self.operational:
+            n = event.where[2] if event.where is not None else None
+            record = struct.pack("<LBBH", self.backend.engine.trace.counter, event.proc,
+                                 event.to, (n or 0) & 0xFFFF)
             self._tpdo2_queue.append(record)
             self._tpdo_ready(2)
 

@@ -21,10 +21,10 @@ from pathlib import Path
 from ncgate.config import Config, StorageConfig, load_config
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.programs import check_context, storage_of
-from ncgate.interpreter.checker import check_program
 from ncgate.interpreter.diagnostics import Diagnostic
-from ncgate.interpreter.nodes import Exe, Num
-from ncgate.interpreter.parser import Program, program_name
+from ncgate.interpreter.nc110.checker import check_program
+from ncgate.interpreter.nc110.nodes import Exe, Num
+from ncgate.interpreter.nc110.parser import Program, program_name
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES
 
 CONFIG_BESIDE = "ncgate.toml"

@@ -13,26 +13,29 @@ from contextlib import suppress
 
 from ncgate.config import Config
 from ncgate.gateway.app import Gateway
-from ncgate.interpreter.trace import Event
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.events import Event
 
 log = logging.getLogger("ncgate")
 
 
 def describe(event: Event) -> str | None:
     """A log line for the events worth a line; None for the rest."""
-    kind, proc = event["event"], event["proc"]
-    where = f" at {event['prog']}:{event['line']}" if event.get("prog") and "line" in event \
-        else ""
-    if kind == "start":
-        return f"P{proc} starts {event['prog']} (by {event['by']})"
-    if kind == "end":
-        return f"P{proc} ends ({event['how']}){where}"
-    if kind == "alarm":
-        return f"P{proc} ALARM {event['code']}{where}: {event['message']}"
-    if kind in ("deadlock", "stall"):
-        return str(event.get("message", kind))
-    if kind == "hazard":
-        return f"P{proc} hazard{where}: {event['message']}"
+    proc, where = event.proc, event.where
+    at = f" at {where[0]}:{where[1]}" if where is not None and where[0] else ""
+    if isinstance(event, ev.Start):
+        return f"P{proc} starts {event.prog} (by {event.by})"
+    if isinstance(event, ev.End):
+        return f"P{proc} ends ({event.how}){at}"
+    if isinstance(event, ev.Alarm):
+        return f"P{proc} ALARM {event.code.label}{at}: {event.message}"
+    if isinstance(event, ev.Deadlock):
+        return event.message
+    if isinstance(event, ev.Stall):
+        return "stall: " + "; ".join(f"P{b.proc} {b.prog}:{b.line} {b.reason}"
+                                     for b in event.blocked)
+    if isinstance(event, ev.Hazard):
+        return f"P{proc} hazard{at}: {event.message}"
     return None
 
 
@@ -48,7 +51,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
     def on_event(event: Event) -> None:
         line = describe(event)
         if line is not None:
-            (log.warning if event["event"] in ("alarm", "deadlock", "stall", "hazard")
+            (log.warning if isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)
              else log.info)(line)
 
     try:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from ncgate.config import Config
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.wiring import Backend
-from ncgate.interpreter.runtime import Engine, ProcessState, WaitKind
+from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 
 MAP_VERSION = 1
 

@@ -24,7 +24,7 @@ from ncgate.config import Config
 from ncgate.gateway.errors import VirtualPLCError
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.wiring import parse_assignment
-from ncgate.interpreter.runtime import ProcessState
+from ncgate.interpreter.engine import ProcessState
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from ncgate.gateway import Gateway, load_config
 from ncgate.gateway.tracefile import TraceFile
-from ncgate.interpreter.trace import Trace
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.trace import Trace
 
 from ..conftest import EXAMPLES
 
@@ -32,7 +33,7 @@ def test_rotation_keeps_the_size_cap_and_the_newest_backups(tmp_path: Path) -> N
     sink = TraceFile(path, max_bytes=4000, backups=2)
     trace.subscribe(sink.write)
     for i in range(400):
-        trace.record(i / 100, "write", 0, None, {"var": "SK1", "value": i % 256, "who": "t"})
+        trace.record(ev.Write, i / 100, 0, None, "SK1", i % 256, "t")
         if i % 10 == 9:
             sink.flush()
     sink.close()
@@ -51,7 +52,7 @@ def test_no_backups_starts_the_file_afresh(tmp_path: Path) -> None:
     trace = Trace(keep=0)
     trace.subscribe(sink.write)
     for i in range(100):
-        trace.record(0.0, "display", 1, None, {"text": f"line {i}"})
+        trace.record(ev.Display, 0.0, 1, None, f"line {i}")
         sink.flush()
     sink.close()
     assert [p.name for p in tmp_path.iterdir()] == ["trace.jsonl"]

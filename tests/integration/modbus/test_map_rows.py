@@ -7,7 +7,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from ncgate.gateway import Gateway
 from ncgate.gateway.testing.modbus_kit import VirtualPLC, VirtualPLCError
-from ncgate.interpreter.runtime import ProcessState
+from ncgate.interpreter.engine import ProcessState
 
 
 async def test_cell_runs_with_the_test_playing_plc_and_external_process(

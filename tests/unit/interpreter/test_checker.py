@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from ncgate.interpreter.checker import CheckContext, Limits, check_program
 from ncgate.interpreter.codes import DiagnosticCode as C
-from ncgate.interpreter.parser import Program
+from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
+from ncgate.interpreter.nc110.parser import Program
 
 
 def diagnose(text: str, **context: object) -> list[tuple[C, int, int]]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ncgate.interpreter.codes import DiagnosticCode
-from ncgate.interpreter.nodes import (
+from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
     Branch,
@@ -31,7 +31,7 @@ from ncgate.interpreter.nodes import (
     WaitProc,
     Word,
 )
-from ncgate.interpreter.parser import LineError, Program, parse_block
+from ncgate.interpreter.nc110.parser import LineError, Program, parse_block
 
 
 def test_words_run_together_with_columns() -> None:

@@ -7,7 +7,8 @@ import math
 import pytest
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.runtime import ProcessState, WaitKind
+from ncgate.interpreter.engine import ProcessState, WaitKind
+from ncgate.interpreter.engine.states import Stage
 from ncgate.interpreter.settings import SndPolicy
 
 from ...helpers import simulate
@@ -65,7 +66,7 @@ def test_interpolator_wait_is_the_state_the_machine_feels() -> None:
     sim = simulate(programs, until=2.0)
     status = sim.engine.status(1)
     assert status.state is ProcessState.WAIT_PROC
-    assert status.wait is not None and status.wait.stage == "interpolator"
+    assert status.wait is not None and status.wait.stage is Stage.INTERPOLATOR
     assert status.wait.where[1:] == (3, 3) and status.wait_kind is WaitKind.PROC
     assert sim.engine.status(2).state is ProcessState.DWELL
     sim.run()
@@ -122,8 +123,8 @@ def test_wait_on_an_idle_process_that_another_will_start_is_no_orphan() -> None:
 def test_stall_when_nothing_can_change() -> None:
     sim = simulate({"A": "N1(WAI,SA10=1)\nN2M30\n"})
     assert sim.outcome == "blocked"
-    assert [b["proc"] for b in sim.engine.blocked()] == [1]
-    assert "(WAI,SA10=1) waits for SA10=1 (now 0)" in sim.engine.blocked()[0]["reason"]
+    assert [b.proc for b in sim.engine.blocked()] == [1]
+    assert "(WAI,SA10=1) waits for SA10=1 (now 0)" in sim.engine.blocked()[0].reason
 
 
 def test_exe_waits_for_a_busy_process_then_starts_it() -> None:

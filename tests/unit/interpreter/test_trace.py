@@ -6,12 +6,13 @@ import json
 
 import pytest
 
-from ncgate.interpreter.trace import Trace, to_jsonl
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.trace import Trace, to_jsonl
 
 
 def record(trace: Trace, count: int) -> None:
     for i in range(count):
-        trace.record(i / 10, "write", 0, None, {"var": "SA10", "value": i % 2, "who": "test"})
+        trace.record(ev.Write, i / 10, 0, None, "SA10", i % 2, "test")
 
 
 def test_a_trace_that_keeps_everything() -> None:
@@ -23,7 +24,7 @@ def test_a_trace_that_keeps_everything() -> None:
 def test_a_ring_keeps_the_latest_events_and_listeners_hear_every_one() -> None:
     trace = Trace(keep=10)
     heard: list[int] = []
-    trace.subscribe(lambda e: heard.append(e["seq"]))
+    trace.subscribe(lambda e: heard.append(e.seq))
     record(trace, 1000)
     assert [e["seq"] for e in trace.events] == list(range(991, 1001))
     assert heard == list(range(1, 1001))
@@ -32,7 +33,7 @@ def test_a_ring_keeps_the_latest_events_and_listeners_hear_every_one() -> None:
 
 def test_a_ring_of_zero_keeps_nothing_but_counts() -> None:
     trace = Trace(keep=0)
-    trace.record(0.0, "snd", 1, ("A.nc", 3, 30), {"to": 2})
+    trace.record(ev.Snd, 0.0, 1, ("A.nc", 3, 30), 2)
     assert trace.events == [] and trace.seq == 1 and trace.counter == 1
     with pytest.raises(ValueError):
         Trace(keep=-1)
@@ -40,7 +41,7 @@ def test_a_ring_of_zero_keeps_nothing_but_counts() -> None:
 
 def test_jsonl_has_six_decimals_and_the_spec_key_order() -> None:
     trace = Trace()
-    trace.record(1.5, "snd", 1, ("A.nc", 3, 30), {"to": 2})
+    trace.record(ev.Snd, 1.5, 1, ("A.nc", 3, 30), 2)
     line = to_jsonl(trace.events[0])
     assert line.startswith('{"seq": 1, "t": 1.500000, "event": "snd", "proc": 1, "prog": "A.nc"')
     assert json.loads(line)["to"] == 2

@@ -53,9 +53,9 @@ def test_last_writer_across_views() -> None:
 def test_wait_is_level_triggered_and_woken_once_after_the_whole_write() -> None:
     image = IOImage()
     image.write([("SYVAR", 1, "IN", 10)], "t")
-    assert image.wait("SYVAR", 1, "IN", "=", 10, lambda: None) is None  # already true
+    assert image.wait("SYVAR", 1, "IN", lambda v: v == 10, lambda: None) is None  # already true
     seen: list[tuple[int, int]] = []
-    wait = image.wait("SYVAR", 1, "IN", ">", 20,
+    wait = image.wait("SYVAR", 1, "IN", lambda v: v > 20,
                       lambda: seen.append((image.read("SYVAR", 1, "IN"),
                                            image.read("SYVAR", 2, "IN"))))
     assert wait is not None
@@ -71,8 +71,8 @@ def test_wait_is_level_triggered_and_woken_once_after_the_whole_write() -> None:
 def test_bit_waits_see_byte_and_word_writes() -> None:
     image = IOImage()
     woke: list[str] = []
-    image.wait("SA", 10, "bit", "=", 1, lambda: woke.append("bit"))
-    image.wait("SA", 0, "IN", "#", 0, lambda: woke.append("word"))
+    image.wait("SA", 10, "bit", lambda v: v == 1, lambda: woke.append("bit"))
+    image.wait("SA", 0, "IN", lambda v: v != 0, lambda: woke.append("word"))
     image.write([("SA", 1, "BY", 0b100)], "t")
     assert woke == ["word", "bit"]
 
@@ -81,7 +81,7 @@ def test_listeners_hear_before_waits_wake() -> None:
     image = IOImage()
     order: list[str] = []
     image.subscribe(lambda changes, writer: order.append(f"write {writer}"))
-    image.wait("SK", 5, "BY", "=", 1, lambda: order.append("wake"))
+    image.wait("SK", 5, "BY", lambda v: v == 1, lambda: order.append("wake"))
     image.write([("SK", 5, "BY", 1)], "plc")
     assert order == ["write plc", "wake"]
 
@@ -90,7 +90,7 @@ def test_a_write_looks_only_at_waits_on_what_it_changed() -> None:
     image = IOImage(k_bytes=512)
     calls: list[int] = []
     for i in range(100):
-        image.wait("SK", i, "BY", "=", 1, lambda i=i: calls.append(i))
+        image.wait("SK", i, "BY", lambda v: v == 1, lambda i=i: calls.append(i))
     evaluated: list[int] = []
     original = image.read
 
@@ -112,7 +112,7 @@ def test_unchanged_value_wakes_nothing_but_is_heard_and_records_the_writer() -> 
     image = IOImage()
     heard: list[object] = []
     image.subscribe(lambda changes, writer: heard.extend((c.value, c.old) for c in changes))
-    image.wait("SK", 1, "BY", "#", 0, lambda: heard.append("woken"))
+    image.wait("SK", 1, "BY", lambda v: v != 0, lambda: heard.append("woken"))
     assert image.write([("SK", 1, "BY", 0)], "plc") == []
     assert heard == [(0, 0)] and image.last_writer("SK", 1, "BY") == "plc"
     assert image.generation == 0

@@ -13,20 +13,11 @@ from collections.abc import Callable
 from typing import Any
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import InterpreterError
-from ncgate.interpreter.nodes import Binary, Call, Expr, Num, Unary, VarKind, VarRef
+from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.nc110.nodes import Binary, Call, Expr, Num, Unary, VarKind, VarRef
 
 Reader = Callable[[str, int, str], int]
 Evaluator = Callable[[list[float], Reader], float]
-
-
-class RuntimeAlarm(InterpreterError):
-    """A runtime error in a process (spec 2.6): it becomes an alarm with a stable code."""
-
-    def __init__(self, code: AlarmCode, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-        self.message = message
 
 
 def _div(a: float, b: float) -> float:

@@ -8,8 +8,10 @@ about execution.  Must not import ``plc`` or ``gateway``.
 from __future__ import annotations
 
 import enum
+import operator
+from collections.abc import Callable
 from dataclasses import MISSING, dataclass, fields
-from typing import Any, NamedTuple, TypeVar, dataclass_transform
+from typing import Any, Final, NamedTuple, TypeVar, dataclass_transform
 
 _T = TypeVar("_T")
 
@@ -72,23 +74,34 @@ class View(enum.Enum):
     INT16 = "IN"  # SYVAR<n>, SA<n>.IN, SK<n>.IN (little-endian over two bytes)
 
 
+# The relations, defined once: a WAI condition and a branch name them differently, by the same
+# member names (EQ, NE, ...), and the image is handed a ready predicate (plc knows no operators).
+RELATIONS: Final[dict[str, Callable[[float, float], bool]]] = {
+    "EQ": operator.eq, "NE": operator.ne, "GT": operator.gt, "GE": operator.ge,
+    "LT": operator.lt, "LE": operator.le,
+}
+
+
 class CompareOp(enum.Enum):
+    """The comparison of ``(WAI,var op value)``: ``=``, ``#`` (not equal), ``>``, ``<``."""
+
     EQ = "="
     NE = "#"
     GT = ">"
     LT = "<"
 
     def holds(self, left: float, right: float) -> bool:
-        if self is CompareOp.EQ:
-            return left == right
-        if self is CompareOp.NE:
-            return left != right
-        if self is CompareOp.GT:
-            return left > right
-        return left < right
+        return RELATIONS[self.name](left, right)
+
+    def against(self, value: float) -> Callable[[float], bool]:
+        """The predicate ``x op value`` (what the image evaluates on each write)."""
+        relation = RELATIONS[self.name]
+        return lambda x: relation(x, value)
 
 
 class BranchOp(enum.Enum):
+    """The conditional jumps ``(BEQ,a,b,L)`` ... ``(BLE,a,b,L)``."""
+
     EQ = "BEQ"
     NE = "BNE"
     GT = "BGT"
@@ -97,17 +110,7 @@ class BranchOp(enum.Enum):
     LE = "BLE"
 
     def holds(self, left: float, right: float) -> bool:
-        if self is BranchOp.EQ:
-            return left == right
-        if self is BranchOp.NE:
-            return left != right
-        if self is BranchOp.GT:
-            return left > right
-        if self is BranchOp.GE:
-            return left >= right
-        if self is BranchOp.LT:
-            return left < right
-        return left <= right
+        return RELATIONS[self.name](left, right)
 
 
 # ---- expressions ----------------------------------------------------------------------

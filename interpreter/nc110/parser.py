@@ -19,10 +19,8 @@ Must not import ``plc`` or ``gateway``.
 
 from __future__ import annotations
 
-import gc
 import re
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from functools import cache
 from importlib import resources
 from itertools import accumulate
@@ -32,6 +30,7 @@ from typing import Any, Final
 from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
+from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
 from ncgate.interpreter.diagnostics import (
     Diagnostic,
@@ -39,7 +38,7 @@ from ncgate.interpreter.diagnostics import (
     ProgramSyntaxError,
     did_you_mean,
 )
-from ncgate.interpreter.nodes import (
+from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
     Block,
@@ -73,7 +72,7 @@ WORD_LETTERS: Final = frozenset("ABCDFGHIJKLMOPQRSTUVWXYZ")
 @cache
 def lark_parser() -> Lark:
     """The LALR parser of one block (built once per process)."""
-    grammar = resources.files("ncgate.interpreter").joinpath("grammar/nc110.lark")
+    grammar = resources.files("ncgate.interpreter.nc110").joinpath("grammar/nc110.lark")
     return Lark(grammar.read_text("utf-8"), parser="lalr", lexer="contextual",
                 maybe_placeholders=False)
 
@@ -545,29 +544,6 @@ class Program:
                         diagnostics.append(exc.diagnostic)
         return blocks, diagnostics
 
-
-
-@contextmanager
-def gc_paused() -> Iterator[None]:
-    """Pause the cyclic collector while a bulk parse allocates.
-
-    A parse keeps every node alive, so each collection the allocations trigger scans the whole
-    growing tree for nothing (nodes hold no reference cycles): on CPython 3.11 that tripled the
-    cost of parsing a large program.  Reference counting still frees everything as usual.
-    Nested uses are fine: only the outermost one re-enables the collector.
-    """
-    was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was_enabled:
-            # Promote what the parse built straight to the oldest generation (freeze then
-            # unfreeze: two list splices), so the first young collection after this does not
-            # traverse the whole new tree once more.  Full collections still see it.
-            gc.freeze()
-            gc.unfreeze()
-            gc.enable()
 
 
 def program_name(path: Path) -> str:

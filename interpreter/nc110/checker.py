@@ -15,9 +15,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import DiagnosticCode
 from ncgate.interpreter.diagnostics import Diagnostic, did_you_mean
-from ncgate.interpreter.nodes import (
+from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
     Block,
@@ -44,7 +45,7 @@ from ncgate.interpreter.nodes import (
     Word,
     value_object,
 )
-from ncgate.interpreter.parser import Program, gc_paused
+from ncgate.interpreter.nc110.parser import Program
 
 
 @value_object

@@ -6,7 +6,7 @@ parser produces.  Must not import ``plc`` or ``gateway``.
 
 from __future__ import annotations
 
-from ncgate.interpreter.nodes import (
+from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
     Block,

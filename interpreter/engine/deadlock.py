@@ -1,0 +1,87 @@
+"""Deadlock and orphan-wait search (spec 2.3), as pure functions of the processes' state.
+
+The wait-for graph has an edge k -> n for every WAIT_PROC, WAIT_SND and WAIT_EXE of process k
+on process n (a condition wait has no edge: anyone may write the image).  A process is *stuck*
+when it cannot move by itself: it has a program, no alarm, no hold, its decoder is held, and its
+interpolator is either in a wait or has nothing left to run.  A cycle of stuck processes is a
+deadlock; the engine alarms every member with one message naming each blocking block.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+from ncgate.interpreter.engine.process import Process
+from ncgate.interpreter.engine.states import WaitKind, WaitRecord
+
+
+def edges(p: Process) -> list[tuple[int, WaitRecord]]:
+    """The wait-for edges out of ``p``: (the process waited for, the wait)."""
+    return [(w.target, w) for w in p.waits() if w.kind is not WaitKind.COND]
+
+
+def stuck(p: Process) -> bool:
+    if p.loaded is None or p.alarm is not None or p.held or p.external:
+        return False
+    if p.dec_block is None or p.int_timer is not None:
+        return False
+    return p.int_wait is not None or not p.queue
+
+
+def find_cycle(start: Process,
+               processes: Mapping[int, Process]) -> list[tuple[Process, WaitRecord]] | None:
+    """A cycle of stuck processes through ``start``, as (process, its blocking wait) in
+    order, or None."""
+    if not stuck(start):
+        return None
+    # Most waits are on a process that can still move: no cycle through it.
+    if not any(w.target and stuck(processes[w.target]) for w in start.waits()
+               if w.kind is not WaitKind.COND):
+        return None
+    path: list[tuple[Process, WaitRecord]] = []
+    on_path = {start.number}
+
+    def walk(p: Process) -> bool:
+        for target, wait in edges(p):
+            path.append((p, wait))
+            if target == start.number:
+                return True
+            q = processes[target]
+            if target not in on_path and stuck(q):
+                on_path.add(target)
+                if walk(q):
+                    return True
+                on_path.discard(target)
+            path.pop()
+        return False
+
+    return path if walk(start) else None
+
+
+def describe_cycle(start: Process, cycle: list[tuple[Process, WaitRecord]]) -> str:
+    """``deadlock: P1 A.nc:2 N2 (WAI,2) -> P2 B.nc:1 N7 (WAI,1) -> P1``"""
+    parts = [wait.describe(p.number) for p, wait in cycle]
+    return "deadlock: " + " -> ".join(parts) + f" -> P{start.number}"
+
+
+def can_be_started(n: int, waiter: Process, processes: Mapping[int, Process],
+                   exe_pending: Callable[[int], bool], closed: bool,
+                   main: str | None) -> bool:
+    """Whether anything can still start a program in idle process ``n``: an EXE waiting for
+    it, a running program that names it (or names processes by variables), or -- outside a
+    closed simulation -- the fieldbus's cycle start for process 1."""
+    if exe_pending(n):
+        return True
+    if not closed and n == 1 and main:
+        return True
+    for q in processes.values():
+        if q is waiter or q.loaded is None or q.alarm is not None:
+            continue
+        if n in q.loaded.exe_targets or q.loaded.dynamic_exe:
+            return True
+    return False
+
+
+def orphan_message(waiter: Process, wait: WaitRecord) -> str:
+    return (f"orphan wait: {wait.describe(waiter.number)} waits for P{wait.target}, which runs "
+            f"no program and which no running program can start")

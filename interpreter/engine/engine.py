@@ -1,0 +1,643 @@
+"""The engine: processes, the run queue, the decoder and interpolator loops, waits and alarms.
+
+The :class:`Engine` is synchronous and deterministic.  It owns the processes, a timer heap and
+a run queue; it never sleeps and never reads a clock.  A driver decides when time passes: the
+virtual clock (``clock.run_virtual``, ``ncgate sim``) runs everything runnable, then jumps to
+the next timer; the gateway's wall-clock driver arms one loop timer for the next engine timer
+and runs the engine whenever something outside (a fieldbus write) made work runnable.
+
+Each process is a two-stage pipeline (spec 2.4): a *decoder* that runs a program's blocks in
+order, as decoder ops compiled by the dialect's front end (:class:`~.ports.FrontEnd`), and
+turns motion into items of a bounded *motion queue*; and an *interpolator* that executes those
+items in simulated time.  A ``#`` block is queued as one item whose actions act when the
+interpolator reaches it.
+
+The rooms: ``states`` (enums and records), ``process`` (one process), ``timers``, ``actions``
+(what compiled blocks hand over), ``sync`` (the EXE/REL/WAI/SND rules, mixed in here),
+``deadlock`` (the pure search), ``events``/``trace`` (what happened), ``clock`` (the virtual
+clock), ``ports`` (what the engine needs, and what a front end may ask of it).
+
+Must not import ``plc``, ``gateway``, ``config`` or any front end.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError, RuntimeAlarm
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.actions import (
+    Action,
+    Execute,
+    ItemKind,
+    Motion,
+    Send,
+    ShowText,
+    Step,
+    WaitCondition,
+    WaitProcess,
+    WriteSyvar,
+)
+from ncgate.interpreter.engine.events import Blocked, WaitOn
+from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
+from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Process, QueueItem
+from ncgate.interpreter.engine.states import (
+    RUNNING_STATES,
+    STATE_OF_WAIT,
+    WAITING_STATES,
+    DecoderHold,
+    ProcessState,
+    ProcessStatus,
+    Stage,
+    WaitKind,
+    WaitRecord,
+    Where,
+)
+from ncgate.interpreter.engine.sync import SyncRules, first_line
+from ncgate.interpreter.engine.timers import Timer, TimerHeap
+from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.settings import RuntimeSettings
+
+NEXT, WAIT_NEXT, WAIT_RETRY, JUMP = Step.NEXT, Step.WAIT_NEXT, Step.WAIT_RETRY, Step.JUMP
+ActionHandler = Callable[[Process, Stage, Any, Where], bool]
+
+
+class Engine(SyncRules):
+    """Processes, their synchronisation, the motion queues and the timer heap."""
+
+    def __init__(self, settings: RuntimeSettings, image: ImagePort, loader: ProgramLoader,
+                 front_end: FrontEnd, trace: Trace | None = None) -> None:
+        self.settings = settings
+        self.image = image
+        self.loader = loader
+        self.front_end = front_end
+        self.trace = trace if trace is not None else Trace()
+        self._record = self.trace.record  # bound once: every SND and WAI records
+        self.now = 0.0
+        self._wait_timeout_s = settings.wait_timeout_s
+        self.processes = {
+            k: Process(k, k in settings.external, settings.e_params)
+            for k in range(1, settings.processes + 1)
+        }
+        self._timers = TimerHeap()
+        self._runnable: deque[Process] = deque()
+        self._running = False
+        self._loaded: dict[str, LoadedProgram] = {}  # by file: one version each
+        self._init_sync()
+        # Actions by type: what a compiled block may ask the engine to do.  A dialect's own
+        # actions come in through register_action.
+        self._actions: dict[type, ActionHandler] = {
+            WriteSyvar: self._do_write_syvar,
+            WaitProcess: lambda p, s, a, w: self.wait_process(p, s, a.process, a.code, w),
+            WaitCondition: self._wait_condition,
+            Send: lambda p, s, a, w: self.send(p, s, a.process, a.code, w),
+            Execute: self._execute,
+            ShowText: self._show_text,
+        }
+        # Hooks for drivers and the gateway.
+        self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
+        self.on_timer: Callable[[float], None] | None = None  # a timer was armed
+        self.state_listeners: list[Callable[[Process, ProcessState], None]] = []
+
+    def register_action(self, kind: type, handler: ActionHandler) -> None:
+        """Teach the engine a new action (a dialect's own code): ``handler(process, stage,
+        action, where)`` returns True when the action completed, False when the process
+        waits."""
+        self._actions[kind] = handler
+
+    # ==== public API ========================================================================
+
+    def start(self, name: str, process: int = 1, by: str = "operator",
+              device: str | None = None) -> None:
+        """The operator's SPG: load NAME into an idle process and start it."""
+        p = self._process(process)
+        if p.external:
+            raise ValueError(f"process {process} is external: it runs no part program")
+        if p.loaded is not None or p.alarm is not None:
+            raise ValueError(f"process {process} is busy ({p.state.name})")
+        program = self.loader.load(name, device, process)
+        self._start_program(p, program, by)
+        self._kick()
+
+    def cycle_start(self) -> None:
+        """Fieldbus command 1: resume after a feed hold, or start ``main`` in process 1."""
+        if any(p.held for p in self.processes.values()):
+            self.hold(False)
+            return
+        p1 = self.processes[1]
+        if self.settings.main and p1.loaded is None and p1.alarm is None:
+            try:
+                self.start(self.settings.main, 1, by="fieldbus")
+            except (ProgramError, ProgramNotFoundError) as exc:
+                self._alarm(p1, AlarmCode.PROGRAM_NOT_FOUND
+                            if isinstance(exc, ProgramNotFoundError)
+                            else AlarmCode.PROGRAM_INVALID, first_line(exc), None)
+
+    def hold(self, on: bool = True) -> None:
+        """Feed hold: motion stops where it is; ``hold(False)`` resumes it."""
+        for p in self.processes.values():
+            if p.external or p.held == on:
+                continue
+            if on:
+                p.held = True
+                if p.int_timer is not None:
+                    p.int_timer.cancel()
+                    p.int_timer = None
+                    assert p.int_item is not None
+                    elapsed = self.now - p.int_started
+                    p.int_remaining = max(0.0, p.int_item.duration - elapsed)
+            else:
+                p.held = False
+                if p.int_remaining is not None and p.int_item is not None:
+                    remaining, p.int_remaining = p.int_remaining, None
+                    self._arm_item(p, p.int_item, remaining)
+                else:
+                    self._interp_run(p)
+            self._update_state(p)
+        self._kick()
+
+    def reset(self) -> None:
+        """Clear every alarm, discard queues, waits and tokens; every process to IDLE."""
+        for p in self.processes.values():
+            was_busy = p.loaded is not None or p.alarm is not None
+            for wait in p.waits():
+                self._drop_wait(wait)
+            if p.int_timer is not None:
+                p.int_timer.cancel()
+            where = p.where
+            p.clear()
+            p.loaded = None
+            p.alarm = None
+            p.held = False
+            p.E = [0.0] * p.e_params
+            if was_busy:
+                self._record(ev.End, self.now, p.number, where, "reset")
+            self._update_state(p)
+        self._runnable.clear()
+        self._clear_sync()
+
+    def run_until_blocked(self) -> None:
+        """Run everything runnable at the current time."""
+        if self._running:
+            return
+        self._running = True
+        try:
+            runnable = self._runnable
+            while runnable:
+                p = runnable.popleft()
+                p.queued = False
+                if p.loaded is not None and p.alarm is None and p.dec_block is None:
+                    self._run_decoder(p)
+        finally:
+            self._running = False
+
+    def next_timer(self) -> float | None:
+        return self._timers.next_time()
+
+    def advance_to(self, t: float) -> None:
+        """Let time pass to ``t``: fire the timers due, then run what became runnable."""
+        while (timer := self._timers.pop_due(t)) is not None:
+            callback = timer.callback
+            assert callback is not None
+            # What a timer causes happens at its time, even if the wall clock that drives
+            # the engine got round to it a little later.
+            if timer.time > self.now:
+                self.now = timer.time
+            timer.callback = None
+            callback()
+            self.run_until_blocked()
+        if t > self.now:
+            self.now = t
+        self.run_until_blocked()
+
+    def call_at(self, t: float, callback: Callable[[], None]) -> Timer:
+        """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic)."""
+        return self._schedule(max(0.0, t - self.now), callback)
+
+    def set_time(self, t: float) -> None:
+        """The wall-clock driver tells the engine what time it is before outside events."""
+        if t > self.now:
+            self.now = t
+
+    @property
+    def all_idle(self) -> bool:
+        return all(p.loaded is None and p.alarm is None for p in self.processes.values())
+
+    @property
+    def has_runnable(self) -> bool:
+        return bool(self._runnable)
+
+    def blocked(self) -> tuple[Blocked, ...]:
+        """Every process with a program that is waiting, with its why-record."""
+        out = []
+        for p in self.processes.values():
+            if p.loaded is None or p.alarm is not None:
+                continue
+            wait = p.int_wait or p.dec_wait
+            if wait is not None:
+                out.append(Blocked(p.number, *wait.where, f"{wait.code} {wait.reason()}"))
+            else:
+                out.append(Blocked(p.number, *p.where, "blocked"))
+        return tuple(out)
+
+    def record_stall(self) -> None:
+        """Every process is blocked and nothing can change: say so in the trace."""
+        self._record(ev.Stall, self.now, 0, None, self.blocked())
+
+    def status(self, number: int) -> ProcessStatus:
+        p = self._process(number)
+        wait = p.int_wait if p.int_wait is not None else p.dec_wait
+        _, line, n = p.where
+        alarm_code, alarm_message = (p.alarm[0], p.alarm[1]) if p.alarm else (0, None)
+        return ProcessStatus(
+            number=p.number, state=p.state, external=p.external,
+            program=p.loaded.program.name if p.loaded else None, line=line, n=n, wait=wait,
+            alarm_code=alarm_code, alarm_message=alarm_message,
+            snd_sent=p.stats.snd_sent, snd_received=p.stats.snd_received,
+            blocks=p.stats.blocks, position=self._position(p),
+            motion_active=p.motion_active,
+            held=p.held,
+        )
+
+    def note_write(self, name: str, value: int, who: str) -> None:
+        """Record an image write in the trace (the gateway forwards the image's changes)."""
+        p = self._writer_proc
+        if p is not None and who.startswith(f"P{p.number} "):
+            self._record(ev.Write, self.now, p.number, p.where, name, value, who)
+        else:
+            self._record(ev.Write, self.now, 0, None, name, value, who)
+
+    def note_hazard(self, proc: int, message: str) -> None:
+        """Record a hazard found outside the engine (a script's SND that could not go)."""
+        self._record(ev.Hazard, self.now, proc, None, message)
+
+    def finish_stats(self) -> None:
+        """Account the time of the current states up to now (for the summary)."""
+        for p in self.processes.values():
+            self._account(p)
+
+    # ==== processes =========================================================================
+
+    def _loaded_program(self, program: ProgramText) -> LoadedProgram:
+        lp = self._loaded.get(program.file)
+        if lp is None or lp.program is not program:
+            targets, dynamic = self.front_end.exe_targets(program)
+            file = program.file.replace("\\", "/").rsplit("/", 1)[-1]
+            lp = LoadedProgram(program, file, [None] * len(program), targets, dynamic)
+            self._loaded[program.file] = lp  # a new version replaces the old one
+        return lp
+
+    def _start_program(self, p: Process, program: ProgramText, by: str | int) -> None:
+        p.clear()
+        p.loaded = self._loaded_program(program)
+        p.stats.programs += 1
+        self._record(ev.Start, self.now, p.number, None, program.name, by)
+        self._update_state(p)
+        self._make_runnable(p)
+
+    def _make_runnable(self, p: Process) -> None:
+        if not p.queued:
+            p.queued = True
+            self._runnable.append(p)
+            if not self._running and self.on_kick is not None:
+                self.on_kick()
+
+    def _kick(self) -> None:
+        if self._runnable and not self._running and self.on_kick is not None:
+            self.on_kick()
+
+    def _schedule(self, delay: float, callback: Callable[[], None]) -> Timer:
+        t = self.now + delay
+        timer = self._timers.push(t, callback)
+        if self.on_timer is not None:
+            self.on_timer(t)
+        return timer
+
+    # ---- state --------------------------------------------------------------------------
+
+    def _derive_state(self, p: Process) -> ProcessState:
+        if p.alarm is not None:
+            return ProcessState.ALARM
+        if p.loaded is None:
+            return ProcessState.IDLE
+        if p.held:
+            return ProcessState.HOLD
+        # The interpolator's wait is the one the machine feels (spec 2.4).
+        if p.int_wait is not None:
+            return STATE_OF_WAIT[p.int_wait.kind]
+        if p.dec_wait is not None:
+            return STATE_OF_WAIT[p.dec_wait.kind]
+        if p.int_item is not None and p.int_item.kind == ItemKind.DWELL:
+            return ProcessState.DWELL
+        return ProcessState.RUNNING
+
+    def _account(self, p: Process) -> None:
+        spent = self.now - p.state_since
+        if spent > 0:
+            if p.state in RUNNING_STATES:
+                p.stats.running_s += spent
+            elif p.state in WAITING_STATES:
+                p.stats.waiting_s += spent
+        p.state_since = self.now
+
+    def _update_state(self, p: Process) -> None:
+        state = self._derive_state(p)
+        if state is not p.state:
+            self._account(p)
+            old, p.state = p.state, state
+            if self.state_listeners:  # copied: a listener may unsubscribe
+                for listener in list(self.state_listeners):
+                    listener(p, old)
+
+    def _position(self, p: Process) -> tuple[float, ...]:
+        item = p.int_item
+        if item is not None and item.move is not None:
+            move = item.move
+            if p.int_remaining is not None:
+                done = 1.0 - (p.int_remaining / item.duration if item.duration else 0.0)
+            elif item.duration > 0:
+                done = min(1.0, max(0.0, (self.now - p.int_started) / item.duration))
+            else:
+                done = 1.0
+            return tuple(a + (b - a) * done for a, b in zip(move.start, move.end, strict=True))
+        return tuple(p.actual)
+
+    # ==== the decoder =======================================================================
+
+    def _run_decoder(self, p: Process) -> None:
+        loaded = p.loaded
+        assert loaded is not None
+        blocks = loaded.blocks
+        lines = len(blocks)
+        budget = self.settings.slice_blocks
+        stats = p.stats
+        try:
+            while True:
+                block = p.block
+                if block is None:
+                    pc = p.pc
+                    if pc >= lines:
+                        self.end_decoding(p, "eof", (loaded.file, lines, None))
+                        return
+                    block = blocks[pc] or self._compile(loaded, pc)
+                    if block.counted:
+                        stats.blocks += 1
+                    p.block = block
+                    i = 0
+                else:
+                    i = p.op_i
+                ops = block.ops
+                count = len(ops)
+                # The op index lives in a local; p.op_i is written only when the decoder stops
+                # (ops never read it).
+                while i < count:
+                    result = ops[i](p)
+                    if result == NEXT:
+                        i += 1
+                    elif result == WAIT_NEXT:
+                        p.op_i = i + 1
+                        return
+                    elif result == WAIT_RETRY:
+                        p.op_i = i
+                        return
+                    elif result == JUMP:
+                        break
+                    else:  # END
+                        return
+                else:
+                    p.pc += 1
+                p.block = None
+                budget -= 1
+                if budget == 0:  # let the others run; a loop with no motion never blocks
+                    self._make_runnable(p)
+                    return
+        except RuntimeAlarm as alarm:
+            self._alarm(p, alarm.code, alarm.message, p.where)
+
+    def end_decoding(self, p: Process, how: str, where: Where) -> None:
+        p.dec_block = DecoderHold.DONE
+        p.end_how = how
+        p.end_where = where
+        self._interp_run(p)
+
+    def _compile(self, loaded: LoadedProgram, index: int) -> CompiledBlock:
+        compiled = self.front_end.compile_block(self, loaded, index)
+        loaded.blocks[index] = compiled
+        return compiled
+
+    # ---- motion queue -------------------------------------------------------------------
+
+    def queue_motion(self, p: Process, items: list[QueueItem]) -> Step:
+        """Queue items (the decoder's pending ones first); NEXT, or WAIT_RETRY if full."""
+        if p.pending is None:
+            p.pending = items
+        lookahead = self.settings.lookahead
+        pending = p.pending
+        while pending:
+            # The queue holds the items waiting behind the one the interpolator executes;
+            # lookahead 0: the next item only when the interpolator is done with the last.
+            waiting = len(p.queue) - (1 if p.int_item is not None else 0)
+            if (not lookahead and p.queue) or (lookahead and waiting >= lookahead):
+                break
+            p.queue.append(pending.pop(0))
+            self._interp_run(p)
+        if pending:
+            p.dec_block = DecoderHold.FULL
+            return WAIT_RETRY
+        p.pending = None
+        if self.settings.lookahead == 0 and (p.queue or p.int_item is not None):
+            p.dec_block = DecoderHold.FLUSH  # lookahead 0: the decoder waits for each item
+            return WAIT_NEXT
+        return NEXT
+
+    def flush(self, p: Process) -> Step:
+        """Wait until the motion queue is empty (sync_reads, spec 2.4)."""
+        if p.queue or p.int_item is not None:
+            p.dec_block = DecoderHold.FLUSH
+            return WAIT_RETRY
+        return NEXT
+
+    # ==== the interpolator ==================================================================
+
+    def _interp_run(self, p: Process) -> None:
+        while True:
+            if p.int_timer is not None or p.int_wait is not None or p.held or p.alarm:
+                return
+            if p.int_remaining is not None:
+                return
+            if not p.queue:
+                p.int_item = None
+                self._queue_drained(p)
+                return
+            item = p.queue[0]
+            p.int_item = item
+            if item.kind == ItemKind.SYNC:
+                if not self._run_sync_item(p, item):
+                    return
+                self._item_done(p)
+                continue
+            if item.duration > 0:
+                self._arm_item(p, item, item.duration)
+                self._update_state(p)
+                return
+            self._item_done(p)
+
+    def _arm_item(self, p: Process, item: QueueItem, duration: float) -> None:
+        p.int_started = self.now - (item.duration - duration)
+        p.int_timer = self._schedule(duration, lambda: self._timed_done(p, item))
+
+    def _timed_done(self, p: Process, item: QueueItem) -> None:
+        p.int_timer = None
+        if item.move is not None:
+            p.actual = list(item.move.end)
+        p.stats.moving_s += item.duration
+        if item.kind == ItemKind.SYNC:  # a move inside a # block
+            p.sync_i += 1
+            self._continue_sync(p)
+            return
+        self._item_done(p)
+        self._interp_run(p)
+
+    def _item_done(self, p: Process) -> None:
+        item = p.queue.popleft()
+        if item.move is not None:
+            p.actual = list(item.move.end)
+        p.int_item = None
+        p.sync_i = 0
+        if p.dec_block is DecoderHold.FULL:
+            p.dec_block = None
+            self._make_runnable(p)
+        self._update_state(p)
+
+    def _queue_drained(self, p: Process) -> None:
+        if p.dec_block is DecoderHold.FLUSH:
+            p.dec_block = None
+            self._make_runnable(p)
+        elif p.dec_block is DecoderHold.DONE and p.loaded is not None and p.alarm is None:
+            self._end_program(p)
+        else:
+            self._update_state(p)
+            self._check_deadlock(p)
+
+    def _run_sync_item(self, p: Process, item: QueueItem) -> bool:
+        """Run a # block's actions from ``p.sync_i``; False when one of them blocks."""
+        actions = item.actions or []
+        try:
+            while p.sync_i < len(actions):
+                action = actions[p.sync_i]
+                if isinstance(action, Motion):
+                    move = action.move
+                    if move.duration_s > 0:
+                        sub = QueueItem(ItemKind.SYNC, move.duration_s, item.where, move)
+                        p.int_started = self.now
+                        p.int_timer = self._schedule(move.duration_s,
+                                                     functools.partial(self._timed_done, p, sub))
+                        return False
+                    p.actual = list(move.end)
+                elif not self.perform(p, Stage.INTERPOLATOR, action, item.where):
+                    p.sync_i += 1
+                    return False
+                p.sync_i += 1
+        except RuntimeAlarm as alarm:
+            self._alarm(p, alarm.code, alarm.message, item.where)
+            return False
+        return True
+
+    def _continue_sync(self, p: Process) -> None:
+        item = p.queue[0] if p.queue else None
+        if item is None or item.kind != ItemKind.SYNC or p.alarm is not None:
+            return
+        if self._run_sync_item(p, item):
+            self._item_done(p)
+            self._interp_run(p)
+
+    # ==== actions and waits ==================================================================
+
+    def perform(self, p: Process, stage: Stage, action: Action, where: Where) -> bool:
+        """Perform one action; True when it completed, False when the process waits."""
+        return self._actions[type(action)](p, stage, action, where)
+
+    def _do_write_syvar(self, p: Process, stage: Stage, action: WriteSyvar,
+                        where: Where) -> bool:
+        self.write_syvar(p, action.index, action.value, where)
+        return True
+
+    def _show_text(self, p: Process, stage: Stage, action: ShowText, where: Where) -> bool:
+        self._record(ev.Display, self.now, p.number, where, action.text)
+        return True
+
+    def _begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
+        if stage is Stage.DECODER:
+            p.dec_wait = wait
+            p.dec_block = DecoderHold.WAIT
+        else:
+            p.int_wait = wait
+        self._record(ev.Wait, self.now, p.number, wait.where,
+                     WaitOn(wait.kind, wait.target, wait.cond, wait.value))
+        if self._wait_timeout_s:
+            wait.timeout = self._schedule(self._wait_timeout_s,
+                                          lambda: self._wait_timed_out(p, wait))
+        self._update_state(p)
+
+    def _finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
+        """The wait is over: resume the stage that waited."""
+        if wait.timeout is not None:
+            wait.timeout.cancel()
+        self._record(ev.Resume, self.now, p.number, wait.where, by)
+        if p.dec_wait is wait:
+            p.dec_wait = None
+            p.dec_block = None
+            self._update_state(p)
+            self._make_runnable(p)
+        elif p.int_wait is wait:
+            p.int_wait = None
+            self._update_state(p)
+            self._continue_sync(p)
+            self._interp_run(p)
+
+    def _drop_wait(self, wait: WaitRecord) -> None:
+        if wait.handle is not None:
+            wait.handle.cancel()
+        if wait.timeout is not None:
+            wait.timeout.cancel()
+
+    def _wait_timed_out(self, p: Process, wait: WaitRecord) -> None:
+        if wait is p.dec_wait or wait is p.int_wait:
+            self._alarm(p, AlarmCode.WAIT_TIMEOUT,
+                        f"wait longer than {self.settings.wait_timeout_s:g} s: "
+                        f"{wait.describe(p.number)} {wait.reason()}", wait.where)
+
+    # ==== ends and alarms ====================================================================
+
+    def _end_program(self, p: Process) -> None:
+        how = p.end_how or "eof"
+        where = p.end_where
+        p.clear()
+        p.loaded = None
+        self._record(ev.End, self.now, p.number, where, how)
+        self._update_state(p)
+        self._became_free(p)
+
+    def _alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
+        if p.alarm is not None:
+            return
+        for wait in p.waits():
+            self._drop_wait(wait)
+        if p.int_timer is not None:
+            p.int_timer.cancel()
+        self._forget_waiter(p)
+        loaded = p.loaded
+        p.clear()
+        p.loaded = loaded
+        p.alarm = (int(code), message, where)
+        p.stats.alarms += 1
+        self._record(ev.Alarm, self.now, p.number, where, code, message)
+        self._update_state(p)
+        self._became_free(p)
+
+
+__all__ = ["Engine", "WaitKind"]

@@ -1,0 +1,222 @@
+"""The trace's events (spec 4.4), typed: one immutable record per kind of event.
+
+Each event is a ``NamedTuple`` -- typed, immutable and as cheap to build as a tuple, which
+matters: every SND and WAI records events.  The first four fields are common: ``seq`` (1, 2,
+...), ``t`` (simulated seconds), ``proc`` (0 for the PLC and the fieldbus) and ``where``
+(program file, line, N) or None; the rest are the event's own.  Inside ncgate events stay typed
+(the CANopen node reads an alarm's :class:`~ncgate.interpreter.codes.AlarmCode`, not a label);
+:func:`as_dict` renders one as the JSON object of spec 4.4, and only the edges call it (the
+trace file, ``Gateway.trace``, the Gantt picture).
+
+Stdlib only.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Final, NamedTuple
+
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.engine.states import WaitKind, Where
+
+
+class Blocked(NamedTuple):
+    """A process in a deadlock cycle or a stall: where it is blocked, and why."""
+
+    proc: int
+    prog: str
+    line: int
+    n: int | None
+    reason: str
+
+
+class WaitOn(NamedTuple):
+    """What a ``wait`` event waits on: a process, a condition, an SND's target, an EXE's."""
+
+    kind: WaitKind
+    target: int = 0
+    cond: str | None = None
+    value: int | float | None = None
+
+
+class Start(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    prog: str
+    by: int | str  # a process number, "operator" or "fieldbus"
+
+    @property
+    def kind(self) -> str:
+        return "start"
+
+
+class Wait(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    on: WaitOn
+
+    @property
+    def kind(self) -> str:
+        return "wait"
+
+
+class Resume(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    by: int | str  # a process number, "cond" or "fieldbus"
+
+    @property
+    def kind(self) -> str:
+        return "resume"
+
+
+class Snd(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    to: int
+
+    @property
+    def kind(self) -> str:
+        return "snd"
+
+
+class Exe(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    to: int
+    target_prog: str
+
+    @property
+    def kind(self) -> str:
+        return "exe"
+
+
+class End(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    how: str  # "REL", "M30", "M02", "eof", "reset"
+
+    @property
+    def kind(self) -> str:
+        return "end"
+
+
+class Write(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    var: str
+    value: int
+    who: str
+
+    @property
+    def kind(self) -> str:
+        return "write"
+
+
+class Alarm(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    code: AlarmCode
+    message: str
+
+    @property
+    def kind(self) -> str:
+        return "alarm"
+
+
+class Deadlock(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    cycle: tuple[Blocked, ...]
+    message: str
+
+    @property
+    def kind(self) -> str:
+        return "deadlock"
+
+
+class Stall(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    blocked: tuple[Blocked, ...]
+
+    @property
+    def kind(self) -> str:
+        return "stall"
+
+
+class Hazard(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    message: str
+
+    @property
+    def kind(self) -> str:
+        return "hazard"
+
+
+class Display(NamedTuple):
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    text: str
+
+    @property
+    def kind(self) -> str:
+        return "display"
+
+
+Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
+         | Display)
+# Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3).
+COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm})
+_ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
+
+
+def as_dict(event: Event) -> dict[str, Any]:
+    """The JSON object of spec 4.4 (``t`` rounded to 6 decimals), keys in the spec's order."""
+    out: dict[str, Any] = {"seq": event.seq, "t": round(event.t, 6), "event": event.kind,
+                           "proc": event.proc}
+    where = event.where
+    if where is not None:
+        out["prog"], out["line"], out["n"] = where
+    for name in event._fields[4:]:
+        out[name] = _json(getattr(event, name))
+    return out
+
+
+def _json(value: Any) -> Any:
+    if isinstance(value, WaitOn):
+        if value.kind is WaitKind.COND:
+            number = value.value
+            if isinstance(number, float) and number == int(number):
+                number = int(number)
+            return {"cond": value.cond, "value": number}
+        return {_ON_KEY[value.kind]: value.target}
+    if isinstance(value, AlarmCode):
+        return value.label
+    if isinstance(value, tuple) and value and isinstance(value[0], Blocked):
+        return [b._asdict() for b in value]
+    return value

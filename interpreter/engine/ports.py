@@ -1,0 +1,107 @@
+"""What the engine needs from outside, stated as protocols (STYLE: LinuxCNC's canonical
+interface), and what a dialect's front end may ask of the engine.
+
+Outward: the gateway wires real implementations in -- ``ncgate.plc.image.IOImage`` is an
+:class:`ImagePort`, the gateway's program store a :class:`ProgramLoader`.  Variables are
+addressed as in the PLC: area ``"SA" | "SK" | "SYVAR"``, index, view ``"bit" | "BY" | "IN"``.
+
+Inward: a dialect is a :class:`FrontEnd` -- it compiles a block of its own language into
+decoder ops, which act only through the :class:`BlockHost` (the engine's public operations).
+The engine imports no front end; ``ncgate.interpreter.nc110`` is one, a second dialect is a
+sibling folder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from ncgate.interpreter.engine.actions import Action, Step
+    from ncgate.interpreter.engine.process import (
+        CompiledBlock,
+        LoadedProgram,
+        Process,
+        QueueItem,
+    )
+    from ncgate.interpreter.engine.states import Stage, Where
+    from ncgate.interpreter.settings import RuntimeSettings
+
+
+class Cancellable(Protocol):
+    def cancel(self) -> None: ...
+
+
+class ImagePort(Protocol):
+    def read(self, area: str, index: int, view: str) -> int: ...
+
+    def write(self, changes: Iterable[tuple[str, int, str, int]], writer: str) -> object: ...
+
+    def check(self, area: str, index: int, view: str, value: int) -> None: ...
+
+    def wait(self, area: str, index: int, view: str, test: Callable[[int], bool],
+             on_true: Callable[[], None]) -> Cancellable | None:
+        """None when ``test(value)`` holds now; else call ``on_true`` once when it does."""
+
+    def last_writer(self, area: str, index: int, view: str) -> str | None: ...
+
+
+class ProgramText(Protocol):
+    """A program as the engine sees it: a name, a file, a number of blocks (lines)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def file(self) -> str: ...
+
+    def __len__(self) -> int: ...
+
+
+class ProgramLoader(Protocol):
+    def load(self, name: str, device: str | None, process: int) -> ProgramText:
+        """A checked program, ready to run in ``process``.
+
+        Raises ``ProgramNotFoundError`` or ``ProgramSyntaxError`` (with every diagnostic).
+        """
+
+
+class BlockHost(Protocol):
+    """What a front end's compiled ops may ask of the engine (all on the process ``p``)."""
+
+    @property
+    def settings(self) -> RuntimeSettings: ...
+
+    @property
+    def image(self) -> ImagePort: ...
+
+    def queue_motion(self, p: Process, items: list[QueueItem]) -> Step:
+        """Queue motion items (the pending ones first): NEXT, or WAIT_RETRY when full."""
+
+    def flush(self, p: Process) -> Step:
+        """NEXT when the motion queue is empty, else wait until it is (WAIT_RETRY)."""
+
+    def perform(self, p: Process, stage: Stage, action: Action, where: Where) -> bool:
+        """Do one action now; False when the process waits."""
+
+    def wait_process(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        """``(WAI,n)``: the hot path of an SND/WAI exchange, with no action object."""
+
+    def send(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        """``(SND,n)``: likewise."""
+
+    def write_syvar(self, p: Process, index: int, value: int, where: Where) -> None: ...
+
+    def end_decoding(self, p: Process, how: str, where: Where) -> None:
+        """The program ends (REL, M30, ...) once the motion queued before has run."""
+
+
+class FrontEnd(Protocol):
+    """A dialect: compiles its programs' blocks for the engine."""
+
+    def compile_block(self, host: BlockHost, loaded: LoadedProgram,
+                      index: int) -> CompiledBlock:
+        """Block ``index`` as decoder ops; raises RuntimeAlarm if it cannot run."""
+
+    def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
+        """The processes the program may start, and whether it names others by variables."""

@@ -1,0 +1,105 @@
+"""One process (channel): its program, decoder position, motion queue and interpolator."""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ncgate.interpreter.engine.actions import Action, ItemKind, Step
+from ncgate.interpreter.engine.states import (
+    DecoderHold,
+    ProcessState,
+    Stats,
+    WaitRecord,
+    Where,
+)
+from ncgate.interpreter.engine.timers import Timer
+from ncgate.interpreter.motion import Modal, Move
+
+if TYPE_CHECKING:
+    from ncgate.interpreter.engine.ports import ProgramText
+
+Op = Callable[["Process"], Step]  # one step of a compiled block
+
+
+@dataclass(slots=True)
+class QueueItem:
+    kind: ItemKind
+    duration: float
+    where: Where
+    move: Move | None = None
+    actions: list[Action] | None = None  # SYNC: the evaluated codes of a # block
+
+
+@dataclass(slots=True)
+class CompiledBlock:
+    ops: tuple[Op, ...]
+    where: Where
+    counted: bool
+
+
+@dataclass(slots=True)
+class LoadedProgram:
+    program: ProgramText
+    file: str  # display name in messages and the trace
+    blocks: list[CompiledBlock | None]
+    exe_targets: frozenset[int]  # the processes it may start (orphan-wait detection)
+    dynamic_exe: bool  # it starts processes named by E parameters: any of them
+
+
+class Process:
+    """One process (channel): decoder + motion queue + interpolator."""
+
+    def __init__(self, number: int, external: bool, e_params: int) -> None:
+        self.number = number
+        self.external = external
+        self.e_params = e_params
+        self.E: list[float] = [0.0] * e_params
+        self.loaded: LoadedProgram | None = None
+        self.modal = Modal()
+        self.stats = Stats()
+        self.state = ProcessState.IDLE
+        self.state_since = 0.0
+        self.alarm: tuple[int, str, Where | None] | None = None
+        self.held = False
+        self.actual: list[float] = list(self.modal.position)  # the interpolator's position
+        self.queued = False  # in the engine's run queue
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the running program (not E parameters, position or statistics)."""
+        self.pc = 0
+        self.op_i = 0
+        self.block: CompiledBlock | None = None
+        self.repeats: list[list[int]] = []  # [line of the RPT, repetitions left]
+        self.dec_block: DecoderHold | None = None  # None: the decoder may run
+        self.dec_wait: WaitRecord | None = None
+        self.end_how: str | None = None
+        self.end_where: Where | None = None
+        self.pending: list[QueueItem] | None = None
+        self.queue: deque[QueueItem] = deque()
+        self.int_item: QueueItem | None = None
+        self.int_timer: Timer | None = None
+        self.int_started = 0.0
+        self.int_remaining: float | None = None  # a timed item paused by a feed hold
+        self.int_wait: WaitRecord | None = None
+        self.sync_i = 0
+
+    @property
+    def motion_active(self) -> bool:
+        """A timed queue item under way (or paused by a feed hold): spec 2.4's flag."""
+        return self.int_timer is not None or self.int_remaining is not None
+
+    @property
+    def where(self) -> Where:
+        if self.block is not None:
+            return self.block.where
+        if self.loaded is not None:  # between blocks: the line the decoder is at
+            return (self.loaded.file, min(self.pc + 1, len(self.loaded.blocks)), None)
+        return ("", 0, None)
+
+    def waits(self) -> tuple[WaitRecord, ...]:
+        """The waits the process is in (its interpolator's first, the one the machine feels)."""
+        return tuple(w for w in (self.int_wait, self.dec_wait) if w is not None)

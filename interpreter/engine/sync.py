@@ -1,0 +1,332 @@
+"""The synchronisation rules of spec 2.2: EXE, REL, WAI, SND, latched tokens, rendezvous.
+
+The rules, as transitions (k is the process executing the code, n the one it names):
+
+    (WAI,n)   n already waits in (SND,k)   -> the SND is delivered; n resumes, k goes on
+              a latched token n->k exists  -> it is consumed (delivered); k goes on
+              otherwise                    -> k waits in WAIT_PROC on n
+                                              (orphan check, then deadlock check)
+    (SND,n)   n is external                -> published on the fieldbus; k goes on
+              n is IDLE or in ALARM        -> alarm of k (SND_TO_IDLE)
+              n waits in (WAI,k)           -> delivered; n resumes, k goes on
+              snd = latched                -> a token k->n, and a `hazard` event; k goes on
+              otherwise (rendezvous)       -> k waits in WAIT_SND on n (deadlock check)
+    (EXE,n,P) n is k or external           -> alarm of k
+              P cannot be loaded           -> alarm of k
+              n is IDLE                    -> P starts in n; k goes on
+              otherwise                    -> k waits in WAIT_EXE, first come first served
+    (WAI,var op value)                     -> level-triggered: goes on if it holds, else waits
+                                              until the write that makes it true
+    n becomes free (its program ended, or it is in ALARM):
+              tokens to n are discarded; a rendezvous sender to n gets an alarm; the first
+              EXE waiting for n starts its program (if n is IDLE); every WAI on an idle
+              process is checked for being an orphan.
+    An external process k (the fieldbus) sends (SND,n): delivered if n waits for k, else
+    latched (it cannot be made to wait) with a `hazard` event.
+
+The engine core (``engine.py``) provides the waits, alarms and program starts these rules use;
+what it must provide is declared below.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import (
+    ProgramError,
+    ProgramNotFoundError,
+    RuntimeAlarm,
+)
+from ncgate.interpreter.engine import deadlock
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.actions import Execute, WaitCondition
+from ncgate.interpreter.engine.events import Blocked
+from ncgate.interpreter.engine.ports import ImagePort, ProgramLoader, ProgramText
+from ncgate.interpreter.engine.process import Process
+from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where
+from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
+
+
+class SyncRules:
+    """EXE/REL/WAI/SND between processes (a part of :class:`Engine`)."""
+
+    # ---- provided by the engine core ----------------------------------------------------
+    settings: RuntimeSettings
+    image: ImagePort
+    loader: ProgramLoader
+    trace: Trace
+    processes: dict[int, Process]
+    now: float
+    _record: Callable[..., None]
+
+    def _begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
+        raise NotImplementedError
+
+    def _finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
+        raise NotImplementedError
+
+    def _alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
+        raise NotImplementedError
+
+    def _start_program(self, p: Process, program: ProgramText, by: str | int) -> None:
+        raise NotImplementedError
+
+    def _kick(self) -> None:
+        raise NotImplementedError
+
+    # ---- state --------------------------------------------------------------------------
+
+    def _init_sync(self) -> None:
+        self._proc_waiters: dict[tuple[int, int], Process] = {}  # (waited-for, waiter)
+        self._snd_pending: dict[tuple[int, int], Process] = {}  # (sender, target)
+        # Latched SNDs not yet taken: (sender, target) -> where each was sent from (None: by
+        # the fieldbus), oldest first.
+        self._tokens: dict[tuple[int, int], deque[Where | None]] = {}
+        self._exe_waiters: dict[int, deque[tuple[Process, ProgramText, str]]] = {}
+        self._writer_proc: Process | None = None
+        # The last SND delivered: sender, target, N, its number on the event counter.
+        self.last_snd: tuple[int, int, int, int] | None = None
+
+    def _clear_sync(self) -> None:
+        self._proc_waiters.clear()
+        self._snd_pending.clear()
+        self._tokens.clear()
+        self._exe_waiters.clear()
+
+    def _forget_waiter(self, p: Process) -> None:
+        """P is in ALARM: it waits for nobody any more."""
+        for key in [k for k, q in self._proc_waiters.items() if q is p]:
+            del self._proc_waiters[key]
+        for key in [k for k, q in self._snd_pending.items() if q is p]:
+            del self._snd_pending[key]
+        for n, waiters in self._exe_waiters.items():
+            self._exe_waiters[n] = deque(w for w in waiters if w[0] is not p)
+
+    # ---- WAI,n ----------------------------------------------------------------------------
+
+    def wait_process(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        if n == p.number:
+            raise RuntimeAlarm(AlarmCode.WAIT_FOR_SELF, "a process cannot wait for itself")
+        sender = self._process_arg(n)
+        pending = self._snd_pending.pop((n, p.number), None)
+        if pending is not None:  # a rendezvous sender is already there
+            wait = _wait_of(pending, WaitKind.SND)
+            self._deliver_snd(pending, p, wait)
+            self._finish_wait(pending, wait, p.number)
+            return True
+        tokens = self._tokens.get((n, p.number))
+        if tokens:
+            sent_from = tokens.popleft()
+            if not tokens:
+                del self._tokens[(n, p.number)]
+            self._deliver_snd(sender, p, None, where=sent_from, external=sent_from is None)
+            return True
+        wait = WaitRecord(WaitKind.PROC, n, code, where, self.now, stage)
+        self._proc_waiters[(n, p.number)] = p
+        self._begin_wait(p, stage, wait)
+        if not self._check_orphan(p, wait):
+            self._check_deadlock(p)
+        return False
+
+    def _end_wait_proc(self, p: Process, sender: int) -> None:
+        self._proc_waiters.pop((sender, p.number), None)
+        self._finish_wait(p, _wait_of(p, WaitKind.PROC), sender)
+
+    # ---- SND,n ----------------------------------------------------------------------------
+
+    def send(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        target = self._process_arg(n)
+        if target.external:
+            self._deliver_snd(p, target, None, where=where)
+            return True
+        if target.loaded is None or target.alarm is not None:
+            state = "runs no program" if target.alarm is None else "is in ALARM"
+            raise RuntimeAlarm(AlarmCode.SND_TO_IDLE, f"SND to process {n}, which {state}")
+        if (p.number, n) in self._proc_waiters:
+            self._deliver_snd(p, target, None, where=where)
+            self._end_wait_proc(target, p.number)
+            return True
+        if self.settings.snd is SndPolicy.LATCHED:
+            self._tokens.setdefault((p.number, n), deque()).append(where)
+            self._record(ev.Hazard, self.now, p.number, where,
+                         f"SND to P{n} before P{n} waits for P{p.number}: on the real control "
+                         "this ordering is a race")
+            return True
+        wait = WaitRecord(WaitKind.SND, n, code, where, self.now, stage)
+        self._snd_pending[(p.number, n)] = p
+        self._begin_wait(p, stage, wait)
+        self._check_deadlock(p)
+        return False
+
+    def external_snd(self, sender: int, target: int) -> None:
+        """An SND in the name of external process ``sender`` (fieldbus mailbox, script)."""
+        s = self._process(sender)
+        if not s.external:
+            raise ValueError(f"process {sender} is not external")
+        t = self._process(target)
+        if t.external:
+            self._deliver_snd(s, t, None, external=True)
+            return
+        if t.loaded is None or t.alarm is not None:
+            raise ValueError(f"SND to process {target}, which runs no program")
+        if (sender, target) in self._proc_waiters:
+            self._deliver_snd(s, t, None, external=True)
+            self._end_wait_proc(t, sender)
+        else:
+            # An external sender cannot be made to wait: latch it, and say it is a race.
+            self._tokens.setdefault((sender, target), deque()).append(None)
+            self._record(ev.Hazard, self.now, sender, None,
+                         f"SND from external P{sender} to P{target} before P{target} waits "
+                         "for it: latched")
+        self._kick()
+
+    def _deliver_snd(self, sender: Process, target: Process, wait: WaitRecord | None,
+                     where: Where | None = None, external: bool = False) -> None:
+        if where is None and wait is not None:
+            where = wait.where
+        if where is None and not external:
+            where = sender.where
+        sender.stats.snd_sent += 1
+        target.stats.snd_received += 1
+        n = where[2] if where is not None and where[2] is not None else 0
+        # Recorded before the event, so that whoever hears it reads this SND; its number is
+        # the value the event counter takes with it.
+        self.last_snd = (sender.number, target.number, n, (self.trace.counter + 1) & 0xFFFFFFFF)
+        self._record(ev.Snd, self.now, sender.number, where, target.number)
+
+    # ---- WAI,var op value -----------------------------------------------------------------
+
+    def _wait_condition(self, p: Process, stage: Stage, cond: WaitCondition,
+                        where: Where) -> bool:
+        area, index, view = cond.area, cond.index, cond.view
+        wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self.now, stage,
+                          cond=cond.text)
+
+        def satisfied() -> None:
+            wait.handle = None
+            wait.value = self.image.read(area, index, view)
+            self._finish_wait(p, wait, "cond")
+
+        handle = self.image.wait(area, index, view, cond.test, satisfied)
+        if handle is None:
+            return True
+        wait.handle = handle
+        wait.value = self.image.read(area, index, view)
+        wait.writer = self.image.last_writer(area, index, view)
+        self._begin_wait(p, stage, wait)
+        return False
+
+    def write_syvar(self, p: Process, index: int, value: int, where: Where) -> None:
+        self._writer_proc = p
+        try:
+            n = f" N{where[2]}" if where[2] is not None else f" line {where[1]}"
+            self.image.write([("SYVAR", index, "IN", value)], f"P{p.number}{n}")
+        finally:
+            self._writer_proc = None
+
+    # ---- EXE --------------------------------------------------------------------------------
+
+    def _execute(self, p: Process, stage: Stage, exe: Execute, where: Where) -> bool:
+        n, name, code = exe.process, exe.program, exe.code
+        if n == p.number:
+            raise RuntimeAlarm(AlarmCode.EXE_ON_SELF,
+                               f"a process cannot start a program in itself (EXE,{n})")
+        target = self._process_arg(n)
+        if target.external:
+            raise RuntimeAlarm(AlarmCode.EXE_ON_EXTERNAL,
+                               f"process {n} is external: it runs no part program")
+        try:
+            program = self.loader.load(name, exe.device, n)
+        except ProgramNotFoundError as exc:
+            raise RuntimeAlarm(AlarmCode.PROGRAM_NOT_FOUND, str(exc)) from None
+        except ProgramError as exc:
+            raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID,
+                               f"program {name} does not check: {first_line(exc)}") from None
+        if target.loaded is None and target.alarm is None:
+            self._record(ev.Exe, self.now, p.number, where, n, program.name)
+            self._start_program(target, program, p.number)
+            return True
+        wait = WaitRecord(WaitKind.EXE, n, code, where, self.now, stage)
+        self._exe_waiters.setdefault(n, deque()).append((p, program, code))
+        self._begin_wait(p, stage, wait)
+        self._check_deadlock(p)
+        return False
+
+    def _process(self, number: int) -> Process:
+        p = self.processes.get(number)
+        if p is None:
+            raise ValueError(f"process {number} is not configured (1..{len(self.processes)})")
+        return p
+
+    def _process_arg(self, n: int) -> Process:
+        p = self.processes.get(n)
+        if p is None:
+            raise RuntimeAlarm(AlarmCode.PROCESS_OUT_OF_RANGE,
+                               f"process {n} is not configured (1..{len(self.processes)})")
+        return p
+
+    # ---- a process becomes free ---------------------------------------------------------
+
+    def _became_free(self, p: Process) -> None:
+        """P is IDLE (or in ALARM): tokens to it go, its SND partners and EXE waiters move."""
+        for key in [k for k in self._tokens if k[1] == p.number]:
+            del self._tokens[key]
+        for (sender, target), q in list(self._snd_pending.items()):
+            if target == p.number:
+                del self._snd_pending[(sender, target)]
+                state = "runs no program" if p.alarm is None else "is in ALARM"
+                wait = q.int_wait or q.dec_wait
+                self._alarm(q, AlarmCode.SND_TO_IDLE,
+                            f"SND to process {p.number}, which {state}",
+                            wait.where if wait else q.where)
+        if p.alarm is None and p.loaded is None:
+            waiters = self._exe_waiters.get(p.number)
+            if waiters:
+                q, program, _ = waiters.popleft()
+                wait = _wait_of(q, WaitKind.EXE)
+                self._record(ev.Exe, self.now, q.number, wait.where, p.number, program.name)
+                self._start_program(p, program, q.number)
+                self._finish_wait(q, wait, p.number)
+        for q in self.processes.values():
+            for wait in (q.dec_wait, q.int_wait):
+                if wait is not None and wait.kind is WaitKind.PROC:
+                    self._check_orphan(q, wait)
+
+    # ---- deadlocks and orphans (the search itself: deadlock.py) ----------------------------
+
+    def _check_orphan(self, p: Process, wait: WaitRecord) -> bool:
+        target = self.processes[wait.target]
+        if target.external or target.loaded is not None or target.alarm is not None:
+            return False
+        if deadlock.can_be_started(wait.target, p, self.processes,
+                                   lambda n: bool(self._exe_waiters.get(n)),
+                                   self.settings.closed, self.settings.main):
+            return False
+        self._alarm(p, AlarmCode.ORPHAN_WAIT, deadlock.orphan_message(p, wait), wait.where)
+        return True
+
+    def _check_deadlock(self, start: Process) -> None:
+        cycle = deadlock.find_cycle(start, self.processes)
+        if cycle is None:
+            return
+        message = deadlock.describe_cycle(start, cycle)
+        blocked = tuple(Blocked(p.number, *w.where, w.code) for p, w in cycle)
+        self._record(ev.Deadlock, self.now, 0, None, blocked, message)
+        for p, wait in cycle:
+            self._alarm(p, AlarmCode.DEADLOCK, message, wait.where)
+
+
+def _wait_of(p: Process, kind: WaitKind) -> WaitRecord:
+    """The wait of that kind a process is in (its interpolator's, else its decoder's)."""
+    for wait in p.waits():
+        if wait.kind is kind:
+            return wait
+    raise AssertionError(f"P{p.number} is in no {kind.name} wait")
+
+
+def first_line(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+

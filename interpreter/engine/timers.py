@@ -1,0 +1,46 @@
+"""The engine's timers: a heap of (time, order, timer); a cancelled timer stays in the heap with
+no callback and is dropped when it reaches the top.  No clock is read here: whoever drives the
+engine says what time it is (the virtual clock, or the wall clock in the gateway)."""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable
+
+
+class Timer:
+    __slots__ = ("callback", "time")
+
+    def __init__(self, time: float, callback: Callable[[], None] | None) -> None:
+        self.time = time
+        self.callback = callback
+
+    def cancel(self) -> None:
+        self.callback = None
+
+
+class TimerHeap:
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, Timer]] = []
+        self._order = itertools.count()  # equal times fire in the order they were armed
+
+    def push(self, t: float, callback: Callable[[], None]) -> Timer:
+        timer = Timer(t, callback)
+        heapq.heappush(self._heap, (t, next(self._order), timer))
+        return timer
+
+    def next_time(self) -> float | None:
+        heap = self._heap
+        while heap and heap[0][2].callback is None:
+            heapq.heappop(heap)
+        return heap[0][0] if heap else None
+
+    def pop_due(self, t: float) -> Timer | None:
+        """The next live timer due at or before ``t`` (taken off the heap), or None."""
+        heap = self._heap
+        while heap and heap[0][0] <= t:
+            _, _, timer = heapq.heappop(heap)
+            if timer.callback is not None:
+                return timer
+        return None

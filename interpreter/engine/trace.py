@@ -1,0 +1,87 @@
+"""The trace (spec 4.4): every synchronisation event, in order, as typed events
+(:mod:`ncgate.interpreter.engine.events`).
+
+:meth:`Trace.record` numbers an event and keeps it; :attr:`Trace.events` renders the kept ones
+as the dicts of spec 4.4, and :func:`to_jsonl` one dict as a JSON line with a fixed key order
+and ``t`` printed with exactly six decimals, so that two runs of one scenario give
+byte-identical files.  Listeners get the typed event itself, as it is recorded.
+
+How much is kept is the owner's choice: everything (``ncgate sim``, a bounded batch run that
+writes its trace at the end), or only the latest ``keep`` events (``ncgate run``, which runs
+for a shift: memory must not grow with the number of events; listeners -- the trace file, the
+log -- see every one).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from collections.abc import Callable, Iterable
+from typing import Any, TextIO
+
+from ncgate.interpreter.engine.events import COUNTED, Event, as_dict
+from ncgate.interpreter.engine.states import Where
+
+EventDict = dict[str, Any]
+Listener = Callable[[Event], None]
+
+
+class Trace:
+    """Collects events; listeners see each event as it is recorded.
+
+    ``keep=None`` keeps every event; ``keep=n`` only the latest n (a ring).
+    """
+
+    def __init__(self, keep: int | None = None) -> None:
+        if keep is not None and keep < 0:
+            raise ValueError(f"keep: expected None or a count >= 0, got {keep}")
+        self.keep = keep
+        self.seq = 0
+        self.counter = 0  # the fieldbus event counter
+        self._ring: deque[Event] = deque(maxlen=keep)  # keep=n
+        self._all: list[Event] = []  # keep=None
+        self._dicts: list[EventDict] = []  # cached dicts of _all
+        self._append = self._ring.append if keep is not None else self._all.append
+        self._listeners: list[Listener] = []
+
+    @property
+    def kept(self) -> list[Event]:
+        """The typed events kept (every one, or the latest ``keep``), in event order."""
+        return list(self._ring) if self.keep is not None else self._all
+
+    @property
+    def events(self) -> list[EventDict]:
+        """The events kept, as the dicts of spec 4.4."""
+        if self.keep is not None:
+            return [as_dict(e) for e in self._ring]
+        done = len(self._dicts)
+        if done < len(self._all):
+            self._dicts.extend(as_dict(e) for e in self._all[done:])
+        return self._dicts
+
+    def subscribe(self, listener: Listener) -> Callable[[], None]:
+        self._listeners.append(listener)
+        return lambda: self._listeners.remove(listener)
+
+    def record(self, kind: Callable[..., Event], t: float, proc: int, where: Where | None,
+               *fields: Any) -> None:
+        """Record an event of type ``kind`` (e.g. ``events.Snd``) with its own fields."""
+        self.seq += 1
+        event = kind(self.seq, t, proc, where, *fields)
+        if kind in COUNTED:
+            self.counter = (self.counter + 1) & 0xFFFFFFFF
+        self._append(event)
+        for listener in self._listeners:
+            listener(event)
+
+
+def to_jsonl(event: EventDict) -> str:
+    rest = {k: v for k, v in event.items() if k not in ("seq", "t")}
+    body = json.dumps(rest, separators=(", ", ": "), ensure_ascii=False)
+    return f'{{"seq": {event["seq"]}, "t": {event["t"]:.6f}, {body[1:]}'
+
+
+def write_jsonl(events: Iterable[EventDict], out: TextIO) -> None:
+    for event in events:
+        out.write(to_jsonl(event))
+        out.write("\n")
