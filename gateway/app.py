@@ -9,9 +9,8 @@ on the wall clock, and (in later issues) the Modbus server and the CANopen node.
         await gw.wait_idle(timeout_s=30)
         events = gw.trace
 
-The engine is driven by :class:`WallClockDriver`: an engine timer becomes one ``call_at`` on
-the loop; a write from outside wakes its waits at once and schedules a run with
-``call_soon`` -- event-driven, no polling between a write and the wake.
+The engine is driven by :class:`~ncgate.gateway.wallclock.WallClockDriver` on the loop's
+clock.
 """
 
 from __future__ import annotations
@@ -27,65 +26,12 @@ from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeo
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.tracefile import TraceFile
+from ncgate.gateway.wallclock import WallClockDriver
 from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, Trace
 from ncgate.plc.image import IOImage
-
-
-class WallClockDriver:
-    """Runs an :class:`Engine` on the asyncio loop's clock, ``time_scale`` times faster."""
-
-    def __init__(self, engine: Engine, time_scale: float,
-                 loop: asyncio.AbstractEventLoop) -> None:
-        self.engine = engine
-        self.scale = time_scale
-        self.loop = loop
-        self.t0 = loop.time()
-        self._timer: asyncio.TimerHandle | None = None
-        self._timer_at: float | None = None
-        self._soon: asyncio.Handle | None = None
-        self.changed = asyncio.Event()
-        engine.on_kick = self.kick
-        engine.on_timer = lambda t: self.kick()
-
-    def now(self) -> float:
-        """Simulated seconds since the driver started."""
-        return (self.loop.time() - self.t0) * self.scale
-
-    def kick(self) -> None:
-        if self._soon is None:
-            self._soon = self.loop.call_soon(self._run)
-
-    def _run(self, due: float = 0.0) -> None:
-        self._soon = None
-        self._timer = None if due else self._timer
-        # A loop timer may fire a hair early: never let time run backwards past what is due.
-        self.engine.advance_to(max(self.now(), due))
-        self._arm()
-        self.changed.set()
-
-    def _arm(self) -> None:
-        t = self.engine.next_timer()
-        if t is None:
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            return
-        if self._timer is not None and self._timer_at == t:
-            return
-        if self._timer is not None:
-            self._timer.cancel()
-        self._timer_at = t
-        self._timer = self.loop.call_at(self.t0 + t / self.scale, self._run, t)
-
-    def close(self) -> None:
-        for handle in (self._timer, self._soon):
-            if handle is not None:
-                handle.cancel()
-        self.engine.on_kick = None
-        self.engine.on_timer = None
 
 
 class Gateway:
@@ -115,7 +61,8 @@ class Gateway:
                                          loop=loop)
             trace.subscribe(self._trace_file.write)
         runtime = build_runtime(self.config, closed=False, trace=trace)
-        driver = WallClockDriver(runtime.engine, self.config.nc.time_scale, loop)
+        driver = WallClockDriver(runtime.engine, self.config.nc.time_scale, loop,
+                                 stall_s=self.config.nc.stall_s)
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
             runtime.trace.subscribe(listener)

@@ -87,6 +87,7 @@ class Engine(SyncRules):
         self._runnable: deque[Process] = deque()
         self._running = False
         self._loaded: dict[str, LoadedProgram] = {}  # by file: one version each
+        self.last_change = 0.0  # the time of the last state change or image write
         self._init_sync()
         # Actions by type: what a compiled block may ask the engine to do.  A dialect's own
         # actions come in through register_action.
@@ -244,6 +245,14 @@ class Engine(SyncRules):
                 out.append(Blocked(p.number, *p.where, "blocked"))
         return tuple(out)
 
+    @property
+    def stalled(self) -> bool:
+        """Some process has a program, and every such process waits (none runs, dwells or is
+        held): only something outside can change that."""
+        busy = [p for p in self.processes.values() if p.loaded is not None and p.alarm is None]
+        return bool(busy) and not self._runnable and all(
+            p.state in WAITING_STATES and not p.motion_active for p in busy)
+
     def record_stall(self) -> None:
         """Every process is blocked and nothing can change: say so in the trace."""
         self._record(ev.Stall, self.now, 0, None, self.blocked())
@@ -265,6 +274,7 @@ class Engine(SyncRules):
 
     def note_write(self, name: str, value: int, who: str) -> None:
         """Record an image write in the trace (the gateway forwards the image's changes)."""
+        self.last_change = self.now
         p = self._writer_proc
         if p is not None and who.startswith(f"P{p.number} "):
             self._record(ev.Write, self.now, p.number, p.where, name, value, who)
@@ -347,6 +357,7 @@ class Engine(SyncRules):
     def _update_state(self, p: Process) -> None:
         state = self._derive_state(p)
         if state is not p.state:
+            self.last_change = self.now
             self._account(p)
             old, p.state = p.state, state
             if self.state_listeners:  # copied: a listener may unsubscribe

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
 
 from ncgate.gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
+from ncgate.interpreter.engine import events as ev
 
 from ..conftest import EXAMPLES
 
@@ -100,3 +102,37 @@ async def test_timing_follows_time_scale(tmp_path: Path) -> None:
         (end,) = [e for e in gw.trace if e["event"] == "end"]
     # The dwell ends at its timer's own time, however late the loop got round to it.
     assert end["t"] - start["t"] == pytest.approx(4.0, abs=2e-6)
+
+
+async def test_a_stall_is_reported_after_stall_s_and_not_again_until_something_changes(
+        tmp_path: Path) -> None:
+    """nc.stall_s in run: every process blocked and nothing changing for stall_s (simulated)
+    seconds gives one `stall` event naming the waits; outside can still end it."""
+    (tmp_path / "A.nc").write_text("N10(WAI,SA10=1)\nN20(WAI,SA11=1)\nN30M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n')
+    stalls: list[ev.Stall] = []
+    seen = asyncio.Event()
+
+    def listen(event: ev.Event) -> None:
+        if isinstance(event, ev.Stall):
+            stalls.append(event)
+            seen.set()
+
+    config = fast(tmp_path, scale=100.0, **{"nc.stall_s": 5.0, "canopen.enabled": False})
+    async with Gateway(config, listeners=[listen]) as gw:
+        await gw.start("A")
+        async with asyncio.timeout(10):
+            await seen.wait()
+        (stall,) = stalls
+        assert [(b.proc, b.n) for b in stall.blocked] == [(1, 10)]
+        assert "(WAI,SA10=1) waits for SA10=1 (now 0)" in stall.blocked[0].reason
+        assert stall.t >= 5.0
+        seen.clear()
+        gw.write("SA10", 1)  # something changed: P1 goes on to N20 and waits again
+        async with asyncio.timeout(10):
+            await seen.wait()
+        assert [(b.proc, b.n) for b in stalls[1].blocked] == [(1, 20)]
+        assert stalls[1].t >= gw.engine.last_change + 5.0 - 1e-9
+        gw.write("SA11", 1)
+        await gw.wait_idle(timeout_s=10)
+    assert len(stalls) == 2

@@ -1,0 +1,96 @@
+"""The engine on the wall clock (``ncgate run``, the ``Gateway`` API).
+
+An engine timer becomes one ``call_at`` on the asyncio loop; a write from outside wakes its
+waits at once and schedules a run with ``call_soon`` -- event-driven, no polling between a
+write and the wake.  ``nc.time_scale`` makes simulated time pass faster than the wall clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+from ncgate.interpreter.engine import Engine
+
+
+class WallClockDriver:
+    """Runs an :class:`Engine` on the asyncio loop's clock, ``time_scale`` times faster."""
+
+    def __init__(self, engine: Engine, time_scale: float, loop: asyncio.AbstractEventLoop,
+                 stall_s: float = 0.0) -> None:
+        self.engine = engine
+        self.scale = time_scale
+        self.loop = loop
+        self.stall_s = stall_s
+        self._stall_timer: asyncio.TimerHandle | None = None
+        self._stall_reported_at: float | None = None
+        self.t0 = loop.time()
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at: float | None = None
+        self._soon: asyncio.Handle | None = None
+        self.changed = asyncio.Event()
+        engine.on_kick = self.kick
+        engine.on_timer = lambda t: self.kick()
+
+    def now(self) -> float:
+        """Simulated seconds since the driver started."""
+        return (self.loop.time() - self.t0) * self.scale
+
+    def kick(self) -> None:
+        if self._soon is None:
+            self._soon = self.loop.call_soon(self._run)
+
+    def _run(self, due: float = 0.0) -> None:
+        self._soon = None
+        self._timer = None if due else self._timer
+        # A loop timer may fire a hair early: never let time run backwards past what is due.
+        self.engine.advance_to(max(self.now(), due))
+        self._arm()
+        self._arm_stall()
+        self.changed.set()
+
+    def _arm(self) -> None:
+        t = self.engine.next_timer()
+        if t is None:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            return
+        if self._timer is not None and self._timer_at == t:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = t
+        self._timer = self.loop.call_at(self.t0 + t / self.scale, self._run, t)
+
+    def _arm_stall(self) -> None:
+        """nc.stall_s: when every process with a program has been blocked, and nothing has
+        changed (no state, no image write), for stall_s simulated seconds, the trace says so
+        (once per stall).  Outside can still end it: it is reported, not an alarm."""
+        if self._stall_timer is not None:
+            self._stall_timer.cancel()
+            self._stall_timer = None
+        engine = self.engine
+        if not self.stall_s or not engine.stalled:
+            return
+        if self._stall_reported_at == engine.last_change:
+            return  # this stall was reported
+        due = engine.last_change + self.stall_s
+        self._stall_timer = self.loop.call_at(self.t0 + due / self.scale, self._stall_due)
+
+    def _stall_due(self) -> None:
+        self._stall_timer = None
+        engine = self.engine
+        engine.set_time(self.now())
+        if engine.stalled and engine.now >= engine.last_change + self.stall_s:
+            self._stall_reported_at = engine.last_change
+            engine.record_stall()
+            self.changed.set()
+        else:
+            self._arm_stall()
+
+    def close(self) -> None:
+        for handle in (self._timer, self._soon, self._stall_timer):
+            if handle is not None:
+                handle.cancel()
+        self.engine.on_kick = None
+        self.engine.on_timer = None
