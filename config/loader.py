@@ -193,7 +193,9 @@ class PlcConfig:
     sa_bits: int = setting(1024, "bits of the SA packet (a multiple of 8)", lo=8, hi=65536)
     k_bytes: int = setting(512, "bytes of the K packet", lo=2, hi=65536)
     syvars: int = setting(256, "SYVARs (16-bit signed)", lo=1, hi=32768)
-    scan_ms: int = setting(10, "the PLC scan period (PLC logic)", lo=1, hi=60_000)
+    scan_ms: int = setting(10, "the scan period of PLC logic (reserved: PLC logic in Structured "
+                                  "Text comes with a later release; no effect yet)", lo=1,
+                      hi=60_000)
 
 
 @dataclass(frozen=True, slots=True)
@@ -464,3 +466,32 @@ _CHECKS: dict[type, Callable[[_Reader, Any, str], Any]] = {PlcConfig: _check_plc
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusConfig, CanopenConfig,
     TraceConfig)})
+
+
+def config_markdown() -> str:
+    """docs/config.md: every key, its default and what it does, from the schema itself."""
+    lines = ["# Configuration keys", "",
+             "Generated from `config/loader.py` (the dataclasses are the schema; "
+             "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
+             "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
+             "`[plc]`, `[modbus]`, `[modbus.map]`, `[canopen]`, `[trace]`); an unknown key or "
+             "a bad value is an error naming the file and the dotted key. Paths are relative "
+             "to the config file.", "",
+             "| key | default | what |", "|---|---|---|"]
+    for dotted, default, doc in keys(Config):
+        lines.append(f"| `{dotted}` | {_shown(default)} | {doc} |")
+    return "\n".join(lines) + "\n"
+
+
+def _shown(value: Any) -> str:
+    if isinstance(value, enum.Enum):
+        value = value.value
+    if isinstance(value, bool):
+        return f"`{str(value).lower()}`"
+    if isinstance(value, str):
+        return f'`"{value}"`'
+    if isinstance(value, tuple | frozenset | list):
+        return f"`[{', '.join(_shown(v).strip('`') for v in sorted(value))}]`"
+    if value is None or value == {}:
+        return "—"
+    return f"`{value:g}`" if isinstance(value, float) else f"`{value}`"

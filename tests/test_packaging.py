@@ -124,3 +124,13 @@ def test_examples_are_listed_and_run(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["sim", "--example", "errors"]) == 2
     assert main(["sim", "--example", "nowhere"]) == 2
     assert "no example 'nowhere'" in capsys.readouterr().err
+
+
+def test_nothing_in_the_repository_reaches_outside_it() -> None:
+    """Users' clones have only the repository: no file may point at a folder beside it."""
+    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT,
+                            capture_output=True, text=True, check=True).stdout.split()
+    outside = "../" + "shared"  # spelled apart so that this test does not find itself
+    offenders = [name for name in listed if (ROOT / name).is_file()
+                 and outside in (ROOT / name).read_text(errors="replace")]
+    assert not offenders

@@ -113,3 +113,25 @@ def test_overrides_by_dotted_key_are_validated_too() -> None:
     assert cfg.modbus.port == 0 and cfg.nc.processes == 3
     with pytest.raises(ConfigError, match=r"<built-in default>: nc.lookahead"):
         load_config(None, overrides={"nc.lookahead": -1})
+
+
+def test_docs_config_md_is_generated_from_the_schema() -> None:
+    from pathlib import Path
+
+    from ncgate.config.loader import config_markdown
+
+    root = Path(__file__).resolve().parents[3]
+    assert (root / "docs" / "config.md").read_text() == config_markdown(), (
+        "docs/config.md is stale: regenerate it from ncgate.config.loader.config_markdown()")
+
+
+def test_every_key_of_the_schema_is_read_and_unknown_ones_are_refused(tmp_path: Path) -> None:
+    from ncgate.config.loader import Config, keys
+
+    for dotted, _, _ in keys(Config):
+        if "[]" in dotted or "MP0 .." in dotted:
+            continue
+        section, _, name = dotted.rpartition(".")
+        path = write(tmp_path, f"[{section}]\n{name}_typo = 1\n")
+        with pytest.raises(ConfigError, match=rf"{section}\.{name}_typo: unknown key"):
+            load_config(path)
