@@ -18,7 +18,7 @@ import random
 import re
 import time
 
-from ncgate.interpreter import parser as parser_module
+from ncgate.interpreter.nc110 import parser as parser_module
 from ncgate.interpreter.nc110.checker import CheckContext, check_program
 from ncgate.interpreter.nc110.parser import Program
 

@@ -34,9 +34,11 @@ def find_cycle(start: Process,
     order, or None."""
     if not stuck(start):
         return None
-    # Most waits are on a process that can still move: no cycle through it.
-    if not any(w.target and stuck(processes[w.target]) for w in start.waits()
-               if w.kind is not WaitKind.COND):
+    # Most waits are on a process that can still move: no cycle through it.  (Spelled out:
+    # this runs on every WAI and SND that waits.  A condition wait's target is 0.)
+    dec, itp = start.dec_wait, start.int_wait
+    if not ((dec is not None and dec.target and stuck(processes[dec.target]))
+            or (itp is not None and itp.target and stuck(processes[itp.target]))):
         return None
     path: list[tuple[Process, WaitRecord]] = []
     on_path = {start.number}

@@ -64,6 +64,7 @@ from ncgate.interpreter.settings import RuntimeSettings
 
 NEXT, WAIT_NEXT, WAIT_RETRY, JUMP = Step.NEXT, Step.WAIT_NEXT, Step.WAIT_RETRY, Step.JUMP
 ActionHandler = Callable[[Process, Stage, Any, Where], bool]
+_new = tuple.__new__  # a NamedTuple without its generated __new__ (the SND/WAI hot path)
 
 
 class Engine(SyncRules):
@@ -588,7 +589,7 @@ class Engine(SyncRules):
         else:
             p.int_wait = wait
         self._record(ev.Wait, self.now, p.number, wait.where,
-                     WaitOn(wait.kind, wait.target, wait.cond, wait.value))
+                     _new(WaitOn, (wait.kind, wait.target, wait.cond, wait.value)))
         if self._wait_timeout_s:
             wait.timeout = self._schedule(self._wait_timeout_s,
                                           lambda: self._wait_timed_out(p, wait))

@@ -321,9 +321,10 @@ class SyncRules:
 
 def _wait_of(p: Process, kind: WaitKind) -> WaitRecord:
     """The wait of that kind a process is in (its interpolator's, else its decoder's)."""
-    for wait in p.waits():
-        if wait.kind is kind:
-            return wait
+    if p.int_wait is not None and p.int_wait.kind is kind:
+        return p.int_wait
+    if p.dec_wait is not None and p.dec_wait.kind is kind:
+        return p.dec_wait
     raise AssertionError(f"P{p.number} is in no {kind.name} wait")
 
 

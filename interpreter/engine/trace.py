@@ -23,6 +23,7 @@ from ncgate.interpreter.engine.events import COUNTED, Event, as_dict
 from ncgate.interpreter.engine.states import Where
 
 EventDict = dict[str, Any]
+_new = tuple.__new__
 Listener = Callable[[Event], None]
 
 
@@ -63,11 +64,13 @@ class Trace:
         self._listeners.append(listener)
         return lambda: self._listeners.remove(listener)
 
-    def record(self, kind: Callable[..., Event], t: float, proc: int, where: Where | None,
+    def record(self, kind: type[Event], t: float, proc: int, where: Where | None,
                *fields: Any) -> None:
         """Record an event of type ``kind`` (e.g. ``events.Snd``) with its own fields."""
         self.seq += 1
-        event = kind(self.seq, t, proc, where, *fields)
+        # tuple.__new__ builds the NamedTuple without its generated __new__: this is on the
+        # path of every SND and WAI.
+        event = _new(kind, (self.seq, t, proc, where, *fields))
         if kind in COUNTED:
             self.counter = (self.counter + 1) & 0xFFFFFFFF
         self._append(event)
