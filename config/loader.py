@@ -366,7 +366,7 @@ class _Reader:
             else:
                 values[f.name] = self._value(f, t.get(f.name, f.default), dotted,
                                              (hi or {}).get(f.name, meta.get("hi")))
-        return _CHECKS.get(cls, _no_check)(self, cls(**values), key)
+        return cls(**values)
 
     def _table(self, raw: Any, key: str, known: set[str]) -> dict[str, Any]:
         if raw is None:
@@ -424,18 +424,10 @@ class _Reader:
 # ---- checks across keys ----------------------------------------------------------------------
 
 
-def _no_check(r: _Reader, value: Any, key: str) -> Any:
-    return value
-
-
-def _check_plc(r: _Reader, plc: PlcConfig, key: str) -> PlcConfig:
-    if plc.sa_bits % 8:
-        raise r.fail(f"{key}.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
-    return plc
-
-
 def _check_config(r: _Reader, config: Config) -> None:
     nc, plc, canopen = config.nc, config.plc, config.canopen
+    if plc.sa_bits % 8:
+        raise r.fail("plc.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
     if canopen.enabled:
         # The dictionary's shape (spec 3.3): 0x2000 is one ARRAY of at most 254 entries,
         # 0x2100+j (128 K bytes each) must stay below 0x2200.
@@ -462,7 +454,6 @@ def _check_config(r: _Reader, config: Config) -> None:
                                  f"{other} ({o_start}..{o_start + o_count - 1})")
 
 
-_CHECKS: dict[type, Callable[[_Reader, Any, str], Any]] = {PlcConfig: _check_plc}
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusConfig, CanopenConfig,
     TraceConfig)})

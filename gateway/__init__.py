@@ -2,7 +2,7 @@
 
 ``gateway`` wires the packages together: it may import ``plc``, ``interpreter`` and
 ``config``; none of them imports ``gateway``.  The public API (spec 4.5):
-``from gateway import Gateway, load_config``.
+``from ncgate import Gateway, load_config`` (or ``from ncgate.gateway import ...``).
 """
 
 from ncgate.config import load_config

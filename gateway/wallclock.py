@@ -23,6 +23,7 @@ class WallClockDriver:
         self.stall_s = stall_s
         self._stall_timer: asyncio.TimerHandle | None = None
         self._stall_reported_at: float | None = None
+        self._stall_due_at: float | None = None
         self.t0 = loop.time()
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
@@ -66,19 +67,22 @@ class WallClockDriver:
         """nc.stall_s: when every process with a program has been blocked, and nothing has
         changed (no state, no image write), for stall_s simulated seconds, the trace says so
         (once per stall).  Outside can still end it: it is reported, not an alarm."""
+        engine = self.engine
+        due: float | None = None
+        if self.stall_s and engine.stalled and self._stall_reported_at != engine.last_change:
+            due = engine.last_change + self.stall_s  # None: no stall, or this one was reported
+        if due == self._stall_due_at:
+            return  # the timer in place is the right one (or none is needed)
         if self._stall_timer is not None:
             self._stall_timer.cancel()
             self._stall_timer = None
-        engine = self.engine
-        if not self.stall_s or not engine.stalled:
-            return
-        if self._stall_reported_at == engine.last_change:
-            return  # this stall was reported
-        due = engine.last_change + self.stall_s
-        self._stall_timer = self.loop.call_at(self.t0 + due / self.scale, self._stall_due)
+        self._stall_due_at = due
+        if due is not None:
+            self._stall_timer = self.loop.call_at(self.t0 + due / self.scale, self._stall_due)
 
     def _stall_due(self) -> None:
         self._stall_timer = None
+        self._stall_due_at = None
         engine = self.engine
         engine.set_time(self.now())
         if engine.stalled and engine.now >= engine.last_change + self.stall_s:

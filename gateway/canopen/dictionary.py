@@ -7,7 +7,7 @@ bytes, 0x2100+j K bytes, 0x2200+j SYVARs), the command record (0x2400), the proc
 records (0x2500+k-1) and the last SND (0x2600).  Sizes follow the image.
 
 The manufacturer objects hold no data of their own: the node reads and writes the live image
-and process status through callbacks (``gateway.canopen_node``).
+and process status through callbacks (``ncgate.gateway.canopen.node``).
 """
 
 from __future__ import annotations

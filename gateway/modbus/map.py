@@ -1,7 +1,7 @@
 """The Modbus map (spec 3.2): which address is what, and reading and writing it.
 
 Protocol-free: it works on the four Modbus tables with 0-based addresses and returns values or
-a Modbus exception code; ``gateway.modbus_server`` does the wire.  Every write of one request
+a Modbus exception code; ``ncgate.gateway.modbus.server`` does the wire.  Every write of one request
 is validated whole and then applied with one image write (spec 3.1: atomic, named writer).
 
 Decisions where the spec is silent (docs/decisions.md): a process's block of discrete inputs

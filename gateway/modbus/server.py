@@ -16,7 +16,7 @@ module owns the layer where those are decided:
   and byte count (03), then the address range (02), then values (03);
 
 and uses pymodbus where it serves: its request classes decode a PDU that passed validation,
-its response classes encode the answers.  The map itself lives in ``gateway.modbus_map``.
+its response classes encode the answers.  The map itself lives in ``ncgate.gateway.modbus.map``.
 """
 
 from __future__ import annotations

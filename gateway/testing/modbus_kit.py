@@ -1,6 +1,6 @@
 """A virtual PLC over Modbus TCP, for integration tests (spec 4.5).
 
-It speaks the map in force (``gateway.modbus_map``) through pymodbus's client, so a test
+It speaks the map in force (``ncgate.gateway.modbus.map``) through pymodbus's client, so a test
 plays the PLC with the real protocol:
 
     plc = VirtualPLC("127.0.0.1", port, config)

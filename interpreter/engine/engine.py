@@ -53,7 +53,6 @@ from ncgate.interpreter.engine.states import (
     ProcessState,
     ProcessStatus,
     Stage,
-    WaitKind,
     WaitRecord,
     Where,
 )
@@ -87,7 +86,8 @@ class Engine(SyncRules):
         self._timers = TimerHeap()
         self._runnable: deque[Process] = deque()
         self._running = False
-        self._loaded: dict[str, LoadedProgram] = {}  # by file: one version each
+        # By (file, process): the latest version of each, with its compiled blocks.
+        self._loaded: dict[tuple[str, int], LoadedProgram] = {}
         self.last_change = 0.0  # the time of the last state change or image write
         self._init_sync()
         # Actions by type: what a compiled block may ask the engine to do.  A dialect's own
@@ -250,9 +250,16 @@ class Engine(SyncRules):
     def stalled(self) -> bool:
         """Some process has a program, and every such process waits (none runs, dwells or is
         held): only something outside can change that."""
-        busy = [p for p in self.processes.values() if p.loaded is not None and p.alarm is None]
-        return bool(busy) and not self._runnable and all(
-            p.state in WAITING_STATES and not p.motion_active for p in busy)
+        if self._runnable:
+            return False
+        busy = False
+        for p in self.processes.values():
+            if p.loaded is None or p.alarm is not None:
+                continue
+            if p.state not in WAITING_STATES or p.motion_active:
+                return False
+            busy = True
+        return busy
 
     def record_stall(self) -> None:
         """Every process is blocked and nothing can change: say so in the trace."""
@@ -293,18 +300,19 @@ class Engine(SyncRules):
 
     # ==== processes =========================================================================
 
-    def _loaded_program(self, program: ProgramText) -> LoadedProgram:
-        lp = self._loaded.get(program.file)
+    def _loaded_program(self, program: ProgramText, process: int) -> LoadedProgram:
+        key = (program.file, process)
+        lp = self._loaded.get(key)
         if lp is None or lp.program is not program:
             targets, dynamic = self.front_end.exe_targets(program)
             file = program.file.replace("\\", "/").rsplit("/", 1)[-1]
             lp = LoadedProgram(program, file, [None] * len(program), targets, dynamic)
-            self._loaded[program.file] = lp  # a new version replaces the old one
+            self._loaded[key] = lp  # a new version replaces the old one
         return lp
 
     def _start_program(self, p: Process, program: ProgramText, by: str | int) -> None:
         p.clear()
-        p.loaded = self._loaded_program(program)
+        p.loaded = self._loaded_program(program, p.number)
         p.stats.programs += 1
         self._record(ev.Start, self.now, p.number, None, program.name, by)
         self._update_state(p)
@@ -651,5 +659,3 @@ class Engine(SyncRules):
         self._update_state(p)
         self._became_free(p)
 
-
-__all__ = ["Engine", "WaitKind"]

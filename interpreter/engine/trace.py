@@ -46,11 +46,6 @@ class Trace:
         self._listeners: list[Listener] = []
 
     @property
-    def kept(self) -> list[Event]:
-        """The typed events kept (every one, or the latest ``keep``), in event order."""
-        return list(self._ring) if self.keep is not None else self._all
-
-    @property
     def events(self) -> list[EventDict]:
         """The events kept, as the dicts of spec 4.4."""
         if self.keep is not None:

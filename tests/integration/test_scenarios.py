@@ -233,7 +233,7 @@ def test_lazy_parse_starts_a_huge_program_without_parsing_it(tmp_path: Path) -> 
     (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "BIG"\nlazy_parse = true\n')
     config = load_config(tmp_path / "ncgate.toml")
     result = run_sim(config, "BIG", load_script(None), until=0.0)
-    program = next(iter(result.runtime.store._cache.values()))
+    _, program = next(iter(result.runtime.store._cache.values()))
     parsed = sum(1 for b in program._blocks if b is not None)
     assert parsed <= 2  # N1 and nothing past the wait
     assert result.events[-1]["event"] == "stall"
