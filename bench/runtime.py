@@ -45,6 +45,8 @@ class Loader:
 
 
 def simulate(programs: dict[str, str], **settings: object) -> tuple[Engine, float, float]:
+    # The loops measured here have no motion on purpose: no runaway limit (nc.runaway_blocks).
+    settings.setdefault("runaway_blocks", 0)
     engine = Engine(RuntimeSettings(**settings), IOImage(), Loader(programs),  # type: ignore[arg-type]
                     NC110(), Trace())
     gc.collect()

@@ -171,6 +171,11 @@ class NcConfig:
     stall_s: float = setting(60.0, "run: report a stall when every process with a program has "
                              "been blocked this long with the image unchanged", lo=0,
                              positive=True)
+    runaway_blocks: int = setting(100_000, "a process that decodes this many blocks without "
+                                  "time passing is a runaway: alarm AL144 (0: no limit)",
+                                  lo=0, hi=1_000_000_000)
+    block_time_ms: float = setting(0.0, "processing time of each block in ms, as a real "
+                                   "control has (0: blocks take no time)", lo=0, hi=60_000)
     rapid_mm_min: float = setting(10000.0, "G0 feed", lo=0, positive=True)
     tool_change_s: float = setting(2.0, "duration of M6", lo=0)
     main: str = setting("PROG91", "the main program of process 1 (the operator's SPG)")

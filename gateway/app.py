@@ -144,8 +144,7 @@ class Gateway:
     def _settle(self) -> None:
         """Run what an outside input made runnable, at the input's time."""
         assert self._driver is not None
-        self.engine.run_until_blocked()
-        self._driver.kick()
+        self._driver.settle()
 
     async def start(self, name: str | None = None, process: int = 1) -> None:
         """The operator's SPG: start NAME (default: the config's main) in a process."""

@@ -31,7 +31,7 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 @dataclass
 class SimResult:
-    outcome: str  # "idle", "until", "stall", "alarm"
+    outcome: str  # "idle", "until", "stall", "alarm", "interrupted"
     exit_status: int
     runtime: Runtime
 
@@ -145,19 +145,34 @@ class ScriptPlayer:
                 self.runtime.engine.note_hazard(entry.sender, f"script {entry.key}: {exc}")
 
 
-def run_sim(config: Config, main: str, script: Script, until: float | None = None) -> SimResult:
-    """Run a closed simulation; raises ProgramError/ProgramNotFoundError if MAIN cannot start."""
+def run_sim(config: Config, main: str | Sequence[str], script: Script,
+            until: float | None = None) -> SimResult:
+    """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
+    process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)).
+
+    Raises ProgramError/ProgramNotFoundError if a program cannot start, ValueError if one
+    cannot run in its process (too many programs, an external process)."""
+    mains = [main] if isinstance(main, str) else list(main)
+    processes = config.nc.processes
+    if len(mains) > processes:
+        raise ValueError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
     player = ScriptPlayer(runtime, script)
     engine = runtime.engine
-    engine.start(main, 1, by="operator")
+    for number, name in enumerate(mains, start=1):
+        engine.start(name, number, by="operator")
     player.arm()
-    outcome = run_virtual(engine, until)
+    try:
+        outcome = run_virtual(engine, until)
+    except KeyboardInterrupt:  # Ctrl-C: what happened so far is still reported and written
+        engine.finish_stats()
+        return SimResult("interrupted", EXIT_FAILED, runtime)
     engine.finish_stats()
-    if outcome == "blocked":
+    alarms = any(p.stats.alarms for p in engine.processes.values())
+    if outcome == "blocked" and engine.blocked():
         engine.record_stall()
         return SimResult("stall", EXIT_FAILED, runtime)
-    if any(p.stats.alarms for p in engine.processes.values()):
+    if alarms:  # "blocked" with nobody blocked: every process left is in ALARM
         return SimResult("alarm", EXIT_FAILED, runtime)
     return SimResult(outcome, EXIT_OK, runtime)
 
@@ -184,14 +199,35 @@ def summary_table(result: SimResult) -> str:
     return out.getvalue()
 
 
+HAZARD_LINES = 20  # distinct hazards the summary lists; the trace has them all
+
+
 def report(result: SimResult, out: TextIO) -> None:
     engine = result.runtime.engine
+    hazards: dict[tuple[object, ...], list[EventDict]] = {}
     for event in result.events:
         if event["event"] in ("alarm", "stall", "deadlock"):
             out.write(_describe(event) + "\n")
+        elif event["event"] == "hazard":
+            key = (event["proc"], event.get("prog"), event.get("line"), event["message"])
+            hazards.setdefault(key, []).append(event)
+    for i, same in enumerate(hazards.values()):
+        if i == HAZARD_LINES:
+            out.write(f"... {len(hazards) - HAZARD_LINES} more hazards in the trace\n")
+            break
+        first = same[0]
+        where = f" {first['prog']}:{first['line']}" if first.get("prog") else ""
+        n = f" N{first['n']}" if first.get("n") is not None else ""
+        times = f" ({len(same)} times)" if len(same) > 1 else ""
+        out.write(f"[{first['t']:.3f}] P{first['proc']} hazard{where}{n}: "
+                  f"{first['message']}{times}\n")
     out.write(summary_table(result))
+    alarms = sum(p.stats.alarms for p in engine.processes.values())
     verdict = {"idle": "every program ended", "until": "stopped at --until",
-               "stall": "stall", "alarm": "ended with alarms"}[result.outcome]
+               "stall": "stall", "alarm": "ended with alarms",
+               "interrupted": "interrupted (Ctrl-C)"}[result.outcome]
+    if alarms and result.outcome != "alarm":
+        verdict += f", {alarms} alarm{'s' if alarms > 1 else ''}"
     out.write(f"simulated {engine.now:.3f} s: {verdict}\n")
 
 

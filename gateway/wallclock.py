@@ -36,6 +36,11 @@ class WallClockDriver:
         """Simulated seconds since the driver started."""
         return (self.loop.time() - self.t0) * self.scale
 
+    def settle(self) -> None:
+        """Run (a slice of) what an outside input made runnable, now; the rest soon."""
+        self.engine.run_until_blocked(self.engine.settings.slice_blocks)
+        self.kick()
+
     def kick(self) -> None:
         if self._soon is None:
             self._soon = self.loop.call_soon(self._run)
@@ -44,7 +49,10 @@ class WallClockDriver:
         self._soon = None
         self._timer = None if due else self._timer
         # A loop timer may fire a hair early: never let time run backwards past what is due.
-        self.engine.advance_to(max(self.now(), due))
+        # At most a slice of blocks at a time: a loop with no motion must leave the event
+        # loop free to serve the fieldbus and signals; the rest runs on the next turn.
+        if self.engine.advance_to(max(self.now(), due), self.engine.settings.slice_blocks):
+            self.kick()
         self._arm()
         self._arm_stall()
         self.changed.set()

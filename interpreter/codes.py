@@ -83,6 +83,7 @@ class AlarmCode(enum.IntEnum):
     ORPHAN_WAIT = 141
     STALL = 142
     WAIT_TIMEOUT = 143
+    RUNAWAY = 144
 
     @property
     def label(self) -> str:

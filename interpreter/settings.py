@@ -34,5 +34,9 @@ class RuntimeSettings:
     main: str | None = None
     # Closed simulation: nothing outside can start a program (orphan-wait detection).
     closed: bool = True
-    # Blocks one process decodes before the others get a turn (a loop with no motion).
+    # Blocks one process decodes before the others (and, under run, the fieldbus) get a turn.
     slice_blocks: int = 10_000
+    # Blocks a process may decode without time passing before it is a runaway (0: no limit).
+    runaway_blocks: int = 100_000
+    # Processing time of each block, in milliseconds (0: blocks take no time).
+    block_time_ms: float = 0.0

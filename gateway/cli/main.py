@@ -45,13 +45,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     sim = commands.add_parser(
         "sim", help="closed simulation on the virtual clock",
-        description="Run MAIN in process 1 on the virtual clock, the script playing the PLC; "
+        description="Run MAIN in process 1 on the virtual clock, the script playing the PLC "
+        "(several programs: the first in process 1, the second in process 2, ...); "
         "print a summary table. Exit 0 when every program ended normally (or --until was "
         "reached with no alarm), 1 on an alarm, deadlock or stall, 2 on usage, config or "
         "program errors.",
     )
-    sim.add_argument("main", nargs="?", metavar="MAIN",
-                     help="the main program (default: the config's nc.main)")
+    sim.add_argument("main", nargs="*", metavar="MAIN",
+                     help="the main program (default: the config's nc.main); more than one: "
+                     "each starts in its own process, in order")
     sim.add_argument("--config", metavar="C", help="config file (default: built-in)")
     sim.add_argument("--example", metavar="NAME", help="run an installed example: its config, "
                      "its script and its main program (see 'ncgate examples')")
@@ -166,11 +168,14 @@ def _sim(args: argparse.Namespace) -> int:
                              f"ncgate check --example {example.name}")
         args.config = str(example.config)
         args.script = args.script or (str(example.script) if example.script else None)
-        args.main = args.main or example.main
+        args.main = args.main or [example.main]
     config = load_config(args.config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
-    result = run_sim(config, args.main or config.nc.main, script, args.until)
+    try:
+        result = run_sim(config, args.main or config.nc.main, script, args.until)
+    except ValueError as exc:  # a program for a process that cannot run it
+        raise UsageError(str(exc)) from None
     report(result, sys.stdout)
     if args.trace:
         with open(args.trace, "w", encoding="utf-8") as out:

@@ -86,6 +86,10 @@ class Engine(SyncRules):
         self._timers = TimerHeap()
         self._runnable: deque[Process] = deque()
         self._running = False
+        self._unfinished = False  # a run limited in blocks left work at the current time
+        self._decoded = 0  # blocks decoded, all processes
+        self._epoch = 0  # counts the moments the engine stood still (runaway detection)
+        self._block_time = settings.block_time_ms / 1000.0
         # By (file, process): the latest version of each, with its compiled blocks.
         self._loaded: dict[tuple[str, int], LoadedProgram] = {}
         self.last_change = 0.0  # the time of the last state change or image write
@@ -170,6 +174,8 @@ class Engine(SyncRules):
                 self._drop_wait(wait)
             if p.int_timer is not None:
                 p.int_timer.cancel()
+            if p.dec_timer is not None:
+                p.dec_timer.cancel()
             where = p.where
             p.clear()
             p.loaded = None
@@ -182,26 +188,45 @@ class Engine(SyncRules):
         self._runnable.clear()
         self._clear_sync()
 
-    def run_until_blocked(self) -> None:
-        """Run everything runnable at the current time."""
+    def run_until_blocked(self, blocks: int | None = None) -> None:
+        """Run everything runnable at the current time.  With ``blocks``, stop once about
+        that many blocks were decoded (at most one turn of ``slice_blocks`` more) and leave
+        the rest runnable: the wall-clock driver serves the fieldbus between such runs."""
         if self._running:
             return
         self._running = True
         try:
             runnable = self._runnable
+            stop_at = None if blocks is None else self._decoded + blocks
+            self._unfinished = False
             while runnable:
+                if stop_at is not None and self._decoded >= stop_at:
+                    self._unfinished = True
+                    return
                 p = runnable.popleft()
                 p.queued = False
                 if p.loaded is not None and p.alarm is None and p.dec_block is None:
                     self._run_decoder(p)
+            # Nothing runnable: the engine stands still, time may pass.  A process that
+            # decodes runaway_blocks blocks between two such moments is a runaway.
+            self._epoch += 1
         finally:
             self._running = False
 
     def next_timer(self) -> float | None:
         return self._timers.next_time()
 
-    def advance_to(self, t: float) -> None:
-        """Let time pass to ``t``: fire the timers due, then run what became runnable."""
+    def advance_to(self, t: float, blocks: int | None = None) -> bool:
+        """Let time pass to ``t``: fire the timers due, each followed by what it made
+        runnable, then run what is runnable at ``t``.
+
+        With ``blocks`` (see :meth:`run_until_blocked`) this may stop early; it returns True
+        when work is left, and the caller calls again (with the same or a later ``t``): the
+        work left over runs first, before any timer."""
+        if self._unfinished:
+            self.run_until_blocked(blocks)
+            if self._unfinished:
+                return True
         while (timer := self._timers.pop_due(t)) is not None:
             callback = timer.callback
             assert callback is not None
@@ -211,10 +236,13 @@ class Engine(SyncRules):
                 self.now = timer.time
             timer.callback = None
             callback()
-            self.run_until_blocked()
+            self.run_until_blocked(blocks)
+            if self._unfinished:
+                return True
         if t > self.now:
             self.now = t
-        self.run_until_blocked()
+        self.run_until_blocked(blocks)
+        return self._unfinished
 
     def call_at(self, t: float, callback: Callable[[], None]) -> Timer:
         """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic)."""
@@ -284,8 +312,8 @@ class Engine(SyncRules):
         """Record an image write in the trace (the gateway forwards the image's changes)."""
         self.last_change = self.now
         p = self._writer_proc
-        if p is not None and who.startswith(f"P{p.number} "):
-            self._record(ev.Write, self.now, p.number, p.where, name, value, who)
+        if p is not None and who.startswith(f"P{p.number} "):  # at the writing block
+            self._record(ev.Write, self.now, p.number, self._writer_where, name, value, who)
         else:
             self._record(ev.Write, self.now, 0, None, name, value, who)
 
@@ -393,7 +421,15 @@ class Engine(SyncRules):
         assert loaded is not None
         blocks = loaded.blocks
         lines = len(blocks)
+        if p.spin_epoch != self._epoch:  # the engine stood still since: time could pass
+            p.spin_epoch = self._epoch
+            p.spin = 0
+        runaway = self.settings.runaway_blocks
         budget = self.settings.slice_blocks
+        if runaway and runaway - p.spin < budget:
+            budget = runaway - p.spin
+        turn = budget
+        block_time = self._block_time
         stats = p.stats
         try:
             while True:
@@ -425,18 +461,58 @@ class Engine(SyncRules):
                         p.op_i = i
                         return
                     elif result == JUMP:
+                        p.loop = (block.where, p.pc)
                         break
                     else:  # END
                         return
                 else:
                     p.pc += 1
                 p.block = None
-                budget -= 1
-                if budget == 0:  # let the others run; a loop with no motion never blocks
-                    self._make_runnable(p)
+                if block.counted:  # blocks as the statistics count them: not empty lines
+                    budget -= 1
+                    if block_time:  # the block takes its processing time
+                        p.dec_block = DecoderHold.BLOCK_TIME
+                        p.dec_timer = self._schedule(block_time,
+                                                     functools.partial(self._block_timed, p))
+                        return
+                if budget == 0:
+                    p.spin += turn
+                    self._decoded += turn
+                    turn = 0
+                    if runaway and p.spin >= runaway:
+                        self._runaway(p)
+                        return
+                    self._make_runnable(p)  # let the others run; this one goes on after
                     return
         except RuntimeAlarm as alarm:
             self._alarm(p, alarm.code, alarm.message, p.where)
+        finally:
+            p.spin += turn - budget
+            self._decoded += turn - budget
+    def _block_timed(self, p: Process) -> None:
+        p.dec_timer = None
+        if p.dec_block is DecoderHold.BLOCK_TIME:
+            p.dec_block = None
+            self._make_runnable(p)
+
+    def _runaway(self, p: Process) -> None:
+        """A process decoded runaway_blocks blocks and no time passed: name its loop."""
+        limit = self.settings.runaway_blocks
+        advice = ("; give the loop motion, a dwell or a wait, or set nc.block_time_ms")
+        if p.loop is None:
+            self._alarm(p, AlarmCode.RUNAWAY,
+                        f"runaway: {limit} blocks without time passing{advice}", p.where)
+            return
+        (file, line, n), target = p.loop
+        assert p.loaded is not None
+        lines = p.loaded.program.lines
+
+        def shown(index: int) -> str:
+            text = lines[index].strip() if 0 <= index < len(lines) else ""
+            return f"line {index + 1}" + (f" '{text[:40]}'" if text else "")
+        self._alarm(p, AlarmCode.RUNAWAY,
+                    f"runaway: {limit} blocks without time passing in the loop from "
+                    f"{shown(line - 1)} back to {shown(target)}{advice}", (file, line, n))
 
     def end_decoding(self, p: Process, how: str, where: Where) -> None:
         p.dec_block = DecoderHold.DONE
@@ -583,7 +659,7 @@ class Engine(SyncRules):
 
     def _do_write_syvar(self, p: Process, stage: Stage, action: WriteSyvar,
                         where: Where) -> bool:
-        self.write_syvar(p, action.index, action.value, where)
+        self.write_syvar(p, action.index, action.value, where, stage)
         return True
 
     def _show_text(self, p: Process, stage: Stage, action: ShowText, where: Where) -> bool:
@@ -649,6 +725,8 @@ class Engine(SyncRules):
             self._drop_wait(wait)
         if p.int_timer is not None:
             p.int_timer.cancel()
+        if p.dec_timer is not None:
+            p.dec_timer.cancel()
         self._forget_waiter(p)
         loaded = p.loaded
         p.clear()

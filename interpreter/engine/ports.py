@@ -13,7 +13,7 @@ sibling folder.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
@@ -55,6 +55,11 @@ class ProgramText(Protocol):
     @property
     def file(self) -> str: ...
 
+    @property
+    def lines(self) -> Sequence[str]:
+        """The source of each block (for messages)."""
+        ...
+
     def __len__(self) -> int: ...
 
 
@@ -90,7 +95,8 @@ class BlockHost(Protocol):
     def send(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
         """``(SND,n)``: likewise."""
 
-    def write_syvar(self, p: Process, index: int, value: int, where: Where) -> None: ...
+    def write_syvar(self, p: Process, index: int, value: int, where: Where,
+                    stage: Stage = ...) -> None: ...
 
     def end_decoding(self, p: Process, how: str, where: Where) -> None:
         """The program ends (REL, M30, ...) once the motion queued before has run."""

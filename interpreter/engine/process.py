@@ -86,6 +86,11 @@ class Process:
         self.int_remaining: float | None = None  # a timed item paused by a feed hold
         self.int_wait: WaitRecord | None = None
         self.sync_i = 0
+        self.dec_timer: Timer | None = None  # nc.block_time_ms: the block's processing time
+        # Runaway detection: blocks decoded since the engine last stood still (its epoch).
+        self.spin = 0
+        self.spin_epoch = -1
+        self.loop: tuple[Where, int] | None = None  # the last jump: its block, its target
 
     @property
     def motion_active(self) -> bool:

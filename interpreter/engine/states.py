@@ -4,6 +4,7 @@ dataclasses.  Everything else in the engine speaks these types; nothing here act
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
@@ -52,6 +53,7 @@ class DecoderHold(enum.Enum):
     FULL = "full"  # the motion queue is full: retry the block when an item is done
     FLUSH = "flush"  # until the motion queue is empty (lookahead 0, sync_reads)
     DONE = "done"  # reached the end; the program ends when the queue drains
+    BLOCK_TIME = "block_time"  # nc.block_time_ms: the last block's processing time runs
 
 
 STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
@@ -77,6 +79,9 @@ class WaitRecord:
     writer: str | None = None
     handle: Cancellable | None = None
     timeout: Timer | None = None
+    # A condition's variable as it is now: (value, last writer).  The why-record shows the
+    # current value and who wrote it last (spec 2.2.6), not those from when the wait began.
+    probe: Callable[[], tuple[int, str | None]] | None = None
 
     def describe(self, proc: int) -> str:
         file, line, n = self.where
@@ -85,8 +90,9 @@ class WaitRecord:
 
     def reason(self) -> str:
         if self.kind is WaitKind.COND:
-            writer = f", last written by {self.writer}" if self.writer else ""
-            return f"waits for {self.cond} (now {fmt_number(self.value)}{writer})"
+            value, writer = self.probe() if self.probe is not None else (self.value, self.writer)
+            by = f", last written by {writer}" if writer else ""
+            return f"waits for {self.cond} (now {fmt_number(value)}{by})"
         return {WaitKind.PROC: f"waits for an SND from P{self.target}",
                 WaitKind.SND: f"waits for P{self.target} to take its SND",
                 WaitKind.EXE: f"waits for P{self.target} to be free"}.get(self.kind, "waits")

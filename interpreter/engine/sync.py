@@ -87,6 +87,7 @@ class SyncRules:
         self._tokens: dict[tuple[int, int], deque[Where | None]] = {}
         self._exe_waiters: dict[int, deque[tuple[Process, ProgramText, str]]] = {}
         self._writer_proc: Process | None = None
+        self._writer_where: Where | None = None  # the block of the write under way
         # The last SND delivered: sender, target, N, its number on the event counter.
         self.last_snd: tuple[int, int, int, int] | None = None
 
@@ -108,6 +109,8 @@ class SyncRules:
     # ---- WAI,n ----------------------------------------------------------------------------
 
     def wait_process(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        if p.queue and stage is Stage.DECODER:
+            self._acts_early(p, code, where)
         if n == p.number:
             raise RuntimeAlarm(AlarmCode.WAIT_FOR_SELF, "a process cannot wait for itself")
         sender = self._process_arg(n)
@@ -138,6 +141,8 @@ class SyncRules:
     # ---- SND,n ----------------------------------------------------------------------------
 
     def send(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
+        if p.queue and stage is Stage.DECODER:
+            self._acts_early(p, code, where)
         target = self._process_arg(n)
         if target.external:
             self._deliver_snd(p, target, None, where=where)
@@ -201,13 +206,17 @@ class SyncRules:
 
     def _wait_condition(self, p: Process, stage: Stage, cond: WaitCondition,
                         where: Where) -> bool:
+        if p.queue and stage is Stage.DECODER:
+            self._acts_early(p, f"(WAI,{cond.text})", where)
         area, index, view = cond.area, cond.index, cond.view
         wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self.now, stage,
                           cond=cond.text)
 
         def satisfied() -> None:
             wait.handle = None
+            wait.probe = None
             wait.value = self.image.read(area, index, view)
+            wait.writer = self.image.last_writer(area, index, view)
             self._finish_wait(p, wait, "cond")
 
         handle = self.image.wait(area, index, view, cond.test, satisfied)
@@ -216,16 +225,33 @@ class SyncRules:
         wait.handle = handle
         wait.value = self.image.read(area, index, view)
         wait.writer = self.image.last_writer(area, index, view)
+        image = self.image
+        wait.probe = lambda: (image.read(area, index, view), image.last_writer(area, index, view))
         self._begin_wait(p, stage, wait)
         return False
 
-    def write_syvar(self, p: Process, index: int, value: int, where: Where) -> None:
+    def write_syvar(self, p: Process, index: int, value: int, where: Where,
+                    stage: Stage = Stage.DECODER) -> None:
+        if p.queue and stage is Stage.DECODER:
+            self._acts_early(p, f"SYVAR{index}={value}", where)
         self._writer_proc = p
+        self._writer_where = where
         try:
             n = f" N{where[2]}" if where[2] is not None else f" line {where[1]}"
             self.image.write([("SYVAR", index, "IN", value)], f"P{p.number}{n}")
         finally:
             self._writer_proc = None
+
+    def _acts_early(self, p: Process, code: str, where: Where) -> None:
+        """A plain (not #) SND, WAI or SYVAR write acts when the decoder reaches it (spec 2.4),
+        here while motion programmed above it is still queued: on the machine it happens
+        before that motion ends.  Legal (manual 1.4), but rarely what was meant: say so."""
+        _, line, n = p.queue[0].where
+        above = f"N{n}" if n is not None else f"line {line}"
+        self._record(ev.Hazard, self.now, p.number, where,
+                     f"{code} acted at decode time while motion programmed above it ({above}) "
+                     "was still queued; mark the block # to act in motion order, or set "
+                     "nc.lookahead = 0")
 
     # ---- EXE --------------------------------------------------------------------------------
 
@@ -315,6 +341,10 @@ class SyncRules:
         message = deadlock.describe_cycle(start, cycle)
         blocked = tuple(Blocked(p.number, *w.where, w.code) for p, w in cycle)
         self._record(ev.Deadlock, self.now, 0, None, blocked, message)
+        # Every member is the deadlock: none of them may first be alarmed as the partner of
+        # another (an SND to a process in ALARM), so none of them waits for anyone any more.
+        for p, _ in cycle:
+            self._forget_waiter(p)
         for p, wait in cycle:
             self._alarm(p, AlarmCode.DEADLOCK, message, wait.where)
 

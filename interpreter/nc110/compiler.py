@@ -407,14 +407,33 @@ class _BlockCompiler:
     def _repeat_op(self, item: Repeat) -> Op:
         count = self._int_arg(item.count, "repeat count")
         index = self.index
+        program = self.program
 
         def repeat(p: Process) -> Step:
             n = count(p)
-            if n < 1:
-                raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, f"(RPT,{n}): count below 1")
+            if n < 0:
+                raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, f"(RPT,{n}): a negative count")
+            if n == 0:  # repeated no time: on after the matching (ERP)
+                p.pc = _matching_erp(program, index) + 1
+                p.block = None
+                return JUMP
             p.repeats.append([index, n])
             return NEXT
         return repeat
+
+
+def _matching_erp(program: Program, index: int) -> int:
+    """The line of the (ERP) that closes the (RPT) on line ``index`` (nesting counted)."""
+    depth = 0
+    for i in range(index + 1, len(program)):
+        for item in program.block(i).items:
+            if isinstance(item, Repeat):
+                depth += 1
+            elif isinstance(item, EndRepeat):
+                if depth == 0:
+                    return i
+                depth -= 1
+    raise RuntimeAlarm(AlarmCode.REPEAT_MISMATCH, "(RPT) without a matching (ERP)")
 
 
 def _int16(value: float, name: str) -> int:

@@ -100,3 +100,28 @@ def test_map_shows_the_canopen_dictionary(capsys: pytest.CaptureFixture[str]) ->
     assert capsys.readouterr().out.startswith("index,sub,name,type,access,default\n0x1000,0,")
     assert main(["map"]) == 0
     assert "# CANopen dictionary (node 16)" in capsys.readouterr().out
+
+
+async def test_a_runaway_program_leaves_modbus_answering_and_sigterm_working(
+        tmp_path: Path) -> None:
+    """Issue 9.1: a loop with no motion and no runaway limit decodes forever, in slices: the
+    event loop still serves Modbus between them and stops on SIGTERM."""
+    (tmp_path / "LOOP.nc").write_text('"L"\nN1E1=E1+1\nN2(DIS,"spin",E1)\nN3(BNC,L)\n')
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "LOOP"\nautostart = true\nrunaway_blocks = 0\n'
+                      '[nc.storage]\nMP0 = "."\n[modbus]\nport = 0\n')
+    proc, port, lines = await start_run(config)
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0, timeout=5)
+    assert await client.connect()
+    for _ in range(20):  # the loop runs all along; every read is answered
+        r = await client.read_input_registers(0, count=2, device_id=1)
+        assert r.registers == [1, 5]
+    client.close()
+    proc.send_signal(signal.SIGTERM)
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines) + rest
+    assert code == 0, log[-2000:]
+    assert "Traceback" not in log

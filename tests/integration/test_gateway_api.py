@@ -136,3 +136,31 @@ async def test_a_stall_is_reported_after_stall_s_and_not_again_until_something_c
         gw.write("SA11", 1)
         await gw.wait_idle(timeout_s=10)
     assert len(stalls) == 2
+
+
+async def test_a_runaway_loop_is_an_alarm_and_start_returns(tmp_path: Path) -> None:
+    """Issue 9.1: `await gw.start` returns; the loop ends in AL144 naming the loop."""
+    (tmp_path / "LOOP.nc").write_text('"L"\nN1E1=E1+1\nN2(BNC,L)\n')
+    (tmp_path / "ncgate.toml").write_text('[nc.storage]\nMP0 = "."\n')
+    async with Gateway(fast(tmp_path)) as gw:
+        await gw.start("LOOP")
+        with pytest.raises(ProcessAlarmError, match=r"runaway: 100000 blocks.*line 3"):
+            await gw.wait_idle(timeout_s=20)
+        assert gw.status(1).alarm_code == 144
+
+
+async def test_an_endless_loop_without_limit_can_be_reset_by_the_fieldbus(
+        tmp_path: Path) -> None:
+    (tmp_path / "LOOP.nc").write_text('"L"\nN1E1=E1+1\nN2(BNC,L)\n')
+    (tmp_path / "ncgate.toml").write_text('[nc]\nrunaway_blocks = 0\n[nc.storage]\nMP0 = "."\n')
+    async with Gateway(fast(tmp_path)) as gw:
+        await gw.start("LOOP")
+        driver = gw._driver
+        assert driver is not None
+        for _ in range(3):  # the engine hands the loop back between slices
+            driver.changed.clear()
+            await driver.changed.wait()
+        blocks = gw.status(1).blocks
+        assert gw.status(1).state.name == "RUNNING" and blocks > 0
+        gw.command(3)  # reset, as a PLC would write it
+        await gw.wait_idle(timeout_s=5)
