@@ -122,6 +122,20 @@ def main() -> None:
     print(f"parse + check (ncgate):     {lines / parse_s:12,.0f} lines/s  ({parse_s:.3f} s)")
     print(f"ratio parse+check / tokeniser: {parse_s / base_s:.2f}x   "
           f"(targets: >= 50,000 lines/s, <= 4x)")
+    one_huge_block()
+
+
+def one_huge_block() -> None:
+    """Issue 9.2: one block of 160,000 words (320 KB) costs what its words cost in a block
+    of 16,000: the time per word of the two, and their ratio (1.0 is linear)."""
+    per_word = {}
+    for words in (16_000, 160_000):
+        text = "N1G1F600" + "X1Y2" * (words // 2) + "\n"
+        seconds = best_of(2, parse_and_check, text)
+        per_word[words] = seconds / words
+        print(f"one block of {words:7,} words ({len(text) / 1024:5.0f} KB): {seconds:.3f} s")
+    print(f"time per word, 160,000 vs 16,000: {per_word[160_000] / per_word[16_000]:.2f}x   "
+          "(linear: about 1x)")
 
 
 if __name__ == "__main__":

@@ -29,6 +29,9 @@ class DiagnosticCode(enum.Enum):
     MISSING_COMPARISON = ("NC006", Severity.ERROR, "a WAI condition without = # > <")
     UNTERMINATED_STRING = ("NC010", Severity.ERROR, "a label or text without its closing quote")
     MISSING_CLOSE_PAREN = ("NC012", Severity.ERROR, "a code without its closing ')'")
+    EXPRESSION_TOO_DEEP = ("NC013", Severity.ERROR, "an expression nested deeper than 64 levels")
+    NUMBER_OUT_OF_RANGE = ("NC014", Severity.ERROR, "a number too large to represent")
+    NOT_UTF8 = ("NC015", Severity.ERROR, "a program file that is not UTF-8")
     # -- semantics (the checker) ----------------------------------------------------------
     PROCESS_OUT_OF_RANGE = ("NC020", Severity.ERROR, "a process number that is not configured")
     WAIT_FOR_SELF = ("NC021", Severity.ERROR, "(WAI,n) on the process's own number")
@@ -39,6 +42,7 @@ class DiagnosticCode(enum.Enum):
     INDEX_OUT_OF_RANGE = ("NC031", Severity.ERROR, "a constant index outside the configured size")
     WRITE_TO_PLC_PACKET = ("NC032", Severity.ERROR, "a program writing SA or SK (PLC-owned)")
     BIT_VALUE = ("NC033", Severity.ERROR, "a bit compared with a value other than 0 or 1")
+    FEED_NOT_POSITIVE = ("NC034", Severity.ERROR, "a feed (F) of zero or less")
     UNKNOWN_LABEL = ("NC040", Severity.ERROR, "a jump to a label the program does not define")
     DUPLICATE_LABEL = ("NC041", Severity.ERROR, "a label defined twice")
     UNBALANCED_REPEAT = ("NC042", Severity.ERROR, "RPT without ERP, or ERP without RPT")
@@ -48,6 +52,7 @@ class DiagnosticCode(enum.Enum):
     SYVAR_WITHOUT_INDEX = ("NW001", Severity.WARNING, "SYVAR with no index reads SYVAR0")
     UNMODELLED_CODE = ("NW002", Severity.WARNING, "an NC-110 code the simulator keeps inert")
     CONDITION_NEVER_HOLDS = ("NW003", Severity.WARNING, "a WAI value outside the variable's range")
+    CYRILLIC_LOOKALIKE = ("NW004", Severity.WARNING, "Cyrillic look-alikes read as Latin (Е4)")
 
     @property
     def code(self) -> str:

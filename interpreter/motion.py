@@ -14,6 +14,10 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm
 
 AXES = "XYZUVWABC"
+# An I/J/K arc's end must lie on the circle through its start (as LinuxCNC and real controls
+# check): the two radii may differ by this much, absolute or relative, whichever is larger.
+ARC_TOLERANCE_MM = 0.002
+ARC_TOLERANCE_REL = 0.001
 AXIS_INDEX = {a: i for i, a in enumerate(AXES)}
 PLANES = {17: (0, 1, 2, "I", "J"), 18: (2, 0, 1, "K", "I"), 19: (1, 2, 0, "J", "K")}
 
@@ -58,8 +62,11 @@ def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
             raise RuntimeAlarm(AlarmCode.NO_FEED,
                                f"G{modal.motion} move with no feed (F) programmed")
         rate = modal.feed_mm_min
+    duration = length / rate * 60.0
+    if not math.isfinite(duration):  # coordinates near the limits of a double
+        raise RuntimeAlarm(AlarmCode.VALUE_OUT_OF_RANGE, "the move is too long to represent")
     modal.position = end
-    return Move(start, tuple(end), length, length / rate * 60.0)
+    return Move(start, tuple(end), length, duration)
 
 
 def _arc_length(modal: Modal, start: tuple[float, ...], end: list[float],
@@ -82,6 +89,12 @@ def _arc_length(modal: Modal, start: tuple[float, ...], end: list[float],
         radius = math.hypot(sa - ca, sb - cb)
         if radius == 0:
             raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, "arc with no radius (I/J/K missing)")
+        end_radius = math.hypot(ea - ca, eb - cb)
+        if abs(end_radius - radius) > max(ARC_TOLERANCE_MM, ARC_TOLERANCE_REL * radius):
+            raise RuntimeAlarm(
+                AlarmCode.BAD_ARGUMENT,
+                f"arc end point is not on its circle: radius {radius:.4f} mm at the start, "
+                f"{end_radius:.4f} mm at the end")
         a0 = math.atan2(sb - cb, sa - ca)
         a1 = math.atan2(eb - cb, ea - ca)
         sweep = (a0 - a1) if clockwise else (a1 - a0)

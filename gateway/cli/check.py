@@ -12,6 +12,7 @@ read for that even when it is not among the files checked.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
@@ -21,7 +22,7 @@ from pathlib import Path
 from ncgate.config import Config, StorageConfig, load_config
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.programs import check_context, storage_of
-from ncgate.interpreter.diagnostics import Diagnostic
+from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
 from ncgate.interpreter.nc110.checker import check_program
 from ncgate.interpreter.nc110.nodes import Exe, Num
 from ncgate.interpreter.nc110.parser import Program, program_name
@@ -102,12 +103,19 @@ def check_files(
     for paths in groups.values():
         cfg = config if config is not None else config_for(paths[0], None)
         storage = storage_of(cfg)
-        programs = {p: Program.from_path(p) for p in paths}
+        programs: dict[Path, Program] = {}
+        for path in paths:
+            try:
+                programs[path] = Program.from_path(path)
+            except ProgramSyntaxError as exc:  # not UTF-8: its report is that diagnostic
+                reports[path] = FileReport(path, exc.diagnostics)
         known = {program.name.upper() for program in programs.values()}
         context_programs = list(programs.values())
         main_path = storage.find(cfg.nc.main)
         if main_path is not None and program_name(main_path).upper() not in known:
-            context_programs.append(Program.from_path(main_path))
+            # A main program that is not UTF-8 starts nothing we could infer from.
+            with contextlib.suppress(ProgramSyntaxError):
+                context_programs.append(Program.from_path(main_path))
         runs = process_assignments(context_programs, cfg.nc.main)
         for path, program in programs.items():
             runs_in = {process} if process is not None else runs.get(program.name.upper(), set())

@@ -138,9 +138,9 @@ class _Checker:
                 continue
             for item in block.items:
                 kind = type(item)
-                if kind is Word:  # most items: only an E-parameter value needs a look
-                    if type(item.value) is VarRef:  # type: ignore[union-attr]
-                        self.var(item.value)  # type: ignore[union-attr]
+                if kind is Word:  # most items: only an E parameter or a feed needs a look
+                    if type(item.value) is VarRef or item.letter == "F":  # type: ignore[union-attr]
+                        self.word(item)  # type: ignore[arg-type]
                     continue
                 handler = dispatch.get(kind)
                 if handler is not None:
@@ -191,6 +191,9 @@ class _Checker:
     def word(self, item: Word) -> None:
         if isinstance(item.value, VarRef):
             self.var(item.value)
+        elif item.letter == "F" and item.value <= 0:
+            self.report(DiagnosticCode.FEED_NOT_POSITIVE,
+                        f"F{item.text}: a feed must be positive (mm/min)", item.span)
 
     def assign(self, item: Assign) -> None:
         target = item.target

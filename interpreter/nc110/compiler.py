@@ -260,6 +260,9 @@ class _BlockCompiler:
                 elif g == 91:
                     modal.absolute = False
             elif letter == "F":
+                if v <= 0:
+                    raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT,
+                                       f"F{fmt_number(v)}: a feed must be positive")
                 modal.feed_mm_min = v
             elif letter == "T":
                 modal.tool = word.text

@@ -68,11 +68,22 @@ def _source(expr: Expr) -> str:
 _NAMESPACE: dict[str, Any] = {"_div": _div, **{f"_f_{k}": v for k, v in _FUNCS.items()}}
 
 
+def _not_finite(value: float) -> float:
+    what = "not a number" if value != value else "too large (overflow)"
+    raise RuntimeAlarm(AlarmCode.VALUE_OUT_OF_RANGE, f"the value of an expression is {what}")
+
+
+_NAMESPACE["_not_finite"] = _not_finite
+
+
 def compile_expr(expr: Expr) -> Evaluator:
+    """The expression as a function; it never returns inf or NaN (``v - v`` is 0 only for a
+    finite v): overflow is an alarm at the block that computed it."""
     if isinstance(expr, Num):
         value = expr.value
         return lambda E, read: value
-    fn: Evaluator = eval(f"lambda E, read: {_source(expr)}", dict(_NAMESPACE))
+    fn: Evaluator = eval(f"lambda E, read: v if (v := {_source(expr)}) - v == 0 "
+                         "else _not_finite(v)", dict(_NAMESPACE))
     return fn
 
 

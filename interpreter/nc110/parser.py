@@ -20,7 +20,7 @@ Must not import ``plc`` or ``gateway``.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from functools import cache
 from importlib import resources
 from itertools import accumulate
@@ -127,8 +127,23 @@ def _var_from_token(tok: Tok, ctx: _Ctx) -> VarRef:
 
 # The builders call these two directly: a word's letter and kind are the same in every line
 # of a shape, so only the value text varies.
+_INF: Final = float("inf")
+
+
+def _float(text: str, col: int, ctx: _Ctx) -> float:
+    """A literal's value; one that is too large for a double is a diagnostic, not inf."""
+    value = float(text)
+    if value == _INF:
+        raise _error(ctx, col, DiagnosticCode.NUMBER_OUT_OF_RANGE,
+                     f"a number of {len(text)} characters is too large (at most about 1.8e308)")
+    return value
+
+
 def _number_word(letter: str, value: str, col: int, ctx: _Ctx) -> Word:
-    return Word(letter, float(value), value, _new_tuple(Span, (ctx[0], ctx[1], col)))
+    number = float(value)
+    if number == _INF:  # inline: this is the commonest node of all
+        number = _float(value, col + 1, ctx)
+    return Word(letter, number, value, _new_tuple(Span, (ctx[0], ctx[1], col)))
 
 
 def _e_word(letter: str, value: str, col: int, ctx: _Ctx) -> Word:
@@ -215,15 +230,15 @@ def _cb_other_code(ch: list[Child], ctx: _Ctx) -> InertCode:
 
 
 def _cb_number(ch: list[Child], ctx: _Ctx) -> Num:
-    return Num(float(ch[0][1]), _span(ctx, ch[0][2]))
+    return Num(_float(ch[0][1], ch[0][2], ctx), _span(ctx, ch[0][2]))
 
 
 def _cb_neg_number(ch: list[Child], ctx: _Ctx) -> Num:
-    return Num(-float(ch[1][1]), _span(ctx, ch[0][2]))
+    return Num(-_float(ch[1][1], ch[1][2], ctx), _span(ctx, ch[0][2]))
 
 
 def _cb_number_plus(ch: list[Child], ctx: _Ctx) -> Num:
-    return Num(float(ch[1][1]), _span(ctx, ch[0][2]))
+    return Num(_float(ch[1][1], ch[1][2], ctx), _span(ctx, ch[0][2]))
 
 
 def _cb_binop(ch: list[Child], ctx: _Ctx) -> Binary:
@@ -286,14 +301,16 @@ Builder = Callable[[Sequence[str], Sequence[int], _Ctx], Any]
 _CALLBACK_NAMES: Final = {cb: f"_cb_{name}" for name, cb in _CALLBACKS.items()}
 
 
-def _token_parts(token: Token, shape: str, split: bool, skip: int = 0) -> tuple[str, str]:
-    """Source of the token's text (less its first ``skip`` characters) and of its column."""
+def _token_parts(token: Token, runs_before: Sequence[int], split: bool,
+                 skip: int = 0) -> tuple[str, str]:
+    """Source of the token's text (less its first ``skip`` characters) and of its column.
+    ``runs_before[i]``: how many digit runs (each a "0" in the shape) come before column i."""
     pos = token.start_pos or 0
     if not split:
         return repr(token.value[skip:]), str(pos + 1)
     pieces = token.value.split("0")
     pieces[0] = pieces[0][skip:]
-    k = shape.count("0", 0, pos)
+    k = runs_before[pos]
     text = " + ".join(
         part for i, piece in enumerate(pieces)
         for part in ((repr(piece),) if i == 0 else (f"runs[{k + i - 1}]", repr(piece)))
@@ -304,33 +321,33 @@ def _token_parts(token: Token, shape: str, split: bool, skip: int = 0) -> tuple[
     return text, col
 
 
-def _tree_source(tree: Tree[Token] | Token, shape: str, split: bool) -> str:
+def _tree_source(tree: Tree[Token] | Token, runs_before: Sequence[int], split: bool) -> str:
     if isinstance(tree, Token):
-        text, col = _token_parts(tree, shape, split)
+        text, col = _token_parts(tree, runs_before, split)
         return f"({tree.type!r}, {text}, {col})"
     rule = tree.data if isinstance(tree.data, str) else tree.data.value
     if rule == "start":
-        return _start_source(tree, shape, split)
+        return _start_source(tree, runs_before, split)
     if rule == "word":  # the commonest node: no child list, no token tuple
         token = tree.children[0]
         assert isinstance(token, Token)
-        value, col = _token_parts(token, shape, split, skip=1)
+        value, col = _token_parts(token, runs_before, split, skip=1)
         make = "_e_word" if token.value[1] in "eE" else "_number_word"
         return f"{make}({token.value[0].upper()!r}, {value}, {col}, ctx)"
-    children = ", ".join(_tree_source(c, shape, split) for c in tree.children)
+    children = ", ".join(_tree_source(c, runs_before, split) for c in tree.children)
     return f"{_CALLBACK_NAMES[_CALLBACKS[rule]]}([{children}], ctx)"
 
 
-def _start_source(tree: Tree[Token], shape: str, split: bool) -> str:
+def _start_source(tree: Tree[Token], runs_before: Sequence[int], split: bool) -> str:
     """The Block of a shape, built in one call: its prefix and items are known statically."""
     fields = {"deleted": "False", "label": "None", "number": "None", "synced": "False",
               "comment": "None"}
     items: list[str] = []
     for child in tree.children:
         if not isinstance(child, Token):
-            items.append(_tree_source(child, shape, split))
+            items.append(_tree_source(child, runs_before, split))
             continue
-        text, _ = _token_parts(child, shape, split)
+        text, _ = _token_parts(child, runs_before, split)
         if child.type == "NWORD":
             fields["number"] = f"int(({text})[1:])"
         elif child.type == "SLASH":
@@ -348,7 +365,8 @@ def _start_source(tree: Tree[Token], shape: str, split: bool) -> str:
 
 
 def _compile(tree: Tree[Token], shape: str, split: bool) -> Builder:
-    source = f"def build(runs, lens, ctx):\n    return {_tree_source(tree, shape, split)}\n"
+    runs_before = list(accumulate((c == "0" for c in shape), initial=0))
+    source = f"def build(runs, lens, ctx):\n    return {_tree_source(tree, runs_before, split)}\n"
     namespace: dict[str, Any] = {name: cb for cb, name in _CALLBACK_NAMES.items()}
     namespace.update(_number_word=_number_word, _e_word=_e_word, _Block=Block, _span=_span)
     exec(compile(source, f"<shape {shape!r}>", "exec"), namespace)
@@ -360,6 +378,98 @@ def _failed(runs: Sequence[str], lens: Sequence[int], ctx: _Ctx) -> Any:
     return _parse_as_written(ctx[2], ctx)
 
 
+# ---- limits: nesting and long blocks --------------------------------------------------------
+# An expression nests at most MAX_DEPTH levels: each operator, sign, pair of parentheses and
+# function call counts one (``1+2+3`` is two levels, ``-(SIN(E1))`` three).  Deeper input is
+# diagnosed (NC013) before anything recursive sees it.  A block longer than LONG_BLOCK
+# characters is built straight from lark's tree, without a recipe: recipes pay off for the
+# short blocks programs repeat, and compiling one for a huge block costs more than it saves.
+
+MAX_DEPTH: Final = 64
+LONG_BLOCK: Final = 1000
+_NESTING_RULES: Final = frozenset({"binop", "neg", "pos", "call", "paren"})
+
+
+def _rule(tree: Tree[Token]) -> str:
+    return tree.data if isinstance(tree.data, str) else tree.data.value
+
+
+def _too_deep(tree: Tree[Token]) -> Token | None:
+    """The operator, sign or opening token where nesting first passes MAX_DEPTH, if it does."""
+    stack: list[tuple[Tree[Token], int]] = [(tree, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if _rule(node) in _NESTING_RULES:
+            depth += 1
+            if depth > MAX_DEPTH:
+                children = node.children
+                token = children[1] if _rule(node) == "binop" else children[0]
+                return token if isinstance(token, Token) else None
+        stack.extend((c, depth) for c in node.children if isinstance(c, Tree))
+    return None
+
+
+def _check_depth(tree: Tree[Token], ctx: _Ctx) -> None:
+    token = _too_deep(tree)
+    if token is not None:
+        raise _error(ctx, (token.start_pos or 0) + 1, DiagnosticCode.EXPRESSION_TOO_DEEP,
+                     f"expression nested deeper than {MAX_DEPTH} levels (each operator, sign, "
+                     "parenthesis and function counts one)")
+
+
+def _build_direct(tree: Tree[Token], ctx: _Ctx) -> Block:
+    """The Block of a parse tree, built without recursion and without a recipe."""
+    stack: list[tuple[Tree[Token], list[Child], Iterator[Tree[Token] | Token]]] = [
+        (tree, [], iter(tree.children))]
+    while True:
+        node, built, children = stack[-1]
+        child = next(children, None)
+        if child is None:
+            stack.pop()
+            value = _finish(node, built, ctx)
+            if not stack:
+                block: Block = value
+                return block
+            stack[-1][1].append(value)
+        elif isinstance(child, Token):
+            built.append((child.type, child.value, (child.start_pos or 0) + 1))
+        elif _rule(child) == "word":
+            token = child.children[0]
+            assert isinstance(token, Token)
+            make = _e_word if token.value[1] in "eE" else _number_word
+            built.append(make(token.value[0].upper(), token.value[1:],
+                              (token.start_pos or 0) + 1, ctx))
+        else:
+            stack.append((child, [], iter(child.children)))
+
+
+def _finish(node: Tree[Token], built: list[Child], ctx: _Ctx) -> Any:
+    rule = _rule(node)
+    if rule != "start":
+        return _CALLBACKS[rule](built, ctx)
+    deleted, synced = False, False
+    label: str | None = None
+    number: int | None = None
+    comment: str | None = None
+    items = []
+    for c in built:
+        if type(c) is not tuple:
+            items.append(c)
+            continue
+        kind, text, _ = c
+        if kind == "NWORD":
+            number = int(text[1:])
+        elif kind == "SLASH":
+            deleted = True
+        elif kind == "STRING":
+            label = text[1:-1]
+        elif kind == "HASH":
+            synced = True
+        else:  # COMMENT
+            comment = text[1:].strip()
+    return Block(_span(ctx, 1), deleted, label, number, synced, tuple(items), comment)
+
+
 def parse_block_uncached(text: str, file: str = "<string>", line: int = 1) -> Block:
     """Parse one line with lark as written, bypassing the shape cache (for tests, debugging)."""
     ctx = (file, line, text)
@@ -367,6 +477,7 @@ def parse_block_uncached(text: str, file: str = "<string>", line: int = 1) -> Bl
         tree = lark_parser().parse(text)
     except UnexpectedInput as exc:
         raise LineError(_diagnose(exc, ctx)) from None
+    _check_depth(tree, ctx)
     block: Block = _compile(tree, text, split=False)((), _NO_RUNS, ctx)
     return block
 
@@ -378,6 +489,8 @@ _SHAPES_MAX: Final = 100_000
 
 def parse_block(text: str, file: str = "<string>", line: int = 1) -> Block:
     """Parse one line into a :class:`Block`; raise :class:`LineError` if it does not parse."""
+    if len(text) > LONG_BLOCK:
+        return _parse_as_written(text, (file, line, text))
     parts = _DIGIT_RUNS.split(text)
     shape = "0".join(parts[0::2])
     builder = _SHAPES.get(shape)
@@ -398,7 +511,8 @@ def _learn(shape: str) -> Builder:
     except UnexpectedInput:
         builder: Builder = _failed
     else:
-        builder = _compile(tree, shape, split=True)
+        # Too deep: the line as written gives the diagnostic, at its own columns.
+        builder = _failed if _too_deep(tree) else _compile(tree, shape, split=True)
     if len(_SHAPES) >= _SHAPES_MAX:
         _SHAPES.clear()
     _SHAPES[shape] = builder
@@ -406,13 +520,13 @@ def _learn(shape: str) -> Builder:
 
 
 def _parse_as_written(text: str, ctx: _Ctx) -> Block:
+    """Lark on the line as written (a long line, or one whose shape did not parse)."""
     try:
         tree = lark_parser().parse(text)
     except UnexpectedInput as exc:
         raise LineError(_diagnose(exc, ctx)) from None
-    # Not reached while the shape invariant holds; parse the line on its own terms if not.
-    block: Block = _compile(tree, text, split=False)((), _NO_RUNS, ctx)
-    return block
+    _check_depth(tree, ctx)
+    return _build_direct(tree, ctx)
 
 
 # ---- turning lark's errors into diagnostics ------------------------------------------------
@@ -481,6 +595,10 @@ def _diagnose(exc: UnexpectedInput, ctx: _Ctx) -> Diagnostic:
 
 # ---- programs ------------------------------------------------------------------------------
 
+_LOOKALIKE_CHARS: Final = "\u0410\u0412\u0415\u041a\u041c\u041d\u041e\u0420\u0421\u0422\u0425" \
+    "\u0430\u0432\u0435\u043a\u043c\u043d\u043e\u0440\u0441\u0442\u0445"  # АВЕКМНОРСТХ, lower
+_LOOKALIKES: Final = str.maketrans(_LOOKALIKE_CHARS, "ABEKMHOPCTXabekmhopctx")
+_CYRILLIC: Final = re.compile(f"[{_LOOKALIKE_CHARS}]")
 _LABELS: Final = re.compile(r'^[ \t]*(?:/[ \t]*)?"([^"\n]*)"', re.MULTILINE)
 
 
@@ -491,15 +609,21 @@ class Program:
     fast pre-scan, so a decoder can jump before the blocks in between were ever parsed.
     """
 
-    __slots__ = ("_blocks", "file", "label_lines", "labels", "lines", "name")
+    __slots__ = ("_blocks", "file", "label_lines", "labels", "lines", "name", "notes")
 
     def __init__(self, name: str, file: str, text: str) -> None:
         self.name = name
         self.file = file
+        if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
+            text = text[1:]
         lines = text.split("\n")
         if lines and lines[-1] == "":
             lines.pop()
         self.lines: list[str] = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+        # Diagnostics of the file as a whole, found before any block is parsed.
+        self.notes: list[Diagnostic] = []
+        if _CYRILLIC.search(text):
+            self._latinise()
         self.labels: dict[str, int] = {}
         self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
         line_no, last = 0, 0
@@ -507,14 +631,58 @@ class Program:
             line_no += text.count("\n", last, m.start())
             last = m.start()
             self.label_lines.append((m.group(1), line_no))
-            self.labels.setdefault(m.group(1).upper(), line_no)
+            # A jump's name had its look-alikes read as Latin: so has the label it names.
+            self.labels.setdefault(m.group(1).upper().translate(_LOOKALIKES), line_no)
         self._blocks: list[Block | None] = [None] * len(self.lines)
+
+    def _latinise(self) -> None:
+        """Read the Cyrillic look-alikes of address letters as their Latin twins, outside
+        quotes and comments (operators type Е4 for E4), with a warning naming them."""
+        for i, line in enumerate(self.lines):
+            if not _CYRILLIC.search(line):
+                continue
+            out: list[str] = []
+            found: list[tuple[int, str]] = []
+            quoted = False
+            for col, ch in enumerate(line, start=1):
+                if ch == '"':
+                    quoted = not quoted
+                elif ch == ";" and not quoted:
+                    out.append(line[col - 1:])
+                    break
+                elif not quoted and ch in _LOOKALIKE_CHARS:
+                    found.append((col, ch))
+                    ch = ch.translate(_LOOKALIKES)
+                out.append(ch)
+            if found:
+                self.lines[i] = "".join(out)
+                letters = ", ".join(sorted({f"{ch}\u2192{ch.translate(_LOOKALIKES)}"
+                                            for _, ch in found}))
+                self.notes.append(Diagnostic(
+                    DiagnosticCode.CYRILLIC_LOOKALIKE,
+                    f"Cyrillic letters read as their Latin twins: {letters}",
+                    _new_tuple(Span, (self.file, i + 1, found[0][0])), line))
 
     @classmethod
     def from_path(cls, path: Path | str, display: str | None = None) -> Program:
+        """Read a program file (UTF-8, with or without a byte-order mark).  A file that is not
+        UTF-8 is a diagnostic at its first bad byte (NC015), with the file's name."""
         p = Path(path)
-        text = p.read_text(encoding="utf-8")
-        return cls(program_name(p), display if display is not None else str(path), text)
+        shown = display if display is not None else str(path)
+        data = p.read_bytes()
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            start = data.rfind(b"\n", 0, exc.start) + 1
+            end = data.find(b"\n", exc.start)
+            source = data[start:end if end >= 0 else len(data)].decode("utf-8", "replace")
+            line = data.count(b"\n", 0, exc.start) + 1
+            column = len(data[start:exc.start].decode("utf-8", "replace")) + 1
+            raise ProgramSyntaxError([Diagnostic(
+                DiagnosticCode.NOT_UTF8,
+                f"byte 0x{data[exc.start]:02x} is not UTF-8: save the program as UTF-8",
+                _new_tuple(Span, (shown, line, column)), source.rstrip("\r"))]) from None
+        return cls(program_name(p), shown, text)
 
     def __len__(self) -> int:
         return len(self.lines)
@@ -532,7 +700,7 @@ class Program:
 
     def parse_all(self) -> tuple[list[Block | None], list[Diagnostic]]:
         """Every block (None where a line does not parse) and every syntax diagnostic."""
-        diagnostics: list[Diagnostic] = []
+        diagnostics: list[Diagnostic] = list(self.notes)
         blocks = self._blocks
         file = self.file
         with gc_paused():

@@ -22,14 +22,18 @@ from ncgate.gateway.sim import run_sim
 from ..conftest import EXAMPLES
 
 Event = dict[str, Any]
-_AXIS = re.compile(r"(?<=[XYZIJ])-?\d+(\.\d+)?")
+_AXIS = re.compile(r"(?<=[XYZ])-?\d+(\.\d+)?")
 _FEED = re.compile(r"(?<=F)\d+")
+_ARC = re.compile(r"G0?[23](?!\d)")
+_ARC_WORD = re.compile(r"[IJK]-?\d+(\.\d+)?")
 
 
 def randomise(text: str, rng: random.Random) -> str:
     out = []
     for line in text.splitlines():
         if not line.startswith(";") and "(" not in line:
+            # Random end points do not lie on an arc's circle: arcs become straight moves.
+            line = _ARC_WORD.sub("", _ARC.sub("G1", line))
             line = _AXIS.sub(lambda m: f"{rng.uniform(-200, 200):.3f}", line)
             line = _FEED.sub(lambda m: str(rng.randint(20, 20000)), line)
         out.append(line)
