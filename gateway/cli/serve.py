@@ -39,6 +39,9 @@ def describe(event: Event) -> str | None:
     return None
 
 
+HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace has them all)
+
+
 async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -48,7 +51,16 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
             loop.add_signal_handler(sig, stop.set)
             installed.append(sig)
 
+    hazards_logged: set[tuple[int, object]] = set()
+
     def on_event(event: Event) -> None:
+        if isinstance(event, ev.Hazard):
+            # A loop repeats its hazards every turn: the log names each block once, the
+            # trace has every one.
+            key = (event.proc, event.where)
+            if key in hazards_logged or len(hazards_logged) >= HAZARDS_LOGGED:
+                return
+            hazards_logged.add(key)
         line = describe(event)
         if line is not None:
             (log.warning if isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)

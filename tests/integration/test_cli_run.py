@@ -125,3 +125,29 @@ async def test_a_runaway_program_leaves_modbus_answering_and_sigterm_working(
     log = "".join(lines) + rest
     assert code == 0, log[-2000:]
     assert "Traceback" not in log
+
+
+async def test_the_log_names_a_hazard_once_per_block(tmp_path: Path) -> None:
+    """A loop repeats its hazard every turn: the log says it once, the trace every time."""
+    (tmp_path / "LOOP.nc").write_text(
+        '"L"\nN1G1X10F60000\nN2SYVAR1=E1\nN3G1X0\nN4E1=E1+1\nN5(BLT,E1,20,L)\nN6M30\n')
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "LOOP"\nautostart = true\ntime_scale = 1000.0\n'
+                      '[nc.storage]\nMP0 = "."\n[modbus]\nport = 0\n'
+                      f'[trace]\nfile = "{tmp_path / "t.jsonl"}"\n')
+    proc, _, lines = await start_run(config)
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):
+        while not any("P1 ends (M30)" in line for line in lines):
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(lines)
+            lines.append(line)
+    proc.send_signal(signal.SIGTERM)
+    async with asyncio.timeout(20):
+        lines.append((await proc.stdout.read()).decode())
+        assert await proc.wait() == 0
+    log = "".join(lines)
+    assert log.count("P1 hazard") == 1
+    assert "P1 hazard at LOOP.nc:3: SYVAR1=0 acted at decode time" in log
+    traced = [json.loads(line) for line in (tmp_path / "t.jsonl").read_text().splitlines()]
+    assert sum(e["event"] == "hazard" for e in traced) == 20
