@@ -222,7 +222,11 @@ class ModbusConfig:
     enabled: bool = setting(True, "serve Modbus TCP")
     host: str = setting("127.0.0.1", "the address to listen on")
     port: int = setting(DEFAULT_MODBUS_PORT, "the port (0: a free one, for tests)", parse=_port)
-    unit_ids: tuple[int, ...] = setting((1,), "unit ids answered", parse=_unit_ids)
+    unit_ids: tuple[int, ...] = setting((1,), "unit ids answered (and always 0xFF, the server "
+                                        "itself; 0 too unless strict_unit_id)",
+                                        parse=_unit_ids)
+    strict_unit_id: bool = setting(False, "answer unit id 0 with exception 0x0B unless it is "
+                                   "listed in unit_ids")
     max_clients: int = setting(16, "connections at once", lo=1, hi=10_000)
     idle_timeout_s: float = setting(60.0, "close a connection silent this long", lo=0,
                                     positive=True)

@@ -60,6 +60,30 @@ from ncgate.gateway.wiring import Backend
 log = logging.getLogger("ncgate.modbus")
 
 PARTIAL_FRAME_TIMEOUT_S: Final = 5.0
+# Unsent answers of one connection above which its requests are no longer read, and below
+# which reading resumes (a client that sends and never reads cannot make us buffer for it).
+WRITE_HIGH_WATER: Final = 256 * 1024
+WRITE_LOW_WATER: Final = 64 * 1024
+NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
+
+
+class RateLimitedLog:
+    """One warning line per interval at most; the lines held back are counted in the next."""
+
+    def __init__(self, interval_s: float = 1.0) -> None:
+        self.interval_s = interval_s
+        self.last = float("-inf")
+        self.held = 0
+
+    def note(self, line: str) -> None:
+        now = asyncio.get_running_loop().time()
+        if now - self.last < self.interval_s:
+            self.held += 1
+            return
+        more = f" (and {self.held} more like it)" if self.held else ""
+        self.held = 0
+        self.last = now
+        log.warning("%s%s", line, more)
 _MBAP = struct.Struct(">HHHB")
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
 _READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
@@ -117,10 +141,13 @@ def _pdu(response: ModbusPDU) -> bytes:
 class RequestHandler:
     """Answers one request PDU against the map."""
 
-    def __init__(self, mmap: ModbusMap, backend: Backend, unit_ids: frozenset[int]) -> None:
+    def __init__(self, mmap: ModbusMap, backend: Backend, unit_ids: frozenset[int],
+                 strict_unit_id: bool = False) -> None:
         self.map = mmap
         self.backend = backend
-        self.unit_ids = unit_ids
+        # 0xFF ("no sub-unit") is the server itself; 0 is answered too unless strict (what
+        # libmodbus clients send when they never set a slave id); other ids get 0x0B.
+        self.unit_ids = unit_ids | {NO_SUB_UNIT} | (set() if strict_unit_id else {0})
         self.decoder = DecodePDU(is_server=True)
         self.served = 0
 
@@ -184,7 +211,7 @@ class RequestHandler:
                                                   or_mask=request.or_mask))
         # 23: both ranges are checked before anything is written; the write comes first
         values = list(request.write_registers)
-        m.region(Table.HOLDING, request.read_address, request.read_count)
+        m.segments(Table.HOLDING, request.read_address, request.read_count)  # as FC3 reads
         m.check_register_values(request.write_address, values)
         m.write_registers(backend, request.write_address, values, who)
         regs = m.read_registers(backend, Table.HOLDING, request.read_address,
@@ -202,24 +229,41 @@ class _Connection(asyncio.Protocol):
         self.last_activity = self.loop.time()
         self.partial_since: float | None = None
         self.timer: asyncio.TimerHandle | None = None
+        self.paused = False  # the client does not read its answers (backpressure)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
         peer = transport.get_extra_info("peername") or ("?", 0)
         self.who = f"modbus {peer[0]}:{peer[1]}"
         server = self.server
-        if len(server.connections) >= server.config.max_clients:
-            log.warning("%s refused: %d clients already (max_clients)", self.who,
-                        len(server.connections))
-            self.transport.abort()
-            return
         if not server.allowed(peer[0]):
-            log.warning("%s refused: not in the allow-list", self.who)
+            server.refusals.note(f"{self.who} refused: not in the allow-list")
             self.transport.abort()
             return
+        self.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
+        if len(server.connections) >= server.config.max_clients:
+            # At the limit the connection idle longest makes room (as PLC Modbus servers
+            # do): idle sockets cannot lock everyone else out.
+            idlest = min(server.connections, key=lambda c: c.last_activity)
+            server.refusals.note(f"{idlest.who} closed for {self.who}: "
+                                 f"{len(server.connections)} clients already (max_clients)")
+            idlest.evict()
         server.connections.add(self)
         log.info("%s connected (%d clients)", self.who, len(server.connections))
         self._arm(self.server.config.idle_timeout_s)
+
+    def pause_writing(self) -> None:
+        """Answers not yet sent passed the high-water mark: answer and read no more requests
+        from this client until it reads its answers (the others are served meanwhile)."""
+        self.paused = True
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.pause_reading()
+
+    def resume_writing(self) -> None:
+        self.paused = False
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.resume_reading()
+            self._process()  # what arrived before the pause
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self in self.server.connections:
@@ -232,6 +276,13 @@ class _Connection(asyncio.Protocol):
             self.timer.cancel()
             self.timer = None
 
+    def evict(self) -> None:
+        """Out of the count at once (its connection_lost comes later), and closed."""
+        self.server.connections.discard(self)
+        self.server.connections_changed.set()
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.abort()
+
     def close(self, why: str) -> None:
         if self.transport is not None and not self.transport.is_closing():
             log.info("%s closed: %s", self.who, why)
@@ -239,11 +290,17 @@ class _Connection(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         self.last_activity = self.loop.time()
+        self.buffer += data
+        self._process()
+
+    def _process(self) -> None:
+        """Answer every complete frame in the buffer, in order, unless the client stopped
+        reading its answers (then the rest waits in the buffer until it does)."""
         buffer = self.buffer
-        buffer += data
         handle = self.server.handler.handle
         out: list[bytes] = []
-        while len(buffer) >= 7:
+        size = 0
+        while len(buffer) >= 7 and not self.paused:
             tid, protocol, length, unit = _MBAP.unpack_from(buffer)
             if protocol != 0 or not 2 <= length <= 254:
                 if out:
@@ -257,9 +314,15 @@ class _Connection(asyncio.Protocol):
             del buffer[:end]
             answer = handle(unit, pdu, self.who)
             out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
+            size += len(answer) + 7
+            if size >= WRITE_LOW_WATER:  # in batches: the transport may pause us on a write
+                self._send(out)
+                out, size = [], 0
+                self.partial_since = None
         if out:
             self._send(out)
-        if not buffer:
+            self.partial_since = None  # each frame has its own 5 s, from its first byte
+        if not buffer or self.paused:
             self.partial_since = None
         elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
             self.partial_since = self.last_activity
@@ -297,7 +360,9 @@ class ModbusServer:
 
     def __init__(self, config: ModbusConfig, mmap: ModbusMap, backend: Backend) -> None:
         self.config = config
-        self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids))
+        self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids),
+                                      config.strict_unit_id)
+        self.refusals = RateLimitedLog()
         self.connections: set[_Connection] = set()
         self.all_closed = asyncio.Event()
         self.connections_changed = asyncio.Event()  # set when a connection goes

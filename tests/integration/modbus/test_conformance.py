@@ -153,11 +153,23 @@ async def test_unknown_function_codes(ncgate_gateway: Gateway, raw: Raw, fc: int
     await still_serves(ncgate_gateway, raw, before)
 
 
-async def test_unit_id_not_served(ncgate_gateway: Gateway, raw: Raw) -> None:
+async def test_unit_ids_as_the_modbus_tcp_guide_says(ncgate_gateway: Gateway,
+                                                     raw: Raw) -> None:
+    """0xFF is the server itself and 0 is answered (libmodbus's defaults); others get 0x0B
+    and store nothing."""
     before = ncgate_gateway.image.snapshot()
-    for unit in (0, 2, 255):
+    for unit in (2, 3, 254):  # the fixture serves 1 and 7
         assert await raw.ask(pdu(6, "HH", 7, 9), unit=unit) == exc(6, 0x0B)
     await still_serves(ncgate_gateway, raw, before)
+    for unit, value in ((0xFF, 9), (0, 10)):
+        assert await raw.ask(pdu(6, "HH", 7, value), unit=unit) == pdu(6, "HH", 7, value)
+        assert ncgate_gateway.image.read("SK", 7, "BY") == value
+
+
+@pytest.mark.parametrize("ncgate_config", [{"modbus.strict_unit_id": True}], indirect=True)
+async def test_strict_unit_id_refuses_0_but_not_0xff(ncgate_gateway: Gateway, raw: Raw) -> None:
+    assert await raw.ask(pdu(6, "HH", 7, 9), unit=0) == exc(6, 0x0B)
+    assert await raw.ask(pdu(6, "HH", 7, 9), unit=0xFF) == pdu(6, "HH", 7, 9)
 
 
 @pytest.mark.parametrize(("protocol", "length"), [(1, None), (0xFFFF, None), (0, 0), (0, 1),
@@ -207,6 +219,21 @@ async def test_read_write_multiple_writes_first_then_reads(ncgate_gateway: Gatew
     before = ncgate_gateway.image.snapshot()
     # a bad read range stops the write too
     assert await raw.ask(pdu(23, "HHHHBH", 600, 1, 31, 1, 2, 1)) == exc(23, 2)
+    await still_serves(ncgate_gateway, raw, before)
+
+
+async def test_read_write_multiple_reads_across_adjacent_regions_as_fc3(
+        ncgate_gateway: Gateway, raw: Raw) -> None:
+    """Issue 10.1: the command (2000) and the mailbox (2001..2002) are adjacent regions; FC3
+    reads across them (docs/decisions.md), and so does FC23's read."""
+    fc3 = await raw.ask(pdu(3, "HH", 2000, 3))
+    assert fc3 == bytes((3, 6)) + struct.pack(">HHH", 0, 0, 0)
+    answer = await raw.ask(pdu(23, "HHHHBH", 2000, 3, 31, 1, 2, 4))
+    assert answer == bytes((23,)) + fc3[1:]
+    assert ncgate_gateway.image.read("SK", 31, "BY") == 4
+    # A bad write value with that read: 03 (the value), not 02, and nothing stored.
+    before = ncgate_gateway.image.snapshot()
+    assert await raw.ask(pdu(23, "HHHHBH", 2000, 3, 31, 1, 2, 256)) == exc(23, 3)
     await still_serves(ncgate_gateway, raw, before)
 
 

@@ -12,7 +12,7 @@ from ncgate.gateway import Gateway
 from .rawclient import Raw, mbap
 
 SA_BITS, K_BYTES, SYVARS, SA_BYTES = 1024, 512, 256, 128
-UNITS = (1, 7)
+UNITS = (1, 7, 0, 0xFF)  # the configured ids, 0 (not strict) and 0xFF (the server)
 BOUNDARIES = [0, 1, 7, 8, 510, 511, 512, 999, 1000, 1255, 1256, 1499, 1500, 1627, 1628, 1999,
               2000, 2001, 2002, 2003, 1023, 1024, 65535]
 
@@ -99,7 +99,7 @@ class Oracle:
 
 def random_frame(rng: random.Random) -> tuple[int, bytes, bytes]:
     """(unit, pdu, whole frame); a few frames have a bad MBAP header."""
-    unit = rng.choice([1, 1, 1, 7, 0, 3])
+    unit = rng.choice([1, 1, 1, 7, 0, 3, 0xFF, 2])
     r = rng.random()
     if r < 0.1:  # raw garbage
         p = bytes(rng.randrange(256) for _ in range(rng.randint(1, 20)))

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import socket
+import struct
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
@@ -16,24 +18,39 @@ GOOD = pdu(4, "HH", 0, 1)
 
 
 @pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 3}], indirect=True)
-async def test_connections_beyond_max_clients_are_refused_at_once(
+async def test_at_max_clients_the_connection_idle_longest_makes_room(
         ncgate_gateway: Gateway) -> None:
+    """Issue 10.6: idle sockets cannot lock everyone out; the newcomer is served."""
     address = ncgate_gateway.modbus_address
     clients = [await Raw.open(*address) for _ in range(3)]
-    for c in clients:
+    for c in clients:  # clients[0] asked first: it has been idle longest
         assert (await c.ask(GOOD))[0] == 4
-    extra = await Raw.open(*address)
-    assert await extra.closed_by_peer(timeout_s=2.0)
-    clients[0].close()
-    server = ncgate_gateway.modbus_server
-    assert server is not None
-    # once one leaves, a newcomer is served
-    async with asyncio.timeout(5):
-        await server.wait_connections(2)
     newcomer = await Raw.open(*address)
     assert (await newcomer.ask(GOOD))[0] == 4
+    assert await clients[0].closed_by_peer(timeout_s=5.0)
+    for c in clients[1:]:  # the others are untouched
+        assert (await c.ask(GOOD))[0] == 4
+    server = ncgate_gateway.modbus_server
+    assert server is not None and len(server.connections) == 3
     for c in (*clients[1:], newcomer):
         c.close()
+
+
+@pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 2}], indirect=True)
+async def test_a_burst_of_reset_sockets_never_refuses_the_next_client(
+        ncgate_gateway: Gateway, caplog: pytest.LogCaptureFixture) -> None:
+    address = ncgate_gateway.modbus_address
+    for _ in range(50):  # connect and reset at once, as a scanner does
+        _reader, writer = await asyncio.open_connection(*address)
+        sock = writer.get_extra_info("socket")
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        writer.close()
+    client = await Raw.open(*address)
+    assert (await client.ask(GOOD))[0] == 4
+    client.close()
+    # The lines about making room are rate-limited: far fewer than the 48 evictions.
+    lines = [r for r in caplog.records if "max_clients" in r.getMessage()]
+    assert len(lines) < 10
 
 
 @pytest.mark.parametrize("ncgate_config", [{"modbus.idle_timeout_s": 0.3}], indirect=True)
@@ -84,3 +101,49 @@ async def test_twenty_concurrent_clients_lose_no_write(ncgate_gateway: Gateway) 
     for e in writes:
         per_var[e["var"]] += 1
     assert set(per_var.values()) == {writes_each}
+
+
+async def test_each_frame_has_its_own_partial_frame_clock(
+        ncgate_gateway: Gateway, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 10.2: segments that always end mid-frame, each frame completing at once, are
+    served for as long as the client goes on (here three times the partial-frame timeout)."""
+    timeout = 0.05
+    monkeypatch.setattr(modbus_server, "PARTIAL_FRAME_TIMEOUT_S", timeout)
+    client = await Raw.open(*ncgate_gateway.modbus_address)
+    loop = asyncio.get_running_loop()
+    frames = [mbap(tid, 1, GOOD) for tid in range(1, 10_000)]
+    await client.send(frames[0][:5])
+    start, i = loop.time(), 0
+    while loop.time() - start < 3 * timeout:
+        await client.send(frames[i][5:] + frames[i + 1][:5])  # ends in the middle of the next
+        tid, _, answer = await client.recv()
+        assert (tid, answer[0]) == (i + 1, 4)
+        i += 1
+    client.close()
+
+
+async def test_a_client_that_never_reads_is_not_buffered_for_and_hurts_no_one(
+        ncgate_gateway: Gateway) -> None:
+    """Issue 10.3: backpressure. 10 MB of requests whose answers are never read: the server
+    stops taking this client's requests once its unsent answers pass the high-water mark,
+    and another client is served all the while."""
+    address = ncgate_gateway.modbus_address
+    flood = await Raw.open(*address)
+    request = mbap(1, 1, pdu(4, "HH", 100, 125))  # 12 bytes asking for a 257-byte answer
+    flood.writer.write(request * (10 * 1024 * 1024 // len(request)))  # never drained, never read
+    other = await Raw.open(*address)
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    async with asyncio.timeout(30):  # the other client is answered until the flood pauses
+        while not any(getattr(c, "paused", False) for c in server.connections):
+            assert (await other.ask(GOOD))[0] == 4
+    for _ in range(20):  # and after
+        assert (await other.ask(GOOD))[0] == 4
+    flooding = [c for c in server.connections if c.paused]
+    assert len(flooding) == 1  # paused: it reads no requests
+    transport = flooding[0].transport
+    assert transport is not None
+    assert transport.get_write_buffer_size() < modbus_server.WRITE_HIGH_WATER + 2 * 64 * 1024
+    assert len(flooding[0].buffer) <= 1024 * 1024  # what arrived before the pause, at most
+    flood.writer.transport.abort()
+    other.close()
