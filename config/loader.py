@@ -179,6 +179,8 @@ class NcConfig:
     rapid_mm_min: float = setting(10000.0, "G0 feed", lo=0, positive=True)
     tool_change_s: float = setting(2.0, "duration of M6", lo=0)
     main: str = setting("PROG91", "the main program of process 1 (the operator's SPG)")
+    cell: str = setting("ncgate cell", "the cell's name, as fieldbus masters see it (Modbus "
+                        "device identification: UserApplicationName)")
     autostart: bool = setting(False, "run: start main at once (else on cycle start)")
     e_params: int = setting(1000, "E parameters per process (E0..)", lo=1, hi=100_000)
     optional_skip: bool = setting(False, "skip blocks that start with /")

@@ -22,10 +22,14 @@ from canopen.objectdictionary import (
 from canopen.objectdictionary.datatypes import INTEGER16, UNSIGNED8, UNSIGNED16, UNSIGNED32
 
 from ncgate.config import Config
+from ncgate.gateway.identity import (
+    PRODUCT_CODE,
+    PRODUCT_NAME,
+    REVISION,
+    VENDOR_ID,
+    VENDOR_NAME,
+)
 
-VENDOR_ID = 0x00000000  # no CiA vendor id assigned; tools show the product name instead
-PRODUCT_CODE = 0x4E434754  # "NCGT"
-REVISION = 0x00010000  # map/dictionary version 1.0
 CHUNK = 128  # K bytes and SYVARs per object (0x2100+j, 0x2200+j)
 MAX_PROCESS_STATES_IN_TPDO1 = 8
 
@@ -99,8 +103,8 @@ def build_dictionary(config: Config) -> ObjectDictionary:
     od.node_id = node_id
     od.bitrate = config.canopen.bitrate
     info = od.device_information
-    info.vendor_name = "ncgate"
-    info.product_name = "ncgate CNC co-simulator gateway"
+    info.vendor_name = VENDOR_NAME
+    info.product_name = PRODUCT_NAME
     info.product_number = PRODUCT_CODE
     info.revision_number = REVISION
     info.order_code = "ncgate"

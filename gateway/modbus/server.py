@@ -46,9 +46,11 @@ from pymodbus.pdu.register_message import (
 )
 
 from ncgate.config import ModbusConfig
+from ncgate.gateway import identity
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.map import (
     DEVICE_FAILURE,
+    ILLEGAL_ADDRESS,
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
     TARGET_NO_RESPONSE,
@@ -87,7 +89,9 @@ class RateLimitedLog:
 _MBAP = struct.Struct(">HHHB")
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
 _READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
-SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23})
+SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23, 43})
+MEI_DEVICE_ID: Final = 0x0E  # FC43's "read device identification"
+CONFORMITY: Final = 0x82  # regular identification, stream and individual access
 
 
 def validate(pdu: bytes) -> None:
@@ -118,6 +122,11 @@ def validate(pdu: bytes) -> None:
     elif fc == 22:
         if n != 7:
             raise ModbusError(ILLEGAL_VALUE, "length")
+    elif fc == 43:
+        if n < 2 or pdu[1] != MEI_DEVICE_ID:  # 0x0D (CANopen reference) is not served
+            raise ModbusError(ILLEGAL_FUNCTION, "MEI type other than 0x0E")
+        if n != 4 or not 1 <= pdu[2] <= 4:
+            raise ModbusError(ILLEGAL_VALUE, "read device id code")
     else:  # 23
         if n < 10:
             raise ModbusError(ILLEGAL_VALUE, "length")
@@ -150,6 +159,11 @@ class RequestHandler:
         self.unit_ids = unit_ids | {NO_SUB_UNIT} | (set() if strict_unit_id else {0})
         self.decoder = DecodePDU(is_server=True)
         self.served = 0
+        # Device identification (FC43/14): the identity CANopen's 0x1018 gives too.
+        texts = {0x00: identity.VENDOR_NAME, 0x01: identity.product_code_text(),
+                 0x02: identity.revision_text(), 0x04: identity.PRODUCT_NAME,
+                 0x05: identity.model_name(), 0x06: mmap.config.nc.cell}
+        self.identity = {k: v.encode("utf-8")[:240] for k, v in texts.items()}
 
     def handle(self, unit: int, pdu: bytes, who: str) -> bytes:
         fc = pdu[0]
@@ -158,6 +172,8 @@ class RequestHandler:
             return exception_pdu(fc, TARGET_NO_RESPONSE)
         try:
             validate(pdu)
+            if fc == 43:
+                return self._device_identification(pdu[2], pdu[3])
             request = self.decoder.decode(pdu)
             if request is None:  # not reached: validation accepts only what decodes
                 raise ModbusError(ILLEGAL_VALUE, "undecodable")
@@ -167,6 +183,32 @@ class RequestHandler:
         except Exception:  # a bug of ours must not take the connection down
             log.exception("modbus: request %s from %s failed", pdu.hex(), who)
             return exception_pdu(fc, DEVICE_FAILURE)
+
+    def _device_identification(self, code: int, object_id: int) -> bytes:
+        """FC43/14 (Modbus application protocol 6.21): the basic objects (0..2) and the
+        regular ones we have (4..6), in stream access (codes 1-3) or one at a time (4)."""
+        objects = self.identity
+        if code == 4:
+            if object_id not in objects:
+                raise ModbusError(ILLEGAL_ADDRESS, f"no device identification object {object_id}")
+            chosen = [object_id]
+        else:
+            last = 0x02 if code == 1 else 0xFF
+            ids = [i for i in sorted(objects) if i <= last]
+            # An object id the category does not hold restarts at the beginning.
+            start = object_id if object_id in ids else 0
+            chosen = [i for i in ids if i >= start]
+        body = bytearray()
+        count, next_id = 0, 0
+        for i in chosen:
+            value = objects[i]
+            if 6 + len(body) + 2 + len(value) > 253 - 1 and count:  # does not fit: next time
+                next_id = i
+                break
+            body += bytes((i, len(value))) + value
+            count += 1
+        more = 0xFF if next_id else 0x00
+        return bytes((43, MEI_DEVICE_ID, code, CONFORMITY, more, next_id, count)) + bytes(body)
 
     def _execute(self, fc: int, request: Any, pdu: bytes, who: str) -> bytes:
         m, backend = self.map, self.backend

@@ -9,8 +9,11 @@ from collections.abc import AsyncIterator
 
 import pytest
 import pytest_asyncio
+from pymodbus.client import AsyncModbusTcpClient
 
+from ncgate import __version__
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.dictionary import build_dictionary
 from ncgate.gateway.modbus.map import ModbusMap, Table
 
 from .rawclient import Raw, mbap, pdu
@@ -252,4 +255,41 @@ async def test_read_only(ncgate_gateway: Gateway, raw: Raw) -> None:
                     pdu(22, "HHH", 1, 0, 1), pdu(23, "HHHHBH", 0, 1, 0, 1, 2, 1)):
         assert await raw.ask(request) == exc(request[0], 2)
     assert (await raw.ask(pdu(3, "HH", 0, 1)))[0] == 3  # reads still work
+    await still_serves(ncgate_gateway, raw, before)
+
+
+@pytest.mark.parametrize("ncgate_config", [{"nc.cell": "test cell"}], indirect=True)
+async def test_device_identification_as_hmis_ask_for_it(ncgate_gateway: Gateway) -> None:
+    """Issue 10.4: FC43/14 with pymodbus's client: basic and regular streams, one object at a
+    time, the same identity as CANopen 0x1018 and the config's cell name."""
+    host, port = ncgate_gateway.modbus_address
+    client = AsyncModbusTcpClient(host, port=port, retries=0)
+    await client.connect()
+    try:
+        basic = await client.read_device_information(read_code=1, object_id=0, device_id=1)
+        assert basic.information == {0: b"ncgate", 1: b"NCGT", 2: b"1.0"}
+        assert basic.conformity == 0x82 and basic.more_follows == 0
+        regular = await client.read_device_information(read_code=2, object_id=0, device_id=1)
+        assert regular.information == {
+            0: b"ncgate", 1: b"NCGT", 2: b"1.0", 4: b"ncgate CNC co-simulator gateway",
+            5: f"ncgate {__version__}".encode(), 6: b"test cell"}
+        one = await client.read_device_information(read_code=4, object_id=6, device_id=1)
+        assert one.information == {6: b"test cell"}
+        missing = await client.read_device_information(read_code=4, object_id=3, device_id=1)
+        assert missing.isError() and missing.exception_code == 2
+    finally:
+        client.close()
+    od = build_dictionary(ncgate_gateway.config)
+    assert od[0x1018][2].default == int.from_bytes(b"NCGT", "big")  # the same product code
+    assert od[0x1018][3].default >> 16 == 1 and od[0x1018][3].default & 0xFFFF == 0  # "1.0"
+
+
+async def test_device_identification_errors(ncgate_gateway: Gateway, raw: Raw) -> None:
+    before = ncgate_gateway.image.snapshot()
+    assert await raw.ask(bytes((43, 0x0D, 1, 0))) == exc(43, 1)  # CANopen reference: not served
+    assert await raw.ask(bytes((43, 0x0E, 5, 0))) == exc(43, 3)  # no read code 5
+    assert await raw.ask(bytes((43, 0x0E, 1))) == exc(43, 3)  # too short
+    # Stream access from an object the category does not hold restarts at object 0.
+    answer = await raw.ask(bytes((43, 0x0E, 1, 0x05)))
+    assert answer[:7] == bytes((43, 0x0E, 1, 0x82, 0, 0, 3)) and answer[7:9] == bytes((0, 6))
     await still_serves(ncgate_gateway, raw, before)
