@@ -163,7 +163,9 @@ class RequestHandler:
         texts = {0x00: identity.VENDOR_NAME, 0x01: identity.product_code_text(),
                  0x02: identity.revision_text(), 0x04: identity.PRODUCT_NAME,
                  0x05: identity.model_name(), 0x06: mmap.config.nc.cell}
-        self.identity = {k: v.encode("utf-8")[:240] for k, v in texts.items()}
+        # At most 240 bytes an object (one PDU holds 253), cut at a whole character.
+        self.identity = {k: v.encode("utf-8")[:240].decode("utf-8", "ignore").encode("utf-8")
+                         for k, v in texts.items()}
 
     def handle(self, unit: int, pdu: bytes, who: str) -> bytes:
         fc = pdu[0]
