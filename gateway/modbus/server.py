@@ -344,6 +344,7 @@ class _Connection(asyncio.Protocol):
         handle = self.server.handler.handle
         out: list[bytes] = []
         size = 0
+        answered = False
         while len(buffer) >= 7 and not self.paused:
             tid, protocol, length, unit = _MBAP.unpack_from(buffer)
             if protocol != 0 or not 2 <= length <= 254:
@@ -358,15 +359,16 @@ class _Connection(asyncio.Protocol):
             del buffer[:end]
             answer = handle(unit, pdu, self.who)
             out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
+            answered = True
             size += len(answer) + 7
             if size >= WRITE_LOW_WATER:  # in batches: the transport may pause us on a write
                 self._send(out)
                 out, size = [], 0
-                self.partial_since = None
         if out:
             self._send(out)
+        if answered:
             self.partial_since = None  # each frame has its own 5 s, from its first byte
-        if not buffer or self.paused:
+        if not buffer or self.paused:  # nothing begun, or a paused client: not timed
             self.partial_since = None
         elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
             self.partial_since = self.last_activity

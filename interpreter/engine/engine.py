@@ -170,12 +170,7 @@ class Engine(SyncRules):
         """Clear every alarm, discard queues, waits and tokens; every process to IDLE."""
         for p in self.processes.values():
             was_busy = p.loaded is not None or p.alarm is not None
-            for wait in p.waits():
-                self._drop_wait(wait)
-            if p.int_timer is not None:
-                p.int_timer.cancel()
-            if p.dec_timer is not None:
-                p.dec_timer.cancel()
+            self._cancel_pending(p)
             where = p.where
             p.clear()
             p.loaded = None
@@ -718,15 +713,19 @@ class Engine(SyncRules):
         self._update_state(p)
         self._became_free(p)
 
-    def _alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
-        if p.alarm is not None:
-            return
+    def _cancel_pending(self, p: Process) -> None:
+        """Its waits, its motion timer and its block-time timer: nothing of it fires later."""
         for wait in p.waits():
             self._drop_wait(wait)
         if p.int_timer is not None:
             p.int_timer.cancel()
         if p.dec_timer is not None:
             p.dec_timer.cancel()
+
+    def _alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
+        if p.alarm is not None:
+            return
+        self._cancel_pending(p)
         self._forget_waiter(p)
         loaded = p.loaded
         p.clear()
