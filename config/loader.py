@@ -215,6 +215,8 @@ class ModbusMapConfig:
     command: int = setting(2000, "holding address of the command word; the SND mailbox "
                            "follows at +1, +2", lo=0, hi=65535)
     status: int = setting(100, "input base of the per-process status blocks", lo=0, hi=65535)
+    snd_log: int = setting(200, "input base of the SND log (the last 16 SNDs, 98 registers)",
+                           lo=0, hi=65535)
     read_only: frozenset[str] = setting(frozenset(), "regions clients may not write: "
                                         + ", ".join(MAP_REGIONS), parse=_read_only_regions)
 
@@ -452,7 +454,8 @@ def _check_config(r: _Reader, config: Config) -> None:
     m = config.modbus.map
     holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
                ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
-    status = [("status", m.status, 20 * nc.processes), ("info", 0, 8)]
+    status = [("status", m.status, 20 * nc.processes), ("snd_log", m.snd_log, 98),
+              ("info", 0, 8)]
     for regions in (holding, status):
         for i, (name, start, count) in enumerate(regions):
             if start + count > 65536:

@@ -22,6 +22,7 @@ from ncgate.config import Config
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.wiring import Backend
 from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
+from ncgate.interpreter.engine.sync import SND_LOG
 
 MAP_VERSION = 1
 
@@ -55,6 +56,7 @@ class Kind(enum.Enum):
     MAILBOX = "SND mailbox"
     INFO = "gateway info"
     PROCESS_STATUS = "process status"
+    SND_LOG = "SND log"
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,6 +96,8 @@ class ModbusMap:
     """The map in force for a config."""
 
     STATUS_STRIDE, FLAGS_STRIDE = 20, 16
+    LOG_ENTRY = 6  # registers of one SND log entry
+    LOG_SIZE = 2 + SND_LOG * LOG_ENTRY
 
     def __init__(self, config: Config) -> None:
         self.config = config
@@ -103,6 +107,7 @@ class ModbusMap:
             layout.k_bytes, layout.syvars, layout.sa_bytes)
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
         self.STATUS_BASE = layout.status
+        self.SND_LOG_BASE = layout.snd_log
         sa_bytes = plc.sa_bits // 8
         every = config.modbus.read_only
 
@@ -135,6 +140,11 @@ class ModbusMap:
                    f"process k at {self.STATUS_BASE}+20(k-1)+0..17: "
                    + ", ".join(PROCESS_REGISTERS)
                    + "; +18..19 read 0"),
+            Region(Table.INPUT, self.SND_LOG_BASE, self.LOG_SIZE, Kind.SND_LOG, "r", "record",
+                   f"SND log: {self.SND_LOG_BASE}-{self.SND_LOG_BASE + 1} sequence number of "
+                   f"the newest SND (u32, 0: none yet), then the last {SND_LOG} SNDs, newest "
+                   f"first, {self.LOG_ENTRY} registers each: sequence (u32), sender, target, "
+                   "block N, id (0 for an SND); unused entries read 0"),
         ]
         # No overlap check here: the config loader refuses overlapping regions and names the
         # key (modbus.map.*), and a Config comes from the loader.
@@ -203,6 +213,8 @@ class ModbusMap:
             return [0] * count
         if kind is Kind.INFO:
             return self._info(backend.engine)[first:first + count]
+        if kind is Kind.SND_LOG:
+            return snd_log_registers(backend.engine)[first:first + count]
         return self._status_registers(backend.engine, address, count)
 
     def _info(self, engine: Engine) -> list[int]:
@@ -333,6 +345,17 @@ def _flag(engine: Engine, k: int, bit: int) -> bool:
     return (p.loaded is not None, state in (ProcessState.RUNNING, ProcessState.DWELL),
             state in _WAITING, state is ProcessState.ALARM,
             p.motion_active, p.held)[bit]
+
+
+def snd_log_registers(engine: Engine) -> list[int]:
+    """The SND log window: the newest sequence number (u32), then the entries newest first."""
+    seq = engine.snd_seq
+    regs = [seq >> 16 & 0xFFFF, seq & 0xFFFF]
+    for number, sender, target, n, ident in reversed(engine.snd_log):
+        regs += [number >> 16 & 0xFFFF, number & 0xFFFF, sender, target, n & 0xFFFF,
+                 ident & 0xFFFF]
+    regs += [0] * (ModbusMap.LOG_SIZE - len(regs))
+    return regs
 
 
 def process_registers(engine: Engine, k: int) -> list[int]:

@@ -30,9 +30,10 @@ from ncgate.interpreter.engine import ProcessState
 @dataclass(frozen=True, slots=True)
 class SndSeen:
     sender: int
-    target: int
+    target: int  # 0: a broadcast (an ISG signal to every channel)
     n: int  # the N number of the SND block (0 when none)
-    event: int  # low 16 bits of its event number
+    seq: int  # its sequence number in the SND log (1, 2, ... since the gateway started)
+    id: int = 0  # an ISG signal's number (0 for an SND)
 
 
 class VirtualPLC:
@@ -43,13 +44,13 @@ class VirtualPLC:
         self.unit = unit if unit is not None else config.modbus.unit_ids[0]
         self.poll_s = poll_s
         self.client = AsyncModbusTcpClient(host, port=port, retries=0)
-        self._last_event: int | None = None
+        self._last_seq = 0  # the newest SND log entry this client has returned
 
     async def connect(self) -> None:
         if not await self.client.connect():
             raise VirtualPLCError("cannot connect to the gateway")
-        _, _, _, _, _, _, _, event = await self._input(0, 8)
-        self._last_event = event
+        hi, lo = await self._input(self.map.SND_LOG_BASE, 2)
+        self._last_seq = hi << 16 | lo  # SNDs from now on
 
     def close(self) -> None:
         self.client.close()
@@ -153,20 +154,41 @@ class VirtualPLC:
         hi, lo = await self._input(2, 2)
         return hi << 16 | lo
 
-    async def next_snd(self, timeout_s: float = 10.0) -> SndSeen:
-        """The next SND the gateway reports after the last one this client saw.
+    async def snd_log(self) -> list[SndSeen]:
+        """The SND log window: the last 16 SNDs the gateway reports, oldest first."""
+        m = self.map
+        regs = await self._input(m.SND_LOG_BASE, m.LOG_SIZE)
+        out = []
+        for at in range(2, m.LOG_SIZE, m.LOG_ENTRY):
+            hi, lo, sender, target, n, ident = regs[at:at + m.LOG_ENTRY]
+            if hi or lo:
+                out.append(SndSeen(sender, target, n, hi << 16 | lo, ident))
+        return out[::-1]
 
-        The map holds only the last SND: when several happen between two polls (plain SNDs at
-        decode time often come in bursts), this is the latest of them.  The per-process SND
-        counters (``status``) count every one.
+    async def next_snd(self, timeout_s: float = 10.0) -> SndSeen:
+        """The next SND after the last one this client returned (or, first, after connect).
+
+        It reads the SND log window, so it loses none while fewer than 16 SNDs happen between
+        two calls; when more do, the oldest are gone and it raises VirtualPLCError naming how
+        many were missed.
         """
         try:
             async with asyncio.timeout(timeout_s):
                 while True:
-                    sender, target, n, event = await self._input(4, 4)
-                    if event != self._last_event and (sender or target):
-                        self._last_event = event
-                        return SndSeen(sender, target, n, event)
+                    log = await self.snd_log()
+                    unseen = [s for s in log if s.seq > self._last_seq]
+                    if unseen:
+                        first = unseen[0]
+                        missed = first.seq - self._last_seq - 1
+                        if missed:
+                            # Said once: the next call returns the oldest one still there.
+                            self._last_seq = first.seq - 1
+                            raise VirtualPLCError(
+                                f"{missed} SND(s) after #{first.seq - missed - 1} left the "
+                                f"log window before this client read it; next is #{first.seq}")
+                        self._last_seq = first.seq
+                        return first
+                    # A Modbus client learns only by reading: poll.
                     await asyncio.sleep(self.poll_s)
         except TimeoutError:
             raise VirtualPLCError(f"no new SND in {timeout_s:g} s") from None

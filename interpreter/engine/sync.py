@@ -49,6 +49,8 @@ from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
 
+SND_LOG = 16  # entries of the SND log the fieldbus shows
+
 
 class SyncRules:
     """EXE/REL/WAI/SND between processes (a part of :class:`Engine`)."""
@@ -90,6 +92,11 @@ class SyncRules:
         self._writer_where: Where | None = None  # the block of the write under way
         # The last SND delivered: sender, target, N, its number on the event counter.
         self.last_snd: tuple[int, int, int, int] | None = None
+        # The SND log (the Modbus window of the last SND_LOG): (sequence, sender, target, N,
+        # id), newest last.  The sequence counts every SND since the engine was made (1, 2,
+        # ...); a reset does not restart it, so a poller can tell what it missed.
+        self.snd_seq = 0
+        self.snd_log: deque[tuple[int, int, int, int, int]] = deque(maxlen=SND_LOG)
 
     def _clear_sync(self) -> None:
         self._proc_waiters.clear()
@@ -188,6 +195,11 @@ class SyncRules:
                          "for it: latched")
         self._kick()
 
+    def _log_snd(self, sender: int, target: int, n: int, ident: int = 0) -> None:
+        """One entry of the SND log (target 0: a broadcast; ident: a signal's number)."""
+        self.snd_seq = seq = self.snd_seq + 1
+        self.snd_log.append((seq, sender, target, n, ident))
+
     def _deliver_snd(self, sender: Process, target: Process, wait: WaitRecord | None,
                      where: Where | None = None, external: bool = False) -> None:
         if where is None and wait is not None:
@@ -200,6 +212,7 @@ class SyncRules:
         # Recorded before the event, so that whoever hears it reads this SND; its number is
         # the value the event counter takes with it.
         self.last_snd = (sender.number, target.number, n, (self.trace.counter + 1) & 0xFFFFFFFF)
+        self._log_snd(sender.number, target.number, n)
         self._record(ev.Snd, self.now, sender.number, where, target.number)
 
     # ---- WAI,var op value -----------------------------------------------------------------

@@ -31,6 +31,9 @@ PROGRAMS = {
             "N6SYVAR3=-7\nN7M30\n",
     "SIDE": "N1(WAI,SK5=200)\nN2G1Y5F600\nN3(REL)\n",
     "LONG": "N1G1X1000F60\nN2M30\n",  # 1000 s: something to hold and reset
+    # 20 SNDs to the external P4 in one decoder run: more than a poller sees between two reads.
+    "BURST": "".join(f"N{n}(SND,4)\n" for n in range(1, 21)) + "N21M30\n",
+    "BURST16": "".join(f"N{n}(SND,4)\n" for n in range(1, 17)) + "N17M30\n",
 }
 
 
