@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import importlib.util
 import ipaddress
+import ssl
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -30,6 +32,7 @@ from ncgate.interpreter.settings import SndPolicy
 MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
 DEFAULT_MODBUS_PORT = 5020
+DEFAULT_TLS_PORT = 802  # mbaps, Modbus/TCP Security
 MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
 
 
@@ -95,10 +98,26 @@ def _processes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) ->
 
 
 def _port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
-    value = t.get("port", DEFAULT_MODBUS_PORT)
+    value = t.get("port", DEFAULT_TLS_PORT if key.endswith(".tls.port") else DEFAULT_MODBUS_PORT)
     if value == 0 and not isinstance(value, bool):
         return 0  # 0 asks the system for a free port (tests, the Python API)
     return r.int_(value, key, 1, 65535)
+
+
+def _roles(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("roles", {})
+    if not isinstance(raw, dict):
+        raise r.fail(key, f"expected a table of role = [regions], got {raw!r}")
+    roles: dict[str, frozenset[str]] = {}
+    for role, regions in raw.items():
+        if not isinstance(regions, list):
+            raise r.fail(f"{key}.{role}", f"expected a list of regions, got {regions!r}")
+        for i, region in enumerate(regions):
+            if region not in MAP_REGIONS:
+                raise r.fail(f"{key}.{role}[{i}]", f"expected one of {', '.join(MAP_REGIONS)}, "
+                             f"got {region!r}")
+        roles[role] = frozenset(regions)
+    return roles
 
 
 def _unit_ids(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -222,6 +241,24 @@ class ModbusMapConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class ModbusTlsConfig:
+    """Modbus/TCP Security (TLS with mutual authentication): on when ``cert`` is set."""
+
+    port: int = setting(DEFAULT_TLS_PORT, "the Modbus/TCP Security (mbaps) port; below 1024 "
+                        "it needs root or CAP_NET_BIND_SERVICE (0: a free one)", parse=_port)
+    cert: Path | None = setting(None, "the server's certificate chain (PEM); setting it turns "
+                                "TLS on", parse=_optional_path)
+    key: Path | None = setting(None, "the server's private key (PEM)", parse=_optional_path)
+    ca: Path | None = setting(None, "clients must present a certificate signed by this CA "
+                              "(PEM)", parse=_optional_path)
+    plain: bool = setting(True, "also serve plain Modbus/TCP on modbus.port (false: TLS only)")
+
+    @property
+    def enabled(self) -> bool:
+        return self.cert is not None
+
+
+@dataclass(frozen=True, slots=True)
 class ModbusConfig:
     enabled: bool = setting(True, "serve Modbus TCP")
     host: str = setting("127.0.0.1", "the address to listen on")
@@ -238,6 +275,11 @@ class ModbusConfig:
     allow: tuple[str, ...] = setting((), "client addresses or networks allowed (empty: all)",
                                      parse=_allow)
     map: ModbusMapConfig = setting(doc="[modbus.map]", factory=ModbusMapConfig)
+    tls: ModbusTlsConfig = setting(doc="[modbus.tls]", factory=ModbusTlsConfig)
+    roles: Mapping[str, frozenset[str]] = setting(
+        doc="[modbus.roles]: role = [regions it may write] (of the map's read_only names); "
+        "a TLS client's role comes from its certificate; any role reads, an unlisted one (or "
+        "none) only reads", parse=_roles, factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -451,6 +493,7 @@ def _check_config(r: _Reader, config: Config) -> None:
         if plc.k_bytes > 128 * 256:
             raise r.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at most 32768 "
                          f"K bytes, got {plc.k_bytes}")
+    _check_tls(r, config.modbus.tls)
     m = config.modbus.map
     holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
                ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
@@ -468,9 +511,43 @@ def _check_config(r: _Reader, config: Config) -> None:
                                  f"{other} ({o_start}..{o_start + o_count - 1})")
 
 
+def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
+    """The TLS files exist and load (so that a bad one is named before anything starts)."""
+    if not tls.enabled:
+        for name in ("key", "ca"):
+            if getattr(tls, name) is not None:
+                raise r.fail("modbus.tls.cert", f"missing (modbus.tls.{name} is set: TLS "
+                             "needs cert, key and ca)")
+        if not tls.plain:
+            raise r.fail("modbus.tls.plain", "false needs TLS on (modbus.tls.cert, key, ca): "
+                         "Modbus would have no listener; set modbus.enabled = false instead")
+        return
+    for name in ("key", "ca"):
+        if getattr(tls, name) is None:
+            raise r.fail(f"modbus.tls.{name}", "missing (TLS needs cert, key and ca)")
+    for name in ("cert", "key", "ca"):
+        path = getattr(tls, name)
+        if not path.is_file():
+            raise r.fail(f"modbus.tls.{name}", f"no such file: {path}")
+    assert tls.cert is not None and tls.key is not None
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    try:
+        context.load_cert_chain(tls.cert, tls.key)
+    except (ssl.SSLError, ValueError) as exc:
+        raise r.fail("modbus.tls.key", f"the certificate {tls.cert.name} and key "
+                     f"{tls.key.name} do not load as a pair: {exc}") from None
+    try:
+        context.load_verify_locations(cafile=tls.ca)
+    except (ssl.SSLError, ValueError) as exc:
+        raise r.fail("modbus.tls.ca", f"not a PEM CA certificate: {exc}") from None
+    if importlib.util.find_spec("cryptography") is None:
+        raise r.fail("modbus.tls.cert", "Modbus/TCP Security reads the client's role from its "
+                     "certificate with the cryptography package: pip install 'ncgate[tls]'")
+
+
 _SECTIONS.update({cls.__name__: cls for cls in (
-    StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusConfig, CanopenConfig,
-    TraceConfig)})
+    StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusTlsConfig, ModbusConfig,
+    CanopenConfig, TraceConfig)})
 
 
 def config_markdown() -> str:
@@ -479,8 +556,9 @@ def config_markdown() -> str:
              "Generated from `config/loader.py` (the dataclasses are the schema; "
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
-             "`[plc]`, `[modbus]`, `[modbus.map]`, `[canopen]`, `[trace]`); an unknown key or "
-             "a bad value is an error naming the file and the dotted key. Paths are relative "
+             "`[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, `[modbus.roles]`, "
+             "`[canopen]`, `[trace]`); an unknown key or a bad value is an error naming the "
+             "file and the dotted key. Paths are relative "
              "to the config file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):

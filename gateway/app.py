@@ -46,7 +46,6 @@ class Gateway:
         self._runtime: Runtime | None = None
         self._driver: WallClockDriver | None = None
         self._modbus: ModbusServer | None = None
-        self._modbus_address: tuple[str, int] | None = None
         self._canopen: CanopenNode | None = None
         self._trace_file: TraceFile | None = None
 
@@ -70,7 +69,7 @@ class Gateway:
         try:
             if self.config.modbus.enabled:
                 self._modbus = ModbusServer(self.config.modbus, self.map, self)
-                self._modbus_address = await self._modbus.start()
+                await self._modbus.start()
             if self.config.canopen.enabled:
                 self._canopen = CanopenNode(self.config, self)
                 self._canopen.start()
@@ -99,9 +98,19 @@ class Gateway:
     @property
     def modbus_address(self) -> tuple[str, int]:
         """(host, port) the Modbus server listens on (port 0 in the config: a free one)."""
-        if self._modbus_address is None:
-            raise GatewayError("the Modbus server is not running (modbus.enabled = false?)")
-        return self._modbus_address
+        address = self._modbus.address if self._modbus is not None else None
+        if address is None:
+            raise GatewayError("the Modbus server is not running (modbus.enabled = false? "
+                               "modbus.tls.plain = false?)")
+        return address
+
+    @property
+    def modbus_tls_address(self) -> tuple[str, int]:
+        """(host, port) of Modbus/TCP Security (``[modbus.tls]``)."""
+        address = self._modbus.tls_address if self._modbus is not None else None
+        if address is None:
+            raise GatewayError("Modbus/TCP Security is not on (modbus.tls.cert unset?)")
+        return address
 
     @property
     def modbus_server(self) -> ModbusServer | None:

@@ -72,10 +72,15 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,
                      "started" if config.nc.autostart else "waits for cycle start")
-            if config.modbus.enabled:
-                host, port = gw.modbus_address
-                log.info("Modbus TCP on %s:%d, unit ids %s, at most %d clients", host, port,
-                         ",".join(map(str, config.modbus.unit_ids)), config.modbus.max_clients)
+            server = gw.modbus_server
+            if server is not None:
+                units = ",".join(map(str, config.modbus.unit_ids))
+                if server.address is not None:
+                    log.info("Modbus TCP on %s:%d, unit ids %s, at most %d clients",
+                             *server.address, units, config.modbus.max_clients)
+                if server.tls_address is not None:
+                    log.info("Modbus/TCP Security (TLS) on %s:%d, roles %s", *server.tls_address,
+                             ", ".join(config.modbus.roles) or "none")
             await stop.wait()
             log.info("stopping")
     finally:

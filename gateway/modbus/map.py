@@ -73,6 +73,11 @@ class Region:
     def end(self) -> int:
         return self.start + self.count
 
+    @property
+    def name(self) -> str:
+        """Its name in the config (modbus.map.read_only, modbus.roles); "" if not writable."""
+        return REGION_NAMES.get(self.kind, "")
+
     def hmi(self, address: int) -> str:
         """The 1-based 5/6-digit number of an address (e.g. holding 0 -> 400001)."""
         number = address + 1
@@ -80,8 +85,8 @@ class Region:
         return f"{self.table.prefix}{number:0{width - 1}d}"
 
 
-
-
+REGION_NAMES = {Kind.SA_BITS: "sa_bits", Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars",
+                Kind.SA_BYTES: "sa_bytes", Kind.COMMAND: "command", Kind.MAILBOX: "mailbox"}
 PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")
 PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait target",
                      "alarm code", "SNDs sent (hi)", "SNDs sent (lo)", "SNDs received (hi)",

@@ -22,8 +22,10 @@ its response classes encode the answers.  The map itself lives in ``ncgate.gatew
 from __future__ import annotations
 
 import asyncio
+import errno
 import ipaddress
 import logging
+import ssl
 import struct
 from collections.abc import Callable
 from typing import Any, Final, cast
@@ -48,6 +50,7 @@ from pymodbus.pdu.register_message import (
 from ncgate.config import ModbusConfig
 from ncgate.gateway import identity
 from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.modbus import security
 from ncgate.gateway.modbus.map import (
     DEVICE_FAILURE,
     ILLEGAL_ADDRESS,
@@ -57,6 +60,7 @@ from ncgate.gateway.modbus.map import (
     ModbusMap,
     Table,
 )
+from ncgate.gateway.modbus.security import TlsSession
 from ncgate.gateway.wiring import Backend
 
 log = logging.getLogger("ncgate.modbus")
@@ -90,6 +94,7 @@ _MBAP = struct.Struct(">HHHB")
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
 _READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
 SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23, 43})
+WRITES: Final = frozenset({5, 6, 15, 16, 22, 23})
 MEI_DEVICE_ID: Final = 0x0E  # FC43's "read device identification"
 CONFORMITY: Final = 0x82  # regular identification, stream and individual access
 
@@ -167,7 +172,10 @@ class RequestHandler:
         self.identity = {k: v.encode("utf-8")[:240].decode("utf-8", "ignore").encode("utf-8")
                          for k, v in texts.items()}
 
-    def handle(self, unit: int, pdu: bytes, who: str) -> bytes:
+    def handle(self, unit: int, pdu: bytes, who: str,
+               writable: frozenset[str] | None = None) -> bytes:
+        """The answer PDU.  ``writable``: the map regions this client's role may write (None:
+        no roles, as on plain Modbus/TCP); a write elsewhere is exception 01."""
         fc = pdu[0]
         self.served += 1
         if unit not in self.unit_ids:
@@ -176,9 +184,13 @@ class RequestHandler:
             validate(pdu)
             if fc == 43:
                 return self._device_identification(pdu[2], pdu[3])
+            if writable is not None and fc in WRITES and not writable:
+                raise ModbusError(ILLEGAL_FUNCTION, "this client's role may not write")
             request = self.decoder.decode(pdu)
             if request is None:  # not reached: validation accepts only what decodes
                 raise ModbusError(ILLEGAL_VALUE, "undecodable")
+            if writable is not None and fc in WRITES:
+                self._authorise(fc, request, writable)
             return self._execute(fc, request, pdu, who)
         except ModbusError as exc:
             return exception_pdu(fc, exc.code)
@@ -211,6 +223,22 @@ class RequestHandler:
             count += 1
         more = 0xFF if next_id else 0x00
         return bytes((43, MEI_DEVICE_ID, code, CONFORMITY, more, next_id, count)) + bytes(body)
+
+    def _authorise(self, fc: int, request: Any, writable: frozenset[str]) -> None:
+        """Exception 01 unless the role may write every region the request writes (after
+        the address check: an unmapped address is still 02)."""
+        if fc in (5, 15):
+            table, address, count = Table.COILS, request.address, 1 if fc == 5 else request.count
+        elif fc == 23:
+            table, address, count = (Table.HOLDING, request.write_address,
+                                     len(request.write_registers))
+        else:
+            count = 1 if fc in (6, 22) else request.count
+            table, address = Table.HOLDING, request.address
+        for region, _, _ in self.map.segments(table, address, count):
+            if region.name not in writable:
+                raise ModbusError(ILLEGAL_FUNCTION, f"this client's role may not write "
+                                  f"{region.name}")
 
     def _execute(self, fc: int, request: Any, pdu: bytes, who: str) -> bytes:
         m, backend = self.map, self.backend
@@ -264,8 +292,12 @@ class RequestHandler:
 
 
 class _Connection(asyncio.Protocol):
-    def __init__(self, server: ModbusServer) -> None:
+    def __init__(self, server: ModbusServer, tls: ssl.SSLContext | None = None) -> None:
         self.server = server
+        # Modbus/TCP Security: the TLS session (None: plain Modbus/TCP) and what the client's
+        # role may write (None: no roles apply, as on plain Modbus/TCP).
+        self.tls = TlsSession(tls) if tls is not None else None
+        self.writable: frozenset[str] | None = None
         self.buffer = bytearray()
         self.transport: asyncio.Transport | None = None
         self.who = "modbus ?"
@@ -294,7 +326,13 @@ class _Connection(asyncio.Protocol):
             idlest.evict()
         server.connections.add(self)
         log.info("%s connected (%d clients)", self.who, len(server.connections))
-        self._arm(self.server.config.idle_timeout_s)
+        if self.tls is not None:
+            self.writable = frozenset()  # nothing until the handshake names a role
+            # The handshake has the 5 s of a partial frame.
+            self.partial_since = self.last_activity
+            self._arm(min(PARTIAL_FRAME_TIMEOUT_S, server.config.idle_timeout_s))
+        else:
+            self._arm(server.config.idle_timeout_s)
 
     def pause_writing(self) -> None:
         """Answers not yet sent passed the high-water mark: answer and read no more requests
@@ -334,8 +372,43 @@ class _Connection(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         self.last_activity = self.loop.time()
+        tls = self.tls
+        if tls is not None:
+            was_established = tls.established
+            try:
+                data = tls.feed(data)
+            except ssl.SSLError as exc:
+                self._flush_tls()  # the alert tells the client why
+                self.server.refusals.note(f"{self.who} refused: TLS handshake failed "
+                                          f"({exc.reason or exc})")
+                self.close("TLS handshake failed")
+                return
+            self._flush_tls()
+            if not tls.established:
+                return
+            if not was_established:
+                self._established()
+            if tls.closed:
+                self.close("the client closed the TLS session")
+                return
         self.buffer += data
         self._process()
+
+    def _flush_tls(self) -> None:
+        assert self.tls is not None and self.transport is not None
+        pending = self.tls.outgoing()
+        if pending and not self.transport.is_closing():
+            self.transport.write(pending)
+
+    def _established(self) -> None:
+        """The handshake is done and the client's certificate verified: read its role."""
+        assert self.tls is not None
+        der = self.tls.peer_certificate()
+        role = security.role_of(der) if der is not None else None
+        self.writable = self.server.config.roles.get(role, frozenset()) if role else frozenset()
+        self.who += f" role {role}" if role else " (no role)"
+        self.partial_since = None
+        log.info("%s: %s established", self.who, self.tls.version())
 
     def _process(self) -> None:
         """Answer every complete frame in the buffer, in order, unless the client stopped
@@ -357,7 +430,7 @@ class _Connection(asyncio.Protocol):
                 break
             pdu = bytes(buffer[7:end])
             del buffer[:end]
-            answer = handle(unit, pdu, self.who)
+            answer = handle(unit, pdu, self.who, self.writable)
             out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
             answered = True
             size += len(answer) + 7
@@ -378,7 +451,8 @@ class _Connection(asyncio.Protocol):
 
     def _send(self, answers: list[bytes]) -> None:
         assert self.transport is not None
-        self.transport.write(answers[0] if len(answers) == 1 else b"".join(answers))
+        data = answers[0] if len(answers) == 1 else b"".join(answers)
+        self.transport.write(data if self.tls is None else self.tls.encrypt(data))
 
     def _arm(self, delay: float) -> None:
         self.timer = self.loop.call_later(delay, self._check_timeouts)
@@ -390,7 +464,9 @@ class _Connection(asyncio.Protocol):
         now = self.loop.time()
         idle = self.server.config.idle_timeout_s
         if self.partial_since is not None and now - self.partial_since >= PARTIAL_FRAME_TIMEOUT_S:
-            self.close(f"partial frame not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
+            what = ("TLS handshake" if self.tls is not None and not self.tls.established
+                    else "partial frame")
+            self.close(f"{what} not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
             return
         if now - self.last_activity >= idle:
             self.close(f"idle for {idle:g} s")
@@ -412,8 +488,11 @@ class ModbusServer:
         self.connections: set[_Connection] = set()
         self.all_closed = asyncio.Event()
         self.connections_changed = asyncio.Event()  # set when a connection goes
-        self._server: asyncio.Server | None = None
+        self._servers: list[asyncio.Server] = []
         self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
+        # (host, port) of the plain Modbus/TCP listener and of the TLS one (None: off).
+        self.address: tuple[str, int] | None = None
+        self.tls_address: tuple[str, int] | None = None
 
     def allowed(self, host: str) -> bool:
         if not self._allow:
@@ -430,21 +509,41 @@ class ModbusServer:
             self.connections_changed.clear()
             await self.connections_changed.wait()
 
-    async def start(self) -> tuple[str, int]:
+    async def start(self) -> None:
+        """Listen: plain Modbus/TCP on ``port`` and, with ``[modbus.tls]``, Modbus/TCP
+        Security on ``tls.port``; both share ``max_clients``."""
+        tls = self.config.tls
+        if not tls.enabled or tls.plain:
+            self.address = await self._listen(self.config.port, None)
+        if tls.enabled:
+            self.tls_address = await self._listen(tls.port, security.server_context(tls))
+
+    async def _listen(self, port: int, context: ssl.SSLContext | None) -> tuple[str, int]:
         loop = asyncio.get_running_loop()
-        factory: Callable[[], asyncio.Protocol] = lambda: _Connection(self)  # noqa: E731
-        self._server = await loop.create_server(factory, self.config.host, self.config.port,
-                                                reuse_address=True)
-        host, port = self._server.sockets[0].getsockname()[:2]
-        return host, port
+        factory: Callable[[], asyncio.Protocol] = lambda: _Connection(self, context)  # noqa: E731
+        try:
+            server = await loop.create_server(factory, self.config.host, port,
+                                              reuse_address=True)
+        except OSError as exc:  # name the key to change
+            key = "modbus.tls.port" if context is not None else "modbus.port"
+            hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
+                    if exc.errno == errno.EACCES else "")
+            raise OSError(exc.errno, f"{key}: cannot listen on {self.config.host}:{port}: "
+                          f"{exc.strerror}{hint}") from None
+        self._servers.append(server)
+        host, bound = server.sockets[0].getsockname()[:2]
+        return host, bound
 
     async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-            if self.connections:
-                self.all_closed.clear()
-                for connection in list(self.connections):
-                    connection.close("server shutting down")
-                await self.all_closed.wait()  # every connection_lost has run
-            await self._server.wait_closed()
-            self._server = None
+        if not self._servers:
+            return
+        for server in self._servers:
+            server.close()
+        if self.connections:
+            self.all_closed.clear()
+            for connection in list(self.connections):
+                connection.close("server shutting down")
+            await self.all_closed.wait()  # every connection_lost has run
+        for server in self._servers:
+            await server.wait_closed()
+        self._servers = []

@@ -46,11 +46,12 @@ except ImportError:  # the ncgate[pytest] extra is not installed
 
 
 def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Config:
-    """A config for a test: the file (None: built-in) with Modbus on a free port and the
-    CANopen node on a virtual CAN channel of its own (so tests never hear each other)."""
+    """A config for a test: the file (None: built-in) with Modbus (and Modbus/TCP Security,
+    if configured) on free ports and the CANopen node on a virtual CAN channel of its own (so
+    tests never hear each other)."""
     channel = f"ncgate-test-{next(_channels)}"
-    return load_config(path, overrides={"modbus.port": 0, "canopen.channel": channel,
-                                        **overrides})
+    return load_config(path, overrides={"modbus.port": 0, "modbus.tls.port": 0,
+                                        "canopen.channel": channel, **overrides})
 
 
 _channels = itertools.count(1)

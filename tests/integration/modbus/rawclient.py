@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import ssl
 import struct
 
 
@@ -21,8 +22,9 @@ class Raw:
         self.tid = 0
 
     @classmethod
-    async def open(cls, host: str, port: int) -> Raw:
-        reader, writer = await asyncio.open_connection(host, port)
+    async def open(cls, host: str, port: int, tls: ssl.SSLContext | None = None) -> Raw:
+        reader, writer = await asyncio.open_connection(
+            host, port, ssl=tls, server_hostname="localhost" if tls is not None else None)
         return cls(reader, writer)
 
     async def send(self, data: bytes) -> None:
