@@ -151,6 +151,8 @@ class ModbusMap:
                    f"first, {self.LOG_ENTRY} registers each: sequence (u32), sender, target, "
                    "block N, id (0 for an SND); unused entries read 0"),
         ]
+        # (table, address, count) -> its segments: a bounded cache of the ranges clients read.
+        self._pieces: dict[tuple[Table, int, int], list[tuple[Region, int, int]]] = {}
         # No overlap check here: the config loader refuses overlapping regions and names the
         # key (modbus.map.*), and a Config comes from the loader.
 
@@ -195,7 +197,13 @@ class ModbusMap:
 
     def read_registers(self, backend: Backend, table: Table, address: int,
                        count: int) -> list[int]:
-        pieces = self.segments(table, address, count)
+        key = (table, address, count)
+        pieces = self._pieces.get(key)
+        if pieces is None:  # pollers read the same ranges again and again: remember them
+            pieces = self.segments(table, address, count)
+            if len(self._pieces) >= 4096:
+                self._pieces.clear()
+            self._pieces[key] = pieces
         if len(pieces) == 1:
             return self._read_region(backend, *pieces[0])
         out: list[int] = []

@@ -91,6 +91,9 @@ class RateLimitedLog:
         self.last = now
         log.warning("%s%s", line, more)
 _MBAP = struct.Struct(">HHHB")
+_ADDRESS_COUNT = struct.Struct(">HH")
+# A read-registers answer PDU of n registers: function code, byte count, the registers.
+_REGISTERS: Final = [struct.Struct(f">BB{n}H") for n in range(126)]
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
 _READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
 SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23, 43})
@@ -180,6 +183,17 @@ class RequestHandler:
         self.served += 1
         if unit not in self.unit_ids:
             return exception_pdu(fc, TARGET_NO_RESPONSE)
+        if fc in (3, 4) and len(pdu) == 5:  # the pollers' hot path
+            # What validate, pymodbus's decoder and its response would do, without objects.
+            address, count = _ADDRESS_COUNT.unpack_from(pdu, 1)
+            if not 1 <= count <= 125:
+                return exception_pdu(fc, ILLEGAL_VALUE)
+            table = Table.HOLDING if fc == 3 else Table.INPUT
+            try:
+                regs = self.map.read_registers(self.backend, table, address, count)
+            except ModbusError as exc:
+                return exception_pdu(fc, exc.code)
+            return cast(bytes, _REGISTERS[count].pack(fc, 2 * count, *regs))
         try:
             validate(pdu)
             if fc == 43:
@@ -298,6 +312,7 @@ class _Connection(asyncio.Protocol):
         # role may write (None: no roles apply, as on plain Modbus/TCP).
         self.tls = TlsSession(tls) if tls is not None else None
         self.writable: frozenset[str] | None = None
+        self.handle = server.handler.handle
         self.buffer = bytearray()
         self.transport: asyncio.Transport | None = None
         self.who = "modbus ?"
@@ -373,6 +388,15 @@ class _Connection(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         self.last_activity = self.loop.time()
         tls = self.tls
+        if tls is None and not self.buffer and not self.paused and len(data) >= 8:
+            # The common case, one whole request in one segment: answer it straight away.
+            tid, protocol, length, unit = _MBAP.unpack_from(data)
+            if len(data) == 6 + length and protocol == 0 and length <= 254:
+                answer = self.handle(unit, data[7:], self.who, self.writable)
+                assert self.transport is not None
+                self.transport.write(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
+                self.partial_since = None
+                return
         if tls is not None:
             was_established = tls.established
             try:
@@ -414,7 +438,7 @@ class _Connection(asyncio.Protocol):
         """Answer every complete frame in the buffer, in order, unless the client stopped
         reading its answers (then the rest waits in the buffer until it does)."""
         buffer = self.buffer
-        handle = self.server.handler.handle
+        handle = self.handle
         out: list[bytes] = []
         size = 0
         answered = False

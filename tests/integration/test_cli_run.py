@@ -17,9 +17,10 @@ from ncgate.gateway.cli.main import main
 from ..conftest import EXAMPLES
 
 
-async def start_run(config: Path) -> tuple[asyncio.subprocess.Process, int, list[str]]:
+async def start_run(config: Path, *more: str
+                    ) -> tuple[asyncio.subprocess.Process, int, list[str]]:
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "ncgate", "run", "--config", str(config),
+        sys.executable, "-m", "ncgate", "run", "--config", str(config), *more,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
     assert proc.stdout is not None
     lines: list[str] = []
@@ -33,13 +34,15 @@ async def start_run(config: Path) -> tuple[asyncio.subprocess.Process, int, list
                 return proc, int(found.group(1)), lines
 
 
+@pytest.mark.parametrize("loop", ["asyncio", "uvloop"])  # uvloop: the 'fast' extra, in 'test'
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int) -> None:
+async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int,
+                                                        loop: str) -> None:
     config = tmp_path / "ncgate.toml"
     folder = EXAMPLES / "scheme3"
     config.write_text(f'[nc]\nautostart = true\ntime_scale = 100.0\n[nc.storage]\n'
                       f'MP0 = "{folder}"\n[modbus]\nport = 0\n')
-    proc, port, lines = await start_run(config)
+    proc, port, lines = await start_run(config, "--loop", loop)
     client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
     assert await client.connect()
     r = await client.read_input_registers(0, count=2, device_id=1)
@@ -53,6 +56,7 @@ async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int
     log = "".join(lines) + rest
     assert code == 0, log
     assert "P1 starts PROG91 (by operator)" in log
+    assert f"event loop: {loop}" in log
     assert "connected" in log and "stopped" in log
     assert "Traceback" not in log and "Task was destroyed" not in log
 
