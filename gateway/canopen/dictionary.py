@@ -144,7 +144,8 @@ def build_dictionary(config: Config) -> ObjectDictionary:
                 _map_entry(LAST_SND, 3, 8), _map_entry(LAST_SND, 4, 16)]
     for n, (cob, mapped) in enumerate(((0x180, states), (0x280, last_snd))):
         od.add_object(_record(f"TPDO{n + 1} communication parameter", 0x1800 + n, [
-            ("COB-ID used by TPDO", UNSIGNED32, "rw", cob + node_id),
+            # bit 30: no RTR (the node does not answer remote frames)
+            ("COB-ID used by TPDO", UNSIGNED32, "rw", 0x40000000 | cob + node_id),
             ("Transmission type", UNSIGNED8, "rw", 255),  # event-driven
             ("Inhibit time (100 us)", UNSIGNED16, "rw", 0),
         ]))

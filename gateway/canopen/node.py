@@ -10,8 +10,10 @@ prompt however busy the loop is.
 
 What this module adds to ``canopen.LocalNode``:
 
-- SDO: no service in STOPPED; an abandoned segmented transfer is aborted after 1 s
-  (0x05040000); a value out of range, also one carried in a wider type, is 0x06090030;
+- SDO: a server of our own (:class:`_SdoServer`: one transfer at a time, closed by every
+  abort); no service in STOPPED; an abandoned segmented transfer is aborted after 1 s
+  (0x05040000); a value out of range, also one carried in a wider type, is 0x06090030; the
+  COB-ID rules of CiA 301; the command word answered before it runs;
 - NMT: boot-up and PRE-OPERATIONAL (or OPERATIONAL with ``nmt_autostart``) at start and after
   a reset node / reset communication, which also restores the communication parameters;
 - PDOs, only in OPERATIONAL: TPDO1 (process states) sent on change, TPDO2 (last SND) on every
@@ -71,58 +73,154 @@ T = TypeVar("T")
 
 
 class _SdoServer(SdoServer):
-    """canopen's SDO server, silent in STOPPED, with a timeout for segmented downloads."""
+    """The SDO server (CiA 301 7.2.4) with the transfer state of its own.
+
+    canopen's server keeps the state of the last transfer whatever happened to it, so an
+    aborted download went on accepting segments and a stray upload segment replayed the last
+    buffer.  Here one transfer at most is open (``_mode``), every abort closes it, and a
+    segment with no transfer open is 0x05040001.  Block transfers are not served (0x05040001:
+    a master falls back to segmented).  Silent in STOPPED; an open transfer abandoned for
+    1 s is aborted with 0x05040000 (silently dropped in STOPPED).  canopen's ``upload`` and
+    ``download`` for local access stay as they are.
+    """
 
     def __init__(self, rx_cobid: int, tx_cobid: int, node: _Node) -> None:
         super().__init__(rx_cobid, tx_cobid, node)
         self._gateway_node = node
         self._lock = threading.Lock()
-        self._segmented = False
+        self._mode: str | None = None  # "upload" | "download" while a transfer is open
+        self._buffer_: bytearray = bytearray()
+        self._toggle_ = 0
+        self._size: int | None = None  # the size a segmented download announced
+        self._where = (0, 0)  # the open (or last) transfer's index and sub-index
         self._timer: threading.Timer | None = None
 
     def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._gateway_node.nmt._state == NMT_STOPPED:
             return  # no SDO service in STOPPED (CiA 301)
+        request = bytes(data).ljust(8, b"\0")
         with self._lock:
-            command = data[0]
-            ccs = command & 0xE0
-            # canopen aborts these with the index of the last transfer (None before the first
-            # one, which fails): answer them here with the request's own index.
-            if ccs in (0xE0, 0xC0) or (ccs == 0x00 and not self._segmented):
-                self._refuse(data, ABORT_COMMAND)  # no such command, or no transfer open
-                return
-            super().on_request(can_id, data, timestamp)
-            if ccs == 0x20:  # initiate download: segmented unless expedited
-                self._segmented = not command & 0x02
-            elif ccs == 0x00:  # download segment: open until the last one
-                self._segmented = not command & 0x01
-            else:
-                self._segmented = False
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
-            if self._segmented:
+            self._stop_timer()
+            try:
+                self._serve(request)
+            except SdoAbortedError as exc:
+                self._abort_transfer(exc.code)
+            except Exception:  # a bug of ours must not leave a transfer half open
+                log.exception("SDO request %s failed", request.hex())
+                self._abort_transfer(0x08000000)
+            if self._mode is not None:
                 self._timer = threading.Timer(SEGMENTED_TIMEOUT_S, self._expire)
                 self._timer.daemon = True
                 self._timer.start()
 
-    def _refuse(self, request: bytes | bytearray, code: int) -> None:
-        index, subindex = struct.unpack_from("<HB", bytes(request).ljust(4, b"\0"), 1)
+    def _serve(self, request: bytes) -> None:
+        command = request[0]
+        ccs = command & 0xE0
+        if ccs == 0x80:  # the client aborts: close, no answer
+            self._mode = None
+            return
+        if ccs in (0x20, 0x40):  # initiate download / upload: a new transfer
+            self._mode = None
+            index, subindex = struct.unpack_from("<HB", request, 1)
+            self._where = (index, subindex)
+            if ccs == 0x40:
+                self._initiate_upload(index, subindex)
+            else:
+                self._initiate_download(command, request, index, subindex)
+            return
+        if ccs == 0x60 and self._mode == "upload":
+            self._upload_segment(command)
+            return
+        if ccs == 0x00 and self._mode == "download":
+            self._download_segment(command, request)
+            return
+        # A segment with no such transfer open, a block transfer, or no such command.
+        if ccs in (0xA0, 0xC0, 0xE0):  # these carry an index: name it
+            self._where = struct.unpack_from("<HB", request, 1)
+        self._mode = None
+        raise SdoAbortedError(ABORT_COMMAND)
+
+    def _initiate_upload(self, index: int, subindex: int) -> None:
+        data = self._gateway_node.get_data(index, subindex, check_readable=True)
+        if not data:
+            raise SdoAbortedError(0x08000024)  # no data available
+        if len(data) <= 4:
+            self.send_response(struct.pack("<BHB", 0x43 | (4 - len(data)) << 2, index,
+                                           subindex) + data.ljust(4, b"\0"))
+            return
+        self._mode, self._buffer_, self._toggle_ = "upload", bytearray(data), 0
+        self.send_response(struct.pack("<BHBL", 0x41, index, subindex, len(data)))
+
+    def _upload_segment(self, command: int) -> None:
+        if command & 0x10 != self._toggle_:
+            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+        chunk = bytes(self._buffer_[:7])
+        del self._buffer_[:7]
+        last = not self._buffer_
+        self.send_response(bytes((self._toggle_ | (7 - len(chunk)) << 1 | int(last),))
+                           + chunk.ljust(7, b"\0"))
+        self._toggle_ ^= 0x10
+        if last:
+            self._mode = None
+
+    def _initiate_download(self, command: int, request: bytes, index: int,
+                           subindex: int) -> None:
+        node = self._gateway_node
+        obj = node.object_for(index, subindex)
+        if not obj.writable:
+            raise SdoAbortedError(0x06010002)
+        if command & 0x02:  # expedited
+            size = 4 - (command >> 2 & 0x3) if command & 0x01 else 4
+            node.set_data(index, subindex, request[4:4 + size], check_writable=True)
+            self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+            return
+        self._size = struct.unpack_from("<L", request, 4)[0] if command & 0x01 else None
+        if self._size is not None:
+            node.check_size(obj, self._size)  # a number of the wrong size: refused now
+        self._mode, self._buffer_, self._toggle_ = "download", bytearray(), 0
+        self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+
+    def _download_segment(self, command: int, request: bytes) -> None:
+        if command & 0x10 != self._toggle_:
+            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+        self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
+        if command & 0x01:  # the last segment
+            data = bytes(self._buffer_)
+            if self._size is not None and len(data) != self._size:
+                raise SdoAbortedError(ABORT_LENGTH)  # not what it announced
+            index, subindex = self._where
+            node = self._gateway_node
+            node.check_size(node.object_for(index, subindex), len(data))
+            node.set_data(index, subindex, data, check_writable=True)
+            self._mode = None
+        self.send_response(bytes((0x20 | self._toggle_,)) + bytes(7))
+        self._toggle_ ^= 0x10
+
+    def _abort_transfer(self, code: int) -> None:
+        """Answer with an abort naming the transfer's object, and close it."""
+        self._mode = None
+        index, subindex = self._where
         self.send_response(struct.pack("<BHBL", 0x80, index, subindex, code))
+
+    def _stop_timer(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
 
     def _expire(self) -> None:
         with self._lock:
-            if self._segmented:
-                self._segmented = False
-                log.info("SDO segmented transfer abandoned: abort after %g s",
-                         SEGMENTED_TIMEOUT_S)
-                self.abort(ABORT_TIMEOUT)
+            if self._mode is None:
+                return
+            if self._gateway_node.nmt._state == NMT_STOPPED:
+                self._mode = None  # nothing is sent in STOPPED
+                return
+            log.info("SDO %s of 0x%04X:%02X abandoned: abort after %g s", self._mode,
+                     *self._where, SEGMENTED_TIMEOUT_S)
+            self._abort_transfer(ABORT_TIMEOUT)
 
     def close(self) -> None:
         with self._lock:
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
+            self._stop_timer()
 
 
 class _Node(canopen.LocalNode):
@@ -132,17 +230,30 @@ class _Node(canopen.LocalNode):
         super().__init__(node_id, od)
         self.sdo = _SdoServer(0x600 + node_id, 0x580 + node_id, self)
 
-    def _object(self, index: int, subindex: int) -> ODVariable:
+    def object_for(self, index: int, subindex: int) -> ODVariable:
+        """The object an SDO names, or the abort: 0x06020000 no object, 0x06090011 no such
+        sub-index (a VAR has only 0)."""
         if index not in self.object_dictionary:
             raise SdoAbortedError(0x06020000)
         obj = self.object_dictionary[index]
-        if not isinstance(obj, ODVariable):
-            # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
-            # ones the dictionary defines exist here.
-            if subindex not in obj.subindices:
+        if isinstance(obj, ODVariable):
+            if subindex != 0:
                 raise SdoAbortedError(0x06090011)
-            obj = obj[subindex]
-        return obj
+            return obj
+        # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
+        # ones the dictionary defines exist here.
+        if subindex not in obj.subindices:
+            raise SdoAbortedError(0x06090011)
+        return obj[subindex]
+
+    _object = object_for
+
+    @staticmethod
+    def check_size(obj: ODVariable, size: int) -> None:
+        """A segmented transfer to a number must carry exactly its size (CiA 301: 0x06070012
+        too long, 0x06070013 too short); only an expedited one may use a wider type."""
+        if obj.data_type in NUMBER_TYPES and 8 * size != len(obj):
+            raise SdoAbortedError(0x06070012 if 8 * size > len(obj) else 0x06070013)
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
         # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
@@ -312,6 +423,11 @@ class CanopenNode:
             return
         if command in (0x81, 0x82):  # reset node / reset communication
             self._reset_communication()
+            if command == 0x81:
+                # Reset node also restores the node's own application values: the SND sender
+                # written to 0x2400:2.  The image behind 0x2000..0x23FF is the soft PLC's, not
+                # the node's (docs/decisions.md): it is left as it is.
+                self.node.data_store.pop(COMMAND, None)
             self._boot()
         elif command == 0x01:
             self._call_soon(self._entered_operational)
@@ -367,15 +483,47 @@ class CanopenNode:
         raise SdoAbortedError(0x06010001)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
-        if index in (0x1400, 0x1401) and subindex == 1:
-            self._call_soon(self._subscribe_rpdos)
+        # On the CAN thread, before canopen stores the value and answers: an abort raised
+        # here refuses the write.
+        if index in (0x1400, 0x1401, 0x1800, 0x1801) and subindex == 1:
+            cob = int.from_bytes(data, "little")
+            self._check_cob_id(index, cob)
+            if index < 0x1800:  # in effect before the answer goes out
+                self._subscribe_rpdo(index - 0x1400 + 1, cob)
             return
         if index < 0x2000:
             return
         value = od.decode_raw(data)
         assert isinstance(value, int)
+        if index == COMMAND and subindex == 1:
+            # Accepted at once; the work (a cycle start may parse a long program) runs on,
+            # and its outcome shows in the status objects, the EMCY and the trace.
+            if value not in (1, 2, 3):
+                raise SdoAbortedError(ABORT_RANGE)
+            self._call_soon(lambda: self._run_command(value))
+            return
         who = f"canopen SDO 0x{0x600 + self.node_id:03X}"
         self._on_loop(lambda: self._write(index, subindex, value, who))
+
+    def _run_command(self, word: int) -> None:
+        try:
+            self.backend.command(word)
+        except Exception:  # answered already: say it in the log
+            log.exception("command %d written through 0x2400:1 failed", word)
+
+    def _check_cob_id(self, index: int, cob: int) -> None:
+        """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise)."""
+        current = self._comm(index, 1)
+        if cob & 0x20000000:
+            raise SdoAbortedError(ABORT_RANGE)  # 29-bit identifiers are not supported
+        if index >= 0x1800 and not cob & 0x40000000:
+            # canopen drops remote frames, so the node cannot answer an RTR: it says so.
+            raise SdoAbortedError(ABORT_RANGE)
+        valid_now, valid_then = not current & 0x80000000, not cob & 0x80000000
+        if valid_now and valid_then and (cob ^ current) & 0x1FFFFFFF:
+            raise SdoAbortedError(ABORT_RANGE)  # the id changes only while the PDO is off
+        if valid_then and _restricted(cob & 0x7FF):
+            raise SdoAbortedError(ABORT_RANGE)
 
     def _write(self, index: int, subindex: int, value: int, who: str) -> None:
         backend = self.backend
@@ -422,15 +570,19 @@ class CanopenNode:
 
     def _subscribe_rpdos(self) -> None:
         for n in (1, 2):
-            cob = self._comm(0x1400 + n - 1, 1)
-            old = self._rpdo_cobs.get(n)
-            if old == cob:
-                continue
-            if old is not None:
-                self.network.unsubscribe(old, self._rpdo_callbacks[n])
-            if not cob & 0x80000000:
-                self.network.subscribe(cob & 0x7FF, self._rpdo_callbacks[n])
-            self._rpdo_cobs[n] = cob
+            self._subscribe_rpdo(n, self._comm(0x1400 + n - 1, 1))
+
+    def _subscribe_rpdo(self, n: int, cob: int) -> None:
+        """RPDO n listens on ``cob`` (bit 31: not at all) from now on."""
+        old = self._rpdo_cobs.get(n)
+        if old == cob:
+            return
+        callback = self._rpdo_callbacks[n]
+        if old is not None and not old & 0x80000000:
+            self.network.unsubscribe(old & 0x7FF, callback)
+        if not cob & 0x80000000:
+            self.network.subscribe(cob & 0x7FF, callback)
+        self._rpdo_cobs[n] = cob
 
     def _on_rpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
         self._on_rpdo("SA", can_id, data)
@@ -468,16 +620,20 @@ class CanopenNode:
         self._tpdo_ready(1)
 
     def _on_event(self, event: Event) -> None:
+        stopped = self.node.nmt._state == NMT_STOPPED  # no EMCY in STOPPED (CiA 301)
         if isinstance(event, ev.Alarm):
             self._alarmed = True
             register = self._error_register()
-            self.node.emcy.send(EMCY_SOFTWARE, register,
-                                struct.pack("<BH2x", event.proc & 0xFF, int(event.code) & 0xFFFF))
+            if not stopped:
+                self.node.emcy.send(EMCY_SOFTWARE, register,
+                                    struct.pack("<BH2x", event.proc & 0xFF,
+                                                int(event.code) & 0xFFFF))
         elif isinstance(event, ev.End) and event.how == "reset" and self._alarmed:
             # A reset clears the alarms one process at a time: when none is left, say so.
             if self._error_register() == 0:
                 self._alarmed = False
-                self.node.emcy.reset(0)
+                if not stopped:
+                    self.node.emcy.reset(0)
         elif isinstance(event, ev.Snd) and self.operational:
             n = event.where[2] if event.where is not None else None
             record = struct.pack("<LBBH", self.backend.engine.trace.counter, event.proc,
@@ -520,6 +676,16 @@ class CanopenNode:
         self._tpdo_last[n] = time.monotonic()
         if n == 2 and self._tpdo2_queue:
             self._tpdo_ready(2)  # every SND goes out, spaced by the inhibit time
+
+
+# CiA 301 table 3: identifiers no PDO may use (NMT, SYNC/EMCY, TIME, SDO, NMT error control,
+# LSS).
+_RESTRICTED = ((0x000, 0x07F), (0x101, 0x180), (0x581, 0x5FF), (0x601, 0x67F), (0x6E0, 0x6FF),
+               (0x701, 0x77F), (0x780, 0x7FF))
+
+
+def _restricted(can_id: int) -> bool:
+    return any(lo <= can_id <= hi for lo, hi in _RESTRICTED)
 
 
 def _last_snd(engine: Engine) -> tuple[int, int, int, int]:

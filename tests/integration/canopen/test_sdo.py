@@ -33,7 +33,7 @@ async def test_standard_entries(gw: Gateway, master: Master) -> None:
     assert await master.upload(0x1001, 0) == u8(0)
     assert await master.upload(0x1018, 0) == u8(4)
     assert await master.upload(0x1018, 4) == struct.pack("<L", 16)  # serial: the node id
-    assert await master.upload(0x1800, 1) == struct.pack("<L", 0x190)
+    assert await master.upload(0x1800, 1) == struct.pack("<L", 0x40000190)  # no RTR
     assert await master.upload(0x1A00, 0) == u8(4)  # 4 processes in TPDO1
     assert await master.upload(0x1A00, 1) == struct.pack("<L", 0x25000108)
     assert await master.upload(0x1600, 3) == struct.pack("<L", 0x20000308)
