@@ -19,8 +19,15 @@ from canopen.objectdictionary import (
     ODVariable,
     export_od,
 )
-from canopen.objectdictionary.datatypes import INTEGER16, UNSIGNED8, UNSIGNED16, UNSIGNED32
+from canopen.objectdictionary.datatypes import (
+    INTEGER16,
+    UNSIGNED8,
+    UNSIGNED16,
+    UNSIGNED32,
+    VISIBLE_STRING,
+)
 
+from ncgate import __version__
 from ncgate.config import Config
 from ncgate.gateway.identity import (
     PRODUCT_CODE,
@@ -49,6 +56,15 @@ def _var(name: str, index: int, sub: int, data_type: int, access: str,
     if default is not None:
         v.default = default
     v.pdo_mappable = pdo
+    return v
+
+
+def _string(name: str, index: int, text: str) -> ODVariable:
+    """A constant VISIBLE_STRING (read by segmented upload when longer than 4 bytes)."""
+    v = ODVariable(name, index, 0)
+    v.data_type = VISIBLE_STRING
+    v.access_type = "const"
+    v.default = text  # type: ignore[assignment]  # canopen's annotation says int; it takes str
     return v
 
 
@@ -118,6 +134,10 @@ def build_dictionary(config: Config) -> ObjectDictionary:
 
     od.add_object(_var("Device type", 0x1000, 0, UNSIGNED32, "ro", 0))
     od.add_object(_var("Error register", 0x1001, 0, UNSIGNED8, "ro", 0))
+    od.add_object(_string("Manufacturer device name", 0x1008, PRODUCT_NAME))
+    od.add_object(_string("Manufacturer hardware version", 0x1009, "none (software node)"))
+    od.add_object(_string("Manufacturer software version", 0x100A, __version__))
+    od.add_object(_var("COB-ID EMCY", 0x1014, 0, UNSIGNED32, "ro", 0x80 + node_id))
     od.add_object(_var("Producer heartbeat time", 0x1017, 0, UNSIGNED16, "rw",
                        config.canopen.heartbeat_ms))
     od.add_object(_record("Identity object", 0x1018, [
@@ -185,7 +205,7 @@ def build_dictionary(config: Config) -> ObjectDictionary:
 
 
 _TYPE_NAMES = {UNSIGNED8: "UNSIGNED8", UNSIGNED16: "UNSIGNED16", UNSIGNED32: "UNSIGNED32",
-               INTEGER16: "INTEGER16"}
+               INTEGER16: "INTEGER16", VISIBLE_STRING: "VISIBLE_STRING"}
 
 
 def dictionary_rows(config: Config) -> list[dict[str, object]]:

@@ -179,3 +179,19 @@ async def test_reset_node_forgets_the_snd_sender_and_keeps_the_image(gw: Gateway
     assert await master.upload(0x2100, 6) == u8(200)
     # the node's own application value is back to power-on: no sender written yet
     assert await sdo_error(master.download(0x2400, 3, u8(1))) == 0x08000022
+
+
+# -- 12. identity and housekeeping objects masters read --------------------------------------------
+
+async def test_identity_strings_by_segmented_upload(gw: Gateway, master: Master) -> None:
+    from ncgate import __version__
+
+    assert await master.upload(0x1008, 0) == b"ncgate CNC co-simulator gateway"  # 31 bytes
+    assert await master.upload(0x100A, 0) == __version__.encode()
+    assert len(await master.upload(0x1009, 0)) > 4
+    assert await master.upload(0x1014, 0) == struct.pack("<L", 0x90)  # EMCY of node 16
+    # a segmented upload with a wrong toggle bit is aborted, and closed
+    answer = await master.raw_sdo(struct.pack("<BHB4x", 0x40, 0x1008, 0))
+    assert answer[0] == 0x41 and int.from_bytes(answer[4:8], "little") == 31
+    assert abort_code(await master.raw_sdo(bytes((0x70,)) + bytes(7))) == 0x05030000
+    assert abort_code(await master.raw_sdo(bytes((0x60,)) + bytes(7))) == 0x05040001
