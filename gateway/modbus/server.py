@@ -428,7 +428,12 @@ class _Connection(asyncio.Protocol):
         """The handshake is done and the client's certificate verified: read its role."""
         assert self.tls is not None
         der = self.tls.peer_certificate()
-        role = security.role_of(der) if der is not None else None
+        try:
+            role = security.role_of(der) if der is not None else None
+        except ValueError as exc:  # an extension cryptography cannot parse: no role
+            log.warning("%s: the certificate's extensions do not parse (%s): no role",
+                        self.who, exc)
+            role = None
         self.writable = self.server.config.roles.get(role, frozenset()) if role else frozenset()
         self.who += f" role {role}" if role else " (no role)"
         self.partial_since = None
