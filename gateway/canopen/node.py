@@ -246,8 +246,6 @@ class _Node(canopen.LocalNode):
             raise SdoAbortedError(0x06090011)
         return obj[subindex]
 
-    _object = object_for
-
     @staticmethod
     def check_size(obj: ODVariable, size: int) -> None:
         """A segmented transfer to a number must carry exactly its size (CiA 301: 0x06070012
@@ -258,7 +256,7 @@ class _Node(canopen.LocalNode):
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
         # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
         # which (ODArray has no __contains__) sorts every sub-index on every access.
-        obj = self._object(index, subindex)
+        obj = self.object_for(index, subindex)
         if check_readable and not obj.readable:
             raise SdoAbortedError(0x06010001)
         for callback in self._read_callbacks:
@@ -275,7 +273,7 @@ class _Node(canopen.LocalNode):
 
     def set_data(self, index: int, subindex: int, data: bytes,
                  check_writable: bool = False) -> None:
-        obj = self._object(index, subindex)
+        obj = self.object_for(index, subindex)
         if check_writable and not obj.writable:
             raise SdoAbortedError(0x06010002)
         if obj.data_type in NUMBER_TYPES and 8 * len(data) != len(obj):
