@@ -282,6 +282,14 @@ class ModbusConfig:
         "none) only reads", parse=_roles, factory=dict)
 
 
+class MasterLost(enum.Enum):
+    """``canopen.on_master_lost``: what the node does when the master's heartbeat stops."""
+
+    NONE = "none"
+    HOLD = "hold"
+    RESET = "reset"
+
+
 @dataclass(frozen=True, slots=True)
 class CanopenConfig:
     enabled: bool = setting(True, "run the CANopen node")
@@ -296,6 +304,12 @@ class CanopenConfig:
     hub: bool = setting(False, "host a python-can-remote hub for masters in other processes")
     hub_host: str = setting("127.0.0.1", "the hub's address")
     hub_port: int = setting(54701, "the hub's port", lo=0, hi=65535)
+    on_master_lost: MasterLost = setting(
+        MasterLost.HOLD, "when the heartbeat the master set in 0x1016 stops: alarm and EMCY, "
+        "and \"hold\" (feed hold), \"reset\" (reset the processes) or \"none\"")
+    store_file: Path | None = setting(
+        None, "where 0x1010 keeps the communication parameters (default: "
+        "ncgate-canopen-node<id>.json next to the config)", parse=_optional_path)
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,6 +21,7 @@ from types import TracebackType
 from typing import Any
 
 from ncgate.config import Config, load_config
+from ncgate.gateway.canopen.clock import Clock
 from ncgate.gateway.canopen.node import CanopenNode
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
 from ncgate.gateway.modbus.map import ModbusMap
@@ -28,6 +29,7 @@ from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
 from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
+from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, Trace
@@ -38,10 +40,15 @@ class Gateway:
     """Soft PLC + processes (+ fieldbus servers in later issues), as an async context."""
 
     def __init__(self, config: Config | None = None,
-                 listeners: Sequence[Callable[[Event], None]] = ()) -> None:
-        """``listeners`` hear every trace event from the start (before an autostart)."""
+                 listeners: Sequence[Callable[[Event], None]] = (),
+                 canopen_clock: Clock | None = None) -> None:
+        """``listeners`` hear every trace event from the start (before an autostart).
+        ``canopen_clock`` drives the CANopen node's timers (inhibit, event timer, heartbeat
+        consumer, SDO timeout): a test passes a
+        :class:`~ncgate.gateway.canopen.clock.ManualClock` and moves time itself."""
         self.config = config if config is not None else load_config(None)
         self._listeners = tuple(listeners)
+        self._canopen_clock = canopen_clock
         self.map = ModbusMap(self.config)
         self._runtime: Runtime | None = None
         self._driver: WallClockDriver | None = None
@@ -71,7 +78,7 @@ class Gateway:
                 self._modbus = ModbusServer(self.config.modbus, self.map, self)
                 await self._modbus.start()
             if self.config.canopen.enabled:
-                self._canopen = CanopenNode(self.config, self)
+                self._canopen = CanopenNode(self.config, self, self._canopen_clock)
                 self._canopen.start()
             if self.config.nc.autostart:
                 await self.start()
@@ -183,6 +190,12 @@ class Gateway:
         """An SND in the name of external process ``sender``."""
         self._sync_clock()
         self.engine.external_snd(sender, target)
+        self._settle()
+
+    def fieldbus_alarm(self, code: AlarmCode, message: str) -> None:
+        """An alarm of the fieldbus side (process 0 in the trace), e.g. a lost master."""
+        self._sync_clock()
+        self.engine.fieldbus_alarm(code, message)
         self._settle()
 
     def command(self, word: int) -> None:

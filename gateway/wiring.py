@@ -10,6 +10,7 @@ from typing import Protocol
 
 from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore
+from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm
 from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.trace import Trace
@@ -73,6 +74,8 @@ class Backend(Protocol):
     def command(self, word: int) -> None: ...
 
     def send(self, sender: int, target: int) -> None: ...
+
+    def fieldbus_alarm(self, code: AlarmCode, message: str) -> None: ...
 
 
 ImageVar = tuple[str, int, str]

@@ -89,6 +89,7 @@ class AlarmCode(enum.IntEnum):
     STALL = 142
     WAIT_TIMEOUT = 143
     RUNAWAY = 144
+    MASTER_LOST = 150  # a fieldbus master's heartbeat stopped (CANopen 0x1016)
 
     @property
     def label(self) -> str:

@@ -12,12 +12,15 @@ and process status through callbacks (``ncgate.gateway.canopen.node``).
 
 from __future__ import annotations
 
+import io
+import os
+from datetime import UTC, datetime
+
 from canopen.objectdictionary import (
     ObjectDictionary,
     ODArray,
     ODRecord,
     ODVariable,
-    export_od,
 )
 from canopen.objectdictionary.datatypes import (
     INTEGER16,
@@ -26,6 +29,7 @@ from canopen.objectdictionary.datatypes import (
     UNSIGNED32,
     VISIBLE_STRING,
 )
+from canopen.objectdictionary.eds import export_eds
 
 from ncgate import __version__
 from ncgate.config import Config
@@ -39,6 +43,13 @@ from ncgate.gateway.identity import (
 
 CHUNK = 128  # K bytes and SYVARs per object (0x2100+j, 0x2200+j)
 MAX_PROCESS_STATES_IN_TPDO1 = 8
+PDO_COUNT = 4  # RPDO1..4, TPDO1..4
+MAX_MAPPED = 8  # objects per PDO (granularity 8: whole bytes, at most 8 of them)
+CONSUMER_ENTRIES = 4  # 0x1016: nodes whose heartbeat the node watches
+
+SYNC_COB_ID, STORE, RESTORE, CONSUMER_HEARTBEAT = 0x1005, 0x1010, 0x1011, 0x1016
+RPDO_COMMUNICATION, RPDO_MAPPING = 0x1400, 0x1600
+TPDO_COMMUNICATION, TPDO_MAPPING = 0x1800, 0x1A00
 
 SA_BYTES, K_BASE, SYVAR_BASE = 0x2000, 0x2100, 0x2200
 COMMAND, STATUS_BASE, LAST_SND = 0x2400, 0x2500, 0x2600
@@ -68,38 +79,103 @@ def _string(name: str, index: int, text: str) -> ODVariable:
     return v
 
 
-def _record(name: str, index: int, members: list[tuple[str, int, str, int | None]]
-            ) -> ODRecord:
+def _record(name: str, index: int, members: list[tuple[str, int, str, int | None]],
+            pdo: bool = False) -> ODRecord:
     record = ODRecord(name, index)
     record.add_member(_var("Highest sub-index supported", index, 0, UNSIGNED8, "const",
                            len(members)))
     for sub, (member, data_type, access, default) in enumerate(members, start=1):
-        record.add_member(_var(member, index, sub, data_type, access, default,
-                               pdo=access in ("ro", "rw")))
+        record.add_member(_var(member, index, sub, data_type, access, default, pdo=pdo))
     return record
 
 
-def _array(name: str, index: int, count: int, member: str, data_type: int, access: str
-           ) -> ODArray:
+def _array(name: str, index: int, count: int, member: str, data_type: int, access: str,
+           default: int = 0, pdo: bool = True, names: tuple[str, ...] = ()) -> ODArray:
     array = ODArray(name, index)
     array.add_member(_var("Number of entries", index, 0, UNSIGNED8, "const", count))
     for sub in range(1, count + 1):
-        array.add_member(_var(f"{member} {sub - 1}", index, sub, data_type, access, 0,
-                              pdo=True))
+        label = names[sub - 1] if names else f"{member} {sub - 1}"
+        array.add_member(_var(label, index, sub, data_type, access, default, pdo=pdo))
     return array
 
 
-def _mapping(name: str, index: int, entries: list[int]) -> ODRecord:
+def _cob_id(name: str, index: int, flags: int, base: int, node_id: int) -> ODVariable:
+    """A COB-ID whose default follows the node id: ``$NODEID+0x...`` in the EDS (CiA 306)."""
+    v = _var(name, index, 1, UNSIGNED32, "rw", flags | base + node_id)
+    _relative(v, flags | base)
+    return v
+
+
+def _relative(v: ODVariable, offset: int) -> None:
+    """canopen writes ``default_raw`` to the EDS as it is (its ODVariable sets it on import)."""
+    v.default_raw = f"$NODEID+0x{offset:X}"  # type: ignore[attr-defined]
+    v.relative = True
+
+
+def _communication(name: str, index: int, cob: ODVariable, transmit: bool) -> ODRecord:
+    """PDO communication parameter (CiA 301 7.5.2.35/36): an RPDO has COB-ID and type, a
+    TPDO also inhibit time, event timer and SYNC start value (sub 4 is reserved)."""
     record = ODRecord(name, index)
-    record.add_member(_var("Number of mapped objects", index, 0, UNSIGNED8, "const",
-                           len(entries)))
-    for sub, entry in enumerate(entries, start=1):
-        record.add_member(_var(f"Mapped object {sub}", index, sub, UNSIGNED32, "const", entry))
+    record.add_member(_var("Highest sub-index supported", index, 0, UNSIGNED8, "const",
+                           6 if transmit else 2))
+    record.add_member(cob)
+    record.add_member(_var("Transmission type", index, 2, UNSIGNED8, "rw", 255))
+    if transmit:
+        record.add_member(_var("Inhibit time", index, 3, UNSIGNED16, "rw", 0))
+        record.add_member(_var("Event timer", index, 5, UNSIGNED16, "rw", 0))
+        record.add_member(_var("SYNC start value", index, 6, UNSIGNED8, "rw", 0))
     return record
 
 
-def _map_entry(index: int, sub: int, bits: int) -> int:
+def _mapping(name: str, index: int, entries: list[int]) -> ODRecord:
+    """PDO mapping parameter: sub 0 the number of mapped objects (0..8), subs 1..8 the
+    entries (index << 16 | sub-index << 8 | bits); writable while the PDO is disabled."""
+    record = ODRecord(name, index)
+    count = _var("Number of mapped objects", index, 0, UNSIGNED8, "rw", len(entries))
+    count.max = MAX_MAPPED
+    record.add_member(count)
+    for sub in range(1, MAX_MAPPED + 1):
+        entry = entries[sub - 1] if sub <= len(entries) else 0
+        record.add_member(_var(f"Mapped object {sub}", index, sub, UNSIGNED32, "rw", entry))
+    return record
+
+
+def map_entry(index: int, sub: int, bits: int) -> int:
     return index << 16 | sub << 8 | bits
+
+
+def default_mappings(config: Config) -> dict[int, list[int]]:
+    """The mapping each PDO has at power-on (spec 3.3), by mapping index."""
+    plc, processes = config.plc, config.nc.processes
+    return {
+        RPDO_MAPPING: [map_entry(SA_BYTES, i, 8) for i in range(1, min(8, plc.sa_bits // 8) + 1)],
+        RPDO_MAPPING + 1: [map_entry(K_BASE, i, 8) for i in range(1, min(8, plc.k_bytes) + 1)],
+        RPDO_MAPPING + 2: [], RPDO_MAPPING + 3: [],
+        TPDO_MAPPING: [map_entry(STATUS_BASE + k, 1, 8)
+                       for k in range(min(processes, MAX_PROCESS_STATES_IN_TPDO1))],
+        TPDO_MAPPING + 1: [map_entry(LAST_SND, 1, 32), map_entry(LAST_SND, 2, 8),
+                           map_entry(LAST_SND, 3, 8), map_entry(LAST_SND, 4, 16)],
+        TPDO_MAPPING + 2: [], TPDO_MAPPING + 3: [],
+    }
+
+
+def _pdos(od: ObjectDictionary, config: Config) -> None:
+    """RPDO1..4 and TPDO1..4.  Defaults (spec 3.3): RPDO1 <- SA bytes 0..7, RPDO2 <- K bytes
+    0..7, TPDO1 -> process states 1..8 (on change), TPDO2 -> the last SND record (on every
+    SND); RPDO3/4 and TPDO3/4 are disabled and empty, for the master to map.  TPDO COB-IDs
+    have bit 30 set: the node answers no RTR."""
+    node_id = config.canopen.node_id
+    mappings = default_mappings(config)
+    for kind, comm, mapping, base, rtr in (("RPDO", RPDO_COMMUNICATION, RPDO_MAPPING, 0x200, 0),
+                                           ("TPDO", TPDO_COMMUNICATION, TPDO_MAPPING, 0x180,
+                                            0x40000000)):
+        for n in range(PDO_COUNT):
+            flags = rtr | (0 if n < 2 else 0x80000000)
+            cob = _cob_id(f"COB-ID used by {kind}", comm + n, flags, base + 0x100 * n, node_id)
+            od.add_object(_communication(f"{kind}{n + 1} communication parameter", comm + n,
+                                         cob, transmit=kind == "TPDO"))
+            od.add_object(_mapping(f"{kind}{n + 1} mapping parameter", mapping + n,
+                                   mappings[mapping + n]))
 
 
 def chunks(total: int) -> list[tuple[int, int]]:
@@ -108,8 +184,39 @@ def chunks(total: int) -> list[tuple[int, int]]:
 
 
 def write_eds(config: Config, path: str) -> None:
-    """The node's EDS (CiA 306), for CANopen configuration tools (``ncgate eds``)."""
-    export_od(build_dictionary(config), path, doc_type="eds")
+    """The node's EDS (CiA 306), for CANopen configuration tools (``ncgate eds``).
+
+    [FileInfo] and [DeviceInfo] carry CiA 306's whole keyword sets; the dates are today's
+    (or ``SOURCE_DATE_EPOCH``'s, for a reproducible file); COB-IDs are ``$NODEID+...``.
+    """
+    od = build_dictionary(config)
+    info = od.device_information
+    info.simple_boot_up_master = False
+    info.dynamic_channels_supported = False
+    info.group_messaging = False
+    info.LSS_supported = False
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    when = (datetime.fromtimestamp(int(epoch), UTC) if epoch
+            else datetime.now(UTC))
+    date, clock = when.strftime("%m-%d-%Y"), when.strftime("%I:%M%p")
+    file_info = {
+        "FileName": os.path.basename(path),
+        "FileVersion": 1,
+        "FileRevision": 0,
+        "EDSVersion": "4.0",
+        "Description": f"{PRODUCT_NAME} {__version__}: Modbus/CANopen gateway of a "
+                       f"multi-process CNC simulator",
+        "CreationTime": clock, "CreationDate": date, "CreatedBy": f"ncgate {__version__}",
+        "ModificationTime": clock, "ModificationDate": date,
+        "ModifiedBy": f"ncgate {__version__}",
+    }
+    text = io.StringIO()
+    export_eds(od, text, file_info=file_info)
+    # canopen adds its own "EdsVersion" beside CiA 306's "EDSVersion": keep one.
+    lines = [line for line in text.getvalue().splitlines(keepends=True)
+             if not line.startswith("EdsVersion=")]
+    with open(path, "w", encoding="utf-8") as out:
+        out.writelines(lines)
 
 
 def build_dictionary(config: Config) -> ObjectDictionary:
@@ -128,8 +235,8 @@ def build_dictionary(config: Config) -> ObjectDictionary:
     info.simple_boot_up_slave = True
     info.granularity = 8
     # canopen annotates these counts as bool; the EDS wants the numbers (CiA 306).
-    info.nr_of_RXPDO = 2  # type: ignore[assignment]
-    info.nr_of_TXPDO = 2  # type: ignore[assignment]
+    info.nr_of_RXPDO = PDO_COUNT  # type: ignore[assignment]
+    info.nr_of_TXPDO = PDO_COUNT  # type: ignore[assignment]
     info.allowed_baudrates = {10000, 20000, 50000, 125000, 250000, 500000, 800000, 1000000}
 
     od.add_object(_var("Device type", 0x1000, 0, UNSIGNED32, "ro", 0))
@@ -137,7 +244,9 @@ def build_dictionary(config: Config) -> ObjectDictionary:
     od.add_object(_string("Manufacturer device name", 0x1008, PRODUCT_NAME))
     od.add_object(_string("Manufacturer hardware version", 0x1009, "none (software node)"))
     od.add_object(_string("Manufacturer software version", 0x100A, __version__))
-    od.add_object(_var("COB-ID EMCY", 0x1014, 0, UNSIGNED32, "ro", 0x80 + node_id))
+    emcy = _var("COB-ID EMCY", 0x1014, 0, UNSIGNED32, "ro", 0x80 + node_id)
+    _relative(emcy, 0x80)
+    od.add_object(emcy)
     od.add_object(_var("Producer heartbeat time", 0x1017, 0, UNSIGNED16, "rw",
                        config.canopen.heartbeat_ms))
     od.add_object(_record("Identity object", 0x1018, [
@@ -147,30 +256,16 @@ def build_dictionary(config: Config) -> ObjectDictionary:
         ("Serial number", UNSIGNED32, "ro", node_id),
     ]))
 
-    # PDOs (spec 3.3 defaults): RPDO1 <- SA bytes 0..7, RPDO2 <- K bytes 0..7,
-    # TPDO1 -> process states 1..8 (on change), TPDO2 -> the last SND record (on every SND).
-    for n, (cob, mapped) in enumerate((
-        (0x200, [_map_entry(SA_BYTES, i, 8) for i in range(1, 9)]),
-        (0x300, [_map_entry(K_BASE, i, 8) for i in range(1, 9)]),
-    )):
-        od.add_object(_record(f"RPDO{n + 1} communication parameter", 0x1400 + n, [
-            ("COB-ID used by RPDO", UNSIGNED32, "rw", cob + node_id),
-            ("Transmission type", UNSIGNED8, "rw", 255),
-        ]))
-        od.add_object(_mapping(f"RPDO{n + 1} mapping parameter", 0x1600 + n, mapped))
-    states = [_map_entry(STATUS_BASE + k, 1, 8)
-              for k in range(min(processes, MAX_PROCESS_STATES_IN_TPDO1))]
-    last_snd = [_map_entry(LAST_SND, 1, 32), _map_entry(LAST_SND, 2, 8),
-                _map_entry(LAST_SND, 3, 8), _map_entry(LAST_SND, 4, 16)]
-    for n, (cob, mapped) in enumerate(((0x180, states), (0x280, last_snd))):
-        od.add_object(_record(f"TPDO{n + 1} communication parameter", 0x1800 + n, [
-            # bit 30: no RTR (the node does not answer remote frames)
-            ("COB-ID used by TPDO", UNSIGNED32, "rw", 0x40000000 | cob + node_id),
-            ("Transmission type", UNSIGNED8, "rw", 255),  # event-driven
-            ("Inhibit time (100 us)", UNSIGNED16, "rw", 0),
-        ]))
-        od.add_object(_mapping(f"TPDO{n + 1} mapping parameter", 0x1A00 + n, mapped))
-
+    # SYNC consumer (the node produces no SYNC: bit 30 stays clear).
+    od.add_object(_var("COB-ID SYNC message", SYNC_COB_ID, 0, UNSIGNED32, "rw", 0x80))
+    # Store / restore the communication parameters (CiA 301 7.5.2.13/14): sub 1 all, sub 2
+    # communication; reading 1 says "saves on command".
+    for index, name in ((STORE, "Store parameters"), (RESTORE, "Restore default parameters")):
+        od.add_object(_array(name, index, 2, "", UNSIGNED32, "rw", default=1, pdo=False,
+                             names=("all parameters", "communication parameters")))
+    od.add_object(_array("Consumer heartbeat time", CONSUMER_HEARTBEAT, CONSUMER_ENTRIES,
+                         "Consumer heartbeat time", UNSIGNED32, "rw", default=0, pdo=False))
+    _pdos(od, config)
     # Manufacturer area.
     od.add_object(_array("SA bytes", SA_BYTES, plc.sa_bits // 8, "SA byte", UNSIGNED8, "rw"))
     for j, (first, count) in enumerate(chunks(plc.k_bytes)):
@@ -194,13 +289,13 @@ def build_dictionary(config: Config) -> ObjectDictionary:
             ("Alarm code", UNSIGNED16, "ro", None),
             ("SNDs sent", UNSIGNED32, "ro", None),
             ("SNDs received", UNSIGNED32, "ro", None),
-        ]))
+        ], pdo=True))
     od.add_object(_record("Last SND", LAST_SND, [
         ("Event number", UNSIGNED32, "ro", None),
         ("Sender", UNSIGNED8, "ro", None),
         ("Target", UNSIGNED8, "ro", None),
         ("Block N", UNSIGNED16, "ro", None),
-    ]))
+    ], pdo=True))
     return od
 
 

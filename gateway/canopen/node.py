@@ -8,18 +8,21 @@ image reads use an immutable snapshot that the loop publishes after every write,
 the write's values are stored (so never half a request), which keeps SDO reads of the image
 prompt however busy the loop is.
 
-What this module adds to ``canopen.LocalNode``:
+The rooms:
 
-- SDO: a server of our own (:class:`_SdoServer`: one transfer at a time, closed by every
-  abort); no service in STOPPED; an abandoned segmented transfer is aborted after 1 s
-  (0x05040000); a value out of range, also one carried in a wider type, is 0x06090030; the
-  COB-ID rules of CiA 301; the command word answered before it runs;
-- NMT: boot-up and PRE-OPERATIONAL (or OPERATIONAL with ``nmt_autostart``) at start and after
-  a reset node / reset communication, which also restores the communication parameters;
-- PDOs, only in OPERATIONAL: TPDO1 (process states) sent on change, TPDO2 (last SND) on every
-  SND, both with the inhibit time of 0x1800/0x1801 sub 3; RPDO1/RPDO2 stored into SA and K;
-- EMCY 0x6200 on every alarm (process number, alarm code in the manufacturer bytes), an
-  error-reset EMCY on reset; 0x1001 follows the alarms.
+- ``sdo``: the SDO server (one transfer at a time, closed by every abort; no service in
+  STOPPED; 1 s timeout) and the value checks of spec 3.3;
+- ``pdo``: RPDO1..4 / TPDO1..4 with dynamic mapping, the transmission types, inhibit time,
+  event timer and SYNC, and the checks of CiA 301 on their parameters;
+- ``heartbeat``: the heartbeat consumer (0x1016) and what the node does when the master's
+  heartbeat stops (``canopen.on_master_lost``);
+- ``store``: 0x1010/0x1011, the communication parameters kept next to the config;
+- ``clock``: the timers, on the loop or driven by a test.
+
+Here: NMT (boot-up, PRE-OPERATIONAL or OPERATIONAL with ``nmt_autostart``, resets that
+restore the communication parameters), the manufacturer objects wired to the image and the
+processes, the command word answered before it runs, EMCY on every alarm and an error reset
+when they are gone; 0x1001 follows.
 """
 
 from __future__ import annotations
@@ -29,298 +32,85 @@ import concurrent.futures
 import logging
 import struct
 import threading
-import time
-from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 import canopen
 from can_remote import RemoteServer
-from canopen.objectdictionary import ODRecord, ODVariable
-from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
+from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
-from canopen.sdo.server import SdoServer
 
-from ncgate.config import Config
+from ncgate.config import Config, MasterLost
+from ncgate.gateway.canopen import pdo, store
+from ncgate.gateway.canopen.clock import Clock, LoopClock
 from ncgate.gateway.canopen.dictionary import (
     CHUNK,
     COMMAND,
+    CONSUMER_ENTRIES,
+    CONSUMER_HEARTBEAT,
     K_BASE,
     LAST_SND,
-    MAX_PROCESS_STATES_IN_TPDO1,
+    RESTORE,
     SA_BYTES,
     STATUS_BASE,
+    STORE,
+    SYNC_COB_ID,
     SYVAR_BASE,
+    TPDO_COMMUNICATION,
     build_dictionary,
 )
+from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
+from ncgate.gateway.canopen.sdo import ABORT_RANGE, NMT_OPERATIONAL, NMT_STOPPED, Device
 from ncgate.gateway.wiring import Backend
+from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 
 log = logging.getLogger("ncgate.canopen")
 
-ABORT_TIMEOUT = 0x05040000
-ABORT_COMMAND = 0x05040001
-ABORT_LENGTH = 0x06070010
-ABORT_RANGE = 0x06090030
 ABORT_DEVICE_STATE = 0x08000022
-SEGMENTED_TIMEOUT_S = 1.0
+ABORT_CANNOT_STORE = 0x08000020
 EMCY_SOFTWARE = 0x6200
-NMT_OPERATIONAL, NMT_STOPPED, NMT_PRE_OPERATIONAL = 5, 4, 127
+EMCY_HEARTBEAT = 0x8130  # life guard or heartbeat error (CiA 301 table 21)
+REGISTER_GENERIC, REGISTER_COMMUNICATION = 0x01, 0x10
 
 T = TypeVar("T")
-
-
-class _SdoServer(SdoServer):
-    """The SDO server (CiA 301 7.2.4) with the transfer state of its own.
-
-    canopen's server keeps the state of the last transfer whatever happened to it, so an
-    aborted download went on accepting segments and a stray upload segment replayed the last
-    buffer.  Here one transfer at most is open (``_mode``), every abort closes it, and a
-    segment with no transfer open is 0x05040001.  Block transfers are not served (0x05040001:
-    a master falls back to segmented).  Silent in STOPPED; an open transfer abandoned for
-    1 s is aborted with 0x05040000 (silently dropped in STOPPED).  canopen's ``upload`` and
-    ``download`` for local access stay as they are.
-    """
-
-    def __init__(self, rx_cobid: int, tx_cobid: int, node: _Node) -> None:
-        super().__init__(rx_cobid, tx_cobid, node)
-        self._gateway_node = node
-        self._lock = threading.Lock()
-        self._mode: str | None = None  # "upload" | "download" while a transfer is open
-        self._buffer_: bytearray = bytearray()
-        self._toggle_ = 0
-        self._size: int | None = None  # the size a segmented download announced
-        self._where = (0, 0)  # the open (or last) transfer's index and sub-index
-        self._timer: threading.Timer | None = None
-
-    def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if self._gateway_node.nmt._state == NMT_STOPPED:
-            return  # no SDO service in STOPPED (CiA 301)
-        request = bytes(data).ljust(8, b"\0")
-        with self._lock:
-            self._stop_timer()
-            try:
-                self._serve(request)
-            except SdoAbortedError as exc:
-                self._abort_transfer(exc.code)
-            except Exception:  # a bug of ours must not leave a transfer half open
-                log.exception("SDO request %s failed", request.hex())
-                self._abort_transfer(0x08000000)
-            if self._mode is not None:
-                self._timer = threading.Timer(SEGMENTED_TIMEOUT_S, self._expire)
-                self._timer.daemon = True
-                self._timer.start()
-
-    def _serve(self, request: bytes) -> None:
-        command = request[0]
-        ccs = command & 0xE0
-        if ccs == 0x80:  # the client aborts: close, no answer
-            self._mode = None
-            return
-        if ccs in (0x20, 0x40):  # initiate download / upload: a new transfer
-            self._mode = None
-            index, subindex = struct.unpack_from("<HB", request, 1)
-            self._where = (index, subindex)
-            if ccs == 0x40:
-                self._initiate_upload(index, subindex)
-            else:
-                self._initiate_download(command, request, index, subindex)
-            return
-        if ccs == 0x60 and self._mode == "upload":
-            self._upload_segment(command)
-            return
-        if ccs == 0x00 and self._mode == "download":
-            self._download_segment(command, request)
-            return
-        # A segment with no such transfer open, a block transfer, or no such command.
-        if ccs in (0xA0, 0xC0, 0xE0):  # these carry an index: name it
-            self._where = struct.unpack_from("<HB", request, 1)
-        self._mode = None
-        raise SdoAbortedError(ABORT_COMMAND)
-
-    def _initiate_upload(self, index: int, subindex: int) -> None:
-        data = self._gateway_node.get_data(index, subindex, check_readable=True)
-        if not data:
-            raise SdoAbortedError(0x08000024)  # no data available
-        if len(data) <= 4:
-            self.send_response(struct.pack("<BHB", 0x43 | (4 - len(data)) << 2, index,
-                                           subindex) + data.ljust(4, b"\0"))
-            return
-        self._mode, self._buffer_, self._toggle_ = "upload", bytearray(data), 0
-        self.send_response(struct.pack("<BHBL", 0x41, index, subindex, len(data)))
-
-    def _upload_segment(self, command: int) -> None:
-        if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
-        chunk = bytes(self._buffer_[:7])
-        del self._buffer_[:7]
-        last = not self._buffer_
-        self.send_response(bytes((self._toggle_ | (7 - len(chunk)) << 1 | int(last),))
-                           + chunk.ljust(7, b"\0"))
-        self._toggle_ ^= 0x10
-        if last:
-            self._mode = None
-
-    def _initiate_download(self, command: int, request: bytes, index: int,
-                           subindex: int) -> None:
-        node = self._gateway_node
-        obj = node.object_for(index, subindex)
-        if not obj.writable:
-            raise SdoAbortedError(0x06010002)
-        if command & 0x02:  # expedited
-            size = 4 - (command >> 2 & 0x3) if command & 0x01 else 4
-            node.set_data(index, subindex, request[4:4 + size], check_writable=True)
-            self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
-            return
-        self._size = struct.unpack_from("<L", request, 4)[0] if command & 0x01 else None
-        if self._size is not None:
-            node.check_size(obj, self._size)  # a number of the wrong size: refused now
-        self._mode, self._buffer_, self._toggle_ = "download", bytearray(), 0
-        self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
-
-    def _download_segment(self, command: int, request: bytes) -> None:
-        if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
-        self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
-        if command & 0x01:  # the last segment
-            data = bytes(self._buffer_)
-            if self._size is not None and len(data) != self._size:
-                raise SdoAbortedError(ABORT_LENGTH)  # not what it announced
-            index, subindex = self._where
-            node = self._gateway_node
-            node.check_size(node.object_for(index, subindex), len(data))
-            node.set_data(index, subindex, data, check_writable=True)
-            self._mode = None
-        self.send_response(bytes((0x20 | self._toggle_,)) + bytes(7))
-        self._toggle_ ^= 0x10
-
-    def _abort_transfer(self, code: int) -> None:
-        """Answer with an abort naming the transfer's object, and close it."""
-        self._mode = None
-        index, subindex = self._where
-        self.send_response(struct.pack("<BHBL", 0x80, index, subindex, code))
-
-    def _stop_timer(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-
-    def _expire(self) -> None:
-        with self._lock:
-            if self._mode is None:
-                return
-            if self._gateway_node.nmt._state == NMT_STOPPED:
-                self._mode = None  # nothing is sent in STOPPED
-                return
-            log.info("SDO %s of 0x%04X:%02X abandoned: abort after %g s", self._mode,
-                     *self._where, SEGMENTED_TIMEOUT_S)
-            self._abort_transfer(ABORT_TIMEOUT)
-
-    def close(self) -> None:
-        with self._lock:
-            self._stop_timer()
-
-
-class _Node(canopen.LocalNode):
-    """A LocalNode with our SDO server and the value-range checks of spec 3.3."""
-
-    def __init__(self, node_id: int, od: canopen.ObjectDictionary) -> None:
-        super().__init__(node_id, od)
-        self.sdo = _SdoServer(0x600 + node_id, 0x580 + node_id, self)
-
-    def object_for(self, index: int, subindex: int) -> ODVariable:
-        """The object an SDO names, or the abort: 0x06020000 no object, 0x06090011 no such
-        sub-index (a VAR has only 0)."""
-        if index not in self.object_dictionary:
-            raise SdoAbortedError(0x06020000)
-        obj = self.object_dictionary[index]
-        if isinstance(obj, ODVariable):
-            if subindex != 0:
-                raise SdoAbortedError(0x06090011)
-            return obj
-        # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
-        # ones the dictionary defines exist here.
-        if subindex not in obj.subindices:
-            raise SdoAbortedError(0x06090011)
-        return obj[subindex]
-
-    @staticmethod
-    def check_size(obj: ODVariable, size: int) -> None:
-        """A segmented transfer to a number must carry exactly its size (CiA 301: 0x06070012
-        too long, 0x06070013 too short); only an expedited one may use a wider type."""
-        if obj.data_type in NUMBER_TYPES and 8 * size != len(obj):
-            raise SdoAbortedError(0x06070012 if 8 * size > len(obj) else 0x06070013)
-
-    def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
-        # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
-        # which (ODArray has no __contains__) sorts every sub-index on every access.
-        obj = self.object_for(index, subindex)
-        if check_readable and not obj.readable:
-            raise SdoAbortedError(0x06010001)
-        for callback in self._read_callbacks:
-            result = callback(index=index, subindex=subindex, od=obj)
-            if result is not None:
-                return obj.encode_raw(result)
-        stored = self.data_store.get(index, {}).get(subindex)
-        if stored is not None:
-            return stored
-        for value in (obj.value, obj.default):
-            if value is not None:
-                return obj.encode_raw(value)
-        raise SdoAbortedError(0x060A0023)  # resource not available
-
-    def set_data(self, index: int, subindex: int, data: bytes,
-                 check_writable: bool = False) -> None:
-        obj = self.object_for(index, subindex)
-        if check_writable and not obj.writable:
-            raise SdoAbortedError(0x06010002)
-        if obj.data_type in NUMBER_TYPES and 8 * len(data) != len(obj):
-            # A value too big for the object, sent in a wider type, is out of range (spec
-            # 3.3); any other size mismatch is a length error.
-            if 8 * len(data) > len(obj) and 0 < len(data) <= 8 and obj.max is not None:
-                value = int.from_bytes(data, "little", signed=obj.data_type in SIGNED_TYPES)
-                if not (obj.min or 0) <= value <= obj.max:
-                    raise SdoAbortedError(ABORT_RANGE)
-            raise SdoAbortedError(ABORT_LENGTH)
-        super().set_data(index, subindex, data, check_writable)
 
 
 class CanopenNode:
     """The node on the bus, wired to the gateway's image and processes."""
 
-    def __init__(self, config: Config, backend: Backend) -> None:
+    def __init__(self, config: Config, backend: Backend, clock: Clock | None = None) -> None:
         self.config = config
         self.backend = backend
         self.node_id = config.canopen.node_id
         self.od = build_dictionary(config)
-        self.node = _Node(self.node_id, self.od)
+        self.device = Device(self.node_id, self.od)
+        self.node = self.device  # the LocalNode (the name tests and tools know)
         self.network = canopen.Network()
         # The notifier thread wakes this often when the bus is quiet; shutting down waits for
         # it, so the default of 1 s would make every stop last a second.
         self.network.NOTIFIER_CYCLE = 0.05
         self.loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
-        self._tpdo_last: dict[int, float] = {}
-        self._tpdo1_pending: bytes | None = None
-        self._tpdo1_sent: bytes | None = None
-        self._tpdo2_queue: deque[bytes] = deque()
-        self._tpdo_timer: dict[int, asyncio.TimerHandle] = {}
-        self._alarmed = False
-        self._rpdo_cobs: dict[int, int] = {}  # RPDO number -> subscribed COB-ID
-        self._rpdo_callbacks: dict[int, Callable[[int, bytearray, float], None]] = {
-            1: self._on_rpdo1, 2: self._on_rpdo2}
+        self._clock = clock
+        self.pdos = pdo.Pdos(self)
+        self.heartbeats: HeartbeatConsumer | None = None
+        self.store_path = config.canopen.store_file or store.default_path(config.source,
+                                                                          self.node_id)
+        self._alarmed = False  # an EMCY for a process alarm went out and was not reset
+        self._master_lost: set[int] = set()
         self._hub: RemoteServer | None = None
         # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
         self._view: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())
-        # RPDO writes handed to the loop (counted by the CAN thread) and done (by the loop):
-        # while one is on its way, an SDO read goes through the loop too, behind it, so that
-        # what the bus said first is seen first.
-        self._rpdo_handed = 0
-        self._rpdo_done = 0
         self.hub_address: tuple[str, int] | None = None
+
+    @property
+    def clock(self) -> Clock:
+        assert self._clock is not None, "the node is not started"
+        return self._clock
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -328,21 +118,29 @@ class CanopenNode:
         cfg = self.config.canopen
         self.loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
+        if self._clock is None:
+            self._clock = LoopClock(self.loop)
+        self.device.clock = self._clock
+        self.heartbeats = HeartbeatConsumer(self._clock, self.subscribe, self.unsubscribe,
+                                            self.call_soon, self._on_master_lost,
+                                            self._on_master_back)
+        self._restore_stored()
         self.network.connect(interface=cfg.interface, channel=cfg.channel, bitrate=cfg.bitrate)
-        self.network.add_node(self.node)
-        self.node.add_read_callback(self._on_read)
-        self.node.add_write_callback(self._on_write)
+        self.network.add_node(self.device)
+        self.device.add_read_callback(self._on_read)
+        self.device.add_write_callback(self._on_write)
+        self.device.stored = self._on_stored
         self.network.subscribe(0, self._on_nmt)  # after canopen's own NMT handler
-        self._subscribe_rpdos()
+        self.pdos.configure_all()
+        self._configure_heartbeats()
         engine = self.backend.engine
         engine.state_listeners.append(self._on_state)
         engine.trace.subscribe(self._on_event)
         self._publish()
-        self._unsubscribe_image = self.backend.image.subscribe(lambda values, who:
-                                                               self._publish())
+        self._unsubscribe_image = self.backend.image.subscribe(self._on_image)
         self._boot()
         log.info("CANopen node %d on %s/%s (%s)", self.node_id, cfg.interface, cfg.channel,
-                 self.node.nmt.state)
+                 self.device.nmt.state)
         if cfg.hub:
             self._start_hub()
 
@@ -366,10 +164,11 @@ class CanopenNode:
             self._hub.shutdown()
             self._hub.server_close()
             self._hub = None
-        for handle in self._tpdo_timer.values():
-            handle.cancel()
-        self.node.nmt.stop_heartbeat()
-        self.node.sdo.close()  # type: ignore[attr-defined]
+        self.pdos.close()
+        if self.heartbeats is not None:
+            self.heartbeats.close()
+        self.device.nmt.stop_heartbeat()
+        self.device.sdo.close()  # type: ignore[attr-defined]
         engine = self.backend.engine
         if self._on_state in engine.state_listeners:
             engine.state_listeners.remove(self._on_state)
@@ -379,14 +178,50 @@ class CanopenNode:
     def _boot(self) -> None:
         """Boot-up message, then PRE-OPERATIONAL (or OPERATIONAL with nmt_autostart)."""
         self.network.send_message(0x700 + self.node_id, b"\x00")
-        self.node.nmt.send_command(0x80)  # starts the heartbeat producer (0x1017)
+        self.device.nmt.send_command(0x80)  # starts the heartbeat producer (0x1017)
+        self.call_soon(self.pdos.left_operational)
         if self.config.canopen.nmt_autostart:
-            self.node.nmt.send_command(0x01)
-            self._call_soon(self._entered_operational)
+            self.device.nmt.send_command(0x01)
+            self.call_soon(self.pdos.entered_operational)
 
     @property
     def operational(self) -> bool:
-        return self.node.nmt._state == NMT_OPERATIONAL
+        return self.device.nmt._state == NMT_OPERATIONAL
+
+    @property
+    def stopped(self) -> bool:
+        return self.device.nmt._state == NMT_STOPPED
+
+    # -- what the PDOs and the heartbeat consumer use (pdo.Host) ----------------------------
+
+    def send(self, cob: int, data: bytes) -> None:
+        self.network.send_message(cob, data)
+
+    def subscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
+        self.network.subscribe(cob, callback)
+
+    def unsubscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
+        self.network.unsubscribe(cob, callback)
+
+    def apply(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None:
+        self.backend.apply_writes(changes, who)
+
+    def getter(self, index: int, subindex: int) -> Callable[[], int]:
+        """A mapped object's value, read on the loop (for a TPDO frame)."""
+        image, engine = self.backend.image, self.backend.engine
+        if index == SA_BYTES:
+            i = subindex - 1
+            return lambda: image.sa[i]
+        if index < SYVAR_BASE:
+            i = (index - K_BASE) * CHUNK + subindex - 1
+            return lambda: image.k[i]
+        if index < COMMAND:
+            i = (index - SYVAR_BASE) * CHUNK + subindex - 1
+            return lambda: (image.syvar[i] + 0x8000 & 0xFFFF) - 0x8000
+        if STATUS_BASE <= index < LAST_SND and subindex == 1:
+            k = index - STATUS_BASE + 1
+            return lambda: int(engine.processes[k].state)
+        return lambda: self._read(index, subindex)
 
     # -- threads ----------------------------------------------------------------------------
 
@@ -406,7 +241,7 @@ class CanopenNode:
         self.loop.call_soon_threadsafe(run)
         return future.result(timeout=timeout_s)
 
-    def _call_soon(self, fn: Callable[[], None]) -> None:
+    def call_soon(self, fn: Callable[[], None]) -> None:
         assert self.loop is not None
         if threading.get_ident() == self._loop_thread:
             self.loop.call_soon(fn)
@@ -425,20 +260,52 @@ class CanopenNode:
                 # Reset node also restores the node's own application values: the SND sender
                 # written to 0x2400:2.  The image behind 0x2000..0x23FF is the soft PLC's, not
                 # the node's (docs/decisions.md): it is left as it is.
-                self.node.data_store.pop(COMMAND, None)
+                self.device.data_store.pop(COMMAND, None)
             self._boot()
         elif command == 0x01:
-            self._call_soon(self._entered_operational)
+            self.call_soon(self.pdos.entered_operational)
+        elif command in (0x02, 0x80):
+            self.call_soon(self.pdos.left_operational)
 
     def _reset_communication(self) -> None:
-        """Communication parameters (0x1000..0x1FFF) back to their defaults."""
-        for index in [i for i in self.node.data_store if i < 0x2000]:
-            del self.node.data_store[index]
-        self._subscribe_rpdos()
+        """Communication parameters (0x1000..0x1FFF) back to their power-on values: the
+        stored ones (0x1010) or the defaults."""
+        for index in [i for i in self.device.data_store if i < 0x2000]:
+            del self.device.data_store[index]
+        self._restore_stored()
+        self.pdos.configure_all()
+        self._configure_heartbeats()
 
-    def _entered_operational(self) -> None:
-        self._tpdo1_sent = None
-        self._on_state(None, ProcessState.IDLE)  # the states as they are now
+    def _restore_stored(self) -> None:
+        stored = store.load(self.store_path)
+        if stored is None:
+            return
+        problem = self._check_stored(stored)
+        if problem:
+            log.warning("%s: stored CANopen parameters not used (%s); the defaults apply",
+                        self.store_path, problem)
+            return
+        for index, subs in stored.items():
+            self.device.data_store[index] = dict(subs)
+
+    def _check_stored(self, stored: store.Parameters) -> str | None:
+        """Whether stored parameters fit this dictionary (the config may have changed)."""
+        for index, subs in stored.items():
+            if not 0x1000 <= index < 0x2000 or index in (STORE, RESTORE):
+                return f"0x{index:04X} is not a communication parameter"
+            for sub, data in subs.items():
+                try:
+                    obj = self.device.object_for(index, sub)
+                except SdoAbortedError:
+                    return f"0x{index:04X}:{sub} is not in the dictionary"
+                if not obj.writable or 8 * len(data) != len(obj):
+                    return f"0x{index:04X}:{sub} does not fit"
+        return None
+
+    def _configure_heartbeats(self) -> None:
+        assert self.heartbeats is not None
+        self.heartbeats.configure([pdo.param(self.device, CONSUMER_HEARTBEAT, s)
+                                   for s in range(1, CONSUMER_ENTRIES + 1)])
 
     # -- SDO: the live image and status -------------------------------------------------------
 
@@ -446,12 +313,18 @@ class CanopenNode:
         image = self.backend.image
         self._view = (bytes(image.sa), bytes(image.k), tuple(image.syvar))
 
+    def _on_image(self, values: object, who: str) -> None:
+        self._publish()
+        self.pdos.image_changed()
+
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
         if index == 0x1001:
             return self._on_loop(self._error_register)
+        if index in (STORE, RESTORE) and subindex:
+            return 1  # saves and restores on command
         if index < 0x2000 or subindex == 0:
             return None  # the dictionary's own value (stored or default)
-        if index < COMMAND and self._rpdo_done == self._rpdo_handed:
+        if index < COMMAND and self.pdos.done == self.pdos.handed:
             return self._image_value(index, subindex)  # the snapshot, from this thread
         return self._on_loop(lambda: self._read(index, subindex))
 
@@ -464,7 +337,9 @@ class CanopenNode:
         return syvar[(index - SYVAR_BASE) * CHUNK + subindex - 1]
 
     def _error_register(self) -> int:
-        return int(any(p.alarm is not None for p in self.backend.engine.processes.values()))
+        alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
+        lost = REGISTER_GENERIC | REGISTER_COMMUNICATION if self._master_lost else 0
+        return int(alarms) | lost
 
     def _read(self, index: int, subindex: int) -> int:
         """Any manufacturer object, on the loop."""
@@ -482,14 +357,20 @@ class CanopenNode:
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         # On the CAN thread, before canopen stores the value and answers: an abort raised
-        # here refuses the write.
-        if index in (0x1400, 0x1401, 0x1800, 0x1801) and subindex == 1:
-            cob = int.from_bytes(data, "little")
-            self._check_cob_id(index, cob)
-            if index < 0x1800:  # in effect before the answer goes out
-                self._subscribe_rpdo(index - 0x1400 + 1, cob)
-            return
+        # here refuses the write, and nothing is stored.
         if index < 0x2000:
+            number = int.from_bytes(data, "little")
+            if pdo.is_pdo_parameter(index):
+                pdo.check_write(self.device, index, subindex, number)
+            elif index == SYNC_COB_ID:
+                pdo.check_sync_cob_id(number)
+            elif index == CONSUMER_HEARTBEAT:
+                entries = [pdo.param(self.device, CONSUMER_HEARTBEAT, s)
+                           for s in range(1, CONSUMER_ENTRIES + 1)]
+                entries[subindex - 1] = number
+                check_entries(entries)
+            elif index in (STORE, RESTORE):
+                self._store_command(index, number)
             return
         value = od.decode_raw(data)
         assert isinstance(value, int)
@@ -498,30 +379,52 @@ class CanopenNode:
             # and its outcome shows in the status objects, the EMCY and the trace.
             if value not in (1, 2, 3):
                 raise SdoAbortedError(ABORT_RANGE)
-            self._call_soon(lambda: self._run_command(value))
+            self.call_soon(lambda: self._run_command(value))
             return
         who = f"canopen SDO 0x{0x600 + self.node_id:03X}"
         self._on_loop(lambda: self._write(index, subindex, value, who))
+
+    def _on_stored(self, index: int, subindex: int) -> None:
+        """After a write was stored (CAN thread): put it into effect before the answer."""
+        if index in (STORE, RESTORE):
+            self.device.data_store.pop(index, None)  # a command, not a value to keep
+        elif pdo.is_pdo_parameter(index):
+            n = (index & 0xFF) + 1
+            if index < TPDO_COMMUNICATION:
+                self.pdos.configure_rpdo(n)
+            else:
+                self.call_soon(lambda: self.pdos.configure_tpdo(n))
+        elif index == SYNC_COB_ID:
+            self.pdos.configure_sync()
+        elif index == CONSUMER_HEARTBEAT:
+            self._configure_heartbeats()
+
+    def _store_command(self, index: int, value: int) -> None:
+        """0x1010 "save" / 0x1011 "load" (CiA 301): any other value is refused, 0x08000020."""
+        if index == STORE and value == store.SAVE:
+            parameters = {i: dict(subs) for i, subs in list(self.device.data_store.items())
+                          if 0x1000 <= i < 0x2000 and i not in (STORE, RESTORE)}
+            try:
+                store.save(self.store_path, parameters)
+            except OSError as exc:
+                log.error("CANopen parameters not stored: %s", exc)
+                raise SdoAbortedError(ABORT_CANNOT_STORE) from None
+            log.info("CANopen communication parameters stored in %s", self.store_path)
+        elif index == RESTORE and value == store.LOAD:
+            try:
+                store.remove(self.store_path)
+            except OSError as exc:
+                log.error("stored CANopen parameters not removed: %s", exc)
+                raise SdoAbortedError(ABORT_CANNOT_STORE) from None
+            log.info("CANopen defaults restored: in effect after the next reset")
+        else:
+            raise SdoAbortedError(ABORT_CANNOT_STORE)
 
     def _run_command(self, word: int) -> None:
         try:
             self.backend.command(word)
         except Exception:  # answered already: say it in the log
             log.exception("command %d written through 0x2400:1 failed", word)
-
-    def _check_cob_id(self, index: int, cob: int) -> None:
-        """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise)."""
-        current = self._comm(index, 1)
-        if cob & 0x20000000:
-            raise SdoAbortedError(ABORT_RANGE)  # 29-bit identifiers are not supported
-        if index >= 0x1800 and not cob & 0x40000000:
-            # canopen drops remote frames, so the node cannot answer an RTR: it says so.
-            raise SdoAbortedError(ABORT_RANGE)
-        valid_now, valid_then = not current & 0x80000000, not cob & 0x80000000
-        if valid_now and valid_then and (cob ^ current) & 0x1FFFFFFF:
-            raise SdoAbortedError(ABORT_RANGE)  # the id changes only while the PDO is off
-        if valid_then and _restricted(cob & 0x7FF):
-            raise SdoAbortedError(ABORT_RANGE)
 
     def _write(self, index: int, subindex: int, value: int, who: str) -> None:
         backend = self.backend
@@ -538,17 +441,13 @@ class CanopenNode:
 
     def _command(self, subindex: int, value: int) -> None:
         nc = self.config.nc
-        if subindex == 1:
-            if value not in (1, 2, 3):
-                raise SdoAbortedError(ABORT_RANGE)
-            self.backend.command(value)
-        elif subindex == 2:
+        if subindex == 2:
             if value not in nc.external:
                 raise SdoAbortedError(ABORT_RANGE)  # only an external process sends
         else:
             if not 1 <= value <= nc.processes:
                 raise SdoAbortedError(ABORT_RANGE)  # an unknown SND target
-            stored = self.node.data_store.get(COMMAND, {}).get(2)
+            stored = self.device.data_store.get(COMMAND, {}).get(2)
             if stored is None:
                 raise SdoAbortedError(ABORT_DEVICE_STATE)  # no sender written yet
             try:
@@ -556,137 +455,58 @@ class CanopenNode:
             except ValueError:
                 raise SdoAbortedError(ABORT_DEVICE_STATE) from None  # runs no program
 
-    # -- PDOs -------------------------------------------------------------------------------
+    # -- the master's heartbeat (loop) ------------------------------------------------------
 
-    def _comm(self, index: int, subindex: int) -> int:
-        stored = self.node.data_store.get(index, {}).get(subindex)
-        if stored is not None:
-            return int.from_bytes(stored, "little")
-        obj = self.od[index]
-        assert isinstance(obj, ODRecord)
-        return int(obj[subindex].default or 0)
+    def _on_master_lost(self, node_id: int, ms: int) -> None:
+        reaction = self.config.canopen.on_master_lost
+        self._master_lost.add(node_id)
+        what = {MasterLost.NONE: "no reaction (canopen.on_master_lost = \"none\")",
+                MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
+        self.backend.fieldbus_alarm(
+            AlarmCode.MASTER_LOST,
+            f"CANopen: no heartbeat from node {node_id} for {ms} ms (0x1016); {what}")
+        if not self.stopped:
+            self.device.emcy.send(EMCY_HEARTBEAT, self._error_register(),
+                                  struct.pack("<B4x", node_id))
+        if reaction is MasterLost.HOLD:
+            self.backend.command(2)
+        elif reaction is MasterLost.RESET:
+            self.backend.command(3)
 
-    def _subscribe_rpdos(self) -> None:
-        for n in (1, 2):
-            self._subscribe_rpdo(n, self._comm(0x1400 + n - 1, 1))
-
-    def _subscribe_rpdo(self, n: int, cob: int) -> None:
-        """RPDO n listens on ``cob`` (bit 31: not at all) from now on."""
-        old = self._rpdo_cobs.get(n)
-        if old == cob:
+    def _on_master_back(self, node_id: int) -> None:
+        if node_id not in self._master_lost:
             return
-        callback = self._rpdo_callbacks[n]
-        if old is not None and not old & 0x80000000:
-            self.network.unsubscribe(old & 0x7FF, callback)
-        if not cob & 0x80000000:
-            self.network.subscribe(cob & 0x7FF, callback)
-        self._rpdo_cobs[n] = cob
+        self._master_lost.discard(node_id)
+        log.warning("CANopen: the heartbeat of node %d is back (the processes stay as they "
+                    "are: cycle start resumes a hold)", node_id)
+        if self._error_register() == 0 and not self.stopped:
+            self.device.emcy.reset(0)
 
-    def _on_rpdo1(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        self._on_rpdo("SA", can_id, data)
-
-    def _on_rpdo2(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        self._on_rpdo("SK", can_id, data)
-
-    def _on_rpdo(self, area: str, can_id: int, data: bytes | bytearray) -> None:
-        if not self.operational:
-            return  # PDOs only in OPERATIONAL
-        if len(data) < 8:
-            log.warning("RPDO 0x%03X with %d bytes ignored (8 mapped)", can_id, len(data))
-            return
-        changes = [(area, i, "BY", b) for i, b in enumerate(bytes(data[:8]))]
-        who = f"canopen 0x{can_id:03X}"
-
-        def apply() -> None:
-            try:
-                self.backend.apply_writes(changes, who)
-            finally:
-                self._rpdo_done += 1
-
-        self._rpdo_handed += 1
-        self._call_soon(apply)
+    # -- PDO triggers and EMCY (loop) -------------------------------------------------------
 
     def _on_state(self, process: Process | None, old: ProcessState) -> None:
-        if not self.operational:
-            return
-        engine = self.backend.engine
-        states = bytes(int(engine.processes[k].state) for k in
-                       range(1, min(len(engine.processes), MAX_PROCESS_STATES_IN_TPDO1) + 1))
-        if states == self._tpdo1_sent:
-            return
-        self._tpdo1_pending = states
-        self._tpdo_ready(1)
+        self.pdos.status_changed()
 
     def _on_event(self, event: Event) -> None:
-        stopped = self.node.nmt._state == NMT_STOPPED  # no EMCY in STOPPED (CiA 301)
         if isinstance(event, ev.Alarm):
+            if event.proc == 0:
+                return  # a fieldbus alarm: its own EMCY (above)
             self._alarmed = True
             register = self._error_register()
-            if not stopped:
-                self.node.emcy.send(EMCY_SOFTWARE, register,
-                                    struct.pack("<BH2x", event.proc & 0xFF,
-                                                int(event.code) & 0xFFFF))
+            if not self.stopped:  # no EMCY in STOPPED (CiA 301)
+                self.device.emcy.send(EMCY_SOFTWARE, register,
+                                      struct.pack("<BH2x", event.proc & 0xFF,
+                                                  int(event.code) & 0xFFFF))
         elif isinstance(event, ev.End) and event.how == "reset" and self._alarmed:
             # A reset clears the alarms one process at a time: when none is left, say so.
             if self._error_register() == 0:
                 self._alarmed = False
-                if not stopped:
-                    self.node.emcy.reset(0)
-        elif isinstance(event, ev.Snd) and self.operational:
-            n = event.where[2] if event.where is not None else None
-            record = struct.pack("<LBBH", self.backend.engine.trace.counter, event.proc,
-                                 event.to, (n or 0) & 0xFFFF)
-            self._tpdo2_queue.append(record)
-            self._tpdo_ready(2)
-
-    def _tpdo_ready(self, n: int) -> None:
-        """Send TPDO n now, or when its inhibit time has passed."""
-        if n in self._tpdo_timer:
-            return  # a send is already scheduled
-        inhibit_s = self._comm(0x1800 + n - 1, 3) * 100e-6
-        wait = self._tpdo_last.get(n, -1e9) + inhibit_s - time.monotonic()
-        if wait <= 0:
-            self._send_tpdo(n)
-        else:
-            assert self.loop is not None
-            self._tpdo_timer[n] = self.loop.call_later(wait, self._inhibit_over, n)
-
-    def _inhibit_over(self, n: int) -> None:
-        del self._tpdo_timer[n]
-        self._send_tpdo(n)
-
-    def _send_tpdo(self, n: int) -> None:
-        if not self.operational:
-            self._tpdo2_queue.clear()
-            return
-        cob = self._comm(0x1800 + n - 1, 1)
-        if n == 1:
-            data, self._tpdo1_pending = self._tpdo1_pending, None
-            if data is None:
-                return
-            self._tpdo1_sent = data
-        else:
-            if not self._tpdo2_queue:
-                return
-            data = self._tpdo2_queue.popleft()
-        if not cob & 0x80000000:
-            self.network.send_message(cob & 0x7FF, data)
-        self._tpdo_last[n] = time.monotonic()
-        if n == 2 and self._tpdo2_queue:
-            self._tpdo_ready(2)  # every SND goes out, spaced by the inhibit time
-
-
-# CiA 301 table 3: identifiers no PDO may use (NMT, SYNC/EMCY, TIME, SDO, NMT error control,
-# LSS).
-_RESTRICTED = ((0x000, 0x07F), (0x101, 0x180), (0x581, 0x5FF), (0x601, 0x67F), (0x6E0, 0x6FF),
-               (0x701, 0x77F), (0x780, 0x7FF))
-
-
-def _restricted(can_id: int) -> bool:
-    return any(lo <= can_id <= hi for lo, hi in _RESTRICTED)
+                if not self.stopped:
+                    self.device.emcy.reset(0)
+        elif isinstance(event, ev.Snd):
+            self.pdos.snd()
 
 
 def _last_snd(engine: Engine) -> tuple[int, int, int, int]:
     sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
     return number & 0xFFFFFFFF, sender, target, n & 0xFFFF
-

@@ -28,7 +28,8 @@ def describe(event: Event) -> str | None:
     if isinstance(event, ev.End):
         return f"P{proc} ends ({event.how}){at}"
     if isinstance(event, ev.Alarm):
-        return f"P{proc} ALARM {event.code.label}{at}: {event.message}"
+        who = f"P{proc}" if proc else "fieldbus"  # process 0: the PLC/fieldbus side
+        return f"{who} ALARM {event.code.label}{at}: {event.message}"
     if isinstance(event, ev.Deadlock):
         return event.message
     if isinstance(event, ev.Stall):

@@ -166,6 +166,11 @@ class Engine(SyncRules):
             self._update_state(p)
         self._kick()
 
+    def fieldbus_alarm(self, code: AlarmCode, message: str) -> None:
+        """An alarm of the PLC/fieldbus side (process 0 in the trace, spec 4.4), e.g. a master
+        whose heartbeat stopped; it stops no process by itself."""
+        self._record(ev.Alarm, self.now, 0, None, code, message)
+
     def reset(self) -> None:
         """Clear every alarm, discard queues, waits and tokens; every process to IDLE."""
         for p in self.processes.values():

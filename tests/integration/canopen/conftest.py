@@ -19,6 +19,7 @@ import pytest_asyncio
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.gateway.canopen.dictionary import build_dictionary
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
@@ -86,6 +87,15 @@ class Master:
                        ) -> None:
         await asyncio.to_thread(self.node.sdo.download, index, sub, data, force_segment)
 
+    async def while_disabled(self, comm: int, sub: int, data: bytes) -> None:
+        """Write a PDO parameter CiA 301 lets change only while the PDO does not exist
+        (inhibit time, SYNC start value): disable, write, enable again."""
+        cob = await self.upload(comm, 1)
+        await self.download(comm, 1, (int.from_bytes(cob, "little") | 0x80000000)
+                            .to_bytes(4, "little"))
+        await self.download(comm, sub, data)
+        await self.download(comm, 1, cob)
+
     async def raw_sdo(self, payload: bytes, timeout_s: float = 5.0) -> bytes:
         """Send a raw SDO request frame; the node's answer frame."""
         answers = self.frames.get(0x580 + self.node_id) or self.listen(0x580 + self.node_id)
@@ -96,6 +106,15 @@ class Master:
 
     def nmt(self, command: int) -> None:
         self.network.send_message(0, bytes((command, self.node_id)))
+
+    async def barrier(self) -> None:
+        """Until the node has handled every frame sent before, and its loop has run what
+        they handed it: a status read goes through the node's receive thread, then its loop,
+        and its answer follows on the bus whatever the node sent meanwhile."""
+        await self.upload(0x2500, 1)
+
+    def sync(self, counter: int | None = None, cob: int = 0x80) -> None:
+        self.network.send_message(cob, b"" if counter is None else bytes((counter,)))
 
 
 def connect_master(config: Config) -> Master:
@@ -121,6 +140,20 @@ def master(ncgate_config: Config) -> Iterator[Master]:
 @pytest_asyncio.fixture
 async def gw(master: Master, ncgate_config: Config) -> AsyncIterator[Gateway]:
     async with Gateway(ncgate_config) as gateway:
+        yield gateway
+
+
+@pytest.fixture
+def clock() -> ManualClock:
+    return ManualClock()
+
+
+@pytest_asyncio.fixture
+async def clocked(master: Master, ncgate_config: Config, clock: ManualClock
+                  ) -> AsyncIterator[Gateway]:
+    """A gateway whose CANopen timers (inhibit, event timer, heartbeat consumer, SDO
+    timeout) run on ``clock``: the test moves time with ``clock.advance``."""
+    async with Gateway(ncgate_config, canopen_clock=clock) as gateway:
         yield gateway
 
 

@@ -81,7 +81,7 @@ async def test_tpdo1_on_every_state_change_and_tpdo2_on_every_snd(gw: Gateway,
 
 
 async def test_tpdo2_inhibit_time_spaces_the_snds(gw: Gateway, master: Master) -> None:
-    await master.download(0x1801, 3, struct.pack("<H", 500))  # 50 ms
+    await master.while_disabled(0x1801, 3, struct.pack("<H", 500))  # 50 ms
     master.nmt(0x01)
     await master.next(0x190)  # the node is OPERATIONAL: it sent its states
     gw.command(1)
@@ -163,7 +163,8 @@ async def test_reset_node_boots_again_in_pre_operational(gw: Gateway, master: Ma
     assert await master.next(0x710) == b"\x00"
     master.nmt(0x01)
     assert await master.next(0x190) == bytes(4)
-    await master.download(0x1800, 3, struct.pack("<H", 30))
+    await master.while_disabled(0x1800, 3, struct.pack("<H", 30))
+    assert await master.next(0x190) == bytes(4)  # enabled again: where things stand
     master.nmt(0x81)  # reset node
     assert await master.next(0x710) == b"\x00"  # boot-up again
     node = gw.canopen_node

@@ -1,0 +1,565 @@
+"""PDOs as a master configures them (CiA 301 7.2.2, 7.5.2.35-38): RPDO1..4 and TPDO1..4 with
+dynamic mapping, the transmission types, inhibit time, event timer and SYNC.
+
+Two halves, on two threads:
+
+- **Checks** (:func:`check_write`), on python-can's receive thread before canopen stores an
+  SDO write: the COB-ID rules, the transmission types the node honours, the mapping
+  procedure (only while the PDO is disabled and its count is 0; 0x06040041 / 0x06040042).
+  A refused write stores nothing.
+- **The runtime** (:class:`Pdos`): RPDO frames and SYNC arrive on the receive thread and are
+  handed to the loop; TPDOs are built and sent on the loop, where the image and the processes
+  live.  Timers (inhibit, event timer) run on the node's clock, so tests drive them.
+
+Transmission types.  TPDO: 0 (at the next SYNC after a change), 1..240 (every n-th SYNC;
+the SYNC start value of sub 6 waits for that SYNC counter), 254/255 (on change, spaced by the
+inhibit time, and when the event timer runs out).  RPDO: 0..240 (applied at the next SYNC),
+254/255 (at once).  252/253 (RTR only) and the reserved 241..251 are refused with 0x06090030:
+the node answers no remote frames (canopen's network drops them).
+
+"On change" means: the image bytes or SYVARs a TPDO maps were written, a process it maps
+changed state, or an SND happened.  A TPDO that maps the last-SND record sends one frame per
+SND, spaced by its inhibit time (a queue of at most 256; older ones are counted as lost).
+Block N and line are sampled (by SYNC, the event timer or another change), not watched: a
+frame per block would flood the bus.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary.datatypes import (
+    INTEGER8,
+    INTEGER16,
+    INTEGER32,
+    UNSIGNED8,
+    UNSIGNED16,
+    UNSIGNED32,
+)
+from canopen.sdo.exceptions import SdoAbortedError
+
+from ncgate.gateway.canopen.clock import Clock, Timer
+from ncgate.gateway.canopen.dictionary import (
+    COMMAND,
+    K_BASE,
+    LAST_SND,
+    MAX_MAPPED,
+    PDO_COUNT,
+    RPDO_COMMUNICATION,
+    RPDO_MAPPING,
+    SA_BYTES,
+    STATUS_BASE,
+    SYNC_COB_ID,
+    SYVAR_BASE,
+    TPDO_COMMUNICATION,
+    TPDO_MAPPING,
+)
+from ncgate.gateway.canopen.sdo import Device
+
+log = logging.getLogger("ncgate.canopen")
+
+ABORT_UNSUPPORTED_ACCESS = 0x06010000
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_MAP_LENGTH = 0x06040042
+ABORT_RANGE = 0x06090030
+NOT_VALID, NO_RTR, EXTENDED = 0x80000000, 0x40000000, 0x20000000
+EVENT_TYPES = (254, 255)
+SND_QUEUE = 256
+
+_FORMAT = {UNSIGNED8: "B", UNSIGNED16: "H", UNSIGNED32: "L", INTEGER8: "b", INTEGER16: "h",
+           INTEGER32: "l"}
+# CiA 301 7.4.7.1: a data type's index may be mapped into an RPDO to skip its bytes.
+_DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
+
+# CiA 301 table 3: identifiers no PDO may use (NMT, SYNC/EMCY, TIME, SDO, NMT error control,
+# LSS).
+_RESTRICTED = ((0x000, 0x07F), (0x101, 0x180), (0x581, 0x5FF), (0x601, 0x67F), (0x6E0, 0x6FF),
+               (0x701, 0x77F), (0x780, 0x7FF))
+
+
+def restricted(can_id: int) -> bool:
+    return any(lo <= can_id <= hi for lo, hi in _RESTRICTED)
+
+
+def param(device: Device, index: int, subindex: int) -> int:
+    """A communication parameter as it is now: written (stored) or its default."""
+    stored = device.data_store.get(index, {}).get(subindex)
+    if stored is not None:
+        return int.from_bytes(stored, "little")
+    obj = device.object_dictionary[index]
+    if isinstance(obj, ODVariable):
+        return int(obj.default or 0)
+    return int(obj[subindex].default or 0)
+
+
+# ---- the checks (receive thread, before the write is stored) ------------------------------
+
+def is_pdo_parameter(index: int) -> bool:
+    return RPDO_COMMUNICATION <= index < RPDO_COMMUNICATION + PDO_COUNT \
+        or RPDO_MAPPING <= index < RPDO_MAPPING + PDO_COUNT \
+        or TPDO_COMMUNICATION <= index < TPDO_COMMUNICATION + PDO_COUNT \
+        or TPDO_MAPPING <= index < TPDO_MAPPING + PDO_COUNT
+
+
+def check_write(device: Device, index: int, subindex: int, value: int) -> None:
+    """Refuse (SdoAbortedError) a write to a PDO parameter that CiA 301 forbids now."""
+    transmit = index >= TPDO_COMMUNICATION
+    comm = index if index & 0x200 == 0 else index - 0x200  # 0x16xx -> 0x14xx, 0x1Axx -> 0x18xx
+    valid = not param(device, comm, 1) & NOT_VALID
+    if comm == index:
+        if subindex == 1:
+            _check_cob_id(param(device, index, 1), value, transmit)
+        elif subindex == 2:
+            if not (value <= 240 or value in EVENT_TYPES):
+                raise SdoAbortedError(ABORT_RANGE)  # RTR-only or reserved: not honoured
+        elif subindex in (3, 6) and valid and value != param(device, index, subindex):
+            # inhibit time and SYNC start value: only while the PDO does not exist
+            raise SdoAbortedError(ABORT_RANGE)
+        return
+    # A mapping parameter: the procedure of CiA 301 7.5.2.37/38.
+    if valid:
+        raise SdoAbortedError(ABORT_UNSUPPORTED_ACCESS)
+    if subindex == 0:
+        if value > MAX_MAPPED:
+            raise SdoAbortedError(ABORT_MAP_LENGTH)
+        bits = sum(mapped_bits(device, param(device, index, s), transmit)
+                   for s in range(1, value + 1))
+        if bits > 64:
+            raise SdoAbortedError(ABORT_MAP_LENGTH)
+        return
+    if param(device, index, 0) != 0:
+        raise SdoAbortedError(ABORT_UNSUPPORTED_ACCESS)  # disable the mapping first
+    if value:
+        mapped_bits(device, value, transmit)
+
+
+def mapped_bits(device: Device, entry: int, transmit: bool) -> int:
+    """The size of a mapping entry; 0x06040041 if it names nothing this PDO can carry."""
+    index, subindex, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
+    if index in _DUMMY_BITS and subindex == 0 and not transmit:
+        if bits != _DUMMY_BITS[index]:
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        return bits
+    try:
+        obj = device.object_for(index, subindex)
+    except SdoAbortedError:
+        raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
+    if not obj.pdo_mappable or bits != len(obj) \
+            or not (obj.readable if transmit else obj.writable):
+        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+    return bits
+
+
+def _check_cob_id(current: int, cob: int, transmit: bool) -> None:
+    """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise)."""
+    if cob & EXTENDED:
+        raise SdoAbortedError(ABORT_RANGE)  # 29-bit identifiers are not supported
+    if transmit and not cob & NO_RTR:
+        # canopen drops remote frames, so the node cannot answer an RTR: it says so.
+        raise SdoAbortedError(ABORT_RANGE)
+    valid_now, valid_then = not current & NOT_VALID, not cob & NOT_VALID
+    if valid_now and valid_then and (cob ^ current) & 0x1FFFFFFF:
+        raise SdoAbortedError(ABORT_RANGE)  # the id changes only while the PDO is off
+    if valid_then and restricted(cob & 0x7FF):
+        raise SdoAbortedError(ABORT_RANGE)
+
+
+def check_sync_cob_id(cob: int) -> None:
+    """0x1005: the node consumes SYNC and produces none (bit 30), 11-bit ids only."""
+    if cob & (NO_RTR | EXTENDED):
+        raise SdoAbortedError(ABORT_RANGE)
+
+
+# ---- the runtime --------------------------------------------------------------------------
+
+Target = tuple[str, int, str]  # an image variable: (area, index, view)
+
+
+class Host(Protocol):
+    """What the PDOs need of the node."""
+
+    device: Device
+
+    @property
+    def clock(self) -> Clock: ...
+
+    @property
+    def operational(self) -> bool: ...
+
+    def send(self, cob: int, data: bytes) -> None: ...
+
+    def subscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None: ...
+
+    def unsubscribe(self, cob: int,
+                    callback: Callable[[int, bytearray, float], None]) -> None: ...
+
+    def getter(self, index: int, subindex: int) -> Callable[[], int]: ...
+
+    def call_soon(self, fn: Callable[[], None]) -> None: ...
+
+    def apply(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A mapping compiled: the frame's struct, and what each value is."""
+
+    frame: struct.Struct
+    objects: tuple[tuple[int, int], ...]  # (index, sub-index) of each value, dummies skipped
+    image: bool  # maps SA, K or SYVAR
+    status: bool  # maps a process status
+    snd: bool  # maps the last SND
+    only_snd: bool  # maps nothing else (TPDO2's default): nothing to say before an SND
+
+    @classmethod
+    def of(cls, device: Device, mapping: int) -> Layout:
+        fmt, objects = "<", []
+        for sub in range(1, param(device, mapping, 0) + 1):
+            entry = param(device, mapping, sub)
+            index, subindex = entry >> 16, entry >> 8 & 0xFF
+            if index in _DUMMY_BITS:
+                fmt += f"{_DUMMY_BITS[index] // 8}x"
+                continue
+            data_type = device.object_for(index, subindex).data_type
+            fmt += _FORMAT[data_type or UNSIGNED8]
+            objects.append((index, subindex))
+        return cls(struct.Struct(fmt), tuple(objects),
+                   image=any(i < COMMAND for i, _ in objects),
+                   status=any(STATUS_BASE <= i < LAST_SND for i, _ in objects),
+                   snd=any(i == LAST_SND for i, _ in objects),
+                   only_snd=bool(objects) and all(i == LAST_SND for i, _ in objects))
+
+
+def image_target(index: int, subindex: int) -> Target:
+    if index == SA_BYTES:
+        return ("SA", subindex - 1, "BY")
+    if index < SYVAR_BASE:
+        return ("SK", (index - K_BASE) * 128 + subindex - 1, "BY")
+    return ("SYVAR", (index - SYVAR_BASE) * 128 + subindex - 1, "IN")
+
+
+class Tpdo:
+    """One TPDO's configuration and transmission state (on the loop)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.cob = NOT_VALID
+        self.type = 255
+        self.inhibit_s = 0.0
+        self.event_s = 0.0
+        self.sync_start = 0
+        self.layout: Layout | None = None
+        self.getters: tuple[Callable[[], int], ...] = ()
+        self.last: bytes | None = None  # the last frame sent
+        self.last_t = -1e18
+        self.pending: bytes | None = None  # a change waiting for the inhibit time
+        self.queue: deque[bytes] = deque()  # one frame per SND
+        self.force = False  # the event timer ran out: send what is there now
+        self.inhibit_timer: Timer | None = None
+        self.event_timer: Timer | None = None
+        self.sync_count = 0
+        self.started = False  # a SYNC start value was met
+        self.sync_due = False  # type 0: a change since the last SYNC
+
+    @property
+    def valid(self) -> bool:
+        return not self.cob & NOT_VALID
+
+    def frame(self) -> bytes:
+        assert self.layout is not None
+        return self.layout.frame.pack(*[get() for get in self.getters])
+
+    def idle(self) -> None:
+        """Nothing pending, no timer armed."""
+        for timer in (self.inhibit_timer, self.event_timer):
+            if timer is not None:
+                timer.cancel()
+        self.inhibit_timer = self.event_timer = None
+        self.pending, self.force, self.sync_due = None, False, False
+        self.queue.clear()
+        self.sync_count, self.started = 0, False
+
+
+class Rpdo:
+    """One RPDO's configuration, swapped whole on the receive thread."""
+
+    def __init__(self, n: int, cob: int, sync: bool, layout: Layout) -> None:
+        self.n, self.cob, self.sync, self.layout = n, cob, sync, layout
+        self.targets = tuple(image_target(i, s) for i, s in layout.objects)
+
+
+class Pdos:
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        self.tpdos = {n: Tpdo(n) for n in range(1, PDO_COUNT + 1)}
+        self.rpdos: dict[int, Rpdo] = {}
+        self._subscribed: dict[int, int] = {}  # RPDO n -> the COB-ID it listens on
+        self._rpdo_callbacks = {n: self._rpdo_callback(n) for n in range(1, PDO_COUNT + 1)}
+        self._sync_cob: int | None = None
+        self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], str]] = {}
+        # RPDO writes handed to the loop (counted on the receive thread) and done (on the
+        # loop): the node's SDO reads of the image go through the loop while they differ.
+        self.handed = 0
+        self.done = 0
+        self.sent = 0  # TPDO frames
+        self.lost_snds = 0  # SND frames that fell out of a full queue
+        self._lost_logged = 0.0
+
+    # -- configuration (receive thread for RPDOs and SYNC, loop for TPDOs) ------------------
+
+    def configure_all(self) -> None:
+        """From the parameters as they are now (start, reset communication)."""
+        for n in self.tpdos:
+            self.configure_rpdo(n)
+        self.configure_sync()
+        self.host.call_soon(self._configure_tpdos)
+
+    def _configure_tpdos(self) -> None:
+        for n in self.tpdos:
+            self.configure_tpdo(n)
+
+    def configure_rpdo(self, n: int) -> None:
+        device = self.host.device
+        cob = param(device, RPDO_COMMUNICATION + n - 1, 1)
+        sync = param(device, RPDO_COMMUNICATION + n - 1, 2) <= 240
+        self.rpdos[n] = Rpdo(n, cob, sync, Layout.of(device, RPDO_MAPPING + n - 1))
+        self._sync_pending.pop(n, None)
+        old = self._subscribed.get(n)
+        if old == cob:
+            return
+        callback = self._rpdo_callbacks[n]
+        if old is not None and not old & NOT_VALID:
+            self.host.unsubscribe(old & 0x7FF, callback)
+        if not cob & NOT_VALID:
+            self.host.subscribe(cob & 0x7FF, callback)
+        self._subscribed[n] = cob
+
+    def configure_sync(self) -> None:
+        cob = param(self.host.device, SYNC_COB_ID, 0) & 0x7FF
+        if cob == self._sync_cob:
+            return
+        if self._sync_cob is not None:
+            self.host.unsubscribe(self._sync_cob, self._on_sync)
+        self.host.subscribe(cob, self._on_sync)
+        self._sync_cob = cob
+
+    def configure_tpdo(self, n: int) -> None:
+        """On the loop, after a write to TPDO n's parameters was stored."""
+        device, t = self.host.device, self.tpdos[n]
+        comm = TPDO_COMMUNICATION + n - 1
+        t.idle()
+        t.cob = param(device, comm, 1)
+        t.type = param(device, comm, 2)
+        t.inhibit_s = param(device, comm, 3) * 100e-6
+        t.event_s = param(device, comm, 5) / 1000
+        t.sync_start = param(device, comm, 6)
+        t.layout = Layout.of(device, TPDO_MAPPING + n - 1)
+        t.getters = tuple(self.host.getter(i, s) for i, s in t.layout.objects)
+        t.last = None
+        if self.host.operational and t.valid:
+            self._begin(t)
+
+    def close(self) -> None:
+        for t in self.tpdos.values():
+            t.idle()
+
+    # -- NMT (loop) -------------------------------------------------------------------------
+
+    def entered_operational(self) -> None:
+        for t in self.tpdos.values():
+            t.idle()
+            t.last = None
+            if t.valid:
+                self._begin(t)
+
+    def left_operational(self) -> None:
+        for t in self.tpdos.values():
+            t.idle()
+
+    def _begin(self, t: Tpdo) -> None:
+        """A TPDO comes to life: an event-driven one says where things stand (unless all it
+        maps is the last SND: it speaks of SNDs only), and its event timer starts."""
+        assert t.layout is not None
+        if t.type in EVENT_TYPES:
+            if not t.layout.only_snd:
+                t.pending = t.frame()
+                self._ready(t)
+            self._arm_event_timer(t)
+
+    # -- changes (loop) -----------------------------------------------------------------------
+
+    def image_changed(self) -> None:
+        self._changed(lambda layout: layout.image)
+
+    def status_changed(self) -> None:
+        self._changed(lambda layout: layout.status)
+
+    def snd(self) -> None:
+        """An SND happened: one frame each for the TPDOs that map the last SND."""
+        if not self.host.operational:
+            return
+        for t in self.tpdos.values():
+            if not t.valid or t.layout is None:
+                continue
+            if t.layout.snd and t.type in EVENT_TYPES:
+                if len(t.queue) == SND_QUEUE:
+                    t.queue.popleft()
+                    self._lost_snd(t)
+                t.queue.append(t.frame())
+                self._ready(t)
+            elif t.layout.snd or t.layout.status:
+                self._change(t)
+
+    def _changed(self, uses: Callable[[Layout], bool]) -> None:
+        if not self.host.operational:
+            return
+        for t in self.tpdos.values():
+            if t.valid and t.layout is not None and uses(t.layout):
+                self._change(t)
+
+    def _change(self, t: Tpdo) -> None:
+        if t.type == 0:
+            t.sync_due = True
+        elif t.type in EVENT_TYPES:
+            data = t.frame()
+            if data != (t.pending if t.pending is not None else t.last):
+                t.pending = data
+                self._ready(t)
+
+    def _lost_snd(self, t: Tpdo) -> None:
+        self.lost_snds += 1
+        now = time.monotonic()
+        if now - self._lost_logged > 10:
+            self._lost_logged = now
+            log.warning("TPDO%d: more than %d SNDs wait for the inhibit time; the oldest are "
+                        "dropped (%d so far)", t.n, SND_QUEUE, self.lost_snds)
+
+    # -- transmission (loop) ----------------------------------------------------------------
+
+    def _ready(self, t: Tpdo) -> None:
+        """Send now, or when the inhibit time has passed."""
+        if t.inhibit_timer is not None:
+            return
+        wait = t.last_t + t.inhibit_s - self.host.clock.monotonic()
+        if wait <= 0:
+            self._transmit(t)
+        else:
+            t.inhibit_timer = self.host.clock.call_later(wait, lambda: self._inhibit_over(t))
+
+    def _inhibit_over(self, t: Tpdo) -> None:
+        t.inhibit_timer = None
+        self._transmit(t)
+
+    def _transmit(self, t: Tpdo) -> None:
+        if not (self.host.operational and t.valid):
+            t.idle()
+            return
+        if t.queue:
+            data = t.queue.popleft()
+        elif t.pending is not None:
+            data, t.pending = t.pending, None
+            if data == t.last and not t.force:
+                return  # changed and changed back within the inhibit time
+        elif t.force:
+            data = t.frame()
+        else:
+            return
+        t.force = False
+        self._send(t, data)
+        self._arm_event_timer(t)
+        if t.queue or t.pending is not None:
+            self._ready(t)
+
+    def _send(self, t: Tpdo, data: bytes) -> None:
+        self.host.send(t.cob & 0x7FF, data)
+        t.last = data
+        t.last_t = self.host.clock.monotonic()
+        self.sent += 1
+
+    def _arm_event_timer(self, t: Tpdo) -> None:
+        if t.event_timer is not None:
+            t.event_timer.cancel()
+            t.event_timer = None
+        if t.event_s > 0 and t.type in EVENT_TYPES:
+            t.event_timer = self.host.clock.call_later(t.event_s, lambda: self._event_due(t))
+
+    def _event_due(self, t: Tpdo) -> None:
+        t.event_timer = None
+        t.force = True
+        self._ready(t)
+
+    # -- RPDOs and SYNC (receive thread, then loop) -------------------------------------------
+
+    def _rpdo_callback(self, n: int) -> Callable[[int, bytearray, float], None]:
+        return lambda can_id, data, timestamp: self._on_rpdo(n, can_id, data)
+
+    def _on_rpdo(self, n: int, can_id: int, data: bytearray) -> None:
+        if not self.host.operational:
+            return  # PDOs only in OPERATIONAL
+        r = self.rpdos[n]
+        if len(data) < r.layout.frame.size:
+            log.warning("RPDO%d 0x%03X with %d bytes ignored (%d mapped)", n, can_id,
+                        len(data), r.layout.frame.size)
+            return
+        values = r.layout.frame.unpack_from(bytes(data))
+        changes = [(area, i, view, v) for (area, i, view), v in zip(r.targets, values,
+                                                                   strict=True)]
+        if not changes:
+            return
+        who = f"canopen 0x{can_id:03X}"
+        if r.sync:
+            self._sync_pending[n] = (changes, who)  # applied at the next SYNC; the last wins
+            return
+        self.handed += 1
+        self.host.call_soon(lambda: self._apply([(changes, who)]))
+
+    def _apply(self, batches: list[tuple[list[tuple[str, int, str, int]], str]]) -> None:
+        for changes, who in batches:
+            try:
+                self.host.apply(changes, who)
+            finally:
+                self.done += 1
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if not self.host.operational:
+            return
+        counter = data[0] if data else None
+        batches = list(self._sync_pending.values())
+        self._sync_pending.clear()
+        self.handed += len(batches)
+        self.host.call_soon(lambda: self._sync(counter, batches))
+
+    def _sync(self, counter: int | None,
+              batches: list[tuple[list[tuple[str, int, str, int]], str]]) -> None:
+        """At a SYNC: the synchronous TPDOs send what they sample now, then the RPDO data
+        received since the last SYNC is applied (inputs sampled, outputs actuated)."""
+        if self.host.operational:
+            for t in self.tpdos.values():
+                if t.valid and t.type <= 240:
+                    self._sync_tpdo(t, counter)
+        self._apply(batches)
+
+    def _sync_tpdo(self, t: Tpdo, counter: int | None) -> None:
+        if t.type == 0:
+            if t.sync_due:
+                t.sync_due = False
+                self._send(t, t.frame())
+            return
+        if not t.started:
+            if t.sync_start and counter is not None:
+                if counter != t.sync_start:
+                    return
+                t.started, t.sync_count = True, t.type - 1  # the first frame now
+            else:
+                t.started = True
+        t.sync_count += 1
+        if t.sync_count >= t.type:
+            t.sync_count = 0
+            self._send(t, t.frame())

@@ -1,0 +1,247 @@
+"""The node's SDO server (CiA 301 7.2.4) and the LocalNode it serves, with the value checks
+of spec 3.3.  The server runs on python-can's receive thread; what it reads and writes goes
+through the node's callbacks (``ncgate.gateway.canopen.node``)."""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from collections.abc import Callable
+
+import canopen
+from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
+from canopen.sdo.exceptions import SdoAbortedError
+from canopen.sdo.server import SdoServer
+
+from ncgate.gateway.canopen.clock import Clock, Timer
+
+log = logging.getLogger("ncgate.canopen")
+
+ABORT_TIMEOUT = 0x05040000
+ABORT_COMMAND = 0x05040001
+ABORT_LENGTH = 0x06070010
+ABORT_RANGE = 0x06090030
+SEGMENTED_TIMEOUT_S = 1.0
+NMT_OPERATIONAL, NMT_STOPPED, NMT_PRE_OPERATIONAL = 5, 4, 127
+
+
+class SdoService(SdoServer):
+    """The SDO server (CiA 301 7.2.4) with the transfer state of its own.
+
+    canopen's server keeps the state of the last transfer whatever happened to it, so an
+    aborted download went on accepting segments and a stray upload segment replayed the last
+    buffer.  Here one transfer at most is open (``_mode``), every abort closes it, and a
+    segment with no transfer open is 0x05040001.  Block transfers are not served (0x05040001:
+    a master falls back to segmented).  Silent in STOPPED; an open transfer abandoned for
+    1 s is aborted with 0x05040000 (silently dropped in STOPPED).  canopen's ``upload`` and
+    ``download`` for local access stay as they are.
+    """
+
+    def __init__(self, rx_cobid: int, tx_cobid: int, node: Device) -> None:
+        super().__init__(rx_cobid, tx_cobid, node)
+        self._gateway_node = node
+        self._lock = threading.Lock()
+        self._mode: str | None = None  # "upload" | "download" while a transfer is open
+        self._buffer_: bytearray = bytearray()
+        self._toggle_ = 0
+        self._size: int | None = None  # the size a segmented download announced
+        self._where = (0, 0)  # the open (or last) transfer's index and sub-index
+        self._timer: Timer | None = None
+
+    def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if self._gateway_node.nmt._state == NMT_STOPPED:
+            return  # no SDO service in STOPPED (CiA 301)
+        request = bytes(data).ljust(8, b"\0")
+        with self._lock:
+            self._stop_timer()
+            try:
+                self._serve(request)
+            except SdoAbortedError as exc:
+                self._abort_transfer(exc.code)
+            except Exception:  # a bug of ours must not leave a transfer half open
+                log.exception("SDO request %s failed", request.hex())
+                self._abort_transfer(0x08000000)
+            if self._mode is not None:
+                self._timer = self._gateway_node.clock.call_later(SEGMENTED_TIMEOUT_S,
+                                                                  self._expire)
+
+    def _serve(self, request: bytes) -> None:
+        command = request[0]
+        ccs = command & 0xE0
+        if ccs == 0x80:  # the client aborts: close, no answer
+            self._mode = None
+            return
+        if ccs in (0x20, 0x40):  # initiate download / upload: a new transfer
+            self._mode = None
+            index, subindex = struct.unpack_from("<HB", request, 1)
+            self._where = (index, subindex)
+            if ccs == 0x40:
+                self._initiate_upload(index, subindex)
+            else:
+                self._initiate_download(command, request, index, subindex)
+            return
+        if ccs == 0x60 and self._mode == "upload":
+            self._upload_segment(command)
+            return
+        if ccs == 0x00 and self._mode == "download":
+            self._download_segment(command, request)
+            return
+        # A segment with no such transfer open, a block transfer, or no such command.
+        if ccs in (0xA0, 0xC0, 0xE0):  # these carry an index: name it
+            self._where = struct.unpack_from("<HB", request, 1)
+        self._mode = None
+        raise SdoAbortedError(ABORT_COMMAND)
+
+    def _initiate_upload(self, index: int, subindex: int) -> None:
+        data = self._gateway_node.get_data(index, subindex, check_readable=True)
+        if not data:
+            raise SdoAbortedError(0x08000024)  # no data available
+        if len(data) <= 4:
+            self.send_response(struct.pack("<BHB", 0x43 | (4 - len(data)) << 2, index,
+                                           subindex) + data.ljust(4, b"\0"))
+            return
+        self._mode, self._buffer_, self._toggle_ = "upload", bytearray(data), 0
+        self.send_response(struct.pack("<BHBL", 0x41, index, subindex, len(data)))
+
+    def _upload_segment(self, command: int) -> None:
+        if command & 0x10 != self._toggle_:
+            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+        chunk = bytes(self._buffer_[:7])
+        del self._buffer_[:7]
+        last = not self._buffer_
+        self.send_response(bytes((self._toggle_ | (7 - len(chunk)) << 1 | int(last),))
+                           + chunk.ljust(7, b"\0"))
+        self._toggle_ ^= 0x10
+        if last:
+            self._mode = None
+
+    def _initiate_download(self, command: int, request: bytes, index: int,
+                           subindex: int) -> None:
+        node = self._gateway_node
+        obj = node.object_for(index, subindex)
+        if not obj.writable:
+            raise SdoAbortedError(0x06010002)
+        if command & 0x02:  # expedited
+            size = 4 - (command >> 2 & 0x3) if command & 0x01 else 4
+            node.set_data(index, subindex, request[4:4 + size], check_writable=True)
+            self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+            return
+        self._size = struct.unpack_from("<L", request, 4)[0] if command & 0x01 else None
+        if self._size is not None:
+            node.check_size(obj, self._size)  # a number of the wrong size: refused now
+        self._mode, self._buffer_, self._toggle_ = "download", bytearray(), 0
+        self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+
+    def _download_segment(self, command: int, request: bytes) -> None:
+        if command & 0x10 != self._toggle_:
+            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+        self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
+        if command & 0x01:  # the last segment
+            data = bytes(self._buffer_)
+            if self._size is not None and len(data) != self._size:
+                raise SdoAbortedError(ABORT_LENGTH)  # not what it announced
+            index, subindex = self._where
+            node = self._gateway_node
+            node.check_size(node.object_for(index, subindex), len(data))
+            node.set_data(index, subindex, data, check_writable=True)
+            self._mode = None
+        self.send_response(bytes((0x20 | self._toggle_,)) + bytes(7))
+        self._toggle_ ^= 0x10
+
+    def _abort_transfer(self, code: int) -> None:
+        """Answer with an abort naming the transfer's object, and close it."""
+        self._mode = None
+        index, subindex = self._where
+        self.send_response(struct.pack("<BHBL", 0x80, index, subindex, code))
+
+    def _stop_timer(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _expire(self) -> None:
+        with self._lock:
+            if self._mode is None:
+                return
+            if self._gateway_node.nmt._state == NMT_STOPPED:
+                self._mode = None  # nothing is sent in STOPPED
+                return
+            log.info("SDO %s of 0x%04X:%02X abandoned: abort after %g s", self._mode,
+                     *self._where, SEGMENTED_TIMEOUT_S)
+            self._abort_transfer(ABORT_TIMEOUT)
+
+    def close(self) -> None:
+        with self._lock:
+            self._stop_timer()
+
+
+class Device(canopen.LocalNode):
+    """A LocalNode with our SDO server and the value-range checks of spec 3.3."""
+
+    clock: Clock  # the node's (set before the node joins the bus)
+
+    def __init__(self, node_id: int, od: canopen.ObjectDictionary) -> None:
+        super().__init__(node_id, od)
+        self.sdo = SdoService(0x600 + node_id, 0x580 + node_id, self)
+        # Called (on the CAN thread) once a write is stored: the node reconfigures what the
+        # value controls (a PDO, the SYNC, the heartbeat consumer).
+        self.stored: Callable[[int, int], None] = lambda index, subindex: None
+
+    def object_for(self, index: int, subindex: int) -> ODVariable:
+        """The object an SDO names, or the abort: 0x06020000 no object, 0x06090011 no such
+        sub-index (a VAR has only 0)."""
+        if index not in self.object_dictionary:
+            raise SdoAbortedError(0x06020000)
+        obj = self.object_dictionary[index]
+        if isinstance(obj, ODVariable):
+            if subindex != 0:
+                raise SdoAbortedError(0x06090011)
+            return obj
+        # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
+        # ones the dictionary defines exist here.
+        if subindex not in obj.subindices:
+            raise SdoAbortedError(0x06090011)
+        return obj[subindex]
+
+    @staticmethod
+    def check_size(obj: ODVariable, size: int) -> None:
+        """A segmented transfer to a number must carry exactly its size (CiA 301: 0x06070012
+        too long, 0x06070013 too short); only an expedited one may use a wider type."""
+        if obj.data_type in NUMBER_TYPES and 8 * size != len(obj):
+            raise SdoAbortedError(0x06070012 if 8 * size > len(obj) else 0x06070013)
+
+    def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
+        # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
+        # which (ODArray has no __contains__) sorts every sub-index on every access.
+        obj = self.object_for(index, subindex)
+        if check_readable and not obj.readable:
+            raise SdoAbortedError(0x06010001)
+        for callback in self._read_callbacks:
+            result = callback(index=index, subindex=subindex, od=obj)
+            if result is not None:
+                return obj.encode_raw(result)
+        stored = self.data_store.get(index, {}).get(subindex)
+        if stored is not None:
+            return stored
+        for value in (obj.value, obj.default):
+            if value is not None:
+                return obj.encode_raw(value)
+        raise SdoAbortedError(0x060A0023)  # resource not available
+
+    def set_data(self, index: int, subindex: int, data: bytes,
+                 check_writable: bool = False) -> None:
+        obj = self.object_for(index, subindex)
+        if check_writable and not obj.writable:
+            raise SdoAbortedError(0x06010002)
+        if obj.data_type in NUMBER_TYPES and 8 * len(data) != len(obj):
+            # A value too big for the object, sent in a wider type, is out of range (spec
+            # 3.3); any other size mismatch is a length error.
+            if 8 * len(data) > len(obj) and 0 < len(data) <= 8 and obj.max is not None:
+                value = int.from_bytes(data, "little", signed=obj.data_type in SIGNED_TYPES)
+                if not (obj.min or 0) <= value <= obj.max:
+                    raise SdoAbortedError(ABORT_RANGE)
+            raise SdoAbortedError(ABORT_LENGTH)
+        super().set_data(index, subindex, data, check_writable)
+        self.stored(index, subindex)
