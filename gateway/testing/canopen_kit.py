@@ -4,6 +4,8 @@
     value = await master.upload(0x2500, 1)    # process 1 state
     await master.download(0x2000, 2, b"\\x04") # SA byte 1 -> SA10
     frame = await master.next_frame(0x290)    # the next TPDO2 (an SND)
+    master.sync()                             # synchronous PDOs
+    master.heartbeat(1)                       # the master's heartbeat, if 0x1016 watches it
     master.close()
 
 canopen's SDO client blocks, and the node answers from the asyncio loop that runs your test:
@@ -55,6 +57,16 @@ class CanopenMaster:
     def nmt(self, command: int) -> None:
         """NMT: 0x01 start, 0x02 stop, 0x80 pre-operational, 0x81/0x82 resets."""
         self.network.send_message(0, bytes((command, self.node_id)))
+
+    def sync(self, counter: int | None = None, cob_id: int = 0x80) -> None:
+        """A SYNC (with the counter byte if given): synchronous TPDOs answer, synchronous
+        RPDOs take effect."""
+        self.network.send_message(cob_id, b"" if counter is None else bytes((counter,)))
+
+    def heartbeat(self, node_id: int = 1, state: int = 0x05) -> None:
+        """One heartbeat of the master (node ``node_id``, OPERATIONAL), for a node that
+        watches it through 0x1016."""
+        self.network.send_message(0x700 + node_id, bytes((state,)))
 
     def close(self) -> None:
         self.network.disconnect()

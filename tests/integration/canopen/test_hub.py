@@ -55,3 +55,22 @@ async def test_plugin_master_fixture(ncgate_gateway: Gateway, canopen_master: ob
     await canopen_master.download(0x2000, 2, b"\x04")  # SA10 -> P1 goes on, sends to P4
     frame = await canopen_master.next_frame(0x290)
     assert frame[4:6] == b"\x01\x04"  # sender 1, target 4
+
+
+async def test_plugin_master_syncs_and_beats(ncgate_gateway: Gateway,
+                                             canopen_master: object) -> None:
+    from ncgate.gateway.testing.canopen_kit import CanopenMaster
+
+    assert isinstance(canopen_master, CanopenMaster)
+    await canopen_master.download(0x1800, 1, (0xC0000190).to_bytes(4, "little"))
+    await canopen_master.download(0x1800, 2, b"\x01")  # TPDO1 on every SYNC
+    await canopen_master.download(0x1800, 1, (0x40000190).to_bytes(4, "little"))
+    canopen_master.nmt(0x01)
+    canopen_master.sync()
+    assert await canopen_master.next_frame(0x190) == bytes(4)
+    # the node watches node 1's heartbeat for 50 ms: one beat, then silence
+    await canopen_master.download(0x1016, 1, (1 << 16 | 50).to_bytes(4, "little"))
+    canopen_master.heartbeat(1)
+    emcy = await canopen_master.next_frame(0x90)
+    assert emcy[:3] == b"\x30\x81\x11"  # 0x8130 heartbeat error, register 0x11
+    assert [e["code"] for e in ncgate_gateway.trace if e["event"] == "alarm"] == ["AL150"]
