@@ -8,6 +8,7 @@ import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.clock import ManualClock
 
 from .conftest import Master, abort_code, i16, u8, u16
 
@@ -104,12 +105,18 @@ async def test_bad_command_specifier(gw: Gateway, master: Master) -> None:
     assert answer[1:4] == bytes((0x00, 0x20, 0x01))  # it names the request's object
 
 
-async def test_abandoned_segmented_transfer_times_out(gw: Gateway, master: Master) -> None:
+async def test_abandoned_segmented_transfer_times_out(clocked: Gateway, master: Master,
+                                                      clock: ManualClock) -> None:
+    gw = clocked
     # Initiate a segmented download of 2 bytes to SYVAR0, then send nothing more.
     init = struct.pack("<BHBL", 0x21, 0x2200, 1, 2)
     answer = await master.raw_sdo(init)
     assert answer[0] == 0x60  # initiate download response
     queue_ = master.frames[0x580 + master.node_id]
+    clock.advance(0.999)
+    sdo = gw.canopen_node.node.sdo  # type: ignore[union-attr]
+    assert sdo._mode == "download"  # still open: no abort yet (an abort closes it)
+    clock.advance(0.001)
     late = await master.next(0x580 + master.node_id, timeout_s=5.0)  # the node gives up
     assert abort_code(late) == 0x05040000 and queue_.empty()
     # a late segment is refused, and nothing was stored
