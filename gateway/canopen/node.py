@@ -57,6 +57,7 @@ from ncgate.gateway.canopen.dictionary import (
     SYNC_COB_ID,
     SYVAR_BASE,
     TPDO_COMMUNICATION,
+    TPDO_MAPPING,
     build_dictionary,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
@@ -300,6 +301,19 @@ class CanopenNode:
                     return f"0x{index:04X}:{sub} is not in the dictionary"
                 if not obj.writable or 8 * len(data) != len(obj):
                     return f"0x{index:04X}:{sub} does not fit"
+        for index, subs in stored.items():  # a mapping must name what this dictionary has
+            if pdo.is_pdo_parameter(index) and index & 0x200:
+                count = subs.get(0)
+                n = int.from_bytes(count, "little") if count else pdo.param(self.device,
+                                                                             index, 0)
+                for sub in range(1, n + 1):
+                    entry = subs.get(sub)
+                    value = (int.from_bytes(entry, "little") if entry
+                             else pdo.param(self.device, index, sub))
+                    try:
+                        pdo.mapped_bits(self.device, value, index >= TPDO_MAPPING)
+                    except SdoAbortedError:
+                        return f"0x{index:04X}:{sub} maps 0x{value:08X}, not mappable here"
         return None
 
     def _configure_heartbeats(self) -> None:

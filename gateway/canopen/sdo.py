@@ -162,7 +162,11 @@ class SdoService(SdoServer):
             self._timer = None
 
     def _expire(self) -> None:
-        with self._lock:
+        # On the loop's thread: never wait for the lock there.  A request holding it may be
+        # waiting for the loop itself (a write), and it re-arms or closes the transfer anyway.
+        if not self._lock.acquire(blocking=False):
+            return
+        try:
             if self._mode is None:
                 return
             if self._gateway_node.nmt._state == NMT_STOPPED:
@@ -171,6 +175,8 @@ class SdoService(SdoServer):
             log.info("SDO %s of 0x%04X:%02X abandoned: abort after %g s", self._mode,
                      *self._where, SEGMENTED_TIMEOUT_S)
             self._abort_transfer(ABORT_TIMEOUT)
+        finally:
+            self._lock.release()
 
     def close(self) -> None:
         with self._lock:

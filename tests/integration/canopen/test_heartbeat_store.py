@@ -209,6 +209,9 @@ async def test_a_store_file_that_does_not_fit_is_ignored(master: Master,
     store.save(path, {0x1A07: {0: b"\x01"}})  # no such object here
     async with Gateway(ncgate_config):
         assert await master.upload(0x1802, 1) == u32(0xC0000390)
+    store.save(path, {0x1A02: {0: b"\x01", 1: struct.pack("<L", 0x20FF0108)}})  # no such byte
+    async with Gateway(ncgate_config):
+        assert await master.upload(0x1A02, 0) == u8(0)
     path.write_text("{half a fi")
     async with Gateway(ncgate_config):
         assert await master.upload(0x1802, 1) == u32(0xC0000390)

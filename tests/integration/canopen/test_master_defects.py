@@ -200,3 +200,25 @@ async def test_identity_strings_by_segmented_upload(gw: Gateway, master: Master)
     assert answer[0] == 0x41 and int.from_bytes(answer[4:8], "little") == 31
     assert abort_code(await master.raw_sdo(bytes((0x70,)) + bytes(7))) == 0x05030000
     assert abort_code(await master.raw_sdo(bytes((0x60,)) + bytes(7))) == 0x05040001
+
+
+async def test_sdo_timeout_never_blocks_the_loop_on_a_busy_server(clocked: Gateway,
+                                                                  master: Master,
+                                                                  clock: ManualClock) -> None:
+    """The timeout fires on the loop; a request being served holds the server's lock and may
+    itself wait for the loop (a write).  The timer must give way, not wait for the lock."""
+    sdo = clocked.canopen_node.node.sdo  # type: ignore[union-attr]
+    assert (await master.raw_sdo(struct.pack("<BHBL", 0x21, 0x2200, 1, 2)))[0] == 0x60
+    held, release = threading.Event(), threading.Event()
+
+    def serving() -> None:  # as the receive thread does while it serves a request
+        with sdo._lock:
+            held.set()
+            release.wait(5)
+    worker = threading.Thread(target=serving)
+    worker.start()
+    held.wait(5)
+    clock.advance(1.0)  # returns at once: the timer gave way
+    release.set()
+    worker.join(5)
+    assert sdo._mode == "download"  # left to the request in progress
