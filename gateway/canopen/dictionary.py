@@ -178,6 +178,16 @@ def _pdos(od: ObjectDictionary, config: Config) -> None:
                                    mappings[mapping + n]))
 
 
+def image_target(index: int, subindex: int) -> tuple[str, int, str]:
+    """The image variable behind a manufacturer object's sub-index (0x2000..0x23FF):
+    (area, index, view) as ``IOImage.read``/``write`` take it."""
+    if index == SA_BYTES:
+        return ("SA", subindex - 1, "BY")
+    if index < SYVAR_BASE:
+        return ("SK", (index - K_BASE) * CHUNK + subindex - 1, "BY")
+    return ("SYVAR", (index - SYVAR_BASE) * CHUNK + subindex - 1, "IN")
+
+
 def chunks(total: int) -> list[tuple[int, int]]:
     """(first element, count) of each object of CHUNK elements."""
     return [(first, min(CHUNK, total - first)) for first in range(0, total, CHUNK)]

@@ -44,21 +44,18 @@ from ncgate.config import Config, MasterLost
 from ncgate.gateway.canopen import pdo, store
 from ncgate.gateway.canopen.clock import Clock, LoopClock
 from ncgate.gateway.canopen.dictionary import (
-    CHUNK,
     COMMAND,
     CONSUMER_ENTRIES,
     CONSUMER_HEARTBEAT,
-    K_BASE,
     LAST_SND,
     RESTORE,
-    SA_BYTES,
     STATUS_BASE,
     STORE,
     SYNC_COB_ID,
-    SYVAR_BASE,
     TPDO_COMMUNICATION,
     TPDO_MAPPING,
     build_dictionary,
+    image_target,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
 from ncgate.gateway.canopen.sdo import ABORT_RANGE, NMT_OPERATIONAL, NMT_STOPPED, Device
@@ -87,8 +84,7 @@ class CanopenNode:
         self.backend = backend
         self.node_id = config.canopen.node_id
         self.od = build_dictionary(config)
-        self.device = Device(self.node_id, self.od)
-        self.node = self.device  # the LocalNode (the name tests and tools know)
+        self.node = Device(self.node_id, self.od)  # canopen's LocalNode, with our SDO server
         self.network = canopen.Network()
         # The notifier thread wakes this often when the bus is quiet; shutting down waits for
         # it, so the default of 1 s would make every stop last a second.
@@ -121,16 +117,16 @@ class CanopenNode:
         self._loop_thread = threading.get_ident()
         if self._clock is None:
             self._clock = LoopClock(self.loop)
-        self.device.clock = self._clock
+        self.node.clock = self._clock
         self.heartbeats = HeartbeatConsumer(self._clock, self.subscribe, self.unsubscribe,
                                             self.call_soon, self._on_master_lost,
                                             self._on_master_back)
         self._restore_stored()
         self.network.connect(interface=cfg.interface, channel=cfg.channel, bitrate=cfg.bitrate)
-        self.network.add_node(self.device)
-        self.device.add_read_callback(self._on_read)
-        self.device.add_write_callback(self._on_write)
-        self.device.stored = self._on_stored
+        self.network.add_node(self.node)
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+        self.node.stored = self._on_stored
         self.network.subscribe(0, self._on_nmt)  # after canopen's own NMT handler
         self.pdos.configure_all()
         self._configure_heartbeats()
@@ -141,7 +137,7 @@ class CanopenNode:
         self._unsubscribe_image = self.backend.image.subscribe(self._on_image)
         self._boot()
         log.info("CANopen node %d on %s/%s (%s)", self.node_id, cfg.interface, cfg.channel,
-                 self.device.nmt.state)
+                 self.node.nmt.state)
         if cfg.hub:
             self._start_hub()
 
@@ -168,8 +164,8 @@ class CanopenNode:
         self.pdos.close()
         if self.heartbeats is not None:
             self.heartbeats.close()
-        self.device.nmt.stop_heartbeat()
-        self.device.sdo.close()  # type: ignore[attr-defined]
+        self.node.nmt.stop_heartbeat()
+        self.node.sdo.close()  # type: ignore[attr-defined]
         engine = self.backend.engine
         if self._on_state in engine.state_listeners:
             engine.state_listeners.remove(self._on_state)
@@ -179,19 +175,19 @@ class CanopenNode:
     def _boot(self) -> None:
         """Boot-up message, then PRE-OPERATIONAL (or OPERATIONAL with nmt_autostart)."""
         self.network.send_message(0x700 + self.node_id, b"\x00")
-        self.device.nmt.send_command(0x80)  # starts the heartbeat producer (0x1017)
+        self.node.nmt.send_command(0x80)  # starts the heartbeat producer (0x1017)
         self.call_soon(self.pdos.left_operational)
         if self.config.canopen.nmt_autostart:
-            self.device.nmt.send_command(0x01)
+            self.node.nmt.send_command(0x01)
             self.call_soon(self.pdos.entered_operational)
 
     @property
     def operational(self) -> bool:
-        return self.device.nmt._state == NMT_OPERATIONAL
+        return self.node.nmt._state == NMT_OPERATIONAL
 
     @property
     def stopped(self) -> bool:
-        return self.device.nmt._state == NMT_STOPPED
+        return self.node.nmt._state == NMT_STOPPED
 
     # -- what the PDOs and the heartbeat consumer use (pdo.Host) ----------------------------
 
@@ -209,16 +205,11 @@ class CanopenNode:
 
     def getter(self, index: int, subindex: int) -> Callable[[], int]:
         """A mapped object's value, read on the loop (for a TPDO frame)."""
-        image, engine = self.backend.image, self.backend.engine
-        if index == SA_BYTES:
-            i = subindex - 1
-            return lambda: image.sa[i]
-        if index < SYVAR_BASE:
-            i = (index - K_BASE) * CHUNK + subindex - 1
-            return lambda: image.k[i]
+        engine = self.backend.engine
         if index < COMMAND:
-            i = (index - SYVAR_BASE) * CHUNK + subindex - 1
-            return lambda: (image.syvar[i] + 0x8000 & 0xFFFF) - 0x8000
+            area, i, view = image_target(index, subindex)
+            read = self.backend.image.read
+            return lambda: read(area, i, view)
         if STATUS_BASE <= index < LAST_SND and subindex == 1:
             k = index - STATUS_BASE + 1
             return lambda: int(engine.processes[k].state)
@@ -261,7 +252,7 @@ class CanopenNode:
                 # Reset node also restores the node's own application values: the SND sender
                 # written to 0x2400:2.  The image behind 0x2000..0x23FF is the soft PLC's, not
                 # the node's (docs/decisions.md): it is left as it is.
-                self.device.data_store.pop(COMMAND, None)
+                self.node.data_store.pop(COMMAND, None)
             self._boot()
         elif command == 0x01:
             self.call_soon(self.pdos.entered_operational)
@@ -271,8 +262,8 @@ class CanopenNode:
     def _reset_communication(self) -> None:
         """Communication parameters (0x1000..0x1FFF) back to their power-on values: the
         stored ones (0x1010) or the defaults."""
-        for index in [i for i in self.device.data_store if i < 0x2000]:
-            del self.device.data_store[index]
+        for index in [i for i in self.node.data_store if i < 0x2000]:
+            del self.node.data_store[index]
         self._restore_stored()
         self.pdos.configure_all()
         self._configure_heartbeats()
@@ -287,7 +278,7 @@ class CanopenNode:
                         self.store_path, problem)
             return
         for index, subs in stored.items():
-            self.device.data_store[index] = dict(subs)
+            self.node.data_store[index] = dict(subs)
 
     def _check_stored(self, stored: store.Parameters) -> str | None:
         """Whether stored parameters fit this dictionary (the config may have changed)."""
@@ -296,7 +287,7 @@ class CanopenNode:
                 return f"0x{index:04X} is not a communication parameter"
             for sub, data in subs.items():
                 try:
-                    obj = self.device.object_for(index, sub)
+                    obj = self.node.object_for(index, sub)
                 except SdoAbortedError:
                     return f"0x{index:04X}:{sub} is not in the dictionary"
                 if not obj.writable or 8 * len(data) != len(obj):
@@ -304,21 +295,21 @@ class CanopenNode:
         for index, subs in stored.items():  # a mapping must name what this dictionary has
             if pdo.is_pdo_parameter(index) and index & 0x200:
                 count = subs.get(0)
-                n = int.from_bytes(count, "little") if count else pdo.param(self.device,
+                n = int.from_bytes(count, "little") if count else pdo.param(self.node,
                                                                              index, 0)
                 for sub in range(1, n + 1):
                     entry = subs.get(sub)
                     value = (int.from_bytes(entry, "little") if entry
-                             else pdo.param(self.device, index, sub))
+                             else pdo.param(self.node, index, sub))
                     try:
-                        pdo.mapped_bits(self.device, value, index >= TPDO_MAPPING)
+                        pdo.mapped_bits(self.node, value, index >= TPDO_MAPPING)
                     except SdoAbortedError:
                         return f"0x{index:04X}:{sub} maps 0x{value:08X}, not mappable here"
         return None
 
     def _configure_heartbeats(self) -> None:
         assert self.heartbeats is not None
-        self.heartbeats.configure([pdo.param(self.device, CONSUMER_HEARTBEAT, s)
+        self.heartbeats.configure([pdo.param(self.node, CONSUMER_HEARTBEAT, s)
                                    for s in range(1, CONSUMER_ENTRIES + 1)])
 
     # -- SDO: the live image and status -------------------------------------------------------
@@ -344,11 +335,8 @@ class CanopenNode:
 
     def _image_value(self, index: int, subindex: int) -> int:
         sa, k, syvar = self._view
-        if index == SA_BYTES:
-            return sa[subindex - 1]
-        if index < SYVAR_BASE:
-            return k[(index - K_BASE) * CHUNK + subindex - 1]
-        return syvar[(index - SYVAR_BASE) * CHUNK + subindex - 1]
+        area, i, _ = image_target(index, subindex)
+        return (sa if area == "SA" else k if area == "SK" else syvar)[i]
 
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
@@ -375,11 +363,11 @@ class CanopenNode:
         if index < 0x2000:
             number = int.from_bytes(data, "little")
             if pdo.is_pdo_parameter(index):
-                pdo.check_write(self.device, index, subindex, number)
+                pdo.check_write(self.node, index, subindex, number)
             elif index == SYNC_COB_ID:
                 pdo.check_sync_cob_id(number)
             elif index == CONSUMER_HEARTBEAT:
-                entries = [pdo.param(self.device, CONSUMER_HEARTBEAT, s)
+                entries = [pdo.param(self.node, CONSUMER_HEARTBEAT, s)
                            for s in range(1, CONSUMER_ENTRIES + 1)]
                 entries[subindex - 1] = number
                 check_entries(entries)
@@ -400,9 +388,7 @@ class CanopenNode:
 
     def _on_stored(self, index: int, subindex: int) -> None:
         """After a write was stored (CAN thread): put it into effect before the answer."""
-        if index in (STORE, RESTORE):
-            self.device.data_store.pop(index, None)  # a command, not a value to keep
-        elif pdo.is_pdo_parameter(index):
+        if pdo.is_pdo_parameter(index):
             n = (index & 0xFF) + 1
             if index < TPDO_COMMUNICATION:
                 self.pdos.configure_rpdo(n)
@@ -416,7 +402,7 @@ class CanopenNode:
     def _store_command(self, index: int, value: int) -> None:
         """0x1010 "save" / 0x1011 "load" (CiA 301): any other value is refused, 0x08000020."""
         if index == STORE and value == store.SAVE:
-            parameters = {i: dict(subs) for i, subs in list(self.device.data_store.items())
+            parameters = {i: dict(subs) for i, subs in list(self.node.data_store.items())
                           if 0x1000 <= i < 0x2000 and i not in (STORE, RESTORE)}
             try:
                 store.save(self.store_path, parameters)
@@ -441,15 +427,8 @@ class CanopenNode:
             log.exception("command %d written through 0x2400:1 failed", word)
 
     def _write(self, index: int, subindex: int, value: int, who: str) -> None:
-        backend = self.backend
-        if index == SA_BYTES:
-            backend.apply_writes([("SA", subindex - 1, "BY", value)], who)
-        elif K_BASE <= index < SYVAR_BASE:
-            backend.apply_writes([("SK", (index - K_BASE) * CHUNK + subindex - 1, "BY", value)],
-                                 who)
-        elif SYVAR_BASE <= index < COMMAND:
-            backend.apply_writes(
-                [("SYVAR", (index - SYVAR_BASE) * CHUNK + subindex - 1, "IN", value)], who)
+        if index < COMMAND:
+            self.backend.apply_writes([(*image_target(index, subindex), value)], who)
         elif index == COMMAND:
             self._command(subindex, value)
 
@@ -461,7 +440,7 @@ class CanopenNode:
         else:
             if not 1 <= value <= nc.processes:
                 raise SdoAbortedError(ABORT_RANGE)  # an unknown SND target
-            stored = self.device.data_store.get(COMMAND, {}).get(2)
+            stored = self.node.data_store.get(COMMAND, {}).get(2)
             if stored is None:
                 raise SdoAbortedError(ABORT_DEVICE_STATE)  # no sender written yet
             try:
@@ -480,7 +459,7 @@ class CanopenNode:
             AlarmCode.MASTER_LOST,
             f"CANopen: no heartbeat from node {node_id} for {ms} ms (0x1016); {what}")
         if not self.stopped:
-            self.device.emcy.send(EMCY_HEARTBEAT, self._error_register(),
+            self.node.emcy.send(EMCY_HEARTBEAT, self._error_register(),
                                   struct.pack("<B4x", node_id))
         if reaction is MasterLost.HOLD:
             self.backend.command(2)
@@ -494,7 +473,7 @@ class CanopenNode:
         log.warning("CANopen: the heartbeat of node %d is back (the processes stay as they "
                     "are: cycle start resumes a hold)", node_id)
         if self._error_register() == 0 and not self.stopped:
-            self.device.emcy.reset(0)
+            self.node.emcy.reset(0)
 
     # -- PDO triggers and EMCY (loop) -------------------------------------------------------
 
@@ -508,7 +487,7 @@ class CanopenNode:
             self._alarmed = True
             register = self._error_register()
             if not self.stopped:  # no EMCY in STOPPED (CiA 301)
-                self.device.emcy.send(EMCY_SOFTWARE, register,
+                self.node.emcy.send(EMCY_SOFTWARE, register,
                                       struct.pack("<BH2x", event.proc & 0xFF,
                                                   int(event.code) & 0xFFFF))
         elif isinstance(event, ev.End) and event.how == "reset" and self._alarmed:
@@ -516,7 +495,7 @@ class CanopenNode:
             if self._error_register() == 0:
                 self._alarmed = False
                 if not self.stopped:
-                    self.device.emcy.reset(0)
+                    self.node.emcy.reset(0)
         elif isinstance(event, ev.Snd):
             self.pdos.snd()
 

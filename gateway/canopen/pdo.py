@@ -48,18 +48,16 @@ from canopen.sdo.exceptions import SdoAbortedError
 from ncgate.gateway.canopen.clock import Clock, Timer
 from ncgate.gateway.canopen.dictionary import (
     COMMAND,
-    K_BASE,
     LAST_SND,
     MAX_MAPPED,
     PDO_COUNT,
     RPDO_COMMUNICATION,
     RPDO_MAPPING,
-    SA_BYTES,
     STATUS_BASE,
     SYNC_COB_ID,
-    SYVAR_BASE,
     TPDO_COMMUNICATION,
     TPDO_MAPPING,
+    image_target,
 )
 from ncgate.gateway.canopen.sdo import Device
 
@@ -179,13 +177,10 @@ def check_sync_cob_id(cob: int) -> None:
 
 # ---- the runtime --------------------------------------------------------------------------
 
-Target = tuple[str, int, str]  # an image variable: (area, index, view)
-
-
 class Host(Protocol):
     """What the PDOs need of the node."""
 
-    device: Device
+    node: Device
 
     @property
     def clock(self) -> Clock: ...
@@ -237,14 +232,6 @@ class Layout:
                    only_snd=bool(objects) and all(i == LAST_SND for i, _ in objects))
 
 
-def image_target(index: int, subindex: int) -> Target:
-    if index == SA_BYTES:
-        return ("SA", subindex - 1, "BY")
-    if index < SYVAR_BASE:
-        return ("SK", (index - K_BASE) * 128 + subindex - 1, "BY")
-    return ("SYVAR", (index - SYVAR_BASE) * 128 + subindex - 1, "IN")
-
-
 class Tpdo:
     """One TPDO's configuration and transmission state (on the loop)."""
 
@@ -283,6 +270,7 @@ class Tpdo:
                 timer.cancel()
         self.inhibit_timer = self.event_timer = None
         self.pending, self.force, self.sync_due = None, False, False
+        self.last = None  # the next frame is news, whatever went before
         self.queue.clear()
         self.sync_count, self.started = 0, False
 
@@ -326,7 +314,7 @@ class Pdos:
             self.configure_tpdo(n)
 
     def configure_rpdo(self, n: int) -> None:
-        device = self.host.device
+        device = self.host.node
         cob = param(device, RPDO_COMMUNICATION + n - 1, 1)
         sync = param(device, RPDO_COMMUNICATION + n - 1, 2) <= 240
         self.rpdos[n] = Rpdo(n, cob, sync, Layout.of(device, RPDO_MAPPING + n - 1))
@@ -342,7 +330,7 @@ class Pdos:
         self._subscribed[n] = cob
 
     def configure_sync(self) -> None:
-        cob = param(self.host.device, SYNC_COB_ID, 0) & 0x7FF
+        cob = param(self.host.node, SYNC_COB_ID, 0) & 0x7FF
         if cob == self._sync_cob:
             return
         if self._sync_cob is not None:
@@ -352,7 +340,7 @@ class Pdos:
 
     def configure_tpdo(self, n: int) -> None:
         """On the loop, after a write to TPDO n's parameters was stored."""
-        device, t = self.host.device, self.tpdos[n]
+        device, t = self.host.node, self.tpdos[n]
         comm = TPDO_COMMUNICATION + n - 1
         t.idle()
         t.cob = param(device, comm, 1)
@@ -362,7 +350,6 @@ class Pdos:
         t.sync_start = param(device, comm, 6)
         t.layout = Layout.of(device, TPDO_MAPPING + n - 1)
         t.getters = tuple(self.host.getter(i, s) for i, s in t.layout.objects)
-        t.last = None
         if self.host.operational and t.valid:
             self._begin(t)
 
@@ -375,7 +362,6 @@ class Pdos:
     def entered_operational(self) -> None:
         for t in self.tpdos.values():
             t.idle()
-            t.last = None
             if t.valid:
                 self._begin(t)
 

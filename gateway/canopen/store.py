@@ -68,18 +68,13 @@ def load(path: Path) -> Parameters | None:
     """The stored parameters, or None (no file, or one that cannot be used: logged)."""
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError) as exc:
-        log.warning("%s: stored CANopen parameters not used (%s); the defaults apply", path,
-                    exc)
-        return None
-    try:
         if document["format"] != FORMAT:
             raise ValueError(f"format {document['format']!r}, expected {FORMAT!r}")
         return {int(index, 16): {int(sub): bytes.fromhex(data) for sub, data in subs.items()}
                 for index, subs in document["parameters"].items()}
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except FileNotFoundError:
+        return None
+    except (OSError, KeyError, TypeError, ValueError, AttributeError) as exc:
         log.warning("%s: stored CANopen parameters not used (%s); the defaults apply", path,
                     exc)
         return None

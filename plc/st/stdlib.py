@@ -16,7 +16,7 @@ practice differ, ncgate follows the practice of CODESYS/TwinCAT and says so:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 # ---- elementary integer types: (bits, signed) ----------------------------------------------
 
@@ -145,10 +145,10 @@ class CTU:
     PV: int = 0
     Q: bool = False
     CV: int = 0
-    _m: bool = False
+    _cu: R_TRIG = field(default_factory=R_TRIG)  # IEC: CU is edge-triggered
 
     def __call__(self, now_ms: int = 0) -> None:
-        edge, self._m = self.CU and not self._m, self.CU
+        edge = _rise(self._cu, self.CU)
         if self.R:
             self.CV = 0
         elif edge and limits("INT")[1] > self.CV:
@@ -163,10 +163,10 @@ class CTD:
     PV: int = 0
     Q: bool = False
     CV: int = 0
-    _m: bool = False
+    _cd: R_TRIG = field(default_factory=R_TRIG)
 
     def __call__(self, now_ms: int = 0) -> None:
-        edge, self._m = self.CD and not self._m, self.CD
+        edge = _rise(self._cd, self.CD)
         if self.LD:
             self.CV = self.PV
         elif edge and limits("INT")[0] < self.CV:
@@ -184,12 +184,11 @@ class CTUD:
     QU: bool = False
     QD: bool = False
     CV: int = 0
-    _mu: bool = False
-    _md: bool = False
+    _cu: R_TRIG = field(default_factory=R_TRIG)
+    _cd: R_TRIG = field(default_factory=R_TRIG)
 
     def __call__(self, now_ms: int = 0) -> None:
-        up, self._mu = self.CU and not self._mu, self.CU
-        down, self._md = self.CD and not self._md, self.CD
+        up, down = _rise(self._cu, self.CU), _rise(self._cd, self.CD)
         lo, hi = limits("INT")
         if self.R:
             self.CV = 0
@@ -202,6 +201,12 @@ class CTUD:
                 self.CV -= 1
         self.QU = self.CV >= self.PV
         self.QD = self.CV <= 0
+
+
+def _rise(trig: R_TRIG, clk: bool) -> bool:
+    trig.CLK = clk
+    trig()
+    return trig.Q
 
 
 # ---- bistables -----------------------------------------------------------------------------
