@@ -156,6 +156,30 @@ def _optional_path(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
     return (r.base / r.str_(t[name], key)).resolve()
 
 
+def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("logic", [])
+    items = [raw] if isinstance(raw, str) else raw
+    if not isinstance(items, list) or not all(isinstance(x, str) for x in items):
+        raise r.fail(key, f"expected a file name or a list of them, got {raw!r}")
+    paths = []
+    for i, item in enumerate(items):
+        path = (r.base / item).resolve()
+        if not path.is_file():
+            raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
+                         f"no such file: {path}")
+        paths.append(path)
+    return tuple(paths)
+
+
+def _programs(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("programs", [])
+    if not isinstance(raw, list) or not all(isinstance(x, str) and x for x in raw):
+        raise r.fail(key, f"expected a list of PROGRAM names, got {raw!r}")
+    if raw and not done.get("logic"):
+        raise r.fail(key, "names programs, but plc.logic names no file")
+    return tuple(raw)
+
+
 # ---- the schema ----------------------------------------------------------------------------
 
 
@@ -219,9 +243,18 @@ class PlcConfig:
     sa_bits: int = setting(1024, "bits of the SA packet (a multiple of 8)", lo=8, hi=65536)
     k_bytes: int = setting(512, "bytes of the K packet", lo=2, hi=65536)
     syvars: int = setting(256, "SYVARs (16-bit signed)", lo=1, hi=32768)
-    scan_ms: int = setting(10, "the scan period of PLC logic (reserved: PLC logic in Structured "
-                                  "Text comes with a later release; no effect yet)", lo=1,
-                      hi=60_000)
+    logic: tuple[Path, ...] = setting((), "PLC logic in Structured Text: a .st file or a list "
+                                      "of them (none: the PLC runs no logic)", parse=_logic)
+    programs: tuple[str, ...] = setting((), "the PROGRAMs each scan runs, in this order "
+                                        "(default: every PROGRAM, in file order)",
+                                        parse=_programs)
+    scan_ms: int = setting(10, "the scan period of PLC logic, in ms of machine time (virtual "
+                           "in sim, nc.time_scale on the wall clock in run)", lo=1, hi=60_000)
+    loop_limit: int = setting(100_000, "loop iterations one scan may run before the PLC "
+                              "faults (the iteration guard)", lo=1, hi=100_000_000)
+    retain_file: Path | None = setting(
+        None, "where VAR RETAIN values are kept (default: ncgate-plc-retain.sqlite next to "
+        "the config)", parse=_optional_path)
 
 
 @dataclass(frozen=True, slots=True)
@@ -236,6 +269,8 @@ class ModbusMapConfig:
     status: int = setting(100, "input base of the per-process status blocks", lo=0, hi=65535)
     snd_log: int = setting(200, "input base of the SND log (the last 16 SNDs, 98 registers)",
                            lo=0, hi=65535)
+    plc_status: int = setting(300, "input base of the PLC status (10 registers)", lo=0,
+                              hi=65535)
     read_only: frozenset[str] = setting(frozenset(), "regions clients may not write: "
                                         + ", ".join(MAP_REGIONS), parse=_read_only_regions)
 
@@ -512,7 +547,7 @@ def _check_config(r: _Reader, config: Config) -> None:
     holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
                ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
     status = [("status", m.status, 20 * nc.processes), ("snd_log", m.snd_log, 98),
-              ("info", 0, 8)]
+              ("plc_status", m.plc_status, 10), ("info", 0, 8)]
     for regions in (holding, status):
         for i, (name, start, count) in enumerate(regions):
             if start + count > 65536:

@@ -26,6 +26,7 @@ from ncgate.gateway.canopen.node import CanopenNode
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
+from ncgate.gateway.plc import ScanDriver, start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
 from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
@@ -34,6 +35,7 @@ from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStat
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, Trace
 from ncgate.plc.image import IOImage
+from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 
 class Gateway:
@@ -41,11 +43,12 @@ class Gateway:
 
     def __init__(self, config: Config | None = None,
                  listeners: Sequence[Callable[[Event], None]] = (),
-                 canopen_clock: Clock | None = None) -> None:
+                 canopen_clock: Clock | None = None, cold: bool = False) -> None:
         """``listeners`` hear every trace event from the start (before an autostart).
         ``canopen_clock`` drives the CANopen node's timers (inhibit, event timer, heartbeat
         consumer, SDO timeout): a test passes a
-        :class:`~ncgate.gateway.canopen.clock.ManualClock` and moves time itself."""
+        :class:`~ncgate.gateway.canopen.clock.ManualClock` and moves time itself.
+        ``cold``: the PLC logic starts without its stored RETAIN values (``run --cold``)."""
         self.config = config if config is not None else load_config(None)
         self._listeners = tuple(listeners)
         self._canopen_clock = canopen_clock
@@ -55,6 +58,8 @@ class Gateway:
         self._modbus: ModbusServer | None = None
         self._canopen: CanopenNode | None = None
         self._trace_file: TraceFile | None = None
+        self._cold = cold
+        self._plc: tuple[PlcRuntime, ScanDriver] | None = None
 
     async def __aenter__(self) -> Gateway:
         loop = asyncio.get_running_loop()
@@ -74,6 +79,8 @@ class Gateway:
             runtime.trace.subscribe(listener)
         self._runtime, self._driver = runtime, driver
         try:
+            self._plc = start_plc(self.config, runtime.engine, runtime.image, closed=False,
+                                  wall=driver.now, cold=self._cold)
             if self.config.modbus.enabled:
                 self._modbus = ModbusServer(self.config.modbus, self.map, self)
                 await self._modbus.start()
@@ -95,6 +102,12 @@ class Gateway:
         if self._canopen is not None:
             self._canopen.close()
             self._canopen = None
+        if self._plc is not None:
+            runtime, scans = self._plc
+            scans.close()
+            if runtime.retain is not None:
+                runtime.retain.close()
+            self._plc = None
         if self._driver is not None:
             self._driver.close()
         self._driver = None
@@ -150,6 +163,18 @@ class Gateway:
 
     def status(self, process: int) -> ProcessStatus:
         return self.engine.status(process)
+
+    @property
+    def plc(self) -> PlcRuntime:
+        """The PLC logic: ``gw.plc.read("main.t1.ET")``, ``gw.plc.status``."""
+        if self._plc is None:
+            raise GatewayError("the PLC runs no logic (set [plc] logic in the config)")
+        return self._plc[0]
+
+    @property
+    def plc_status(self) -> PlcStatus | None:
+        """The PLC's status (None: no logic), for the fieldbus status objects."""
+        return self._plc[0].status if self._plc is not None else None
 
     # -- acting as the operator and as a PLC -----------------------------------------------
 
@@ -207,6 +232,8 @@ class Gateway:
             self.engine.hold(True)
         elif word == 3:
             self.engine.reset()
+            if self._plc is not None:
+                self._plc[0].restart()  # a PLC in FAULT starts again
         else:
             raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
         self._settle()

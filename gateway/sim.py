@@ -14,6 +14,7 @@ from typing import TextIO
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.script import Script, ScriptEntry
+from ncgate.gateway.plc import start_plc
 from ncgate.gateway.wiring import (
     ImageVar,
     Runtime,
@@ -162,6 +163,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     for number, name in enumerate(mains, start=1):
         engine.start(name, number, by="operator")
     player.arm()
+    plc = start_plc(config, engine, runtime.image, closed=True)
+    runtime.plc = plc[0] if plc is not None else None
     try:
         outcome = run_virtual(engine, until)
     except KeyboardInterrupt:  # Ctrl-C: what happened so far is still reported and written

@@ -20,6 +20,7 @@ from ncgate.interpreter.nc110.nodes import Assign, CompareOp, VarKind, VarRef, V
 from ncgate.interpreter.nc110.parser import LineError, parse_block
 from ncgate.interpreter.settings import RuntimeSettings
 from ncgate.plc.image import Change, IOImage
+from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
@@ -36,6 +37,7 @@ class Runtime:
     store: ProgramStore
     engine: Engine
     trace: Trace
+    plc: PlcRuntime | None = None  # the PLC logic, when [plc] logic names any
 
 
 def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> Runtime:
@@ -76,6 +78,9 @@ class Backend(Protocol):
     def send(self, sender: int, target: int) -> None: ...
 
     def fieldbus_alarm(self, code: AlarmCode, message: str) -> None: ...
+
+    @property
+    def plc_status(self) -> PlcStatus | None: ...
 
 
 ImageVar = tuple[str, int, str]

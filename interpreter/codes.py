@@ -90,6 +90,7 @@ class AlarmCode(enum.IntEnum):
     WAIT_TIMEOUT = 143
     RUNAWAY = 144
     MASTER_LOST = 150  # a fieldbus master's heartbeat stopped (CANopen 0x1016)
+    PLC_FAULT = 160  # the PLC logic stopped on a runtime error (ST: file:line:col)
 
     @property
     def label(self) -> str:

@@ -10,7 +10,7 @@ import difflib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from ncgate.errors import NcgateError
+from ncgate.errors import NcgateError, render_diagnostic
 from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity
 from ncgate.interpreter.nc110.nodes import Span
 
@@ -32,13 +32,8 @@ class Diagnostic:
 
     def render(self) -> str:
         span = self.span
-        # Tabs are shown as one space each so that the caret stays under its column.
-        shown = self.source_line.replace("\t", " ")
-        caret = " " * (max(span.column, 1) - 1) + "^"
-        return (
-            f"{span.file}:{span.line}:{span.column}: {self.severity.value} {self.code.code}: "
-            f"{self.message}\n  {shown}\n  {caret}"
-        )
+        return render_diagnostic(span.file, span.line, span.column, self.severity.value,
+                                 self.code.code, self.message, self.source_line)
 
     def __str__(self) -> str:
         return self.render()

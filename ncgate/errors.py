@@ -27,3 +27,13 @@ from __future__ import annotations
 
 class NcgateError(Exception):
     """Root of ncgate's exceptions."""
+
+
+def render_diagnostic(file: str, line: int, column: int, severity: str, code: str,
+                      message: str, source_line: str) -> str:
+    """A diagnostic as every front end shows it (spec 1.6), like a compiler:
+    ``file:line:col: error CODE: message``, then the source line and a caret under the
+    column.  Tabs are shown as one space each, so that the caret stays under its column."""
+    shown = source_line.replace("\t", " ")
+    caret = " " * (max(column, 1) - 1) + "^"
+    return f"{file}:{line}:{column}: {severity} {code}: {message}\n  {shown}\n  {caret}"

@@ -4,7 +4,8 @@
   ``interpreter`` (they install as sub-packages of ``ncgate``);
 - interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config; its engine
   imports no dialect's front end;
-- plc: stdlib (+ ``ncgate.errors``); config: the same and ``ncgate.interpreter.settings``;
+- plc: stdlib + lark, for its Structured Text compiler, as the design card says (+
+  ``ncgate.errors``); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can; the CLI and the test
   kit are leaves that nothing else in the gateway imports.
@@ -62,7 +63,7 @@ def allowed(name: str, prefixes: set[str]) -> bool:
 
 RULES = {
     "interpreter": STDLIB | {"lark", "ncgate.interpreter", "ncgate.errors"},
-    "plc": STDLIB | {"ncgate.plc", "ncgate.errors"},
+    "plc": STDLIB | {"lark", "ncgate.plc", "ncgate.errors"},
     # The config names the engine's choices (the SND policy), defined once in its leaf module.
     "config": STDLIB | {"ncgate.config", "ncgate.errors", "ncgate.interpreter.settings"},
 }

@@ -4,7 +4,7 @@ CiA 301 communication area: 0x1000 device type, 0x1001 error register, 0x1017 pr
 heartbeat time, 0x1018 identity, the PDO communication (0x1400/0x1401, 0x1800/0x1801) and
 mapping (0x1600/0x1601, 0x1A00/0x1A01) entries.  Manufacturer area: the image (0x2000 SA
 bytes, 0x2100+j K bytes, 0x2200+j SYVARs), the command record (0x2400), the process status
-records (0x2500+k-1) and the last SND (0x2600).  Sizes follow the image.
+records (0x2500+k-1), the last SND (0x2600) and the PLC status (0x2700).  Sizes follow the image.
 
 The manufacturer objects hold no data of their own: the node reads and writes the live image
 and process status through callbacks (``ncgate.gateway.canopen.node``).
@@ -52,7 +52,7 @@ RPDO_COMMUNICATION, RPDO_MAPPING = 0x1400, 0x1600
 TPDO_COMMUNICATION, TPDO_MAPPING = 0x1800, 0x1A00
 
 SA_BYTES, K_BASE, SYVAR_BASE = 0x2000, 0x2100, 0x2200
-COMMAND, STATUS_BASE, LAST_SND = 0x2400, 0x2500, 0x2600
+COMMAND, STATUS_BASE, LAST_SND, PLC_STATUS = 0x2400, 0x2500, 0x2600, 0x2700
 
 _RANGE = {UNSIGNED8: (0, 0xFF), UNSIGNED16: (0, 0xFFFF), UNSIGNED32: (0, 0xFFFFFFFF),
           INTEGER16: (-0x8000, 0x7FFF)}
@@ -305,6 +305,14 @@ def build_dictionary(config: Config) -> ObjectDictionary:
         ("Sender", UNSIGNED8, "ro", None),
         ("Target", UNSIGNED8, "ro", None),
         ("Block N", UNSIGNED16, "ro", None),
+    ], pdo=True))
+    od.add_object(_record("PLC status", PLC_STATUS, [
+        ("State", UNSIGNED8, "ro", None),
+        ("Scans", UNSIGNED32, "ro", None),
+        ("Last scan us", UNSIGNED32, "ro", None),
+        ("Max scan us", UNSIGNED32, "ro", None),
+        ("Overruns", UNSIGNED32, "ro", None),
+        ("Fault line", UNSIGNED16, "ro", None),
     ], pdo=True))
     return od
 

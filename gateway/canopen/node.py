@@ -48,6 +48,7 @@ from ncgate.gateway.canopen.dictionary import (
     CONSUMER_ENTRIES,
     CONSUMER_HEARTBEAT,
     LAST_SND,
+    PLC_STATUS,
     RESTORE,
     STATUS_BASE,
     STORE,
@@ -59,6 +60,7 @@ from ncgate.gateway.canopen.dictionary import (
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
 from ncgate.gateway.canopen.sdo import ABORT_RANGE, NMT_OPERATIONAL, NMT_STOPPED, Device
+from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.wiring import Backend
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState
@@ -355,6 +357,14 @@ class CanopenNode:
                     s.snd_received & 0xFFFFFFFF][subindex - 1]
         if index == LAST_SND:
             return list(_last_snd(engine))[subindex - 1]
+        if index == PLC_STATUS:
+            regs = plc_registers(self.backend.plc_status)
+            if subindex == 1:
+                return regs[0]
+            if subindex == 6:
+                return regs[9]
+            hi, lo = regs[2 * subindex - 3], regs[2 * subindex - 2]
+            return hi << 16 | lo
         raise SdoAbortedError(0x06010001)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from ncgate.config import Config
 from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
 from ncgate.gateway.wiring import Backend
 from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 from ncgate.interpreter.engine.sync import SND_LOG
@@ -57,6 +58,7 @@ class Kind(enum.Enum):
     INFO = "gateway info"
     PROCESS_STATUS = "process status"
     SND_LOG = "SND log"
+    PLC_STATUS = "PLC status"
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +115,7 @@ class ModbusMap:
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
         self.STATUS_BASE = layout.status
         self.SND_LOG_BASE = layout.snd_log
+        self.PLC_BASE = layout.plc_status
         sa_bytes = plc.sa_bits // 8
         every = config.modbus.read_only
 
@@ -150,6 +153,9 @@ class ModbusMap:
                    f"the newest SND (u32, 0: none yet), then the last {SND_LOG} SNDs, newest "
                    f"first, {self.LOG_ENTRY} registers each: sequence (u32), sender, target, "
                    "block N, id (0 for an SND); unused entries read 0"),
+            Region(Table.INPUT, self.PLC_BASE, len(PLC_REGISTERS), Kind.PLC_STATUS, "r",
+                   "record", f"PLC status at {self.PLC_BASE}+0..{len(PLC_REGISTERS) - 1}: "
+                   + ", ".join(PLC_REGISTERS)),
         ]
         # (table, address, count) -> its segments: a bounded cache of the ranges clients read.
         self._pieces: dict[tuple[Table, int, int], list[tuple[Region, int, int]]] = {}
@@ -228,6 +234,8 @@ class ModbusMap:
             return self._info(backend.engine)[first:first + count]
         if kind is Kind.SND_LOG:
             return snd_log_registers(backend.engine)[first:first + count]
+        if kind is Kind.PLC_STATUS:
+            return plc_registers(backend.plc_status)[first:first + count]
         return self._status_registers(backend.engine, address, count)
 
     def _info(self, engine: Engine) -> list[int]:

@@ -164,9 +164,11 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                                 int(status.wait_kind), status.wait_target, status.alarm_code,
                                 status.snd_sent, status.snd_received][sub - 1]
                     assert int.from_bytes(data, "little") == expected
+                if index == 0x2700:  # the PLC status: this config runs no logic (all 0)
+                    assert int.from_bytes(data, "little") == 0
             else:  # write-only: the command record
                 with pytest.raises(SdoAbortedError) as caught:
                     await master.upload(index, sub)
                 assert caught.value.code == 0x06010001
             checked += 1
-    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4
+    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4 + 6

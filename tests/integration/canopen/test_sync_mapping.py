@@ -276,7 +276,7 @@ def test_eds_tells_what_can_be_mapped(tmp_path: Path, ncgate_config: Config) -> 
         members = [obj] if isinstance(obj, canopen.objectdictionary.ODVariable) else [
             obj[s] for s in obj.subindices if s]
         for m in members:
-            image_or_status = 0x2000 <= index < 0x2400 or 0x2500 <= index <= 0x2600
+            image_or_status = 0x2000 <= index < 0x2400 or 0x2500 <= index <= 0x2700
             assert m.pdo_mappable == image_or_status, (hex(index), m.subindex)
     for key in ("FileName", "FileVersion", "FileRevision", "EDSVersion", "Description",
                 "CreationTime", "CreationDate", "CreatedBy", "ModificationTime",

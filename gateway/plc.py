@@ -1,0 +1,196 @@
+"""The PLC logic in the gateway: loading ``[plc] logic``, the NC port the scan acts through,
+and the scan on the engine's clock.
+
+The scan is an engine timer every ``plc.scan_ms`` of machine time: on the virtual clock in
+``sim`` (deterministic: the same scans at the same instants every run) and on the wall clock
+in ``run`` (the wall-clock driver fires engine timers on the asyncio loop).  Scan k is due at
+``t0 + k * period``, whatever the scans before it cost, so the scan never drifts; when the
+loop comes late past a whole period the missed scans are skipped and counted as overruns.
+
+``nc.stall_s`` with PLC logic (spec 2.3): the scan is not pending work.  In ``sim`` the scan
+stops rescheduling itself once every process with a program has waited ``stall_s`` with no
+change (no state change, no image write) and no other timer is pending, and the run ends as
+a stall; in ``run`` the wall-clock driver reports the stall on the same rule.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+
+from ncgate.config import Config, ConfigError
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.engine import Engine, ProcessState
+from ncgate.interpreter.engine.states import WAITING_STATES
+from ncgate.interpreter.engine.timers import Timer
+from ncgate.plc.image import IOImage
+from ncgate.plc.retain import RetainStore, default_path
+from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
+from ncgate.plc.st.compiler import Context, Logic, compile_logic
+from ncgate.plc.st.parser import parse_file
+
+log = logging.getLogger("ncgate.plc")
+
+# The PLC status block of the fieldbus maps (Modbus input registers, CANopen 0x2700).
+PLC_REGISTERS = ("state (0 stopped, 1 running, 2 fault)", "scans (hi)", "scans (lo)",
+                 "last scan µs (hi)", "last scan µs (lo)", "max scan µs (hi)",
+                 "max scan µs (lo)", "overruns (hi)", "overruns (lo)",
+                 "fault source line (0: none)")
+
+
+def logic_context(config: Config) -> Context:
+    plc, nc = config.plc, config.nc
+    return Context(plc.sa_bits, plc.k_bytes, plc.syvars, nc.processes, nc.external)
+
+
+def load_logic(files: tuple[Path, ...], config: Config) -> Logic:
+    """Parse and check every file; raises LogicError with all the diagnostics."""
+    return compile_logic([parse_file(path) for path in files], logic_context(config))
+
+
+def program_order(logic: Logic, config: Config) -> list[str]:
+    """``plc.programs`` checked against the logic (ConfigError naming the key), or every
+    PROGRAM in file order."""
+    if not config.plc.programs:
+        if not logic.programs:
+            where = config.source or "<config>"
+            raise ConfigError(f"{where}: plc.logic: the files hold no PROGRAM to run")
+        return list(logic.programs)
+    order = []
+    for i, name in enumerate(config.plc.programs):
+        if name.upper() not in logic.programs:
+            known = ", ".join(logic.display.values()) or "none"
+            raise ConfigError(f"{config.source or '<config>'}: plc.programs[{i}]: no PROGRAM "
+                              f"{name} in plc.logic (PROGRAMs: {known})")
+        order.append(name)
+    return order
+
+
+class EngineNc:
+    """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`)."""
+
+    def __init__(self, engine: Engine, on_command: Callable[[int], None] | None = None) -> None:
+        self.engine = engine
+        self.on_command = on_command
+
+    def snapshot(self) -> list[NcSnapshot]:
+        out = []
+        for p in self.engine.processes.values():
+            state = p.state
+            n = p.where[2]
+            out.append((int(state), n or 0, p.where[1], state in WAITING_STATES,
+                        p.alarm is not None, p.alarm[0] if p.alarm else 0,
+                        state is ProcessState.IDLE, p.held))
+        return out
+
+    def events(self) -> int:
+        return self.engine.trace.counter
+
+    def last_snd(self) -> tuple[int, int, int]:
+        last = self.engine.last_snd
+        return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
+
+    def command(self, word: int) -> None:
+        engine = self.engine
+        if word == 1:
+            engine.cycle_start()
+        elif word == 2:
+            engine.hold(True)
+        else:
+            engine.reset()
+        if self.on_command is not None:
+            self.on_command(word)
+
+    def send(self, sender: int, target: int) -> None:
+        self.engine.external_snd(sender, target)
+
+    def fault(self, message: str) -> None:
+        self.engine.fieldbus_alarm(AlarmCode.PLC_FAULT, f"PLC fault: {message}")
+
+    def hazard(self, message: str) -> None:
+        self.engine.note_hazard(0, message)
+
+
+class ScanDriver:
+    """Runs the scan every ``scan_ms`` as an engine timer."""
+
+    def __init__(self, engine: Engine, runtime: PlcRuntime, scan_ms: int, *,
+                 wall: Callable[[], float] | None = None, closed: bool = False,
+                 stall_s: float = 60.0) -> None:
+        self.engine = engine
+        self.runtime = runtime
+        self.period = scan_ms / 1000.0
+        self.wall = wall
+        self.closed = closed
+        self.stall_s = stall_s
+        self.t0 = engine.now
+        self.k = 0
+        self._timer: Timer | None = engine.call_at(self.t0, self._scan)
+
+    def _scan(self) -> None:
+        engine, period = self.engine, self.period
+        due = self.t0 + self.k * period
+        self.runtime.scan(round(due * 1000))
+        self.k += 1
+        if self.wall is not None:
+            late = self.wall() - (self.t0 + self.k * period)
+            if late >= period:  # the loop came a whole period late or more: skip, count
+                missed = int(late // period)
+                self.runtime.status.overruns += missed
+                self.k += missed
+        if self.closed and engine.stalled and engine.next_timer() is None and (
+                engine.now - engine.last_change >= self.stall_s):
+            self._timer = None  # nothing but the scan is left: let the run end as a stall
+            return
+        self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
+
+    def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self.runtime.stop()
+
+
+def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
+              wall: Callable[[], float] | None = None, cold: bool = False,
+              on_command: Callable[[int], None] | None = None
+              ) -> tuple[PlcRuntime, ScanDriver] | None:
+    """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
+
+    RETAIN values are kept in ``plc.retain_file`` in ``run`` only: a simulation (``closed``)
+    starts from the initial values every time, so that it stays deterministic."""
+    plc = config.plc
+    if not plc.logic:
+        return None
+    logic = load_logic(plc.logic, config)
+    order = program_order(logic, config)
+    store = None
+    if not closed and any(v.retain for table in logic.programs.values()
+                          for v in table.values()):
+        store = RetainStore(plc.retain_file or default_path(config.source))
+        if cold:
+            store.clear()
+    runtime = PlcRuntime(logic, image, EngineNc(engine, on_command), order, plc.loop_limit,
+                         store)
+    driver = ScanDriver(engine, runtime, plc.scan_ms, wall=wall, closed=closed,
+                        stall_s=config.nc.stall_s)
+    log.info("PLC logic: %s, scan %d ms, programs %s", ", ".join(p.name for p in plc.logic),
+             plc.scan_ms, ", ".join(order))
+    return runtime, driver
+
+
+def plc_registers(status: PlcStatus | None) -> list[int]:
+    """The PLC status block; all 0 (state 0, stopped) when the PLC runs no logic."""
+    if status is None:
+        return [0] * len(PLC_REGISTERS)
+    regs = [int(status.state)]
+    for value in (status.scans, status.last_scan_us, status.max_scan_us, status.overruns):
+        value &= 0xFFFFFFFF
+        regs += [value >> 16, value & 0xFFFF]
+    fault = status.fault
+    regs.append(fault.span.line & 0xFFFF if fault is not None and fault.span else 0)
+    return regs
+
+
+__all__ = ["EngineNc", "PlcState", "ScanDriver", "load_logic", "start_plc"]

@@ -1,0 +1,301 @@
+"""The PLC scan: compiled Structured Text run cyclically against the I/O image.
+
+One scan (IEC 61131-3's cyclic task):
+1. inputs: a consistent copy of the image (SA, K, SYVARs) and of the NC's status;
+2. the programs, in the configured order, on that copy;
+3. outputs: what the programs changed in the copy is written to the image as **one atomic
+   write by writer ``plc``** (spec 3.1) -- waits it satisfies see ``plc`` as their writer;
+   then the NC commands whose output rose (NC.START, NC.HOLD, NC.RESET) and the queued
+   NC.SEND calls.
+Fieldbus writes between two scans apply to the image at once and are read by the next scan.
+
+A runtime error (division by zero, an index out of range, the iteration guard) puts the PLC
+in FAULT: the scan's outputs are dropped, the image keeps what the last good scan wrote,
+no further scan runs, and the NC is told (an alarm with the statement's file:line:col).
+:meth:`PlcRuntime.restart` (the NC's reset) starts it again with its initial values and
+the RETAIN ones.
+
+When a scan runs is the caller's business (``ncgate.gateway.plc`` puts it on the engine's
+clock).  Stdlib only; the NC is reached through :class:`NcPort`.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from ncgate.plc.image import IOImage
+from ncgate.plc.retain import RetainStore
+from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar
+from ncgate.plc.st.types import ArrayOf, FbOf
+
+log = logging.getLogger("ncgate.plc")
+
+NcSnapshot = tuple[int, int, int, bool, bool, int, bool, bool]  # see compiler.NC_PROCESS
+
+
+class PlcState(enum.IntEnum):
+    STOPPED = 0
+    RUNNING = 1
+    FAULT = 2
+
+
+class NcPort(Protocol):
+    """What the scan reads of the NC and how it acts on it (the gateway wires the engine)."""
+
+    def snapshot(self) -> list[NcSnapshot]: ...
+
+    def events(self) -> int: ...
+
+    def last_snd(self) -> tuple[int, int, int]: ...  # sender, target, sequence
+
+    def command(self, word: int) -> None: ...  # 1 cycle start, 2 feed hold, 3 reset
+
+    def send(self, sender: int, target: int) -> None: ...  # ValueError when it cannot go
+
+    def fault(self, message: str) -> None: ...
+
+    def hazard(self, message: str) -> None: ...
+
+
+@dataclass
+class PlcStatus:
+    state: PlcState = PlcState.STOPPED
+    scans: int = 0
+    last_scan_us: int = 0
+    max_scan_us: int = 0
+    overruns: int = 0
+    fault: PlcFault | None = None
+
+
+class PlcRuntime:
+    """Compiled logic + its program instances + the scan."""
+
+    def __init__(self, logic: Logic, image: IOImage, nc: NcPort, order: Sequence[str],
+                 loop_limit: int = 100_000, retain: RetainStore | None = None) -> None:
+        self.logic = logic
+        self.image = image
+        self.nc = nc
+        self.order = [name.upper() for name in order]
+        self.loop_limit = loop_limit
+        self.retain = retain
+        self.status = PlcStatus()
+        ns = logic.namespace
+        self._ns = ns
+        self._sa = ns["_SA"] = bytearray(image.sa)
+        self._k = ns["_SK"] = bytearray(image.k)
+        self._sy = ns["_SY"] = list(image.syvar)
+        self._sends: list[tuple[int, int]] = []
+        ns["_NC_SEND"] = lambda sender, target: self._sends.append((sender, target))
+        self._outputs: list[bool] = ns["_NCO"]
+        self._last_outputs = [False, False, False]
+        self._retained = [(p, v) for p, table in logic.programs.items()
+                          for v in table.values() if v.retain]
+        self._saved: dict[str, tuple[str, Any]] | None = None
+        self.programs: dict[str, Any] = {}
+        self._runs: list[Any] = []
+        self.start()
+
+    # -- life cycle ------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """(Re)create the program instances: initial values, then the RETAIN ones."""
+        self.programs = {key: self.logic.new_program(key) for key in self.logic.programs}
+        self._runs = [self.programs[key] for key in self.order]
+        self._outputs[:] = [False, False, False]
+        self._last_outputs = [False, False, False]
+        self._sends.clear()
+        if self.retain is not None:
+            self._apply_retained(self.retain.load())
+        self.status.state = PlcState.RUNNING
+        self.status.fault = None
+
+    def restart(self) -> None:
+        """The NC's reset: a PLC in FAULT starts again (a running one is left alone)."""
+        if self.status.state is PlcState.FAULT:
+            log.info("PLC restarted after its fault")
+            self.start()
+
+    def stop(self) -> None:
+        self.status.state = PlcState.STOPPED
+
+    # -- the scan ----------------------------------------------------------------------------------
+
+    def scan(self, now_ms: int) -> None:
+        status = self.status
+        if status.state is not PlcState.RUNNING:
+            return
+        started = time.perf_counter_ns()
+        image, ns = self.image, self._ns
+        before_sa, before_k, before_sy = bytes(image.sa), bytes(image.k), list(image.syvar)
+        self._sa[:] = before_sa
+        self._k[:] = before_k
+        self._sy[:] = before_sy
+        nc = self.nc
+        ns["_NCS"] = nc.snapshot()
+        ns["_NCE"] = nc.events() & 0xFFFFFFFF
+        ns["_NCL"] = nc.last_snd()
+        ns["_NOW"] = now_ms
+        ns["_LEFT"] = self.loop_limit
+        self._sends.clear()
+        try:
+            for program in self._runs:
+                program()
+        except (ArithmeticError, IndexError, ValueError, IterationGuard, RecursionError) as exc:
+            self._fault(exc)
+            return
+        changes = self._changes(before_sa, before_k, before_sy)
+        if changes:
+            image.write(changes, "plc")
+        self._act()
+        if self._retained:
+            self._save_retained()
+        elapsed = (time.perf_counter_ns() - started) // 1000
+        status.scans += 1
+        status.last_scan_us = elapsed
+        if elapsed > status.max_scan_us:
+            status.max_scan_us = elapsed
+
+    def _changes(self, sa: bytes, k: bytes, sy: list[int]) -> list[tuple[str, int, str, int]]:
+        out: list[tuple[str, int, str, int]] = []
+        new_sa, new_k, new_sy = self._sa, self._k, self._sy
+        if new_sa != sa:
+            for byte, (old, new) in enumerate(zip(sa, new_sa, strict=True)):
+                flipped = old ^ new
+                while flipped:
+                    bit = (flipped & -flipped).bit_length() - 1
+                    flipped &= flipped - 1
+                    out.append(("SA", byte * 8 + bit, "bit", new >> bit & 1))
+        if new_k != k:
+            out += [("SK", i, "BY", new) for i, (old, new) in enumerate(zip(k, new_k,
+                                                                           strict=True))
+                    if old != new]
+        if new_sy != sy:
+            out += [("SYVAR", i, "IN", new) for i, (old, new) in enumerate(zip(sy, new_sy,
+                                                                              strict=True))
+                    if old != new]
+        return out
+
+    def _act(self) -> None:
+        outputs, last = self._outputs, self._last_outputs
+        if outputs != last:
+            for i, word in enumerate((1, 2, 3)):
+                if outputs[i] and not last[i]:  # NC.START/HOLD/RESET act on a rising edge
+                    self.nc.command(word)
+            self._last_outputs = [bool(o) for o in outputs]
+        for sender, target in self._sends:
+            try:
+                self.nc.send(sender, target)
+            except ValueError as exc:
+                self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
+        self._sends.clear()
+
+    def _fault(self, exc: BaseException) -> None:
+        span, line = self.logic.locate(exc.__traceback__)
+        message = str(exc)
+        if isinstance(exc, IterationGuard):
+            message = (f"more than {self.loop_limit} loop iterations in one scan "
+                       "(plc.loop_limit)")
+        elif isinstance(exc, RecursionError):
+            message = "calls nested too deep"
+        elif isinstance(exc, ZeroDivisionError):
+            message = "division by zero"
+        fault = PlcFault(message, span, line)
+        self.status.state = PlcState.FAULT
+        self.status.fault = fault
+        log.error("PLC fault: %s", fault)
+        self.nc.fault(str(fault))
+
+    # -- RETAIN ------------------------------------------------------------------------------------
+
+    def retained_values(self) -> dict[str, tuple[str, Any]]:
+        out = {}
+        for program, var in self._retained:
+            value = getattr(self.programs[program], f"v_{var.key}")
+            out[f"{program}.{var.key}"] = (str(var.type), list(value)
+                                           if isinstance(value, list) else value)
+        return out
+
+    def _save_retained(self) -> None:
+        values = self.retained_values()
+        if values != self._saved and self.retain is not None:
+            self.retain.save(values)
+            self._saved = values
+
+    def _apply_retained(self, stored: dict[str, tuple[str, Any]]) -> None:
+        for program, var in self._retained:
+            name = f"{program}.{var.key}"
+            found = stored.get(name)
+            if found is None:
+                continue
+            type_name, value = found
+            if type_name != str(var.type) or not _fits(value, var.type):
+                log.warning("RETAIN %s: the stored %s no longer fits %s; initial value "
+                            "used", name, type_name, var.type)
+                continue
+            setattr(self.programs[program], f"v_{var.key}", value)
+        self._saved = self.retained_values()
+
+    # -- watching ---------------------------------------------------------------------------
+
+    def read(self, path: str) -> Any:
+        """A variable's value by its path: ``"main.t1.ET"``, ``"main.counts[3]"``
+        (case-insensitive).  KeyError with the names there are when a part is unknown."""
+        program, _, rest = path.partition(".")
+        key = program.upper()
+        if key not in self.programs:
+            raise KeyError(f"no program {program!r} (programs: "
+                           f"{', '.join(self.logic.display[k] for k in self.programs)})")
+        if not rest:
+            raise KeyError(f"{path!r}: name a variable of {program}")
+        obj: Any = self.programs[key]
+        table: dict[str, ProgramVar] | None = self.logic.programs[key]
+        t: Any = None
+        for part in _split(rest):
+            if isinstance(part, int):
+                if not isinstance(t, ArrayOf) or not t.lo <= part <= t.hi:
+                    raise KeyError(f"{path!r}: [{part}] is not an index of {t}")
+                obj, t = obj[part - t.lo], t.element
+                table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None
+                continue
+            name = part.upper()
+            if isinstance(t, FbOf) and t.std:
+                if not hasattr(obj, name) or name.startswith("_"):
+                    raise KeyError(f"{path!r}: {t.name} has no {part}")
+                obj, t = getattr(obj, name), None
+                continue
+            if table is None or name not in table:
+                known = ", ".join(v.display for v in (table or {}).values())
+                raise KeyError(f"{path!r}: no {part} here ({known})")
+            var = table[name]
+            obj, t = getattr(obj, f"v_{name}"), var.type
+            table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None
+        return list(obj) if isinstance(obj, list) else obj
+
+
+def _split(rest: str) -> list[str | int]:
+    parts: list[str | int] = []
+    for piece in rest.split("."):
+        name, _, tail = piece.partition("[")
+        if name:
+            parts.append(name)
+        while tail:
+            index, _, tail = tail.partition("]")
+            parts.append(int(index))
+            tail = tail.removeprefix("[")
+    return parts
+
+
+def _fits(value: Any, t: Any) -> bool:
+    if isinstance(t, ArrayOf):
+        return isinstance(value, list) and len(value) == t.length and all(
+            _fits(v, t.element) for v in value)
+    if t == "BOOL":
+        return isinstance(value, bool)
+    if t in ("REAL", "LREAL"):
+        return isinstance(value, float | int) and not isinstance(value, bool)
+    return isinstance(value, int) and not isinstance(value, bool)

@@ -1,0 +1,1327 @@
+"""Structured Text -> checked, compiled Python: the soft PLC's logic.
+
+Every POU of every file is checked first (names, types, constant indices, writes to inputs;
+all diagnostics of a load are reported together), then compiled to Python source, once, with
+``compile()``: a PROGRAM or FUNCTION_BLOCK becomes a class whose ``__call__`` runs its body, a
+FUNCTION a Python function.  A scan then costs what the statements cost -- no tree is walked
+(``bench/plc.py`` measures it against :mod:`ncgate.plc.st.walk`).
+
+Semantics where IEC 61131-3 leaves a choice (docs/plc.md):
+- integer intermediate results are exact, and a value wraps to its type when it is stored
+  (in a variable, an input, the image), as CODESYS and TwinCAT compute in a wider register;
+- integer ``/`` truncates toward zero, ``MOD`` takes the dividend's sign (as C);
+- a division by zero, an index outside its array or the image, and a loop that runs past
+  the per-scan iteration guard raise :class:`PlcFault` at the statement's file:line:col.
+
+Generated names: ``self.v_X`` (a variable X of a program or FB), ``v_X`` (of a function),
+``_SA``/``_SK``/``_SY`` (the scan's copy of the image), ``_NC*`` (the NC's status and
+outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan).
+"""
+
+from __future__ import annotations
+
+import math
+import types as pytypes
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from ncgate.plc.image import PlcError
+from ncgate.plc.st import nodes as n
+from ncgate.plc.st import stdlib
+from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic, did_you_mean
+from ncgate.plc.st.types import (
+    ANY_INT,
+    ANY_REAL,
+    BITS,
+    ELEMENTARY,
+    INTS,
+    REALS,
+    SIGNED,
+    UNSIGNED,
+    ArrayOf,
+    FbOf,
+    Type,
+    common,
+    default_value,
+    is_int,
+    is_num,
+    is_real,
+    limits,
+    widens,
+)
+
+IMAGE_NAMES = ("SA", "SAB", "SK", "SYVAR")
+RESERVED = (*IMAGE_NAMES, "NC")
+# The standard function blocks: member -> (direction, type).
+STD_FBS: dict[str, dict[str, tuple[str, str]]] = {
+    **{t: {"IN": ("in", "BOOL"), "PT": ("in", "TIME"), "Q": ("out", "BOOL"),
+           "ET": ("out", "TIME")} for t in ("TON", "TOF", "TP")},
+    **{t: {"CLK": ("in", "BOOL"), "Q": ("out", "BOOL")} for t in ("R_TRIG", "F_TRIG")},
+    "CTU": {"CU": ("in", "BOOL"), "R": ("in", "BOOL"), "PV": ("in", "INT"),
+            "Q": ("out", "BOOL"), "CV": ("out", "INT")},
+    "CTD": {"CD": ("in", "BOOL"), "LD": ("in", "BOOL"), "PV": ("in", "INT"),
+            "Q": ("out", "BOOL"), "CV": ("out", "INT")},
+    "CTUD": {"CU": ("in", "BOOL"), "CD": ("in", "BOOL"), "R": ("in", "BOOL"),
+             "LD": ("in", "BOOL"), "PV": ("in", "INT"), "QU": ("out", "BOOL"),
+             "QD": ("out", "BOOL"), "CV": ("out", "INT")},
+    "SR": {"S1": ("in", "BOOL"), "R": ("in", "BOOL"), "Q1": ("out", "BOOL")},
+    "RS": {"S": ("in", "BOOL"), "R1": ("in", "BOOL"), "Q1": ("out", "BOOL")},
+}
+STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
+                 "SQRT", "EXPT", "TRUNC")
+# NC.P[k] members: (index in the snapshot tuple, type).
+NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
+              "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
+              "IDLE": (6, "BOOL"), "HELD": (7, "BOOL")}
+NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
+NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2}
+
+
+class PlcFault(PlcError, RuntimeError):
+    """A runtime error of the logic: the PLC goes to FAULT.  ``span`` is the statement."""
+
+    def __init__(self, message: str, span: n.Span | None, source_line: str = "") -> None:
+        where = f"{span}: " if span is not None else ""
+        super().__init__(f"{where}{message}")
+        self.message = message
+        self.span = span
+        self.source_line = source_line
+
+
+class IterationGuard(RuntimeError):
+    """Raised inside the generated code when a scan's loop iterations run out."""
+
+
+@dataclass(frozen=True, slots=True)
+class Context:
+    """What the logic is checked against: the image's sizes and the NC's processes."""
+
+    sa_bits: int = 1024
+    k_bytes: int = 512
+    syvars: int = 256
+    processes: int = 5
+    external: frozenset[int] = frozenset()
+
+
+# ---- helpers the generated code calls -------------------------------------------------------
+
+def _ix(i: int, lo: int, length: int) -> int:
+    j = i - lo
+    if 0 <= j < length:
+        return j
+    raise IndexError(f"index {i} outside {lo}..{lo + length - 1}")
+
+
+def _mod(a: int, b: int) -> int:
+    if b == 0:
+        raise ZeroDivisionError("MOD by zero")
+    return a - b * int(a / b) if abs(a) < 1 << 52 else int(math.fmod(a, b))
+
+
+def _idiv(a: int, b: int) -> int:
+    if b == 0:
+        raise ZeroDivisionError("division by zero")
+    q = abs(a) // abs(b)
+    return q if (a < 0) == (b < 0) else -q
+
+
+def _fdiv(a: float, b: float) -> float:
+    if b == 0:
+        raise ZeroDivisionError("division by zero")
+    return a / b
+
+
+def _pow(a: float, b: float) -> float:
+    try:
+        result = float(a) ** b
+    except ZeroDivisionError:
+        raise ZeroDivisionError("0 ** a negative power") from None
+    if isinstance(result, complex):
+        raise ValueError(f"{a} ** {b} has no real value")
+    return float(result)
+
+
+def _sqrt(a: float) -> float:
+    if a < 0:
+        raise ValueError(f"SQRT of {a}")
+    return math.sqrt(a)
+
+
+def _r2i(value: float, bits: int, signed: bool) -> int:
+    """REAL -> integer: rounded half to even (IEC), then wrapped."""
+    if math.isnan(value) or math.isinf(value):
+        raise ValueError(f"{value} has no integer value")
+    v = round(value) & ((1 << bits) - 1)
+    return v - (1 << bits) if signed and v >> (bits - 1) else v
+
+
+def _trunc(value: float) -> int:
+    if math.isnan(value) or math.isinf(value):
+        raise ValueError(f"{value} has no integer value")
+    v = int(value) & 0xFFFFFFFF
+    return v - (1 << 32) if v >> 31 else v
+
+
+def _mux(k: int, values: tuple[Any, ...]) -> Any:
+    if 0 <= k < len(values):
+        return values[k]
+    raise IndexError(f"MUX selector {k} outside 0..{len(values) - 1}")
+
+
+def _guard() -> None:
+    raise IterationGuard("the loop iteration guard ran out")
+
+
+HELPERS: dict[str, Any] = {
+    "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
+    "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard,
+    "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
+    **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
+}
+_BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD"}
+
+
+# ---- expressions and places ---------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class E:
+    """A compiled expression: its Python code, type, constant value (or None), and whether
+    its value is already inside its type (False after integer arithmetic: wrap on store)."""
+
+    code: str
+    type: Type
+    const: Any = None
+    exact: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class Place:
+    """Something that can be read and perhaps written."""
+
+    read: str
+    type: Type
+    store: Callable[[str], str] | None  # value code -> statement; None: read-only
+    why_read_only: str = ""
+
+
+def wrap_code(code: str, t: Type) -> str:
+    if t == "TIME":
+        t = "DINT"
+    if t in SIGNED:
+        half = 1 << (stdlib.INTEGER_TYPES[str(t)][0] - 1)
+        return f"((({code}) + {half}) & {2 * half - 1}) - {half}"
+    if t in UNSIGNED or t in BITS:
+        return f"(({code}) & {(1 << stdlib.INTEGER_TYPES[str(t)][0]) - 1})"
+    return code
+
+
+def const_code(value: Any, t: Type) -> str:
+    if t in REALS or t == ANY_REAL:
+        return repr(float(value))
+    if t == "BOOL":
+        return "True" if value else "False"
+    return repr(int(value))
+
+
+def wrap_value(value: int, t: Type) -> int:
+    return stdlib.wrap(value, "DINT" if t == "TIME" else str(t))
+
+
+# ---- signatures ------------------------------------------------------------------------------
+
+@dataclass
+class VarInfo:
+    display: str
+    type: Type
+    section: str
+    qualifier: str | None
+    span: n.Span
+    initial: Any = None
+
+
+@dataclass
+class PouInfo:
+    pou: n.Pou
+    file: n.SourceFile
+    vars: dict[str, VarInfo] = field(default_factory=dict)
+    result: Type | None = None
+
+    @property
+    def inputs(self) -> list[tuple[str, VarInfo]]:
+        return [(k, v) for k, v in self.vars.items() if v.section == "VAR_INPUT"]
+
+
+class Problems(Exception):
+    """Stops checking one statement; the diagnostic is already recorded."""
+
+
+# ---- the compiler ------------------------------------------------------------------------------
+
+class _Emitter:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.spans: list[n.Span | None] = []
+        self.indent = 0
+
+    def emit(self, text: str, span: n.Span | None) -> None:
+        self.lines.append("    " * self.indent + text)
+        self.spans.append(span)
+
+
+class Compiler:
+    def __init__(self, files: Sequence[n.SourceFile], context: Context) -> None:
+        self.files = list(files)
+        self.ctx = context
+        self.diagnostics: list[StDiagnostic] = []
+        self.pous: dict[str, PouInfo] = {}
+        self.out = _Emitter()
+        self._temp = 0
+
+    # -- reporting --------------------------------------------------------------------------
+
+    def _source(self, span: n.Span) -> str:
+        for f in self.files:
+            if f.path == span.file:
+                return f.line(span.line)
+        return ""
+
+    def error(self, code: StCode, message: str, span: n.Span) -> Problems:
+        self.diagnostics.append(StDiagnostic(code, message, span, self._source(span)))
+        return Problems()
+
+    # -- pass 1: POUs and their declarations ---------------------------------------------------
+
+    def collect(self) -> None:
+        for f in self.files:
+            for pou in f.pous:
+                if pou.key in self.pous:
+                    other = self.pous[pou.key].pou.span
+                    self.error(StCode.DUPLICATE_POU, f"{pou.name} is already defined at "
+                               f"{other}", pou.span)
+                    continue
+                if pou.key in STD_FBS or pou.key in STD_FUNCTIONS or _conversion(pou.key):
+                    self.error(StCode.DUPLICATE_POU, f"{pou.name} is a standard "
+                               "function or function block", pou.span)
+                    continue
+                self.pous[pou.key] = PouInfo(pou, f)
+        for info in self.pous.values():
+            self._declare(info)
+        self._check_recursion()
+
+    def resolve_type(self, ref: n.TypeRef, in_function: bool) -> Type:
+        if isinstance(ref, n.ArrayType):
+            if ref.hi < ref.lo:
+                raise self.error(StCode.UNSUPPORTED, f"ARRAY[{ref.lo}..{ref.hi}] is empty",
+                                 ref.span)
+            if ref.hi - ref.lo >= 65536:
+                raise self.error(StCode.UNSUPPORTED, "an array of more than 65536 elements",
+                                 ref.span)
+            return ArrayOf(ref.lo, ref.hi, self.resolve_type(ref.element, in_function))
+        key = ref.name.upper()
+        if key in ELEMENTARY:
+            return key
+        if key in STD_FBS or (key in self.pous and self.pous[key].pou.kind == "FUNCTION_BLOCK"):
+            if in_function:
+                raise self.error(StCode.UNSUPPORTED, "a FUNCTION keeps no state: declare "
+                                 f"the {ref.name} instance in a FUNCTION_BLOCK or PROGRAM",
+                                 ref.span)
+            return FbOf(key, key in STD_FBS)
+        hint = (" (64-bit and string types are outside ncgate's subset)"
+                if key in ("LINT", "ULINT", "LWORD", "STRING", "WSTRING", "LTIME") else
+                did_you_mean(key, [*ELEMENTARY, *STD_FBS, *(
+                    k for k, p in self.pous.items() if p.pou.kind == "FUNCTION_BLOCK")]))
+        raise self.error(StCode.UNKNOWN_TYPE, f"unknown type {ref.name}{hint}", ref.span)
+
+    def _declare(self, info: PouInfo) -> None:
+        pou = info.pou
+        in_function = pou.kind == "FUNCTION"
+        if pou.result is not None:
+            try:
+                result = self.resolve_type(pou.result, True)
+                if not isinstance(result, str):
+                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION returns an elementary "
+                                     "type", pou.result.span)
+                info.result = result
+                info.vars[pou.key] = VarInfo(pou.name, result, "RESULT", None, pou.span,
+                                             default_value(result))
+            except Problems:
+                pass
+        for decl in pou.decls:
+            key = decl.name.upper()
+            try:
+                if key in RESERVED:
+                    raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is reserved "
+                                     "(the image and the NC)", decl.span)
+                if key in info.vars:
+                    raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is declared twice "
+                                     f"(first at {info.vars[key].span})", decl.span)
+                t = self.resolve_type(decl.type, in_function)
+                if decl.qualifier == "RETAIN" and pou.kind != "PROGRAM":
+                    raise self.error(StCode.UNSUPPORTED, "RETAIN variables belong in a "
+                                     "PROGRAM", decl.span)
+                if decl.qualifier == "RETAIN" and _holds_fb(t):
+                    raise self.error(StCode.UNSUPPORTED, "a function block instance cannot be "
+                                     "RETAIN; retain the values it needs", decl.span)
+                if in_function and decl.section == "VAR_OUTPUT":
+                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION gives one result: no "
+                                     "VAR_OUTPUT", decl.span)
+                initial = self._initial(decl, t)
+                info.vars[key] = VarInfo(decl.name, t, decl.section, decl.qualifier,
+                                         decl.span, initial)
+            except Problems:
+                continue
+
+    def _initial(self, decl: n.VarDecl, t: Type) -> Any:
+        if decl.initial is None:
+            if decl.qualifier == "CONSTANT":
+                raise self.error(StCode.NOT_CONSTANT, f"the CONSTANT {decl.name} needs a "
+                                 "value", decl.span)
+            return None if isinstance(t, FbOf) or _holds_fb(t) else default_value(t)
+        if isinstance(t, FbOf) or _holds_fb(t):
+            raise self.error(StCode.UNSUPPORTED, "a function block instance takes no initial "
+                             "value", decl.span)
+        if isinstance(decl.initial, n.ArrayInit):
+            if not isinstance(t, ArrayOf):
+                raise self.error(StCode.TYPE_MISMATCH, f"{decl.name} is {t}, not an array",
+                                 decl.initial.span)
+            values = []
+            for count, expr in decl.initial.items:
+                values += [self._const(expr, t.element)] * count
+            if len(values) > t.length:
+                raise self.error(StCode.INDEX_RANGE, f"{len(values)} initial values for "
+                                 f"{t.length} elements", decl.initial.span)
+            return values + [default_value(t.element)] * (t.length - len(values))
+        if isinstance(t, ArrayOf):
+            return [self._const(decl.initial, t.element)] * t.length
+        return self._const(decl.initial, t)
+
+    def _const(self, expr: n.Expr, t: Type) -> Any:
+        e = self.expr(expr, Scope(self, None, ""))
+        if e.const is None:
+            raise self.error(StCode.NOT_CONSTANT, "an initial value is a constant",
+                             _span_of(expr))
+        self.coerce(e, t, _span_of(expr))
+        if t in REALS:
+            return float(e.const)
+        if t == "BOOL":
+            return bool(e.const)
+        return wrap_value(e.const, t) if isinstance(t, str) and t != "BOOL" else e.const
+
+    def _check_recursion(self) -> None:
+        uses: dict[str, set[str]] = {}
+        for key, info in self.pous.items():
+            found: set[str] = set()
+            for v in info.vars.values():
+                t = v.type
+                while isinstance(t, ArrayOf):
+                    t = t.element
+                if isinstance(t, FbOf) and not t.std:
+                    found.add(t.name)
+            for call in _calls(info.pou.body):
+                if call in self.pous:
+                    found.add(call)
+            uses[key] = found
+        for start in uses:
+            stack, seen = [start], set()
+            while stack:
+                for nxt in uses.get(stack.pop(), ()):
+                    if nxt == start:
+                        pou = self.pous[start].pou
+                        self.error(StCode.RECURSION, f"{pou.name} calls or contains itself "
+                                   "(IEC 61131-3 allows no recursion)", pou.span)
+                        stack = []
+                        break
+                    if nxt not in seen:
+                        seen.add(nxt)
+                        stack.append(nxt)
+
+    # -- pass 2: code -------------------------------------------------------------------------
+
+    def compile(self) -> tuple[str, list[n.Span | None]]:
+        self.collect()
+        out = self.out
+        for key, info in self.pous.items():
+            if info.pou.kind == "FUNCTION":
+                self._function(key, info)
+            else:
+                self._class(key, info)
+        return "\n".join(out.lines) + "\n", out.spans
+
+    def _class(self, key: str, info: PouInfo) -> None:
+        out = self.out
+        prefix = "P_" if info.pou.kind == "PROGRAM" else "FB_"
+        names = [f"v_{k}" for k in info.vars]
+        out.emit(f"class {prefix}{key}:", info.pou.span)
+        out.indent += 1
+        out.emit(f"__slots__ = {tuple(names)!r}", None)
+        out.emit("def __init__(self):", None)
+        out.indent += 1
+        for k, v in info.vars.items():
+            out.emit(f"self.v_{k} = {_init_code(v.type, v.initial)}", v.span)
+        out.emit("pass", None)
+        out.indent -= 1
+        out.emit("def __call__(self, _now=0):", info.pou.span)
+        out.indent += 1
+        self._body(info, Scope(self, info, "self."))
+        out.indent -= 2
+
+    def _function(self, key: str, info: PouInfo) -> None:
+        out = self.out
+        params = ", ".join(f"v_{k}={_init_code(v.type, v.initial)}" for k, v in info.inputs)
+        out.emit(f"def F_{key}({params}):", info.pou.span)
+        out.indent += 1
+        for k, v in info.vars.items():
+            if v.section != "VAR_INPUT":
+                out.emit(f"v_{k} = {_init_code(v.type, v.initial)}", v.span)
+        self._body(info, Scope(self, info, ""))
+        out.emit(f"return v_{key}", None)
+        out.indent -= 1
+
+    def _body(self, info: PouInfo, scope: Scope) -> None:
+        out = self.out
+        guard_at = len(out.lines)
+        out.emit("global _LEFT", None)
+        for k, v in info.vars.items():
+            if v.section == "VAR_TEMP":
+                out.emit(f"{scope.prefix}v_{k} = {_init_code(v.type, v.initial)}", v.span)
+        start = len(out.lines)
+        self.stmts(info.pou.body, scope)
+        if len(out.lines) == start:
+            out.emit("pass", None)
+        if not scope.loops_used:
+            del out.lines[guard_at], out.spans[guard_at]
+
+    def temp(self) -> str:
+        self._temp += 1
+        return f"_t{self._temp}"
+
+    # -- statements ----------------------------------------------------------------------------
+
+    def stmts(self, body: Iterable[n.Stmt], scope: Scope) -> None:
+        for stmt in body:
+            try:
+                self.stmt(stmt, scope)
+            except Problems:
+                continue
+
+    def block(self, body: Sequence[n.Stmt], scope: Scope) -> None:
+        out = self.out
+        out.indent += 1
+        start = len(out.lines)
+        self.stmts(body, scope)
+        if len(out.lines) == start:
+            out.emit("pass", None)
+        out.indent -= 1
+
+    def stmt(self, s: n.Stmt, scope: Scope) -> None:
+        out = self.out
+        span = s.span
+        if isinstance(s, n.Assign):
+            place = scope.place(s.target, write=True)
+            value = self.coerce(self.expr(s.expr, scope), place.type, _span_of(s.expr))
+            assert place.store is not None
+            out.emit(place.store(value), span)
+        elif isinstance(s, n.CallStmt):
+            self.call_stmt(s, scope)
+        elif isinstance(s, n.If):
+            for i, (cond, body) in enumerate(s.branches):
+                c = self.condition(cond, scope)
+                out.emit(f"{'if' if i == 0 else 'elif'} {c}:", _span_of(cond))
+                self.block(body, scope)
+            if s.otherwise is not None:
+                out.emit("else:", span)
+                self.block(s.otherwise, scope)
+        elif isinstance(s, n.Case):
+            self.case(s, scope)
+        elif isinstance(s, n.For):
+            self.for_loop(s, scope)
+        elif isinstance(s, n.While):
+            c = self.condition(s.cond, scope)
+            out.emit(f"while {c}:", span)
+            self.loop_body(s.body, scope, span)
+        elif isinstance(s, n.Repeat):
+            out.emit("while True:", span)
+            self.loop_body(s.body, scope, span, until=s.cond)
+        elif isinstance(s, n.Exit):
+            if not scope.loop_depth:
+                raise self.error(StCode.EXIT_OUTSIDE_LOOP, "EXIT outside a loop", span)
+            out.emit("break", span)
+        elif isinstance(s, n.Return):
+            pou = scope.info.pou if scope.info is not None else None
+            out.emit(f"return v_{pou.key}" if pou is not None and pou.kind == "FUNCTION"
+                     else "return", span)
+
+    def loop_body(self, body: Sequence[n.Stmt], scope: Scope, span: n.Span,
+                  until: n.Expr | None = None, step: str | None = None) -> None:
+        out = self.out
+        scope.loops_used = True
+        out.indent += 1
+        out.emit("_LEFT -= 1", span)
+        out.emit("if _LEFT < 0: _guard()", span)
+        scope.loop_depth += 1
+        try:
+            self.stmts(body, scope)
+        finally:
+            scope.loop_depth -= 1
+        if until is not None:
+            c = self.condition(until, scope)
+            out.emit(f"if {c}: break", _span_of(until))
+        if step is not None:
+            out.emit(step, span)
+        out.indent -= 1
+
+    def condition(self, expr: n.Expr, scope: Scope) -> str:
+        e = self.expr(expr, scope)
+        if e.type != "BOOL":
+            raise self.error(StCode.TYPE_MISMATCH, f"a condition is BOOL, not {e.type}",
+                             _span_of(expr))
+        return e.code
+
+    def case(self, s: n.Case, scope: Scope) -> None:
+        out = self.out
+        sel = self.expr(s.selector, scope)
+        if not is_int(sel.type):
+            raise self.error(StCode.TYPE_MISMATCH, f"CASE selects on an integer, not "
+                             f"{sel.type}", _span_of(s.selector))
+        t = self.temp()
+        out.emit(f"{t} = {sel.code}", s.span)
+        seen: set[int] = set()
+        first = True
+        for labels, body in s.arms:
+            tests = []
+            for label in labels:
+                lo = self._label(label.lo, sel.type)
+                hi = self._label(label.hi, sel.type) if label.hi is not None else None
+                values = {lo} if hi is None else set(range(lo, hi + 1)) if hi - lo < 4096 \
+                    else set()
+                if values & seen:
+                    self.error(StCode.DUPLICATE_LABEL, f"CASE value {min(values & seen)} "
+                               "is listed twice", label.span)
+                seen |= values
+                tests.append(f"{t} == {lo}" if hi is None else f"{lo} <= {t} <= {hi}")
+            out.emit(f"{'if' if first else 'elif'} {' or '.join(tests) or 'False'}:",
+                     labels[0].span if labels else s.span)
+            first = False
+            self.block(body, scope)
+        if s.otherwise is not None:
+            if first:
+                out.emit("if True:", s.span)
+            else:
+                out.emit("else:", s.span)
+            self.block(s.otherwise, scope)
+
+    def _label(self, lit: n.Literal, selector: Type) -> int:
+        t = lit.type or ANY_INT
+        if t not in INTS and t != ANY_INT:
+            raise self.error(StCode.TYPE_MISMATCH, f"a CASE label is an integer, not {t}",
+                             lit.span)
+        self.coerce(E(repr(lit.value), t, lit.value), selector, lit.span)
+        return int(lit.value)
+
+    def for_loop(self, s: n.For, scope: Scope) -> None:
+        out = self.out
+        var = scope.place(n.Var(s.var, (), s.var_span), write=True)
+        if not is_int(var.type) or var.type == "TIME":
+            raise self.error(StCode.TYPE_MISMATCH, f"a FOR variable is an integer, not "
+                             f"{var.type}", s.var_span)
+        assert var.store is not None
+        start = self.coerce(self.expr(s.start, scope), var.type, _span_of(s.start))
+        end = self.coerce(self.expr(s.end, scope), var.type, _span_of(s.end))
+        step_e = self.expr(s.step, scope) if s.step is not None else E("1", ANY_INT, 1)
+        step = self.coerce(step_e, var.type, _span_of(s.step) if s.step else s.span)
+        out.emit(var.store(start), s.span)
+        end_t = self.temp()
+        out.emit(f"{end_t} = {end}", s.span)
+        if step_e.const is None:
+            step_t = self.temp()
+            out.emit(f"{step_t} = {step}", s.span)
+            test = f"(({var.read} <= {end_t}) if {step_t} >= 0 else ({var.read} >= {end_t}))"
+        else:
+            step_t = step
+            test = f"{var.read} {'>=' if step_e.const < 0 else '<='} {end_t}"
+        out.emit(f"while {test}:", s.span)
+        key = s.var.upper()
+        scope.loop_vars.append(key)
+        try:
+            self.loop_body(s.body, scope, s.span,
+                           step=var.store(wrap_code(f"{var.read} + {step_t}", var.type)))
+        finally:
+            scope.loop_vars.pop()
+
+    def call_stmt(self, s: n.CallStmt, scope: Scope) -> None:
+        out = self.out
+        target = s.target
+        if target.name.upper() == "NC" and len(target.selectors) == 1 and isinstance(
+                target.selectors[0], n.Field) and target.selectors[0].name.upper() == "SEND":
+            self.nc_send(s, scope)
+            return
+        place = scope.place(target, write=False)
+        fb = place.type
+        if not isinstance(fb, FbOf):
+            raise self.error(StCode.NOT_CALLABLE, f"{_show(target)} is {fb}, not a function "
+                             "block instance", s.span)
+        members = self.members(fb)
+        f = self.temp()
+        out.emit(f"{f} = {place.read}", s.span)
+        given: set[str] = set()
+        outputs: list[str] = []
+        for arg in s.args:
+            if arg.name is None:
+                raise self.error(StCode.BAD_ARGUMENTS, f"name the inputs of {fb.name} "
+                                 "(IN := …)", arg.span)
+            key = arg.name.upper()
+            member = members.get(key)
+            if member is None:
+                raise self.error(StCode.UNKNOWN_MEMBER, f"{fb.name} has no {arg.name}"
+                                 + did_you_mean(key, members), arg.span)
+            if key in given:
+                raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is given twice", arg.span)
+            given.add(key)
+            direction, mtype = member
+            attr = key if fb.std else f"v_{key}"
+            if arg.output is None:
+                if direction != "in":
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is an output of "
+                                     f"{fb.name}: bind it with =>", arg.span)
+                assert arg.expr is not None
+                value = self.coerce(self.expr(arg.expr, scope), mtype, _span_of(arg.expr))
+                out.emit(f"{f}.{attr} = {value}", s.span)
+            else:
+                if direction != "out":
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is an input of "
+                                     f"{fb.name}: give it with :=", arg.span)
+                dest = scope.place(arg.output, write=True)
+                assert dest.store is not None
+                outputs.append(dest.store(self.coerce(E(f"{f}.{attr}", mtype), dest.type,
+                                                      arg.output.span)))
+        out.emit(f"{f}(_NOW)", s.span)
+        for line in outputs:
+            out.emit(line, s.span)
+
+    def nc_send(self, s: n.CallStmt, scope: Scope) -> None:
+        if len(s.args) != 2 or any(a.name is not None for a in s.args):
+            raise self.error(StCode.BAD_ARGUMENTS, "NC.SEND(sender, target) takes two "
+                             "numbers", s.span)
+        codes = []
+        for arg, what in zip(s.args, ("sender", "target"), strict=True):
+            assert arg.expr is not None
+            e = self.expr(arg.expr, scope)
+            codes.append(self.coerce(e, "INT", arg.span))
+            if e.const is not None:
+                if not 1 <= e.const <= self.ctx.processes:
+                    raise self.error(StCode.INDEX_RANGE, f"process {e.const} is not "
+                                     f"configured (1..{self.ctx.processes})", arg.span)
+                if what == "sender" and e.const not in self.ctx.external:
+                    raise self.error(StCode.EXTERNAL_SENDER, f"process {e.const} is not "
+                                     "external: the PLC sends only in the name of an external "
+                                     "process ([[nc.process]] external = true)", arg.span)
+        self.out.emit(f"_NC_SEND({codes[0]}, {codes[1]})", s.span)
+
+    def members(self, fb: FbOf) -> dict[str, tuple[str, Type]]:
+        if fb.std:
+            return dict(STD_FBS[fb.name])
+        info = self.pous[fb.name]
+        out: dict[str, tuple[str, Type]] = {}
+        for k, v in info.vars.items():
+            direction = {"VAR_INPUT": "in", "VAR_OUTPUT": "out"}.get(v.section, "internal")
+            out[k] = (direction, v.type)
+        return out
+
+    # -- expressions ---------------------------------------------------------------------------
+
+    def coerce(self, e: E, t: Type, span: n.Span) -> str:
+        """The code storing ``e`` in a place of type ``t`` (wrapped), or a diagnostic."""
+        if e.type == t:
+            if isinstance(t, ArrayOf):
+                return f"list({e.code})"
+            if isinstance(t, str) and is_int(t) and not e.exact:
+                return wrap_code(e.code, t)
+            return e.code
+        if e.type in (ANY_INT, ANY_REAL) and e.const is not None and isinstance(t, str):
+            if t in INTS and e.type == ANY_INT:
+                lo, hi = limits(t)
+                if not lo <= e.const <= hi:
+                    raise self.error(StCode.CONSTANT_RANGE, f"{e.const} does not fit in {t} "
+                                     f"({lo}..{hi})", span)
+                return repr(int(e.const))
+            if t in REALS:
+                return repr(float(e.const))
+        if widens(e.type, t):
+            if t in REALS and not is_real(e.type):
+                return f"float({e.code})"
+            return wrap_code(e.code, t) if not e.exact else e.code
+        hint = ""
+        if isinstance(e.type, str) and isinstance(t, str) and e.type in ELEMENTARY \
+                and t in ELEMENTARY:
+            hint = f" (convert it: {e.type}_TO_{t})"
+        elif e.type == ANY_INT and t == "TIME":
+            hint = " (write a duration: T#100ms)"
+        raise self.error(StCode.TYPE_MISMATCH, f"a {_tname(e.type)} where a {t} is expected"
+                         + hint, span)
+
+    def expr(self, x: n.Expr, scope: Scope) -> E:
+        if isinstance(x, n.Literal):
+            return self.literal(x)
+        if isinstance(x, n.Var):
+            place = scope.place(x, write=False)
+            if isinstance(place.type, FbOf):
+                raise self.error(StCode.TYPE_MISMATCH, f"{_show(x)} is a {place.type} "
+                                 "instance, not a value (read a member: .Q)", x.span)
+            return E(place.read, place.type)
+        if isinstance(x, n.Unary):
+            return self.unary(x, scope)
+        if isinstance(x, n.Binary):
+            return self.binary(x, scope)
+        return self.call(x, scope)
+
+    def literal(self, x: n.Literal) -> E:
+        t = x.type
+        if t is None:
+            kind: Type = ANY_REAL if isinstance(x.value, float) else ANY_INT
+            if kind == ANY_INT and abs(int(x.value)) >= 1 << 32:
+                raise self.error(StCode.CONSTANT_RANGE, f"{x.value} is too large (at most "
+                                 "32 bits)", x.span)
+            return E(repr(x.value), kind, x.value)
+        if t in INTS:
+            lo, hi = limits(t)
+            if not lo <= x.value <= hi:
+                raise self.error(StCode.CONSTANT_RANGE, f"{x.value} does not fit in {t} "
+                                 f"({lo}..{hi})", x.span)
+        return E(const_code(x.value, t), t, x.value)
+
+    def unary(self, x: n.Unary, scope: Scope) -> E:
+        e = self.expr(x.operand, scope)
+        if x.op == "NOT":
+            if e.type == "BOOL":
+                return E(f"(not {e.code})", "BOOL", None if e.const is None else not e.const)
+            if e.type in INTS:
+                if e.type in SIGNED:
+                    return E(f"(~{e.code})", e.type)
+                return E(f"(~{e.code} & {limits(str(e.type))[1]})", e.type)
+            raise self.error(StCode.TYPE_MISMATCH, f"NOT takes a BOOL or a bit string, not "
+                             f"{_tname(e.type)}" + (" (type it: WORD#5)" if e.type == ANY_INT
+                                                    else ""), x.span)
+        if not is_num(e.type) and e.type != "TIME":
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.op} takes a number, not "
+                             f"{_tname(e.type)}", x.span)
+        if x.op == "+":
+            return e
+        if e.const is not None:
+            return E(repr(-e.const), e.type, -e.const, e.type in (ANY_INT, ANY_REAL) or
+                     not is_int(e.type) or limits(str(e.type))[0] <= -e.const <=
+                     limits(str(e.type))[1])
+        return E(f"(-{e.code})", e.type, None, not is_int(e.type) and e.type != "TIME")
+
+    def binary(self, x: n.Binary, scope: Scope) -> E:
+        a, b = self.expr(x.left, scope), self.expr(x.right, scope)
+        op = x.op
+        if op in ("AND", "OR", "XOR"):
+            if a.type == "BOOL" and b.type == "BOOL":
+                py = {"AND": "and", "OR": "or", "XOR": "!="}[op]
+                return E(f"({a.code} {py} {b.code})", "BOOL")
+            t = common(a.type, b.type)
+            if t is None or t not in INTS:
+                raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(a.type)} and "
+                                 f"{_tname(b.type)}", x.span)
+            py = {"AND": "&", "OR": "|", "XOR": "^"}[op]
+            return E(f"({a.code} {py} {b.code})", t)
+        if op in ("=", "<>", "<", ">", "<=", ">="):
+            ok = (is_num(a.type) and is_num(b.type)) or ((a.type == b.type and isinstance(
+                a.type, str)) and (a.type != "BOOL" or op in ("=", "<>")))
+            if not ok:
+                raise self.error(StCode.TYPE_MISMATCH, f"{op} between {_tname(a.type)} and "
+                                 f"{_tname(b.type)}", x.span)
+            py = {"=": "==", "<>": "!="}.get(op, op)
+            return E(f"({a.code} {py} {b.code})", "BOOL")
+        if op == "**":
+            if not (is_num(a.type) and is_num(b.type)):
+                raise self.error(StCode.TYPE_MISMATCH, f"** of {_tname(a.type)} and "
+                                 f"{_tname(b.type)}", x.span)
+            t = "LREAL" if "LREAL" in (a.type, b.type) else "REAL"
+            return E(f"_pow({a.code}, {b.code})", t)
+        # + - * / MOD
+        if "TIME" in (a.type, b.type):
+            return self._time_arith(x, a, b)
+        t = common(a.type, b.type)
+        if t is None or not is_num(t):
+            raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(a.type)} and "
+                             f"{_tname(b.type)}", x.span)
+        if op in ("/", "MOD") and b.const is not None and b.const == 0:
+            raise self.error(StCode.DIVISION_BY_ZERO, f"{op} by zero", _span_of(x.right))
+        real = is_real(t)
+        if op == "MOD" and real:
+            raise self.error(StCode.TYPE_MISMATCH, "MOD takes integers", x.span)
+        if a.const is not None and b.const is not None and t in (ANY_INT, ANY_REAL):
+            value = _fold(op, a.const, b.const, real)
+            return E(repr(value), t, value)
+        if op == "/":
+            code = f"_fdiv({a.code}, {b.code})" if real else f"_idiv({a.code}, {b.code})"
+            if b.const is not None and real:
+                code = f"({a.code} / {b.code})"
+        elif op == "MOD":
+            code = f"_mod({a.code}, {b.code})"
+        else:
+            code = f"({a.code} {op} {b.code})"
+        return E(code, t, None, real)
+
+    def _time_arith(self, x: n.Binary, a: E, b: E) -> E:
+        op = x.op
+        if op in ("+", "-") and a.type == "TIME" and b.type == "TIME":
+            return E(f"({a.code} {op} {b.code})", "TIME", None, False)
+        if op in ("*", "/") and a.type == "TIME" and is_int(b.type):
+            if op == "/" and b.const == 0:
+                raise self.error(StCode.DIVISION_BY_ZERO, "/ by zero", _span_of(x.right))
+            code = f"({a.code} * {b.code})" if op == "*" else f"_idiv({a.code}, {b.code})"
+            return E(code, "TIME", None, False)
+        if op == "*" and b.type == "TIME" and is_int(a.type):
+            return E(f"({a.code} * {b.code})", "TIME", None, False)
+        raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(a.type)} and "
+                         f"{_tname(b.type)} (TIME adds to TIME, and multiplies or divides by "
+                         "an integer)", x.span)
+
+    def call(self, x: n.Call, scope: Scope) -> E:
+        key = x.name.upper()
+        conv = _conversion(key)
+        if conv is not None:
+            return self.convert(x, *conv, scope)
+        if key in STD_FUNCTIONS:
+            return self.std_call(x, key, scope)
+        info = self.pous.get(key)
+        if info is None or info.pou.kind != "FUNCTION":
+            what = ("a function block: declare an instance and call it as a statement"
+                    if key in STD_FBS or info is not None else "not a function")
+            hint = did_you_mean(key, [*STD_FUNCTIONS, *(k for k, p in self.pous.items()
+                                                        if p.pou.kind == "FUNCTION")])
+            raise self.error(StCode.UNKNOWN_CALL, f"{x.name} is {what}{hint}", x.span)
+        inputs = info.inputs
+        values: dict[str, str] = {}
+        for i, arg in enumerate(x.args):
+            if arg.output is not None:
+                raise self.error(StCode.BAD_ARGUMENTS, "a FUNCTION has no outputs to bind",
+                                 arg.span)
+            if arg.name is None:
+                if i >= len(inputs) or any(a.name is not None for a in x.args[:i]):
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes {len(inputs)} "
+                                     "input(s); positional ones come first", arg.span)
+                k, v = inputs[i]
+            else:
+                k = arg.name.upper()
+                found = dict(inputs).get(k)
+                if found is None:
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} has no input "
+                                     f"{arg.name}" + did_you_mean(k, dict(inputs)), arg.span)
+                v = found
+            if k in values:
+                raise self.error(StCode.BAD_ARGUMENTS, f"{v.display} is given twice",
+                                 arg.span)
+            assert arg.expr is not None
+            values[k] = self.coerce(self.expr(arg.expr, scope), v.type, _span_of(arg.expr))
+        args = ", ".join(f"v_{k}={code}" for k, code in values.items())
+        assert info.result is not None
+        return E(f"F_{key}({args})", info.result)
+
+    def _args(self, x: n.Call, scope: Scope, count: int | None, least: int = 1) -> list[E]:
+        if any(a.name is not None or a.output is not None for a in x.args):
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes its inputs in order, "
+                             "unnamed", x.span)
+        if (count is not None and len(x.args) != count) or len(x.args) < least:
+            want = count if count is not None else f"at least {least}"
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes {want} input(s), got "
+                             f"{len(x.args)}", x.span)
+        return [self.expr(a.expr, scope) for a in x.args if a.expr is not None]
+
+    def _same(self, x: n.Call, values: Sequence[E]) -> Type:
+        t: Type | None = values[0].type
+        for v in values[1:]:
+            t = common(t, v.type) if t is not None else None
+        if t is None:
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} of " + ", ".join(
+                _tname(v.type) for v in values), x.span)
+        return t
+
+    def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
+        if key in ("ABS", "SQRT", "TRUNC"):
+            (a,) = self._args(x, scope, 1)
+            if not is_num(a.type):
+                raise self.error(StCode.TYPE_MISMATCH, f"{key} takes a number, not "
+                                 f"{_tname(a.type)}", x.span)
+            if key == "ABS":
+                return E(f"abs({a.code})", a.type, None, not is_int(a.type))
+            if key == "TRUNC":
+                return E(f"_trunc({a.code})", "DINT")
+            return E(f"_sqrt({a.code})", "LREAL" if a.type == "LREAL" else "REAL")
+        if key == "EXPT":
+            a, b = self._args(x, scope, 2)
+            if not (is_num(a.type) and is_num(b.type)):
+                raise self.error(StCode.TYPE_MISMATCH, f"EXPT of {_tname(a.type)} and "
+                                 f"{_tname(b.type)}", x.span)
+            return E(f"_pow({a.code}, {b.code})", "LREAL" if "LREAL" in (a.type, b.type)
+                     else "REAL")
+        if key in ("MIN", "MAX"):
+            values = self._args(x, scope, None, 2)
+            t = self._same(x, values)
+            if not is_num(t) and t != "TIME":
+                raise self.error(StCode.TYPE_MISMATCH, f"{key} of {t}", x.span)
+            codes = ", ".join(self.coerce(v, t, x.span) if t not in (ANY_INT, ANY_REAL)
+                              else v.code for v in values)
+            return E(f"{key.lower()}({codes})", t)
+        if key == "LIMIT":
+            values = self._args(x, scope, 3)
+            t = self._same(x, values)
+            if not is_num(t) and t != "TIME":
+                raise self.error(StCode.TYPE_MISMATCH, f"LIMIT of {t}", x.span)
+            mn, v, mx = (self.coerce(e, t, x.span) if t not in (ANY_INT, ANY_REAL) else e.code
+                         for e in values)
+            return E(f"min(max({v}, {mn}), {mx})", t)
+        if key == "SEL":
+            g, a, b = self._args(x, scope, 3)
+            if g.type != "BOOL":
+                raise self.error(StCode.TYPE_MISMATCH, f"SEL selects with a BOOL, not "
+                                 f"{_tname(g.type)}", x.args[0].span)
+            t = self._same(x, [a, b])
+            return E(f"({self._as(b, t, x)} if {g.code} else {self._as(a, t, x)})", t)
+        if key == "MUX":
+            values = self._args(x, scope, None, 2)
+            k, rest = values[0], values[1:]
+            if not is_int(k.type):
+                raise self.error(StCode.TYPE_MISMATCH, f"MUX selects with an integer, not "
+                                 f"{_tname(k.type)}", x.span)
+            t = self._same(x, rest)
+            items = ", ".join(self._as(v, t, x) for v in rest)
+            return E(f"_mux({k.code}, ({items},))", t)
+        # SHL SHR ROL ROR
+        a, b = self._args(x, scope, 2)
+        if a.type not in BITS and a.type not in UNSIGNED:
+            raise self.error(StCode.TYPE_MISMATCH, f"{key} shifts a bit string (BYTE, WORD, "
+                             f"DWORD), not {_tname(a.type)}" + (
+                                 " (type it: WORD#16#F)" if a.type == ANY_INT else ""), x.span)
+        if not is_int(b.type):
+            raise self.error(StCode.TYPE_MISMATCH, f"{key} shifts by an integer", x.span)
+        size = stdlib.INTEGER_TYPES[str(a.type)][0]
+        return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
+
+    def _as(self, e: E, t: Type, x: n.Call) -> str:
+        return e.code if t in (ANY_INT, ANY_REAL) else self.coerce(e, t, x.span)
+
+    def convert(self, x: n.Call, src: str, dst: str, scope: Scope) -> E:
+        (a,) = self._args(x, scope, 1)
+        if not (a.type == src or widens(a.type, src)):
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
+                             f"{_tname(a.type)}", x.span)
+        code = a.code
+        if dst in REALS:
+            return E(f"float({code})", dst)
+        if dst == "BOOL":
+            return E(f"({code} != 0)", "BOOL")
+        if src in REALS or a.type == ANY_REAL:
+            size, signed = stdlib.INTEGER_TYPES["DINT" if dst == "TIME" else dst]
+            return E(f"_r2i({code}, {size}, {signed})", dst)
+        if src == "BOOL":
+            return E(f"int({code})", dst)
+        return E(code, dst, None, False)
+
+
+class Scope:
+    """The names a POU body sees, and how to reach them."""
+
+    def __init__(self, compiler: Compiler, info: PouInfo | None, prefix: str) -> None:
+        self.c = compiler
+        self.info = info
+        self.prefix = prefix
+        self.loop_vars: list[str] = []
+        self.loop_depth = 0
+        self.loops_used = False
+
+    def place(self, var: n.Var, write: bool) -> Place:
+        c = self.c
+        key = var.name.upper()
+        if key in IMAGE_NAMES:
+            return self._image(var, key, write)
+        if key == "NC":
+            return self._nc(var, write)
+        info = self.info
+        v = info.vars.get(key) if info is not None else None
+        if v is None:
+            names = [x.display for x in info.vars.values()] if info is not None else []
+            hint = did_you_mean(key, [*names, *IMAGE_NAMES, "NC"])
+            if info is None:
+                raise c.error(StCode.NOT_CONSTANT, f"{var.name}: an initial value is a "
+                              "constant", var.span)
+            raise c.error(StCode.UNKNOWN_NAME, f"unknown variable {var.name}{hint}", var.span)
+        code = f"{self.prefix}v_{key}"
+        t: Type = v.type
+        why = ""
+        if v.qualifier == "CONSTANT":
+            why = f"{v.display} is CONSTANT"
+        elif key in self.loop_vars and not var.selectors:
+            why = f"{v.display} is the FOR loop's variable"
+        return self._select(var, code, t, why, write)
+
+    def _select(self, var: n.Var, code: str, t: Type, why: str, write: bool) -> Place:
+        c = self.c
+        for sel in var.selectors:
+            if isinstance(sel, n.Index):
+                if not isinstance(t, ArrayOf):
+                    raise c.error(StCode.TYPE_MISMATCH, f"{var.name} is {t}, not an array",
+                                  sel.span)
+                i = c.expr(sel.expr, self)
+                if not is_int(i.type):
+                    raise c.error(StCode.TYPE_MISMATCH, f"an index is an integer, not "
+                                  f"{_tname(i.type)}", sel.span)
+                if i.const is not None:
+                    if not t.lo <= i.const <= t.hi:
+                        raise c.error(StCode.INDEX_RANGE, f"index {i.const} outside "
+                                      f"{t.lo}..{t.hi}", sel.span)
+                    code = f"{code}[{i.const - t.lo}]"
+                else:
+                    code = f"{code}[_ix({i.code}, {t.lo}, {t.length})]"
+                t = t.element
+            else:
+                if not isinstance(t, FbOf):
+                    raise c.error(StCode.UNKNOWN_MEMBER, f"{_show(var)}: {t} has no members",
+                                  sel.span)
+                members = c.members(t)
+                mkey = sel.name.upper()
+                member = members.get(mkey)
+                if member is None:
+                    raise c.error(StCode.UNKNOWN_MEMBER, f"{t.name} has no {sel.name}"
+                                  + did_you_mean(mkey, members), sel.span)
+                direction, mtype = member
+                if direction == "internal":
+                    raise c.error(StCode.UNKNOWN_MEMBER, f"{sel.name} is internal to "
+                                  f"{t.name} (only VAR_INPUT and VAR_OUTPUT are seen outside)",
+                                  sel.span)
+                if direction == "out":
+                    why = f"{sel.name} is an output of {t.name}"
+                code = f"{code}.{mkey if t.std else 'v_' + mkey}"
+                t = mtype
+        if write and why:
+            raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: {why}", var.span)
+        if write and isinstance(t, FbOf):
+            raise c.error(StCode.TYPE_MISMATCH, f"cannot assign to the {t.name} instance "
+                          f"{_show(var)}", var.span)
+        final = code
+        return Place(final, t, (lambda value: f"{final} = {value}") if not why else None, why)
+
+    def _image(self, var: n.Var, key: str, write: bool) -> Place:
+        c = self.c
+        ctx = c.ctx
+        if len(var.selectors) != 1 or not isinstance(var.selectors[0], n.Index):
+            raise c.error(StCode.TYPE_MISMATCH, f"{var.name} is indexed: {var.name}[n]",
+                          var.span)
+        sel = var.selectors[0]
+        size = {"SA": ctx.sa_bits, "SAB": ctx.sa_bits // 8, "SK": ctx.k_bytes,
+                "SYVAR": ctx.syvars}[key]
+        i = c.expr(sel.expr, self)
+        if not is_int(i.type):
+            raise c.error(StCode.TYPE_MISMATCH, f"an index is an integer, not "
+                          f"{_tname(i.type)}", sel.span)
+        if i.const is not None and not 0 <= i.const < size:
+            raise c.error(StCode.INDEX_RANGE, f"{var.name}[{i.const}] is outside the image "
+                          f"({var.name}[0..{size - 1}], [plc] in the config)", sel.span)
+        if key == "SA":
+            if i.const is not None:
+                byte, mask = i.const >> 3, 1 << (i.const & 7)
+                return Place(f"((_SA[{byte}] & {mask}) != 0)", "BOOL",
+                             lambda v: f"_SA[{byte}] = (_SA[{byte}] | {mask}) if {v} else "
+                                       f"(_SA[{byte}] & {255 ^ mask})")
+            t = c.temp()
+            idx = f"_ix({i.code}, 0, {size})"
+            return Place(f"((_SA[({t} := {idx}) >> 3] >> ({t} & 7)) & 1 == 1)", "BOOL",
+                         lambda v: f"{t} = {idx}; _SA[{t} >> 3] = (_SA[{t} >> 3] | "
+                                   f"(1 << ({t} & 7))) if {v} else (_SA[{t} >> 3] & "
+                                   f"(255 ^ (1 << ({t} & 7))))")
+        array = {"SAB": "_SA", "SK": "_SK", "SYVAR": "_SY"}[key]
+        t_img = "INT" if key == "SYVAR" else "BYTE"
+        code = f"{array}[{i.const}]" if i.const is not None else \
+            f"{array}[_ix({i.code}, 0, {size})]"
+        return Place(code, t_img, lambda v: f"{code} = {v}")
+
+    def _nc(self, var: n.Var, write: bool) -> Place:
+        c = self.c
+        sels = var.selectors
+        first = sels[0] if sels else None
+        if not isinstance(first, n.Field):
+            raise c.error(StCode.UNKNOWN_MEMBER, "NC has P[k], EVENTS, LAST_SND, START, HOLD, "
+                          "RESET and SEND", var.span)
+        name = first.name.upper()
+        if name in NC_OUTPUTS and len(sels) == 1:
+            code = f"_NCO[{NC_OUTPUTS[name]}]"
+            return Place(code, "BOOL", lambda v: f"{code} = {v}")
+        place: Place | None = None
+        if name == "EVENTS" and len(sels) == 1:
+            place = Place("_NCE", "UDINT", None, "NC.EVENTS is an input")
+        elif name == "LAST_SND" and len(sels) == 2 and isinstance(sels[1], n.Field):
+            found = NC_LAST_SND.get(sels[1].name.upper())
+            if found is None:
+                raise c.error(StCode.UNKNOWN_MEMBER, f"NC.LAST_SND has no {sels[1].name}"
+                              + did_you_mean(sels[1].name, NC_LAST_SND), sels[1].span)
+            place = Place(f"_NCL[{found[0]}]", found[1], None, "NC.LAST_SND is an input")
+        elif name == "P" and len(sels) == 3 and isinstance(sels[1], n.Index) and isinstance(
+                sels[2], n.Field):
+            i = c.expr(sels[1].expr, self)
+            if not is_int(i.type):
+                raise c.error(StCode.TYPE_MISMATCH, "a process number is an integer",
+                              sels[1].span)
+            count = c.ctx.processes
+            if i.const is not None and not 1 <= i.const <= count:
+                raise c.error(StCode.INDEX_RANGE, f"process {i.const} is not configured "
+                              f"(1..{count})", sels[1].span)
+            member = NC_PROCESS.get(sels[2].name.upper())
+            if member is None:
+                raise c.error(StCode.UNKNOWN_MEMBER, f"NC.P[k] has no {sels[2].name}"
+                              + did_you_mean(sels[2].name, NC_PROCESS), sels[2].span)
+            k = str(i.const - 1) if i.const is not None else f"_ix({i.code}, 1, {count})"
+            place = Place(f"_NCS[{k}][{member[0]}]", member[1], None,
+                          f"NC.P[k].{sels[2].name.upper()} is an input")
+        if place is None:
+            raise c.error(StCode.UNKNOWN_MEMBER, f"{_show(var)}: NC has P[k].STATE/N/LINE/"
+                          "WAITING/ALARM/ALARM_CODE/IDLE/HELD, EVENTS, LAST_SND.SENDER/"
+                          "TARGET/SEQ, START, HOLD, RESET and SEND(sender, target)"
+                          + did_you_mean(name, ["P", "EVENTS", "LAST_SND", *NC_OUTPUTS]),
+                          first.span)
+        if write:
+            raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: "
+                          f"{place.why_read_only}", var.span)
+        return place
+
+
+def _fold(op: str, a: Any, b: Any, real: bool) -> Any:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        return a / b if real else _idiv(a, b)
+    return _mod(a, b)
+
+
+def _conversion(key: str) -> tuple[str, str] | None:
+    if "_TO_" not in key:
+        return None
+    src, _, dst = key.partition("_TO_")
+    if src in ELEMENTARY and dst in ELEMENTARY and src != dst:
+        return src, dst
+    return None
+
+
+def _holds_fb(t: Type) -> bool:
+    while isinstance(t, ArrayOf):
+        t = t.element
+    return isinstance(t, FbOf)
+
+
+def _init_code(t: Type, initial: Any) -> str:
+    if isinstance(t, FbOf):
+        return f"_STD_{t.name}()" if t.std else f"FB_{t.name}()"
+    if isinstance(t, ArrayOf):
+        if _holds_fb(t):
+            return f"[{_init_code(t.element, None)} for _ in range({t.length})]"
+        return repr(list(initial))
+    return repr(initial)
+
+
+def _span_of(x: Any) -> n.Span:
+    span: n.Span = x.span
+    return span
+
+
+def _show(var: n.Var) -> str:
+    text = var.name
+    for sel in var.selectors:
+        text += f".{sel.name}" if isinstance(sel, n.Field) else "[…]"
+    return text
+
+
+def _tname(t: Type) -> str:
+    return {ANY_INT: "integer literal", ANY_REAL: "real literal"}.get(str(t), str(t))
+
+
+def _calls(body: Iterable[n.Stmt]) -> set[str]:
+    """Every function called in a body (for the recursion check)."""
+    found: set[str] = set()
+
+    def walk(x: Any) -> None:
+        if isinstance(x, n.Call):
+            found.add(x.name.upper())
+        if isinstance(x, tuple | list):
+            for item in x:
+                walk(item)
+        elif hasattr(x, "__dataclass_fields__") and not isinstance(x, n.Span):
+            for name in x.__dataclass_fields__:
+                walk(getattr(x, name))
+
+    walk(tuple(body))
+    return found
+
+
+# ---- the result ----------------------------------------------------------------------------
+
+@dataclass
+class ProgramVar:
+    key: str
+    display: str
+    type: Type
+    retain: bool
+
+
+class Logic:
+    """Compiled logic: the generated module, its programs, and the way back from a Python
+    line to the ST statement (for faults)."""
+
+    def __init__(self, files: Sequence[n.SourceFile], compiler: Compiler, source: str,
+                 spans: list[n.Span | None]) -> None:
+        self.files = tuple(files)
+        self.python_source = source
+        self._spans = spans
+        self._filename = f"<ncgate-st {id(self):x}>"
+        self.namespace: dict[str, Any] = dict(HELPERS)
+        self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
+                              _NCO=[False, False, False], _NC_SEND=lambda s, t: None)
+        code = compile(source, self._filename, "exec")
+        exec(code, self.namespace)
+        self.programs: dict[str, dict[str, ProgramVar]] = {}
+        self.display: dict[str, str] = {}
+        self.fb_vars: dict[str, dict[str, ProgramVar]] = {}
+        for key, info in compiler.pous.items():
+            table = {k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN")
+                     for k, v in info.vars.items()}
+            if info.pou.kind == "PROGRAM":
+                self.programs[key] = table
+                self.display[key] = info.pou.name
+            elif info.pou.kind == "FUNCTION_BLOCK":
+                self.fb_vars[key] = table
+
+    def new_program(self, key: str) -> Any:
+        return self.namespace[f"P_{key}"]()
+
+    def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
+        """The ST statement of the innermost generated frame in a traceback."""
+        line = None
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename == self._filename:
+                line = tb.tb_lineno
+            tb = tb.tb_next
+        if line is None:
+            return None, ""
+        for i in range(min(line, len(self._spans)) - 1, -1, -1):
+            span = self._spans[i]
+            if span is not None:
+                for f in self.files:
+                    if f.path == span.file:
+                        return span, f.line(span.line)
+                return span, ""
+        return None, ""
+
+
+def compile_logic(files: Sequence[n.SourceFile], context: Context | None = None) -> Logic:
+    """Check and compile; raises :class:`LogicError` with every diagnostic found."""
+    compiler = Compiler(files, context or Context())
+    source, spans = compiler.compile()
+    if compiler.diagnostics:
+        raise LogicError(sorted(compiler.diagnostics,
+                                key=lambda d: (d.span.file, d.span.line, d.span.column)))
+    return Logic(files, compiler, source, spans)

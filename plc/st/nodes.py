@@ -1,0 +1,226 @@
+"""The syntax tree of a Structured Text file: program organisation units (POUs), their
+declarations, statements and expressions.  Frozen dataclasses; names are kept as written
+(IEC names are case-insensitive: compare ``key``s, the upper-case forms)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class Span:
+    """Where a node starts: file, line and column, 1-based."""
+
+    file: str
+    line: int
+    column: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}"
+
+
+# ---- types -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class NamedType:
+    name: str
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class ArrayType:
+    lo: int
+    hi: int
+    element: NamedType
+    span: Span
+
+
+TypeRef = NamedType | ArrayType
+
+
+# ---- expressions -------------------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class Literal:
+    """A constant.  ``type`` is None for an untyped number (``5``, ``16#FF``, ``1.5``)."""
+
+    value: bool | int | float
+    type: str | None
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    name: str
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Index:
+    expr: Expr
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Var:
+    """A name with member and index selectors: ``x``, ``t1.Q``, ``arr[i]``, ``NC.P[2].STATE``."""
+
+    name: str
+    selectors: tuple[Field | Index, ...]
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Binary:
+    op: str  # upper case: "+", "MOD", "AND", "<=", …  ("&" is read as "AND")
+    left: Expr
+    right: Expr
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Unary:
+    op: str  # "-", "+", "NOT"
+    operand: Expr
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Arg:
+    """One argument: positional (``name`` None), input ``name := expr``, output ``name => var``."""
+
+    name: str | None
+    expr: Expr | None
+    output: Var | None
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Call:
+    name: str
+    args: tuple[Arg, ...]
+    span: Span
+
+
+Expr = Literal | Var | Binary | Unary | Call
+
+
+# ---- declarations --------------------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class ArrayInit:
+    items: tuple[tuple[int, Expr], ...]  # (repeat count, value)
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class VarDecl:
+    name: str
+    type: TypeRef
+    initial: Expr | ArrayInit | None
+    section: str  # VAR, VAR_INPUT, VAR_OUTPUT, VAR_TEMP
+    qualifier: str | None  # RETAIN, CONSTANT
+    span: Span
+
+
+# ---- statements ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class Assign:
+    target: Var
+    expr: Expr
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class CallStmt:
+    target: Var
+    args: tuple[Arg, ...]
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class If:
+    branches: tuple[tuple[Expr, tuple[Stmt, ...]], ...]
+    otherwise: tuple[Stmt, ...] | None
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class CaseLabel:
+    lo: Literal
+    hi: Literal | None  # a range lo..hi
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Case:
+    selector: Expr
+    arms: tuple[tuple[tuple[CaseLabel, ...], tuple[Stmt, ...]], ...]
+    otherwise: tuple[Stmt, ...] | None
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class For:
+    var: str
+    var_span: Span
+    start: Expr
+    end: Expr
+    step: Expr | None
+    body: tuple[Stmt, ...]
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class While:
+    cond: Expr
+    body: tuple[Stmt, ...]
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Repeat:
+    body: tuple[Stmt, ...]
+    cond: Expr
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Exit:
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class Return:
+    span: Span
+
+
+Stmt = Assign | CallStmt | If | Case | For | While | Repeat | Exit | Return
+
+
+@dataclass(frozen=True, slots=True)
+class Pou:
+    """A PROGRAM, FUNCTION_BLOCK or FUNCTION."""
+
+    kind: str
+    name: str
+    result: NamedType | None  # a FUNCTION's type
+    decls: tuple[VarDecl, ...]
+    body: tuple[Stmt, ...]
+    span: Span
+
+    @property
+    def key(self) -> str:
+        return self.name.upper()
+
+
+@dataclass(frozen=True, slots=True)
+class SourceFile:
+    path: str
+    text: str
+    pous: tuple[Pou, ...]
+
+    def line(self, number: int) -> str:
+        lines = self.text.splitlines()
+        return lines[number - 1] if 0 < number <= len(lines) else ""

@@ -1,0 +1,371 @@
+"""Structured Text source -> :mod:`ncgate.plc.st.nodes`, with syntax diagnostics.
+
+The grammar is ``grammar/st.lark`` (LALR, built once per process).  A syntax error is one
+diagnostic at the first bad item, with what the grammar expected there.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+
+from ncgate.plc.st import nodes as n
+from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
+
+_TIME_PART = re.compile(r"([0-9][0-9_]*(?:\.[0-9]+)?)(d|h|ms|m|s)_?", re.IGNORECASE)
+_MS = {"d": 86_400_000, "h": 3_600_000, "m": 60_000, "s": 1000, "ms": 1}
+# What people call the grammar's punctuation, for "expected ..." in a syntax error.
+_SHOWN = {"SEMICOLON": "';'", "COLON": "':'", "LPAR": "'('", "RPAR": "')'", "COMMA": "','",
+          "LSQB": "'['", "RSQB": "']'", "DOT": "'.'", "NAME": "a name", "INT": "a number"}
+
+
+@functools.cache
+def _parser() -> Lark:
+    text = resources.files("ncgate.plc.st").joinpath("grammar/st.lark").read_text("utf-8")
+    return Lark(text, parser="lalr", propagate_positions=True, maybe_placeholders=False)
+
+
+class BadLiteral(ValueError):
+    def __init__(self, token: Token, message: str) -> None:
+        super().__init__(message)
+        self.token = token
+
+
+def parse_number(text: str) -> int:
+    """``1_000``, ``16#FF``, ``2#1010`` -> int."""
+    text = text.replace("_", "")
+    if "#" in text:
+        base, digits = text.split("#", 1)
+        return int(digits, int(base))
+    return int(text)
+
+
+def parse_time(text: str) -> int:
+    """``T#1s500ms`` -> 1500 (milliseconds, rounded)."""
+    body = text.split("#", 1)[1]
+    sign = -1 if body.startswith("-") else 1
+    body = body.lstrip("+-")
+    total = 0.0
+    for value, unit in _TIME_PART.findall(body):
+        total += float(value.replace("_", "")) * _MS[unit.lower()]
+    return sign * round(total)
+
+
+def parse_typed(text: str) -> tuple[str, bool | int | float]:
+    """``INT#-5`` -> ("INT", -5); ``REAL#1.5``; ``BOOL#TRUE``; ``WORD#16#FF``."""
+    type_name, raw = text.split("#", 1)
+    type_name = type_name.upper()
+    if type_name == "BOOL":
+        value: bool | int | float = raw.upper() in ("TRUE", "1")
+        if raw.upper() not in ("TRUE", "FALSE", "0", "1"):
+            raise ValueError(f"BOOL# takes TRUE, FALSE, 0 or 1, not {raw}")
+        return type_name, value
+    sign = -1 if raw.startswith("-") else 1
+    raw = raw.lstrip("+-")
+    if type_name in ("REAL", "LREAL"):
+        return type_name, sign * (float(raw.replace("_", "")) if "#" not in raw
+                                  else parse_number(raw))
+    if "." in raw:
+        raise ValueError(f"{type_name}# takes a whole number, not {raw}")
+    return type_name, sign * parse_number(raw)
+
+
+def _span(file: str, item: Any) -> n.Span:
+    return n.Span(file, getattr(item, "line", 1) or 1, getattr(item, "column", 1) or 1)
+
+
+@v_args(meta=True)
+class _Build(Transformer[Token, Any]):
+    def __init__(self, file: str) -> None:
+        super().__init__()
+        self.file = file
+
+    def _s(self, meta: Any, children: list[Any] | None = None) -> n.Span:
+        if not getattr(meta, "empty", True):
+            return n.Span(self.file, meta.line, meta.column)
+        for child in children or ():
+            span = getattr(child, "span", None) or (
+                _span(self.file, child) if isinstance(child, Token) else None)
+            if span is not None:
+                return span
+        return n.Span(self.file, 1, 1)
+
+    # -- POUs --------------------------------------------------------------------------------
+
+    def start(self, meta: Any, children: list[n.Pou]) -> tuple[n.Pou, ...]:
+        return tuple(children)
+
+    def _pou(self, kind: str, meta: Any, children: list[Any]) -> n.Pou:
+        name = children[1]
+        result = None
+        rest = children[2:-1]
+        if kind == "FUNCTION":
+            result, rest = rest[0], rest[1:]
+            if not isinstance(result, n.NamedType):
+                raise BadLiteral(name, "a FUNCTION returns an elementary type, not an array")
+        decls = tuple(d for block in rest[:-1] for d in block)
+        return n.Pou(kind, str(name), result, decls, rest[-1], self._s(meta, children))
+
+    def program(self, meta: Any, children: list[Any]) -> n.Pou:
+        return self._pou("PROGRAM", meta, children)
+
+    def function_block(self, meta: Any, children: list[Any]) -> n.Pou:
+        return self._pou("FUNCTION_BLOCK", meta, children)
+
+    def function(self, meta: Any, children: list[Any]) -> n.Pou:
+        return self._pou("FUNCTION", meta, children)
+
+    def var_block(self, meta: Any, children: list[Any]) -> list[n.VarDecl]:
+        section = str(children[0]).upper()
+        qualifier = None
+        items = children[1:-1]
+        if items and isinstance(items[0], Token):
+            qualifier = str(items[0]).upper()
+            items = items[1:]
+        return [n.VarDecl(d.name, d.type, d.initial, section, qualifier, d.span)
+                for decl in items for d in decl]
+
+    def var_decl(self, meta: Any, children: list[Any]) -> list[n.VarDecl]:
+        names = [c for c in children if isinstance(c, Token) and c.type == "NAME"]
+        rest = [c for c in children if not (isinstance(c, Token) and c.type == "NAME")]
+        type_ref = rest[0]
+        initial = rest[1] if len(rest) > 1 else None
+        return [n.VarDecl(str(t), type_ref, initial, "VAR", None, _span(self.file, t))
+                for t in names]
+
+    def named_type(self, meta: Any, children: list[Token]) -> n.NamedType:
+        return n.NamedType(str(children[0]), _span(self.file, children[0]))
+
+    def array_type(self, meta: Any, children: list[Any]) -> n.ArrayType:
+        _, lo, hi, _, elem = children
+        return n.ArrayType(lo, hi, n.NamedType(str(elem), _span(self.file, elem)),
+                           self._s(meta, children))
+
+    def bound(self, meta: Any, children: list[Token]) -> int:
+        value = parse_number(str(children[-1]))
+        return -value if len(children) == 2 else value
+
+    def array_init(self, meta: Any, children: list[tuple[int, n.Expr]]) -> n.ArrayInit:
+        return n.ArrayInit(tuple(children), self._s(meta, []))
+
+    def init_one(self, meta: Any, children: list[n.Expr]) -> tuple[int, n.Expr]:
+        return (1, children[0])
+
+    def init_repeat(self, meta: Any, children: list[Any]) -> tuple[int, n.Expr]:
+        return (parse_number(str(children[0])), children[1])
+
+    # -- statements --------------------------------------------------------------------------
+
+    def stmts(self, meta: Any, children: list[Any]) -> tuple[n.Stmt, ...]:
+        return tuple(c for c in children if not isinstance(c, Token))
+
+    def assign(self, meta: Any, children: list[Any]) -> n.Assign:
+        return n.Assign(children[0], children[1], children[0].span)
+
+    def call_stmt(self, meta: Any, children: list[Any]) -> n.CallStmt:
+        return n.CallStmt(children[0], tuple(children[1:]), children[0].span)
+
+    def in_arg(self, meta: Any, children: list[Any]) -> n.Arg:
+        return n.Arg(str(children[0]), children[1], None, _span(self.file, children[0]))
+
+    def out_arg(self, meta: Any, children: list[Any]) -> n.Arg:
+        return n.Arg(str(children[0]), None, children[1], _span(self.file, children[0]))
+
+    def pos_arg(self, meta: Any, children: list[Any]) -> n.Arg:
+        return n.Arg(None, children[0], None, children[0].span)
+
+    def if_stmt(self, meta: Any, children: list[Any]) -> n.If:
+        parts = [c for c in children if not isinstance(c, Token)]
+        branches = [(parts[0], parts[1])]
+        otherwise = None
+        for part in parts[2:]:
+            if isinstance(part, tuple) and len(part) == 2 and part[0] == "ELSIF":
+                branches.append(part[1])
+            else:
+                otherwise = part
+        return n.If(tuple(branches), otherwise, self._s(meta, children))
+
+    def elsif(self, meta: Any, children: list[Any]) -> tuple[str, tuple[n.Expr, Any]]:
+        return ("ELSIF", (children[1], children[3]))
+
+    def else_part(self, meta: Any, children: list[Any]) -> tuple[n.Stmt, ...]:
+        body: tuple[n.Stmt, ...] = children[1]
+        return body
+
+    def case_stmt(self, meta: Any, children: list[Any]) -> n.Case:
+        parts = [c for c in children if not isinstance(c, Token)]
+        selector, rest = parts[0], parts[1:]
+        arms = tuple(p for p in rest if isinstance(p, tuple) and p and p[0] == "ARM")
+        otherwise = next((p for p in rest if not (isinstance(p, tuple) and p
+                                                   and p[0] == "ARM")), None)
+        return n.Case(selector, tuple((a[1], a[2]) for a in arms), otherwise,
+                      self._s(meta, children))
+
+    def case_arm(self, meta: Any, children: list[Any]) -> tuple[str, Any, Any]:
+        return ("ARM", tuple(children[:-1]), children[-1])
+
+    def label_one(self, meta: Any, children: list[n.Literal]) -> n.CaseLabel:
+        return n.CaseLabel(children[0], None, children[0].span)
+
+    def label_range(self, meta: Any, children: list[n.Literal]) -> n.CaseLabel:
+        return n.CaseLabel(children[0], children[1], children[0].span)
+
+    def case_value(self, meta: Any, children: list[Token]) -> n.Literal:
+        token = children[-1]
+        negative = len(children) == 2
+        span = _span(self.file, children[0])
+        if token.type == "TYPED_LIT":
+            type_name, value = self._typed(token)
+        else:
+            type_name, value = None, parse_number(str(token))
+        if isinstance(value, bool | float):
+            raise BadLiteral(token, f"a CASE label is a whole number, not {token}")
+        return n.Literal(-value if negative else value, type_name, span)
+
+    def for_stmt(self, meta: Any, children: list[Any]) -> n.For:
+        parts = [c for c in children if not (isinstance(c, Token) and c.type != "NAME")]
+        var, start, end = parts[0], parts[1], parts[2]
+        step = parts[3] if len(parts) == 5 else None
+        return n.For(str(var), _span(self.file, var), start, end, step, parts[-1],
+                     self._s(meta, children))
+
+    def while_stmt(self, meta: Any, children: list[Any]) -> n.While:
+        return n.While(children[1], children[3], self._s(meta, children))
+
+    def repeat_stmt(self, meta: Any, children: list[Any]) -> n.Repeat:
+        return n.Repeat(children[1], children[3], self._s(meta, children))
+
+    def exit_stmt(self, meta: Any, children: list[Token]) -> n.Exit:
+        return n.Exit(_span(self.file, children[0]))
+
+    def return_stmt(self, meta: Any, children: list[Token]) -> n.Return:
+        return n.Return(_span(self.file, children[0]))
+
+    # -- expressions -------------------------------------------------------------------------
+
+    def binary(self, meta: Any, children: list[Any]) -> n.Binary:
+        left, op, right = children
+        name = str(op).upper()
+        return n.Binary("AND" if name == "&" else name, left, right, _span(self.file, op))
+
+    def unary(self, meta: Any, children: list[Any]) -> n.Unary:
+        op, operand = children
+        return n.Unary(str(op).upper(), operand, _span(self.file, op))
+
+    def call(self, meta: Any, children: list[Any]) -> n.Call:
+        return n.Call(str(children[0]), tuple(children[1:]), _span(self.file, children[0]))
+
+    def variable(self, meta: Any, children: list[Any]) -> n.Var:
+        return n.Var(str(children[0]), tuple(children[1:]), _span(self.file, children[0]))
+
+    def field(self, meta: Any, children: list[Token]) -> n.Field:
+        return n.Field(str(children[0]), _span(self.file, children[0]))
+
+    def index(self, meta: Any, children: list[Any]) -> n.Index:
+        return n.Index(children[0], children[0].span)
+
+    def int_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        return n.Literal(parse_number(str(children[0])), None, _span(self.file, children[0]))
+
+    def real_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        return n.Literal(float(str(children[0]).replace("_", "")), None,
+                         _span(self.file, children[0]))
+
+    def _typed(self, token: Token) -> tuple[str, bool | int | float]:
+        try:
+            return parse_typed(str(token))
+        except ValueError as exc:
+            raise BadLiteral(token, str(exc)) from None
+
+    def typed_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        type_name, value = self._typed(children[0])
+        return n.Literal(value, type_name, _span(self.file, children[0]))
+
+    def time_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        return n.Literal(parse_time(str(children[0])), "TIME", _span(self.file, children[0]))
+
+    def bool_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        return n.Literal(str(children[0]).upper() == "TRUE", "BOOL",
+                         _span(self.file, children[0]))
+
+
+def _expected(exc: UnexpectedToken | UnexpectedEOF) -> str:
+    parser = _parser()
+    shown = []
+    for name in sorted(exc.expected):
+        if name in _SHOWN:
+            shown.append(_SHOWN[name])
+            continue
+        try:
+            pattern = parser.get_terminal(name).pattern
+        except KeyError:
+            continue
+        if pattern.type == "str":
+            shown.append(f"'{pattern.value}'" if not pattern.value.isalpha()
+                         else pattern.value.upper())
+        else:
+            shown.append(name.lower().replace("_", " "))
+    shown = sorted(set(shown))
+    if len(shown) > 8:
+        shown = [*shown[:8], "…"]
+    return ", ".join(shown)
+
+
+def parse_source(text: str, file: str) -> n.SourceFile:
+    """Parse one file; raises :class:`LogicError` with a diagnostic on a syntax error."""
+    lines = text.splitlines()
+
+    def fail(code: StCode, message: str, line: int, column: int) -> LogicError:
+        source = lines[line - 1] if 0 < line <= len(lines) else ""
+        return LogicError([StDiagnostic(code, message, n.Span(file, line, column), source)])
+
+    try:
+        tree = _parser().parse(text)
+    except UnexpectedCharacters as exc:
+        pos = exc.pos_in_stream or 0
+        char = text[pos] if pos < len(text) else ""
+        raise fail(StCode.UNEXPECTED_CHARACTER, f"unexpected character {char!r}",
+                   exc.line, exc.column) from None
+    except UnexpectedEOF as exc:
+        line = len(lines) or 1
+        raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected {_expected(exc)}",
+                   line, len(lines[-1]) + 1 if lines else 1) from None
+    except UnexpectedToken as exc:
+        token = exc.token
+        if token.type == "$END":
+            line = len(lines) or 1
+            raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected "
+                       f"{_expected(exc)}", line, len(lines[-1]) + 1 if lines else 1) from None
+        raise fail(StCode.UNEXPECTED_TOKEN, f"unexpected {str(token)!r}; expected "
+                   f"{_expected(exc)}", token.line or 1, token.column or 1) from None
+    except UnexpectedInput as exc:  # pragma: no cover - the three above are all lark raises
+        raise fail(StCode.UNEXPECTED_TOKEN, str(exc), exc.line, exc.column) from None
+    try:
+        pous = _Build(file).transform(tree)
+    except Exception as exc:  # lark wraps a transformer's error in VisitError
+        cause = getattr(exc, "orig_exc", exc)
+        if isinstance(cause, BadLiteral):
+            raise fail(StCode.BAD_LITERAL, str(cause), cause.token.line or 1,
+                       cause.token.column or 1) from None
+        raise
+    return n.SourceFile(file, text, pous)
+
+
+def parse_file(path: str | Path) -> n.SourceFile:
+    path = Path(path)
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise LogicError([StDiagnostic(StCode.NOT_UTF8, f"byte 0x{data[exc.start]:02X} is not "
+                                       "UTF-8 (save the file as UTF-8)",
+                                       n.Span(str(path), line, column), "")]) from None
+    return parse_source(text.removeprefix("\ufeff"), str(path))
