@@ -202,7 +202,7 @@ class PlcRuntime:
                        "(plc.loop_limit)")
         elif isinstance(exc, RecursionError):
             message = "calls nested too deep"
-        elif isinstance(exc, ZeroDivisionError):
+        elif isinstance(exc, ZeroDivisionError) and "MOD" not in message:
             message = "division by zero"
         fault = PlcFault(message, span, line)
         self.status.state = PlcState.FAULT

@@ -821,10 +821,14 @@ class Compiler:
                 py = {"AND": "and", "OR": "or", "XOR": "!="}[op]
                 return E(f"({a.code} {py} {b.code})", "BOOL")
             t = common(a.type, b.type)
-            if t is None or t not in INTS:
+            if t is None or not is_int(t):
                 raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(a.type)} and "
                                  f"{_tname(b.type)}", x.span)
             py = {"AND": "&", "OR": "|", "XOR": "^"}[op]
+            if t == ANY_INT and a.const is not None and b.const is not None:
+                value = {"AND": a.const & b.const, "OR": a.const | b.const,
+                         "XOR": a.const ^ b.const}[op]
+                return E(repr(value), t, value)
             return E(f"({a.code} {py} {b.code})", t)
         if op in ("=", "<>", "<", ">", "<=", ">="):
             ok = (is_num(a.type) and is_num(b.type)) or ((a.type == b.type and isinstance(
