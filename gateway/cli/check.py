@@ -27,6 +27,12 @@ from ncgate.interpreter.nc110.checker import check_program
 from ncgate.interpreter.nc110.nodes import Exe, Num
 from ncgate.interpreter.nc110.parser import Program, program_name
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES
+from ncgate.plc.st.compiler import compile_logic
+from ncgate.plc.st.diagnostics import LogicError, StDiagnostic
+from ncgate.plc.st.nodes import SourceFile
+from ncgate.plc.st.parser import parse_file
+
+LOGIC_SUFFIX = ".st"  # Structured Text: PLC logic, checked as the PLC loads it
 
 CONFIG_BESIDE = "ncgate.toml"
 
@@ -36,7 +42,7 @@ CONFIG_BESIDE = "ncgate.toml"
 @dataclass(frozen=True, slots=True)
 class FileReport:
     path: Path
-    diagnostics: tuple[Diagnostic, ...]
+    diagnostics: tuple[Diagnostic | StDiagnostic, ...]
 
     @property
     def errors(self) -> int:
@@ -58,7 +64,8 @@ def expand(arguments: Sequence[str]) -> list[Path]:
             path = Path(match)
             if path.is_dir():
                 out.extend(sorted(p for p in path.iterdir() if p.is_file()
-                                  and p.suffix.lower() in PROGRAM_SUFFIXES[1:]))
+                                  and p.suffix.lower() in (*PROGRAM_SUFFIXES[1:],
+                                                           LOGIC_SUFFIX)))
             elif path.is_file():
                 out.append(path)
             else:
@@ -100,8 +107,14 @@ def check_files(
     for path in files:
         groups[None if config is not None else path.parent.resolve()].append(path)
     reports: dict[Path, FileReport] = {}
-    for paths in groups.values():
-        cfg = config if config is not None else config_for(paths[0], None)
+    for group in groups.values():
+        cfg = config if config is not None else config_for(group[0], None)
+        logic = [p for p in group if p.suffix.lower() == LOGIC_SUFFIX]
+        if logic:
+            reports.update(check_logic(logic, cfg))
+        paths = [p for p in group if p.suffix.lower() != LOGIC_SUFFIX]
+        if not paths:
+            continue
         storage = storage_of(cfg)
         programs: dict[Path, Program] = {}
         for path in paths:
@@ -122,6 +135,27 @@ def check_files(
             diagnostics = check_program(program, check_context(cfg, storage, runs_in))
             reports[path] = FileReport(path, tuple(diagnostics))
     return [reports[p] for p in files]
+
+
+def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
+    """Structured Text files, checked together (one may use another's function blocks)
+    against the config's image sizes and processes, as ``[plc] logic`` loads them."""
+    from ncgate.gateway.plc import logic_context
+
+    found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
+    parsed: list[SourceFile] = []
+    for path in files:
+        try:
+            parsed.append(parse_file(path))
+        except LogicError as exc:
+            found[str(path)].extend(exc.diagnostics)
+    if parsed:
+        try:
+            compile_logic(parsed, logic_context(config))
+        except LogicError as exc:
+            for d in exc.diagnostics:
+                found.setdefault(d.span.file, []).append(d)
+    return {path: FileReport(path, tuple(found[str(path)])) for path in files}
 
 
 def storage_files(config: Config) -> list[Path]:

@@ -13,6 +13,7 @@ from ncgate.gateway.cli.check import check_files, expand, storage_files
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.interpreter.diagnostics import InterpreterError, ProgramError
+from ncgate.plc.st.diagnostics import LogicError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -28,9 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"ncgate {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     check = commands.add_parser(
-        "check", help="parse and check part programs",
-        description="Parse and check part programs; print every diagnostic. With no FILE, "
-        "check every program on the config's storage devices.",
+        "check", help="parse and check part programs and PLC logic (.st)",
+        description="Parse and check part programs and Structured Text PLC logic (.st files, "
+        "checked together); print every diagnostic. With no FILE, check every program on the "
+        "config's storage devices and its [plc] logic.",
     )
     check.add_argument("files", nargs="*", metavar="FILE",
                        help="program files, directories or globs")
@@ -75,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the event loop: uvloop serves Modbus faster (bench/modbus.py); auto "
                      "takes it when installed (pip install 'ncgate[fast]')")
     run.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    run.add_argument("--cold", action="store_true", help="start the PLC logic without its "
+                     "stored VAR RETAIN values (they are cleared)")
 
     map_ = commands.add_parser("map", help="print the Modbus map in force",
                                description="The Modbus map in force, with 0-based and 1-based "
@@ -118,7 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ConfigError) as exc:
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except ProgramError as exc:
+    except (ProgramError, LogicError) as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
     except (InterpreterError, OSError, ValueError) as exc:
@@ -135,7 +139,11 @@ def _check(args: argparse.Namespace) -> int:
         example = find_example(args.example)
         args.files = [str(example.folder)]
     config = load_config(args.config) if args.config else None
-    files = expand(args.files) if args.files else storage_files(config or load_config(None))
+    if args.files:
+        files = expand(args.files)
+    else:
+        default = config or load_config(None)
+        files = storage_files(default) + list(default.plc.logic)
     if not files:
         raise UsageError("no program to check")
     if args.process is not None:
@@ -216,10 +224,10 @@ def _run(args: argparse.Namespace) -> int:
                              "'ncgate[fast]')") from None
         logging.getLogger("ncgate").info("event loop: uvloop %s",
                                          importlib.metadata.version("uvloop"))
-        uvloop.run(serve(config))
+        uvloop.run(serve(config, cold=args.cold))
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
-        asyncio.run(serve(config))
+        asyncio.run(serve(config, cold=args.cold))
     return EXIT_OK
 
 

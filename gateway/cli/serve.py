@@ -43,7 +43,7 @@ def describe(event: Event) -> str | None:
 HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace has them all)
 
 
-async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
+async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False) -> None:
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
     installed = []
@@ -68,7 +68,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None) -> None:
              else log.info)(line)
 
     try:
-        async with Gateway(config, listeners=[on_event]) as gw:
+        async with Gateway(config, listeners=[on_event], cold=cold) as gw:
             source = str(config.source) if config.source else "built-in default"
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,

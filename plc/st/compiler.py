@@ -757,7 +757,7 @@ class Compiler:
             hint = f" (convert it: {e.type}_TO_{t})"
         elif e.type == ANY_INT and t == "TIME":
             hint = " (write a duration: T#100ms)"
-        raise self.error(StCode.TYPE_MISMATCH, f"a {_tname(e.type)} where a {t} is expected"
+        raise self.error(StCode.TYPE_MISMATCH, f"{_tname(e.type)} where {t} is expected"
                          + hint, span)
 
     def expr(self, x: n.Expr, scope: Scope) -> E:
