@@ -24,7 +24,7 @@ from __future__ import annotations
 import enum
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -98,6 +98,8 @@ class PlcRuntime:
         self._saved: dict[str, tuple[str, Any]] | None = None
         self.programs: dict[str, Any] = {}
         self._runs: list[Any] = []
+        # Called after every scan and on a fault (a watch waits on these, never polls).
+        self.scan_listeners: list[Callable[[], None]] = []
         self.start()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -159,6 +161,8 @@ class PlcRuntime:
         status.last_scan_us = elapsed
         if elapsed > status.max_scan_us:
             status.max_scan_us = elapsed
+        for listener in self.scan_listeners:
+            listener()
 
     def _changes(self, sa: bytes, k: bytes, sy: list[int]) -> list[tuple[str, int, str, int]]:
         out: list[tuple[str, int, str, int]] = []
@@ -209,6 +213,8 @@ class PlcRuntime:
         self.status.fault = fault
         log.error("PLC fault: %s", fault)
         self.nc.fault(str(fault))
+        for listener in self.scan_listeners:
+            listener()
 
     # -- RETAIN ------------------------------------------------------------------------------------
 

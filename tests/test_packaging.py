@@ -43,7 +43,8 @@ def test_the_wheel_holds_one_top_level_package_with_its_data(wheel: Path) -> Non
                    "ncgate/config/programs/PROG91.nc",
                    "ncgate/interpreter/nc110/grammar/nc110.lark",
                    "ncgate/examples/scheme3/PROG91.nc", "ncgate/examples/scheme3/script.toml",
-                   "ncgate/examples/errors/README.md", "ncgate/py.typed"):
+                   "ncgate/examples/errors/README.md", "ncgate/py.typed",
+                   "ncgate/plc/st/grammar/st.lark", "ncgate/examples/plclogic/plc.st"):
         assert needed in names
 
 
@@ -116,8 +117,8 @@ def test_examples_are_listed_and_run(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["examples"]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert [line.split()[:2] for line in listed] == [
-        ["conditional", "COND1"], ["errors", "-"], ["mutual", "MUT1"], ["scheme3", "PROG91"],
-        ["section4", "PR90"]]
+        ["conditional", "COND1"], ["errors", "-"], ["mutual", "MUT1"], ["plclogic", "PROG91"],
+        ["scheme3", "PROG91"], ["section4", "PR90"]]
     assert main(["sim", "--example", "scheme3"]) == 0
     assert "every program ended" in capsys.readouterr().out
     assert main(["check", "--example", "errors"]) == 1

@@ -25,6 +25,7 @@ from ncgate.gateway.errors import VirtualPLCError
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.wiring import parse_assignment
 from ncgate.interpreter.engine import ProcessState
+from ncgate.plc.scan import PlcState
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,6 +35,18 @@ class SndSeen:
     n: int  # the N number of the SND block (0 when none)
     seq: int  # its sequence number in the SND log (1, 2, ... since the gateway started)
     id: int = 0  # an ISG signal's number (0 for an SND)
+
+
+@dataclass(frozen=True, slots=True)
+class PlcSeen:
+    """The PLC status as a Modbus client reads it."""
+
+    state: PlcState
+    scans: int
+    last_scan_us: int
+    max_scan_us: int
+    overruns: int
+    fault_line: int
 
 
 class VirtualPLC:
@@ -141,6 +154,12 @@ class VirtualPLC:
             now = await self.state(process)
             raise VirtualPLCError(f"P{process} not {wanted.name} in {timeout_s:g} s "
                                   f"(it is {now.name})") from None
+
+    async def plc_status(self) -> PlcSeen:
+        """The PLC status block (input registers ``modbus.map.plc_status``..+9)."""
+        r = await self._input(self.map.PLC_BASE, 10)
+        return PlcSeen(PlcState(r[0]), r[1] << 16 | r[2], r[3] << 16 | r[4], r[5] << 16 | r[6],
+                       r[7] << 16 | r[8], r[9])
 
     async def command(self, word: int) -> None:
         """1 cycle start, 2 feed hold, 3 reset."""

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
     from ncgate.gateway.testing.canopen_kit import CanopenMaster
     from ncgate.gateway.testing.modbus_kit import VirtualPLC
+    from ncgate.gateway.testing.plc_kit import PlcWatch
 
 try:
     import pytest_asyncio
@@ -84,6 +85,13 @@ if HAVE_PYTEST_ASYNCIO:
         yield master
         master.close()
 
+    @pytest.fixture
+    def plc_watch(ncgate_gateway: Gateway) -> PlcWatch:
+        """The gateway's PLC logic variables: ``read(path)``, ``await until(path, value)``."""
+        from ncgate.gateway.testing.plc_kit import PlcWatch
+
+        return PlcWatch(ncgate_gateway)
+
     @pytest_asyncio.fixture
     async def virtual_plc(ncgate_gateway: Gateway) -> AsyncIterator[VirtualPLC]:
         """A Modbus client connected to ``ncgate_gateway``, with PLC helpers."""
@@ -102,6 +110,10 @@ else:
 
     @pytest.fixture
     def canopen_master() -> None:
+        pytest.fail(_MISSING)
+
+    @pytest.fixture
+    def plc_watch() -> None:
         pytest.fail(_MISSING)
 
     @pytest.fixture

@@ -683,7 +683,8 @@ class Engine(SyncRules):
         """The wait is over: resume the stage that waited."""
         if wait.timeout is not None:
             wait.timeout.cancel()
-        self._record(ev.Resume, self.now, p.number, wait.where, by)
+        self._record(ev.Resume, self.now, p.number, wait.where, by,
+                     wait.writer if by == "cond" else None)
         if p.dec_wait is wait:
             p.dec_wait = None
             p.dec_block = None

@@ -69,6 +69,7 @@ class Resume(NamedTuple):
     proc: int
     where: Where | None
     by: int | str  # a process number, "cond" or "fieldbus"
+    writer: str | None = None  # "cond": who wrote the value that released it ("plc", …)
 
     @property
     def kind(self) -> str:
@@ -203,7 +204,10 @@ def as_dict(event: Event) -> dict[str, Any]:
     if where is not None:
         out["prog"], out["line"], out["n"] = where
     for name in event._fields[4:]:
-        out[name] = _json(getattr(event, name))
+        value = getattr(event, name)
+        if value is None and name == "writer":
+            continue  # only a condition's resume names the writer
+        out[name] = _json(value)
     return out
 
 

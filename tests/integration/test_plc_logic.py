@@ -1,0 +1,274 @@
+"""PLC logic in Structured Text, as users run it: the shipped example under ``sim`` and under
+``run`` with a Modbus client and a CANopen master watching, a fault raised and cleared over
+Modbus, the stall rule with logic, and RETAIN across a real ``kill -9``."""
+
+from __future__ import annotations
+
+import asyncio
+import random
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymodbus.client import AsyncModbusTcpClient
+
+from ncgate.config import load_config
+from ncgate.config.script import Script
+from ncgate.gateway import Gateway
+from ncgate.gateway.sim import run_sim
+from ncgate.gateway.testing.canopen_kit import CanopenMaster
+from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.gateway.testing.plc_kit import PlcFaulted, PlcWatch
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.plc.scan import PlcState
+
+from ..conftest import EXAMPLES
+
+EXAMPLE = EXAMPLES / "plclogic"
+
+
+def waits_and_resumes(events: list[dict[str, Any]]) -> list[tuple[float, dict[str, Any]]]:
+    """Each wait of P2 at N40 with the resume that ended it."""
+    out = []
+    for i, e in enumerate(events):
+        if e["event"] == "wait" and e["proc"] == 2 and e.get("n") == 40:
+            resume = next(r for r in events[i:] if r["event"] == "resume" and r["proc"] == 2)
+            out.append((e["t"], resume))
+    return out
+
+
+def test_the_example_under_sim_is_played_by_its_logic() -> None:
+    result = run_sim(load_config(EXAMPLE / "ncgate.toml"), "PROG91", Script(None, ()))
+    assert result.outcome == "idle" and result.exit_status == 0
+    events = result.events
+    answered = waits_and_resumes(events)
+    assert len(answered) == 2  # the logic takes SA10 back, so P2 waits in both cycles
+    for waited_at, resume in answered:
+        assert resume["by"] == "cond" and resume["writer"] == "plc"
+        # TON 500 ms from the first 10 ms scan that saw the wait: 0.5 s .. 0.51 s later
+        assert 0.5 <= resume["t"] - waited_at <= 0.51 + 1e-9
+    plc_writes = [(e["var"], e["value"]) for e in events if e["event"] == "write"]
+    assert [w for w in plc_writes if w[0] == "SYVAR20"] == [("SYVAR20", 1), ("SYVAR20", 2)]
+    assert not [w for w in plc_writes if w[0] == "SA11"]  # the timeout bit never rises
+    assert {e["who"] for e in events if e["event"] == "write" and e["proc"] == 0} == {"plc"}
+    assert result.runtime.plc is not None and result.runtime.plc.read("cell.cycles") == 2
+
+
+def test_a_simulation_with_logic_is_deterministic() -> None:
+    config = load_config(EXAMPLE / "ncgate.toml")
+    first = run_sim(config, "PROG91", Script(None, ())).events
+    second = run_sim(config, "PROG91", Script(None, ())).events
+    assert first == second
+
+
+async def test_the_example_under_run_with_a_modbus_client_and_a_canopen_master() -> None:
+    config = ncgate_test_config(EXAMPLE / "ncgate.toml", **{"nc.time_scale": 30.0})
+    async with Gateway(config) as gw:
+        watch = PlcWatch(gw)
+        master = CanopenMaster(config)
+        host, port = gw.modbus_address
+        try:
+            async with VirtualPLC(host, port, config) as plc:
+                assert (await plc.plc_status()).state is PlcState.RUNNING
+                await plc.command(1)  # cycle start: PROG91 in process 1
+                assert await watch.until("cell.cycles", 2, timeout_s=30) == 2
+                assert await plc.get("SYVAR20") == 2
+                await gw.wait_idle(timeout_s=30)
+                seen = await plc.plc_status()
+                assert seen.state is PlcState.RUNNING and seen.scans >= 1
+                assert seen.max_scan_us >= seen.last_scan_us > 0 or seen.last_scan_us == 0
+                assert seen.fault_line == 0
+            state = await master.upload(0x2700, 1)
+            scans = int.from_bytes(await master.upload(0x2700, 2), "little")
+            assert state == bytes([1]) and scans >= seen.scans
+        finally:
+            master.close()
+        answered = waits_and_resumes(gw.trace)
+        assert [r["writer"] for _, r in answered] == ["plc", "plc"]
+        assert watch.read("cell.answer.PT") == 500
+
+
+FAULTY = """PROGRAM main
+VAR q : INT; END_VAR
+q := 100 / SYVAR[1];
+SYVAR[2] := q;
+END_PROGRAM
+"""
+
+
+async def test_a_fault_is_raised_and_cleared_over_modbus(tmp_path: Path) -> None:
+    (tmp_path / "logic.st").write_text(FAULTY)
+    (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "logic.st"\n[canopen]\n'
+                                          'enabled = false\n')
+    config = ncgate_test_config(tmp_path / "ncgate.toml")
+    async with Gateway(config) as gw:
+        watch = PlcWatch(gw)
+        host, port = gw.modbus_address
+        async with VirtualPLC(host, port, config) as plc:
+            # SYVAR1 = 0 at start: the first scan faults at once.
+            with pytest.raises(PlcFaulted, match=r"logic.st:3:1: division by zero"):
+                await watch.until("main.q", 25)
+            seen = await plc.plc_status()
+            assert (seen.state, seen.fault_line) == (PlcState.FAULT, 3)
+            alarms = [e for e in gw.trace if e["event"] == "alarm" and e["proc"] == 0]
+            assert alarms[-1]["code"] == "AL160"
+            assert "logic.st:3:1: division by zero" in alarms[-1]["message"]
+            await plc.set("SYVAR1", 4)
+            assert gw.plc.status.state is PlcState.FAULT  # no scan runs until a reset
+            await plc.command(3)  # reset: the PLC starts again
+            assert await watch.until("main.q", 25) == 25
+            assert await plc.get("SYVAR2") == 25
+            seen = await plc.plc_status()
+            assert (seen.state, seen.fault_line) == (PlcState.RUNNING, 0)
+            await plc.set("SYVAR1", 0)  # again: outputs hold at the last good scan's
+            with pytest.raises(PlcFaulted):
+                await watch.until("main.q", -1)
+            assert await plc.get("SYVAR2") == 25
+
+
+STALL_PROGRAM = "N10(WAI,SA12=1)\nN20G4\nN30M30\n"
+
+
+@pytest.mark.parametrize(("answer_ms", "outcome"), [(3000, "idle"), (None, "stall")])
+def test_a_wait_the_logic_may_release_is_a_stall_only_after_stall_s(
+        tmp_path: Path, answer_ms: int | None, outcome: str) -> None:
+    (tmp_path / "MAIN.nc").write_text(STALL_PROGRAM)
+    answer = (f"t(IN := TRUE, PT := T#{answer_ms}ms); SA[12] := t.Q;" if answer_ms
+              else "SA[13] := NOT SA[13] AND FALSE;")
+    (tmp_path / "plc.st").write_text(f"PROGRAM p VAR t : TON; END_VAR {answer} END_PROGRAM")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "MAIN"\nstall_s = 5\n'
+                                          '[plc]\nlogic = "plc.st"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "MAIN", Script(None, ()))
+    assert result.outcome == outcome
+    if outcome == "stall":
+        stall = next(e for e in result.events if e["event"] == "stall")
+        assert 5.0 <= stall["t"] <= 5.0 + 0.01 + 1e-9  # stall_s after the last change (t=0)
+    else:
+        resume = next(e for e in result.events if e["event"] == "resume")
+        assert resume["writer"] == "plc" and 3.0 <= resume["t"] <= 3.01 + 1e-9
+
+
+RETAINED = """PROGRAM keep
+VAR edge : R_TRIG; END_VAR
+VAR RETAIN count : INT; spin : DINT; END_VAR
+edge(CLK := SA[0]);
+IF edge.Q THEN count := count + 1; END_IF
+spin := spin + 1;                       (* a RETAIN value that changes every scan *)
+SYVAR[0] := count;
+SYVAR[1] := DINT_TO_INT(spin MOD 30000);
+END_PROGRAM
+"""
+
+
+async def start_run(config: Path, *more: str) -> tuple[asyncio.subprocess.Process, int]:
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "ncgate", "run", "--config", str(config), *more,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    async with asyncio.timeout(20):
+        while True:
+            line = (await proc.stdout.readline()).decode()
+            assert line, "ncgate run ended early:\n" + "".join(lines)
+            lines.append(line)
+            found = re.search(r"Modbus TCP on [\d.]+:(\d+)", line)
+            if found:
+                return proc, int(found.group(1))
+
+
+async def holding(client: AsyncModbusTcpClient, address: int, count: int = 1) -> list[int]:
+    r = await client.read_holding_registers(address, count=count, device_id=1)
+    assert not r.isError()
+    return list(r.registers)
+
+
+async def until_scanned(client: AsyncModbusTcpClient) -> None:
+    """Until the PLC status shows a scan (a Modbus client can only poll)."""
+    async with asyncio.timeout(10):
+        while True:
+            r = await client.read_input_registers(300, count=3, device_id=1)
+            if r.registers[0] == 1 and (r.registers[1] << 16 | r.registers[2]) > 0:
+                return
+            await asyncio.sleep(0.01)
+
+
+async def scans(client: AsyncModbusTcpClient) -> int:
+    r = await client.read_input_registers(301, count=2, device_id=1)
+    return int(r.registers[0] << 16 | r.registers[1])
+
+
+async def after_a_scan(client: AsyncModbusTcpClient) -> None:
+    """Until a whole scan has run since now: the PLC has read what was just written (an
+    input shorter than a scan is not seen, as on any PLC)."""
+    first = await scans(client)
+    async with asyncio.timeout(10):
+        while await scans(client) < first + 2:
+            await asyncio.sleep(0.005)
+
+
+async def until_value(client: AsyncModbusTcpClient, address: int, wanted: int) -> None:
+    try:
+        async with asyncio.timeout(10):
+            while (await holding(client, address))[0] != wanted:
+                await asyncio.sleep(0.005)
+    except TimeoutError:
+        now = await holding(client, address)
+        raise AssertionError(f"holding {address} is {now}, not {wanted}") from None
+
+
+async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None:
+    (tmp_path / "keep.st").write_text(RETAINED)
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[plc]\nlogic = "keep.st"\n[modbus]\nport = 0\n[canopen]\n'
+                      'enabled = false\n')
+    rng = random.Random(12)
+    count = 0
+    spin_seen = 0
+    for _ in range(4):
+        proc, port = await start_run(config)
+        client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+        assert await client.connect()
+        try:
+            await until_scanned(client)
+            # what the last process committed is what this one starts from
+            assert (await holding(client, 1000))[0] == count
+            assert (await holding(client, 1001))[0] >= spin_seen
+            for _ in range(2):  # two more rising edges of SA0, each seen committed
+                await client.write_coil(0, True, device_id=1)
+                count += 1
+                await until_value(client, 1000, count)
+                await client.write_coil(0, False, device_id=1)
+                await after_a_scan(client)
+            spin_seen = (await holding(client, 1001))[0]
+            await client.write_coil(0, True, device_id=1)  # a third edge, and kill at once:
+            await asyncio.sleep(rng.uniform(0, 0.02))      # a random moment around its save
+        finally:
+            client.close()
+            proc.kill()
+            await proc.wait()
+        assert proc.returncode == -9
+        probe_proc, probe_port = await start_run(config)
+        probe = AsyncModbusTcpClient("127.0.0.1", port=probe_port, retries=0)
+        assert await probe.connect()
+        try:
+            await until_scanned(probe)
+            after = (await holding(probe, 1000))[0]
+            assert after in (count, count + 1)  # the third edge: saved whole, or not at all
+            count = after
+        finally:
+            probe.close()
+            probe_proc.kill()
+            await probe_proc.wait()
+    # --cold: the stored values are dropped
+    proc, port = await start_run(config, "--cold")
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    assert await client.connect()
+    try:
+        await until_scanned(client)
+        assert (await holding(client, 1000))[0] == 0
+    finally:
+        client.close()
+        proc.kill()
+        await proc.wait()
