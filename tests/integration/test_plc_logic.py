@@ -204,14 +204,14 @@ async def after_a_scan(client: AsyncModbusTcpClient) -> None:
     input shorter than a scan is not seen, as on any PLC)."""
     first = await scans(client)
     async with asyncio.timeout(10):
-        while await scans(client) < first + 2:
+        while await scans(client) < first + 2:  # noqa: ASYNC110 - Modbus: read to learn
             await asyncio.sleep(0.005)
 
 
 async def until_value(client: AsyncModbusTcpClient, address: int, wanted: int) -> None:
     try:
         async with asyncio.timeout(10):
-            while (await holding(client, address))[0] != wanted:
+            while (await holding(client, address))[0] != wanted:  # noqa: ASYNC110 - as above
                 await asyncio.sleep(0.005)
     except TimeoutError:
         now = await holding(client, address)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity, codes_markdown
+from ncgate.plc.st.diagnostics import StCode
+from ncgate.plc.st.diagnostics import codes_markdown as st_codes_markdown
 
 from ...conftest import ROOT
 
@@ -16,6 +18,14 @@ def test_codes_are_unique_and_well_formed() -> None:
     assert len({int(a) for a in AlarmCode}) == len(AlarmCode)
 
 
+def test_st_codes_are_unique_and_well_formed() -> None:
+    codes = [c.code for c in StCode]
+    assert len(codes) == len(set(codes))
+    assert all(c.startswith("ST") and c[2:].isdigit() and len(c) == 5 for c in codes)
+
+
 def test_docs_table_is_the_code_table() -> None:
-    assert (ROOT / "docs" / "diagnostics.md").read_text() == codes_markdown(), (
-        "docs/diagnostics.md is stale: regenerate it from interpreter.codes.codes_markdown()")
+    assert (ROOT / "docs" / "diagnostics.md").read_text() == (
+        codes_markdown() + st_codes_markdown()), (
+        "docs/diagnostics.md is stale: regenerate it from interpreter.codes.codes_markdown() "
+        "+ plc.st.diagnostics.codes_markdown()")
