@@ -967,24 +967,23 @@ class Compiler:
             t = self._same(x, values)
             if not is_num(t) and t != "TIME":
                 raise self.error(StCode.TYPE_MISMATCH, f"{key} of {t}", x.span)
-            codes = ", ".join(self.coerce(v, t, x.span) if t not in (ANY_INT, ANY_REAL)
-                              else v.code for v in values)
-            return E(f"{key.lower()}({codes})", t)
+            codes = ", ".join(self._as(v, t, x) for v in values)
+            return E(f"{key.lower()}({codes})", t, None, _exact(values))
         if key == "LIMIT":
             values = self._args(x, scope, 3)
             t = self._same(x, values)
             if not is_num(t) and t != "TIME":
                 raise self.error(StCode.TYPE_MISMATCH, f"LIMIT of {t}", x.span)
-            mn, v, mx = (self.coerce(e, t, x.span) if t not in (ANY_INT, ANY_REAL) else e.code
-                         for e in values)
-            return E(f"min(max({v}, {mn}), {mx})", t)
+            mn, v, mx = (self._as(e, t, x) for e in values)
+            return E(f"min(max({v}, {mn}), {mx})", t, None, _exact(values))
         if key == "SEL":
             g, a, b = self._args(x, scope, 3)
             if g.type != "BOOL":
                 raise self.error(StCode.TYPE_MISMATCH, f"SEL selects with a BOOL, not "
                                  f"{_tname(g.type)}", x.args[0].span)
             t = self._same(x, [a, b])
-            return E(f"({self._as(b, t, x)} if {g.code} else {self._as(a, t, x)})", t)
+            return E(f"({self._as(b, t, x)} if {g.code} else {self._as(a, t, x)})", t, None,
+                     _exact([a, b]))
         if key == "MUX":
             values = self._args(x, scope, None, 2)
             k, rest = values[0], values[1:]
@@ -993,7 +992,7 @@ class Compiler:
                                  f"{_tname(k.type)}", x.span)
             t = self._same(x, rest)
             items = ", ".join(self._as(v, t, x) for v in rest)
-            return E(f"_mux({k.code}, ({items},))", t)
+            return E(f"_mux({k.code}, ({items},))", t, None, _exact(rest))
         # SHL SHR ROL ROR
         a, b = self._args(x, scope, 2)
         if a.type not in BITS and a.type not in UNSIGNED:
@@ -1006,7 +1005,12 @@ class Compiler:
         return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
 
     def _as(self, e: E, t: Type, x: n.Call) -> str:
-        return e.code if t in (ANY_INT, ANY_REAL) else self.coerce(e, t, x.span)
+        """An argument of a standard function: checked against the common type, but not
+        wrapped -- the functions compute on exact values, like the operators; the result
+        wraps where it is stored."""
+        if t in (ANY_INT, ANY_REAL):
+            return e.code
+        return self.coerce(E(e.code, e.type, e.const, True), t, x.span)
 
     def convert(self, x: n.Call, src: str, dst: str, scope: Scope) -> E:
         (a,) = self._args(x, scope, 1)
@@ -1201,6 +1205,10 @@ def _fold(op: str, a: Any, b: Any, real: bool) -> Any:
     if op == "/":
         return a / b if real else _idiv(a, b)
     return _mod(a, b)
+
+
+def _exact(values: Sequence[E]) -> bool:
+    return all(v.exact for v in values)
 
 
 def _conversion(key: str) -> tuple[str, str] | None:
