@@ -17,7 +17,7 @@ from typing import Any
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
-from ncgate.plc.st.compiler import Compiler, Context, IterationGuard, _idiv, _mod, _pow
+from ncgate.plc.st.compiler import Compiler, Context, IterationGuard, _fold, _pow
 from ncgate.plc.st.types import ArrayOf, FbOf, Type, default_value
 
 
@@ -258,21 +258,10 @@ class Walker:
                 return a <= b
             if op == ">=":
                 return a >= b
-            if op == "+":
-                return a + b
-            if op == "-":
-                return a - b
-            if op == "*":
-                return a * b
-            if op == "/":
-                if isinstance(a, float) or isinstance(b, float):
-                    if b == 0:
-                        raise ZeroDivisionError("division by zero")
-                    return a / b
-                return _idiv(a, b)
-            if op == "MOD":
-                return _mod(a, b)
-            return _pow(a, b)
+            if op == "**":
+                return _pow(a, b)
+            # + - * / MOD: as the compiler folds constants (a float / 0 raises too)
+            return _fold(op, a, b, isinstance(a, float) or isinstance(b, float))
         key = x.name.upper()
         args = [self.value(a.expr, prog) for a in x.args if a.expr is not None]
         if key == "ABS":

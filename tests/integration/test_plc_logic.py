@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import random
-import re
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +23,7 @@ from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.plc.scan import PlcState
 
 from ..conftest import EXAMPLES
+from .test_cli_run import start_run
 
 EXAMPLE = EXAMPLES / "plclogic"
 
@@ -162,22 +161,6 @@ END_PROGRAM
 """
 
 
-async def start_run(config: Path, *more: str) -> tuple[asyncio.subprocess.Process, int]:
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "ncgate", "run", "--config", str(config), *more,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
-    assert proc.stdout is not None
-    lines: list[str] = []
-    async with asyncio.timeout(20):
-        while True:
-            line = (await proc.stdout.readline()).decode()
-            assert line, "ncgate run ended early:\n" + "".join(lines)
-            lines.append(line)
-            found = re.search(r"Modbus TCP on [\d.]+:(\d+)", line)
-            if found:
-                return proc, int(found.group(1))
-
-
 async def holding(client: AsyncModbusTcpClient, address: int, count: int = 1) -> list[int]:
     r = await client.read_holding_registers(address, count=count, device_id=1)
     assert not r.isError()
@@ -227,7 +210,7 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
     count = 0
     spin_seen = 0
     for _ in range(4):
-        proc, port = await start_run(config)
+        proc, port, _ = await start_run(config)
         client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
         assert await client.connect()
         try:
@@ -249,7 +232,7 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
             proc.kill()
             await proc.wait()
         assert proc.returncode == -9
-        probe_proc, probe_port = await start_run(config)
+        probe_proc, probe_port, _ = await start_run(config)
         probe = AsyncModbusTcpClient("127.0.0.1", port=probe_port, retries=0)
         assert await probe.connect()
         try:
@@ -262,7 +245,7 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
             probe_proc.kill()
             await probe_proc.wait()
     # --cold: the stored values are dropped
-    proc, port = await start_run(config, "--cold")
+    proc, port, _ = await start_run(config, "--cold")
     client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
     assert await client.connect()
     try:
