@@ -255,3 +255,47 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
         client.close()
         proc.kill()
         await proc.wait()
+
+
+def test_scans_keep_their_grid_and_count_the_ones_the_loop_missed(tmp_path: Path) -> None:
+    """On the wall clock: scan k is due at k * scan_ms.  The scan due at 20 ms runs with the
+    wall clock at 55 ms: the scans due at 30 and 40 ms are a whole period late or more and
+    are skipped (two overruns); the one due at 50 ms, half a period late, runs; then the grid
+    goes on."""
+    from ncgate.gateway.plc import start_plc
+    from ncgate.gateway.wiring import build_runtime
+
+    (tmp_path / "p.st").write_text("PROGRAM p VAR n : DINT; END_VAR n := n + 1; END_PROGRAM")
+    (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "p.st"\nscan_ms = 10\n')
+    config = load_config(tmp_path / "ncgate.toml")
+    runtime = build_runtime(config, closed=False)
+    engine = runtime.engine
+    lateness = {0.02: 0.035}  # the scan due at 20 ms runs with the wall clock at 55 ms
+    scanned: list[float] = []
+    started = start_plc(config, engine, runtime.image, closed=False,
+                        wall=lambda: engine.now + lateness.get(round(engine.now, 3), 0.0))
+    assert started is not None
+    plc, _ = started
+    plc.scan_listeners.append(lambda: scanned.append(round(engine.now, 3)))
+    engine.advance_to(0.1)
+    assert scanned == [0.0, 0.01, 0.02, 0.05, 0.06, 0.07, 0.08, 0.09, 0.1]
+    assert plc.status.overruns == 2 and plc.read("p.n") == 9
+
+
+def test_programs_run_in_the_configured_order(tmp_path: Path) -> None:
+    from ncgate.config import ConfigError
+
+    (tmp_path / "MAIN.nc").write_text("N10(DLY,0.1)\nN20M30\n")  # a few scans long
+    (tmp_path / "two.st").write_text(
+        "PROGRAM first SYVAR[3] := 1; SYVAR[4] := SYVAR[3]; END_PROGRAM\n"
+        "PROGRAM second SYVAR[3] := 2; END_PROGRAM\n")
+    config_file = tmp_path / "ncgate.toml"
+    for order, last, copied in ((["first", "second"], 2, 1), (["second", "first"], 1, 1)):
+        config_file.write_text(f'[nc]\nmain = "MAIN"\n[plc]\nlogic = "two.st"\n'
+                               f"programs = {order!r}\n".replace("'", '"'))
+        result = run_sim(load_config(config_file), "MAIN", Script(None, ()))
+        assert result.runtime.image.read("SYVAR", 3, "IN") == last
+        assert result.runtime.image.read("SYVAR", 4, "IN") == copied
+    config_file.write_text('[plc]\nlogic = "two.st"\nprograms = ["first", "thrid"]\n')
+    with pytest.raises(ConfigError, match=r"plc\.programs\[1\]: no PROGRAM thrid"):
+        run_sim(load_config(config_file), "MAIN", Script(None, ()))

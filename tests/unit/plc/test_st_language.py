@@ -268,6 +268,7 @@ def test_nc_inputs_and_outputs() -> None:
         st := NC.P[2].STATE; waiting := NC.P[2].WAITING; ev := NC.EVENTS;
         sender := NC.LAST_SND.SENDER; seq := NC.LAST_SND.SEQ;
         NC.START := SA[0];
+        NC.HOLD := SA[2];
         IF SA[1] THEN NC.SEND(4, 2); END_IF
     """, "st, sender : INT; waiting : BOOL; ev, seq : UDINT;")
     plc = Plc(source)
@@ -285,6 +286,9 @@ def test_nc_inputs_and_outputs() -> None:
     plc.image.write([("SA", 0, "bit", 1)], "test")
     plc.scan()
     assert plc.nc.commands == [1, 1]
+    plc.image.write([("SA", 2, "bit", 1)], "test")  # HOLD rises while START stays TRUE:
+    plc.scan()                                       # a feed hold, and no new cycle start
+    assert plc.nc.commands == [1, 1, 2]
     plc.nc.refuse_sends = True
     plc.scan()
     assert plc.nc.hazards == ["PLC NC.SEND(4, 2): process 2 runs no program"]
