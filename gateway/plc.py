@@ -16,6 +16,7 @@ a stall; in ``run`` the wall-clock driver reports the stall on the same rule.
 from __future__ import annotations
 
 import logging
+import sqlite3
 from collections.abc import Callable
 from pathlib import Path
 
@@ -168,9 +169,14 @@ def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
     store = None
     if not closed and any(v.retain for table in logic.programs.values()
                           for v in table.values()):
-        store = RetainStore(plc.retain_file or default_path(config.source))
-        if cold:
-            store.clear()
+        path = plc.retain_file or default_path(config.source)
+        try:
+            store = RetainStore(path)
+            if cold:
+                store.clear()
+        except sqlite3.Error as exc:
+            raise ConfigError(f"{config.source or '<config>'}: plc.retain_file: cannot keep "
+                              f"RETAIN values in {path}: {exc}") from None
     runtime = PlcRuntime(logic, image, EngineNc(engine, on_command), order, plc.loop_limit,
                          store)
     driver = ScanDriver(engine, runtime, plc.scan_ms, wall=wall, closed=closed,

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import sqlite3
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -31,7 +32,7 @@ from typing import Any, Protocol
 from ncgate.plc.image import IOImage
 from ncgate.plc.retain import RetainStore
 from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar
-from ncgate.plc.st.types import ArrayOf, FbOf
+from ncgate.plc.st.types import ArrayOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
 
@@ -96,6 +97,7 @@ class PlcRuntime:
         self._retained = [(p, v) for p, table in logic.programs.items()
                           for v in table.values() if v.retain]
         self._saved: dict[str, tuple[str, Any]] | None = None
+        self._save_failed = False
         self.programs: dict[str, Any] = {}
         self._runs: list[Any] = []
         # Called after every scan and on a fault (a watch waits on these, never polls).
@@ -229,7 +231,17 @@ class PlcRuntime:
     def _save_retained(self) -> None:
         values = self.retained_values()
         if values != self._saved and self.retain is not None:
-            self.retain.save(values)
+            try:
+                self.retain.save(values)
+            except sqlite3.Error as exc:  # a full or vanished disk: the PLC scans on
+                if not self._save_failed:
+                    log.error("RETAIN values not saved to %s: %s (the PLC goes on; saving "
+                              "is retried on the next change)", self.retain.path, exc)
+                self._save_failed = True
+                return
+            if self._save_failed:
+                log.info("RETAIN values saved again to %s", self.retain.path)
+            self._save_failed = False
             self._saved = values
 
     def _apply_retained(self, stored: dict[str, tuple[str, Any]]) -> None:
@@ -304,4 +316,7 @@ def _fits(value: Any, t: Any) -> bool:
         return isinstance(value, bool)
     if t in ("REAL", "LREAL"):
         return isinstance(value, float | int) and not isinstance(value, bool)
-    return isinstance(value, int) and not isinstance(value, bool)
+    if not isinstance(value, int) or isinstance(value, bool):
+        return False
+    lo, hi = limits("DINT" if t == "TIME" else t)
+    return lo <= value <= hi
