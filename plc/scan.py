@@ -149,8 +149,8 @@ class PlcRuntime:
         try:
             for program in self._runs:
                 program()
-        except (ArithmeticError, IndexError, ValueError, IterationGuard, RecursionError) as exc:
-            self._fault(exc)
+        except Exception as exc:  # any error of the logic is a FAULT, never a
+            self._fault(exc)       # crash of the loop that serves the fieldbus
             return
         changes = self._changes(before_sa, before_k, before_sy)
         if changes:
