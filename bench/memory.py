@@ -10,6 +10,8 @@ the sample at the end of the warm-up (target: within 10 %, i.e. <= 1.10x).
 
     python3 dev.py bench                     # every benchmark, this one for 180 s
     .venv/bin/python bench/memory.py --seconds 600
+    .venv/bin/python bench/memory.py --plc   # the same with PLC logic scanning (a RETAIN
+                                             # save and image writes every scan)
     # the same load against another checkout (e.g. the code before the ring):
     PYTHONPATH=/path/to/old .venv/bin/python bench/memory.py --module gateway
 """
@@ -37,13 +39,29 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def write_cell(folder: Path, port: int, time_scale: float) -> Path:
+# --plc: ST logic that writes the image and a RETAIN value on every scan (a save per scan).
+LOGIC = """PROGRAM load
+VAR t : ARRAY[0..9] OF TON; i : INT; END_VAR
+VAR RETAIN scans : DINT; END_VAR
+scans := scans + 1;
+FOR i := 0 TO 9 DO t[i](IN := NOT t[i].Q, PT := T#50ms); SA[900 + i] := t[i].Q; END_FOR
+SK[400] := DINT_TO_BYTE(scans);
+SYVAR[200] := DINT_TO_INT(scans MOD 30000);
+END_PROGRAM
+"""
+
+
+def write_cell(folder: Path, port: int, time_scale: float, plc: bool = False) -> Path:
     (folder / "LOOP.nc").write_text(MAIN)
     (folder / "PEER.nc").write_text(PEER)
     config = folder / "ncgate.toml"
+    logic = ""
+    if plc:
+        (folder / "load.st").write_text(LOGIC)
+        logic = '[plc]\nlogic = "load.st"\n'
     config.write_text(f'[nc]\nmain = "LOOP"\nautostart = true\ntime_scale = {time_scale}\n'
                       f'[nc.storage]\nMP0 = "."\n[modbus]\nport = {port}\nmax_clients = 64\n'
-                      f'[canopen]\nchannel = "bench-memory-{os.getpid()}"\n')
+                      f'[canopen]\nchannel = "bench-memory-{os.getpid()}"\n{logic}')
     return config
 
 
@@ -124,7 +142,7 @@ async def wait_listening(port: int, deadline_s: float = 30.0) -> None:
 async def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         port = free_port()
-        config = write_cell(Path(tmp), port, args.time_scale)
+        config = write_cell(Path(tmp), port, args.time_scale, plc=args.plc)
         server = await asyncio.create_subprocess_exec(
             sys.executable, "-m", args.module, "run", "--config", str(config),
             stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL)
@@ -172,6 +190,8 @@ def main() -> int:
     parser.add_argument("--reconnect-s", type=float, default=2.0)
     parser.add_argument("--time-scale", type=float, default=10.0)
     parser.add_argument("--module", default="ncgate", help="python -m MODULE run")
+    parser.add_argument("--plc", action="store_true", help="with PLC logic scanning every "
+                        "10 ms, writing the image and a RETAIN value each scan")
     return asyncio.run(run(parser.parse_args()))
 
 
