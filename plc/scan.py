@@ -135,14 +135,17 @@ class PlcRuntime:
             return
         started = time.perf_counter_ns()
         image, ns = self.image, self._ns
-        before_sa, before_k, before_sy = bytes(image.sa), bytes(image.k), list(image.syvar)
-        self._sa[:] = before_sa
-        self._k[:] = before_k
-        self._sy[:] = before_sy
-        nc = self.nc
-        ns["_NCS"] = nc.snapshot()
-        ns["_NCE"] = nc.events() & 0xFFFFFFFF
-        ns["_NCL"] = nc.last_snd()
+        # The programs work on a copy.  Nothing writes the image while they run (the scan
+        # is one call on the loop), so the image itself stays the scan's inputs to diff
+        # against.
+        self._sa[:] = image.sa
+        self._k[:] = image.k
+        self._sy[:] = image.syvar
+        if self.logic.reads_nc:
+            nc = self.nc
+            ns["_NCS"] = nc.snapshot()
+            ns["_NCE"] = nc.events() & 0xFFFFFFFF
+            ns["_NCL"] = nc.last_snd()
         ns["_NOW"] = now_ms
         ns["_LEFT"] = self.loop_limit
         self._sends.clear()
@@ -152,7 +155,7 @@ class PlcRuntime:
         except Exception as exc:  # any error of the logic is a FAULT, never a
             self._fault(exc)       # crash of the loop that serves the fieldbus
             return
-        changes = self._changes(before_sa, before_k, before_sy)
+        changes = self._changes(image.sa, image.k, image.syvar)
         if changes:
             image.write(changes, "plc")
         self._act()
@@ -166,7 +169,8 @@ class PlcRuntime:
         for listener in self.scan_listeners:
             listener()
 
-    def _changes(self, sa: bytes, k: bytes, sy: list[int]) -> list[tuple[str, int, str, int]]:
+    def _changes(self, sa: bytearray, k: bytearray, sy: list[int]
+                 ) -> list[tuple[str, int, str, int]]:
         out: list[tuple[str, int, str, int]] = []
         new_sa, new_k, new_sy = self._sa, self._k, self._sy
         if new_sa != sa:

@@ -277,6 +277,7 @@ class Compiler:
         self.pous: dict[str, PouInfo] = {}
         self.out = _Emitter()
         self._temp = 0
+        self.reads_nc = False  # a scan takes the NC's status only for logic that reads it
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -1192,6 +1193,7 @@ class Scope:
         if write:
             raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: "
                           f"{place.why_read_only}", var.span)
+        c.reads_nc = True
         return place
 
 
@@ -1288,6 +1290,7 @@ class Logic:
                  spans: list[n.Span | None]) -> None:
         self.files = tuple(files)
         self.python_source = source
+        self.reads_nc = compiler.reads_nc
         self._spans = spans
         self._filename = f"<ncgate-st {id(self):x}>"
         self.namespace: dict[str, Any] = dict(HELPERS)
