@@ -29,7 +29,13 @@ from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import ScanDriver, start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
-from ncgate.gateway.wiring import Runtime, build_runtime, parse_assignment, variable_name
+from ncgate.gateway.wiring import (
+    Runtime,
+    apply_command,
+    build_runtime,
+    parse_assignment,
+    variable_name,
+)
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
@@ -226,16 +232,9 @@ class Gateway:
     def command(self, word: int) -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
         self._sync_clock()
-        if word == 1:
-            self.engine.cycle_start()
-        elif word == 2:
-            self.engine.hold(True)
-        elif word == 3:
-            self.engine.reset()
-            if self._plc is not None:
-                self._plc[0].restart()  # a PLC in FAULT starts again
-        else:
-            raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
+        apply_command(self.engine, word)
+        if word == 3 and self._plc is not None:
+            self._plc[0].restart()  # a PLC in FAULT starts again
         self._settle()
 
     # -- waiting ------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config, ConfigError
+from ncgate.gateway.wiring import apply_command
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.states import WAITING_STATES
@@ -71,9 +72,8 @@ def program_order(logic: Logic, config: Config) -> list[str]:
 class EngineNc:
     """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`)."""
 
-    def __init__(self, engine: Engine, on_command: Callable[[int], None] | None = None) -> None:
+    def __init__(self, engine: Engine) -> None:
         self.engine = engine
-        self.on_command = on_command
 
     def snapshot(self) -> list[NcSnapshot]:
         out = []
@@ -93,15 +93,7 @@ class EngineNc:
         return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
 
     def command(self, word: int) -> None:
-        engine = self.engine
-        if word == 1:
-            engine.cycle_start()
-        elif word == 2:
-            engine.hold(True)
-        else:
-            engine.reset()
-        if self.on_command is not None:
-            self.on_command(word)
+        apply_command(self.engine, word)
 
     def send(self, sender: int, target: int) -> None:
         self.engine.external_snd(sender, target)
@@ -154,8 +146,7 @@ class ScanDriver:
 
 
 def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
-              wall: Callable[[], float] | None = None, cold: bool = False,
-              on_command: Callable[[int], None] | None = None
+              wall: Callable[[], float] | None = None, cold: bool = False
               ) -> tuple[PlcRuntime, ScanDriver] | None:
     """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
 
@@ -177,7 +168,7 @@ def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
         except sqlite3.Error as exc:
             raise ConfigError(f"{config.source or '<config>'}: plc.retain_file: cannot keep "
                               f"RETAIN values in {path}: {exc}") from None
-    runtime = PlcRuntime(logic, image, EngineNc(engine, on_command), order, plc.loop_limit,
+    runtime = PlcRuntime(logic, image, EngineNc(engine), order, plc.loop_limit,
                          store)
     driver = ScanDriver(engine, runtime, plc.scan_ms, wall=wall, closed=closed,
                         stall_s=config.nc.stall_s)

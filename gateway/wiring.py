@@ -55,6 +55,19 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     return Runtime(config, image, store, engine, trace)
 
 
+def apply_command(engine: Engine, word: int) -> None:
+    """The command word of spec 3.2 -- 1 cycle start, 2 feed hold, 3 reset -- from whoever
+    gives it: a fieldbus, the API, the PLC logic's NC.START/HOLD/RESET."""
+    if word == 1:
+        engine.cycle_start()
+    elif word == 2:
+        engine.hold(True)
+    elif word == 3:
+        engine.reset()
+    else:
+        raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
+
+
 def variable_name(area: str, index: int, view: str) -> str:
     if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
         return f"{area}{index}"

@@ -45,13 +45,19 @@ def limits(type_name: str) -> tuple[int, int]:
 # ---- timers --------------------------------------------------------------------------------
 
 @dataclass
-class TON:
-    """On-delay: Q rises PT after IN rose, while IN stays TRUE; ET counts up to PT."""
+class _Timer:
+    """The interface IEC gives TON, TOF and TP: IN and PT in, Q and ET out (ms)."""
 
     IN: bool = False
     PT: int = 0
     Q: bool = False
     ET: int = 0
+
+
+@dataclass
+class TON(_Timer):
+    """On-delay: Q rises PT after IN rose, while IN stays TRUE; ET counts up to PT."""
+
     _start: int | None = None
 
     def __call__(self, now_ms: int) -> None:
@@ -65,13 +71,9 @@ class TON:
 
 
 @dataclass
-class TOF:
+class TOF(_Timer):
     """Off-delay: Q follows IN up at once and falls PT after IN fell; ET counts from the fall."""
 
-    IN: bool = False
-    PT: int = 0
-    Q: bool = False
-    ET: int = 0
     _start: int | None = None
 
     def __call__(self, now_ms: int) -> None:
@@ -88,13 +90,9 @@ class TOF:
 
 
 @dataclass
-class TP:
+class TP(_Timer):
     """Pulse: a rising IN starts a pulse of PT (Q TRUE); changes of IN during it are ignored."""
 
-    IN: bool = False
-    PT: int = 0
-    Q: bool = False
-    ET: int = 0
     _start: int = 0
 
     def __call__(self, now_ms: int) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ncgate.plc.st.stdlib import INTEGER_TYPES
+from ncgate.plc.st.stdlib import INTEGER_TYPES, limits
 
 SIGNED = ("SINT", "INT", "DINT")
 UNSIGNED = ("USINT", "UINT", "UDINT")
@@ -21,6 +21,7 @@ REALS = ("REAL", "LREAL")
 INTS = (*SIGNED, *UNSIGNED, *BITS)
 ELEMENTARY = ("BOOL", *INTS, *REALS, "TIME")
 ANY_INT, ANY_REAL = "ANY_INT", "ANY_REAL"
+__all__ = ["limits"]  # re-exported: the type's range, as stdlib defines it for wrap()
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,11 +103,6 @@ def common(a: Type, b: Type) -> Type | None:
     if widens(b, a):
         return a
     return None
-
-
-def limits(t: str) -> tuple[int, int]:
-    size, signed = INTEGER_TYPES[t]
-    return (-(1 << (size - 1)), (1 << (size - 1)) - 1) if signed else (0, (1 << size) - 1)
 
 
 def default_value(t: Type) -> object:

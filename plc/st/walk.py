@@ -17,6 +17,7 @@ from typing import Any
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
+from ncgate.plc.st.compiler import IMAGE_NAMES as IMAGE
 from ncgate.plc.st.compiler import Compiler, Context, IterationGuard, _fold, _pow
 from ncgate.plc.st.types import ArrayOf, FbOf, Type, default_value
 
@@ -157,7 +158,7 @@ class Walker:
 
     def locate(self, var: n.Var, prog: str) -> tuple[Any, Type]:
         key = var.name.upper()
-        if key in ("SA", "SAB", "SK", "SYVAR", "NC"):
+        if key in (*IMAGE, "NC"):
             raise NotImplementedError("the image is read through value()")
         obj: Any = self.state[prog][key]
         t: Type = self.types[prog][key]
@@ -176,20 +177,15 @@ class Walker:
 
     def store(self, var: n.Var, value: Any, prog: str) -> None:
         key = var.name.upper()
-        if key in ("SA", "SAB", "SK", "SYVAR"):
-            index = self.value(var.selectors[0].expr, prog)  # type: ignore[union-attr]
+        if key in IMAGE:
+            array, index = self._image_at(var, prog)
             if key == "SA":
-                if not 0 <= index < len(self.sa) * 8:
-                    raise IndexError(f"index {index} outside the image")
                 if value:
                     self.sa[index >> 3] |= 1 << (index & 7)
                 else:
                     self.sa[index >> 3] &= 255 ^ (1 << (index & 7))
-                return
-            array = {"SAB": self.sa, "SK": self.k, "SYVAR": self.syvar}[key]
-            if not 0 <= index < len(array):
-                raise IndexError(f"index {index} outside the image")
-            array[index] = _stored(value, "INT" if key == "SYVAR" else "BYTE")
+            else:
+                array[index] = _stored(value, "INT" if key == "SYVAR" else "BYTE")
             return
         if key == "NC":
             raise NotImplementedError("the walker does not drive the NC")
@@ -209,6 +205,17 @@ class Walker:
             name = last.name.upper()
             setattr(holder, name, _stored(value, _std_member(t.name, name)))
 
+    def _image_at(self, var: n.Var, prog: str) -> tuple[Any, int]:
+        """The array behind ``SA/SAB/SK/SYVAR[i]`` and ``i``, checked against its size (for
+        SA in bits)."""
+        key = var.name.upper()
+        index = self.value(var.selectors[0].expr, prog)  # type: ignore[union-attr]
+        array = {"SA": self.sa, "SAB": self.sa, "SK": self.k, "SYVAR": self.syvar}[key]
+        size = len(array) * 8 if key == "SA" else len(array)
+        if not 0 <= index < size:
+            raise IndexError(f"index {index} outside the image")
+        return array, index
+
     # -- expressions -----------------------------------------------------------------------------
 
     def value(self, x: n.Expr, prog: str) -> Any:
@@ -216,16 +223,10 @@ class Walker:
             return x.value
         if isinstance(x, n.Var):
             key = x.name.upper()
-            if key in ("SA", "SAB", "SK", "SYVAR"):
-                index = self.value(x.selectors[0].expr, prog)  # type: ignore[union-attr]
-                if key == "SA":
-                    if not 0 <= index < len(self.sa) * 8:
-                        raise IndexError(f"index {index} outside the image")
-                    return bool(self.sa[index >> 3] >> (index & 7) & 1)
-                array = {"SAB": self.sa, "SK": self.k, "SYVAR": self.syvar}[key]
-                if not 0 <= index < len(array):
-                    raise IndexError(f"index {index} outside the image")
-                return array[index]
+            if key in IMAGE:
+                array, index = self._image_at(x, prog)
+                return bool(self.sa[index >> 3] >> (index & 7) & 1) if key == "SA" \
+                    else array[index]
             if key == "NC":
                 raise NotImplementedError("the walker does not read the NC")
             obj, _ = self.locate(x, prog)
