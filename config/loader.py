@@ -18,6 +18,7 @@ import dataclasses
 import enum
 import importlib.util
 import ipaddress
+import re
 import ssl
 import tomllib
 from collections.abc import Callable, Mapping
@@ -27,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ncgate.errors import NcgateError
-from ncgate.interpreter.settings import SndPolicy
+from ncgate.interpreter.settings import Dialect, SndPolicy
 
 MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
@@ -180,6 +181,31 @@ def _programs(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
     return tuple(raw)
 
 
+_VE_MAP = re.compile(r"(SYVAR|SA|SK|K)(\d+)(?:\.(BY|IN))?$", re.IGNORECASE)
+
+
+def _external(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("ve", {})
+    if not isinstance(raw, dict):
+        raise r.fail(key, "expected a table of NAME = { map = \"SYVAR5\", sync = true }")
+    out: dict[str, VeConfig] = {}
+    for name, entry in raw.items():
+        item = f"{key}.{name}"
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+            raise r.fail(item, "a V.E. name is letters, digits and _")
+        if isinstance(entry, str):  # NAME = "SYVAR5": synchronous, the ISG default
+            entry = {"map": entry}
+        if not isinstance(entry, dict) or "map" not in entry:
+            raise r.fail(f"{item}.map", "missing (e.g. map = \"SYVAR5\")")
+        ve = r.section(VeConfig, entry, item)
+        m = _VE_MAP.match(ve.map)
+        if m is None:
+            raise r.fail(f"{item}.map", f"expected SYVAR<n>, SA<n>, SA<n>.BY, SA<n>.IN, K<n>, "
+                         f"SK<n> or SK<n>.IN, got {ve.map!r}")
+        out[name.upper()] = ve
+    return out
+
+
 # ---- the schema ----------------------------------------------------------------------------
 
 
@@ -201,8 +227,27 @@ class StorageConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class IsgConfig:
+    max_events: int = setting(150, "ISG: signals stored at once; one more is an alarm of the "
+                              "sender (AL170)", lo=1, hi=1_000_000)
+    signal_params: int = setting(10, "ISG: parameters a signal carries (P[0] ..)", lo=1,
+                                 hi=1000)
+
+
+@dataclass(frozen=True, slots=True)
+class VeConfig:
+    map: str = setting("SYVAR0", "the image variable: SYVAR<n>, SA<n> (bit), SA<n>.BY, "
+                       "SA<n>.IN, K<n> / SK<n> (byte), SK<n>.IN")
+    sync: bool = setting(True, "synchronous: a read waits for the interpolator (an implicit "
+                         "#FLUSH WAIT), a write acts in motion order; false: both at decode "
+                         "time")
+
+
+@dataclass(frozen=True, slots=True)
 class NcConfig:
     processes: int = setting(5, "how many processes (channels)", lo=1, hi=MAX_PROCESSES)
+    dialect: Dialect = setting(Dialect.NC110, 'the part programs\' language: "nc110" '
+                               '(NC-110/NC-200) or "isg" (TwinCAT CNC: #SIGNAL, #WAIT)')
     lookahead: int = setting(16, "motion-queue items the decoder may run ahead (0: none)",
                              lo=0, hi=100_000)
     snd: SndPolicy = setting(SndPolicy.RENDEZVOUS, "an SND waits for its target to wait "
@@ -232,6 +277,10 @@ class NcConfig:
     storage: StorageConfig = setting(doc="[nc.storage]", factory=StorageConfig)
     process: tuple[ProcessConfig, ...] = setting((), "[[nc.process]]: per-process settings",
                                                  parse=_processes)
+    isg: IsgConfig = setting(doc="[nc.isg]", factory=IsgConfig)
+    ve: Mapping[str, VeConfig] = setting(
+        doc="[nc.ve]: ISG V.E. variables, NAME = { map = \"SYVAR5\", sync = true }",
+        parse=_external, factory=dict)
 
     @property
     def external(self) -> frozenset[int]:
@@ -415,6 +464,9 @@ def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
         if cls is NcConfig and f.name == "process":
             out.extend(keys(ProcessConfig, f"{dotted}[]"))
             continue
+        if cls is NcConfig and f.name == "ve":
+            out.extend(keys(VeConfig, f"{dotted}.NAME"))
+            continue
         if cls is StorageConfig and f.name == "devices":
             dotted = f"{prefix}.MP0 .. MP3"
         default = f.default if f.default is not dataclasses.MISSING else (
@@ -530,6 +582,18 @@ class _Reader:
 
 def _check_config(r: _Reader, config: Config) -> None:
     nc, plc, canopen = config.nc, config.plc, config.canopen
+    for name, ve in nc.ve.items():
+        found = _VE_MAP.match(ve.map)
+        assert found is not None
+        area, index, view = found.group(1).upper(), int(found.group(2)), found.group(3)
+        size = {"SYVAR": plc.syvars, "SA": plc.sa_bits, "SK": plc.k_bytes, "K": plc.k_bytes}[area]
+        if area == "SA" and view:
+            size = plc.sa_bits // 8
+        if view and view.upper() == "IN":
+            size -= 1  # two bytes
+        if index >= size:
+            raise r.fail(f"nc.ve.{name}.map", f"{ve.map} is outside the image (plc.sa_bits, "
+                         "plc.k_bytes, plc.syvars)")
     if plc.sa_bits % 8:
         raise r.fail("plc.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
     if canopen.enabled:
@@ -595,7 +659,7 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 
 _SECTIONS.update({cls.__name__: cls for cls in (
-    StorageConfig, NcConfig, PlcConfig, ModbusMapConfig, ModbusTlsConfig, ModbusConfig,
+    StorageConfig, NcConfig, IsgConfig, PlcConfig, ModbusMapConfig, ModbusTlsConfig, ModbusConfig,
     CanopenConfig, TraceConfig)})
 
 

@@ -13,9 +13,12 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ncgate.config import Config
-from ncgate.interpreter.diagnostics import ProgramSyntaxError
+from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
+from ncgate.interpreter.isg.checker import IsgCheckContext, check_file
+from ncgate.interpreter.isg.parser import IsgFile, IsgProgram
 from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
 from ncgate.interpreter.nc110.parser import Program
+from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import Storage
 
 
@@ -35,14 +38,38 @@ def check_context(config: Config, storage: Storage, runs_in: Iterable[int]) -> C
     )
 
 
+def isg_context(config: Config) -> IsgCheckContext:
+    from ncgate.gateway.wiring import external_bindings
+
+    return IsgCheckContext(config.nc.processes, config.nc.e_params,
+                           config.nc.isg.signal_params, external_bindings(config))
+
+
 class ProgramStore:
     def __init__(self, config: Config) -> None:
         self.config = config
         self.storage = storage_of(config)
+        self.dialect = config.nc.dialect
         # (file, process) -> (the version it was read at, the checked program)
-        self._cache: dict[tuple[Path, int], tuple[tuple[int, int], Program]] = {}
+        self._cache: dict[tuple[Path, int], tuple[tuple[int, int], Program | IsgProgram]] = {}
+        # ISG: file -> (version, the parsed file, its diagnostics)
+        self._files: dict[Path, tuple[tuple[int, int], IsgFile, list[Diagnostic]]] = {}
 
-    def load(self, name: str, device: str | None, process: int) -> Program:
+    def isg_file(self, name: str, device: str | None = None) -> IsgFile:
+        """An ISG file by program name, parsed and checked once per version."""
+        path = self.storage.locate(name, device)
+        stat = path.stat()
+        version = (stat.st_mtime_ns, stat.st_size)
+        cached = self._files.get(path)
+        if cached is None or cached[0] != version:
+            source = IsgFile.from_path(path, display=path.name)
+            cached = (version, source, check_file(source, isg_context(self.config)))
+            self._files[path] = cached
+        return cached[1]
+
+    def load(self, name: str, device: str | None, process: int) -> Program | IsgProgram:
+        if self.dialect is Dialect.ISG:
+            return self._load_isg(name, device, process)
         path = self.storage.locate(name, device)
         stat = path.stat()
         version = (stat.st_mtime_ns, stat.st_size)
@@ -57,5 +84,24 @@ class ProgramStore:
             errors = [d for d in diagnostics if d.is_error]
             if errors:
                 raise ProgramSyntaxError(errors)
+        self._cache[(path, process)] = (version, program)
+        return program
+
+    def _load_isg(self, name: str, device: str | None, process: int) -> IsgProgram:
+        source = self.isg_file(name, device)
+        path = self.storage.locate(name, device)
+        version, _, diagnostics = self._files[path]
+        cached = self._cache.get((path, process))
+        if cached is not None and cached[0] == version:
+            program = cached[1]
+            assert isinstance(program, IsgProgram)
+            return program
+        program = source.program(process)
+        # A section is a program: only its own errors (and a file-wide one) keep it from
+        # starting.
+        lo = program.section.header + 1 if program.section else 1
+        errors = [d for d in diagnostics if d.is_error and lo <= d.span.line <= program.end]
+        if errors:
+            raise ProgramSyntaxError(errors)
         self._cache[(path, process)] = (version, program)
         return program

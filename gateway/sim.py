@@ -25,6 +25,7 @@ from ncgate.gateway.wiring import (
 from ncgate.interpreter.engine import Process, ProcessState, run_virtual
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
 from ncgate.interpreter.nc110.nodes import CompareOp
+from ncgate.interpreter.settings import Dialect
 from ncgate.plc.image import PlcError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -149,7 +150,8 @@ class ScriptPlayer:
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
             until: float | None = None) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
-    process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)).
+    process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
+    dialect one sectioned file starts each section in its channel.
 
     Raises ProgramError/ProgramNotFoundError if a program cannot start, ValueError if one
     cannot run in its process (too many programs, an external process)."""
@@ -160,8 +162,14 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     runtime = build_runtime(config, closed=True)
     player = ScriptPlayer(runtime, script)
     engine = runtime.engine
-    for number, name in enumerate(mains, start=1):
-        engine.start(name, number, by="operator")
+    if config.nc.dialect is Dialect.ISG and len(mains) == 1:
+        # Spec 5.1: one sectioned file starts every section in its channel at t = 0.
+        sections = runtime.store.isg_file(mains[0]).sections
+        for channel in [section.channel for section in sections] or [1]:
+            engine.start(mains[0], channel, by="operator")
+    else:
+        for number, name in enumerate(mains, start=1):
+            engine.start(name, number, by="operator")
     player.arm()
     plc = start_plc(config, engine, runtime.image, closed=True)
     runtime.plc = plc[0] if plc is not None else None

@@ -14,20 +14,43 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm
 from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.isg.frontend import ExternalBinding, IsgFrontEnd, IsgOptions
 from ncgate.interpreter.nc110.compiler import NC110
 from ncgate.interpreter.nc110.evaluate import compile_expr
 from ncgate.interpreter.nc110.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
 from ncgate.interpreter.nc110.parser import LineError, parse_block
-from ncgate.interpreter.settings import RuntimeSettings
+from ncgate.interpreter.settings import Dialect, RuntimeSettings
 from ncgate.plc.image import Change, IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
-    """The engine's settings: every one of them that ``[nc]`` holds, by the same name."""
+    """The engine's settings: every one of them that ``[nc]`` holds, by the same name; the
+    ISG dialect adds the buffer effect and operator starts in every channel (spec 5)."""
     nc = config.nc
     names = {f.name for f in dataclasses.fields(RuntimeSettings)} & set(dir(nc))
-    return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed)
+    isg = nc.dialect is Dialect.ISG
+    return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed,
+                           buffered=isg, any_process_starts=isg)
+
+
+def external_bindings(config: Config) -> dict[str, ExternalBinding]:
+    """``[nc.ve]`` as the ISG front end reads it: NAME -> image variable and sync."""
+    out = {}
+    for name, ve in config.nc.ve.items():
+        text = ve.map.upper()
+        if text.startswith("K"):  # K12: the K packet's byte 12, as SK12
+            text = "S" + text
+        (area, index, view), _, _ = parse_condition(f"{text}=0")
+        out[name] = ExternalBinding(area, index, view, ve.sync, ve.map)
+    return out
+
+
+def front_end_of(config: Config) -> NC110 | IsgFrontEnd:
+    if config.nc.dialect is Dialect.ISG:
+        return IsgFrontEnd(IsgOptions(config.nc.isg.max_events, config.nc.isg.signal_params,
+                                      external_bindings(config)))
+    return NC110()
 
 
 @dataclass
@@ -44,7 +67,10 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     image = IOImage(config.plc.sa_bits, config.plc.k_bytes, config.plc.syvars)
     store = ProgramStore(config)
     trace = trace if trace is not None else Trace()
-    engine = Engine(runtime_settings(config, closed), image, store, NC110(), trace)
+    front_end = front_end_of(config)
+    engine = Engine(runtime_settings(config, closed), image, store, front_end, trace)
+    if isinstance(front_end, IsgFrontEnd):
+        front_end.attach(engine, engine.reset_listeners)
 
     def on_write(changes: list[Change] | tuple[Change, ...], writer: str) -> None:
         for change in changes:

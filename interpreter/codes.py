@@ -53,6 +53,36 @@ class DiagnosticCode(enum.Enum):
     UNMODELLED_CODE = ("NW002", Severity.WARNING, "an NC-110 code the simulator keeps inert")
     CONDITION_NEVER_HOLDS = ("NW003", Severity.WARNING, "a WAI value outside the variable's range")
     CYRILLIC_LOOKALIKE = ("NW004", Severity.WARNING, "Cyrillic look-alikes read as Latin (Е4)")
+    # -- the ISG dialect (spec 5) ---------------------------------------------------------
+    ISG_SYNTAX = ("IS001", Severity.ERROR, "ISG: an item where the block syntax does not allow it")
+    ISG_UNKNOWN_COMMAND = ("IS002", Severity.ERROR, "ISG: a #command or $word not in the dialect")
+    ISG_WORD_WITHOUT_VALUE = ("IS003", Severity.ERROR, "ISG: an address letter with no value")
+    ISG_MISSING_BRACKET = ("IS004", Severity.ERROR, "ISG: a [ without its closing ]")
+    ISG_BAD_SYNC_ARGUMENT = ("IS005", Severity.ERROR,
+                             "ISG: a #SIGNAL/#WAIT argument that is not ID COUNT P[i] CH …")
+    ISG_WAIT_SYN_PARAMS = ("IS006", Severity.ERROR,
+                           "ISG: #WAIT SYN with parameters (only the decoder takes them)")
+    ISG_UNKNOWN_EXTERNAL = ("IS007", Severity.ERROR, "ISG: a V.E. name [nc.ve] does not declare")
+    ISG_UNDECLARED_VARIABLE = ("IS008", Severity.ERROR,
+                               "ISG: a V.P. variable read but never declared or assigned")
+    ISG_CHANNEL_OUT_OF_RANGE = ("IS009", Severity.ERROR, "ISG: a channel that is not configured")
+    ISG_PARAM_INDEX = ("IS010", Severity.ERROR,
+                       "ISG: a signal parameter P[i] outside 0..nc.isg.signal_params-1")
+    ISG_UNBALANCED = ("IS011", Severity.ERROR,
+                      "ISG: $IF/$ELSE/$ENDIF, $WHILE/$ENDWHILE or #VAR/#ENDVAR unbalanced")
+    ISG_WRITE_PLC_OWNED = ("IS012", Severity.ERROR,
+                           "ISG: a write of a V.E. variable mapped to SA or SK (PLC-owned)")
+    ISG_COMMAND_NOT_ALONE = ("IS013", Severity.ERROR,
+                             "ISG: a # or $ command sharing its block with other words")
+    ISG_BAD_NUMBER = ("IS014", Severity.ERROR,
+                      "ISG: a signal number, COUNT or channel that is not a positive integer")
+    ISG_PARAM_OUT_OF_RANGE = ("IS015", Severity.ERROR,
+                              "ISG: a P parameter outside P0..nc.e_params-1")
+    ISG_BAD_REMOVE = ("IS016", Severity.ERROR,
+                      "ISG: #SIGNAL REMOVE with ID and IDMIN/IDMAX, or IDMAX without IDMIN")
+    ISG_BUFFERED_SELF_SIGNAL = ("IW001", Severity.WARNING,
+                                "ISG: a #WAIT for this channel's own #SIGNAL SYN with no #FLUSH "
+                                "between: the buffer effect deadlocks it")
 
     @property
     def code(self) -> str:
@@ -91,6 +121,9 @@ class AlarmCode(enum.IntEnum):
     RUNAWAY = 144
     MASTER_LOST = 150  # a fieldbus master's heartbeat stopped (CANopen 0x1016)
     PLC_FAULT = 160  # the PLC logic stopped on a runtime error (ST: file:line:col)
+    SIGNAL_STORE_FULL = 170  # ISG: one signal more than nc.isg.max_events stored
+    SIGNAL_PARAM_MISSING = 171  # ISG: a #WAIT's P[i] that no received signal carried
+    UNDEFINED_VARIABLE = 172  # ISG: a V.P. variable read before any value was given
 
     @property
     def label(self) -> str:

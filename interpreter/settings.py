@@ -17,6 +17,13 @@ class SndPolicy(enum.Enum):
     LATCHED = "latched"  # never blocks: a token per sender->target pair (TwinCAT-style)
 
 
+class Dialect(enum.Enum):
+    """The language of the part programs (spec 5.1)."""
+
+    NC110 = "nc110"  # NC-110/NC-200: (EXE,…) (WAI,…) (SND,…), rendezvous SND
+    ISG = "isg"  # TwinCAT CNC / ISG: channels, #SIGNAL / #WAIT / #FLUSH, stored signals
+
+
 @dataclass(frozen=True, slots=True)
 class RuntimeSettings:
     """The engine's settings; the names are those of ``[nc]`` in the config."""
@@ -40,3 +47,9 @@ class RuntimeSettings:
     runaway_blocks: int = 100_000
     # Processing time of each block, in milliseconds (0: blocks take no time).
     block_time_ms: float = 0.0
+    # The interpolator takes a block only from a full buffer (lookahead blocks), or once the
+    # decoder has reached the end, a flush or a synchronous read: ISG's buffer effect.
+    buffered: bool = False
+    # Outside a closed simulation the operator may start a program in any process (ISG:
+    # channel by channel), so a wait for an idle process is no orphan there.
+    any_process_starts: bool = False

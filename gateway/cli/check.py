@@ -21,11 +21,14 @@ from pathlib import Path
 
 from ncgate.config import Config, StorageConfig, load_config
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.programs import check_context, storage_of
+from ncgate.gateway.programs import check_context, isg_context, storage_of
 from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
+from ncgate.interpreter.isg.checker import check_file
+from ncgate.interpreter.isg.parser import IsgFile
 from ncgate.interpreter.nc110.checker import check_program
 from ncgate.interpreter.nc110.nodes import Exe, Num
 from ncgate.interpreter.nc110.parser import Program, program_name
+from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES
 from ncgate.plc.st.compiler import compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StDiagnostic
@@ -100,9 +103,11 @@ def process_assignments(programs: Iterable[Program], main: str) -> dict[str, set
 
 
 def check_files(
-    files: Sequence[Path], config: Config | None = None, process: int | None = None
+    files: Sequence[Path], config: Config | None = None, process: int | None = None,
+    dialect: Dialect | None = None,
 ) -> list[FileReport]:
-    """Check files; those sharing a config are checked together (process inference)."""
+    """Check files; those sharing a config are checked together (process inference).
+    ``dialect`` overrides the config's ``nc.dialect``."""
     groups: dict[Path | None, list[Path]] = defaultdict(list)
     for path in files:
         groups[None if config is not None else path.parent.resolve()].append(path)
@@ -114,6 +119,9 @@ def check_files(
             reports.update(check_logic(logic, cfg))
         paths = [p for p in group if p.suffix.lower() != LOGIC_SUFFIX]
         if not paths:
+            continue
+        if (dialect or cfg.nc.dialect) is Dialect.ISG:
+            reports.update(check_isg(paths, cfg))
             continue
         storage = storage_of(cfg)
         programs: dict[Path, Program] = {}
@@ -135,6 +143,20 @@ def check_files(
             diagnostics = check_program(program, check_context(cfg, storage, runs_in))
             reports[path] = FileReport(path, tuple(diagnostics))
     return [reports[p] for p in files]
+
+
+def check_isg(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
+    """ISG programs (spec 5): each file with its sections, against the config's channels,
+    signal parameters and [nc.ve]."""
+    context = isg_context(config)
+    out = {}
+    for path in files:
+        try:
+            diagnostics = check_file(IsgFile.from_path(path), context)
+        except ProgramSyntaxError as exc:  # not UTF-8
+            diagnostics = list(exc.diagnostics)
+        out[path] = FileReport(path, tuple(diagnostics))
+    return out
 
 
 def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:

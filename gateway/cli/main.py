@@ -13,6 +13,7 @@ from ncgate.gateway.cli.check import check_files, expand, storage_files
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.interpreter.diagnostics import InterpreterError, ProgramError
+from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
 
 EXIT_OK = 0
@@ -43,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--process", type=int, metavar="N",
                        help="the process the files run in (default: inferred from the main "
                        "program and EXE codes)")
+    check.add_argument("--dialect", choices=[d.value for d in Dialect],
+                       help="the programs' language (default: the config's nc.dialect)")
     check.add_argument("-q", "--quiet", action="store_true", help="no summary line")
 
     sim = commands.add_parser(
@@ -150,7 +153,8 @@ def _check(args: argparse.Namespace) -> int:
         count = (config or load_config(None)).nc.processes
         if not 1 <= args.process <= count:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
-    reports = check_files(files, config, args.process)
+    dialect = Dialect(args.dialect) if args.dialect else None
+    reports = check_files(files, config, args.process, dialect)
     errors = warnings = 0
     for report in reports:
         for diagnostic in report.diagnostics:

@@ -1,9 +1,12 @@
 """Deadlock and orphan-wait search (spec 2.3), as pure functions of the processes' state.
 
 The wait-for graph has an edge k -> n for every WAIT_PROC, WAIT_SND and WAIT_EXE of process k
-on process n (a condition wait has no edge: anyone may write the image).  A process is *stuck*
-when it cannot move by itself: it has a program, no alarm, no hold, its decoder is held, and its
-interpolator is either in a wait or has nothing left to run.  A cycle of stuck processes is a
+on process n, and for an ISG signal wait one to each channel whose signal it still needs (a
+condition or flush wait has no edge: anyone may write the image, and a flush waits on its own
+interpolator, whose waits have their own edges).  A process is *stuck* when it cannot move by
+itself: it has a program, no alarm, no hold, its decoder is held, and its interpolator is in a
+wait, has nothing left to run, or -- ISG's buffer effect -- will not take a block until the
+decoder fills its buffer.  A cycle of stuck processes is a
 deadlock; the engine alarms every member with one message naming each blocking block.
 """
 
@@ -14,10 +17,20 @@ from collections.abc import Callable, Mapping
 from ncgate.interpreter.engine.process import Process
 from ncgate.interpreter.engine.states import WaitKind, WaitRecord
 
+_NO_EDGE = (WaitKind.COND, WaitKind.FLUSH)
+
 
 def edges(p: Process) -> list[tuple[int, WaitRecord]]:
     """The wait-for edges out of ``p``: (the process waited for, the wait)."""
-    return [(w.target, w) for w in p.waits() if w.kind is not WaitKind.COND]
+    out: list[tuple[int, WaitRecord]] = []
+    for w in p.waits():
+        if w.kind in _NO_EDGE:
+            continue
+        if w.targets is not None:
+            out.extend((t, w) for t in w.targets)
+        elif w.target:
+            out.append((w.target, w))
+    return out
 
 
 def stuck(p: Process) -> bool:
@@ -25,7 +38,7 @@ def stuck(p: Process) -> bool:
         return False
     if p.dec_block is None or p.int_timer is not None:
         return False
-    return p.int_wait is not None or not p.queue
+    return p.int_wait is not None or not p.queue or p.starved
 
 
 def find_cycle(start: Process,
@@ -37,8 +50,11 @@ def find_cycle(start: Process,
     # Most waits are on a process that can still move: no cycle through it.  (Spelled out:
     # this runs on every WAI and SND that waits.  A condition wait's target is 0.)
     dec, itp = start.dec_wait, start.int_wait
-    if not ((dec is not None and dec.target and stuck(processes[dec.target]))
-            or (itp is not None and itp.target and stuck(processes[itp.target]))):
+    if (dec is None or dec.targets is None) and (itp is None or itp.targets is None):
+        if not ((dec is not None and dec.target and stuck(processes[dec.target]))
+                or (itp is not None and itp.target and stuck(processes[itp.target]))):
+            return None
+    elif not any(stuck(processes[t]) for t, _ in edges(start)):
         return None
     path: list[tuple[Process, WaitRecord]] = []
     on_path = {start.number}
@@ -63,18 +79,21 @@ def find_cycle(start: Process,
 def describe_cycle(start: Process, cycle: list[tuple[Process, WaitRecord]]) -> str:
     """``deadlock: P1 A.nc:2 N2 (WAI,2) -> P2 B.nc:1 N7 (WAI,1) -> P1``"""
     parts = [wait.describe(p.number) for p, wait in cycle]
-    return "deadlock: " + " -> ".join(parts) + f" -> P{start.number}"
+    message = "deadlock: " + " -> ".join(parts) + f" -> P{start.number}"
+    notes = [note for _, wait in cycle if wait.note is not None and (note := wait.note())]
+    return "; ".join([message, *dict.fromkeys(notes)])
 
 
 def can_be_started(n: int, waiter: Process, processes: Mapping[int, Process],
                    exe_pending: Callable[[int], bool], closed: bool,
-                   main: str | None) -> bool:
+                   main: str | None, any_starts: bool = False) -> bool:
     """Whether anything can still start a program in idle process ``n``: an EXE waiting for
     it, a running program that names it (or names processes by variables), or -- outside a
-    closed simulation -- the fieldbus's cycle start for process 1."""
+    closed simulation -- the fieldbus's cycle start for process 1 (any process, where the
+    operator starts each one: ``any_starts``)."""
     if exe_pending(n):
         return True
-    if not closed and n == 1 and main:
+    if not closed and (any_starts or (n == 1 and main)):
         return True
     for q in processes.values():
         if q is waiter or q.loaded is None or q.alarm is not None:
@@ -84,6 +103,7 @@ def can_be_started(n: int, waiter: Process, processes: Mapping[int, Process],
     return False
 
 
-def orphan_message(waiter: Process, wait: WaitRecord) -> str:
-    return (f"orphan wait: {wait.describe(waiter.number)} waits for P{wait.target}, which runs "
+def orphan_message(waiter: Process, wait: WaitRecord, target: int | None = None) -> str:
+    target = wait.target if target is None else target
+    return (f"orphan wait: {wait.describe(waiter.number)} waits for P{target}, which runs "
             f"no program and which no running program can start")

@@ -42,7 +42,7 @@ from ncgate.interpreter.engine.actions import (
     WaitProcess,
     WriteSyvar,
 )
-from ncgate.interpreter.engine.events import Blocked, WaitOn
+from ncgate.interpreter.engine.events import Blocked, FlushOn, WaitOn
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Process, QueueItem
 from ncgate.interpreter.engine.states import (
@@ -53,6 +53,7 @@ from ncgate.interpreter.engine.states import (
     ProcessState,
     ProcessStatus,
     Stage,
+    WaitKind,
     WaitRecord,
     Where,
 )
@@ -90,6 +91,9 @@ class Engine(SyncRules):
         self._decoded = 0  # blocks decoded, all processes
         self._epoch = 0  # counts the moments the engine stood still (runaway detection)
         self._block_time = settings.block_time_ms / 1000.0
+        # ISG's buffer effect (spec 5.4): the interpolator takes a block only from a full
+        # buffer, or once the decoder has reached the end, a flush or a synchronous read.
+        self._buffered = settings.buffered and settings.lookahead > 0
         # By (file, process): the latest version of each, with its compiled blocks.
         self._loaded: dict[tuple[str, int], LoadedProgram] = {}
         self.last_change = 0.0  # the time of the last state change or image write
@@ -108,12 +112,46 @@ class Engine(SyncRules):
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
         self.state_listeners: list[Callable[[Process, ProcessState], None]] = []
+        self.reset_listeners: list[Callable[[], None]] = []  # a dialect's own state to clear
 
     def register_action(self, kind: type, handler: ActionHandler) -> None:
         """Teach the engine a new action (a dialect's own code): ``handler(process, stage,
         action, where)`` returns True when the action completed, False when the process
         waits."""
         self._actions[kind] = handler
+
+    # ==== what a dialect's own actions may use (ports.BlockHost) ===============================
+
+    def begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
+        """``p``'s decoder or interpolator (``stage``) waits; :meth:`finish_wait` ends it."""
+        self._begin_wait(p, stage, wait)
+
+    def finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
+        self._finish_wait(p, wait, by)
+
+    def check_wait(self, p: Process, wait: WaitRecord) -> None:
+        """After a wait began: an orphan wait, or a deadlock through ``p``, is an alarm."""
+        if not self._check_orphan(p, wait):
+            self._check_deadlock(p)
+
+    def alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
+        self._alarm(p, code, message, where)
+
+    def record(self, kind: type[ev.Event], proc: int, where: Where | None,
+               *fields: object) -> None:
+        """Record a dialect's own event (``events.Signal``, ...) at the current time."""
+        self._record(kind, self.now, proc, where, *fields)
+
+    def flush_wait(self, p: Process, where: Where, code: str) -> bool:
+        """The decoder waits until the interpolator has run every block decoded before
+        (``#FLUSH WAIT``, a synchronous V.E. read): True when there is nothing to wait for."""
+        if not p.queue and p.int_item is None:
+            return True
+        wait = WaitRecord(WaitKind.FLUSH, 0, code, where, self.now, Stage.DECODER,
+                          on=FlushOn())
+        self._begin_wait(p, Stage.DECODER, wait)
+        self._interp_run(p)  # a flush opens the buffer (spec 5.4)
+        return False
 
     # ==== public API ========================================================================
 
@@ -182,11 +220,14 @@ class Engine(SyncRules):
             p.alarm = None
             p.held = False
             p.E = [0.0] * p.e_params
+            p.vars.clear()
             if was_busy:
                 self._record(ev.End, self.now, p.number, where, "reset")
             self._update_state(p)
         self._runnable.clear()
         self._clear_sync()
+        for listener in list(self.reset_listeners):
+            listener()
 
     def run_until_blocked(self, blocks: int | None = None) -> None:
         """Run everything runnable at the current time.  With ``blocks``, stop once about
@@ -554,6 +595,8 @@ class Engine(SyncRules):
         """Wait until the motion queue is empty (sync_reads, spec 2.4)."""
         if p.queue or p.int_item is not None:
             p.dec_block = DecoderHold.FLUSH
+            if self._buffered:
+                self._interp_run(p)
             return WAIT_RETRY
         return NEXT
 
@@ -569,6 +612,13 @@ class Engine(SyncRules):
                 p.int_item = None
                 self._queue_drained(p)
                 return
+            if self._buffered and p.int_item is None and not self._buffer_open(p):
+                if not p.starved:
+                    p.starved = True
+                    self._update_state(p)
+                    self._check_deadlock(p)
+                return
+            p.starved = False
             item = p.queue[0]
             p.int_item = item
             if item.kind == ItemKind.SYNC:
@@ -581,6 +631,15 @@ class Engine(SyncRules):
                 self._update_state(p)
                 return
             self._item_done(p)
+
+    def _buffer_open(self, p: Process) -> bool:
+        """Spec 5.4: a full buffer, or a decoder at the end, a flush or a synchronous read."""
+        if len(p.queue) >= self.settings.lookahead:
+            return True
+        hold = p.dec_block
+        if hold is DecoderHold.DONE or hold is DecoderHold.FLUSH:
+            return True
+        return p.dec_wait is not None and p.dec_wait.kind is WaitKind.FLUSH
 
     def _arm_item(self, p: Process, item: QueueItem, duration: float) -> None:
         p.int_started = self.now - (item.duration - duration)
@@ -610,7 +669,10 @@ class Engine(SyncRules):
         self._update_state(p)
 
     def _queue_drained(self, p: Process) -> None:
-        if p.dec_block is DecoderHold.FLUSH:
+        wait = p.dec_wait
+        if wait is not None and wait.kind is WaitKind.FLUSH:
+            self._finish_wait(p, wait, "flush")
+        elif p.dec_block is DecoderHold.FLUSH:
             p.dec_block = None
             self._make_runnable(p)
         elif p.dec_block is DecoderHold.DONE and p.loaded is not None and p.alarm is None:
@@ -653,7 +715,7 @@ class Engine(SyncRules):
 
     # ==== actions and waits ==================================================================
 
-    def perform(self, p: Process, stage: Stage, action: Action, where: Where) -> bool:
+    def perform(self, p: Process, stage: Stage, action: Action | object, where: Where) -> bool:
         """Perform one action; True when it completed, False when the process waits."""
         return self._actions[type(action)](p, stage, action, where)
 
@@ -672,8 +734,9 @@ class Engine(SyncRules):
             p.dec_block = DecoderHold.WAIT
         else:
             p.int_wait = wait
-        self._record(ev.Wait, self.now, p.number, wait.where,
-                     _new(WaitOn, (wait.kind, wait.target, wait.cond, wait.value)))
+        on = wait.on if wait.on is not None else _new(
+            WaitOn, (wait.kind, wait.target, wait.cond, wait.value))
+        self._record(ev.Wait, self.now, p.number, wait.where, on)
         if self._wait_timeout_s:
             wait.timeout = self._schedule(self._wait_timeout_s,
                                           lambda: self._wait_timed_out(p, wait))

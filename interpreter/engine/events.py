@@ -38,6 +38,20 @@ class WaitOn(NamedTuple):
     value: int | float | None = None
 
 
+class SignalOn(NamedTuple):
+    """What an ISG ``#WAIT`` waits on (spec 5.6): signal ``signal`` from the channels in
+    ``from_`` (or "all": a broadcast), at the decoder ("dec") or the interpolator ("syn")."""
+
+    signal: int
+    from_: tuple[int, ...] | str
+    level: str
+
+
+class FlushOn(NamedTuple):
+    """A ``#FLUSH WAIT`` (or a synchronous V.E. read): the decoder waits for its
+    interpolator."""
+
+
 class Start(NamedTuple):
     seq: int
     t: float
@@ -189,10 +203,43 @@ class Display(NamedTuple):
         return "display"
 
 
+class Signal(NamedTuple):
+    """An ISG ``#SIGNAL`` as it is sent (spec 5.6): to channels, or "all" (a broadcast)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    id: int
+    to: tuple[int, ...] | str
+    count: int | None  # type: ignore[assignment]  # the spec's name; shadows tuple.count
+    params: dict[int, float]
+    level: str  # "dec" or "syn"
+
+    @property
+    def kind(self) -> str:
+        return "signal"
+
+
+class Remove(NamedTuple):
+    """``#SIGNAL REMOVE``: how many stored signals it cleared."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    removed: int
+
+    @property
+    def kind(self) -> str:
+        return "remove"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
-         | Display)
-# Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3).
-COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm})
+         | Display | Signal | Remove)
+# Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
+# counts like an SND (spec 5.6).
+COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})
 _ON_KEY: Final = {WaitKind.PROC: "proc", WaitKind.SND: "snd", WaitKind.EXE: "exe"}
 
 
@@ -212,6 +259,10 @@ def as_dict(event: Event) -> dict[str, Any]:
 
 
 def _json(value: Any) -> Any:
+    if isinstance(value, SignalOn):
+        return {"signal": value.signal, "from": _json(value.from_), "level": value.level}
+    if isinstance(value, FlushOn):
+        return {"flush": True}
     if isinstance(value, WaitOn):
         if value.kind is WaitKind.COND:
             number = value.value
@@ -223,4 +274,9 @@ def _json(value: Any) -> Any:
         return value.label
     if isinstance(value, tuple) and value and isinstance(value[0], Blocked):
         return [b._asdict() for b in value]
+    if isinstance(value, tuple):  # a signal's channels
+        return list(value)
+    if isinstance(value, dict):  # a signal's parameters: index -> value
+        return {str(k): (int(v) if isinstance(v, float) and v.is_integer() else v)
+                for k, v in value.items()}
     return value

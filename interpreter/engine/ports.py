@@ -13,19 +13,23 @@ sibling folder.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
+    from ncgate.interpreter.codes import AlarmCode
     from ncgate.interpreter.engine.actions import Action, Step
+    from ncgate.interpreter.engine.events import Event
     from ncgate.interpreter.engine.process import (
         CompiledBlock,
         LoadedProgram,
         Process,
         QueueItem,
     )
-    from ncgate.interpreter.engine.states import Stage, Where
+    from ncgate.interpreter.engine.states import Stage, WaitRecord, Where
     from ncgate.interpreter.settings import RuntimeSettings
+
+    ActionHandler = Callable[[Process, Stage, Any, Where], bool]
 
 
 class Cancellable(Protocol):
@@ -86,7 +90,7 @@ class BlockHost(Protocol):
     def flush(self, p: Process) -> Step:
         """NEXT when the motion queue is empty, else wait until it is (WAIT_RETRY)."""
 
-    def perform(self, p: Process, stage: Stage, action: Action, where: Where) -> bool:
+    def perform(self, p: Process, stage: Stage, action: Action | object, where: Where) -> bool:
         """Do one action now; False when the process waits."""
 
     def wait_process(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
@@ -100,6 +104,41 @@ class BlockHost(Protocol):
 
     def end_decoding(self, p: Process, how: str, where: Where) -> None:
         """The program ends (REL, M30, ...) once the motion queued before has run."""
+
+    # -- for a dialect's own actions (registered with Engine.register_action) --
+
+    @property
+    def now(self) -> float: ...
+
+    @property
+    def processes(self) -> Mapping[int, Process]: ...
+
+    def begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
+        """The stage waits (state, trace, timeout); ``finish_wait`` ends it."""
+
+    def finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None: ...
+
+    def check_wait(self, p: Process, wait: WaitRecord) -> None:
+        """After a wait began: an orphan wait or a deadlock through ``p`` is an alarm."""
+
+    def alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
+        """An alarm of ``p`` raised outside its own step (e.g. by another channel's signal)."""
+
+    def flush_wait(self, p: Process, where: Where, code: str) -> bool:
+        """The decoder waits for its interpolator to run every block before: True when it
+        need not."""
+
+    def write_image(self, p: Process, area: str, index: int, view: str, value: int,
+                    where: Where) -> None: ...
+
+    def record(self, kind: type[Event], proc: int, where: Where | None,
+               *fields: object) -> None: ...
+
+    def count_signal(self, sender: Process, target: int, ident: int, where: Where) -> None:
+        """A signal counts like an SND on the fieldbus (spec 5.6): the sender's count, the
+        last-SND registers, the SND log (target 0: a broadcast)."""
+
+    def register_action(self, kind: type, handler: ActionHandler) -> None: ...
 
 
 class FrontEnd(Protocol):

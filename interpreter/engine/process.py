@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -30,7 +30,8 @@ class QueueItem:
     duration: float
     where: Where
     move: Move | None = None
-    actions: list[Action] | None = None  # SYNC: the evaluated codes of a # block
+    # SYNC: the evaluated codes of a # block -- an Action, or a dialect's own registered one
+    actions: Sequence[Action | object] | None = None
 
 
 @dataclass(slots=True)
@@ -57,6 +58,9 @@ class Process:
         self.external = external
         self.e_params = e_params
         self.E: list[float] = [0.0] * e_params
+        # A dialect's named variables of the channel (ISG's V.P.): kept like E, cleared by a
+        # reset.
+        self.vars: dict[str, float] = {}
         self.loaded: LoadedProgram | None = None
         self.modal = Modal()
         self.stats = Stats()
@@ -85,6 +89,8 @@ class Process:
         self.int_started = 0.0
         self.int_remaining: float | None = None  # a timed item paused by a feed hold
         self.int_wait: WaitRecord | None = None
+        # The interpolator would run but waits for the decoder to fill its buffer (ISG).
+        self.starved = False
         self.sync_i = 0
         self.dec_timer: Timer | None = None  # nc.block_time_ms: the block's processing time
         # Runaway detection: blocks decoded since the engine last stood still (its epoch).

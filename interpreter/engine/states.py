@@ -37,6 +37,7 @@ class WaitKind(enum.IntEnum):
     COND = 2
     SND = 3
     EXE = 4
+    FLUSH = 5  # the decoder waits for its interpolator (#FLUSH, a synchronous V.E. read)
 
 
 class Stage(enum.Enum):
@@ -59,7 +60,8 @@ class DecoderHold(enum.Enum):
 STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                         WaitKind.COND: ProcessState.WAIT_COND,
                         WaitKind.SND: ProcessState.WAIT_SND,
-                        WaitKind.EXE: ProcessState.WAIT_EXE}
+                        WaitKind.EXE: ProcessState.WAIT_EXE,
+                        WaitKind.FLUSH: ProcessState.WAIT_COND}
 RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD})
 WAITING_STATES: Final = frozenset(STATE_OF_WAIT.values())
 
@@ -82,6 +84,14 @@ class WaitRecord:
     # A condition's variable as it is now: (value, last writer).  The why-record shows the
     # current value and who wrote it last (spec 2.2.6), not those from when the wait began.
     probe: Callable[[], tuple[int, str | None]] | None = None
+    # A dialect's own wait (an ISG signal): what the trace's ``wait`` event shows as ``on``,
+    # the reason as said (instead of the built-in wording), every process that must still act
+    # for it (the wait-for edges; None: ``target``), and a note for a deadlock or stall
+    # report, asked for when one is found (the buffered #SIGNAL SYN and the fix).
+    on: object | None = None
+    text: str | None = None
+    targets: tuple[int, ...] | None = None
+    note: Callable[[], str | None] | None = None
 
     def describe(self, proc: int) -> str:
         file, line, n = self.where
@@ -89,13 +99,17 @@ class WaitRecord:
         return f"P{proc} {file}:{line}{number} {self.code}"
 
     def reason(self) -> str:
+        if self.text is not None:
+            return self.text
         if self.kind is WaitKind.COND:
             value, writer = self.probe() if self.probe is not None else (self.value, self.writer)
             by = f", last written by {writer}" if writer else ""
             return f"waits for {self.cond} (now {fmt_number(value)}{by})"
         return {WaitKind.PROC: f"waits for an SND from P{self.target}",
                 WaitKind.SND: f"waits for P{self.target} to take its SND",
-                WaitKind.EXE: f"waits for P{self.target} to be free"}.get(self.kind, "waits")
+                WaitKind.EXE: f"waits for P{self.target} to be free",
+                WaitKind.FLUSH: "waits for its interpolator to run every block before it",
+                }.get(self.kind, "waits")
 
 
 @dataclass(slots=True)

@@ -195,6 +195,14 @@ class SyncRules:
                          "for it: latched")
         self._kick()
 
+    def count_signal(self, sender: Process, target: int, ident: int, where: Where) -> None:
+        """A dialect's stored signal counts like an SND on the fieldbus (spec 5.6); call it
+        just before recording the signal's event (its number is the counter's next value)."""
+        sender.stats.snd_sent += 1
+        n = where[2] if where[2] is not None else 0
+        self.last_snd = (sender.number, target, n, (self.trace.counter + 1) & 0xFFFFFFFF)
+        self._log_snd(sender.number, target, n, ident)
+
     def _log_snd(self, sender: int, target: int, n: int, ident: int = 0) -> None:
         """One entry of the SND log (target 0: a broadcast; ident: a signal's number)."""
         self.snd_seq = seq = self.snd_seq + 1
@@ -247,11 +255,17 @@ class SyncRules:
                     stage: Stage = Stage.DECODER) -> None:
         if p.queue and stage is Stage.DECODER:
             self._acts_early(p, f"SYVAR{index}={value}", where)
+        self.write_image(p, "SYVAR", index, "IN", value, where)
+
+    def write_image(self, p: Process, area: str, index: int, view: str, value: int,
+                    where: Where) -> None:
+        """A program's write of an image variable, in the name of its block (the trace's
+        ``write`` event names the process and the block)."""
         self._writer_proc = p
         self._writer_where = where
         try:
             n = f" N{where[2]}" if where[2] is not None else f" line {where[1]}"
-            self.image.write([("SYVAR", index, "IN", value)], f"P{p.number}{n}")
+            self.image.write([(area, index, view, value)], f"P{p.number}{n}")
         finally:
             self._writer_proc = None
 
@@ -337,15 +351,21 @@ class SyncRules:
     # ---- deadlocks and orphans (the search itself: deadlock.py) ----------------------------
 
     def _check_orphan(self, p: Process, wait: WaitRecord) -> bool:
-        target = self.processes[wait.target]
-        if target.external or target.loaded is not None or target.alarm is not None:
-            return False
-        if deadlock.can_be_started(wait.target, p, self.processes,
-                                   lambda n: bool(self._exe_waiters.get(n)),
-                                   self.settings.closed, self.settings.main):
-            return False
-        self._alarm(p, AlarmCode.ORPHAN_WAIT, deadlock.orphan_message(p, wait), wait.where)
-        return True
+        for number in (wait.targets if wait.targets is not None else (wait.target,)):
+            if not number:  # a broadcast signal wait: anyone may send it
+                continue
+            target = self.processes[number]
+            if target.external or target.loaded is not None or target.alarm is not None:
+                continue
+            if deadlock.can_be_started(number, p, self.processes,
+                                       lambda n: bool(self._exe_waiters.get(n)),
+                                       self.settings.closed, self.settings.main,
+                                       self.settings.any_process_starts):
+                continue
+            self._alarm(p, AlarmCode.ORPHAN_WAIT, deadlock.orphan_message(p, wait, number),
+                        wait.where)
+            return True
+        return False
 
     def _check_deadlock(self, start: Process) -> None:
         cycle = deadlock.find_cycle(start, self.processes)

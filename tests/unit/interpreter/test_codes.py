@@ -13,8 +13,11 @@ def test_codes_are_unique_and_well_formed() -> None:
     codes = [c.code for c in DiagnosticCode]
     assert len(codes) == len(set(codes))
     for c in DiagnosticCode:
-        prefix = "NC" if c.severity is Severity.ERROR else "NW"
-        assert c.code.startswith(prefix) and c.code[2:].isdigit() and len(c.code) == 5
+        isg = c.name.startswith("ISG_")  # the ISG dialect has its own codes (spec 5.2)
+        prefix = {(False, Severity.ERROR): "NC", (False, Severity.WARNING): "NW",
+                  (True, Severity.ERROR): "IS", (True, Severity.WARNING): "IW"}[
+            (isg, c.severity)]
+        assert c.code.startswith(prefix) and c.code[2:].isdigit() and len(c.code) == 5, c
     assert len({int(a) for a in AlarmCode}) == len(AlarmCode)
 
 

@@ -1,0 +1,304 @@
+"""Stored signals between channels (spec 5.3, 5.4): the ISG dialect's room of the engine.
+
+Unlike NC-110's rendezvous SND, a ``#SIGNAL`` never blocks its sender: it is delivered to the
+WAITs that need it now, and what is left is *stored* until a later ``#WAIT`` consumes it.
+
+- A directed signal (``CH k``, one per named channel) is used up by one matching WAIT of that
+  channel, or by ``COUNT c`` of them.  A broadcast (no ``CH``) satisfies only broadcast WAITs;
+  without ``COUNT`` it is never used up (``#SIGNAL REMOVE`` or a reset clears it), with
+  ``COUNT c`` after c WAITs from any channels.
+- A directed WAIT (``CH j CH k``) needs one signal addressed to its channel from each named
+  channel, in any order, each consumed when it arrives; a broadcast WAIT one broadcast signal.
+- At most ``nc.isg.max_events`` signals are stored at once: one more is an alarm of the sender
+  (a shift's worth of unconsumed signals cannot grow memory without bound).
+
+The board acts through the engine's :class:`~ncgate.interpreter.engine.ports.BlockHost` only:
+its waits are the engine's wait records (state WAIT_PROC, the trace, timeouts, the deadlock
+search -- each directed WAIT has an edge to every channel it still needs).  Must not import
+``plc`` or ``gateway``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.actions import ItemKind
+from ncgate.interpreter.engine.ports import BlockHost
+from ncgate.interpreter.engine.process import Process
+from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where
+
+
+@dataclass(frozen=True, slots=True)
+class SendSignal:
+    """A ``#SIGNAL``, evaluated by the decoder."""
+
+    id: int
+    count: int | None
+    params: tuple[tuple[int, float], ...]
+    to: tuple[int, ...]  # empty: a broadcast
+    level: str  # "dec" or "syn"
+
+
+@dataclass(frozen=True, slots=True)
+class AwaitSignal:
+    """A ``#WAIT``, evaluated by the decoder; ``store`` assigns the received parameters."""
+
+    id: int
+    channels: tuple[int, ...]  # empty: a broadcast wait
+    params: tuple[int, ...]  # the P[i] it assigns
+    level: str
+    code: str
+    store: Callable[[Process, dict[int, float], Where], None] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RemoveSignals:
+    low: int | None
+    high: int | None
+    channels: tuple[int, ...]
+
+
+@dataclass(slots=True)
+class Stored:
+    id: int
+    sender: int
+    to: int  # 0: a broadcast
+    left: int | None  # WAITs it may still satisfy; None: never used up
+    params: tuple[tuple[int, float], ...]
+
+
+@dataclass(slots=True, eq=False)
+class Pending:
+    """A WAIT under way."""
+
+    p: Process
+    action: AwaitSignal
+    record: WaitRecord
+    missing: list[int]  # channels whose signal it still needs; empty for a broadcast wait
+    got: dict[int, float] = field(default_factory=dict)
+
+
+class _Handle:
+    """Cancels a pending WAIT (the engine calls it on an alarm, a timeout or a reset)."""
+
+    __slots__ = ("board", "pending")
+
+    def __init__(self, board: SignalBoard, pending: Pending) -> None:
+        self.board = board
+        self.pending = pending
+
+    def cancel(self) -> None:
+        self.board._forget(self.pending)
+
+
+class SignalBoard:
+    """The stored signals and the WAITs under way, for every channel of one engine."""
+
+    def __init__(self, host: BlockHost, max_events: int) -> None:
+        self.host = host
+        self.max_events = max_events
+        # (id, addressee; 0 for a broadcast) -> stored signals, oldest first
+        self._stored: dict[tuple[int, int], list[Stored]] = {}
+        self.stored_count = 0
+        # (id, channel; 0 for a broadcast wait) -> the WAITs under way, oldest first
+        self._waiting: dict[tuple[int, int], list[Pending]] = {}
+        host.register_action(SendSignal, self.send)
+        host.register_action(AwaitSignal, self.wait)
+        host.register_action(RemoveSignals, self.remove)
+
+    # ---- #SIGNAL ---------------------------------------------------------------------------
+
+    def send(self, p: Process, stage: Stage, sig: SignalSendLike, where: Where) -> bool:
+        host = self.host
+        processes = host.processes
+        for k in sig.to:
+            if k not in processes:
+                raise RuntimeAlarm(AlarmCode.PROCESS_OUT_OF_RANGE,
+                                   f"#SIGNAL to channel {k}, which is not configured "
+                                   f"(1..{len(processes)})")
+        addressees = sig.to or (0,)
+        # Plan first: a signal that cannot be stored whole is an alarm, and nothing of it goes.
+        plan = []
+        new = 0
+        for to in addressees:
+            left = sig.count if sig.count is not None else (1 if to else None)
+            takers = [w for w in self._waiting.get((sig.id, to), ()) if
+                      to == 0 or p.number in w.missing]
+            if left is not None:
+                takers = takers[:left]
+                left -= len(takers)
+            if left is None or left > 0:
+                new += 1
+            plan.append((to, takers, left))
+        if self.stored_count + new > self.max_events:
+            raise RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
+                               f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored "
+                               f"and nc.isg.max_events is {self.max_events}; WAIT for them, "
+                               "#SIGNAL REMOVE them, or raise the limit")
+        host.count_signal(p, addressees[0], sig.id, where)
+        if len(addressees) > 1:
+            p.stats.snd_sent += len(addressees) - 1
+        host.record(ev.Signal, p.number, where, sig.id, sig.to or "all", sig.count,
+                    dict(sig.params), sig.level)
+        for to, takers, left in plan:
+            for w in takers:
+                self._deliver(w, p.number, sig.params, "all" if to == 0 else p.number)
+            if left is None or left > 0:
+                self._stored.setdefault((sig.id, to), []).append(
+                    Stored(sig.id, p.number, to, left, sig.params))
+                self.stored_count += 1
+        return True
+
+    def _deliver(self, w: Pending, sender: int, params: tuple[tuple[int, float], ...],
+                 by: int | str) -> None:
+        w.p.stats.snd_received += 1
+        w.got.update(params)
+        if w.missing:
+            w.missing.remove(sender)
+            w.record.targets = tuple(w.missing)
+            w.record.target = w.missing[0] if w.missing else 0
+        if w.missing:
+            return
+        self._forget(w)
+        record = w.record
+        record.handle = None
+        host = self.host
+        try:
+            self._store(w.p, w.action, w.got, record.where)
+        except RuntimeAlarm as alarm:
+            host.alarm(w.p, alarm.code, alarm.message, record.where)
+            return
+        host.finish_wait(w.p, record, by)
+
+    # ---- #WAIT ------------------------------------------------------------------------------
+
+    def wait(self, p: Process, stage: Stage, act: AwaitSignal, where: Where) -> bool:
+        processes = self.host.processes
+        for k in act.channels:
+            if k not in processes:
+                raise RuntimeAlarm(AlarmCode.PROCESS_OUT_OF_RANGE,
+                                   f"#WAIT for channel {k}, which is not configured "
+                                   f"(1..{len(processes)})")
+        got: dict[int, float] = {}
+        missing = list(dict.fromkeys(act.channels))
+        if not missing:
+            stored = self._take(act.id, 0, None)
+            if stored is not None:
+                p.stats.snd_received += 1
+                self._store(p, act, dict(stored.params), where)
+                return True
+        else:
+            for sender in list(missing):
+                stored = self._take(act.id, p.number, sender)
+                if stored is not None:
+                    p.stats.snd_received += 1
+                    got.update(stored.params)
+                    missing.remove(sender)
+            if not missing:
+                self._store(p, act, got, where)
+                return True
+        frm: tuple[int, ...] | str = act.channels if act.channels else "all"
+        text = (f"waits for signal {act.id} from "
+                + ", ".join(f"P{k}" for k in missing) if missing
+                else f"waits for a broadcast signal {act.id}")
+        record = WaitRecord(WaitKind.PROC, missing[0] if missing else 0, act.code, where,
+                            self.host.now, stage, on=ev.SignalOn(act.id, frm, act.level),
+                            text=text, targets=tuple(missing))
+        pending = Pending(p, act, record, missing, got)
+        record.handle = _Handle(self, pending)
+        record.note = lambda: self._buffered_note(pending)
+        self._waiting.setdefault((act.id, p.number if missing else 0), []).append(pending)
+        host = self.host
+        host.begin_wait(p, stage, record)
+        host.check_wait(p, record)
+        return False
+
+    def _take(self, ident: int, to: int, sender: int | None) -> Stored | None:
+        """Consume one stored signal: the oldest to ``to`` from ``sender`` (any: None)."""
+        key = (ident, to)
+        queue = self._stored.get(key)
+        if not queue:
+            return None
+        for i, stored in enumerate(queue):
+            if sender is None or stored.sender == sender:
+                if stored.left is not None:
+                    stored.left -= 1
+                    if stored.left == 0:
+                        del queue[i]
+                        self.stored_count -= 1
+                        if not queue:
+                            del self._stored[key]
+                return stored
+        return None
+
+    def _store(self, p: Process, act: AwaitSignal, got: dict[int, float], where: Where) -> None:
+        """Assign the WAIT's parameters from what it received (spec 5.4)."""
+        missing = [i for i in act.params if i not in got]
+        if missing:
+            raise RuntimeAlarm(AlarmCode.SIGNAL_PARAM_MISSING,
+                               f"{act.code}: no received signal carried "
+                               + ", ".join(f"P[{i}]" for i in missing))
+        if act.store is not None and act.params:
+            act.store(p, got, where)
+
+    def _forget(self, w: Pending) -> None:
+        key = (w.action.id, w.p.number if w.action.channels else 0)
+        waiting = self._waiting.get(key)
+        if waiting and w in waiting:
+            waiting.remove(w)
+            if not waiting:
+                del self._waiting[key]
+
+    def _buffered_note(self, w: Pending) -> str | None:
+        """The buffer effect (spec 5.4): a #SIGNAL SYN this WAIT needs, still queued in the
+        buffer of a channel whose interpolator will not take it."""
+        processes = self.host.processes
+        for k in w.missing or [w.p.number]:
+            q = processes[k]
+            for item in q.queue:
+                if item.kind != ItemKind.SYNC:
+                    continue
+                for action in item.actions or ():
+                    if (isinstance(action, SendSignal) and action.id == w.action.id
+                            and (w.p.number in action.to if w.missing else not action.to)):
+                        file, line, n = item.where
+                        number = f" N{n}" if n is not None else ""
+                        return (f"the #SIGNAL SYN at {file}:{line}{number} is still in the "
+                                f"buffer of P{k}, whose interpolator waits for the buffer to "
+                                "fill while the decoder waits: add #FLUSH before the #WAIT")
+        return None
+
+    # ---- #SIGNAL REMOVE and reset -------------------------------------------------------------
+
+    def remove(self, p: Process, stage: Stage, act: RemoveSignals, where: Where) -> bool:
+        addressees = set(act.channels) if act.channels else {0}
+        removed = 0
+        for key in list(self._stored):
+            ident, to = key
+            if to not in addressees:
+                continue
+            if act.low is not None and ident < act.low:
+                continue
+            if act.high is not None and ident > act.high:
+                continue
+            removed += len(self._stored.pop(key))
+        self.stored_count -= removed
+        self.host.record(ev.Remove, p.number, where, removed)
+        return True
+
+    def clear(self) -> None:
+        """A reset: every stored signal goes (the engine drops the waits itself)."""
+        self._stored.clear()
+        self._waiting.clear()
+        self.stored_count = 0
+
+    def stored(self) -> list[Stored]:
+        """The stored signals (for tests and the console), oldest first per key."""
+        return [s for queue in self._stored.values() for s in queue]
+
+
+SignalSendLike = SendSignal
