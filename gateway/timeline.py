@@ -1,8 +1,11 @@
 """The timeline picture of a trace (``ncgate sim --gantt``, spec 4.4), as SVG.
 
 One lane per process, coloured by state (derived from the trace's start/wait/resume/end/alarm
-events), an arrow for every SND from the sender's lane to the target's, a mark on the PLC lane
-for every write by the PLC, the fieldbus or the script, and a time axis in seconds.
+events), an arrow for every SND from the sender's lane to the target's, an arrow for every ISG
+signal to each channel it is addressed to (a broadcast: to every lane waiting for it, or a
+mark where it is stored), a mark on the PLC lane for every write by the PLC, the fieldbus or
+the script, and a time axis in seconds.  A #FLUSH wait is a WAIT_COND interval labelled
+"#FLUSH".
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ COLOURS = {
 }
 LABELS = {"RUNNING": "running", "WAIT_PROC": "WAI,n", "WAIT_COND": "WAI,cond",
           "WAIT_SND": "SND waits", "WAIT_EXE": "EXE waits", "ALARM": "alarm"}
-_ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT_EXE"}
+_ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT_EXE",
+       "signal": "WAIT_PROC", "flush": "WAIT_COND"}
 
 LEFT, RIGHT, TOP, LANE, GAP = 150, 30, 50, 34, 14
 
@@ -52,7 +56,14 @@ def state_intervals(events: Iterable[EventDict], processes: int
             close(proc, t)
             target = e["on"][on_kind]
             label = f"N{e['n']} " if e.get("n") is not None else ""
-            label += e["on"]["cond"] if on_kind == "cond" else f"{on_kind} P{target}"
+            if on_kind == "cond":
+                label += e["on"]["cond"]
+            elif on_kind == "signal":
+                label += f"signal {target}"
+            elif on_kind == "flush":
+                label += "#FLUSH"
+            else:
+                label += f"{on_kind} P{target}"
             current[proc] = (t, _ON[on_kind], label)
         elif kind == "resume" and proc in current:
             close(proc, t)
@@ -121,14 +132,41 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
             if label and w > 7 * len(label):
                 parts.append(f'<text x="{x(start) + 4:.1f}" y="{y + LANE / 2 + 4}" '
                              f'fill="white">{escape(label)}</text>')
+    def arrow(t: float, sender: int, target: int, title: str, colour: str = "#222") -> None:
+        y1 = lane_y[sender] + LANE / 2
+        y2 = lane_y[target] + (3 if lane_y[target] > y1 else LANE - 3)
+        if target == sender:  # a channel's signal to itself: a short hook on its lane
+            y2 = y1 - LANE / 2 + 3
+        parts.append(f'<line x1="{x(t):.1f}" y1="{y1:.1f}" x2="{x(t) + 6:.1f}" '
+                     f'y2="{y2:.1f}" stroke="{colour}" stroke-width="1.5" '
+                     f'marker-end="url(#arrow)"><title>{escape(title)}</title></line>')
+
+    waiting: dict[int, dict[str, object]] = {}  # proc -> what it waits on now
     for e in events:
-        if e["event"] == "snd" and e["to"] in lane_y and e["proc"] in lane_y:
-            y1 = lane_y[e["proc"]] + LANE / 2
-            y2 = lane_y[e["to"]] + (3 if lane_y[e["to"]] > y1 else LANE - 3)
-            parts.append(f'<line x1="{x(e["t"]):.1f}" y1="{y1:.1f}" x2="{x(e["t"]) + 6:.1f}" '
-                         f'y2="{y2:.1f}" stroke="#222" stroke-width="1.5" '
-                         f'marker-end="url(#arrow)"><title>SND P{e["proc"]} -&gt; '
-                         f'P{e["to"]} at {e["t"]:.3f} s</title></line>')
+        kind, proc = e["event"], e["proc"]
+        if kind == "wait":
+            waiting[proc] = e["on"]
+        elif kind in ("resume", "end", "alarm"):
+            waiting.pop(proc, None)
+        if kind == "snd" and e["to"] in lane_y and proc in lane_y:
+            arrow(e["t"], proc, e["to"], f"SND P{proc} -> P{e['to']} at {e['t']:.3f} s")
+        elif kind == "signal" and proc in lane_y:
+            title = f"#SIGNAL ID{e['id']} P{proc} -> {{}} at {e['t']:.3f} s ({e['level']})"
+            if e["to"] == "all":
+                takers = [k for k, on in waiting.items() if k in lane_y
+                          and on.get("signal") == e["id"] and on.get("from") == "all"]
+                for k in takers:
+                    arrow(e["t"], proc, k, title.format("all"), "#00796b")
+                if not takers:  # stored for later WAITs: a diamond on the sender's lane
+                    cx, cy = x(e["t"]), lane_y[proc] + LANE / 2
+                    parts.append(f'<path d="M{cx:.1f},{cy - 6:.1f} L{cx + 6:.1f},{cy:.1f} '
+                                 f'L{cx:.1f},{cy + 6:.1f} L{cx - 6:.1f},{cy:.1f} z" '
+                                 f'fill="#00796b"><title>{escape(title.format("all"))}, '
+                                 'stored</title></path>')
+            else:
+                for k in e["to"]:
+                    if k in lane_y:
+                        arrow(e["t"], proc, k, title.format(f"P{k}"), "#00796b")
         elif e["event"] == "write" and e["proc"] == 0:
             cx = x(e["t"])
             parts.append(f'<path d="M{cx - 5:.1f},{plc_y + 8} L{cx + 5:.1f},{plc_y + 8} '
@@ -144,6 +182,7 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                      f'fill="{colour}"/><text x="{lx + 16}" y="{legend_y}">{LABELS[state]}'
                      '</text>')
         lx += 120
-    parts.append(f'<text x="{lx}" y="{legend_y}">→ SND   ▼ PLC write</text>')
+    parts.append(f'<text x="{lx}" y="{legend_y}">→ SND <tspan fill="#00796b">→ #SIGNAL</tspan>'
+                 '   ▼ PLC write</text>')
     parts.append("</svg>")
     out.write("\n".join(parts) + "\n")

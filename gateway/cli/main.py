@@ -281,9 +281,12 @@ def _eds(args: argparse.Namespace) -> int:
 
 
 def _examples() -> int:
-    for example in examples():
+    found = examples()
+    width = max((len(e.name) for e in found), default=0)
+    mains = max((len(e.main or "-") for e in found), default=0)
+    for example in found:
         main = example.main or "-"
-        print(f"{example.name:<12} {main:<8} {example.summary}")
+        print(f"{example.name:<{width}} {main:<{mains}} {example.summary}")
     print(f"installed in {examples_folder()}", file=sys.stderr)
     return EXIT_OK
 
