@@ -132,9 +132,10 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
             if label and w > 7 * len(label):
                 parts.append(f'<text x="{x(start) + 4:.1f}" y="{y + LANE / 2 + 4}" '
                              f'fill="white">{escape(label)}</text>')
+
     def arrow(t: float, sender: int, target: int, title: str, colour: str = "#222") -> None:
         y1 = lane_y[sender] + LANE / 2
-        y2 = lane_y[target] + (3 if lane_y[target] > y1 else LANE - 3)
+        y2: float = lane_y[target] + (3 if lane_y[target] > y1 else LANE - 3)
         if target == sender:  # a channel's signal to itself: a short hook on its lane
             y2 = y1 - LANE / 2 + 3
         parts.append(f'<line x1="{x(t):.1f}" y1="{y1:.1f}" x2="{x(t) + 6:.1f}" '

@@ -118,7 +118,21 @@ def test_the_engine_knows_no_dialect() -> None:
     front end, so a new dialect is a new folder beside nc110/."""
     for path in sources("interpreter/engine"):
         names = imports_of(path, module_name(path))
-        assert not any(allowed(n, {"ncgate.interpreter.nc110"}) for n in names), path
+        assert not any(allowed(n, {"ncgate.interpreter.nc110", "ncgate.interpreter.isg"})
+                       for n in names), path
+
+
+def test_the_dialects_share_only_the_span() -> None:
+    """The ISG front end is a sibling of nc110/, not a variant of it: it takes nothing of the
+    NC-110 front end but the Span every diagnostic carries (nc110.nodes), and NC-110 nothing
+    of it."""
+    for path in sources("interpreter/isg"):
+        names = imports_of(path, module_name(path))
+        assert {n for n in names if allowed(n, {"ncgate.interpreter.nc110"})} <= {
+            "ncgate.interpreter.nc110.nodes"}, path
+    for path in sources("interpreter/nc110"):
+        assert not any(allowed(n, {"ncgate.interpreter.isg"})
+                       for n in imports_of(path, module_name(path))), path
 
 
 def test_importing_the_interpreter_loads_no_other_package() -> None:

@@ -44,7 +44,8 @@ def test_the_wheel_holds_one_top_level_package_with_its_data(wheel: Path) -> Non
                    "ncgate/interpreter/nc110/grammar/nc110.lark",
                    "ncgate/examples/scheme3/PROG91.nc", "ncgate/examples/scheme3/script.toml",
                    "ncgate/examples/errors/README.md", "ncgate/py.typed",
-                   "ncgate/plc/st/grammar/st.lark", "ncgate/examples/plclogic/plc.st"):
+                   "ncgate/plc/st/grammar/st.lark", "ncgate/examples/plclogic/plc.st",
+                   "ncgate/interpreter/isg/signals.py", "ncgate/examples/isg_ve/VE.nc"):
         assert needed in names
 
 
@@ -117,7 +118,10 @@ def test_examples_are_listed_and_run(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["examples"]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert [line.split()[:2] for line in listed] == [
-        ["conditional", "COND1"], ["errors", "-"], ["mutual", "MUT1"], ["plclogic", "PROG91"],
+        ["conditional", "COND1"], ["errors", "-"], ["isg_dec_interp", "DECINT"],
+        ["isg_decoders", "DECODERS"], ["isg_flush", "FLUSH"], ["isg_no_flush", "NOFLUSH"],
+        ["isg_params", "PARAMS"], ["isg_paths", "PATHS"], ["isg_ve", "VE"],
+        ["isg_waits", "WAITS"], ["mutual", "MUT1"], ["plclogic", "PROG91"],
         ["scheme3", "PROG91"], ["section4", "PR90"]]
     assert main(["sim", "--example", "scheme3"]) == 0
     assert "every program ended" in capsys.readouterr().out

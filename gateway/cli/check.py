@@ -152,7 +152,7 @@ def check_isg(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
     out = {}
     for path in files:
         try:
-            diagnostics = check_file(IsgFile.from_path(path), context)
+            diagnostics = check_file(IsgFile.from_path(path, display=str(path)), context)
         except ProgramSyntaxError as exc:  # not UTF-8
             diagnostics = list(exc.diagnostics)
         out[path] = FileReport(path, tuple(diagnostics))

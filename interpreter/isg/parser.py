@@ -413,9 +413,6 @@ def _command(cur: _Line) -> Item:
     if name == "SIGNAL":
         return Signal(syn, args.id or Num(0.0, span), args.count, tuple(args.params),
                       tuple(args.channels), span)
-    if args.count is not None:
-        raise cur.error(DiagnosticCode.ISG_BAD_SYNC_ARGUMENT, "#WAIT takes no COUNT",
-                        args.count.span.column - 1)
     targets: list[tuple[int, Target]] = []
     for index, value in args.params:
         if not isinstance(value, Param | SelfVar | ExternalVar):
@@ -479,6 +476,11 @@ def _sync_args(cur: _Line, command: str, remove: bool) -> _Args:
                                 "AHEAD belongs to #WAIT", start)
             args.ahead = True
             continue
+        if (key in ("IDMIN", "IDMAX") and not remove) or (key == "COUNT" and (
+                remove or command == "WAIT")):
+            raise cur.error(DiagnosticCode.ISG_BAD_SYNC_ARGUMENT,
+                            f"{key} does not belong to #{command}"
+                            f"{' REMOVE' if remove else ''}", start)
         cur.take("=")
         value = cur.value()
         if key == "CH":
@@ -487,10 +489,6 @@ def _sync_args(cur: _Line, command: str, remove: bool) -> _Args:
         slot = {"ID": "id", "IDMIN": "id_min", "IDMAX": "id_max", "COUNT": "count"}[key]
         if getattr(args, slot) is not None:
             raise cur.error(DiagnosticCode.ISG_BAD_SYNC_ARGUMENT, f"{key} is given twice", start)
-        if (key in ("IDMIN", "IDMAX") and not remove) or (key == "COUNT" and remove):
-            raise cur.error(DiagnosticCode.ISG_BAD_SYNC_ARGUMENT,
-                            f"{key} does not belong to #{command}"
-                            f"{' REMOVE' if remove else ''}", start)
         setattr(args, slot, value)
 
 
