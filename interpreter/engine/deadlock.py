@@ -49,12 +49,16 @@ def find_cycle(start: Process,
         return None
     # Most waits are on a process that can still move: no cycle through it.  (Spelled out:
     # this runs on every WAI and SND that waits.  A condition wait's target is 0.)
-    dec, itp = start.dec_wait, start.int_wait
-    if (dec is None or dec.targets is None) and (itp is None or itp.targets is None):
-        if not ((dec is not None and dec.target and stuck(processes[dec.target]))
-                or (itp is not None and itp.target and stuck(processes[itp.target]))):
-            return None
-    elif not any(stuck(processes[t]) for t, _ in edges(start)):
+    for wait in (start.dec_wait, start.int_wait):
+        if wait is None or wait.kind in _NO_EDGE:
+            continue
+        targets = wait.targets
+        if targets is None:
+            if wait.target and stuck(processes[wait.target]):
+                break
+        elif any(stuck(processes[t]) for t in targets):
+            break
+    else:
         return None
     path: list[tuple[Process, WaitRecord]] = []
     on_path = {start.number}

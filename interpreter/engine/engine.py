@@ -122,12 +122,8 @@ class Engine(SyncRules):
 
     # ==== what a dialect's own actions may use (ports.BlockHost) ===============================
 
-    def begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
-        """``p``'s decoder or interpolator (``stage``) waits; :meth:`finish_wait` ends it."""
-        self._begin_wait(p, stage, wait)
-
-    def finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
-        self._finish_wait(p, wait, by)
+    # begin_wait(p, stage, wait): p's decoder or interpolator waits; finish_wait(p, wait, by)
+    # ends it.  Aliases of the engine's own (below): they are on every signal's path.
 
     def check_wait(self, p: Process, wait: WaitRecord) -> None:
         """After a wait began: an orphan wait, or a deadlock through ``p``, is an alarm."""
@@ -758,6 +754,9 @@ class Engine(SyncRules):
             self._update_state(p)
             self._continue_sync(p)
             self._interp_run(p)
+
+    begin_wait = _begin_wait
+    finish_wait = _finish_wait
 
     def _drop_wait(self, wait: WaitRecord) -> None:
         if wait.handle is not None:

@@ -89,7 +89,7 @@ class WaitRecord:
     # for it (the wait-for edges; None: ``target``), and a note for a deadlock or stall
     # report, asked for when one is found (the buffered #SIGNAL SYN and the fix).
     on: object | None = None
-    text: str | None = None
+    text: str | Callable[[], str] | None = None
     targets: tuple[int, ...] | None = None
     note: Callable[[], str | None] | None = None
 
@@ -100,7 +100,7 @@ class WaitRecord:
 
     def reason(self) -> str:
         if self.text is not None:
-            return self.text
+            return self.text if isinstance(self.text, str) else self.text()
         if self.kind is WaitKind.COND:
             value, writer = self.probe() if self.probe is not None else (self.value, self.writer)
             by = f", last written by {writer}" if writer else ""

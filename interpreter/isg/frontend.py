@@ -16,6 +16,7 @@ live in :class:`~ncgate.interpreter.isg.signals.SignalBoard`.  Must not import `
 from __future__ import annotations
 
 import math
+import operator
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -115,7 +116,10 @@ class IsgFrontEnd:
         if block is None or not block.items:
             return CompiledBlock((), (loaded.file, index + 1, None), False)
         where: Where = (loaded.file, index + 1, block.number)
-        ops = _BlockCompiler(host, self.options, program, index, where).compile(block)
+        if self.board is None:
+            raise RuntimeError("attach the ISG front end to its engine before a program starts")
+        ops = _BlockCompiler(host, self.board, self.options, program, index, where).compile(
+            block)
         return CompiledBlock(tuple(ops), where, True)
 
     def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
@@ -123,9 +127,10 @@ class IsgFrontEnd:
 
 
 class _BlockCompiler:
-    def __init__(self, host: BlockHost, options: IsgOptions, program: IsgProgram, index: int,
-                 where: Where) -> None:
+    def __init__(self, host: BlockHost, board: SignalBoard, options: IsgOptions,
+                 program: IsgProgram, index: int, where: Where) -> None:
         self.host = host
+        self.board = board
         self.options = options
         self.program = program
         self.index = index
@@ -321,15 +326,17 @@ class _BlockCompiler:
         channels = [self.int_arg(c, "CH") for c in item.channels]
         level = "syn" if item.syn else "dec"
         where = self.where
-        constant = (not params and not channels and count is None
-                    and isinstance(item.id, Num))
+        check_channels = self.board.check_channels
 
-        def make(p: Process) -> SendSignal:
-            c = count(p) if count is not None else None
+        def make(p: Process | None) -> SendSignal:
+            c = count(p) if count is not None else None  # type: ignore[arg-type]
             if c is not None and c < 1:
                 raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, f"COUNT{c}: at least 1")
-            return SendSignal(ident(p), c, tuple((i, fn(p)) for i, fn in params),
-                              tuple(dict.fromkeys(ch(p) for ch in channels)), level)
+            to = tuple(dict.fromkeys(ch(p) for ch in channels))  # type: ignore[arg-type]
+            check_channels(to, "#SIGNAL to")
+            return SendSignal(ident(p), c,  # type: ignore[arg-type]
+                              tuple((i, fn(p)) for i, fn in params),  # type: ignore[arg-type]
+                              to, level)
         if item.syn:
             queue_motion = self.host.queue_motion
 
@@ -338,17 +345,17 @@ class _BlockCompiler:
                     return queue_motion(p, p.pending)
                 return queue_motion(p, [QueueItem(ItemKind.SYNC, 0.0, where, None, [make(p)])])
             return signal_syn
-        perform = self.host.perform
-        if constant:  # a broadcast of a fixed number: built once
-            fixed = make(None)  # type: ignore[arg-type]
+        send = self.board.send
+        if _constant(item.id, item.count, *item.channels, *(e for _, e in item.params)):
+            fixed = make(None)  # the same signal every time: built once
 
             def signal_fixed(p: Process) -> Step:
-                perform(p, DECODER, fixed, where)
+                send(p, DECODER, fixed, where)
                 return NEXT
             return signal_fixed
 
         def signal(p: Process) -> Step:
-            perform(p, DECODER, make(p), where)
+            send(p, DECODER, make(p), where)
             return NEXT
         return signal
 
@@ -365,8 +372,12 @@ class _BlockCompiler:
             for i, put in stores:
                 put(p, got[i], at)
 
-        def make(p: Process) -> AwaitSignal:
-            return AwaitSignal(ident(p), tuple(ch(p) for ch in channels), indices, level, code,
+        check_channels = self.board.check_channels
+
+        def make(p: Process | None) -> AwaitSignal:
+            chosen = tuple(ch(p) for ch in channels)  # type: ignore[arg-type]
+            check_channels(chosen, "#WAIT for")
+            return AwaitSignal(ident(p), chosen, indices, level, code,  # type: ignore[arg-type]
                                assign if stores else None)
         if item.syn:
             queue_motion = self.host.queue_motion
@@ -376,10 +387,16 @@ class _BlockCompiler:
                     return queue_motion(p, p.pending)
                 return queue_motion(p, [QueueItem(ItemKind.SYNC, 0.0, where, None, [make(p)])])
             return wait_syn
-        perform = self.host.perform
+        wait_for = self.board.wait
+        if _constant(item.id, *item.channels):
+            fixed = make(None)
+
+            def wait_fixed(p: Process) -> Step:
+                return NEXT if wait_for(p, DECODER, fixed, where) else WAIT_NEXT
+            return wait_fixed
 
         def wait(p: Process) -> Step:
-            return NEXT if perform(p, DECODER, make(p), where) else WAIT_NEXT
+            return NEXT if wait_for(p, DECODER, make(p), where) else WAIT_NEXT
         return wait
 
     def _control(self, item: Control) -> Op:
@@ -462,6 +479,10 @@ class _BlockCompiler:
         return end
 
 
+def _constant(*exprs: Expr | None) -> bool:
+    return all(e is None or isinstance(e, Num) for e in exprs)
+
+
 def _code_text(line: str) -> str:
     """A block as the why-record shows it: without its N number and comments."""
     text = re.sub(r"^\s*N\d+\s*", "", blank_comments(line)).strip()
@@ -494,9 +515,9 @@ def _binary(op: str, left: Callable[[Process], float],
         return lambda p: 1.0 if left(p) and right(p) else 0.0
     if op == "OR":
         return lambda p: 1.0 if left(p) or right(p) else 0.0
-    compare = {"==": float.__eq__, "!=": float.__ne__, "<": float.__lt__, "<=": float.__le__,
-               ">": float.__gt__, ">=": float.__ge__}[op]
-    return lambda p: 1.0 if compare(float(left(p)), float(right(p))) else 0.0
+    compare = {"==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le,
+               ">": operator.gt, ">=": operator.ge}[op]
+    return lambda p: 1.0 if compare(left(p), right(p)) else 0.0
 
 
 def _sqrt(arg: Callable[[Process], float]) -> Callable[[Process], float]:

@@ -21,7 +21,7 @@ search -- each directed WAIT has an edge to every channel it still needs).  Must
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm
@@ -53,6 +53,12 @@ class AwaitSignal:
     level: str
     code: str
     store: Callable[[Process, dict[int, float], Where], None] | None = None
+    on: ev.SignalOn | None = None  # the trace's "on"; made here when not given
+
+    def __post_init__(self) -> None:
+        if self.on is None:
+            on = ev.SignalOn(self.id, self.channels if self.channels else "all", self.level)
+            object.__setattr__(self, "on", on)
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,26 +79,27 @@ class Stored:
 
 @dataclass(slots=True, eq=False)
 class Pending:
-    """A WAIT under way."""
+    """A WAIT under way; it is also its wait record's handle (``cancel``)."""
 
+    board: SignalBoard
     p: Process
     action: AwaitSignal
-    record: WaitRecord
+    record: WaitRecord | None
     missing: list[int]  # channels whose signal it still needs; empty for a broadcast wait
-    got: dict[int, float] = field(default_factory=dict)
-
-
-class _Handle:
-    """Cancels a pending WAIT (the engine calls it on an alarm, a timeout or a reset)."""
-
-    __slots__ = ("board", "pending")
-
-    def __init__(self, board: SignalBoard, pending: Pending) -> None:
-        self.board = board
-        self.pending = pending
+    got: dict[int, float]
 
     def cancel(self) -> None:
-        self.board._forget(self.pending)
+        """The engine drops the wait (an alarm, a timeout, a reset)."""
+        self.board._forget(self)
+
+    def reason(self) -> str:
+        ident = self.action.id
+        if not self.missing:
+            return f"waits for a broadcast signal {ident}"
+        return f"waits for signal {ident} from " + ", ".join(f"P{k}" for k in self.missing)
+
+    def note(self) -> str | None:
+        return self.board._buffered_note(self)
 
 
 class SignalBoard:
@@ -104,6 +111,7 @@ class SignalBoard:
         # (id, addressee; 0 for a broadcast) -> stored signals, oldest first
         self._stored: dict[tuple[int, int], list[Stored]] = {}
         self.stored_count = 0
+        self._record = host.record
         # (id, channel; 0 for a broadcast wait) -> the WAITs under way, oldest first
         self._waiting: dict[tuple[int, int], list[Pending]] = {}
         host.register_action(SendSignal, self.send)
@@ -112,29 +120,41 @@ class SignalBoard:
 
     # ---- #SIGNAL ---------------------------------------------------------------------------
 
-    def send(self, p: Process, stage: Stage, sig: SignalSendLike, where: Where) -> bool:
-        host = self.host
-        processes = host.processes
-        for k in sig.to:
+    def check_channels(self, channels: tuple[int, ...], what: str) -> None:
+        """Channels a signal or WAIT names must exist (checked when the action is made)."""
+        processes = self.host.processes
+        for k in channels:
             if k not in processes:
                 raise RuntimeAlarm(AlarmCode.PROCESS_OUT_OF_RANGE,
-                                   f"#SIGNAL to channel {k}, which is not configured "
+                                   f"{what} channel {k}, which is not configured "
                                    f"(1..{len(processes)})")
-        addressees = sig.to or (0,)
+
+    def send(self, p: Process, stage: Stage, sig: SendSignal, where: Where) -> bool:
+        host = self.host
+        if len(sig.to) == 1 and sig.count is None:  # the common case: one WAIT uses it up
+            return self._send_one(p, sig, sig.to[0], where)
+        addressees = sig.to or _BROADCAST
         # Plan first: a signal that cannot be stored whole is an alarm, and nothing of it goes.
         plan = []
         new = 0
+        waiting = self._waiting
+        sender = p.number
         for to in addressees:
             left = sig.count if sig.count is not None else (1 if to else None)
-            takers = [w for w in self._waiting.get((sig.id, to), ()) if
-                      to == 0 or p.number in w.missing]
+            queue = waiting.get((sig.id, to))
+            takers: list[Pending] = []
+            if queue:
+                for w in queue:
+                    if to == 0 or sender in w.missing:
+                        takers.append(w)
+                        if left is not None and len(takers) == left:
+                            break
             if left is not None:
-                takers = takers[:left]
                 left -= len(takers)
             if left is None or left > 0:
                 new += 1
             plan.append((to, takers, left))
-        if self.stored_count + new > self.max_events:
+        if new and self.stored_count + new > self.max_events:
             raise RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
                                f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored "
                                f"and nc.isg.max_events is {self.max_events}; WAIT for them, "
@@ -142,76 +162,118 @@ class SignalBoard:
         host.count_signal(p, addressees[0], sig.id, where)
         if len(addressees) > 1:
             p.stats.snd_sent += len(addressees) - 1
-        host.record(ev.Signal, p.number, where, sig.id, sig.to or "all", sig.count,
+        self._record(ev.Signal, sender, where, sig.id, sig.to or "all", sig.count,
                     dict(sig.params), sig.level)
         for to, takers, left in plan:
             for w in takers:
-                self._deliver(w, p.number, sig.params, "all" if to == 0 else p.number)
+                self._deliver(w, sender, sig.params, sender if to else "all")
             if left is None or left > 0:
-                self._stored.setdefault((sig.id, to), []).append(
-                    Stored(sig.id, p.number, to, left, sig.params))
+                key = (sig.id, to)
+                stored = Stored(sig.id, sender, to, left, sig.params)
+                if key in self._stored:
+                    self._stored[key].append(stored)
+                else:
+                    self._stored[key] = [stored]
                 self.stored_count += 1
+        return True
+
+    def _send_one(self, p: Process, sig: SendSignal, to: int, where: Where) -> bool:
+        """A directed signal without COUNT: to the oldest WAIT that needs it, else stored."""
+        sender = p.number
+        key = (sig.id, to)
+        taker = None
+        queue = self._waiting.get(key)
+        if queue:
+            for w in queue:
+                if sender in w.missing:
+                    taker = w
+                    break
+        if taker is None and self.stored_count >= self.max_events:
+            raise RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
+                               f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored "
+                               f"and nc.isg.max_events is {self.max_events}; WAIT for them, "
+                               "#SIGNAL REMOVE them, or raise the limit")
+        self.host.count_signal(p, to, sig.id, where)
+        self._record(ev.Signal, sender, where, sig.id, sig.to, None, dict(sig.params),
+                     sig.level)
+        if taker is not None:
+            self._deliver(taker, sender, sig.params, sender)
+        else:
+            stored = Stored(sig.id, sender, to, 1, sig.params)
+            if key in self._stored:
+                self._stored[key].append(stored)
+            else:
+                self._stored[key] = [stored]
+            self.stored_count += 1
         return True
 
     def _deliver(self, w: Pending, sender: int, params: tuple[tuple[int, float], ...],
                  by: int | str) -> None:
         w.p.stats.snd_received += 1
-        w.got.update(params)
-        if w.missing:
-            w.missing.remove(sender)
-            w.record.targets = tuple(w.missing)
-            w.record.target = w.missing[0] if w.missing else 0
-        if w.missing:
-            return
-        self._forget(w)
+        if params:
+            w.got.update(params)
         record = w.record
+        assert record is not None
+        missing = w.missing
+        if missing:
+            missing.remove(sender)
+            if missing:
+                record.targets = tuple(missing)
+                record.target = missing[0]
+                return
+            record.targets = ()
+            record.target = 0
+        self._forget(w)
         record.handle = None
         host = self.host
-        try:
-            self._store(w.p, w.action, w.got, record.where)
-        except RuntimeAlarm as alarm:
-            host.alarm(w.p, alarm.code, alarm.message, record.where)
-            return
+        if w.action.params:
+            try:
+                self._store(w.p, w.action, w.got, record.where)
+            except RuntimeAlarm as alarm:
+                host.alarm(w.p, alarm.code, alarm.message, record.where)
+                return
         host.finish_wait(w.p, record, by)
 
     # ---- #WAIT ------------------------------------------------------------------------------
 
     def wait(self, p: Process, stage: Stage, act: AwaitSignal, where: Where) -> bool:
-        processes = self.host.processes
-        for k in act.channels:
-            if k not in processes:
-                raise RuntimeAlarm(AlarmCode.PROCESS_OUT_OF_RANGE,
-                                   f"#WAIT for channel {k}, which is not configured "
-                                   f"(1..{len(processes)})")
+        channels = act.channels
         got: dict[int, float] = {}
-        missing = list(dict.fromkeys(act.channels))
-        if not missing:
-            stored = self._take(act.id, 0, None)
+        stored_map = self._stored
+        if not channels:
+            missing: list[int] = []
+            stored = self._take(act.id, 0, None) if (act.id, 0) in stored_map else None
             if stored is not None:
                 p.stats.snd_received += 1
-                self._store(p, act, dict(stored.params), where)
+                if act.params:
+                    self._store(p, act, dict(stored.params), where)
                 return True
         else:
-            for sender in list(missing):
-                stored = self._take(act.id, p.number, sender)
-                if stored is not None:
-                    p.stats.snd_received += 1
-                    got.update(stored.params)
-                    missing.remove(sender)
-            if not missing:
-                self._store(p, act, got, where)
-                return True
-        frm: tuple[int, ...] | str = act.channels if act.channels else "all"
-        text = (f"waits for signal {act.id} from "
-                + ", ".join(f"P{k}" for k in missing) if missing
-                else f"waits for a broadcast signal {act.id}")
-        record = WaitRecord(WaitKind.PROC, missing[0] if missing else 0, act.code, where,
-                            self.host.now, stage, on=ev.SignalOn(act.id, frm, act.level),
-                            text=text, targets=tuple(missing))
-        pending = Pending(p, act, record, missing, got)
-        record.handle = _Handle(self, pending)
-        record.note = lambda: self._buffered_note(pending)
-        self._waiting.setdefault((act.id, p.number if missing else 0), []).append(pending)
+            missing = list(dict.fromkeys(channels)) if len(channels) > 1 else [channels[0]]
+            if (act.id, p.number) in stored_map:
+                for sender in list(missing):
+                    stored = self._take(act.id, p.number, sender)
+                    if stored is not None:
+                        p.stats.snd_received += 1
+                        got.update(stored.params)
+                        missing.remove(sender)
+                if not missing:
+                    if act.params:
+                        self._store(p, act, got, where)
+                    return True
+        pending = Pending(self, p, act, None, missing, got)
+        # Positional (this is on every WAIT that waits): kind, target, code, where, since,
+        # stage, cond, value, writer, handle, timeout, probe, on, text, targets, note.
+        record = WaitRecord(_PROC, missing[0] if missing else 0, act.code, where,
+                            self.host.now, stage, None, None, None, pending, None, None,
+                            act.on, pending.reason, tuple(missing), pending.note)
+        pending.record = record
+        key = (act.id, p.number if missing else 0)
+        queue = self._waiting.get(key)
+        if queue is None:
+            self._waiting[key] = [pending]
+        else:
+            queue.append(pending)
         host = self.host
         host.begin_wait(p, stage, record)
         host.check_wait(p, record)
@@ -248,8 +310,11 @@ class SignalBoard:
     def _forget(self, w: Pending) -> None:
         key = (w.action.id, w.p.number if w.action.channels else 0)
         waiting = self._waiting.get(key)
-        if waiting and w in waiting:
-            waiting.remove(w)
+        if waiting:
+            if waiting[0] is w:
+                del waiting[0]
+            elif w in waiting:
+                waiting.remove(w)
             if not waiting:
                 del self._waiting[key]
 
@@ -287,7 +352,7 @@ class SignalBoard:
                 continue
             removed += len(self._stored.pop(key))
         self.stored_count -= removed
-        self.host.record(ev.Remove, p.number, where, removed)
+        self._record(ev.Remove, p.number, where, removed)
         return True
 
     def clear(self) -> None:
@@ -301,4 +366,5 @@ class SignalBoard:
         return [s for queue in self._stored.values() for s in queue]
 
 
-SignalSendLike = SendSignal
+_BROADCAST = (0,)
+_PROC = WaitKind.PROC
