@@ -506,7 +506,7 @@ class CanopenNode:
                 self._alarmed = False
                 if not self.stopped:
                     self.node.emcy.reset(0)
-        elif isinstance(event, ev.Snd):
+        elif isinstance(event, ev.Snd | ev.Signal):  # a signal counts like an SND (spec 5.6)
             self.pdos.snd()
 
 

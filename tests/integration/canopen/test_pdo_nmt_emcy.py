@@ -173,3 +173,21 @@ async def test_reset_node_boots_again_in_pre_operational(gw: Gateway, master: Ma
     await gw.start("BAD", process=3)  # a state change: no TPDO1 in PRE-OPERATIONAL ...
     assert (await master.upload(0x2502, 1)) == u8(8)
     assert master.frames[0x190].empty()  # ... and the SDO answer came after the change
+
+
+@pytest.mark.parametrize("ncgate_config", [{"nc.dialect": "isg"}], indirect=True)
+async def test_tpdo2_on_every_isg_signal(gw: Gateway, master: Master, cell: Path) -> None:
+    """Spec 5.6: a signal counts like an SND -- TPDO2 carries the sender, the first channel
+    it is addressed to (0 for a broadcast) and N."""
+    (cell / "SIGS.nc").write_text("%channel1\nN7 #SIGNAL [ID9 CH2 CH3]\nN8 #SIGNAL [ID10]\n"
+                                  "N9 M30\n", encoding="utf-8")
+    master.nmt(0x01)
+    assert await master.next(0x190) == bytes(4)
+    await gw.start("SIGS", process=1)
+    await gw.wait_idle(timeout_s=5)
+    first, second = await master.next(0x290), await master.next(0x290)
+    n1, s1, t1, b1 = struct.unpack("<LBBH", first)
+    n2, s2, t2, b2 = struct.unpack("<LBBH", second)
+    assert (s1, t1, b1) == (1, 2, 7) and (s2, t2, b2) == (1, 0, 8) and n2 > n1
+    with pytest.raises(queue.Empty):  # one TPDO2 per #SIGNAL, not one per channel
+        master.frames[0x290].get(timeout=0.3)
