@@ -306,7 +306,9 @@ class Engine(SyncRules):
                 continue
             wait = p.int_wait or p.dec_wait
             if wait is not None:
-                out.append(Blocked(p.number, *wait.where, f"{wait.code} {wait.reason()}"))
+                note = wait.note() if wait.note is not None else None
+                reason = f"{wait.code} {wait.reason()}" + (f"; {note}" if note else "")
+                out.append(Blocked(p.number, *wait.where, reason))
             else:
                 out.append(Blocked(p.number, *p.where, "blocked"))
         return tuple(out)

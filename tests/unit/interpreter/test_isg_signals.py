@@ -275,3 +275,21 @@ M30
     p = result.runtime.engine.processes[1]
     assert (p.actual[0], p.actual[1]) == (10.0, 7.0)
     assert p.vars == {"LIMIT": 5.0, "STEP": 2.0}
+
+
+def test_a_stall_on_a_broadcast_in_the_own_buffer_says_to_flush(tmp_path: Path) -> None:
+    # Anyone could still send a broadcast, so this is no deadlock -- but when nothing is left
+    # to run, the stall report names the #SIGNAL SYN sitting in the buffer, and the fix.
+    result = isg_sim(tmp_path, """%channel1
+N10 G01 X10 F6000
+N20 #SIGNAL SYN [ID3]
+N30 #WAIT [ID3]
+M30
+%channel2
+M30
+""", processes=2)
+    assert result.outcome == "stall"
+    (stall,) = events(result, "stall")
+    (blocked,) = stall["blocked"]
+    assert blocked["n"] == 30 and "waits for a broadcast signal 3" in blocked["reason"]
+    assert "PROG.nc:3 N20" in blocked["reason"] and "add #FLUSH" in blocked["reason"]
