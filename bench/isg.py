@@ -15,12 +15,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from runtime import PING, PONG, TRIPS  # bench/runtime.py: the NC-110 ping-pong, as it is there
+
 from ncgate.config import load_config
 from ncgate.gateway.wiring import build_runtime
 from ncgate.interpreter.engine import run_virtual
 from ncgate.interpreter.engine.trace import Trace
 
-TRIPS = 50_000
 ROUNDS = 3
 
 ISG = f"""%channel1
@@ -40,23 +41,6 @@ P1 = P1 + 1
 $ENDWHILE
 M30
 """
-PING = f"""N1(EXE,2,PONG)
-"L"
-N2(SND,2)
-N3(WAI,2)
-N4E1=E1+1
-N5(BLT,E1,{TRIPS},L)
-N6M30
-"""
-PONG = f""""L"
-N1(WAI,1)
-N2(SND,1)
-N3E1=E1+1
-N4(BLT,E1,{TRIPS},L)
-N5(REL)
-"""
-
-
 def run(folder: Path, dialect: str, main: str) -> float:
     (folder / "ncgate.toml").write_text(
         f'[nc]\ndialect = "{dialect}"\nprocesses = 2\nmain = "{main}"\n'

@@ -155,10 +155,7 @@ class SignalBoard:
                 new += 1
             plan.append((to, takers, left))
         if new and self.stored_count + new > self.max_events:
-            raise RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
-                               f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored "
-                               f"and nc.isg.max_events is {self.max_events}; WAIT for them, "
-                               "#SIGNAL REMOVE them, or raise the limit")
+            raise self._full(sig)
         host.count_signal(p, addressees[0], sig.id, where)
         if len(addressees) > 1:
             p.stats.snd_sent += len(addressees) - 1
@@ -168,13 +165,7 @@ class SignalBoard:
             for w in takers:
                 self._deliver(w, sender, sig.params, sender if to else "all")
             if left is None or left > 0:
-                key = (sig.id, to)
-                stored = Stored(sig.id, sender, to, left, sig.params)
-                if key in self._stored:
-                    self._stored[key].append(stored)
-                else:
-                    self._stored[key] = [stored]
-                self.stored_count += 1
+                self._keep(Stored(sig.id, sender, to, left, sig.params))
         return True
 
     def _send_one(self, p: Process, sig: SendSignal, to: int, where: Where) -> bool:
@@ -189,23 +180,29 @@ class SignalBoard:
                     taker = w
                     break
         if taker is None and self.stored_count >= self.max_events:
-            raise RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
-                               f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored "
-                               f"and nc.isg.max_events is {self.max_events}; WAIT for them, "
-                               "#SIGNAL REMOVE them, or raise the limit")
+            raise self._full(sig)
         self.host.count_signal(p, to, sig.id, where)
         self._record(ev.Signal, sender, where, sig.id, sig.to, None, dict(sig.params),
                      sig.level)
         if taker is not None:
             self._deliver(taker, sender, sig.params, sender)
         else:
-            stored = Stored(sig.id, sender, to, 1, sig.params)
-            if key in self._stored:
-                self._stored[key].append(stored)
-            else:
-                self._stored[key] = [stored]
-            self.stored_count += 1
+            self._keep(Stored(sig.id, sender, to, 1, sig.params))
         return True
+
+    def _keep(self, stored: Stored) -> None:
+        key = (stored.id, stored.to)
+        if key in self._stored:
+            self._stored[key].append(stored)
+        else:
+            self._stored[key] = [stored]
+        self.stored_count += 1
+
+    def _full(self, sig: SendSignal) -> RuntimeAlarm:
+        return RuntimeAlarm(AlarmCode.SIGNAL_STORE_FULL,
+                            f"#SIGNAL ID{sig.id}: {self.stored_count} signals are stored and "
+                            f"nc.isg.max_events is {self.max_events}; WAIT for them, "
+                            "#SIGNAL REMOVE them, or raise the limit")
 
     def _deliver(self, w: Pending, sender: int, params: tuple[tuple[int, float], ...],
                  by: int | str) -> None:
