@@ -611,9 +611,8 @@ class Engine(SyncRules):
                 self._queue_drained(p)
                 return
             if self._buffered and p.int_item is None and not self._buffer_open(p):
-                if not p.starved:
+                if not p.starved:  # its state is its decoder's; the deadlock search asks
                     p.starved = True
-                    self._update_state(p)
                     self._check_deadlock(p)
                 return
             p.starved = False
