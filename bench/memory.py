@@ -12,6 +12,8 @@ the sample at the end of the warm-up (target: within 10 %, i.e. <= 1.10x).
     .venv/bin/python bench/memory.py --seconds 600
     .venv/bin/python bench/memory.py --plc   # the same with PLC logic scanning (a RETAIN
                                              # save and image writes every scan)
+    .venv/bin/python bench/memory.py --isg   # the ISG dialect: a channel signalling itself,
+                                             # broadcasting and removing, 10 ms of motion
     # the same load against another checkout (e.g. the code before the ring):
     PYTHONPATH=/path/to/old .venv/bin/python bench/memory.py --module gateway
 """
@@ -51,15 +53,34 @@ END_PROGRAM
 """
 
 
-def write_cell(folder: Path, port: int, time_scale: float, plc: bool = False) -> Path:
-    (folder / "LOOP.nc").write_text(MAIN)
+# --isg: one channel (cycle start starts channel 1 only) stores and consumes a directed signal,
+# a broadcast and a SYN signal every 10 ms of motion, and removes the broadcasts.
+ISG = """%channel1
+$WHILE 1
+#SIGNAL [ID1 P[0]=7 CH1]
+#SIGNAL [ID9]
+#SIGNAL SYN [ID2 CH1]
+G91 G01 X1 F6000
+#WAIT [ID1 P[0]=P1 CH1]
+#FLUSH
+#WAIT [ID2 CH1]
+#SIGNAL REMOVE [ID9]
+$ENDWHILE
+"""
+
+
+def write_cell(folder: Path, port: int, time_scale: float, plc: bool = False,
+               isg: bool = False) -> Path:
+    (folder / "LOOP.nc").write_text(ISG if isg else MAIN)
     (folder / "PEER.nc").write_text(PEER)
     config = folder / "ncgate.toml"
+    dialect = 'dialect = "isg"\n' if isg else ""
     logic = ""
     if plc:
         (folder / "load.st").write_text(LOGIC)
         logic = '[plc]\nlogic = "load.st"\n'
-    config.write_text(f'[nc]\nmain = "LOOP"\nautostart = true\ntime_scale = {time_scale}\n'
+    config.write_text(f'[nc]\n{dialect}main = "LOOP"\nautostart = true\n'
+                      f'time_scale = {time_scale}\n'
                       f'[nc.storage]\nMP0 = "."\n[modbus]\nport = {port}\nmax_clients = 64\n'
                       f'[canopen]\nchannel = "bench-memory-{os.getpid()}"\n{logic}')
     return config
@@ -142,7 +163,7 @@ async def wait_listening(port: int, deadline_s: float = 30.0) -> None:
 async def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         port = free_port()
-        config = write_cell(Path(tmp), port, args.time_scale, plc=args.plc)
+        config = write_cell(Path(tmp), port, args.time_scale, plc=args.plc, isg=args.isg)
         server = await asyncio.create_subprocess_exec(
             sys.executable, "-m", args.module, "run", "--config", str(config),
             stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL)
@@ -170,8 +191,9 @@ async def run(args: argparse.Namespace) -> int:
     end = samples[-1]
     print(f"load: {counts[0]:,} writes in {elapsed:.0f} s = {counts[0] / elapsed:,.0f} "
           f"writes/s (FC16 x8 + FC5, half changing), {args.clients} clients reconnecting "
-          f"every {args.reconnect_s:g} s; SND/WAI loop with a 10 ms dwell at time_scale "
-          f"{args.time_scale:g}: {round_trips:,} round trips")
+          f"every {args.reconnect_s:g} s; {'#SIGNAL/#WAIT' if args.isg else 'SND/WAI'} loop "
+          f"with 10 ms of {'motion' if args.isg else 'dwell'} at time_scale "
+          f"{args.time_scale:g}: {round_trips:,} {'signals' if args.isg else 'round trips'}")
     print("RSS curve (s: MiB): " + ", ".join(f"{t:.0f}: {kib / 1024:.1f}"
                                               for t, kib, _ in samples))
     print(f"RSS: start {start_kib / 1024:.1f} MiB, after warm-up ({warm[0]:.0f} s) "
@@ -192,6 +214,8 @@ def main() -> int:
     parser.add_argument("--module", default="ncgate", help="python -m MODULE run")
     parser.add_argument("--plc", action="store_true", help="with PLC logic scanning every "
                         "10 ms, writing the image and a RETAIN value each scan")
+    parser.add_argument("--isg", action="store_true", help="the ISG dialect: signals stored, "
+                        "consumed, broadcast and removed every 10 ms")
     return asyncio.run(run(parser.parse_args()))
 
 
