@@ -293,3 +293,27 @@ M30
     (blocked,) = stall["blocked"]
     assert blocked["n"] == 30 and "waits for a broadcast signal 3" in blocked["reason"]
     assert "PROG.nc:3 N20" in blocked["reason"] and "add #FLUSH" in blocked["reason"]
+
+
+def test_the_interpolator_starts_on_a_full_buffer_or_the_end(tmp_path: Path) -> None:
+    """Spec 5.4: channel 1's move is buffered while its decoder waits (the buffer is not
+    full), so it starts only when the signal lets the decoder reach the end; with
+    nc.lookahead = 2 the buffer is full at once and the move starts at t = 0."""
+    program = """%channel1
+N10 G01 X100 F6000
+N20 #WAIT [ID1 CH2]
+N30 M30
+%channel2
+N10 G01 X50 F6000
+N20 #FLUSH
+N30 #SIGNAL [ID1 CH1]
+N40 M30
+"""
+    result = isg_sim(tmp_path, program, processes=2)
+    assert [(e["proc"], e["t"]) for e in events(result, "end")] == [(2, 0.5), (1, 1.5)]
+    folder = tmp_path / "full"
+    folder.mkdir()
+    result = isg_sim(folder, program.replace("N10 G01 X100 F6000",
+                                             "N10 G01 X100 F6000\nN11 G01 X200"),
+                     processes=2, config="lookahead = 2")
+    assert [(e["proc"], e["t"]) for e in events(result, "end")] == [(2, 0.5), (1, 2.0)]
