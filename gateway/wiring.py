@@ -11,14 +11,14 @@ from typing import Protocol
 from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.diagnostics import LineError, RuntimeAlarm
 from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.isg.frontend import ExternalBinding, IsgFrontEnd, IsgOptions
 from ncgate.interpreter.nc110.compiler import NC110
 from ncgate.interpreter.nc110.evaluate import compile_expr
 from ncgate.interpreter.nc110.nodes import Assign, CompareOp, VarKind, VarRef, View, WaitCond
-from ncgate.interpreter.nc110.parser import LineError, parse_block
+from ncgate.interpreter.nc110.parser import parse_block
 from ncgate.interpreter.settings import Dialect, RuntimeSettings
 from ncgate.plc.image import Change, IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus

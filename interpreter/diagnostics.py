@@ -61,6 +61,14 @@ class InterpreterError(NcgateError):
     """Root of the interpreter's exceptions."""
 
 
+class LineError(InterpreterError):
+    """A block that does not parse (either dialect's parser); carries its diagnostic."""
+
+    def __init__(self, diagnostic: Diagnostic) -> None:
+        super().__init__(diagnostic.render())
+        self.diagnostic = diagnostic
+
+
 class ProgramError(InterpreterError):
     """A program that cannot start: it carries every diagnostic found."""
 

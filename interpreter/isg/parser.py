@@ -24,7 +24,7 @@ from typing import Final
 from ncgate.interpreter.codes import DiagnosticCode
 from ncgate.interpreter.diagnostics import (
     Diagnostic,
-    InterpreterError,
+    LineError,
     ProgramNotFoundError,
     ProgramSyntaxError,
     did_you_mean,
@@ -64,12 +64,6 @@ _NUMBER: Final = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _INT: Final = re.compile(r"\d+")
 _COMPARE: Final = ("==", "!=", "<>", "<=", ">=", "<", ">")
 _SYNC_KEYS: Final = ("IDMIN", "IDMAX", "ID", "COUNT", "CH", "AHEAD")
-
-
-class LineError(InterpreterError):
-    def __init__(self, diagnostic: Diagnostic) -> None:
-        super().__init__(diagnostic.render())
-        self.diagnostic = diagnostic
 
 
 def blank_comments(text: str) -> str:

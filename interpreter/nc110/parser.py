@@ -34,7 +34,7 @@ from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
 from ncgate.interpreter.diagnostics import (
     Diagnostic,
-    InterpreterError,
+    LineError,
     ProgramSyntaxError,
     did_you_mean,
 )
@@ -75,14 +75,6 @@ def lark_parser() -> Lark:
     grammar = resources.files("ncgate.interpreter.nc110").joinpath("grammar/nc110.lark")
     return Lark(grammar.read_text("utf-8"), parser="lalr", lexer="contextual",
                 maybe_placeholders=False)
-
-
-class LineError(InterpreterError):
-    """A block that does not parse; carries its diagnostic."""
-
-    def __init__(self, diagnostic: Diagnostic) -> None:
-        super().__init__(diagnostic.render())
-        self.diagnostic = diagnostic
 
 
 # ---- building nodes from tokens ---------------------------------------------------------

@@ -7,11 +7,11 @@ import json
 
 import pytest
 
-from ncgate.interpreter.diagnostics import ProgramSyntaxError
+from ncgate.interpreter.diagnostics import LineError, ProgramSyntaxError
 from ncgate.interpreter.engine.trace import write_jsonl
 from ncgate.interpreter.nc110 import parser as parser_module
 from ncgate.interpreter.nc110.checker import CheckContext, check_program
-from ncgate.interpreter.nc110.parser import MAX_DEPTH, LineError, Program, parse_block
+from ncgate.interpreter.nc110.parser import MAX_DEPTH, Program, parse_block
 
 from ...helpers import simulate
 

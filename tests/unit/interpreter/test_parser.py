@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ncgate.interpreter.codes import DiagnosticCode
+from ncgate.interpreter.diagnostics import LineError
 from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
@@ -31,7 +32,7 @@ from ncgate.interpreter.nc110.nodes import (
     WaitProc,
     Word,
 )
-from ncgate.interpreter.nc110.parser import LineError, Program, parse_block
+from ncgate.interpreter.nc110.parser import Program, parse_block
 
 
 def test_words_run_together_with_columns() -> None:

@@ -9,14 +9,10 @@ from typing import Any
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from ncgate.interpreter.diagnostics import LineError
 from ncgate.interpreter.nc110.formatter import format_block
 from ncgate.interpreter.nc110.nodes import Span, VarRef, Word
-from ncgate.interpreter.nc110.parser import (
-    WORD_LETTERS,
-    LineError,
-    parse_block,
-    parse_block_uncached,
-)
+from ncgate.interpreter.nc110.parser import WORD_LETTERS, parse_block, parse_block_uncached
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
