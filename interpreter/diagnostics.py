@@ -43,6 +43,13 @@ def render_all(diagnostics: Iterable[Diagnostic]) -> str:
     return "\n".join(d.render() for d in diagnostics)
 
 
+def fmt_number(value: float | None) -> str:
+    """A value as a message shows it: whole numbers without a point."""
+    if value is None:
+        return "?"
+    return str(int(value)) if value == int(value) else f"{value:g}"
+
+
 def did_you_mean(word: str, candidates: Iterable[str]) -> str | None:
     """The closest candidate to a misspelt name, or None when nothing is close."""
     pool = list(candidates)

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.diagnostics import RuntimeAlarm, fmt_number
 
 AXES = "XYZUVWABC"
 # An I/J/K arc's end must lie on the circle through its start (as LinuxCNC and real controls
@@ -30,6 +30,25 @@ class Modal:
     plane: int = 17
     tool: str = ""
     position: list[float] = field(default_factory=lambda: [0.0] * len(AXES))
+
+    def g_word(self, g: int, planes: bool = True) -> None:
+        """A G word's modal effect: G0..G3 motion, G90/G91 absolute/incremental, and (where
+        the dialect has them) G17/G18/G19 planes; other G words change nothing here."""
+        if g in (0, 1, 2, 3):
+            self.motion = g
+        elif g == 90:
+            self.absolute = True
+        elif g == 91:
+            self.absolute = False
+        elif planes and g in (17, 18, 19):
+            self.plane = g
+
+    def feed(self, mm_min: float) -> None:
+        """An F word: the modal feed, which must be positive."""
+        if mm_min <= 0:
+            raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT,
+                               f"F{fmt_number(mm_min)}: a feed must be positive")
+        self.feed_mm_min = mm_min
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
+from ncgate.interpreter.diagnostics import fmt_number
+
 if TYPE_CHECKING:
     from ncgate.interpreter.engine.ports import Cancellable
     from ncgate.interpreter.engine.timers import Timer
@@ -151,10 +153,3 @@ class ProcessStatus:
     @property
     def wait_target(self) -> int:
         return self.wait.target if self.wait else 0
-
-
-def fmt_number(value: float | None) -> str:
-    """A value as a message shows it: whole numbers without a point."""
-    if value is None:
-        return "?"
-    return str(int(value)) if value == int(value) else f"{value:g}"

@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import RuntimeAlarm
+from ncgate.interpreter.diagnostics import RuntimeAlarm, fmt_number
 from ncgate.interpreter.engine.actions import ItemKind, Step
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
-from ncgate.interpreter.engine.states import Stage, Where, fmt_number
+from ncgate.interpreter.engine.states import Stage, Where
 from ncgate.interpreter.isg.nodes import (
     Assign,
     Binary,
@@ -447,18 +447,9 @@ class _BlockCompiler:
             for letter, fn in values:
                 v = fn(p)
                 if letter == "G":
-                    g = int(v)
-                    if g in (0, 1, 2, 3):
-                        modal.motion = g
-                    elif g == 90:
-                        modal.absolute = True
-                    elif g == 91:
-                        modal.absolute = False
+                    modal.g_word(int(v), planes=False)  # the subset has no G17..G19
                 elif letter == "F":
-                    if v <= 0:
-                        raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT,
-                                           f"F{fmt_number(v)}: a feed must be positive")
-                    modal.feed_mm_min = v
+                    modal.feed(v)
                 elif letter in _AXES:
                     axes[letter] = v
                 elif letter in _ARC:

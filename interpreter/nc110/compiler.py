@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import ProgramSyntaxError, RuntimeAlarm
+from ncgate.interpreter.diagnostics import ProgramSyntaxError, RuntimeAlarm, fmt_number
 from ncgate.interpreter.engine.actions import (
     Action,
     Execute,
@@ -31,7 +31,7 @@ from ncgate.interpreter.engine.actions import (
 )
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
-from ncgate.interpreter.engine.states import Stage, Where, fmt_number
+from ncgate.interpreter.engine.states import Stage, Where
 from ncgate.interpreter.motion import AXES, Move, plan_move
 from ncgate.interpreter.nc110.evaluate import compile_expr, reads_image, round_half_away
 from ncgate.interpreter.nc110.formatter import format_item
@@ -250,20 +250,9 @@ class _BlockCompiler:
             v = p.E[value.index] if not isinstance(value, float) else value
             letter = word.letter
             if letter == "G":
-                g = int(v)
-                if g in (0, 1, 2, 3):
-                    modal.motion = g
-                elif g in (17, 18, 19):
-                    modal.plane = g
-                elif g == 90:
-                    modal.absolute = True
-                elif g == 91:
-                    modal.absolute = False
+                modal.g_word(int(v))
             elif letter == "F":
-                if v <= 0:
-                    raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT,
-                                       f"F{fmt_number(v)}: a feed must be positive")
-                modal.feed_mm_min = v
+                modal.feed(v)
             elif letter == "T":
                 modal.tool = word.text
             elif letter == "M" and int(v) == 6:
