@@ -55,47 +55,47 @@ class ProgramStore:
         # ISG: file -> (version, the parsed file, its diagnostics)
         self._files: dict[Path, tuple[tuple[int, int], IsgFile, list[Diagnostic]]] = {}
 
-    def isg_file(self, name: str, device: str | None = None) -> IsgFile:
-        """An ISG file by program name, parsed and checked once per version."""
+    def _located(self, name: str, device: str | None) -> tuple[Path, tuple[int, int]]:
+        """The file of program ``name`` and its version (mtime, size)."""
         path = self.storage.locate(name, device)
         stat = path.stat()
-        version = (stat.st_mtime_ns, stat.st_size)
+        return path, (stat.st_mtime_ns, stat.st_size)
+
+    def isg_file(self, name: str, device: str | None = None) -> IsgFile:
+        """An ISG file by program name, parsed and checked once per version."""
+        return self._isg_entry(*self._located(name, device))[1]
+
+    def _isg_entry(self, path: Path, version: tuple[int, int]
+                   ) -> tuple[tuple[int, int], IsgFile, list[Diagnostic]]:
         cached = self._files.get(path)
         if cached is None or cached[0] != version:
             source = IsgFile.from_path(path, display=path.name)
             cached = (version, source, check_file(source, isg_context(self.config)))
             self._files[path] = cached
-        return cached[1]
+        return cached
 
     def load(self, name: str, device: str | None, process: int) -> Program | IsgProgram:
-        if self.dialect is Dialect.ISG:
-            return self._load_isg(name, device, process)
-        path = self.storage.locate(name, device)
-        stat = path.stat()
-        version = (stat.st_mtime_ns, stat.st_size)
+        path, version = self._located(name, device)
         cached = self._cache.get((path, process))
         if cached is not None and cached[0] == version:
             return cached[1]
-        program = Program.from_path(path, display=path.name)
-        # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
-        if not self.config.nc.lazy_parse:
-            diagnostics = check_program(
-                program, check_context(self.config, self.storage, {process}))
-            errors = [d for d in diagnostics if d.is_error]
-            if errors:
-                raise ProgramSyntaxError(errors)
+        if self.dialect is Dialect.ISG:
+            program: Program | IsgProgram = self._check_section(path, version, process)
+        else:
+            program = Program.from_path(path, display=path.name)
+            # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
+            if not self.config.nc.lazy_parse:
+                diagnostics = check_program(
+                    program, check_context(self.config, self.storage, {process}))
+                errors = [d for d in diagnostics if d.is_error]
+                if errors:
+                    raise ProgramSyntaxError(errors)
         self._cache[(path, process)] = (version, program)
         return program
 
-    def _load_isg(self, name: str, device: str | None, process: int) -> IsgProgram:
-        source = self.isg_file(name, device)
-        path = self.storage.locate(name, device)
-        version, _, diagnostics = self._files[path]
-        cached = self._cache.get((path, process))
-        if cached is not None and cached[0] == version:
-            program = cached[1]
-            assert isinstance(program, IsgProgram)
-            return program
+    def _check_section(self, path: Path, version: tuple[int, int], process: int
+                       ) -> IsgProgram:
+        _, source, diagnostics = self._isg_entry(path, version)
         program = source.program(process)
         # A section is a program: only its own errors (and a file-wide one) keep it from
         # starting.
@@ -103,5 +103,4 @@ class ProgramStore:
         errors = [d for d in diagnostics if d.is_error and lo <= d.span.line <= program.end]
         if errors:
             raise ProgramSyntaxError(errors)
-        self._cache[(path, process)] = (version, program)
         return program
