@@ -177,8 +177,7 @@ class _BlockCompiler:
                 try:
                     return p.E[i]
                 except IndexError:
-                    raise RuntimeAlarm(AlarmCode.INDEX_OUT_OF_RANGE,
-                                       f"P{i}: the channel has P0..P{len(p.E) - 1}") from None
+                    raise _no_param(p, i) from None
             return param
         if isinstance(e, SelfVar):
             name = e.name
@@ -191,9 +190,7 @@ class _BlockCompiler:
                                        f"V.P.{name} is read before it has a value") from None
             return self_var
         if isinstance(e, ExternalVar):
-            binding = self.options.external.get(e.name)
-            if binding is None:  # the checker stops this; a lazy start reaches it
-                raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID, f"V.E.{e.name} is not in [nc.ve]")
+            binding = self.binding(e.name)
             if binding.sync:
                 self.sync_read = True
             read = self.host.image.read
@@ -210,6 +207,13 @@ class _BlockCompiler:
         assert isinstance(e, Binary)
         left, right = self.expr(e.left), self.expr(e.right)
         return _binary(e.op, left, right)
+
+    def binding(self, name: str) -> ExternalBinding:
+        """A V.E. name's binding (the checker refuses an undeclared one before it runs)."""
+        binding = self.options.external.get(name)
+        if binding is None:
+            raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID, f"V.E.{name} is not in [nc.ve]")
+        return binding
 
     def int_arg(self, e: Expr, what: str) -> Callable[[Process], int]:
         if isinstance(e, Num) and e.value == int(e.value):
@@ -233,8 +237,8 @@ class _BlockCompiler:
         where = self.where
         target = item.target
         if isinstance(target, ExternalVar):
-            binding = self.options.external.get(target.name)
-            if binding is not None and binding.sync:  # spec 5.5: in motion order
+            binding = self.binding(target.name)
+            if binding.sync:  # spec 5.5: in motion order
                 queue_motion = self.host.queue_motion
                 name = target.name
 
@@ -260,8 +264,7 @@ class _BlockCompiler:
                 try:
                     p.E[i] = value
                 except IndexError:
-                    raise RuntimeAlarm(AlarmCode.INDEX_OUT_OF_RANGE,
-                                       f"P{i}: the channel has P0..P{len(p.E) - 1}") from None
+                    raise _no_param(p, i) from None
             return param
         if isinstance(target, SelfVar):
             name = target.name
@@ -269,9 +272,7 @@ class _BlockCompiler:
             def self_var(p: Process, value: float, where: Where) -> None:
                 p.vars[name] = value
             return self_var
-        binding = self.options.external.get(target.name)
-        if binding is None:
-            raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID, f"V.E.{target.name} is not in [nc.ve]")
+        binding = self.binding(target.name)
         write_image = self.host.write_image
         name = target.name
 
@@ -479,6 +480,10 @@ def _code_text(line: str) -> str:
     text = re.sub(r"^\s*N\d+\s*", "", blank_comments(line)).strip()
     text = " ".join(text.split())
     return text[:60] if text else "#WAIT"
+
+
+def _no_param(p: Process, i: int) -> RuntimeAlarm:
+    return RuntimeAlarm(AlarmCode.INDEX_OUT_OF_RANGE, f"P{i}: the channel has P0..P{len(p.E) - 1}")
 
 
 def _whole(value: float, name: str) -> int:
