@@ -34,6 +34,7 @@ MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_TLS_PORT = 802  # mbaps, Modbus/TCP Security
+DEFAULT_WEB_PORT = 8080  # the console's port when web.port is not set
 MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
 
 
@@ -119,6 +120,21 @@ def _roles(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
                              f"got {region!r}")
         roles[role] = frozenset(regions)
     return roles
+
+
+def _web_port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int | None:
+    # Unset (None): 8080, and a taken 8080 is not fatal for `run`; set: exactly this port.
+    if "port" not in t:
+        return None
+    value = t["port"]
+    if value == 0 and not isinstance(value, bool):
+        return 0
+    return r.int_(value, key, 1, 65535)
+
+
+def _optional_str(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    name = key.rsplit(".", 1)[1]
+    return r.str_(t[name], key) if name in t else None
 
 
 def _unit_ids(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -410,12 +426,28 @@ class TraceConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class WebConfig:
+    """The commissioning console (``ncgate run``): a page and an HTTP API on one port."""
+
+    enabled: bool = setting(True, "serve the console with `ncgate run` (also --no-web)")
+    host: str = setting("127.0.0.1", "the address to listen on; any but loopback needs a token")
+    port: int | None = setting(None, "the port (default 8080: when it is taken `run` goes on "
+                               "without the console; a port set here must be free; 0: a free "
+                               "one)", parse=_web_port)
+    token: str | None = setting(None, "every write and command needs `Authorization: Bearer "
+                                "<token>`", parse=_optional_str)
+    read_only: bool = setting(False, "refuse every write and command (a view only)")
+    max_streams: int = setting(32, "live streams (browser tabs) at once", lo=1, hi=1000)
+
+
+@dataclass(frozen=True, slots=True)
 class Config:
     nc: NcConfig = setting(doc="[nc]", factory=NcConfig)
     plc: PlcConfig = setting(doc="[plc]", factory=PlcConfig)
     modbus: ModbusConfig = setting(doc="[modbus]", factory=ModbusConfig)
     canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
     trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
+    web: WebConfig = setting(doc="[web]", factory=WebConfig)
     source: Path | None = None  # the file it came from (None: built-in default); not a key
 
 
@@ -607,6 +639,12 @@ def _check_config(r: _Reader, config: Config) -> None:
             raise r.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at most 32768 "
                          f"K bytes, got {plc.k_bytes}")
     _check_tls(r, config.modbus.tls)
+    web = config.web
+    if web.enabled and not is_loopback(web.host) and not web.token:
+        raise r.fail("web.token", f"the console listens on {web.host}, beyond this "
+                     "machine: set a token (or web.host = \"127.0.0.1\")")
+    if web.token is not None and len(web.token) < 8:
+        raise r.fail("web.token", "expected at least 8 characters")
     m = config.modbus.map
     holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
                ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
@@ -622,6 +660,16 @@ def _check_config(r: _Reader, config: Config) -> None:
                     raise r.fail(f"modbus.map.{name}",
                                  f"{name} ({start}..{start + count - 1}) overlaps "
                                  f"{other} ({o_start}..{o_start + o_count - 1})")
+
+
+def is_loopback(host: str) -> bool:
+    """A loopback address, or ``localhost`` (any other name may resolve to anything)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False  # a host name: it may resolve to anything
 
 
 def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
@@ -660,7 +708,7 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, IsgConfig, PlcConfig, ModbusMapConfig, ModbusTlsConfig, ModbusConfig,
-    CanopenConfig, TraceConfig)})
+    CanopenConfig, TraceConfig, WebConfig)})
 
 
 def config_markdown() -> str:
@@ -670,8 +718,8 @@ def config_markdown() -> str:
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
              "`[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, `[modbus.roles]`, "
-             "`[canopen]`, `[trace]`); an unknown key or a bad value is an error naming the "
-             "file and the dotted key. Paths are relative "
+             "`[canopen]`, `[trace]`, `[web]`); an unknown key or a bad value is an error "
+             "naming the file and the dotted key. Paths are relative "
              "to the config file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):

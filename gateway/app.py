@@ -16,9 +16,11 @@ clock.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Sequence
+import secrets
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ncgate.config import Config, load_config
 from ncgate.gateway.canopen.clock import Clock
@@ -27,6 +29,7 @@ from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeo
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import ScanDriver, start_plc
+from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
 from ncgate.gateway.wiring import (
@@ -43,19 +46,38 @@ from ncgate.interpreter.engine.trace import EventDict, Trace
 from ncgate.plc.image import IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus
 
+if TYPE_CHECKING:
+    from ncgate.gateway.web.console import WebConsole
+
 
 class Gateway:
     """Soft PLC + processes (+ fieldbus servers in later issues), as an async context."""
 
     def __init__(self, config: Config | None = None,
                  listeners: Sequence[Callable[[Event], None]] = (),
-                 canopen_clock: Clock | None = None, cold: bool = False) -> None:
+                 canopen_clock: Clock | None = None, cold: bool = False,
+                 console: bool = False, web_default_port: int = 0,
+                 record: str | Path | None = None,
+                 overrides: Mapping[str, Any] | None = None) -> None:
         """``listeners`` hear every trace event from the start (before an autostart).
         ``canopen_clock`` drives the CANopen node's timers (inhibit, event timer, heartbeat
         consumer, SDO timeout): a test passes a
         :class:`~ncgate.gateway.canopen.clock.ManualClock` and moves time itself.
-        ``cold``: the PLC logic starts without its stored RETAIN values (``run --cold``)."""
+        ``cold``: the PLC logic starts without its stored RETAIN values (``run --cold``).
+        ``console``: serve the web console as ``[web]`` says (an unset ``web.port`` is a
+        free port here, or ``web_default_port``, which ``run`` sets to 8080 and which when
+        taken leaves the console off; see :attr:`web_address`); off by default in the API
+        and the tests.
+        ``record``: write the session to this file (``run --record``; ``overrides``: the
+        config overrides the session ran with, for its header)."""
         self.config = config if config is not None else load_config(None)
+        self.session = secrets.token_hex(6)  # names this run to the console's pages
+        self._console_wanted = console
+        self._web_default_port = web_default_port
+        self._console: WebConsole | None = None
+        self._record_path = record
+        self._overrides = dict(overrides or {})
+        self.recorder: SessionRecorder | None = None
         self._listeners = tuple(listeners)
         self._canopen_clock = canopen_clock
         self.map = ModbusMap(self.config)
@@ -85,6 +107,10 @@ class Gateway:
             runtime.trace.subscribe(listener)
         self._runtime, self._driver = runtime, driver
         try:
+            if self._record_path is not None:
+                self.recorder = SessionRecorder(self._record_path, self.config,
+                                                self._overrides, loop)
+                trace.subscribe(self.recorder.event)
             self._plc = start_plc(self.config, runtime.engine, runtime.image, closed=False,
                                   wall=driver.now, cold=self._cold)
             if self.config.modbus.enabled:
@@ -93,6 +119,11 @@ class Gateway:
             if self.config.canopen.enabled:
                 self._canopen = CanopenNode(self.config, self, self._canopen_clock)
                 self._canopen.start()
+            if self._console_wanted and self.config.web.enabled:
+                from ncgate.gateway.web.console import WebConsole  # aiohttp: only if served
+                console = WebConsole(self, self.config.web, self._web_default_port)
+                if await console.start():
+                    self._console = console
             if self.config.nc.autostart:
                 await self.start()
         except BaseException:
@@ -102,6 +133,9 @@ class Gateway:
 
     async def __aexit__(self, exc_type: type[BaseException] | None,
                         exc: BaseException | None, tb: TracebackType | None) -> None:
+        if self._console is not None:
+            await self._console.close()
+            self._console = None
         if self._modbus is not None:
             await self._modbus.close()
             self._modbus = None
@@ -120,6 +154,9 @@ class Gateway:
         if self._trace_file is not None:
             self._trace_file.close()
             self._trace_file = None
+        if self.recorder is not None:
+            self.recorder.close(self.engine.now)
+            self.recorder = None
 
     @property
     def modbus_address(self) -> tuple[str, int]:
@@ -137,6 +174,18 @@ class Gateway:
         if address is None:
             raise GatewayError("Modbus/TCP Security is not on (modbus.tls.cert unset?)")
         return address
+
+    @property
+    def web_address(self) -> tuple[str, int]:
+        """(host, port) of the web console (``Gateway(..., console=True)``)."""
+        if self._console is None or self._console.address is None:
+            raise GatewayError("the web console is not running (Gateway(config, console=True),"
+                               " web.enabled = true?)")
+        return self._console.address
+
+    @property
+    def web_console(self) -> WebConsole | None:
+        return self._console
 
     @property
     def modbus_server(self) -> ModbusServer | None:
@@ -193,46 +242,59 @@ class Gateway:
         assert self._driver is not None
         self._driver.settle()
 
-    async def start(self, name: str | None = None, process: int = 1) -> None:
+    def _input(self, kind: str, **fields: Any) -> None:
+        """An input from outside the cell, for the session record (``run --record``)."""
+        if self.recorder is not None:
+            self.recorder.input(kind, self.engine.now, **fields)
+
+    async def start(self, name: str | None = None, process: int = 1,
+                    by: str = "operator") -> None:
         """The operator's SPG: start NAME (default: the config's main) in a process."""
         name = name or self.config.nc.main
         # Load (parse and check) before reading the clock: the program starts when it is ready.
         self.runtime.store.load(name, None, process)
         self._sync_clock()
-        self.engine.start(name, process)
+        self.engine.start(name, process, by=by)
+        self._input("start", prog=name, proc=process, by=by)
         self._settle()
 
-    def write(self, var: str, value: int, who: str = "api") -> None:
+    def write(self, var: str, value: int, who: str = "api", peer: str | None = None) -> None:
         """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``) as ``who``."""
         (area, index, view), number = parse_assignment(f"{var}={value}")
-        self.apply_writes([(area, index, view, number)], who)
+        self.apply_writes([(area, index, view, number)], who, peer)
 
-    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None:
-        """Write several image variables at once (one fieldbus request), then settle."""
+    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str,
+                     peer: str | None = None) -> None:
+        """Write several image variables at once (one fieldbus request), then settle.
+        ``peer``: the client's address, when ``who`` does not name it (the record has it)."""
         self._sync_clock()
         self.runtime.image.write(changes, who)
+        self._input("write", who=who, peer=peer, changes=[list(c) for c in changes])
         self._settle()
 
     def read(self, var: str) -> int:
         (area, index, view), _ = parse_assignment(f"{var}=0")
         return self.runtime.image.read(area, index, view)
 
-    def send(self, sender: int, target: int) -> None:
+    def send(self, sender: int, target: int, who: str = "api") -> None:
         """An SND in the name of external process ``sender``."""
         self._sync_clock()
         self.engine.external_snd(sender, target)
+        self._input("snd", who=who, **{"from": sender, "to": target})
         self._settle()
 
     def fieldbus_alarm(self, code: AlarmCode, message: str) -> None:
         """An alarm of the fieldbus side (process 0 in the trace), e.g. a lost master."""
         self._sync_clock()
         self.engine.fieldbus_alarm(code, message)
+        self._input("alarm", code=code.name, message=message)
         self._settle()
 
-    def command(self, word: int) -> None:
+    def command(self, word: int, who: str = "api") -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
         self._sync_clock()
         apply_command(self.engine, word)
+        self._input("command", who=who, word=word)
         if word == 3 and self._plc is not None:
             self._plc[0].restart()  # a PLC in FAULT starts again
         self._settle()

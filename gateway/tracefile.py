@@ -25,7 +25,8 @@ class TraceFile:
     """A listener of the trace (``trace.subscribe(file.write)``) that owns one file."""
 
     def __init__(self, path: Path, max_bytes: int, backups: int, flush_s: float = 0.25,
-                 loop: asyncio.AbstractEventLoop | None = None) -> None:
+                 loop: asyncio.AbstractEventLoop | None = None, fresh: bool = False) -> None:
+        """``fresh``: start the file empty (a session record), instead of appending."""
         self.path = path
         self.max_bytes = max_bytes
         self.backups = backups
@@ -34,15 +35,18 @@ class TraceFile:
         self._pending: list[str] = []
         self._pending_bytes = 0
         self._timer: asyncio.TimerHandle | None = None
-        self._fd = self._open()
+        self._fd = self._open(os.O_TRUNC if fresh else 0)
         self._size = os.fstat(self._fd).st_size
 
-    def _open(self) -> int:
+    def _open(self, flags: int = 0) -> int:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        return os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        return os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | flags, 0o644)
 
     def write(self, event: Event) -> None:
-        line = to_jsonl(as_dict(event)) + "\n"
+        self.append(to_jsonl(as_dict(event)) + "\n")
+
+    def append(self, line: str) -> None:
+        """One whole line (ending in a newline), written with the next flush."""
         self._pending.append(line)
         self._pending_bytes += len(line)  # ASCII-mostly: bytes are counted exactly on flush
         if self._pending_bytes >= 1 << 16:

@@ -261,6 +261,26 @@ class IOImage:
 
     # -- snapshots (tests, status) -----------------------------------------------------------
 
+    def writers(self) -> dict[str, dict[int, str]]:
+        """Who last wrote each variable written so far: ``{"SA": {bit: writer}, "SK": {byte:
+        writer}, "SYVAR": {n: writer}}`` (a byte write to the SA packet counts for its
+        bits); the console shows it beside each value."""
+        sa: dict[int, tuple[int, str]] = {}
+        out: dict[str, dict[int, str]] = {"SA": {}, "SK": {}, "SYVAR": {}}
+        for (area, index), stamp in self._writers.items():
+            if area == "SAb":
+                bits = [index]
+            elif area == "SA":
+                bits = list(range(index * 8, index * 8 + 8))
+            else:
+                out[area][index] = stamp[1]
+                continue
+            for bit in bits:
+                if bit not in sa or sa[bit] < stamp:
+                    sa[bit] = stamp
+        out["SA"] = {bit: stamp[1] for bit, stamp in sorted(sa.items())}
+        return out
+
     def snapshot(self) -> tuple[bytes, bytes, tuple[int, ...]]:
         return bytes(self.sa), bytes(self.k), tuple(self.syvar)
 

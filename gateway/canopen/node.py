@@ -432,7 +432,7 @@ class CanopenNode:
 
     def _run_command(self, word: int) -> None:
         try:
-            self.backend.command(word)
+            self.backend.command(word, "canopen")
         except Exception:  # answered already: say it in the log
             log.exception("command %d written through 0x2400:1 failed", word)
 
@@ -454,7 +454,7 @@ class CanopenNode:
             if stored is None:
                 raise SdoAbortedError(ABORT_DEVICE_STATE)  # no sender written yet
             try:
-                self.backend.send(stored[0], value)
+                self.backend.send(stored[0], value, "canopen")
             except ValueError:
                 raise SdoAbortedError(ABORT_DEVICE_STATE) from None  # runs no program
 
@@ -472,9 +472,9 @@ class CanopenNode:
             self.node.emcy.send(EMCY_HEARTBEAT, self._error_register(),
                                   struct.pack("<B4x", node_id))
         if reaction is MasterLost.HOLD:
-            self.backend.command(2)
+            self.backend.command(2, "canopen")
         elif reaction is MasterLost.RESET:
-            self.backend.command(3)
+            self.backend.command(3, "canopen")
 
     def _on_master_back(self, node_id: int) -> None:
         if node_id not in self._master_lost:

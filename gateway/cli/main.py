@@ -6,6 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from ncgate import __version__
 from ncgate.config import ConfigError, default_script_path, load_config
@@ -67,19 +68,42 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
     sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
+    sim.add_argument("--replay", metavar="R.jsonl", help="re-run a session recorded with "
+                     "'ncgate run --record' (its config, programs and inputs) and say whether "
+                     "it matches: exit 0 it does, 1 it diverges (the first divergence is "
+                     "printed)")
+    sim.add_argument("--tolerance-ms", type=float, default=10.0, metavar="MS",
+                     help="--replay: how far apart in machine time a replayed event may be "
+                     "from the recorded one (default 10)")
 
     run = commands.add_parser(
-        "run", help="run the gateway (Modbus TCP) until SIGINT/SIGTERM",
-        description="The soft PLC, the processes on the wall clock and the Modbus TCP server, "
-        "until SIGINT or SIGTERM (clean shutdown, exit 0).",
+        "run", help="run the gateway (Modbus TCP, CANopen, web console) until SIGINT/SIGTERM",
+        description="The soft PLC, the processes on the wall clock, the Modbus TCP server, "
+        "the CANopen node and the web console (http://127.0.0.1:8080/), until SIGINT or "
+        "SIGTERM (clean shutdown, exit 0).",
     )
     run.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                     help="set any config key, e.g. --set nc.time_scale=10 --set "
+                     "modbus.host=0.0.0.0 (a TOML value; a bare word is a string)")
+    run.add_argument("--port", type=int, metavar="N", help="the Modbus TCP port "
+                     "(modbus.port)")
+    web = run.add_mutually_exclusive_group()
+    web.add_argument("--web", metavar="HOST:PORT", help="serve the console here "
+                     "(web.host, web.port; default 127.0.0.1:8080)")
+    web.add_argument("--no-web", action="store_true", help="no web console")
+    run.add_argument("--record", metavar="R.jsonl", help="record the session (every input "
+                     "from outside, with its time, beside the trace) for 'ncgate sim "
+                     "--replay'")
     run.add_argument("--trace", metavar="T.jsonl", help="write every event as JSON Lines, "
                      "rotated at trace.max_mb (default: none; memory keeps trace.ring events)")
     run.add_argument("--loop", choices=("auto", "asyncio", "uvloop"), default="auto",
                      help="the event loop: uvloop serves Modbus faster (bench/modbus.py); auto "
                      "takes it when installed (pip install 'ncgate[fast]')")
-    run.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    loud = run.add_mutually_exclusive_group()
+    loud.add_argument("-v", "--verbose", action="count", default=0, help="-v: ncgate's "
+                      "debug lines too (PLC writes); -vv: the libraries' as well")
+    loud.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
     run.add_argument("--cold", action="store_true", help="start the PLC logic without its "
                      "stored VAR RETAIN values (they are cleared)")
 
@@ -172,6 +196,8 @@ def _sim(args: argparse.Namespace) -> int:
     from ncgate.gateway.sim import report, run_sim, write_trace
     from ncgate.gateway.timeline import write_gantt
 
+    if args.replay:
+        return _replay(args)
     if args.until is not None and args.until < 0:
         raise UsageError("--until: expected a time >= 0")
     if args.example:
@@ -202,6 +228,65 @@ def _sim(args: argparse.Namespace) -> int:
     return result.exit_status
 
 
+def _replay(args: argparse.Namespace) -> int:
+    from ncgate.gateway.record import replay
+    from ncgate.gateway.timeline import write_gantt
+    from ncgate.interpreter.engine.trace import write_jsonl
+
+    if args.main or args.example or args.script or args.until is not None:
+        raise UsageError("--replay takes its programs, inputs and end from the record: it goes "
+                         "without MAIN, --example, --script and --until")
+    result = replay(args.replay, args.config, args.tolerance_ms)
+    for warning in result.warnings:
+        print(f"ncgate sim: warning: {warning}", file=sys.stderr)
+    if args.trace:
+        with open(args.trace, "w", encoding="utf-8") as out:
+            write_jsonl(result.events, out)
+    if args.gantt:
+        config = result.runtime.config.nc
+        with open(args.gantt, "w", encoding="utf-8") as out:
+            write_gantt(result.events, config.processes, out, external=config.external)
+    recording = result.recording
+    print(f"replayed {args.replay}: {len(recording.inputs)} inputs over "
+          f"{recording.end:.3f} s of machine time"
+          + ("" if recording.stop is not None else " (the session did not stop cleanly)"))
+    if result.divergence is not None:
+        print(result.divergence)
+        return EXIT_FAILED
+    print(f"the replay matches: {result.compared} events of the processes, in the same order, "
+          f"within {args.tolerance_ms:g} ms")
+    return EXIT_OK
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides."""
+    import tomllib
+
+    out: dict[str, Any] = {}
+    for item in args.set:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--set {item!r}: expected KEY=VALUE, e.g. nc.time_scale=10")
+        try:
+            value = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text  # a bare word: a string (--set nc.main=PROG91)
+        out[key.strip()] = value
+    if args.port is not None:
+        out["modbus.port"] = args.port
+    if args.web:
+        host, sep, port = args.web.rpartition(":")
+        if not sep or not port.isdigit() or not host:
+            raise UsageError(f"--web {args.web!r}: expected HOST:PORT, e.g. 127.0.0.1:8080")
+        out["web.host"] = host.strip("[]")
+        out["web.port"] = int(port)
+    if args.no_web:
+        out["web.enabled"] = False
+    if args.trace:
+        out["trace.file"] = str(Path(args.trace).resolve())
+    return out
+
+
 def _run(args: argparse.Namespace) -> int:
     import asyncio
     import importlib.metadata
@@ -210,13 +295,15 @@ def _run(args: argparse.Namespace) -> int:
 
     from ncgate.gateway.cli.serve import serve
 
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+    # ncgate's loggers ("ncgate", "ncgate.web", ...) and the libraries' apart: -v shows
+    # ncgate's debug lines (PLC writes), -vv the libraries' step-by-step logging as well.
+    logging.basicConfig(level=logging.DEBUG if args.verbose >= 2 else logging.WARNING,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    if not args.verbose:  # the libraries' own step-by-step logging is for --verbose
-        for library in ("canopen", "can", "pymodbus"):
-            logging.getLogger(library).setLevel(logging.WARNING)
-    overrides = {"trace.file": str(Path(args.trace).resolve())} if args.trace else {}
+    logging.getLogger("ncgate").setLevel(
+        logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO)
+    overrides = _overrides(args)
     config = load_config(args.config, overrides=overrides)
+    record = str(Path(args.record).resolve()) if args.record else None
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
@@ -228,10 +315,10 @@ def _run(args: argparse.Namespace) -> int:
                              "'ncgate[fast]')") from None
         logging.getLogger("ncgate").info("event loop: uvloop %s",
                                          importlib.metadata.version("uvloop"))
-        uvloop.run(serve(config, cold=args.cold))
+        uvloop.run(serve(config, cold=args.cold, record=record, overrides=overrides))
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
-        asyncio.run(serve(config, cold=args.cold))
+        asyncio.run(serve(config, cold=args.cold, record=record, overrides=overrides))
     return EXIT_OK
 
 

@@ -1,30 +1,68 @@
 """``ncgate run``: the gateway until SIGINT or SIGTERM (spec 4.1).
 
-It logs what happens -- the listening address, connections, program starts and ends, alarms,
-deadlocks -- and on a signal closes every connection and returns, leaving no task behind.
+It logs what happens -- the listening addresses, connections, and every sync event in one line
+each at INFO (start, wait with its condition, resume with who, SND, EXE, end, alarm, deadlock,
+stall), PLC and fieldbus writes at DEBUG (``-v``) -- and on a signal closes every connection
+and returns, leaving no task behind.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import signal
 from contextlib import suppress
+from typing import Any
 
 from ncgate.config import Config
+from ncgate.config.loader import DEFAULT_WEB_PORT
 from ncgate.gateway.app import Gateway
+from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
+from ncgate.interpreter.engine.states import WaitKind
 
 log = logging.getLogger("ncgate")
+
+
+def _on(on: object) -> str:
+    if isinstance(on, ev.WaitOn):
+        if on.cond is not None:
+            return f"{on.cond} (now {fmt_number(on.value or 0)})"
+        return {WaitKind.PROC: f"an SND from P{on.target}",
+                WaitKind.SND: f"P{on.target} to take its SND",
+                WaitKind.EXE: f"P{on.target} to be free"}.get(on.kind, on.kind.name)
+    if isinstance(on, ev.SignalOn):
+        source = on.from_ if isinstance(on.from_, str) else ",".join(map(str, on.from_))
+        return f"signal {on.signal} from {source} ({on.level})"
+    if isinstance(on, ev.FlushOn):
+        return "its interpolator (#FLUSH WAIT)"
+    return str(on)
 
 
 def describe(event: Event) -> str | None:
     """A log line for the events worth a line; None for the rest."""
     proc, where = event.proc, event.where
-    at = f" at {where[0]}:{where[1]}" if where is not None and where[0] else ""
+    at = ""
+    if where is not None and where[0]:
+        at = f" at {where[0]}:{where[1]}" + (f" N{where[2]}" if where[2] is not None else "")
     if isinstance(event, ev.Start):
         return f"P{proc} starts {event.prog} (by {event.by})"
+    if isinstance(event, ev.Wait):
+        return f"P{proc} waits{at} for {_on(event.on)}"
+    if isinstance(event, ev.Resume):
+        by = f"P{event.by}" if isinstance(event.by, int) else event.by
+        writer = f", written by {event.writer}" if event.writer else ""
+        return f"P{proc} resumes{at} (by {by}{writer})"
+    if isinstance(event, ev.Snd):
+        return f"P{proc} SND to P{event.to}{at}"
+    if isinstance(event, ev.Exe):
+        return f"P{proc} EXE {event.target_prog} in P{event.to}{at}"
+    if isinstance(event, ev.Write):
+        return f"{event.var} = {event.value} (by {event.who})"
+    if isinstance(event, ev.Display):
+        return f"P{proc} DIS{at}: {event.text}"
     if isinstance(event, ev.End):
         return f"P{proc} ends ({event.how}){at}"
     if isinstance(event, ev.Alarm):
@@ -43,7 +81,8 @@ def describe(event: Event) -> str | None:
 HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace has them all)
 
 
-async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False) -> None:
+async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
+                record: str | None = None, overrides: dict[str, Any] | None = None) -> None:
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
     installed = []
@@ -53,6 +92,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             installed.append(sig)
 
     hazards_logged: set[tuple[int, object]] = set()
+    debug = functools.partial(log.isEnabledFor, logging.DEBUG)
 
     def on_event(event: Event) -> None:
         if isinstance(event, ev.Hazard):
@@ -62,13 +102,19 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if key in hazards_logged or len(hazards_logged) >= HAZARDS_LOGGED:
                 return
             hazards_logged.add(key)
+        if isinstance(event, ev.Write):
+            if debug():  # a PLC writes every scan: not even worded unless asked for
+                log.debug(describe(event))
+            return
         line = describe(event)
         if line is not None:
             (log.warning if isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)
              else log.info)(line)
 
     try:
-        async with Gateway(config, listeners=[on_event], cold=cold) as gw:
+        async with Gateway(config, listeners=[on_event], cold=cold, console=True,
+                           web_default_port=DEFAULT_WEB_PORT, record=record,
+                           overrides=overrides) as gw:
             source = str(config.source) if config.source else "built-in default"
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,
@@ -82,6 +128,12 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
                 if server.tls_address is not None:
                     log.info("Modbus/TCP Security (TLS) on %s:%d, roles %s", *server.tls_address,
                              ", ".join(config.modbus.roles) or "none")
+            if gw.web_console is not None:
+                log.info("web console on %s%s%s", gw.web_console.url,
+                         " (read-only)" if config.web.read_only else "",
+                         " (writes need the token)" if config.web.token else "")
+            if gw.recorder is not None:
+                log.info("recording the session to %s", gw.recorder.path)
             await stop.wait()
             log.info("stopping")
     finally:

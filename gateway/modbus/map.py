@@ -304,7 +304,7 @@ class ModbusMap:
             (word,) = values
             if word not in (1, 2, 3):
                 raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset")
-            backend.command(word)
+            backend.command(word, who)
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:
                 raise ModbusError(ILLEGAL_ADDRESS, "the mailbox takes sender and target in one "
@@ -315,7 +315,7 @@ class ModbusMap:
                 raise ModbusError(ILLEGAL_VALUE, f"SND from {sender} to {target}: the sender "
                                   "must be an external process, the target a configured one")
             try:
-                backend.send(sender, target)
+                backend.send(sender, target, who)
             except ValueError as exc:  # e.g. the target runs no program
                 raise ModbusError(DEVICE_FAILURE, str(exc)) from None
 

@@ -1,0 +1,1 @@
+"""The commissioning console (aiohttp): see console.py."""

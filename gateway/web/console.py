@@ -1,0 +1,372 @@
+"""The commissioning console: the page, the HTTP API under ``/api/`` and the live stream
+(docs/console.md), served by aiohttp on the gateway's own event loop.
+
+The only module that imports the web library.  What it serves:
+
+- ``GET /`` the page, ``GET /static/…`` its script and style (package data, no build step);
+- ``GET /api/status`` processes with their why-records, PLC and variables, image and last
+  writers, fieldbus peers, counters; ``GET /api/events?since=N`` the trace's latest events;
+  ``GET /api/stream`` the live stream (server-sent events: ``status`` and ``events``);
+  ``GET /api/timeline.svg`` the timeline picture of the latest events;
+  ``GET /api/programs`` the programs on the storage devices;
+- ``POST /api/write`` ``{"var": "SA10", "value": 1}`` as writer ``web``;
+  ``POST /api/command`` ``{"command": "start" | "hold" | "reset"}``, or ``{"command":
+  "start", "program": "PROG92", "process": 2}``.
+
+Who may do what: reads are open to whoever reaches the port.  A write or a command is refused
+from a foreign ``Origin`` (403, no cross-site writes from a browser tab), without the token
+when ``web.token`` is set (401), and always under ``web.read_only`` (403).  Bound to loopback
+(the default) the console answers only requests addressed to a loopback name (a DNS-rebinding
+page cannot reach it); bound elsewhere, the config must set a token.  Errors are JSON:
+``{"error": message}`` with the HTTP status.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import hmac
+import io
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from importlib import resources
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import web
+
+from ncgate.config.loader import WebConfig, is_loopback
+from ncgate.gateway.record import program_hashes
+from ncgate.gateway.timeline import write_gantt
+from ncgate.gateway.web.feed import EventFeed
+from ncgate.gateway.web.status import status
+from ncgate.gateway.wiring import parse_assignment
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from ncgate.plc.image import PlcError
+
+if TYPE_CHECKING:
+    from ncgate.gateway.app import Gateway
+
+log = logging.getLogger("ncgate.web")
+
+STATUS_EVERY_S = 0.25  # a stream's status at most this often (and when anything changed)
+PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients keep it
+WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
+BODY_LIMIT = 16 * 1024
+COMMANDS = {"start": 1, "hold": 2, "reset": 3}
+ASSETS = ("index.html", "app.js", "style.css")
+_TYPES = {"html": "text/html", "js": "text/javascript", "css": "text/css"}
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, message: str, headers: dict[str, str] | None = None
+                 ) -> None:
+        super().__init__(message)
+        self.status, self.message, self.headers = status, message, headers or {}
+
+
+class WebConsole:
+    """The console of one gateway: ``await start()``, ``address``, ``await close()``."""
+
+    def __init__(self, gateway: Gateway, config: WebConfig, default_port: int = 0) -> None:
+        self.gw = gateway
+        self.config = config
+        self.default_port = default_port
+        self.address: tuple[str, int] | None = None
+        self.streams = 0
+        self._feed: EventFeed | None = None
+        self._unsubscribe: Callable[[], None] | None = None
+        self._runner: web.AppRunner | None = None
+        self._status_cache: tuple[tuple[int, int, int], float, str] | None = None
+        self._assets = {name: resources.files("ncgate.gateway.web").joinpath(
+            "static", name).read_bytes() for name in ASSETS}
+        self._loopback = is_loopback(config.host)
+
+    # -- life -----------------------------------------------------------------------------
+
+    async def start(self) -> bool:
+        """Listen.  False: the default port is taken and the console stays off (``run`` goes on
+        without it); a port set in the config that is taken raises OSError naming the key."""
+        loop = asyncio.get_running_loop()
+        app = web.Application(middlewares=[self._guard], client_max_size=BODY_LIMIT)
+        app.router.add_get("/", self._asset("index.html"))
+        for name in ASSETS:
+            app.router.add_get(f"/static/{name}", self._asset(name))
+        app.router.add_get("/api/status", self._status)
+        app.router.add_get("/api/events", self._events)
+        app.router.add_get("/api/stream", self._stream)
+        app.router.add_get("/api/timeline.svg", self._timeline)
+        app.router.add_get("/api/programs", self._programs)
+        app.router.add_post("/api/write", self._write)
+        app.router.add_post("/api/command", self._command)
+        runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
+                               handle_signals=False)
+        await runner.setup()
+        port = self.config.port if self.config.port is not None else self.default_port
+        site = web.TCPSite(runner, self.config.host, port, reuse_address=True)
+        try:
+            await site.start()
+        except OSError as exc:
+            await runner.cleanup()
+            if self.config.port is None and port:
+                log.warning("web console off: %s:%d is taken (%s); set web.port or --web "
+                            "HOST:PORT", self.config.host, port, exc.strerror)
+                return False
+            hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
+                    if exc.errno == errno.EACCES else "")
+            raise OSError(exc.errno, f"web.port: cannot listen on {self.config.host}:{port}: "
+                          f"{exc.strerror}{hint}") from None
+        self._runner = runner
+        host, bound = runner.addresses[0][:2]  # the port asked for may be 0
+        self.address = (host, bound)
+        self._feed = EventFeed(loop)
+        self._unsubscribe = self.gw.runtime.trace.subscribe(self._feed.listen)
+        return True
+
+    async def close(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if self._feed is not None:
+            self._feed.close()  # every stream returns
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+        self.address = None
+
+    @property
+    def url(self) -> str:
+        assert self.address is not None
+        host, port = self.address
+        return f"http://{f'[{host}]' if ':' in host else host}:{port}/"
+
+    # -- who may do what ---------------------------------------------------------------------
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        try:
+            if self._loopback and not _loopback_host(request.host):
+                raise ApiError(403, f"the console answers requests to a loopback address, not "
+                               f"to {request.host!r} (web.host)")
+            if request.method not in ("GET", "HEAD"):
+                self._may_change(request)
+            return await handler(request)
+        except ApiError as exc:
+            return _error(exc.status, exc.message, exc.headers)
+        except web.HTTPException as exc:  # aiohttp's own: 404, 405, 413 ...
+            if exc.status < 400:
+                raise
+            return _error(exc.status, exc.reason, {})
+        except (asyncio.CancelledError, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # a bug of ours: said, and the server goes on
+            log.exception("web console: %s %s failed", request.method, request.path)
+            return _error(500, f"internal error: {exc}", {})
+
+    def _may_change(self, request: web.Request) -> None:
+        origin = request.headers.get("Origin")
+        here = f"{request.scheme}://{request.host}"
+        if (origin is not None and origin != here) or (
+                request.headers.get("Sec-Fetch-Site") == "cross-site"):
+            raise ApiError(403, f"a write from another origin ({origin or 'cross-site'}) is "
+                           "refused")
+        token = self.config.token
+        if token is not None:
+            given = request.headers.get("Authorization", "")
+            if not (given.startswith("Bearer ") and hmac.compare_digest(
+                    given[7:].strip().encode(), token.encode())):
+                raise ApiError(401, "this console needs its token: Authorization: Bearer "
+                               "<web.token>", {"WWW-Authenticate": 'Bearer realm="ncgate"'})
+        if self.config.read_only:
+            raise ApiError(403, "the console is read-only (web.read_only)")
+
+    # -- the page ---------------------------------------------------------------------------
+
+    def _asset(self, name: str) -> Handler:
+        body = self._assets[name]
+        kind = _TYPES[name.rsplit(".", 1)[1]]
+
+        async def serve(request: web.Request) -> web.StreamResponse:
+            return web.Response(body=body, content_type=kind, charset="utf-8",
+                                headers={"Cache-Control": "no-cache"})
+        return serve
+
+    # -- reads ------------------------------------------------------------------------------
+
+    async def _status(self, request: web.Request) -> web.StreamResponse:
+        image = request.query.get("image", "1") != "0"
+        return web.json_response(status(self.gw, image=image))
+
+    async def _events(self, request: web.Request) -> web.StreamResponse:
+        assert self._feed is not None
+        since = _int_query(request, "since", 0)
+        texts, missed = self._feed.since(since)
+        body = f'{{"seq":{self._feed.seq},"missed":{missed},"events":[{",".join(texts)}]}}'
+        return web.Response(text=body, content_type="application/json")
+
+    async def _programs(self, request: web.Request) -> web.StreamResponse:
+        names = sorted({p.rsplit("/", 1)[-1].rsplit(".", 1)[0]
+                        for p in program_hashes(self.gw.config)})
+        return web.json_response({"programs": names, "main": self.gw.config.nc.main})
+
+    async def _timeline(self, request: web.Request) -> web.StreamResponse:
+        config = self.gw.config.nc
+        out = io.StringIO()
+        write_gantt(self.gw.trace, config.processes, out, external=config.external)
+        return web.Response(text=out.getvalue(), content_type="image/svg+xml")
+
+    def _status_text(self) -> str:
+        """The status as JSON, built at most once per STATUS_EVERY_S for every stream."""
+        gw = self.gw
+        key = (gw.runtime.trace.seq, gw.image.generation, int(gw.engine.now * 1000))
+        now = asyncio.get_running_loop().time()
+        cached = self._status_cache
+        if cached is None or (cached[0] != key and now - cached[1] >= STATUS_EVERY_S / 2):
+            cached = (key, now, json.dumps(status(gw), separators=(",", ":")))
+            self._status_cache = cached
+        return cached[2]
+
+    async def _stream(self, request: web.Request) -> web.StreamResponse:
+        """Server-sent events: ``status`` (the whole status, when it changed, at most every
+        STATUS_EVERY_S) and ``events`` (new trace events, as they come, with ``id`` = the
+        last seq so that a reconnecting page resumes where it was)."""
+        feed = self._feed
+        assert feed is not None
+        if self.streams >= self.config.max_streams:
+            raise ApiError(503, f"{self.streams} live streams already (web.max_streams)")
+        since = _int_query(request, "since", -1)
+        last_id = request.headers.get("Last-Event-ID", "")
+        if last_id.isdigit():
+            since = int(last_id)
+        if since > feed.seq:
+            since = 0  # an id of an earlier session (the gateway restarted): from the start
+        response = web.StreamResponse(headers={"Content-Type": "text/event-stream",
+                                               "Cache-Control": "no-cache",
+                                               "X-Accel-Buffering": "no"})
+        self.streams += 1
+        try:
+            await response.prepare(request)
+            position = feed.seq if since < 0 else since
+            sent_status = ""
+            status_at = written_at = -1e9
+            loop = asyncio.get_running_loop()
+            await self._send(response, "retry: 1000\n\n")
+            while not feed.closed:
+                parts = []
+                now = loop.time()
+                if now - status_at >= STATUS_EVERY_S:  # first: it names the session
+                    text = self._status_text()
+                    if text != sent_status:
+                        parts.append(f"event: status\ndata: {text}\n\n")
+                        sent_status, status_at = text, now
+                texts, missed = feed.since(position)
+                if texts:
+                    position += missed + len(texts)
+                    parts.append(f"id: {position}\nevent: events\ndata: {{\"missed\":{missed},"
+                                 f"\"events\":[{','.join(texts)}]}}\n\n")
+                if not parts and now - written_at >= PING_S:
+                    parts.append(": ping\n\n")
+                if parts:
+                    await self._send(response, "".join(parts))
+                    written_at = now
+                await feed.wait(STATUS_EVERY_S)
+        except (ConnectionResetError, TimeoutError):
+            pass  # the client went away (or read nothing for WRITE_TIMEOUT_S): its stream ends
+        finally:
+            self.streams -= 1
+        return response
+
+    @staticmethod
+    async def _send(response: web.StreamResponse, text: str) -> None:
+        async with asyncio.timeout(WRITE_TIMEOUT_S):
+            await response.write(text.encode("utf-8"))
+
+    # -- writes and commands -------------------------------------------------------------------
+
+    async def _body(self, request: web.Request) -> dict[str, Any]:
+        if request.content_type != "application/json":
+            raise ApiError(415, "send JSON (Content-Type: application/json)")
+        try:
+            body = await request.json()
+        except (ValueError, UnicodeDecodeError):
+            raise ApiError(400, "the body is not JSON") from None
+        if not isinstance(body, dict):
+            raise ApiError(400, "expected a JSON object")
+        return body
+
+    async def _write(self, request: web.Request) -> web.StreamResponse:
+        body = await self._body(request)
+        var, value = body.get("var"), body.get("value")
+        if not isinstance(var, str) or not var.strip():
+            raise ApiError(400, 'expected {"var": "SA10", "value": 1}: "var" is missing')
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ApiError(400, f'"value": expected a whole number, got {value!r}')
+        try:
+            (area, index, view), number = parse_assignment(f"{var.strip()}={value}")
+            self.gw.image.check(area, index, view, number)
+        except (ValueError, PlcError) as exc:
+            raise ApiError(422, f"{var}: {exc}") from None
+        self.gw.apply_writes([(area, index, view, number)], "web", _peer(request))
+        log.info("web %s: %s = %d", request.remote, var.strip().upper(), number)
+        return web.json_response({"var": var.strip().upper(), "value": number})
+
+    async def _command(self, request: web.Request) -> web.StreamResponse:
+        body = await self._body(request)
+        command = body.get("command")
+        if command not in COMMANDS:
+            raise ApiError(400, f"\"command\": expected one of {', '.join(COMMANDS)}, got "
+                           f"{command!r}")
+        program, process = body.get("program"), body.get("process", 1)
+        if program is None:
+            if "process" in body:
+                raise ApiError(400, '"process" goes with "program"')
+            self.gw.command(COMMANDS[command], "web")
+            log.info("web %s: %s", request.remote, command)
+            return web.json_response({"command": command})
+        if command != "start":
+            raise ApiError(400, '"program" goes with the "start" command')
+        processes = self.gw.config.nc.processes
+        if not isinstance(program, str) or not program or (
+                isinstance(process, bool) or not isinstance(process, int)
+                or not 1 <= process <= processes):
+            raise ApiError(400, f'expected {{"command": "start", "program": NAME, "process": '
+                           f"1..{processes}}}")
+        try:
+            await self.gw.start(program, process)
+        except ProgramNotFoundError as exc:
+            raise ApiError(404, str(exc)) from None
+        except ProgramError as exc:
+            raise ApiError(422, str(exc)) from None
+        except ValueError as exc:  # busy, or external
+            raise ApiError(409, str(exc)) from None
+        log.info("web %s: start %s in P%d", request.remote, program, process)
+        return web.json_response({"command": command, "program": program, "process": process})
+
+
+def _error(status: int, message: str, headers: dict[str, str]) -> web.Response:
+    return web.json_response({"error": message}, status=status, headers=headers)
+
+
+def _peer(request: web.Request) -> str:
+    return f"web {request.remote or '?'}"
+
+
+def _int_query(request: web.Request, name: str, default: int) -> int:
+    text = request.query.get(name)
+    if text is None:
+        return default
+    try:
+        return int(text)
+    except ValueError:
+        raise ApiError(400, f"?{name}=: expected a whole number, got {text!r}") from None
+
+
+def _loopback_host(host_header: str) -> bool:
+    host = host_header
+    if host.startswith("["):
+        host = host[1:].split("]", 1)[0]
+    elif host.count(":") == 1:
+        host = host.split(":", 1)[0]
+    return is_loopback(host.lower())

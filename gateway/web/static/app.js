@@ -1,0 +1,337 @@
+// The ncgate console: one server-sent-event stream (/api/stream) feeds everything; writes and
+// commands go to /api/write and /api/command. No build step, no library. Text from the server
+// is always set with textContent (never as HTML).
+"use strict";
+const $ = (s) => document.querySelector(s);
+const el = (tag, cls, text) => {
+  const e = document.createElement(tag);
+  if (cls) e.className = cls;
+  if (text !== undefined) e.textContent = text;
+  return e;
+};
+const SVG = "http://www.w3.org/2000/svg";
+const KEEP = 3000;          // events the page keeps (log and timeline)
+const WINDOW_S = 30;        // the timeline shows the last WINDOW_S seconds of machine time
+let token = sessionStorage.getItem("ncgate-token") || "";
+let session = null, lastSeq = -1, status = null, events = [], source = null;
+const kinds = new Set();
+
+// ---- the stream -------------------------------------------------------------------------
+function connect() {
+  const url = "/api/stream" + (lastSeq >= 0 ? "?since=" + lastSeq : "");
+  source = new EventSource(url);
+  source.onopen = () => setConn(true);
+  source.onerror = () => {
+    setConn(false);
+    if (source.readyState === EventSource.CLOSED) {  // refused (e.g. 503): try again later
+      source = null;
+      setTimeout(connect, 2000);
+    }  // otherwise the browser reconnects by itself (retry: 1000)
+  };
+  source.addEventListener("status", (e) => {
+    const s = JSON.parse(e.data);
+    if (session !== null && s.session !== session) resetSession();
+    session = s.session;
+    status = s;
+    render();
+  });
+  source.addEventListener("events", (e) => {
+    const batch = JSON.parse(e.data);
+    for (const ev of batch.events) addEvent(ev);
+    if (events.length > KEEP) events.splice(0, events.length - KEEP);
+    renderLog();
+    if (!$("#pause").checked) renderTimeline();
+  });
+}
+function setConn(up) {
+  const c = $("#conn");
+  c.textContent = up ? "live" : "reconnecting…";
+  c.className = up ? "up" : "down";
+}
+function resetSession() {  // the gateway restarted: its events start again at 1
+  events = [];
+  lastSeq = -1;
+  $("#log tbody").replaceChildren();
+}
+function addEvent(ev) {
+  if (ev.seq <= lastSeq) return;
+  lastSeq = ev.seq;
+  events.push(ev);
+  if (!kinds.has(ev.event)) {
+    kinds.add(ev.event);
+    const o = el("option", null, ev.event);
+    o.value = ev.event;
+    $("#filter-kind").append(o);
+  }
+}
+
+// ---- acting -------------------------------------------------------------------------------
+async function post(path, body) {
+  const headers = { "Content-Type": "application/json" };
+  if (token) headers.Authorization = "Bearer " + token;
+  const r = await fetch(path, { method: "POST", headers, body: JSON.stringify(body) });
+  const answer = await r.json().catch(() => ({}));
+  if (r.status === 401) {
+    $("#token").hidden = false;
+    $("#token").focus();
+  }
+  say(r.ok ? "" : (answer.error || r.statusText));
+  return r.ok;
+}
+function say(text) { $("#message").textContent = text; }
+for (const b of document.querySelectorAll("button[data-command]")) {
+  b.addEventListener("click", () => post("/api/command", { command: b.dataset.command }));
+}
+$("#start-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  post("/api/command", { command: "start", program: $("#start-program").value,
+                         process: Number($("#start-process").value) });
+});
+$("#token").addEventListener("change", () => {
+  token = $("#token").value;
+  sessionStorage.setItem("ncgate-token", token);
+});
+function write(variable, value) { return post("/api/write", { var: variable, value }); }
+
+// ---- rendering ----------------------------------------------------------------------------
+function render() {
+  $("#clock").textContent = "t = " + status.t.toFixed(3) + " s" + (status.held ? " (feed hold)" : "");
+  $("#source").textContent = status.config;
+  for (const b of document.querySelectorAll("nav button, nav select")) {
+    b.disabled = status.web.read_only;
+  }
+  if (status.web.token && !token) $("#token").hidden = false;
+  renderLanes();
+  renderImage();
+  renderPlc();
+  renderFieldbus();
+  const procs = $("#start-process");
+  if (procs.options.length !== status.processes.length) {
+    procs.replaceChildren();
+    const filter = $("#filter-proc");
+    for (const p of status.processes) {
+      const o = el("option", null, "P" + p.number);
+      o.value = p.number;
+      procs.append(o);
+      filter.append(o.cloneNode(true));
+    }
+  }
+}
+function renderLanes() {
+  const box = $("#lanes");
+  for (const p of status.processes) {
+    let lane = document.getElementById("lane-" + p.number);
+    if (!lane) {
+      lane = el("div", "lane");
+      lane.id = "lane-" + p.number;
+      lane.append(el("span", "num", "P" + p.number), el("span", "state"), el("div", "detail"));
+      box.append(lane);
+    }
+    const state = lane.querySelector(".state");
+    state.textContent = p.state + (p.external ? " (external)" : "") + (p.held ? " held" : "");
+    state.className = "state s-" + p.state;
+    const detail = lane.querySelector(".detail");
+    detail.replaceChildren();
+    if (p.program) {
+      const where = p.program + ":" + p.line + (p.n !== null ? " N" + p.n : "");
+      detail.append(el("div", "block", where + "  " + p.block));
+    }
+    if (p.wait) {
+      const w = p.wait;
+      let text = w.code + " " + w.reason;
+      detail.append(el("div", "wait", text));
+    }
+    if (p.alarm) {
+      const a = el("div", "alarm", p.alarm.code + ": " + p.alarm.message + " ");
+      const reset = el("button", null, "Reset");
+      reset.addEventListener("click", () => post("/api/command", { command: "reset" }));
+      a.append(reset);
+      detail.append(a);
+    }
+    detail.append(el("small", null, p.blocks + " blocks, " + p.snd_sent + " SND sent, " +
+                     p.snd_received + " received"));
+  }
+}
+function cells(box, count, make) {
+  if (box.children.length !== count) {
+    box.replaceChildren();
+    for (let i = 0; i < count; i++) box.append(make(i));
+  }
+  return box.children;
+}
+function renderImage() {
+  const img = status.image;
+  const sa = cells($("#sa"), img.sa.length, (i) => {
+    const c = el("span", null, "");
+    c.id = "sa-" + i;
+    c.addEventListener("click", () => write("SA" + i, c.classList.contains("on") ? 0 : 1));
+    return c;
+  });
+  for (let i = 0; i < img.sa.length; i++) {
+    const on = img.sa[i] === "1";
+    const c = sa[i];
+    c.classList.toggle("on", on);
+    c.textContent = i % 8 === 0 ? String(i) : "";
+    const who = img.writers.SA[i];
+    c.title = "SA" + i + " = " + (on ? 1 : 0) + (who ? " (last written by " + who + ")" : "");
+    c.classList.toggle("ext", !!who && who !== "plc");
+  }
+  bytes($("#k"), img.k, "SK", img.writers.SK, 255);
+  bytes($("#syvar"), img.syvar, "SYVAR", img.writers.SYVAR, 32767);
+}
+function bytes(box, values, name, writers, max) {
+  const all = cells(box, values.length, (i) => {
+    const c = el("span");
+    c.id = name.toLowerCase() + "-" + i;
+    c.addEventListener("click", () => {
+      const text = prompt(name + i + " = ?", c.dataset.value);
+      if (text !== null && text.trim() !== "") write(name + i, Number(text));
+    });
+    return c;
+  });
+  for (let i = 0; i < values.length; i++) {
+    const c = all[i];
+    c.dataset.value = values[i];
+    c.textContent = values[i];
+    c.classList.toggle("nz", values[i] !== 0);
+    const who = writers[i];
+    c.title = name + i + " = " + values[i] + (who ? " (last written by " + who + ")" : "");
+  }
+}
+function renderPlc() {
+  const box = $("#plc");
+  box.replaceChildren();
+  const plc = status.plc;
+  if (!plc) { box.append(el("p", null, "no PLC logic ([plc] logic)")); return; }
+  box.append(el("p", null, plc.state + ", " + plc.scans + " scans, last " + plc.last_scan_us +
+                " µs, max " + plc.max_scan_us + " µs, " + plc.overruns + " overruns" +
+                (plc.fault ? " — FAULT: " + plc.fault : "")));
+  const t = el("table");
+  for (const v of plc.variables) {
+    const r = el("tr");
+    r.append(el("td", null, v.path), el("td", null, v.type),
+             el("td", null, JSON.stringify(v.value)));
+    t.append(r);
+  }
+  box.append(t);
+}
+function renderFieldbus() {
+  const box = $("#fieldbus");
+  box.replaceChildren();
+  const m = status.fieldbus.modbus, c = status.fieldbus.canopen;
+  if (m) {
+    const where = m.address ? m.address.join(":") : "TLS only";
+    box.append(el("p", null, "Modbus TCP " + where + ": " + m.clients.length + " of " +
+                  m.max_clients + " clients " + (m.clients.length ? "(" + m.clients.join(", ") + ")" : "")));
+  } else box.append(el("p", null, "Modbus off"));
+  if (c) {
+    box.append(el("p", null, "CANopen node " + c.node_id + ": " + c.nmt + ", heartbeat " +
+                  c.heartbeat_ms + " ms" + (c.masters_lost.length ? ", master lost: node " +
+                  c.masters_lost.join(", ") : "")));
+  } else box.append(el("p", null, "CANopen off"));
+}
+function describe(ev) {
+  const skip = new Set(["seq", "t", "event", "proc", "prog", "line", "n"]);
+  const parts = [];
+  for (const [k, v] of Object.entries(ev)) {
+    if (!skip.has(k)) parts.push(k + " " + (typeof v === "object" ? JSON.stringify(v) : v));
+  }
+  return parts.join(", ");
+}
+function renderLog() {
+  const proc = $("#filter-proc").value, kind = $("#filter-kind").value;
+  const body = $("#log tbody");
+  const rows = [];
+  for (let i = events.length - 1; i >= 0 && rows.length < 300; i--) {
+    const ev = events[i];
+    if ((proc && String(ev.proc) !== proc) || (kind && ev.event !== kind)) continue;
+    const r = el("tr", ev.event === "alarm" || ev.event === "deadlock" ? "alarm" : "");
+    const where = ev.prog ? ev.prog + ":" + ev.line + (ev.n !== null && ev.n !== undefined ? " N" + ev.n : "") : "";
+    r.append(el("td", null, ev.seq), el("td", null, ev.t.toFixed(3)), el("td", null, ev.proc),
+             el("td", null, ev.event), el("td", null, where), el("td", null, describe(ev)));
+    rows.push(r);
+  }
+  body.replaceChildren(...rows);
+}
+$("#filter-proc").addEventListener("change", renderLog);
+$("#filter-kind").addEventListener("change", renderLog);
+
+const COLOURS = { run: "#66bb6a", wait: "#ffb74d", alarm: "#e57373" };
+function renderTimeline() {
+  const svg = $("#timeline");
+  const n = status ? status.processes.length : 5;
+  const laneH = 20, top = 14, width = svg.clientWidth || 900, left = 34;
+  svg.setAttribute("height", top + (n + 1) * laneH + 4);
+  const end = Math.max(status ? status.t : 0, events.length ? events[events.length - 1].t : 0);
+  const start = Math.max(0, end - WINDOW_S);
+  const x = (t) => left + (width - left - 6) * (t - start) / Math.max(end - start, 1e-6);
+  const y = (p) => top + (p === 0 ? n : p - 1) * laneH;
+  const parts = [];
+  const open = {};  // process -> [state, since]
+  const segment = (p, kind, t0, t1) => {
+    if (t1 < start) return;
+    const r = document.createElementNS(SVG, "rect");
+    r.setAttribute("class", "seg " + kind);
+    r.setAttribute("x", x(Math.max(t0, start)));
+    r.setAttribute("y", y(p) + 3);
+    r.setAttribute("width", Math.max(1, x(t1) - x(Math.max(t0, start))));
+    r.setAttribute("height", laneH - 6);
+    r.setAttribute("fill", COLOURS[kind]);
+    parts.push(r);
+  };
+  for (const ev of events) {
+    const p = ev.proc, was = open[p];
+    const next = { start: "run", resume: "run", wait: "wait", alarm: "alarm", end: null }[ev.event];
+    if (p && next !== undefined) {
+      if (was) segment(p, was[0], was[1], ev.t);
+      open[p] = next ? [next, ev.t] : null;
+    }
+    if (ev.t < start) continue;
+    if (ev.event === "snd" || ev.event === "exe") {
+      const l = document.createElementNS(SVG, "line");
+      l.setAttribute("class", "arrow");
+      l.setAttribute("x1", x(ev.t)); l.setAttribute("x2", x(ev.t));
+      l.setAttribute("y1", y(p) + laneH / 2); l.setAttribute("y2", y(ev.to) + laneH / 2);
+      l.setAttribute("stroke", ev.event === "snd" ? "#1565c0" : "#6a1b9a");
+      parts.push(l);
+    } else if (ev.event === "write" && p === 0) {
+      const m = document.createElementNS(SVG, "circle");
+      m.setAttribute("class", "mark");
+      m.setAttribute("cx", x(ev.t)); m.setAttribute("cy", y(0) + laneH / 2); m.setAttribute("r", 3);
+      m.setAttribute("fill", "#455a64");
+      const title = document.createElementNS(SVG, "title");
+      title.textContent = ev.var + " = " + ev.value + " by " + ev.who;
+      m.append(title);
+      parts.push(m);
+    }
+  }
+  for (const [p, was] of Object.entries(open)) if (was) segment(Number(p), was[0], was[1], end);
+  for (let p = 0; p <= n; p++) {
+    const t = document.createElementNS(SVG, "text");
+    t.setAttribute("x", 2); t.setAttribute("y", y(p) + laneH / 2 + 4);
+    t.textContent = p === 0 ? "PLC" : "P" + p;
+    parts.push(t);
+  }
+  const axis = document.createElementNS(SVG, "text");
+  axis.setAttribute("x", left); axis.setAttribute("y", 10);
+  axis.textContent = start.toFixed(1) + " s … " + end.toFixed(1) + " s";
+  parts.push(axis);
+  svg.replaceChildren(...parts);
+}
+
+async function loadPrograms() {
+  try {
+    const r = await fetch("/api/programs");
+    const data = await r.json();
+    const box = $("#start-program");
+    box.replaceChildren();
+    for (const name of data.programs) {
+      const o = el("option", null, name);
+      o.value = name;
+      o.selected = name === data.main;
+      box.append(o);
+    }
+  } catch (e) { /* the stream's reconnect will show that the server is away */ }
+}
+loadPrograms();
+connect();

@@ -1,0 +1,131 @@
+"""What the console shows, as JSON-ready dicts: the processes with their why-records, the PLC
+and its variables, the image with its last writers, the fieldbus peers (``GET /api/status``).
+
+Built from the :class:`~ncgate.gateway.app.Gateway` on the loop, on demand; no web library
+here (the HTTP side is :mod:`ncgate.gateway.web.console`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ncgate import __version__
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.engine import ProcessState
+
+if TYPE_CHECKING:
+    from ncgate.gateway.app import Gateway
+
+WATCH_LIMIT = 200  # ST variables the status shows (the first ones, in declaration order)
+_NMT = {0: "INITIALISING", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERATIONAL"}
+
+
+def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
+    """The whole status (``image=False``: without the image, for a light poll)."""
+    engine = gw.engine
+    out: dict[str, Any] = {
+        "version": __version__,
+        "session": gw.session,
+        "t": round(engine.now, 6),
+        "config": str(gw.config.source) if gw.config.source else "built-in default",
+        "main": gw.config.nc.main,
+        "dialect": gw.config.nc.dialect.value,
+        "held": any(p.held for p in engine.processes.values()),
+        "processes": [process(gw, number) for number in engine.processes],
+        "plc": plc(gw),
+        "fieldbus": fieldbus(gw),
+        "counters": {"events": gw.runtime.trace.seq, "sync_events": gw.runtime.trace.counter},
+        "web": {"read_only": gw.config.web.read_only,
+                "token": gw.config.web.token is not None},
+    }
+    if image:
+        out["image"] = image_status(gw)
+    return out
+
+
+def process(gw: Gateway, number: int) -> dict[str, Any]:
+    engine = gw.engine
+    s = engine.status(number)
+    p = engine.processes[number]
+    block = ""
+    if p.loaded is not None and 1 <= s.line <= len(p.loaded.program.lines):
+        block = p.loaded.program.lines[s.line - 1].strip()
+    wait = None
+    if s.wait is not None and s.state is not ProcessState.IDLE:
+        w = s.wait
+        value, writer = w.probe() if w.probe is not None else (w.value, w.writer)
+        wait = {"kind": w.kind.name, "code": w.code, "target": w.target, "cond": w.cond,
+                "value": value, "writer": writer, "since": round(w.since, 6),
+                "reason": w.reason(), "where": {"prog": w.where[0], "line": w.where[1],
+                                                "n": w.where[2]}}
+    alarm = None
+    if s.alarm_message is not None:
+        alarm = {"code": AlarmCode(s.alarm_code).label, "message": s.alarm_message}
+    return {"number": number, "state": s.state.name, "external": s.external,
+            "program": s.program, "line": s.line, "n": s.n, "block": block,
+            "held": s.held, "blocks": s.blocks, "snd_sent": s.snd_sent,
+            "snd_received": s.snd_received, "wait": wait, "alarm": alarm}
+
+
+def plc(gw: Gateway) -> dict[str, Any] | None:
+    """The PLC logic's state and a watch of its programs' variables (None: no logic)."""
+    status = gw.plc_status
+    if status is None:
+        return None
+    runtime = gw.plc
+    variables: list[dict[str, Any]] = []
+    for key, table in runtime.logic.programs.items():
+        name = runtime.logic.display[key]
+        for var in table.values():
+            if len(variables) >= WATCH_LIMIT:
+                break
+            try:
+                value = runtime.read(f"{name}.{var.display}")
+            except KeyError:
+                continue
+            if not isinstance(value, bool | int | float | str | list):
+                # A function block instance: its outputs are read by path (gw.plc.read).
+                value = str(var.type)
+            variables.append({"path": f"{name}.{var.display}", "type": str(var.type),
+                              "value": value, "retain": var.retain})
+    return {"state": status.state.name, "scans": status.scans,
+            "last_scan_us": status.last_scan_us, "max_scan_us": status.max_scan_us,
+            "overruns": status.overruns,
+            "fault": str(status.fault) if status.fault is not None else None,
+            "variables": variables}
+
+
+def fieldbus(gw: Gateway) -> dict[str, Any]:
+    out: dict[str, Any] = {"modbus": None, "canopen": None}
+    server = gw.modbus_server
+    if server is not None:
+        out["modbus"] = {
+            "address": list(server.address) if server.address else None,
+            "tls_address": list(server.tls_address) if server.tls_address else None,
+            "clients": sorted(c.who.removeprefix("modbus ") for c in server.connections),
+            "max_clients": server.config.max_clients,
+        }
+    node = gw.canopen_node
+    if node is not None:
+        heartbeats = node.heartbeats
+        state = node.node.nmt.state
+        out["canopen"] = {
+            "node_id": gw.config.canopen.node_id,
+            "nmt": state if isinstance(state, str) else _NMT.get(int(state), str(state)),
+            "heartbeat_ms": gw.config.canopen.heartbeat_ms,
+            "masters_lost": list(heartbeats.lost_nodes) if heartbeats is not None else [],
+        }
+    return out
+
+
+def image_status(gw: Gateway) -> dict[str, Any]:
+    """The SA packet as bits, the K bytes, the SYVARs, and who last wrote each."""
+    image = gw.image
+    writers = image.writers()
+    return {
+        "sa": "".join(str((image.sa[i >> 3] >> (i & 7)) & 1) for i in range(image.sa_bits)),
+        "k": list(image.k),
+        "syvar": list(image.syvar),
+        "writers": {area: {str(k): v for k, v in table.items()}
+                    for area, table in writers.items()},
+    }
