@@ -205,7 +205,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     run_virtual(engine, end)
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
-                                   tolerance_ms / 1000.0)
+                                   tolerance_ms / 1000.0, cut=recording.stop is None)
     return ReplayResult(recording, runtime, warnings, divergence, compared)
 
 
@@ -258,9 +258,10 @@ def _per_process(events: list[EventDict], end: float) -> dict[int, list[EventDic
 
 
 def compare(recorded: list[EventDict], replayed: list[EventDict], end: float,
-            tolerance_s: float) -> tuple[str | None, int]:
+            tolerance_s: float, cut: bool = False) -> tuple[str | None, int]:
     """The first divergence (by recorded time) between two traces, and how many events were
-    compared."""
+    compared.  ``cut``: the recording ends abruptly at ``end`` (a killed session): what the
+    replay does from ``end`` on was never seen, so it cannot diverge."""
     rec = _per_process(recorded, end)
     rep = _per_process(replayed, end + tolerance_s)
     first: tuple[float, str] | None = None
@@ -274,7 +275,7 @@ def compare(recorded: list[EventDict], replayed: list[EventDict], end: float,
                     abs(x["t"] - y["t"]) <= tolerance_s + 1e-9):
                 compared += 1
                 continue
-            if x is None and y is not None and y["t"] > end:
+            if x is None and y is not None and (y["t"] > end or (cut and y["t"] >= end)):
                 break  # replayed past the recording's end: not seen in the session
             at = min(e["t"] for e in (x, y) if e is not None)
             text = (f"replay diverges at P{proc}'s event {i + 1}:\n"

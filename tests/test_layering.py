@@ -7,8 +7,9 @@
 - plc: stdlib + lark, for its Structured Text compiler, as the design card says (+
   ``ncgate.errors``); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
-  ``canopen/`` (and the test kit's CANopen master) imports canopen or can; the CLI and the test
-  kit are leaves that nothing else in the gateway imports.
+  ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports
+  aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
+  test kit are leaves that nothing else in the gateway imports.
 """
 
 from __future__ import annotations
@@ -104,6 +105,17 @@ def test_fieldbus_libraries_stay_in_their_adapters() -> None:
         if tops & {"canopen", "can", "can_remote"}:
             assert (module.startswith("ncgate.gateway.canopen.")
                     or module == f"{kit}.canopen_kit"), module
+        if "aiohttp" in tops:
+            assert module.startswith("ncgate.gateway.web."), module
+
+
+def test_a_gateway_without_console_does_not_load_the_web_library() -> None:
+    """The API and the tests run without a console: aiohttp is loaded only to serve one."""
+    code = ("import sys, asyncio; from ncgate.gateway import Gateway\n"
+            "async def main():\n"
+            "    async with Gateway() as gw: pass\n"
+            "asyncio.run(main()); sys.exit(1 if 'aiohttp' in sys.modules else 0)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
 
 
 def test_the_cli_and_the_test_kit_are_leaves() -> None:

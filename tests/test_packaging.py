@@ -45,7 +45,9 @@ def test_the_wheel_holds_one_top_level_package_with_its_data(wheel: Path) -> Non
                    "ncgate/examples/scheme3/PROG91.nc", "ncgate/examples/scheme3/script.toml",
                    "ncgate/examples/errors/README.md", "ncgate/py.typed",
                    "ncgate/plc/st/grammar/st.lark", "ncgate/examples/plclogic/plc.st",
-                   "ncgate/interpreter/isg/signals.py", "ncgate/examples/isg_ve/VE.nc"):
+                   "ncgate/interpreter/isg/signals.py", "ncgate/examples/isg_ve/VE.nc",
+                   "ncgate/gateway/web/static/index.html", "ncgate/gateway/web/static/app.js",
+                   "ncgate/gateway/web/static/style.css"):
         assert needed in names
 
 

@@ -79,6 +79,37 @@ def describe(event: Event) -> str | None:
 
 
 HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace has them all)
+# Sync events worded per second: a loop that SNDs a thousand times a second must not flood the
+# log (or block the loop on a full stdout pipe); the trace and the console have every event.
+LOG_LINES_PER_S = 100
+
+
+class LineBudget:
+    """At most ``per_s`` lines a second; the lines left out are counted and said once."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, per_s: int) -> None:
+        self.loop, self.per_s = loop, per_s
+        self.window = -1.0
+        self.used = self.skipped = 0
+        self._timer: asyncio.TimerHandle | None = None
+
+    def take(self) -> bool:
+        now = self.loop.time()
+        if now - self.window >= 1.0:
+            self.window, self.used = now, 0
+        if self.used < self.per_s:
+            self.used += 1
+            return True
+        self.skipped += 1
+        if self._timer is None:
+            self._timer = self.loop.call_at(self.window + 1.0, self._say)
+        return False
+
+    def _say(self) -> None:
+        self._timer = None
+        log.info("... %d more sync events not logged in the last second (the trace and the "
+                 "web console have every one)", self.skipped)
+        self.skipped = 0
 
 
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
@@ -93,6 +124,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
 
     hazards_logged: set[tuple[int, object]] = set()
     debug = functools.partial(log.isEnabledFor, logging.DEBUG)
+    budget = LineBudget(loop, LOG_LINES_PER_S)
 
     def on_event(event: Event) -> None:
         if isinstance(event, ev.Hazard):
@@ -102,14 +134,16 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if key in hazards_logged or len(hazards_logged) >= HAZARDS_LOGGED:
                 return
             hazards_logged.add(key)
+        warn = isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)
         if isinstance(event, ev.Write):
-            if debug():  # a PLC writes every scan: not even worded unless asked for
+            if debug() and budget.take():  # a PLC writes every scan: worded only if asked
                 log.debug(describe(event))
+            return
+        if not warn and not budget.take():
             return
         line = describe(event)
         if line is not None:
-            (log.warning if isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)
-             else log.info)(line)
+            (log.warning if warn else log.info)(line)
 
     try:
         async with Gateway(config, listeners=[on_event], cold=cold, console=True,

@@ -152,6 +152,6 @@ async def test_the_log_names_a_hazard_once_per_block(tmp_path: Path) -> None:
         assert await proc.wait() == 0
     log = "".join(lines)
     assert log.count("P1 hazard") == 1
-    assert "P1 hazard at LOOP.nc:3: SYVAR1=0 acted at decode time" in log
+    assert "P1 hazard at LOOP.nc:3 N2: SYVAR1=0 acted at decode time" in log
     traced = [json.loads(line) for line in (tmp_path / "t.jsonl").read_text().splitlines()]
     assert sum(e["event"] == "hazard" for e in traced) == 20

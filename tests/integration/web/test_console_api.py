@@ -1,0 +1,313 @@
+"""The console's HTTP API over real HTTP on loopback (docs/console.md): every endpoint, the
+token, the Origin and Host checks, read-only, the live stream, and refusing a public bind."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+from collections.abc import AsyncIterator
+from typing import Any
+
+import aiohttp
+import pytest
+
+from ncgate.config import ConfigError
+from ncgate.gateway import Gateway
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+TOKEN = "s3cret-token"
+
+
+async def console(**overrides: Any) -> Gateway:
+    return Gateway(ncgate_test_config(**{"web.port": 0, **overrides}), console=True)
+
+
+@pytest.fixture
+async def gw() -> AsyncIterator[Gateway]:
+    async with await console() as gateway:
+        yield gateway
+
+
+@pytest.fixture
+async def http(gw: Gateway) -> AsyncIterator[aiohttp.ClientSession]:
+    host, port = gw.web_address
+    async with aiohttp.ClientSession(f"http://{host}:{port}") as session:
+        yield session
+
+
+async def post(http: aiohttp.ClientSession, path: str, body: object,
+               **headers: str) -> tuple[int, dict[str, Any]]:
+    async with http.post(path, json=body, headers=headers) as r:
+        return r.status, await r.json()
+
+
+async def test_status_shows_each_process_with_its_why_record(gw: Gateway,
+                                                             http: aiohttp.ClientSession) -> None:
+    await gw.start()
+    await gw.wait_state(2, "WAIT_COND")
+    async with http.get("/api/status") as r:
+        assert r.status == 200
+        status = await r.json()
+    assert [p["number"] for p in status["processes"]] == [1, 2, 3, 4, 5]
+    p2 = status["processes"][1]
+    assert (p2["state"], p2["program"], p2["n"]) == ("WAIT_COND", "PROG92", 40)
+    assert p2["block"] == "N40(WAI,SA10=1)"
+    assert p2["wait"]["cond"] == "SA10=1" and p2["wait"]["value"] == 0
+    assert p2["wait"]["writer"] is None
+    assert status["image"]["sa"][10] == "0" and len(status["image"]["sa"]) == 1024
+    assert status["fieldbus"]["modbus"]["address"] == list(gw.modbus_address)
+    assert status["fieldbus"]["canopen"]["node_id"] == gw.config.canopen.node_id
+    assert status["plc"] is None  # the built-in config has no PLC logic
+    assert status["counters"]["events"] == gw.runtime.trace.seq
+
+
+async def test_a_write_is_stored_as_web_and_releases_the_wait(
+        gw: Gateway, http: aiohttp.ClientSession) -> None:
+    await gw.start()
+    await gw.wait_state(2, "WAIT_COND")
+    code, body = await post(http, "/api/write", {"var": "sa10", "value": 1})
+    assert (code, body) == (200, {"var": "SA10", "value": 1})
+    assert gw.read("SA10") == 1
+    assert gw.image.last_writer("SA", 10, "bit") == "web"
+    resumed = [e for e in gw.trace if e["event"] == "resume" and e["proc"] == 2]
+    assert resumed and resumed[0]["by"] == "cond"
+    async with http.get("/api/status") as r:
+        status = await r.json()
+    assert status["image"]["writers"]["SA"]["10"] == "web"
+
+
+@pytest.mark.parametrize(("body", "status", "said"), [
+    ({"var": "SA5000", "value": 1}, 422, "outside the image"),
+    ({"var": "SA10", "value": 2}, 422, "SA10"),
+    ({"var": "SK3", "value": 256}, 422, "0..255"),
+    ({"var": "E1", "value": 1}, 422, "E parameters"),
+    ({"var": "SA10", "value": True}, 400, "whole number"),
+    ({"var": "SA10", "value": 1.5}, 400, "whole number"),
+    ({"value": 1}, 400, "var"),
+    ({"var": "SA10=1 SA11", "value": 1}, 422, "SA10=1 SA11"),
+    ([1, 2], 400, "JSON object"),
+])
+async def test_a_bad_write_gets_a_json_error_and_stores_nothing(
+        gw: Gateway, http: aiohttp.ClientSession, body: object, status: int, said: str) -> None:
+    before = gw.image.snapshot()
+    seq = gw.runtime.trace.seq
+    code, answer = await post(http, "/api/write", body)
+    assert code == status
+    assert said in answer["error"]
+    assert gw.image.snapshot() == before
+    assert gw.runtime.trace.seq == seq  # no write event either
+
+
+async def test_a_body_that_is_not_json_is_refused(gw: Gateway,
+                                                  http: aiohttp.ClientSession) -> None:
+    async with http.post("/api/write", data=b"SA10=1",
+                         headers={"Content-Type": "text/plain"}) as r:
+        assert r.status == 415
+    async with http.post("/api/write", data=b"{nope",
+                         headers={"Content-Type": "application/json"}) as r:
+        assert r.status == 400
+        assert (await r.json())["error"] == "the body is not JSON"
+    assert gw.read("SA10") == 0
+
+
+async def test_commands_start_hold_and_reset(gw: Gateway, http: aiohttp.ClientSession) -> None:
+    assert await post(http, "/api/command", {"command": "start"}) == (200, {"command": "start"})
+    await gw.wait_state(2, "WAIT_COND")
+    assert gw.trace[0]["event"] == "start" and gw.trace[0]["by"] == "fieldbus"
+    assert (await post(http, "/api/command", {"command": "hold"}))[0] == 200
+    assert all(p.held for p in gw.engine.processes.values() if not p.external)
+    assert (await post(http, "/api/command", {"command": "reset"}))[0] == 200
+    await gw.wait_idle(timeout_s=10)
+    ends = [e["how"] for e in gw.trace if e["event"] == "end"]
+    assert "reset" in ends
+
+
+async def test_start_a_program_in_a_process(gw: Gateway, http: aiohttp.ClientSession) -> None:
+    code, body = await post(http, "/api/command",
+                            {"command": "start", "program": "PROG93", "process": 3})
+    assert code == 200, body
+    starts = [e for e in gw.trace if e["event"] == "start"]
+    assert (starts[0]["proc"], starts[0]["prog"], starts[0]["by"]) == (3, "PROG93", "operator")
+    code, body = await post(http, "/api/command",
+                            {"command": "start", "program": "PROG93", "process": 3})
+    assert code == 409 and "busy" in body["error"]
+    code, body = await post(http, "/api/command",
+                            {"command": "start", "program": "NOPE", "process": 4})
+    assert code == 404 and "NOPE" in body["error"]
+    for bad in ({"command": "start", "program": "PROG93", "process": 9},
+                {"command": "hold", "program": "PROG93"},
+                {"command": "fly"}, {"command": "start", "process": 2}):
+        code, body = await post(http, "/api/command", bad)
+        assert code == 400, bad
+        assert body["error"]
+
+
+async def test_events_timeline_and_programs(gw: Gateway, http: aiohttp.ClientSession) -> None:
+    await gw.start()
+    await gw.wait_state(2, "WAIT_COND")
+    async with http.get("/api/events?since=0") as r:
+        events = await r.json()
+    assert [e["seq"] for e in events["events"]] == list(range(1, events["seq"] + 1))
+    assert events["events"] == gw.trace[:len(events["events"])]
+    async with http.get(f"/api/events?since={events['seq'] - 1}") as r:
+        assert [e["seq"] for e in (await r.json())["events"]] == [events["seq"]]
+    async with http.get("/api/events?since=x") as r:
+        assert r.status == 400
+    async with http.get("/api/timeline.svg") as r:
+        assert r.status == 200 and r.content_type == "image/svg+xml"
+        svg = await r.text()
+    assert svg.startswith("<svg") and "P2" in svg
+    async with http.get("/api/programs") as r:
+        programs = await r.json()
+    assert programs == {"programs": ["PROG91", "PROG92", "PROG93"], "main": "PROG91"}
+    async with http.get("/") as r:
+        assert r.status == 200 and "ncgate console" in await r.text()
+    async with http.get("/static/app.js") as r:
+        assert r.status == 200 and r.content_type == "text/javascript"
+    async with http.get("/api/nothing") as r:
+        assert r.status == 404 and "error" in await r.json()
+
+
+async def test_a_write_from_another_origin_is_refused(gw: Gateway,
+                                                      http: aiohttp.ClientSession) -> None:
+    host, port = gw.web_address
+    code, body = await post(http, "/api/write", {"var": "SA10", "value": 1},
+                            Origin="http://evil.example")
+    assert code == 403 and "another origin" in body["error"]
+    code, _ = await post(http, "/api/write", {"var": "SA10", "value": 1},
+                         **{"Sec-Fetch-Site": "cross-site"})
+    assert code == 403
+    assert gw.read("SA10") == 0
+    code, _ = await post(http, "/api/write", {"var": "SA10", "value": 1},
+                         Origin=f"http://{host}:{port}")
+    assert code == 200 and gw.read("SA10") == 1
+
+
+async def test_a_request_to_a_foreign_host_name_is_refused(gw: Gateway,
+                                                           http: aiohttp.ClientSession) -> None:
+    """DNS rebinding: a page of evil.example whose name now points at 127.0.0.1."""
+    async with http.get("/api/status", headers={"Host": "evil.example"}) as r:
+        assert r.status == 403
+    code, _ = await post(http, "/api/write", {"var": "SA10", "value": 1}, Host="evil.example")
+    assert code == 403 and gw.read("SA10") == 0
+    async with http.get("/api/status", headers={"Host": "localhost:1"}) as r:
+        assert r.status == 200
+
+
+async def test_with_a_token_every_write_and_command_needs_it() -> None:
+    async with await console(**{"web.token": TOKEN}) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            for headers in ({}, {"Authorization": "Bearer wrong-token"},
+                            {"Authorization": TOKEN}):
+                code, body = await post(http, "/api/write", {"var": "SA10", "value": 1},
+                                        **headers)
+                assert code == 401 and "token" in body["error"]
+                code, _ = await post(http, "/api/command", {"command": "start"}, **headers)
+                assert code == 401
+            assert gw.read("SA10") == 0 and gw.trace == []
+            async with http.get("/api/status") as r:  # reading needs none
+                assert r.status == 200 and (await r.json())["web"]["token"] is True
+            bearer = {"Authorization": f"Bearer {TOKEN}"}
+            assert (await post(http, "/api/write", {"var": "SA10", "value": 1},
+                               **bearer))[0] == 200
+            assert gw.read("SA10") == 1
+
+
+async def test_read_only_refuses_every_write_and_command() -> None:
+    async with await console(**{"web.read_only": True}) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            code, body = await post(http, "/api/write", {"var": "SA10", "value": 1})
+            assert code == 403 and "read-only" in body["error"]
+            code, _ = await post(http, "/api/command", {"command": "start"})
+            assert code == 403
+            assert gw.read("SA10") == 0 and gw.trace == []
+
+
+def test_a_public_bind_needs_a_token() -> None:
+    with pytest.raises(ConfigError, match=r"web\.token: the console listens on 0\.0\.0\.0"):
+        ncgate_test_config(**{"web.host": "0.0.0.0"})
+    config = ncgate_test_config(**{"web.host": "0.0.0.0", "web.token": TOKEN})
+    assert config.web.token == TOKEN
+    ncgate_test_config(**{"web.host": "0.0.0.0", "web.enabled": False})  # no console: fine
+
+
+async def test_a_taken_default_port_leaves_the_console_off_a_configured_one_is_an_error(
+        caplog: pytest.LogCaptureFixture) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config = ncgate_test_config()
+        async with Gateway(config, console=True, web_default_port=port) as gw:
+            assert gw.web_console is None
+            await gw.start()  # the rest of the gateway runs
+            await gw.wait_state(2, "WAIT_COND")
+        assert f"web console off: 127.0.0.1:{port} is taken" in caplog.text
+        with pytest.raises(OSError, match=rf"web\.port: cannot listen on 127\.0\.0\.1:{port}"):
+            async with Gateway(ncgate_test_config(**{"web.port": port}), console=True):
+                pass
+
+
+async def read_sse(response: aiohttp.ClientResponse) -> AsyncIterator[tuple[str, str, str]]:
+    """(event, id, data) of each server-sent event."""
+    event, ident, data = "message", "", []
+    async for raw in response.content:
+        line = raw.decode().rstrip("\n")
+        if not line:
+            if data:
+                yield event, ident, "\n".join(data)
+            event, data = "message", []
+        elif line.startswith("event: "):
+            event = line[7:]
+        elif line.startswith("id: "):
+            ident = line[4:]
+        elif line.startswith("data: "):
+            data.append(line[6:])
+
+
+async def next_of(stream: AsyncIterator[tuple[str, str, str]], kind: str
+                  ) -> tuple[str, dict[str, Any]]:
+    async with asyncio.timeout(10):
+        async for event, ident, data in stream:
+            if event == kind:
+                return ident, json.loads(data)
+    raise AssertionError(f"the stream ended before a {kind} event")
+
+
+async def test_the_stream_sends_status_then_events_as_they_happen(
+        gw: Gateway, http: aiohttp.ClientSession) -> None:
+    async with http.get("/api/stream") as r:
+        assert r.status == 200 and r.content_type == "text/event-stream"
+        stream = read_sse(r)
+        _, status = await next_of(stream, "status")
+        assert status["session"] == gw.session
+        await gw.start()
+        ident, batch = await next_of(stream, "events")
+        assert batch["missed"] == 0
+        assert batch["events"][0] == gw.trace[0]
+        seen = list(batch["events"])
+        while not any(e["event"] == "wait" and e["proc"] == 2 for e in seen):
+            ident, batch = await next_of(stream, "events")
+            seen += batch["events"]
+        assert int(ident) == seen[-1]["seq"]
+        assert seen == gw.trace[:len(seen)]
+    # A page that reconnects says where it was (Last-Event-ID): it gets the rest, not again
+    # what it had.
+    gw.write("SA10", 1)
+    async with http.get("/api/stream", headers={"Last-Event-ID": ident}) as r:
+        _, batch = await next_of(read_sse(r), "events")
+        assert batch["events"][0]["seq"] == int(ident) + 1
+
+
+async def test_streams_beyond_max_streams_are_refused() -> None:
+    async with await console(**{"web.max_streams": 1}) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with http.get("/api/stream") as first:
+                await next_of(read_sse(first), "status")
+                async with http.get("/api/stream") as second:
+                    assert second.status == 503
+                    assert "max_streams" in (await second.json())["error"]
