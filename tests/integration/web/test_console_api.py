@@ -305,9 +305,9 @@ async def test_the_stream_sends_status_then_events_as_they_happen(
 async def test_streams_beyond_max_streams_are_refused() -> None:
     async with await console(**{"web.max_streams": 1}) as gw:
         host, port = gw.web_address
-        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
-            async with http.get("/api/stream") as first:
-                await next_of(read_sse(first), "status")
-                async with http.get("/api/stream") as second:
-                    assert second.status == 503
-                    assert "max_streams" in (await second.json())["error"]
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/stream") as first:
+            await next_of(read_sse(first), "status")
+            async with http.get("/api/stream") as second:
+                assert second.status == 503
+                assert "max_streams" in (await second.json())["error"]
