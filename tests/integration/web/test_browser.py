@@ -1,0 +1,194 @@
+"""The console in a real browser: Debian's Chromium driven by Selenium through chromedriver,
+against ``ncgate run`` as a user starts it (a real process, real HTTP).
+
+CI installs chromium and chromium-driver (.ci/run); on a developer machine without them these
+tests are skipped with that reason -- never in CI, where a missing browser is a failure.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+if CHROMIUM is None or CHROMEDRIVER is None:
+    if os.environ.get("CI"):
+        pytest.fail("chromium / chromedriver are not installed: .ci/run must install them",
+                    pytrace=False)
+    pytestmark = pytest.mark.skip(reason="no chromium or chromedriver (apt-get install "
+                                  "chromium chromium-driver); CI runs these tests")
+else:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+WAIT_S = 20
+
+
+class RunProcess:
+    """``ncgate run`` in a subprocess; its output read all along (a full pipe would stall it)."""
+
+    def __init__(self, *args: str) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "ncgate", "run", *args],
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.lines: list[str] = []
+        self.changed = threading.Condition()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self.changed:
+                self.lines.append(line)
+                self.changed.notify_all()
+        with self.changed:
+            self.lines.append("")  # the end
+            self.changed.notify_all()
+
+    def wait_for(self, text: str) -> str:
+        """The first line with ``text``, once it is out (the process ending first fails)."""
+        def seen() -> str | None:
+            return next((line for line in self.lines if text in line), None)
+
+        with self.changed:
+            self.changed.wait_for(lambda: seen() is not None or "" in self.lines, WAIT_S)
+            line = seen()
+            assert line is not None, f"no {text!r} from ncgate run:\n" + "".join(self.lines)
+            return line
+
+    def stop(self) -> None:
+        self.proc.send_signal(signal.SIGTERM)
+        assert self.proc.wait(timeout=WAIT_S) == 0, "".join(self.lines)
+        self.reader.join(WAIT_S)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def web_port() -> int:
+    return free_port()
+
+
+def start_run(port: int, channel: str) -> RunProcess:
+    run = RunProcess("--port", "0", "--web", f"127.0.0.1:{port}",
+                     "--set", "nc.time_scale=10", "--set", f"canopen.channel={channel}")
+    run.wait_for(f"web console on http://127.0.0.1:{port}/")
+    return run
+
+
+@pytest.fixture
+def browser() -> Iterator[Any]:
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
+                "--window-size=1400,1200"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def until(driver: Any, what: str, check: Any) -> Any:
+    try:
+        return WebDriverWait(driver, WAIT_S).until(lambda d: check(d))
+    except Exception as exc:
+        page = driver.find_element(By.TAG_NAME, "body").text
+        raise AssertionError(f"the page never showed {what}:\n{page}") from exc
+
+
+def text(driver: Any, css: str) -> str:
+    found = driver.find_elements(By.CSS_SELECTOR, css)
+    return found[0].text if found else ""
+
+
+def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
+                                                              web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-1")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        until(browser, "five lanes", lambda d: len(d.find_elements(By.CSS_SELECTOR,
+                                                                   ".lane")) == 5)
+        browser.find_element(By.ID, "btn-start").click()
+        # P2 waits at N40 with its condition, the value now and the block.
+        until(browser, "P2 waiting at N40",
+              lambda d: text(d, "#lane-2 .state") == "WAIT_COND"
+              and "PROG92:8 N40" in text(d, "#lane-2 .block")
+              and "(WAI,SA10=1) waits for SA10=1 (now 0)" in text(d, "#lane-2 .wait"))
+        segments = len(browser.find_elements(By.CSS_SELECTOR, "#timeline rect.seg"))
+        assert segments >= 2
+        # Force SA10 in the image grid: P2 resumes, the log says who, the timeline grows.
+        browser.find_element(By.ID, "sa-10").click()
+        until(browser, "SA10 on, written by web",
+              lambda d: "on" in d.find_element(By.ID, "sa-10").get_attribute("class")
+              and "last written by web" in d.find_element(By.ID, "sa-10").get_attribute(
+                  "title"))
+        until(browser, "P2's resume in the event log",
+              lambda d: any("resume" in row.text and "by cond" in row.text
+                            and "writer web" in row.text
+                            for row in d.find_elements(By.CSS_SELECTOR, "#log tbody tr")))
+        until(browser, "a longer timeline",
+              lambda d: len(d.find_elements(By.CSS_SELECTOR, "#timeline rect.seg")) > segments)
+        assert run.wait_for("P2 resumes at PROG92.nc:8 N40 (by cond, written by web)")
+
+        # The server goes away: the page says so, and comes back by itself with the new run.
+        run.stop()
+        until(browser, "the lost connection", lambda d: text(d, "#conn") == "reconnecting…")
+        run = start_run(web_port, "ncgate-browser-2")
+        until(browser, "the new run, live",
+              lambda d: text(d, "#conn") == "live"
+              and text(d, "#lane-2 .state") == "IDLE"
+              and not d.find_elements(By.CSS_SELECTOR, "#log tbody tr"))
+        browser.find_element(By.ID, "btn-start").click()
+        until(browser, "P2 waiting again, and the new run's events",
+              lambda d: text(d, "#lane-2 .state") == "WAIT_COND"
+              and any(row.text.startswith("1 ") and "start" in row.text
+                      for row in d.find_elements(By.CSS_SELECTOR, "#log tbody tr")))
+    finally:
+        if run.proc.poll() is None:
+            run.stop()
+
+
+def test_feed_hold_and_starting_a_program_from_the_form(browser: Any, web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-3")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "btn-hold").click()
+        until(browser, "the feed hold", lambda d: "(feed hold)" in text(d, "#clock"))
+        browser.find_element(By.ID, "btn-start").click()  # cycle start releases the hold
+        until(browser, "the hold released", lambda d: "(feed hold)" not in text(d, "#clock"))
+        until(browser, "the programs on MP0",
+              lambda d: [o.text for o in d.find_elements(By.CSS_SELECTOR,
+                                                         "#start-program option")]
+              == ["PROG91", "PROG92", "PROG93"])
+        browser.find_element(By.CSS_SELECTOR, "#start-program option[value=PROG93]").click()
+        browser.find_element(By.CSS_SELECTOR, "#start-process option[value='3']").click()
+        browser.find_element(By.CSS_SELECTOR, "#start-form button").click()
+        until(browser, "PROG93 in P3 waiting for P1",
+              lambda d: text(d, "#lane-3 .state") == "WAIT_PROC"
+              and "PROG93:2 N1" in text(d, "#lane-3 .block"))
+        # Starting it again: the process is busy; the page says why.
+        browser.find_element(By.CSS_SELECTOR, "#start-form button").click()
+        until(browser, "the refusal", lambda d: "process 3 is busy" in text(d, "#message"))
+    finally:
+        run.stop()
