@@ -248,7 +248,8 @@ class WebConsole:
         self.streams += 1
         try:
             await response.prepare(request)
-            position = feed.seq if since < 0 else since
+            # A new page gets what the ring holds (its timeline and log start filled).
+            position = max(since, 0)
             sent_status = ""
             status_at = written_at = -1e9
             loop = asyncio.get_running_loop()

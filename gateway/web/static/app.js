@@ -133,8 +133,7 @@ function renderLanes() {
     const detail = lane.querySelector(".detail");
     detail.replaceChildren();
     if (p.program) {
-      const where = p.program + ":" + p.line + (p.n !== null ? " N" + p.n : "");
-      detail.append(el("div", "block", where + "  " + p.block));
+      detail.append(el("div", "block", p.program + ":" + p.line + "  " + p.block));
     }
     if (p.wait) {
       const w = p.wait;

@@ -132,7 +132,7 @@ def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
         # P2 waits at N40 with its condition, the value now and the block.
         until(browser, "P2 waiting at N40",
               lambda d: text(d, "#lane-2 .state") == "WAIT_COND"
-              and "PROG92:8 N40" in text(d, "#lane-2 .block")
+              and "PROG92:8 N40(WAI,SA10=1)" in text(d, "#lane-2 .block")
               and "(WAI,SA10=1) waits for SA10=1 (now 0)" in text(d, "#lane-2 .wait"))
         segments = len(browser.find_elements(By.CSS_SELECTOR, "#timeline rect.seg"))
         assert segments >= 2
@@ -186,7 +186,7 @@ def test_feed_hold_and_starting_a_program_from_the_form(browser: Any, web_port: 
         browser.find_element(By.CSS_SELECTOR, "#start-form button").click()
         until(browser, "PROG93 in P3 waiting for P1",
               lambda d: text(d, "#lane-3 .state") == "WAIT_PROC"
-              and "PROG93:2 N1" in text(d, "#lane-3 .block"))
+              and "PROG93:2 N1(WAI,1)" in text(d, "#lane-3 .block"))
         # Starting it again: the process is busy; the page says why.
         browser.find_element(By.CSS_SELECTOR, "#start-form button").click()
         until(browser, "the refusal", lambda d: "process 3 is busy" in text(d, "#message"))

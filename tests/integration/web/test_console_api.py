@@ -294,6 +294,10 @@ async def test_the_stream_sends_status_then_events_as_they_happen(
             seen += batch["events"]
         assert int(ident) == seen[-1]["seq"]
         assert seen == gw.trace[:len(seen)]
+    # A page opened now gets what the ring holds, from the first event on.
+    async with http.get("/api/stream") as r:
+        _, batch = await next_of(read_sse(r), "events")
+        assert batch["events"][:len(seen)] == seen
     # A page that reconnects says where it was (Last-Event-ID): it gets the rest, not again
     # what it had.
     gw.write("SA10", 1)
