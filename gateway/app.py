@@ -148,6 +148,7 @@ class Gateway:
             if runtime.retain is not None:
                 runtime.retain.close()
             self._plc = None
+        stop_t = self._driver.now() if self._driver is not None else 0.0
         if self._driver is not None:
             self._driver.close()
         self._driver = None
@@ -155,7 +156,7 @@ class Gateway:
             self._trace_file.close()
             self._trace_file = None
         if self.recorder is not None:
-            self.recorder.close(self.engine.now)
+            self.recorder.close(max(stop_t, self.engine.now))
             self.recorder = None
 
     @property

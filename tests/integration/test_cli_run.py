@@ -16,6 +16,8 @@ from ncgate.gateway.cli.main import main
 
 from ..conftest import EXAMPLES
 
+PROGRAMS = Path(__file__).resolve().parents[2] / "config" / "programs"
+
 
 async def start_run(config: Path, *more: str
                     ) -> tuple[asyncio.subprocess.Process, int, list[str]]:
@@ -155,3 +157,93 @@ async def test_the_log_names_a_hazard_once_per_block(tmp_path: Path) -> None:
     assert "P1 hazard at LOOP.nc:3 N2: SYVAR1=0 acted at decode time" in log
     traced = [json.loads(line) for line in (tmp_path / "t.jsonl").read_text().splitlines()]
     assert sum(e["event"] == "hazard" for e in traced) == 20
+
+
+def test_run_refuses_a_console_beyond_loopback_without_a_token(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--no-web", "--web", "0.0.0.0:8080"]) == 2  # one or the other
+    capsys.readouterr()
+    assert main(["run", "--web", "0.0.0.0:18080"]) == 2
+    assert ("web.token: the console listens on 0.0.0.0, beyond this machine"
+            in capsys.readouterr().err)
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (["--set", "nc.bogus=1"], "nc.bogus: unknown key"),
+    (["--set", "novalue"], "expected KEY=VALUE"),
+    (["--set", "modbus.port=70000"], "modbus.port: expected an integer 1..65535"),
+    (["--port", "70000"], "modbus.port: expected an integer 1..65535"),
+    (["--web", "8080"], "expected HOST:PORT"),
+])
+def test_run_names_a_bad_override(capsys: pytest.CaptureFixture[str], args: list[str],
+                                  said: str) -> None:
+    assert main(["run", *args]) == 2
+    assert said in capsys.readouterr().err
+
+
+async def test_run_logs_every_sync_event_in_a_line(tmp_path: Path) -> None:
+    """Start, wait with its condition, resume with who wrote the value, SND, end."""
+    config = tmp_path / "ncgate.toml"
+    config.write_text("")  # the built-in programs are not here: --set points at them
+    proc, port, lines = await start_run(
+        config, "--no-web", "--set", "nc.autostart=true", "--set", "nc.time_scale=20",
+        "--set", f"nc.storage.MP0={json.dumps(str(PROGRAMS))}")
+    assert proc.stdout is not None
+
+    async def line_with(text: str) -> str:
+        async with asyncio.timeout(20):
+            while not any(text in line for line in lines):
+                line = (await proc.stdout.readline()).decode()  # type: ignore[union-attr]
+                assert line, "".join(lines)
+                lines.append(line)
+        return next(line for line in lines if text in line)
+
+    await line_with("P1 starts PROG91 (by operator)")
+    await line_with("P1 EXE PROG92 in P2 at PROG91.nc:4 N1")
+    await line_with("P2 waits at PROG92.nc:8 N40 for SA10=1 (now 0)")
+    client = AsyncModbusTcpClient("127.0.0.1", port=port)
+    assert await client.connect()
+    await client.write_coil(10, True, device_id=1)
+    local_port = client.ctx.transport.get_extra_info("sockname")[1]  # type: ignore[union-attr]
+    await line_with("P2 resumes at PROG92.nc:8 N40 (by cond, written by modbus 127.0.0.1:"
+                    f"{local_port})")
+    await line_with("P2 SND to P1 at PROG92.nc:10 N85")
+    await line_with("P2 ends (REL) at PROG92.nc:14 N100")
+    client.close()
+    proc.send_signal(signal.SIGTERM)
+    async with asyncio.timeout(20):
+        await proc.stdout.read()
+        assert await proc.wait() == 0
+
+
+async def test_run_quiet_says_warnings_only_and_records_the_session(tmp_path: Path) -> None:
+    (tmp_path / "ZERO.nc").write_text("N1E1=1\nN2E2=E1/0\nN3M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "ZERO"\n[nc.storage]\nMP0 = "."\n')
+    record = tmp_path / "session.jsonl"
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "ncgate", "run", "--config", str(config), "-q", "--no-web",
+        "--port", "0", "--record", str(record), "--set", "nc.autostart=true",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    assert proc.stdout is not None
+    out = []
+    async with asyncio.timeout(20):
+        while not any("ALARM" in line for line in out):  # the first line -q lets through
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(out)
+            out.append(line)
+    proc.send_signal(signal.SIGTERM)
+    async with asyncio.timeout(20):
+        out.append((await proc.stdout.read()).decode())
+        assert await proc.wait() == 0
+    log = "".join(out)
+    assert "WARNING ncgate: P1 ALARM AL101 at ZERO.nc:2 N2: division by zero" in log
+    assert " INFO " not in log, log  # -q: warnings and errors only
+    lines = [json.loads(line) for line in record.read_text().splitlines()]
+    assert lines[0]["ncgate_record"] == 1 and lines[0]["config"] == str(config)
+    assert lines[0]["overrides"]["nc.autostart"] is True
+    starts = [line for line in lines if line.get("input") == "start"]
+    assert starts == [{"input": "start", "t": starts[0]["t"], "prog": "ZERO", "proc": 1,
+                       "by": "operator"}]
+    assert any(line.get("event") == "alarm" for line in lines)
+    assert "stop" in lines[-1]
