@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-MAIN = ('(EXE,2,PEER)\n(EXE,3,LOOP)\n"L"\nN1(SND,2)\nN2(WAI,2)\nN3(DLY,0.005)\n'
+MAIN = ('(EXE,2,PEER)\n(EXE,3,LOOP)\n"L"\nN1(SND,2)\nN2(WAI,2)\nN3(DLY,0.008)\n'
         'N4(BNC,L)\n')
 PEER = '"L"\nN1(WAI,1)\nN2(SND,1)\nN3(BNC,L)\n'
 LOOP = '"L"\nN1(WAI,SA10=1)\nN2(WAI,SK3=0)\nN3(WAI,SA10=0)\nN4(WAI,SK3=1)\nN5(BNC,L)\n'
@@ -40,7 +40,7 @@ WRITES = [struct.pack(">HHHBBHH", 0, 0, 6, 1, 5, 10, 0xFF00),
           struct.pack(">HHHBBHH", 0, 0, 6, 1, 6, 3, 0),
           struct.pack(">HHHBBHH", 0, 0, 6, 1, 5, 10, 0),
           struct.pack(">HHHBBHH", 0, 0, 6, 1, 6, 3, 1)]
-WRITE_EVERY_S = 0.002  # one Modbus write every 2 ms (500/s)
+WRITE_EVERY_S = 0.005  # one Modbus write every 5 ms (200/s)
 
 
 def rss_kib() -> int:
