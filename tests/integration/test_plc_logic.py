@@ -62,8 +62,11 @@ def test_a_simulation_with_logic_is_deterministic() -> None:
     assert first == second
 
 
-async def test_the_example_under_run_with_a_modbus_client_and_a_canopen_master() -> None:
-    config = ncgate_test_config(EXAMPLE / "ncgate.toml", **{"nc.time_scale": 30.0})
+async def test_the_example_under_run_with_a_modbus_client_and_a_canopen_master(
+        tmp_path: Path) -> None:
+    # RETAIN values go to the test's folder, not next to the example.
+    config = ncgate_test_config(EXAMPLE / "ncgate.toml", **{
+        "nc.time_scale": 30.0, "plc.retain_file": str(tmp_path / "retain.sqlite")})
     async with Gateway(config) as gw:
         watch = PlcWatch(gw)
         master = CanopenMaster(config)

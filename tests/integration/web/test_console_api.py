@@ -7,6 +7,7 @@ import asyncio
 import json
 import socket
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 import aiohttp
@@ -14,6 +15,7 @@ import pytest
 
 from ncgate.config import ConfigError
 from ncgate.gateway import Gateway
+from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
 TOKEN = "s3cret-token"
@@ -60,6 +62,30 @@ async def test_status_shows_each_process_with_its_why_record(gw: Gateway,
     assert status["fieldbus"]["canopen"]["node_id"] == gw.config.canopen.node_id
     assert status["plc"] is None  # the built-in config has no PLC logic
     assert status["counters"]["events"] == gw.runtime.trace.seq
+
+
+async def test_status_shows_the_plc_its_variables_and_the_modbus_clients(
+        tmp_path: Path) -> None:
+    example = Path(__file__).resolve().parents[3] / "examples" / "plclogic" / "ncgate.toml"
+    config = ncgate_test_config(example, **{"web.port": 0, "nc.time_scale": 30.0,
+                                            "plc.retain_file": str(tmp_path / "r.sqlite")})
+    async with Gateway(config, console=True) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        host, port = gw.web_address
+        await plc.command(1)
+        await gw.wait_idle(timeout_s=30)
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/status") as r:
+            status = await r.json()
+        assert status["plc"]["state"] == "RUNNING" and status["plc"]["scans"] > 0
+        watch = {v["path"]: v for v in status["plc"]["variables"]}
+        assert watch["cell.cycles"]["type"] == "INT"
+        assert watch["cell.cycles"]["value"] == gw.plc.read("cell.cycles") == 2
+        assert watch["cell.total"]["retain"] is True
+        assert watch["cell.answer"]["value"] == "TON"  # a function block: read it by path
+        clients = status["fieldbus"]["modbus"]["clients"]
+        assert len(clients) == 1 and clients[0].startswith("127.0.0.1:")
+        assert status["image"]["writers"]["SA"]["10"] == "plc"
 
 
 async def test_a_write_is_stored_as_web_and_releases_the_wait(
