@@ -18,6 +18,8 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
+from ...conftest import EXAMPLES
+
 TOKEN = "s3cret-token"
 
 
@@ -66,7 +68,7 @@ async def test_status_shows_each_process_with_its_why_record(gw: Gateway,
 
 async def test_status_shows_the_plc_its_variables_and_the_modbus_clients(
         tmp_path: Path) -> None:
-    example = Path(__file__).resolve().parents[3] / "examples" / "plclogic" / "ncgate.toml"
+    example = EXAMPLES / "plclogic" / "ncgate.toml"
     config = ncgate_test_config(example, **{"web.port": 0, "nc.time_scale": 30.0,
                                             "plc.retain_file": str(tmp_path / "r.sqlite")})
     async with Gateway(config, console=True) as gw, \
