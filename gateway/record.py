@@ -53,16 +53,20 @@ COMPARED: dict[str, tuple[str, ...]] = {
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
+def program_files(config: Config) -> list[Path]:
+    """Every file on the config's storage devices (the programs a session can run)."""
+    out: list[Path] = []
+    for folder in dict.fromkeys(config.nc.storage.devices.values()):
+        if folder.is_dir():
+            out += [path for path in sorted(folder.iterdir())
+                    if path.is_file() and not path.name.startswith(".")]
+    return out
+
+
 def program_hashes(config: Config) -> dict[str, str]:
     """sha256 of every program file on the config's storage devices, by path."""
-    out: dict[str, str] = {}
-    for folder in dict.fromkeys(config.nc.storage.devices.values()):
-        if not folder.is_dir():
-            continue
-        for path in sorted(folder.iterdir()):
-            if path.is_file() and not path.name.startswith("."):
-                out[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return out
+    return {str(path): hashlib.sha256(path.read_bytes()).hexdigest()
+            for path in program_files(config)}
 
 
 class SessionRecorder:

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from ncgate.config.loader import WebConfig, is_loopback
-from ncgate.gateway.record import program_hashes
+from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
@@ -207,8 +207,7 @@ class WebConsole:
         return web.Response(text=body, content_type="application/json")
 
     async def _programs(self, request: web.Request) -> web.StreamResponse:
-        names = sorted({p.rsplit("/", 1)[-1].rsplit(".", 1)[0]
-                        for p in program_hashes(self.gw.config)})
+        names = sorted({path.stem for path in program_files(self.gw.config)})
         return web.json_response({"programs": names, "main": self.gw.config.nc.main})
 
     async def _timeline(self, request: web.Request) -> web.StreamResponse:
