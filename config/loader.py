@@ -101,6 +101,10 @@ def _processes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) ->
 
 def _port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
     value = t.get("port", DEFAULT_TLS_PORT if key.endswith(".tls.port") else DEFAULT_MODBUS_PORT)
+    return _port_number(r, value, key)
+
+
+def _port_number(r: _Reader, value: Any, key: str) -> int:
     if value == 0 and not isinstance(value, bool):
         return 0  # 0 asks the system for a free port (tests, the Python API)
     return r.int_(value, key, 1, 65535)
@@ -124,12 +128,7 @@ def _roles(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
 
 def _web_port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int | None:
     # Unset (None): 8080, and a taken 8080 is not fatal for `run`; set: exactly this port.
-    if "port" not in t:
-        return None
-    value = t["port"]
-    if value == 0 and not isinstance(value, bool):
-        return 0
-    return r.int_(value, key, 1, 65535)
+    return _port_number(r, t["port"], key) if "port" in t else None
 
 
 def _optional_str(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:

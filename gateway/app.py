@@ -270,7 +270,7 @@ class Gateway:
         ``peer``: the client's address, when ``who`` does not name it (the record has it)."""
         self._sync_clock()
         self.runtime.image.write(changes, who)
-        self._input("write", who=who, peer=peer, changes=[list(c) for c in changes])
+        self._input("write", who=who, peer=peer, changes=changes)
         self._settle()
 
     def read(self, var: str) -> int:
@@ -294,10 +294,8 @@ class Gateway:
     def command(self, word: int, who: str = "api") -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
         self._sync_clock()
-        apply_command(self.engine, word)
+        apply_command(self.engine, word, self._plc[0] if self._plc is not None else None)
         self._input("command", who=who, word=word)
-        if word == 3 and self._plc is not None:
-            self._plc[0].restart()  # a PLC in FAULT starts again
         self._settle()
 
     # -- waiting ------------------------------------------------------------------------------

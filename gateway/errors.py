@@ -3,11 +3,20 @@
 
 from __future__ import annotations
 
+import errno
+
 from ncgate.errors import NcgateError
 
 
 class GatewayError(NcgateError):
     """Root of the gateway's exceptions."""
+
+
+def listen_error(exc: OSError, key: str, host: str, port: int) -> OSError:
+    """A port that cannot be listened on, said with the config key to change."""
+    hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
+            if exc.errno == errno.EACCES else "")
+    return OSError(exc.errno, f"{key}: cannot listen on {host}:{port}: {exc.strerror}{hint}")
 
 
 class UsageError(GatewayError, ValueError):

@@ -159,10 +159,6 @@ class ReplayResult:
     compared: int  # events compared
 
     @property
-    def matched(self) -> bool:
-        return self.divergence is None
-
-    @property
     def events(self) -> list[EventDict]:
         return self.runtime.trace.events
 
@@ -178,8 +174,6 @@ def replay(path: str | Path, config: str | Path | None = None,
     recording = read_record(path)
     header = recording.header
     overrides = dict(header.get("overrides") or {})
-    for key in ("trace.file", "web.port", "modbus.port"):
-        overrides.pop(key, None)  # nothing of these is used on the virtual clock
     source = config if config is not None else header.get("config")
     try:
         cfg = load_config(source, overrides=overrides)
@@ -220,13 +214,10 @@ def _apply(runtime: Runtime, item: dict[str, Any]) -> None:
             runtime.image.write([tuple(c) for c in item["changes"]],
                                 item["who"])
         elif kind == "command":
-            apply_command(engine, int(item["word"]))
-            if item["word"] == 3 and runtime.plc is not None:
-                runtime.plc.restart()
+            apply_command(engine, int(item["word"]), runtime.plc)
         elif kind == "snd":
             engine.external_snd(int(item["from"]), int(item["to"]))
         elif kind == "start":
-            runtime.store.load(item["prog"], None, int(item["proc"]))
             engine.start(item["prog"], int(item["proc"]), by=item.get("by", "operator"))
         elif kind == "alarm":
             engine.fieldbus_alarm(AlarmCode[item["code"]], item["message"])

@@ -81,15 +81,18 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     return Runtime(config, image, store, engine, trace)
 
 
-def apply_command(engine: Engine, word: int) -> None:
+def apply_command(engine: Engine, word: int, plc: PlcRuntime | None = None) -> None:
     """The command word of spec 3.2 -- 1 cycle start, 2 feed hold, 3 reset -- from whoever
-    gives it: a fieldbus, the API, the PLC logic's NC.START/HOLD/RESET."""
+    gives it: a fieldbus, the API, a replayed session, the PLC logic's NC.START/HOLD/RESET.
+    A reset also starts ``plc`` again if it is in FAULT."""
     if word == 1:
         engine.cycle_start()
     elif word == 2:
         engine.hold(True)
     elif word == 3:
         engine.reset()
+        if plc is not None:
+            plc.restart()
     else:
         raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
 

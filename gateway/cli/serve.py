@@ -124,6 +124,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
 
     hazards_logged: set[tuple[int, object]] = set()
     debug = functools.partial(log.isEnabledFor, logging.DEBUG)
+    info = functools.partial(log.isEnabledFor, logging.INFO)
     budget = LineBudget(loop, LOG_LINES_PER_S)
 
     def on_event(event: Event) -> None:
@@ -139,7 +140,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if debug() and budget.take():  # a PLC writes every scan: worded only if asked
                 log.debug(describe(event))
             return
-        if not warn and not budget.take():
+        if not warn and not (info() and budget.take()):
             return
         line = describe(event)
         if line is not None:

@@ -24,7 +24,6 @@ lives in ``ncgate.gateway.modbus.map``.
 from __future__ import annotations
 
 import asyncio
-import errno
 import ipaddress
 import logging
 import ssl
@@ -49,7 +48,7 @@ from pymodbus.pdu.register_message import (
 
 from ncgate.config import ModbusConfig
 from ncgate.gateway import identity
-from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.errors import ModbusError, listen_error
 from ncgate.gateway.modbus import security
 from ncgate.gateway.modbus.map import (
     DEVICE_FAILURE,
@@ -553,10 +552,7 @@ class ModbusServer:
                                               reuse_address=True)
         except OSError as exc:  # name the key to change
             key = "modbus.tls.port" if context is not None else "modbus.port"
-            hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
-                    if exc.errno == errno.EACCES else "")
-            raise OSError(exc.errno, f"{key}: cannot listen on {self.config.host}:{port}: "
-                          f"{exc.strerror}{hint}") from None
+            raise listen_error(exc, key, self.config.host, port) from None
         self._servers.append(server)
         host, bound = server.sockets[0].getsockname()[:2]
         return host, bound

@@ -24,7 +24,6 @@ page cannot reach it); bound elsewhere, the config must set a token.  Errors are
 from __future__ import annotations
 
 import asyncio
-import errno
 import hmac
 import io
 import json
@@ -36,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from ncgate.config.loader import WebConfig, is_loopback
+from ncgate.gateway.errors import listen_error
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
@@ -114,10 +114,7 @@ class WebConsole:
                 log.warning("web console off: %s:%d is taken (%s); set web.port or --web "
                             "HOST:PORT", self.config.host, port, exc.strerror)
                 return False
-            hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
-                    if exc.errno == errno.EACCES else "")
-            raise OSError(exc.errno, f"web.port: cannot listen on {self.config.host}:{port}: "
-                          f"{exc.strerror}{hint}") from None
+            raise listen_error(exc, "web.port", self.config.host, port) from None
         self._runner = runner
         host, bound = runner.addresses[0][:2]  # the port asked for may be 0
         self.address = (host, bound)

@@ -17,7 +17,6 @@ if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
 
 WATCH_LIMIT = 200  # ST variables the status shows (the first ones, in declaration order)
-_NMT = {0: "INITIALISING", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERATIONAL"}
 
 
 def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
@@ -108,10 +107,9 @@ def fieldbus(gw: Gateway) -> dict[str, Any]:
     node = gw.canopen_node
     if node is not None:
         heartbeats = node.heartbeats
-        state = node.node.nmt.state
         out["canopen"] = {
             "node_id": gw.config.canopen.node_id,
-            "nmt": state if isinstance(state, str) else _NMT.get(int(state), str(state)),
+            "nmt": node.node.nmt.state,  # its name, e.g. "PRE-OPERATIONAL"
             "heartbeat_ms": gw.config.canopen.heartbeat_ms,
             "masters_lost": list(heartbeats.lost_nodes) if heartbeats is not None else [],
         }
