@@ -33,6 +33,7 @@ import canopen
 from ncgate.config import load_config
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.dictionary import build_dictionary
+from ncgate.inputs import Source, SourceKind, Var, Writes
 
 ROUNDS, TRIPS, SAMPLES = 3, 2000, 2000
 
@@ -241,11 +242,13 @@ def tpdos_on_write_storm() -> None:
             time.sleep(0.001)
         base = count[0]  # the four "where things stand" frames
 
+        BENCH = Source(SourceKind.API, "bench")
+
         async def storm(gw: Gateway) -> float:
             start = time.perf_counter()
             for i in range(STORM_WRITES):
                 v = (i + 1) & 0xFF  # never the value before: every write is a change
-                gw.apply_writes([("SA", b, "BY", v) for b in range(8)], "bench")
+                gw.apply(Writes(tuple((Var("SA", b, "BY"), v) for b in range(8)), BENCH))
                 if i % 64 == 0:
                     await asyncio.sleep(0)  # let the loop breathe, as a server would
             return time.perf_counter() - start

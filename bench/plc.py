@@ -61,10 +61,10 @@ class QuietNc:
     def last_snd(self) -> tuple[int, int, int]:
         return (0, 0, 0)
 
-    def command(self, word: int) -> None:
+    def command(self, word: int, where: str) -> None:
         pass
 
-    def send(self, sender: int, target: int) -> None:
+    def send(self, sender: int, target: int, where: str) -> None:
         pass
 
     def fault(self, message: str) -> None:

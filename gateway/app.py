@@ -16,6 +16,7 @@ clock.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import secrets
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -23,27 +24,35 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 from ncgate.config import Config, load_config
+from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.canopen.clock import Clock
 from ncgate.gateway.canopen.node import CanopenNode
+from ncgate.gateway.door import Door
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
+from ncgate.gateway.lifecycle import Adapter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import ScanDriver, start_plc
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
-from ncgate.gateway.wiring import (
-    Runtime,
-    apply_command,
-    build_runtime,
-    parse_assignment,
-    variable_name,
+from ncgate.gateway.wiring import Runtime, build_runtime, variable_name
+from ncgate.inputs import (
+    API,
+    Command,
+    CommandKind,
+    Input,
+    Snd,
+    Source,
+    SourceKind,
+    Start,
+    Var,
+    Write,
 )
-from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, Trace
-from ncgate.plc.image import IOImage
+from ncgate.plc.image import ImageAddressError, IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 if TYPE_CHECKING:
@@ -88,76 +97,98 @@ class Gateway:
         self._trace_file: TraceFile | None = None
         self._cold = cold
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
+        self._stack: contextlib.AsyncExitStack | None = None
+        self.door: Door  # set on entry: the one way in (:meth:`apply`)
 
     async def __aenter__(self) -> Gateway:
         loop = asyncio.get_running_loop()
+        # Every adapter is started in order and its close pushed on one stack: whatever
+        # fails, what was started is closed (in reverse order), and one failing close does
+        # not skip the others (contextlib.AsyncExitStack).
+        stack = self._stack = contextlib.AsyncExitStack()
+        try:
+            await self._open(stack, loop)
+        except BaseException:
+            self._stack = None
+            await stack.aclose()
+            raise
+        return self
+
+    async def _open(self, stack: contextlib.AsyncExitStack,
+                    loop: asyncio.AbstractEventLoop) -> None:
         # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
         # for) every event.
         trace = Trace(keep=self.config.trace.ring)
         t = self.config.trace
         if t.file is not None:
-            self._trace_file = TraceFile(t.file, int(t.max_mb * 1_000_000), t.backups,
-                                         loop=loop)
-            trace.subscribe(self._trace_file.write)
+            trace_file = TraceFile(t.file, int(t.max_mb * 1_000_000), t.backups, loop=loop)
+            stack.callback(trace_file.close)
+            trace.subscribe(trace_file.write)
         runtime = build_runtime(self.config, closed=False, trace=trace)
         driver = WallClockDriver(runtime.engine, self.config.nc.time_scale, loop,
                                  stall_s=self.config.nc.stall_s)
+        self._runtime, self._driver = runtime, driver
+        stack.callback(self._stop_clock)
+        self.door = Door(runtime, lambda: runtime.plc, sync=self._sync_clock)
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
             runtime.trace.subscribe(listener)
-        self._runtime, self._driver = runtime, driver
-        try:
-            if self._record_path is not None:
-                self.recorder = SessionRecorder(self._record_path, self.config,
-                                                self._overrides, loop)
-                trace.subscribe(self.recorder.event)
-            self._plc = start_plc(self.config, runtime.engine, runtime.image, closed=False,
-                                  wall=driver.now, cold=self._cold)
-            if self.config.modbus.enabled:
-                self._modbus = ModbusServer(self.config.modbus, self.map, self)
-                await self._modbus.start()
-            if self.config.canopen.enabled:
-                self._canopen = CanopenNode(self.config, self, self._canopen_clock)
-                self._canopen.start()
-            if self._console_wanted and self.config.web.enabled:
-                from ncgate.gateway.web.console import WebConsole  # aiohttp: only if served
-                console = WebConsole(self, self.config.web, self._web_default_port)
-                if await console.start():
-                    self._console = console
-            if self.config.nc.autostart:
-                await self.start()
-        except BaseException:
-            await self.__aexit__(None, None, None)
-            raise
-        return self
+        if self._record_path is not None:
+            recorder = SessionRecorder(self._record_path, self.config, self._overrides, loop)
+            stack.callback(self._close_record, recorder)
+            self.recorder = recorder
+            trace.subscribe(recorder.event)
+            runtime.store.loaded.append(recorder.program)
+            self.door.recorder = recorder.input
+        plc = start_plc(self.config, runtime, self.door, closed=False, wall=driver.now,
+                        cold=self._cold)
+        if plc is not None:
+            self._plc = plc
+            stack.callback(self._stop_plc, plc)
+        adapters: list[Adapter] = []
+        if self.config.modbus.enabled:
+            self._modbus = ModbusServer(self.config.modbus, self.map, self)
+            adapters.append(self._modbus)
+        if self.config.canopen.enabled:
+            self._canopen = CanopenNode(self.config, self, self._canopen_clock)
+            adapters.append(self._canopen)
+        if self._console_wanted and self.config.web.enabled:
+            from ncgate.gateway.web.console import WebConsole  # aiohttp: only if served
+            self._console = WebConsole(self, self.config.web, self._web_default_port)
+            adapters.append(self._console)
+        for adapter in adapters:
+            await adapter.start()
+            stack.push_async_callback(adapter.close)
+        if self._console is not None and self._console.address is None:
+            self._console = None  # an unset port that was taken: run goes on without it
+        if self.config.nc.autostart:
+            await self.start(source=Source(SourceKind.API, "nc.autostart"))
+
+    def _stop_clock(self) -> None:
+        if self._driver is not None:
+            self._driver.close()
+
+    def _stop_plc(self, plc: tuple[PlcRuntime, ScanDriver]) -> None:
+        runtime, scans = plc
+        scans.close()
+        if runtime.retain is not None:
+            runtime.retain.close()
+        self._plc = None
+
+    def _close_record(self, recorder: SessionRecorder) -> None:
+        stop_t = self._driver.now() if self._driver is not None else 0.0
+        recorder.close(max(stop_t, self.engine.now))
+        self.recorder = None
 
     async def __aexit__(self, exc_type: type[BaseException] | None,
                         exc: BaseException | None, tb: TracebackType | None) -> None:
-        if self._console is not None:
-            await self._console.close()
-            self._console = None
-        if self._modbus is not None:
-            await self._modbus.close()
-            self._modbus = None
-        if self._canopen is not None:
-            self._canopen.close()
-            self._canopen = None
-        if self._plc is not None:
-            runtime, scans = self._plc
-            scans.close()
-            if runtime.retain is not None:
-                runtime.retain.close()
-            self._plc = None
-        stop_t = self._driver.now() if self._driver is not None else 0.0
-        if self._driver is not None:
-            self._driver.close()
-        self._driver = None
-        if self._trace_file is not None:
-            self._trace_file.close()
-            self._trace_file = None
-        if self.recorder is not None:
-            self.recorder.close(max(stop_t, self.engine.now))
-            self.recorder = None
+        stack, self._stack = self._stack, None
+        try:
+            if stack is not None:
+                await stack.aclose()
+        finally:
+            self._console = self._modbus = self._canopen = None
+            self._driver = None
 
     @property
     def modbus_address(self) -> tuple[str, int]:
@@ -243,60 +274,41 @@ class Gateway:
         assert self._driver is not None
         self._driver.settle()
 
-    def _input(self, kind: str, **fields: Any) -> None:
-        """An input from outside the cell, for the session record (``run --record``)."""
-        if self.recorder is not None:
-            self.recorder.input(kind, self.engine.now, **fields)
+    def apply(self, item: Input) -> None:
+        """The one way into the cell (:mod:`ncgate.inputs`): validate ``item``, record it,
+        apply it at the wall clock's now and run what it made runnable.  Raises
+        :class:`~ncgate.errors.InputRefused` (nothing applied) with a reason."""
+        if self._driver is None:
+            raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+        self.door.apply(item)
+        self._settle()
 
     async def start(self, name: str | None = None, process: int = 1,
-                    by: str = "operator") -> None:
+                    source: Source = API) -> None:
         """The operator's SPG: start NAME (default: the config's main) in a process."""
-        name = name or self.config.nc.main
-        # Load (parse and check) before reading the clock: the program starts when it is ready.
-        self.runtime.store.load(name, None, process)
-        self._sync_clock()
-        self.engine.start(name, process, by=by)
-        self._input("start", prog=name, proc=process, by=by)
-        self._settle()
+        self.apply(Start(name, process, source))
 
-    def write(self, var: str, value: int, who: str = "api", peer: str | None = None) -> None:
-        """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``) as ``who``."""
-        (area, index, view), number = parse_assignment(f"{var}={value}")
-        self.apply_writes([(area, index, view, number)], who, peer)
-
-    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str,
-                     peer: str | None = None) -> None:
-        """Write several image variables at once (one fieldbus request), then settle.
-        ``peer``: the client's address, when ``who`` does not name it (the record has it)."""
-        self._sync_clock()
-        self.runtime.image.write(changes, who)
-        self._input("write", who=who, peer=peer, changes=changes)
-        self._settle()
+    def write(self, var: str, value: int, source: Source = API) -> None:
+        """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``)."""
+        self.apply(Write(Var.parse(var), value, source))
 
     def read(self, var: str) -> int:
-        (area, index, view), _ = parse_assignment(f"{var}=0")
-        return self.runtime.image.read(area, index, view)
+        v = Var.parse(var)
+        try:
+            return self.runtime.image.read(v.area, v.index, v.view)
+        except ImageAddressError as exc:
+            raise InputRefused(Reason.OUTSIDE_IMAGE, str(exc)) from None
 
-    def send(self, sender: int, target: int, who: str = "api") -> None:
+    def send(self, sender: int, target: int, source: Source = API) -> None:
         """An SND in the name of external process ``sender``."""
-        self._sync_clock()
-        self.engine.external_snd(sender, target)
-        self._input("snd", who=who, **{"from": sender, "to": target})
-        self._settle()
+        self.apply(Snd(sender, target, source))
 
-    def fieldbus_alarm(self, code: AlarmCode, message: str) -> None:
-        """An alarm of the fieldbus side (process 0 in the trace), e.g. a lost master."""
-        self._sync_clock()
-        self.engine.fieldbus_alarm(code, message)
-        self._input("alarm", code=code.name, message=message)
-        self._settle()
-
-    def command(self, word: int, who: str = "api") -> None:
+    def command(self, word: int | CommandKind, source: Source = API) -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
-        self._sync_clock()
-        apply_command(self.engine, word, self._plc[0] if self._plc is not None else None)
-        self._input("command", who=who, word=word)
-        self._settle()
+        if isinstance(word, bool) or word not in tuple(CommandKind):
+            raise InputRefused(Reason.BAD_VALUE, f"command {word!r}: 1 cycle start, 2 feed "
+                               "hold, 3 reset")
+        self.apply(Command(CommandKind(word), None, source))
 
     # -- waiting ------------------------------------------------------------------------------
 

@@ -12,11 +12,16 @@ class GatewayError(NcgateError):
     """Root of the gateway's exceptions."""
 
 
-def listen_error(exc: OSError, key: str, host: str, port: int) -> OSError:
+class ListenError(GatewayError, OSError):
+    """A port that cannot be listened on (an OSError too, with its errno)."""
+
+
+def listen_error(exc: OSError, key: str, host: str, port: int) -> ListenError:
     """A port that cannot be listened on, said with the config key to change."""
     hint = (" (a port below 1024 needs root or CAP_NET_BIND_SERVICE)"
             if exc.errno == errno.EACCES else "")
-    return OSError(exc.errno, f"{key}: cannot listen on {host}:{port}: {exc.strerror}{hint}")
+    return ListenError(exc.errno, f"{key}: cannot listen on {host}:{port}: {exc.strerror}"
+                       f"{hint}")
 
 
 class UsageError(GatewayError, ValueError):

@@ -21,12 +21,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config, ConfigError
-from ncgate.gateway.wiring import apply_command
+from ncgate.gateway.door import Door
+from ncgate.gateway.wiring import Runtime
+from ncgate.inputs import Command, CommandKind, FieldbusAlarm, Snd, Source, SourceKind
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.states import WAITING_STATES
 from ncgate.interpreter.engine.timers import Timer
-from ncgate.plc.image import IOImage
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.compiler import Context, Logic, compile_logic
@@ -70,10 +71,13 @@ def program_order(logic: Logic, config: Config) -> list[str]:
 
 
 class EngineNc:
-    """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`)."""
+    """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`): it reads the engine,
+    and acts on it through the door, attributed ``plc FILE:LINE`` (where the logic set the
+    output)."""
 
-    def __init__(self, engine: Engine) -> None:
+    def __init__(self, engine: Engine, door: Door) -> None:
         self.engine = engine
+        self.door = door
 
     def snapshot(self) -> list[NcSnapshot]:
         out = []
@@ -92,14 +96,15 @@ class EngineNc:
         last = self.engine.last_snd
         return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
 
-    def command(self, word: int) -> None:
-        apply_command(self.engine, word)
+    def command(self, word: int, where: str) -> None:
+        self.door.apply(Command(CommandKind(word), None, Source(SourceKind.PLC, where)))
 
-    def send(self, sender: int, target: int) -> None:
-        self.engine.external_snd(sender, target)
+    def send(self, sender: int, target: int, where: str) -> None:
+        self.door.apply(Snd(sender, target, Source(SourceKind.PLC, where)))
 
     def fault(self, message: str) -> None:
-        self.engine.fieldbus_alarm(AlarmCode.PLC_FAULT, f"PLC fault: {message}")
+        self.door.apply(FieldbusAlarm(AlarmCode.PLC_FAULT, f"PLC fault: {message}",
+                                      Source(SourceKind.PLC)))
 
     def hazard(self, message: str) -> None:
         self.engine.note_hazard(0, message)
@@ -145,7 +150,7 @@ class ScanDriver:
         self.runtime.stop()
 
 
-def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
+def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
               wall: Callable[[], float] | None = None, cold: bool = False
               ) -> tuple[PlcRuntime, ScanDriver] | None:
     """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
@@ -168,13 +173,15 @@ def start_plc(config: Config, engine: Engine, image: IOImage, *, closed: bool,
         except sqlite3.Error as exc:
             raise ConfigError(f"{config.source or '<config>'}: plc.retain_file: cannot keep "
                               f"RETAIN values in {path}: {exc}") from None
-    runtime = PlcRuntime(logic, image, EngineNc(engine), order, plc.loop_limit,
-                         store)
-    driver = ScanDriver(engine, runtime, plc.scan_ms, wall=wall, closed=closed,
+    engine = runtime.engine
+    logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door), order,
+                               plc.loop_limit, store)
+    runtime.plc = logic_runtime
+    driver = ScanDriver(engine, logic_runtime, plc.scan_ms, wall=wall, closed=closed,
                         stall_s=config.nc.stall_s)
     log.info("PLC logic: %s, scan %d ms, programs %s", ", ".join(p.name for p in plc.logic),
              plc.scan_ms, ", ".join(order))
-    return runtime, driver
+    return logic_runtime, driver
 
 
 def plc_registers(status: PlcStatus | None) -> list[int]:

@@ -9,7 +9,7 @@ into an alarm of the calling process.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ncgate.config import Config
@@ -54,6 +54,9 @@ class ProgramStore:
         self._cache: dict[tuple[Path, int], tuple[tuple[int, int], Program | IsgProgram]] = {}
         # ISG: file -> (version, the parsed file, its diagnostics)
         self._files: dict[Path, tuple[tuple[int, int], IsgFile, list[Diagnostic]]] = {}
+        # Told of every program file read (again, when it changed): the session record
+        # hashes the files a session used.
+        self.loaded: list[Callable[[Path], None]] = []
 
     def _located(self, name: str, device: str | None) -> tuple[Path, tuple[int, int]]:
         """The file of program ``name`` and its version (mtime, size)."""
@@ -91,6 +94,8 @@ class ProgramStore:
                 if errors:
                     raise ProgramSyntaxError(errors)
         self._cache[(path, process)] = (version, program)
+        for listener in self.loaded:
+            listener(path)
         return program
 
     def _check_section(self, path: Path, version: tuple[int, int], process: int

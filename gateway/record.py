@@ -1,23 +1,31 @@
 """A commissioning session on disk, and its replay on the virtual clock (``run --record``,
-``sim --replay``).
+``sim --replay``).  The format is documented in docs/console.md ("The session record").
 
 The record is JSON Lines, in the order things happened:
 
-- line 1, the header: ``{"ncgate_record": 1, "version", "config", "overrides", "time_scale",
-  "programs": {file: sha256}}``: what the replay needs to run the same cell;
-- an *input* line for everything that came from outside the cell, with its machine time:
+- line 1, the header: ``{"ncgate_record": 2, "version", "config", "overrides",
+  "time_scale", "files": {path: sha256}}`` -- what the replay needs to run the same cell; the
+  files are the ones the session used from the start (the config, the PLC logic);
+- ``{"program": path, "sha256"}`` when the session first reads a part program (and again
+  when it changed): the replay warns when a program it runs is not the one recorded;
+- an *input* line for everything that came through the door from outside the cell, with its
+  machine time and its source (``who``: the trace's attribution; ``peer``: the address):
   ``{"input": "write", "t", "who", "peer", "changes": [[area, index, view, value], ...]}``,
-  ``"command"`` (``word``), ``"snd"`` (``from``, ``to``), ``"start"`` (``prog``, ``proc``),
-  ``"alarm"`` (``code``, ``message``: a fieldbus alarm such as a lost CANopen master);
+  ``"command"`` (``command``: cycle_start | feed_hold | reset, ``process``: null),
+  ``"snd"`` (``from``, ``to``), ``"start"`` (``prog``, ``proc``), ``"alarm"`` (``code``: the
+  alarm number, ``message``).  The PLC logic's inputs are not recorded: the replay runs the
+  same logic;
 - every trace event of spec 4.4, as in a trace file (the lines with ``"seq"``);
 - on a clean stop, ``{"stop": t}``.
 
-The PLC logic's own writes are not inputs: the replay runs the same logic.  Lines are written
-whole (:class:`~ncgate.gateway.tracefile.TraceFile`), so a record cut by ``kill -9`` ends on
-a whole line and replays up to it.
+An input's line is written before the events it causes, and lines are written whole
+(:class:`~ncgate.gateway.tracefile.TraceFile`), so a record cut anywhere -- ``kill -9``, a
+full disk -- holds no effect without its cause and replays up to its last line.  Every line is
+validated on reading: anything else than the above is an error naming the line (exit 2).
 
 :func:`replay` runs the recorded config and programs on the virtual clock, applies every input
-at its time, and compares what each process did -- the blocks at which it started, waited,
+at its time through the same door (:class:`~ncgate.gateway.door.Door`) with its recorded
+source, and compares what each process did -- the blocks at which it started, waited,
 resumed, sent, started another, raised an alarm or ended, in order, with times within a
 tolerance -- against the recording.
 """
@@ -28,33 +36,48 @@ import asyncio
 import hashlib
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ncgate import __version__
 from ncgate.config import Config, ConfigError, load_config
+from ncgate.errors import InputRefused
+from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.plc import start_plc
 from ncgate.gateway.tracefile import TraceFile
-from ncgate.gateway.wiring import Runtime, apply_command, build_runtime
-from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from ncgate.gateway.wiring import Runtime, build_runtime
+from ncgate.inputs import (
+    Command,
+    CommandKind,
+    FieldbusAlarm,
+    Input,
+    Snd,
+    Source,
+    Start,
+    Var,
+    Write,
+    Writes,
+)
 from ncgate.interpreter.engine import run_virtual
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict
 
-FORMAT = 1
+FORMAT = 2
 # What is compared, per process, and the fields that must agree besides the block.
 COMPARED: dict[str, tuple[str, ...]] = {
     "start": ("prog", "by"), "wait": ("on",), "resume": ("by",), "snd": ("to",),
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
 }
+EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
+                    "remove"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
 def program_files(config: Config) -> list[Path]:
-    """Every file on the config's storage devices (the programs a session can run)."""
+    """Every file on the config's storage devices (what the console lists)."""
     out: list[Path] = []
     for folder in dict.fromkeys(config.nc.storage.devices.values()):
         if folder.is_dir():
@@ -63,23 +86,143 @@ def program_files(config: Config) -> list[Path]:
     return out
 
 
-def program_hashes(config: Config) -> dict[str, str]:
-    """sha256 of every program file on the config's storage devices, by path."""
-    return {str(path): hashlib.sha256(path.read_bytes()).hexdigest()
-            for path in program_files(config)}
+def _sha256(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
 
+
+def session_files(config: Config) -> dict[str, str]:
+    """sha256 of the files a session uses from its start: the config, the PLC logic."""
+    paths = ([config.source] if config.source else []) + list(config.plc.logic)
+    return {str(p): digest for p in paths if (digest := _sha256(Path(p))) is not None}
+
+
+# -- inputs as lines, and back ------------------------------------------------------------------
+
+def input_line(item: Input, t: float) -> dict[str, Any]:
+    """The record's line for an input at machine time ``t``."""
+    out: dict[str, Any] = {"input": "", "t": round(t, 6), "who": str(item.source),
+                           "peer": item.source.peer}
+    if isinstance(item, Write):
+        out.update(input="write", changes=[[*item.var.address, item.value]])
+    elif isinstance(item, Writes):
+        out.update(input="write", changes=[[*v.address, value] for v, value in item.changes])
+    elif isinstance(item, Command):
+        out.update(input="command", command=CommandKind(item.kind).label,
+                   process=item.process)
+    elif isinstance(item, Snd):
+        out.update({"input": "snd", "from": item.sender, "to": item.target})
+    elif isinstance(item, Start):
+        out.update(input="start", prog=item.program, proc=item.process)
+    else:
+        out.update(input="alarm", code=int(item.code), message=item.message)
+    return out
+
+
+class RecordError(UsageError):
+    """A line of a record that is not what ``run --record`` writes (exit 2)."""
+
+
+def _field(item: dict[str, Any], name: str, kinds: type | tuple[type, ...], what: str,
+           optional: bool = False) -> Any:
+    if name not in item:
+        if optional:
+            return None
+        raise ValueError(f'"{name}" is missing')
+    value = item[name]
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) and bool not in (kinds if isinstance(kinds, tuple)
+                                                 else (kinds,)):
+        raise ValueError(f'"{name}": expected {what}, got {json.dumps(value)}')
+    if not isinstance(value, kinds):
+        raise ValueError(f'"{name}": expected {what}, got {json.dumps(value)}')
+    return value
+
+
+def _time(item: dict[str, Any], name: str) -> float:
+    t = _field(item, name, (int, float), "a time in seconds")
+    if not math.isfinite(t) or t < 0:
+        raise ValueError(f'"{name}": expected a time >= 0, got {t}')
+    return float(t)
+
+
+def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
+    """An input line as (t, input); ValueError saying what is wrong."""
+    kind = item["input"]
+    t = _time(item, "t")
+    who = _field(item, "who", str, "a source such as \"modbus 127.0.0.1:40312\"")
+    peer = _field(item, "peer", str, "an address or null", optional=True)
+    try:
+        source = Source.parse(who, peer)
+    except InputRefused as exc:
+        raise ValueError(f'"who": {exc}') from None
+    if kind == "write":
+        changes = _field(item, "changes", list, "a list of [area, index, view, value]")
+        out = []
+        for change in changes:
+            if not (isinstance(change, list) and len(change) == 4
+                    and all(isinstance(x, str) for x in change[0:1] + change[2:3])
+                    and all(isinstance(x, int) and not isinstance(x, bool)
+                            for x in (change[1], change[3]))):
+                raise ValueError(f'"changes": {json.dumps(change)} is not [area, index, '
+                                 "view, value]")
+            area, index, view, value = change
+            if area not in ("SA", "SK", "SYVAR") or view not in ("bit", "BY", "IN"):
+                raise ValueError(f'"changes": {json.dumps(change)} names no image variable')
+            out.append((Var(area, index, view), value))
+        if not out:
+            raise ValueError('"changes" is empty')
+        return t, Writes(tuple(out), source)
+    if kind == "command":
+        name = _field(item, "command", str, "cycle_start, feed_hold or reset")
+        kinds = {k.label: k for k in CommandKind}
+        if name not in kinds:
+            raise ValueError(f'"command": expected {", ".join(kinds)}, got {json.dumps(name)}')
+        process = _field(item, "process", int, "a process number or null", optional=True)
+        return t, Command(kinds[name], process, source)
+    if kind == "snd":
+        return t, Snd(_field(item, "from", int, "a process number"),
+                      _field(item, "to", int, "a process number"), source)
+    if kind == "start":
+        return t, Start(_field(item, "prog", str, "a program name"),
+                        _field(item, "proc", int, "a process number"), source)
+    if kind == "alarm":
+        return t, FieldbusAlarm(_field(item, "code", int, "an alarm number"),
+                                _field(item, "message", str, "a text"), source)
+    raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
+                     "alarm)")
+
+
+def _check_event(item: dict[str, Any]) -> None:
+    _field(item, "seq", int, "a whole number")
+    _time(item, "t")
+    kind = _field(item, "event", str, "an event name")
+    if kind not in EVENTS:
+        raise ValueError(f'"event": unknown event {json.dumps(kind)}')
+    _field(item, "proc", int, "a process number (0: the PLC and the fieldbus)")
+    _field(item, "prog", str, "a program name or null", optional=True)
+    _field(item, "line", int, "a line number or null", optional=True)
+    _field(item, "n", int, "an N number or null", optional=True)
+
+
+# -- writing ------------------------------------------------------------------------------------
 
 class SessionRecorder:
-    """Writes one session: the header at once, then inputs and trace events as they come."""
+    """Writes one session: the header at once, then inputs (before their effects), programs
+    and trace events as they come."""
 
     def __init__(self, path: str | Path, config: Config, overrides: dict[str, Any],
                  loop: asyncio.AbstractEventLoop | None = None) -> None:
         self.path = Path(path)
         self._file = TraceFile(self.path, UNBOUNDED, 0, loop=loop, fresh=True)
+        self._programs: dict[str, str] = {}
         header = {"ncgate_record": FORMAT, "version": __version__,
                   "config": str(config.source) if config.source else None,
                   "overrides": overrides, "time_scale": config.nc.time_scale,
-                  "programs": program_hashes(config)}
+                  "files": session_files(config)}
         self._file.append(json.dumps(header) + "\n")
         self._file.flush()
 
@@ -87,20 +230,38 @@ class SessionRecorder:
         """A trace listener."""
         self._file.write(event)
 
-    def input(self, kind: str, t: float, **fields: Any) -> None:
-        self._file.append(json.dumps({"input": kind, "t": round(t, 6), **fields}) + "\n")
+    def input(self, item: Input, t: float) -> None:
+        """The door's recorder: called after validation, before the effect."""
+        self._file.append(json.dumps(input_line(item, t)) + "\n")
+
+    def program(self, path: Path) -> None:
+        """A program file the session read (ProgramStore.loaded)."""
+        digest = _sha256(path)
+        if digest is not None and self._programs.get(str(path)) != digest:
+            self._programs[str(path)] = digest
+            self._file.append(json.dumps({"program": str(path), "sha256": digest}) + "\n")
 
     def close(self, t: float) -> None:
         self._file.append(json.dumps({"stop": round(t, 6)}) + "\n")
         self._file.close()
 
 
+# -- reading ------------------------------------------------------------------------------------
+
+@dataclass
+class RecordedInput:
+    line: int  # in the record file, for messages
+    t: float
+    input: Input
+
+
 @dataclass
 class Recording:
     path: Path
     header: dict[str, Any]
-    inputs: list[dict[str, Any]] = field(default_factory=list)
+    inputs: list[RecordedInput] = field(default_factory=list)
     events: list[EventDict] = field(default_factory=list)
+    programs: dict[str, str] = field(default_factory=dict)  # path -> sha256, as last read
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -108,17 +269,20 @@ class Recording:
         """Where the replay stops: the clean stop, else the last thing recorded."""
         if self.stop is not None:
             return self.stop
-        times = [i["t"] for i in self.inputs[-1:]] + [e["t"] for e in self.events[-1:]]
+        times = [i.t for i in self.inputs[-1:]] + [e["t"] for e in self.events[-1:]]
         return max(times, default=0.0)
 
 
 def read_record(path: str | Path) -> Recording:
-    """A record file; UsageError naming the file and line when it is not one."""
+    """A record file, every line validated; RecordError naming the file and line when it
+    is not one (a last line cut by a crash of the writer is ignored)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise UsageError(f"{path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise RecordError(f"{path}: not UTF-8 text: not an ncgate session record") from None
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
@@ -129,26 +293,42 @@ def read_record(path: str | Path) -> Recording:
         except json.JSONDecodeError:
             if number == len(lines) and not text.endswith("\n"):
                 break  # a tail cut by a crash of the writer: replay up to it
-            raise UsageError(f"{path}:{number}: not a JSON line") from None
+            raise RecordError(f"{path}:{number}: not a JSON line") from None
         if not isinstance(item, dict):
-            raise UsageError(f"{path}:{number}: not a JSON object")
+            raise RecordError(f"{path}:{number}: not a JSON object")
         if recording is None:
-            if item.get("ncgate_record") != FORMAT:
-                raise UsageError(f"{path}:1: not an ncgate session record (ncgate run "
-                                 "--record writes one)")
+            found = item.get("ncgate_record")
+            if found != FORMAT:
+                older = (f" (format {found}, from an older ncgate: record the session again)"
+                         if isinstance(found, int) and found < FORMAT else "")
+                raise RecordError(f"{path}:1: not an ncgate session record{older} (ncgate "
+                                  "run --record writes one)")
             recording = Recording(path, item)
-        elif "input" in item:
-            recording.inputs.append(item)
-        elif "seq" in item:
-            recording.events.append(item)
-        elif "stop" in item:
-            recording.stop = float(item["stop"])
-        else:
-            raise UsageError(f"{path}:{number}: neither an input, an event nor the stop")
+            continue
+        try:
+            if recording.stop is not None:
+                raise ValueError("a line after the stop")
+            if "input" in item:
+                t, parsed = parse_input(item)
+                recording.inputs.append(RecordedInput(number, t, parsed))
+            elif "seq" in item:
+                _check_event(item)
+                recording.events.append(item)
+            elif "program" in item:
+                recording.programs[_field(item, "program", str, "a path")] = _field(
+                    item, "sha256", str, "a sha256")
+            elif "stop" in item:
+                recording.stop = _time(item, "stop")
+            else:
+                raise ValueError("neither an input, an event, a program nor the stop")
+        except ValueError as exc:
+            raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
-        raise UsageError(f"{path}: empty: not an ncgate session record")
+        raise RecordError(f"{path}: empty: not an ncgate session record")
     return recording
 
+
+# -- replaying ----------------------------------------------------------------------------------
 
 @dataclass
 class ReplayResult:
@@ -163,6 +343,17 @@ class ReplayResult:
         return self.runtime.trace.events
 
 
+def _changed(recorded: dict[str, str], now: Callable[[str], str | None]) -> list[str]:
+    out = []
+    for file, digest in sorted(recorded.items()):
+        found = now(file)
+        if found is None:
+            out.append(f"{file}: recorded but not found now")
+        elif found != digest:
+            out.append(f"{file}: changed since the recording")
+    return out
+
+
 def replay(path: str | Path, config: str | Path | None = None,
            tolerance_ms: float = 10.0) -> ReplayResult:
     """Re-run a recorded session on the virtual clock and compare it with the recording.
@@ -173,58 +364,60 @@ def replay(path: str | Path, config: str | Path | None = None,
         raise UsageError(f"--tolerance-ms: expected a number >= 0, got {tolerance_ms}")
     recording = read_record(path)
     header = recording.header
-    overrides = dict(header.get("overrides") or {})
+    overrides = header.get("overrides") or {}
     source = config if config is not None else header.get("config")
+    if not isinstance(overrides, dict) or not isinstance(source, str | Path | None):
+        raise RecordError(f"{recording.path}:1: the header's config or overrides are not "
+                          "what run --record writes")
     try:
-        cfg = load_config(source, overrides=overrides)
+        cfg = load_config(source, overrides=dict(overrides))
     except ConfigError as exc:
         raise UsageError(f"the recorded config: {exc}") from None
-    warnings = []
-    now = program_hashes(cfg)
-    for file, digest in sorted((header.get("programs") or {}).items()):
-        name = Path(file).name
-        found = now.get(file) or next((d for f, d in now.items() if Path(f).name == name), None)
-        if found is None:
-            warnings.append(f"{file}: recorded but not found now")
-        elif found != digest:
-            warnings.append(f"{file}: changed since the recording")
     runtime = build_runtime(cfg, closed=False)  # as in `run`: the fieldbus may start programs
     engine = runtime.engine
-    plc = start_plc(cfg, engine, runtime.image, closed=True)
-    runtime.plc = plc[0] if plc is not None else None
+    door = Door(runtime, lambda: runtime.plc)
+    for recorded in recording.inputs:  # a write the image cannot hold: not this session's
+        item = recorded.input
+        if isinstance(item, Writes):
+            try:
+                door.image_changes(item.changes)
+            except InputRefused as exc:
+                raise RecordError(f"{recording.path}:{recorded.line}: {exc} (in the "
+                                  "recorded config)") from None
+    # Which programs a file name finds now, by path and by name (a record taken home).
+    by_name = {p.name: p for p in program_files(cfg)}
+
+    def program_now(file: str) -> str | None:
+        p = Path(file)
+        return _sha256(p) if p.is_file() else (
+            _sha256(by_name[p.name]) if p.name in by_name else None)
+
+    files = header.get("files")
+    files = files if isinstance(files, dict) else {}
+    warnings = _changed({str(k): str(v) for k, v in files.items()},
+                        lambda f: _sha256(Path(f)))
+    warnings += _changed(recording.programs, program_now)
+    start_plc(cfg, runtime, door, closed=True)
     end = recording.end
-    for item in sorted(recording.inputs, key=lambda i: i["t"]):  # stable: same-time order
-        t = float(item["t"])
+    for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order
+        t = recorded.t
         run_virtual(engine, t)
         if engine.now < t:
             engine.set_time(t)
-        _apply(runtime, item)
+        try:
+            door.apply(recorded.input)
+        except InputRefused as exc:
+            # Refused here though the session took it: the divergence shows in the trace.
+            engine.note_hazard(0, f"replay: the input of line {recorded.line} was refused: "
+                               f"{exc}")
         engine.run_until_blocked()
-    run_virtual(engine, end)
+    # A cut record's last event may have come up to the tolerance earlier on the session's
+    # wall clock than on the replay's: run that far, what lies past the cut is not compared.
+    run_virtual(engine, end + (tolerance_ms / 1000.0 if recording.stop is None else 0.0))
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
                                    tolerance_ms / 1000.0, cut=recording.stop is None)
     return ReplayResult(recording, runtime, warnings, divergence, compared)
-
-
-def _apply(runtime: Runtime, item: dict[str, Any]) -> None:
-    engine, kind = runtime.engine, item["input"]
-    try:
-        if kind == "write":
-            runtime.image.write([tuple(c) for c in item["changes"]],
-                                item["who"])
-        elif kind == "command":
-            apply_command(engine, int(item["word"]), runtime.plc)
-        elif kind == "snd":
-            engine.external_snd(int(item["from"]), int(item["to"]))
-        elif kind == "start":
-            engine.start(item["prog"], int(item["proc"]), by=item.get("by", "operator"))
-        elif kind == "alarm":
-            engine.fieldbus_alarm(AlarmCode[item["code"]], item["message"])
-    except (ValueError, KeyError, ProgramError, ProgramNotFoundError) as exc:
-        # As in the session, where the input was refused and changed nothing; a changed
-        # program shows as a divergence, not here.
-        engine.note_hazard(0, f"replay: recorded {kind} input not applied: {exc}")
 
 
 def _key(event: EventDict) -> tuple[Any, ...]:
@@ -237,7 +430,7 @@ def _said(event: EventDict | None) -> str:
     if event is None:
         return "nothing (no such event)"
     where = ""
-    if event.get("prog"):
+    if event.get("prog") and event.get("line") is not None:
         n = f" N{event['n']}" if event.get("n") is not None else ""
         where = f" at {event['prog']}:{event['line']}{n}"
     own = ", ".join(f"{f} {json.dumps(event.get(f))}" for f in COMPARED[event["event"]])
@@ -256,7 +449,8 @@ def compare(recorded: list[EventDict], replayed: list[EventDict], end: float,
             tolerance_s: float, cut: bool = False) -> tuple[str | None, int]:
     """The first divergence (by recorded time) between two traces, and how many events were
     compared.  ``cut``: the recording ends abruptly at ``end`` (a killed session): what the
-    replay does from ``end`` on was never seen, so it cannot diverge."""
+    replay does from ``end`` on -- or from within the tolerance before it, which the session
+    may have done just after the cut -- was never seen, so it cannot diverge."""
     rec = _per_process(recorded, end)
     rep = _per_process(replayed, end + tolerance_s)
     first: tuple[float, str] | None = None
@@ -270,7 +464,8 @@ def compare(recorded: list[EventDict], replayed: list[EventDict], end: float,
                     abs(x["t"] - y["t"]) <= tolerance_s + 1e-9):
                 compared += 1
                 continue
-            if x is None and y is not None and (y["t"] > end or (cut and y["t"] >= end)):
+            if x is None and y is not None and (
+                    y["t"] > end or (cut and y["t"] + tolerance_s >= end)):
                 break  # replayed past the recording's end: not seen in the session
             at = min(e["t"] for e in (x, y) if e is not None)
             text = (f"replay diverges at P{proc}'s event {i + 1}:\n"

@@ -14,6 +14,9 @@ from typing import TextIO
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.script import Script, ScriptEntry
+from ncgate.errors import InputRefused
+from ncgate.gateway.door import Door
+from ncgate.gateway.errors import UsageError
 from ncgate.gateway.plc import start_plc
 from ncgate.gateway.wiring import (
     ImageVar,
@@ -22,6 +25,8 @@ from ncgate.gateway.wiring import (
     parse_assignment,
     parse_condition,
 )
+from ncgate.inputs import Snd, Source, SourceKind, Start, Var, Write
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.engine import Process, ProcessState, run_virtual
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
 from ncgate.interpreter.nc110.nodes import CompareOp
@@ -55,12 +60,16 @@ class CondTrigger:
     value: int
 
 
+SIM = Source(SourceKind.SCRIPT)  # the programs `ncgate sim` starts at t = 0
+
+
 class ScriptPlayer:
     """Feeds the script's writes and SNDs into the runtime at their times."""
 
-    def __init__(self, runtime: Runtime, script: Script) -> None:
+    def __init__(self, runtime: Runtime, script: Script, door: Door) -> None:
         self.runtime = runtime
         self.script = script
+        self.door = door
         self._state_watch: list[tuple[StateTrigger, ScriptEntry]] = []
         for entry in script.entries:
             self._validate(entry)
@@ -73,9 +82,8 @@ class ScriptPlayer:
         config = self.runtime.config
         if entry.set is not None:
             try:
-                (area, index, view), value = parse_assignment(entry.set)
-                self.runtime.image.check(area, index, view, value)
-            except (ValueError, PlcError) as exc:
+                self._write(entry)
+            except (ValueError, InputRefused) as exc:
                 raise self._fail(entry, "set", str(exc)) from None
         if entry.sender is not None:
             if entry.sender not in config.nc.external:
@@ -135,16 +143,23 @@ class ScriptPlayer:
         engine = self.runtime.engine
         engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry))
 
+    def _write(self, entry: ScriptEntry) -> Write:
+        """The entry's ``set`` as an input, checked against the image (not applied)."""
+        (area, index, view), value = parse_assignment(entry.set or "")
+        item = Write(Var(area, index, view), value, Source(SourceKind.SCRIPT, entry.key))
+        self.door.image_changes(((item.var, item.value),))
+        return item
+
     def _fire(self, entry: ScriptEntry) -> None:
-        if entry.set is not None:
-            (area, index, view), value = parse_assignment(entry.set)
-            self.runtime.image.write([(area, index, view, value)], "script")
-        else:
-            assert entry.sender is not None and entry.target is not None
-            try:
-                self.runtime.engine.external_snd(entry.sender, entry.target)
-            except ValueError as exc:
-                self.runtime.engine.note_hazard(entry.sender, f"script {entry.key}: {exc}")
+        source = Source(SourceKind.SCRIPT, entry.key)
+        try:
+            if entry.set is not None:
+                self.door.apply(self._write(entry))
+            else:
+                assert entry.sender is not None and entry.target is not None
+                self.door.apply(Snd(entry.sender, entry.target, source))
+        except InputRefused as exc:
+            self.runtime.engine.note_hazard(entry.sender or 0, f"script {entry.key}: {exc}")
 
 
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
@@ -153,26 +168,31 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
 
-    Raises ProgramError/ProgramNotFoundError if a program cannot start, ValueError if one
+    Raises ProgramError/ProgramNotFoundError if a program cannot start, UsageError if one
     cannot run in its process (too many programs, an external process)."""
     mains = [main] if isinstance(main, str) else list(main)
     processes = config.nc.processes
     if len(mains) > processes:
-        raise ValueError(f"{len(mains)} programs for {processes} processes")
+        raise UsageError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
-    player = ScriptPlayer(runtime, script)
+    door = Door(runtime, lambda: runtime.plc)
+    player = ScriptPlayer(runtime, script, door)
     engine = runtime.engine
     if config.nc.dialect is Dialect.ISG and len(mains) == 1:
         # Spec 5.1: one sectioned file starts every section in its channel at t = 0.
         sections = runtime.store.isg_file(mains[0]).sections
-        for channel in [section.channel for section in sections] or [1]:
-            engine.start(mains[0], channel, by="operator")
+        starts = [(mains[0], section.channel) for section in sections] or [(mains[0], 1)]
     else:
-        for number, name in enumerate(mains, start=1):
-            engine.start(name, number, by="operator")
+        starts = [(name, number) for number, name in enumerate(mains, start=1)]
+    for name, number in starts:
+        try:
+            door.apply(Start(name, number, SIM))
+        except InputRefused as exc:  # the program's own error, with its diagnostics
+            if isinstance(exc.__cause__, ProgramError | ProgramNotFoundError):
+                raise exc.__cause__ from None
+            raise UsageError(str(exc)) from None
     player.arm()
-    plc = start_plc(config, engine, runtime.image, closed=True)
-    runtime.plc = plc[0] if plc is not None else None
+    start_plc(config, runtime, door, closed=True)
     try:
         outcome = run_virtual(engine, until)
     except KeyboardInterrupt:  # Ctrl-C: what happened so far is still reported and written

@@ -8,7 +8,8 @@ in-memory trace keeps only a window (``[trace] ring``).  When the file would pas
 Nothing is ever half-written, even on ``kill -9``: events are collected in memory and written
 with one ``os.write`` of whole lines (a write(2) to a regular file is not cut by a signal), at
 the latest ``flush_s`` after the first of them, and before a rotation or on close.  A kill
-loses at most the events of that last interval, never a line's tail.
+loses at most the events of that last interval, never a line's tail; a write that fails
+half-way (a full disk) is cut back to the last whole line.
 """
 
 from __future__ import annotations
@@ -66,9 +67,15 @@ class TraceFile:
         if self._size and self._size + len(data) > self.max_bytes:
             self._rotate()
         view = memoryview(data)
-        while view:  # a short write happens only on a full disk; the rest follows
-            written = os.write(self._fd, view)
-            view = view[written:]
+        try:
+            while view:  # a short write happens only on a full disk; the rest follows
+                written = os.write(self._fd, view)
+                view = view[written:]
+        except OSError:
+            # The disk is full (or failing): cut the file back to its last whole line, so
+            # that it never ends in half a line, and say so to the caller.
+            os.ftruncate(self._fd, self._size)
+            raise
         self._size += len(data)
 
     def _rotate(self) -> None:

@@ -4,13 +4,12 @@ conversions between the config's and the interpreter's names for things."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore
-from ncgate.interpreter.codes import AlarmCode
+from ncgate.inputs import Input
 from ncgate.interpreter.diagnostics import LineError, RuntimeAlarm
 from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.trace import Trace
@@ -81,22 +80,6 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     return Runtime(config, image, store, engine, trace)
 
 
-def apply_command(engine: Engine, word: int, plc: PlcRuntime | None = None) -> None:
-    """The command word of spec 3.2 -- 1 cycle start, 2 feed hold, 3 reset -- from whoever
-    gives it: a fieldbus, the API, a replayed session, the PLC logic's NC.START/HOLD/RESET.
-    A reset also starts ``plc`` again if it is in FAULT."""
-    if word == 1:
-        engine.cycle_start()
-    elif word == 2:
-        engine.hold(True)
-    elif word == 3:
-        engine.reset()
-        if plc is not None:
-            plc.restart()
-    else:
-        raise ValueError(f"unknown command {word} (1 cycle start, 2 feed hold, 3 reset)")
-
-
 def variable_name(area: str, index: int, view: str) -> str:
     if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
         return f"{area}{index}"
@@ -105,7 +88,7 @@ def variable_name(area: str, index: int, view: str) -> str:
 
 class Backend(Protocol):
     """What the fieldbus adapters act on (the Gateway): the image and processes, read on the
-    loop, and the three ways a fieldbus changes them."""
+    loop, and the one way in (:meth:`ncgate.gateway.Gateway.apply`)."""
 
     @property
     def image(self) -> IOImage: ...
@@ -113,13 +96,7 @@ class Backend(Protocol):
     @property
     def engine(self) -> Engine: ...
 
-    def apply_writes(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
-
-    def command(self, word: int, who: str = ...) -> None: ...
-
-    def send(self, sender: int, target: int, who: str = ...) -> None: ...
-
-    def fieldbus_alarm(self, code: AlarmCode, message: str) -> None: ...
+    def apply(self, item: Input) -> None: ...
 
     @property
     def plc_status(self) -> PlcStatus | None: ...

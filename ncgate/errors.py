@@ -1,7 +1,7 @@
 """The root of every exception ncgate raises.
 
 Each package has one root of its own under it, which also subclasses the fitting builtin
-(STYLE.md, as lark and python-can do), so callers can catch as narrowly as they like::
+(CONTRIBUTING.md, as lark and python-can do), so callers can catch as narrowly as they like::
 
     NcgateError
     ├── ConfigError (ValueError)                  ncgate.config: file + dotted key
@@ -12,6 +12,7 @@ Each package has one root of its own under it, which also subclasses the fitting
     │   ├── ProgramError → ProgramSyntaxError (SyntaxError): diagnostics with spans
     │   ├── ProgramNotFoundError (FileNotFoundError)
     │   └── RuntimeAlarm: an alarm of a process (code + message), never leaves the engine
+    ├── InputRefused                              an outside input refused (a Reason)
     └── GatewayError                              ncgate.gateway
         ├── UsageError (ValueError): bad command-line input, exit status 2
         ├── WaitIdleTimeout (TimeoutError)
@@ -24,9 +25,44 @@ Imports nothing: every package may import it.
 
 from __future__ import annotations
 
+import enum
+
 
 class NcgateError(Exception):
     """Root of ncgate's exceptions."""
+
+
+class Reason(enum.StrEnum):
+    """Why an input from outside the engine was refused (:class:`InputRefused`).  Each
+    protocol maps these to its own code in one table: Modbus exception codes
+    (``gateway/modbus/codes.py``), SDO abort codes (``gateway/canopen/codes.py``), HTTP
+    statuses (the console)."""
+
+    UNKNOWN_VARIABLE = "unknown variable"  # not a variable name at all
+    OUTSIDE_IMAGE = "outside the image"  # a variable the configured image does not hold
+    BAD_VALUE = "bad value"  # a value the variable, command or field cannot take
+    READ_ONLY = "read-only"  # the map locks the region
+    UNKNOWN_PROCESS = "unknown process"  # no such process in the config
+    EXTERNAL_PROCESS = "external process"  # runs no part program (or: only those send)
+    NOT_EXTERNAL = "not an external process"  # an SND from a process that runs programs
+    BUSY = "busy"  # the process already runs a program or is in ALARM
+    NOT_RUNNING = "not running"  # e.g. an SND to a process with no program
+    NOT_CONFIGURED = "not configured"  # nothing to start: no main program configured
+    PROGRAM_NOT_FOUND = "program not found"
+    PROGRAM_INVALID = "program invalid"  # does not parse or check: the diagnostics say why
+    ROLE_FORBIDS = "role forbids"  # the client's role may not do this
+    UNSUPPORTED = "unsupported"  # a form of input this version does not take
+
+
+class InputRefused(NcgateError):
+    """An input from outside the engine was refused and nothing of it applied.
+
+    ``reason`` says why in a form a protocol maps to its own code; the message says it to a
+    person."""
+
+    def __init__(self, reason: Reason, message: str = "") -> None:
+        super().__init__(message or reason.value)
+        self.reason = reason
 
 
 def render_diagnostic(file: str, line: int, column: int, severity: str, code: str,

@@ -29,7 +29,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from ncgate.plc.image import IOImage
+from ncgate.errors import NcgateError
+from ncgate.plc.image import IOImage, PlcError
 from ncgate.plc.retain import RetainStore
 from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar
 from ncgate.plc.st.types import ArrayOf, FbOf, limits
@@ -54,14 +55,23 @@ class NcPort(Protocol):
 
     def last_snd(self) -> tuple[int, int, int]: ...  # sender, target, sequence
 
-    def command(self, word: int) -> None: ...  # 1 cycle start, 2 feed hold, 3 reset
+    # 1 cycle start, 2 feed hold, 3 reset; ``where``: FILE:LINE of the logic that gave it
+    def command(self, word: int, where: str) -> None: ...
 
-    def send(self, sender: int, target: int) -> None: ...  # ValueError when it cannot go
+    # InputRefused when it cannot go (said as a hazard)
+    def send(self, sender: int, target: int, where: str) -> None: ...
 
     def fault(self, message: str) -> None: ...
 
     def hazard(self, message: str) -> None: ...
 
+
+
+class PlcPathError(PlcError, KeyError):
+    """A PLC variable path that names nothing (:meth:`PlcRuntime.read`)."""
+
+    def __str__(self) -> str:  # a KeyError would quote its message
+        return str(self.args[0]) if self.args else ""
 
 @dataclass
 class PlcStatus:
@@ -90,9 +100,11 @@ class PlcRuntime:
         self._sa = ns["_SA"] = bytearray(image.sa)
         self._k = ns["_SK"] = bytearray(image.k)
         self._sy = ns["_SY"] = list(image.syvar)
-        self._sends: list[tuple[int, int]] = []
-        ns["_NC_SEND"] = lambda sender, target: self._sends.append((sender, target))
+        self._sends: list[tuple[int, int, str]] = []
+        ns["_NC_SEND"] = lambda sender, target, where: self._sends.append(
+            (sender, target, where))
         self._outputs: list[bool] = ns["_NCO"]
+        self._outputs_at: list[str] = ns["_NCW"]
         self._last_outputs = [False, False, False]
         self._retained = [(p, v) for p, table in logic.programs.items()
                           for v in table.values() if v.retain]
@@ -195,12 +207,12 @@ class PlcRuntime:
         if outputs != last:
             for i, word in enumerate((1, 2, 3)):
                 if outputs[i] and not last[i]:  # NC.START/HOLD/RESET act on a rising edge
-                    self.nc.command(word)
+                    self.nc.command(word, self._outputs_at[i])
             self._last_outputs = [bool(o) for o in outputs]
-        for sender, target in self._sends:
+        for sender, target, where in self._sends:
             try:
-                self.nc.send(sender, target)
-            except ValueError as exc:
+                self.nc.send(sender, target, where)
+            except NcgateError as exc:
                 self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
         self._sends.clear()
 
@@ -266,33 +278,34 @@ class PlcRuntime:
 
     def read(self, path: str) -> Any:
         """A variable's value by its path: ``"main.t1.ET"``, ``"main.counts[3]"``
-        (case-insensitive).  KeyError with the names there are when a part is unknown."""
+        (case-insensitive).  PlcPathError (a KeyError) with the names there are when a part
+        is unknown."""
         program, _, rest = path.partition(".")
         key = program.upper()
         if key not in self.programs:
-            raise KeyError(f"no program {program!r} (programs: "
+            raise PlcPathError(f"no program {program!r} (programs: "
                            f"{', '.join(self.logic.display[k] for k in self.programs)})")
         if not rest:
-            raise KeyError(f"{path!r}: name a variable of {program}")
+            raise PlcPathError(f"{path!r}: name a variable of {program}")
         obj: Any = self.programs[key]
         table: dict[str, ProgramVar] | None = self.logic.programs[key]
         t: Any = None
         for part in _split(rest):
             if isinstance(part, int):
                 if not isinstance(t, ArrayOf) or not t.lo <= part <= t.hi:
-                    raise KeyError(f"{path!r}: [{part}] is not an index of {t}")
+                    raise PlcPathError(f"{path!r}: [{part}] is not an index of {t}")
                 obj, t = obj[part - t.lo], t.element
                 table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None
                 continue
             name = part.upper()
             if isinstance(t, FbOf) and t.std:
                 if not hasattr(obj, name) or name.startswith("_"):
-                    raise KeyError(f"{path!r}: {t.name} has no {part}")
+                    raise PlcPathError(f"{path!r}: {t.name} has no {part}")
                 obj, t = getattr(obj, name), None
                 continue
             if table is None or name not in table:
                 known = ", ".join(v.display for v in (table or {}).values())
-                raise KeyError(f"{path!r}: no {part} here ({known})")
+                raise PlcPathError(f"{path!r}: no {part} here ({known})")
             var = table[name]
             obj, t = getattr(obj, f"v_{name}"), var.type
             table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None

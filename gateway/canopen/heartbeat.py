@@ -19,8 +19,9 @@ from collections.abc import Callable
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.gateway.canopen.clock import Clock, Timer
-
-ABORT_INCOMPATIBLE = 0x06040043  # general parameter incompatibility
+from ncgate.gateway.canopen.codes import (
+    ABORT_PARAMETER_INCOMPATIBLE,
+)
 
 
 def entry(value: int) -> tuple[int, int] | None:
@@ -33,7 +34,7 @@ def check_entries(entries: list[int]) -> None:
     """CiA 301: two used entries for the same node are refused (0x06040043)."""
     nodes = [e[0] for e in map(entry, entries) if e is not None]
     if len(nodes) != len(set(nodes)):
-        raise SdoAbortedError(ABORT_INCOMPATIBLE)
+        raise SdoAbortedError(ABORT_PARAMETER_INCOMPATIBLE)
 
 
 class _Watch:

@@ -41,8 +41,16 @@ from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config, MasterLost
+from ncgate.errors import InputRefused
 from ncgate.gateway.canopen import pdo, store
 from ncgate.gateway.canopen.clock import Clock, LoopClock
+from ncgate.gateway.canopen.codes import (
+    ABORT_APPLICATION_DEVICE_STATE,
+    ABORT_INVALID_VALUE,
+    ABORT_READ_WRITEONLY,
+    ABORT_STORE_APPLICATION,
+    REFUSAL,
+)
 from ncgate.gateway.canopen.dictionary import (
     COMMAND,
     CONSUMER_ENTRIES,
@@ -59,9 +67,21 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
-from ncgate.gateway.canopen.sdo import ABORT_RANGE, NMT_OPERATIONAL, NMT_STOPPED, Device
+from ncgate.gateway.canopen.sdo import Device
 from ncgate.gateway.plc import plc_registers
+from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
+from ncgate.inputs import (
+    Command,
+    CommandKind,
+    FieldbusAlarm,
+    Snd,
+    Source,
+    SourceKind,
+    Var,
+    Write,
+    Writes,
+)
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState
 from ncgate.interpreter.engine import events as ev
@@ -69,8 +89,6 @@ from ncgate.interpreter.engine.events import Event
 
 log = logging.getLogger("ncgate.canopen")
 
-ABORT_DEVICE_STATE = 0x08000022
-ABORT_CANNOT_STORE = 0x08000020
 EMCY_SOFTWARE = 0x6200
 EMCY_HEARTBEAT = 0x8130  # life guard or heartbeat error (CiA 301 table 21)
 REGISTER_GENERIC, REGISTER_COMMUNICATION = 0x01, 0x10
@@ -105,6 +123,10 @@ class CanopenNode:
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
         self._view: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())
         self.hub_address: tuple[str, int] | None = None
+        self._closed = True  # until start(); then until close()
+        self._pending: set[asyncio.Handle] = set()  # callbacks handed to the loop, not yet run
+        self._sdo_source = Source(SourceKind.CANOPEN, f"SDO 0x{0x600 + self.node_id:03X}")
+        self._refusals = RateLimitedLog(log)
 
     @property
     def clock(self) -> Clock:
@@ -113,8 +135,9 @@ class CanopenNode:
 
     # -- life cycle -----------------------------------------------------------------------
 
-    def start(self) -> None:
+    async def start(self) -> None:
         cfg = self.config.canopen
+        self._closed = False
         self.loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
         if self._clock is None:
@@ -158,7 +181,13 @@ class CanopenNode:
         log.info("CANopen hub for other processes: interface 'remote', channel "
                  "'ws://%s:%d/'", host, port)
 
-    def close(self) -> None:
+    async def close(self) -> None:
+        # Nothing scheduled from the CAN thread runs after this: pending callbacks are
+        # cancelled, and any that race in are dropped (call_soon checks _closed).
+        self._closed = True
+        for handle in list(self._pending):
+            handle.cancel()
+        self._pending.clear()
         if self._hub is not None:
             self._hub.shutdown()
             self._hub.server_close()
@@ -185,11 +214,11 @@ class CanopenNode:
 
     @property
     def operational(self) -> bool:
-        return self.node.nmt._state == NMT_OPERATIONAL
+        return self.node.nmt.state == "OPERATIONAL"
 
     @property
     def stopped(self) -> bool:
-        return self.node.nmt._state == NMT_STOPPED
+        return self.node.nmt.state == "STOPPED"
 
     # -- what the PDOs and the heartbeat consumer use (pdo.Host) ----------------------------
 
@@ -202,8 +231,13 @@ class CanopenNode:
     def unsubscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
         self.network.unsubscribe(cob, callback)
 
-    def apply(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None:
-        self.backend.apply_writes(changes, who)
+    def apply(self, changes: Sequence[tuple[str, int, str, int]], source: Source) -> None:
+        """An RPDO's writes (on the loop); a refusal is logged, rate-limited."""
+        try:
+            self.backend.apply(Writes(tuple((Var(a, i, v), value) for a, i, v, value in changes),
+                                      source))
+        except InputRefused as exc:
+            self._refusals.note(f"{source}: RPDO not applied: {exc}")
 
     def getter(self, index: int, subindex: int) -> Callable[[], int]:
         """A mapped object's value, read on the loop (for a TPDO frame)."""
@@ -220,27 +254,50 @@ class CanopenNode:
     # -- threads ----------------------------------------------------------------------------
 
     def _on_loop(self, fn: Callable[[], T], timeout_s: float = 2.0) -> T:
-        """Run ``fn`` on the asyncio loop and wait for its result (from the CAN thread)."""
+        """Run ``fn`` on the asyncio loop and wait for its result (from the CAN thread).
+        Past ``timeout_s`` it is cancelled (the SDO is aborted) and never runs later."""
         if threading.get_ident() == self._loop_thread:
             return fn()
-        assert self.loop is not None
         future: concurrent.futures.Future[T] = concurrent.futures.Future()
 
         def run() -> None:
+            if not future.set_running_or_notify_cancel():
+                return  # timed out and aborted: nothing of it may happen now
             try:
                 future.set_result(fn())
             except BaseException as exc:  # handed back to the CAN thread
                 future.set_exception(exc)
 
-        self.loop.call_soon_threadsafe(run)
-        return future.result(timeout=timeout_s)
+        self.call_soon(run)
+        try:
+            return future.result(timeout=timeout_s)
+        except concurrent.futures.TimeoutError:
+            # cancel() fails only once run() has begun: then its result is what counts.
+            if future.cancel():
+                raise
+            return future.result()
 
     def call_soon(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` on the loop soon, from any thread; tracked, and dropped once closed."""
         assert self.loop is not None
+        if self._closed:
+            return
+        handle: asyncio.Handle | None = None
+
+        def once() -> None:
+            if handle is not None:
+                self._pending.discard(handle)
+            if not self._closed:
+                fn()
+
         if threading.get_ident() == self._loop_thread:
-            self.loop.call_soon(fn)
+            handle = self.loop.call_soon(once)
         else:
-            self.loop.call_soon_threadsafe(fn)
+            try:
+                handle = self.loop.call_soon_threadsafe(once)
+            except RuntimeError:  # the loop is closed: the gateway is gone
+                return
+        self._pending.add(handle)
 
     # -- NMT --------------------------------------------------------------------------------
 
@@ -365,7 +422,7 @@ class CanopenNode:
                 return regs[9]
             hi, lo = regs[2 * subindex - 3], regs[2 * subindex - 2]
             return hi << 16 | lo
-        raise SdoAbortedError(0x06010001)  # 0x2400: write-only
+        raise SdoAbortedError(ABORT_READ_WRITEONLY)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         # On the CAN thread, before canopen stores the value and answers: an abort raised
@@ -390,11 +447,10 @@ class CanopenNode:
             # Accepted at once; the work (a cycle start may parse a long program) runs on,
             # and its outcome shows in the status objects, the EMCY and the trace.
             if value not in (1, 2, 3):
-                raise SdoAbortedError(ABORT_RANGE)
+                raise SdoAbortedError(ABORT_INVALID_VALUE)
             self.call_soon(lambda: self._run_command(value))
             return
-        who = f"canopen SDO 0x{0x600 + self.node_id:03X}"
-        self._on_loop(lambda: self._write(index, subindex, value, who))
+        self._on_loop(lambda: self._write(index, subindex, value))
 
     def _on_stored(self, index: int, subindex: int) -> None:
         """After a write was stored (CAN thread): put it into effect before the answer."""
@@ -418,45 +474,46 @@ class CanopenNode:
                 store.save(self.store_path, parameters)
             except OSError as exc:
                 log.error("CANopen parameters not stored: %s", exc)
-                raise SdoAbortedError(ABORT_CANNOT_STORE) from None
+                raise SdoAbortedError(ABORT_STORE_APPLICATION) from None
             log.info("CANopen communication parameters stored in %s", self.store_path)
         elif index == RESTORE and value == store.LOAD:
             try:
                 store.remove(self.store_path)
             except OSError as exc:
                 log.error("stored CANopen parameters not removed: %s", exc)
-                raise SdoAbortedError(ABORT_CANNOT_STORE) from None
+                raise SdoAbortedError(ABORT_STORE_APPLICATION) from None
             log.info("CANopen defaults restored: in effect after the next reset")
         else:
-            raise SdoAbortedError(ABORT_CANNOT_STORE)
+            raise SdoAbortedError(ABORT_STORE_APPLICATION)
 
     def _run_command(self, word: int) -> None:
         try:
-            self.backend.command(word, "canopen")
-        except Exception:  # answered already: say it in the log
-            log.exception("command %d written through 0x2400:1 failed", word)
+            self.backend.apply(Command(CommandKind(word), None, self._sdo_source))
+        except InputRefused as exc:  # answered already: say it in the log
+            self._refusals.note(f"command {word} written through 0x2400:1 refused: {exc}")
 
-    def _write(self, index: int, subindex: int, value: int, who: str) -> None:
-        if index < COMMAND:
-            self.backend.apply_writes([(*image_target(index, subindex), value)], who)
-        elif index == COMMAND:
-            self._command(subindex, value)
+    def _write(self, index: int, subindex: int, value: int) -> None:
+        try:
+            if index < COMMAND:
+                self.backend.apply(Write(Var(*image_target(index, subindex)), value,
+                                         self._sdo_source))
+            elif index == COMMAND:
+                self._command(subindex, value)
+        except InputRefused as exc:
+            raise SdoAbortedError(REFUSAL[exc.reason]) from None
 
     def _command(self, subindex: int, value: int) -> None:
         nc = self.config.nc
         if subindex == 2:
             if value not in nc.external:
-                raise SdoAbortedError(ABORT_RANGE)  # only an external process sends
+                raise SdoAbortedError(ABORT_INVALID_VALUE)  # only an external process sends
         else:
             if not 1 <= value <= nc.processes:
-                raise SdoAbortedError(ABORT_RANGE)  # an unknown SND target
+                raise SdoAbortedError(ABORT_INVALID_VALUE)  # an unknown SND target
             stored = self.node.data_store.get(COMMAND, {}).get(2)
             if stored is None:
-                raise SdoAbortedError(ABORT_DEVICE_STATE)  # no sender written yet
-            try:
-                self.backend.send(stored[0], value, "canopen")
-            except ValueError:
-                raise SdoAbortedError(ABORT_DEVICE_STATE) from None  # runs no program
+                raise SdoAbortedError(ABORT_APPLICATION_DEVICE_STATE)  # no sender written yet
+            self.backend.apply(Snd(stored[0], value, self._sdo_source))
 
     # -- the master's heartbeat (loop) ------------------------------------------------------
 
@@ -465,16 +522,17 @@ class CanopenNode:
         self._master_lost.add(node_id)
         what = {MasterLost.NONE: "no reaction (canopen.on_master_lost = \"none\")",
                 MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
-        self.backend.fieldbus_alarm(
+        source = Source(SourceKind.CANOPEN, f"heartbeat of node {node_id}")
+        self.backend.apply(FieldbusAlarm(
             AlarmCode.MASTER_LOST,
-            f"CANopen: no heartbeat from node {node_id} for {ms} ms (0x1016); {what}")
+            f"CANopen: no heartbeat from node {node_id} for {ms} ms (0x1016); {what}", source))
         if not self.stopped:
             self.node.emcy.send(EMCY_HEARTBEAT, self._error_register(),
                                   struct.pack("<B4x", node_id))
         if reaction is MasterLost.HOLD:
-            self.backend.command(2, "canopen")
+            self.backend.apply(Command(CommandKind.FEED_HOLD, None, source))
         elif reaction is MasterLost.RESET:
-            self.backend.command(3, "canopen")
+            self.backend.apply(Command(CommandKind.RESET, None, source))
 
     def _on_master_back(self, node_id: int) -> None:
         if node_id not in self._master_lost:

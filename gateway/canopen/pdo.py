@@ -46,6 +46,12 @@ from canopen.objectdictionary.datatypes import (
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.gateway.canopen.clock import Clock, Timer
+from ncgate.gateway.canopen.codes import (
+    ABORT_INVALID_VALUE,
+    ABORT_PDO_CANNOT_MAP,
+    ABORT_PDO_LENGTH_EXCEEDED,
+    ABORT_UNSUPPORTED_ACCESS,
+)
 from ncgate.gateway.canopen.dictionary import (
     COMMAND,
     LAST_SND,
@@ -60,13 +66,11 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.sdo import Device
+from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.inputs import Source, SourceKind
 
 log = logging.getLogger("ncgate.canopen")
 
-ABORT_UNSUPPORTED_ACCESS = 0x06010000
-ABORT_NOT_MAPPABLE = 0x06040041
-ABORT_MAP_LENGTH = 0x06040042
-ABORT_RANGE = 0x06090030
 NOT_VALID, NO_RTR, EXTENDED = 0x80000000, 0x40000000, 0x20000000
 EVENT_TYPES = (254, 255)
 SND_QUEUE = 256
@@ -116,21 +120,21 @@ def check_write(device: Device, index: int, subindex: int, value: int) -> None:
             _check_cob_id(param(device, index, 1), value, transmit)
         elif subindex == 2:
             if not (value <= 240 or value in EVENT_TYPES):
-                raise SdoAbortedError(ABORT_RANGE)  # RTR-only or reserved: not honoured
+                raise SdoAbortedError(ABORT_INVALID_VALUE)  # RTR-only or reserved: not honoured
         elif subindex in (3, 6) and valid and value != param(device, index, subindex):
             # inhibit time and SYNC start value: only while the PDO does not exist
-            raise SdoAbortedError(ABORT_RANGE)
+            raise SdoAbortedError(ABORT_INVALID_VALUE)
         return
     # A mapping parameter: the procedure of CiA 301 7.5.2.37/38.
     if valid:
         raise SdoAbortedError(ABORT_UNSUPPORTED_ACCESS)
     if subindex == 0:
         if value > MAX_MAPPED:
-            raise SdoAbortedError(ABORT_MAP_LENGTH)
+            raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
         bits = sum(mapped_bits(device, param(device, index, s), transmit)
                    for s in range(1, value + 1))
         if bits > 64:
-            raise SdoAbortedError(ABORT_MAP_LENGTH)
+            raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
         return
     if param(device, index, 0) != 0:
         raise SdoAbortedError(ABORT_UNSUPPORTED_ACCESS)  # disable the mapping first
@@ -143,36 +147,36 @@ def mapped_bits(device: Device, entry: int, transmit: bool) -> int:
     index, subindex, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
     if index in _DUMMY_BITS and subindex == 0 and not transmit:
         if bits != _DUMMY_BITS[index]:
-            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+            raise SdoAbortedError(ABORT_PDO_CANNOT_MAP)
         return bits
     try:
         obj = device.object_for(index, subindex)
     except SdoAbortedError:
-        raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
+        raise SdoAbortedError(ABORT_PDO_CANNOT_MAP) from None
     if not obj.pdo_mappable or bits != len(obj) \
             or not (obj.readable if transmit else obj.writable):
-        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        raise SdoAbortedError(ABORT_PDO_CANNOT_MAP)
     return bits
 
 
 def _check_cob_id(current: int, cob: int, transmit: bool) -> None:
     """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise)."""
     if cob & EXTENDED:
-        raise SdoAbortedError(ABORT_RANGE)  # 29-bit identifiers are not supported
+        raise SdoAbortedError(ABORT_INVALID_VALUE)  # 29-bit identifiers are not supported
     if transmit and not cob & NO_RTR:
         # canopen drops remote frames, so the node cannot answer an RTR: it says so.
-        raise SdoAbortedError(ABORT_RANGE)
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
     valid_now, valid_then = not current & NOT_VALID, not cob & NOT_VALID
     if valid_now and valid_then and (cob ^ current) & 0x1FFFFFFF:
-        raise SdoAbortedError(ABORT_RANGE)  # the id changes only while the PDO is off
+        raise SdoAbortedError(ABORT_INVALID_VALUE)  # the id changes only while the PDO is off
     if valid_then and restricted(cob & 0x7FF):
-        raise SdoAbortedError(ABORT_RANGE)
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
 def check_sync_cob_id(cob: int) -> None:
     """0x1005: the node consumes SYNC and produces none (bit 30), 11-bit ids only."""
     if cob & (NO_RTR | EXTENDED):
-        raise SdoAbortedError(ABORT_RANGE)
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
 # ---- the runtime --------------------------------------------------------------------------
@@ -199,7 +203,7 @@ class Host(Protocol):
 
     def call_soon(self, fn: Callable[[], None]) -> None: ...
 
-    def apply(self, changes: Sequence[tuple[str, int, str, int]], who: str) -> None: ...
+    def apply(self, changes: Sequence[tuple[str, int, str, int]], source: Source) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -291,7 +295,8 @@ class Pdos:
         self._subscribed: dict[int, int] = {}  # RPDO n -> the COB-ID it listens on
         self._rpdo_callbacks = {n: self._rpdo_callback(n) for n in range(1, PDO_COUNT + 1)}
         self._sync_cob: int | None = None
-        self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], str]] = {}
+        self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], Source]] = {}
+        self._short = RateLimitedLog(log)  # RPDOs shorter than their mapping
         # RPDO writes handed to the loop (counted on the receive thread) and done (on the
         # loop): the node's SDO reads of the image go through the loop while they differ.
         self.handed = 0
@@ -491,22 +496,22 @@ class Pdos:
             return  # PDOs only in OPERATIONAL
         r = self.rpdos[n]
         if len(data) < r.layout.frame.size:
-            log.warning("RPDO%d 0x%03X with %d bytes ignored (%d mapped)", n, can_id,
-                        len(data), r.layout.frame.size)
+            self._short.note(f"RPDO{n} 0x{can_id:03X} with {len(data)} bytes ignored "
+                             f"({r.layout.frame.size} mapped)")
             return
         values = r.layout.frame.unpack_from(bytes(data))
         changes = [(area, i, view, v) for (area, i, view), v in zip(r.targets, values,
                                                                    strict=True)]
         if not changes:
             return
-        who = f"canopen 0x{can_id:03X}"
+        who = Source(SourceKind.CANOPEN, f"RPDO{n} 0x{can_id:03X}")
         if r.sync:
             self._sync_pending[n] = (changes, who)  # applied at the next SYNC; the last wins
             return
         self.handed += 1
         self.host.call_soon(lambda: self._apply([(changes, who)]))
 
-    def _apply(self, batches: list[tuple[list[tuple[str, int, str, int]], str]]) -> None:
+    def _apply(self, batches: list[tuple[list[tuple[str, int, str, int]], Source]]) -> None:
         for changes, who in batches:
             try:
                 self.host.apply(changes, who)
@@ -523,7 +528,7 @@ class Pdos:
         self.host.call_soon(lambda: self._sync(counter, batches))
 
     def _sync(self, counter: int | None,
-              batches: list[tuple[list[tuple[str, int, str, int]], str]]) -> None:
+              batches: list[tuple[list[tuple[str, int, str, int]], Source]]) -> None:
         """At a SYNC: the synchronous TPDOs send what they sample now, then the RPDO data
         received since the last SYNC is applied (inputs sampled, outputs actuated)."""
         if self.host.operational:

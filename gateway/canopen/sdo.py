@@ -16,15 +16,26 @@ from canopen.sdo.exceptions import SdoAbortedError
 from canopen.sdo.server import SdoServer
 
 from ncgate.gateway.canopen.clock import Clock, Timer
+from ncgate.gateway.canopen.codes import (
+    ABORT_GENERAL_ERROR,
+    ABORT_INVALID_COMMAND_SPECIFIER,
+    ABORT_INVALID_VALUE,
+    ABORT_LENGTH_NOT_MATCHED,
+    ABORT_LENGTH_TOO_HIGH,
+    ABORT_LENGTH_TOO_LOW,
+    ABORT_NO_DATA_AVAILABLE,
+    ABORT_NO_SDO_CONNECTION,
+    ABORT_NO_SUBINDEX,
+    ABORT_NOT_IN_OD,
+    ABORT_READ_WRITEONLY,
+    ABORT_TIMED_OUT,
+    ABORT_TOGGLE_NOT_ALTERNATED,
+    ABORT_WRITE_READONLY,
+)
 
 log = logging.getLogger("ncgate.canopen")
 
-ABORT_TIMEOUT = 0x05040000
-ABORT_COMMAND = 0x05040001
-ABORT_LENGTH = 0x06070010
-ABORT_RANGE = 0x06090030
 SEGMENTED_TIMEOUT_S = 1.0
-NMT_OPERATIONAL, NMT_STOPPED, NMT_PRE_OPERATIONAL = 5, 4, 127
 
 
 class SdoService(SdoServer):
@@ -51,7 +62,7 @@ class SdoService(SdoServer):
         self._timer: Timer | None = None
 
     def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if self._gateway_node.nmt._state == NMT_STOPPED:
+        if self._gateway_node.nmt.state == "STOPPED":
             return  # no SDO service in STOPPED (CiA 301)
         request = bytes(data).ljust(8, b"\0")
         with self._lock:
@@ -62,7 +73,7 @@ class SdoService(SdoServer):
                 self._abort_transfer(exc.code)
             except Exception:  # a bug of ours must not leave a transfer half open
                 log.exception("SDO request %s failed", request.hex())
-                self._abort_transfer(0x08000000)
+                self._abort_transfer(ABORT_GENERAL_ERROR)
             if self._mode is not None:
                 self._timer = self._gateway_node.clock.call_later(SEGMENTED_TIMEOUT_S,
                                                                   self._expire)
@@ -92,12 +103,12 @@ class SdoService(SdoServer):
         if ccs in (0xA0, 0xC0, 0xE0):  # these carry an index: name it
             self._where = struct.unpack_from("<HB", request, 1)
         self._mode = None
-        raise SdoAbortedError(ABORT_COMMAND)
+        raise SdoAbortedError(ABORT_INVALID_COMMAND_SPECIFIER)
 
     def _initiate_upload(self, index: int, subindex: int) -> None:
         data = self._gateway_node.get_data(index, subindex, check_readable=True)
         if not data:
-            raise SdoAbortedError(0x08000024)  # no data available
+            raise SdoAbortedError(ABORT_NO_DATA_AVAILABLE)  # no data available
         if len(data) <= 4:
             self.send_response(struct.pack("<BHB", 0x43 | (4 - len(data)) << 2, index,
                                            subindex) + data.ljust(4, b"\0"))
@@ -107,7 +118,7 @@ class SdoService(SdoServer):
 
     def _upload_segment(self, command: int) -> None:
         if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)  # toggle bit not alternated
         chunk = bytes(self._buffer_[:7])
         del self._buffer_[:7]
         last = not self._buffer_
@@ -122,7 +133,7 @@ class SdoService(SdoServer):
         node = self._gateway_node
         obj = node.object_for(index, subindex)
         if not obj.writable:
-            raise SdoAbortedError(0x06010002)
+            raise SdoAbortedError(ABORT_WRITE_READONLY)
         if command & 0x02:  # expedited
             size = 4 - (command >> 2 & 0x3) if command & 0x01 else 4
             node.set_data(index, subindex, request[4:4 + size], check_writable=True)
@@ -136,12 +147,12 @@ class SdoService(SdoServer):
 
     def _download_segment(self, command: int, request: bytes) -> None:
         if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(0x05030000)  # toggle bit not alternated
+            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)  # toggle bit not alternated
         self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
         if command & 0x01:  # the last segment
             data = bytes(self._buffer_)
             if self._size is not None and len(data) != self._size:
-                raise SdoAbortedError(ABORT_LENGTH)  # not what it announced
+                raise SdoAbortedError(ABORT_LENGTH_NOT_MATCHED)  # not what it announced
             index, subindex = self._where
             node = self._gateway_node
             node.check_size(node.object_for(index, subindex), len(data))
@@ -169,12 +180,12 @@ class SdoService(SdoServer):
         try:
             if self._mode is None:
                 return
-            if self._gateway_node.nmt._state == NMT_STOPPED:
+            if self._gateway_node.nmt.state == "STOPPED":
                 self._mode = None  # nothing is sent in STOPPED
                 return
             log.info("SDO %s of 0x%04X:%02X abandoned: abort after %g s", self._mode,
                      *self._where, SEGMENTED_TIMEOUT_S)
-            self._abort_transfer(ABORT_TIMEOUT)
+            self._abort_transfer(ABORT_TIMED_OUT)
         finally:
             self._lock.release()
 
@@ -194,21 +205,26 @@ class Device(canopen.LocalNode):
         # Called (on the CAN thread) once a write is stored: the node reconfigures what the
         # value controls (a PDO, the SYNC, the heartbeat consumer).
         self.stored: Callable[[int, int], None] = lambda index, subindex: None
+        self.read_hooks: list[Callable[..., int | None]] = []  # add_read_callback's, for get_data
+
+    def add_read_callback(self, callback: Callable[..., int | None]) -> None:
+        super().add_read_callback(callback)
+        self.read_hooks.append(callback)
 
     def object_for(self, index: int, subindex: int) -> ODVariable:
         """The object an SDO names, or the abort: 0x06020000 no object, 0x06090011 no such
         sub-index (a VAR has only 0)."""
         if index not in self.object_dictionary:
-            raise SdoAbortedError(0x06020000)
+            raise SdoAbortedError(ABORT_NOT_IN_OD)
         obj = self.object_dictionary[index]
         if isinstance(obj, ODVariable):
             if subindex != 0:
-                raise SdoAbortedError(0x06090011)
+                raise SdoAbortedError(ABORT_NO_SUBINDEX)
             return obj
         # canopen's ODArray makes up any sub-index 1..255 from its first member: only the
         # ones the dictionary defines exist here.
         if subindex not in obj.subindices:
-            raise SdoAbortedError(0x06090011)
+            raise SdoAbortedError(ABORT_NO_SUBINDEX)
         return obj[subindex]
 
     @staticmethod
@@ -216,15 +232,16 @@ class Device(canopen.LocalNode):
         """A segmented transfer to a number must carry exactly its size (CiA 301: 0x06070012
         too long, 0x06070013 too short); only an expedited one may use a wider type."""
         if obj.data_type in NUMBER_TYPES and 8 * size != len(obj):
-            raise SdoAbortedError(0x06070012 if 8 * size > len(obj) else 0x06070013)
+            raise SdoAbortedError(ABORT_LENGTH_TOO_HIGH if 8 * size > len(obj)
+                                  else ABORT_LENGTH_TOO_LOW)
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
         # LocalNode.get_data's steps, with our lookup: canopen's tests `subindex in array`,
         # which (ODArray has no __contains__) sorts every sub-index on every access.
         obj = self.object_for(index, subindex)
         if check_readable and not obj.readable:
-            raise SdoAbortedError(0x06010001)
-        for callback in self._read_callbacks:
+            raise SdoAbortedError(ABORT_READ_WRITEONLY)
+        for callback in self.read_hooks:
             result = callback(index=index, subindex=subindex, od=obj)
             if result is not None:
                 return obj.encode_raw(result)
@@ -234,20 +251,20 @@ class Device(canopen.LocalNode):
         for value in (obj.value, obj.default):
             if value is not None:
                 return obj.encode_raw(value)
-        raise SdoAbortedError(0x060A0023)  # resource not available
+        raise SdoAbortedError(ABORT_NO_SDO_CONNECTION)  # resource not available
 
     def set_data(self, index: int, subindex: int, data: bytes,
                  check_writable: bool = False) -> None:
         obj = self.object_for(index, subindex)
         if check_writable and not obj.writable:
-            raise SdoAbortedError(0x06010002)
+            raise SdoAbortedError(ABORT_WRITE_READONLY)
         if obj.data_type in NUMBER_TYPES and 8 * len(data) != len(obj):
             # A value too big for the object, sent in a wider type, is out of range (spec
             # 3.3); any other size mismatch is a length error.
             if 8 * len(data) > len(obj) and 0 < len(data) <= 8 and obj.max is not None:
                 value = int.from_bytes(data, "little", signed=obj.data_type in SIGNED_TYPES)
                 if not (obj.min or 0) <= value <= obj.max:
-                    raise SdoAbortedError(ABORT_RANGE)
-            raise SdoAbortedError(ABORT_LENGTH)
+                    raise SdoAbortedError(ABORT_INVALID_VALUE)
+            raise SdoAbortedError(ABORT_LENGTH_NOT_MATCHED)
         super().set_data(index, subindex, data, check_writable)
         self.stored(index, subindex)

@@ -4,22 +4,25 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from ncgate import __version__
-from ncgate.config import ConfigError, default_script_path, load_config
+from ncgate.config import default_script_path, load_config
+from ncgate.errors import NcgateError
 from ncgate.gateway.cli.check import check_files, expand, storage_files
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
-from ncgate.interpreter.diagnostics import InterpreterError, ProgramError
+from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+EXIT_BUG = 70  # EX_SOFTWARE (sysexits.h): an internal error
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -146,15 +149,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _eds(args)
         if args.command == "examples":
             return _examples()
-    except (UsageError, ConfigError) as exc:
-        print(f"ncgate {args.command}: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except (ProgramError, LogicError) as exc:
+    except (ProgramError, LogicError) as exc:  # diagnostics, each with its source line
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
-    except (InterpreterError, OSError, ValueError) as exc:
+    except (NcgateError, OSError) as exc:  # ours, or the system's (a path, a port): said
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except Exception:  # anything else is a bug of ncgate: show it whole
+        traceback.print_exc()
+        print(f"ncgate {args.command}: this is a bug in ncgate {__version__}; please report "
+              "it with the traceback above and the command that gave it", file=sys.stderr)
+        return EXIT_BUG
     parser.error(f"unknown command {args.command}")
     return EXIT_USAGE  # not reached: parser.error exits
 
@@ -213,10 +218,7 @@ def _sim(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
-    try:
-        result = run_sim(config, args.main or config.nc.main, script, args.until)
-    except ValueError as exc:  # a program for a process that cannot run it
-        raise UsageError(str(exc)) from None
+    result = run_sim(config, args.main or config.nc.main, script, args.until)
     report(result, sys.stdout)
     if args.trace:
         with open(args.trace, "w", encoding="utf-8") as out:

@@ -20,19 +20,15 @@ from dataclasses import dataclass
 
 from ncgate.config import Config
 from ncgate.gateway.errors import ModbusError
+from ncgate.gateway.modbus.codes import COMMAND_WORDS, ILLEGAL_ADDRESS, ILLEGAL_VALUE
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
 from ncgate.gateway.wiring import Backend
+from ncgate.inputs import Command, Snd, Source, Var, Writes
 from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 from ncgate.interpreter.engine.sync import SND_LOG
 
 MAP_VERSION = 1
 
-# Exception codes (Modbus application protocol, 7)
-ILLEGAL_FUNCTION = 0x01
-ILLEGAL_ADDRESS = 0x02
-ILLEGAL_VALUE = 0x03
-DEVICE_FAILURE = 0x04
-TARGET_NO_RESPONSE = 0x0B
 
 
 class Table(enum.Enum):
@@ -257,19 +253,19 @@ class ModbusMap:
     # -- writing ------------------------------------------------------------------------------
 
     def write_bits(self, backend: Backend, address: int, values: Sequence[bool],
-                   who: str) -> None:
+                   source: Source) -> None:
         region = self.region(Table.COILS, address, len(values))  # one region: the coils
         if "w" not in region.access:
             raise ModbusError(ILLEGAL_ADDRESS, "read-only")
-        backend.apply_writes([("SA", address + i, "bit", int(v)) for i, v in enumerate(values)],
-                             who)
+        backend.apply(Writes(tuple((Var("SA", address + i, "bit"), int(v))
+                                   for i, v in enumerate(values)), source))
 
     def _image_changes(self, address: int, values: Sequence[int]
-                       ) -> list[tuple[str, int, str, int]] | tuple[Region, int]:
+                       ) -> list[tuple[Var, int]] | tuple[Region, int]:
         """The image writes of a holding-register write, validated whole; or the one action
         region (command, mailbox) it addresses with the offset into it."""
         pieces = self.segments(Table.HOLDING, address, len(values))
-        changes: list[tuple[str, int, str, int]] = []
+        changes: list[tuple[Var, int]] = []
         for region, start, count in pieces:
             if "w" not in region.access:
                 raise ModbusError(ILLEGAL_ADDRESS, f"{region.kind.value} is read-only")
@@ -282,42 +278,35 @@ class ModbusMap:
             first = start - region.start
             chunk = values[start - address:start - address + count]
             if kind is Kind.SYVARS:
-                changes += [("SYVAR", first + i, "IN", v - 0x10000 if v & 0x8000 else v)
+                changes += [(Var("SYVAR", first + i, "IN"), v - 0x10000 if v & 0x8000 else v)
                             for i, v in enumerate(chunk)]
                 continue
             if any(v > 255 for v in chunk):
                 raise ModbusError(ILLEGAL_VALUE, f"{kind.value} hold 0..255")
             area = "SK" if kind is Kind.K_BYTES else "SA"
-            changes += [(area, first + i, "BY", v) for i, v in enumerate(chunk)]
+            changes += [(Var(area, first + i, "BY"), v) for i, v in enumerate(chunk)]
         return changes
 
     def write_registers(self, backend: Backend, address: int, values: Sequence[int],
-                        who: str) -> None:
+                        source: Source) -> None:
         count = len(values)
         planned = self._image_changes(address, values)
         if isinstance(planned, list):
-            backend.apply_writes(planned, who)
+            backend.apply(Writes(tuple(planned), source))
             return
         region, offset = planned
         kind = region.kind
         if kind is Kind.COMMAND:
             (word,) = values
-            if word not in (1, 2, 3):
+            if word not in COMMAND_WORDS:
                 raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset")
-            backend.command(word, who)
+            backend.apply(Command(COMMAND_WORDS[word], None, source))
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:
                 raise ModbusError(ILLEGAL_ADDRESS, "the mailbox takes sender and target in one "
                                   f"FC16 at {self.MAILBOX}..{self.MAILBOX + 1}")
             sender, target = values
-            external = self.config.nc.external
-            if sender not in external or not 1 <= target <= self.config.nc.processes:
-                raise ModbusError(ILLEGAL_VALUE, f"SND from {sender} to {target}: the sender "
-                                  "must be an external process, the target a configured one")
-            try:
-                backend.send(sender, target, who)
-            except ValueError as exc:  # e.g. the target runs no program
-                raise ModbusError(DEVICE_FAILURE, str(exc)) from None
+            backend.apply(Snd(sender, target, source))  # refusals: codes.REFUSAL
 
     def check_register_values(self, address: int, values: Sequence[int]) -> None:
         """Validate a write without doing it (FC23 checks its write before anything happens;

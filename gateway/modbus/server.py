@@ -47,20 +47,23 @@ from pymodbus.pdu.register_message import (
 )
 
 from ncgate.config import ModbusConfig
+from ncgate.errors import InputRefused
 from ncgate.gateway import identity
 from ncgate.gateway.errors import ModbusError, listen_error
 from ncgate.gateway.modbus import security
-from ncgate.gateway.modbus.map import (
+from ncgate.gateway.modbus.codes import (
     DEVICE_FAILURE,
     ILLEGAL_ADDRESS,
     ILLEGAL_FUNCTION,
     ILLEGAL_VALUE,
+    REFUSAL,
     TARGET_NO_RESPONSE,
-    ModbusMap,
-    Table,
 )
+from ncgate.gateway.modbus.map import ModbusMap, Table
 from ncgate.gateway.modbus.security import TlsSession
+from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
+from ncgate.inputs import Source, SourceKind
 
 log = logging.getLogger("ncgate.modbus")
 
@@ -72,23 +75,6 @@ WRITE_LOW_WATER: Final = 64 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
 
 
-class RateLimitedLog:
-    """One warning line per interval at most; the lines held back are counted in the next."""
-
-    def __init__(self, interval_s: float = 1.0) -> None:
-        self.interval_s = interval_s
-        self.last = float("-inf")
-        self.held = 0
-
-    def note(self, line: str) -> None:
-        now = asyncio.get_running_loop().time()
-        if now - self.last < self.interval_s:
-            self.held += 1
-            return
-        more = f" (and {self.held} more like it)" if self.held else ""
-        self.held = 0
-        self.last = now
-        log.warning("%s%s", line, more)
 _MBAP = struct.Struct(">HHHB")
 _ADDRESS_COUNT = struct.Struct(">HH")
 # A read-registers answer PDU of n registers: function code, byte count, the registers.
@@ -174,7 +160,7 @@ class RequestHandler:
         self.identity = {k: v.encode("utf-8")[:240].decode("utf-8", "ignore").encode("utf-8")
                          for k, v in texts.items()}
 
-    def handle(self, unit: int, pdu: bytes, who: str,
+    def handle(self, unit: int, pdu: bytes, source: Source,
                writable: frozenset[str] | None = None) -> bytes:
         """The answer PDU.  ``writable``: the map regions this client's role may write (None:
         no roles, as on plain Modbus/TCP); a write elsewhere is exception 01."""
@@ -206,11 +192,13 @@ class RequestHandler:
                 raise ModbusError(ILLEGAL_VALUE, "undecodable")
             if writable is not None and fc in WRITES:
                 self._authorise(fc, request, writable)
-            return self._execute(fc, request, pdu, who)
+            return self._execute(fc, request, pdu, source)
         except ModbusError as exc:
             return exception_pdu(fc, exc.code)
+        except InputRefused as exc:  # the door refused it: nothing was applied
+            return exception_pdu(fc, REFUSAL[exc.reason])
         except Exception:  # a bug of ours must not take the connection down
-            log.exception("modbus: request %s from %s failed", pdu.hex(), who)
+            log.exception("modbus: request %s from %s failed", pdu.hex(), source)
             return exception_pdu(fc, DEVICE_FAILURE)
 
     def _device_identification(self, code: int, object_id: int) -> bytes:
@@ -255,7 +243,7 @@ class RequestHandler:
                 raise ModbusError(ILLEGAL_FUNCTION, f"this client's role may not write "
                                   f"{region.name}")
 
-    def _execute(self, fc: int, request: Any, pdu: bytes, who: str) -> bytes:
+    def _execute(self, fc: int, request: Any, pdu: bytes, who: Source) -> bytes:
         m, backend = self.map, self.backend
         if fc == 1:
             bits = m.read_bits(backend, Table.COILS, request.address, request.count)
@@ -310,7 +298,8 @@ class _Connection(asyncio.Protocol):
         self.handle = server.handler.handle
         self.buffer = bytearray()
         self.transport: asyncio.Transport | None = None
-        self.who = "modbus ?"
+        self.source = Source(SourceKind.MODBUS_TLS if tls is not None else SourceKind.MODBUS)
+        self.who = str(self.source)  # for the log: the source, and the address if it has none
         self.loop = asyncio.get_running_loop()
         self.last_activity = self.loop.time()
         self.partial_since: float | None = None
@@ -320,7 +309,9 @@ class _Connection(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
         peer = transport.get_extra_info("peername") or ("?", 0)
-        self.who = f"modbus {peer[0]}:{peer[1]}"
+        address = f"{peer[0]}:{peer[1]}"
+        self.source = Source(self.source.kind, address, address)
+        self.who = str(self.source)
         server = self.server
         if not server.allowed(peer[0]):
             server.refusals.note(f"{self.who} refused: not in the allow-list")
@@ -389,7 +380,7 @@ class _Connection(asyncio.Protocol):
             # bench/modbus.py, 16 connections).  Any other case goes through _process.
             tid, protocol, length, unit = _MBAP.unpack_from(data)
             if len(data) == 6 + length and protocol == 0 and length <= 254:
-                answer = self.handle(unit, data[7:], self.who, self.writable)
+                answer = self.handle(unit, data[7:], self.source, self.writable)
                 assert self.transport is not None
                 self.transport.write(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
                 self.partial_since = None
@@ -432,7 +423,8 @@ class _Connection(asyncio.Protocol):
                         self.who, exc)
             role = None
         self.writable = self.server.config.roles.get(role, frozenset()) if role else frozenset()
-        self.who += f" role {role}" if role else " (no role)"
+        self.source = Source(SourceKind.MODBUS_TLS, role or "(no role)", self.source.peer)
+        self.who = f"{self.source} {self.source.peer}"
         self.partial_since = None
         log.info("%s: %s established", self.who, self.tls.version())
 
@@ -456,7 +448,7 @@ class _Connection(asyncio.Protocol):
                 break
             pdu = bytes(buffer[7:end])
             del buffer[:end]
-            answer = handle(unit, pdu, self.who, self.writable)
+            answer = handle(unit, pdu, self.source, self.writable)
             out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
             answered = True
             size += len(answer) + 7
@@ -510,7 +502,7 @@ class ModbusServer:
         self.config = config
         self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids),
                                       config.strict_unit_id)
-        self.refusals = RateLimitedLog()
+        self.refusals = RateLimitedLog(log)
         self.connections: set[_Connection] = set()
         self.all_closed = asyncio.Event()
         self.connections_changed = asyncio.Event()  # set when a connection goes

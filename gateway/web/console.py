@@ -35,14 +35,13 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from ncgate.config.loader import WebConfig, is_loopback
+from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
-from ncgate.gateway.wiring import parse_assignment
-from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
-from ncgate.plc.image import PlcError
+from ncgate.inputs import Command, CommandKind, Source, SourceKind, Start, Var, Write
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
@@ -54,6 +53,24 @@ PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients k
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
 COMMANDS = {"start": 1, "hold": 2, "reset": 3}
+# Why the door refused an input -> the HTTP status the API answers (the JSON body says the
+# reason in words).  Total: a test checks that every Reason has a row.
+HTTP_STATUS: dict[Reason, int] = {
+    Reason.UNKNOWN_VARIABLE: 422,
+    Reason.OUTSIDE_IMAGE: 422,
+    Reason.BAD_VALUE: 422,
+    Reason.READ_ONLY: 403,
+    Reason.UNKNOWN_PROCESS: 422,
+    Reason.EXTERNAL_PROCESS: 409,
+    Reason.NOT_EXTERNAL: 422,
+    Reason.BUSY: 409,
+    Reason.NOT_RUNNING: 409,
+    Reason.NOT_CONFIGURED: 409,
+    Reason.PROGRAM_NOT_FOUND: 404,
+    Reason.PROGRAM_INVALID: 422,
+    Reason.ROLE_FORBIDS: 403,
+    Reason.UNSUPPORTED: 422,
+}
 ASSETS = ("index.html", "app.js", "style.css")
 _TYPES = {"html": "text/html", "js": "text/javascript", "css": "text/css"}
 
@@ -86,9 +103,10 @@ class WebConsole:
 
     # -- life -----------------------------------------------------------------------------
 
-    async def start(self) -> bool:
-        """Listen.  False: the default port is taken and the console stays off (``run`` goes on
-        without it); a port set in the config that is taken raises OSError naming the key."""
+    async def start(self) -> None:
+        """Listen.  The default port taken: the console stays off, ``address`` None (``run``
+        goes on without it); a port set in the config that is taken raises OSError naming
+        the key."""
         loop = asyncio.get_running_loop()
         app = web.Application(middlewares=[self._guard], client_max_size=BODY_LIMIT)
         app.router.add_get("/", self._asset("index.html"))
@@ -113,14 +131,13 @@ class WebConsole:
             if self.config.port is None and port:
                 log.warning("web console off: %s:%d is taken (%s); set web.port or --web "
                             "HOST:PORT", self.config.host, port, exc.strerror)
-                return False
+                return
             raise listen_error(exc, "web.port", self.config.host, port) from None
         self._runner = runner
         host, bound = runner.addresses[0][:2]  # the port asked for may be 0
         self.address = (host, bound)
         self._feed = EventFeed(loop)
         self._unsubscribe = self.gw.runtime.trace.subscribe(self._feed.listen)
-        return True
 
     async def close(self) -> None:
         if self._unsubscribe is not None:
@@ -301,13 +318,12 @@ class WebConsole:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ApiError(400, f'"value": expected a whole number, got {value!r}')
         try:
-            (area, index, view), number = parse_assignment(f"{var.strip()}={value}")
-            self.gw.image.check(area, index, view, number)
-        except (ValueError, PlcError) as exc:
-            raise ApiError(422, f"{var}: {exc}") from None
-        self.gw.apply_writes([(area, index, view, number)], "web", _peer(request))
-        log.info("web %s: %s = %d", request.remote, var.strip().upper(), number)
-        return web.json_response({"var": var.strip().upper(), "value": number})
+            item = Write(Var.parse(var), value, _source(request))
+            self.gw.apply(item)
+        except InputRefused as exc:
+            raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
+        log.info("web %s: %s = %d", request.remote, item.var, value)
+        return web.json_response({"var": str(item.var), "value": value})
 
     async def _command(self, request: web.Request) -> web.StreamResponse:
         body = await self._body(request)
@@ -316,38 +332,41 @@ class WebConsole:
             raise ApiError(400, f"\"command\": expected one of {', '.join(COMMANDS)}, got "
                            f"{command!r}")
         program, process = body.get("program"), body.get("process", 1)
+        source = _source(request)
         if program is None:
             if "process" in body:
                 raise ApiError(400, '"process" goes with "program"')
-            self.gw.command(COMMANDS[command], "web")
-            log.info("web %s: %s", request.remote, command)
-            return web.json_response({"command": command})
-        if command != "start":
+            item: Command | Start = Command(CommandKind(COMMANDS[command]), None, source)
+        elif command != "start":
             raise ApiError(400, '"program" goes with the "start" command')
-        processes = self.gw.config.nc.processes
-        if not isinstance(program, str) or not program or (
-                isinstance(process, bool) or not isinstance(process, int)
-                or not 1 <= process <= processes):
-            raise ApiError(400, f'expected {{"command": "start", "program": NAME, "process": '
-                           f"1..{processes}}}")
+        else:
+            processes = self.gw.config.nc.processes
+            if not isinstance(program, str) or not program or (
+                    isinstance(process, bool) or not isinstance(process, int)
+                    or not 1 <= process <= processes):
+                raise ApiError(400, f'expected {{"command": "start", "program": NAME, '
+                               f'"process": 1..{processes}}}')
+            item = Start(program, process, source)
         try:
-            await self.gw.start(program, process)
-        except ProgramNotFoundError as exc:
-            raise ApiError(404, str(exc)) from None
-        except ProgramError as exc:
-            raise ApiError(422, str(exc)) from None
-        except ValueError as exc:  # busy, or external
-            raise ApiError(409, str(exc)) from None
-        log.info("web %s: start %s in P%d", request.remote, program, process)
-        return web.json_response({"command": command, "program": program, "process": process})
+            self.gw.apply(item)
+        except InputRefused as exc:
+            raise ApiError(HTTP_STATUS[exc.reason], str(exc)) from None
+        if isinstance(item, Start):
+            log.info("web %s: start %s in P%d", request.remote, program, process)
+            return web.json_response({"command": command, "program": program,
+                                      "process": process})
+        log.info("web %s: %s", request.remote, command)
+        return web.json_response({"command": command})
+
+
+def _source(request: web.Request) -> Source:
+    """The console's attribution: ``web`` and the browser's address."""
+    peer = request.remote or "?"
+    return Source(SourceKind.WEB, peer, peer)
 
 
 def _error(status: int, message: str, headers: dict[str, str]) -> web.Response:
     return web.json_response({"error": message}, status=status, headers=headers)
-
-
-def _peer(request: web.Request) -> str:
-    return f"web {request.remote or '?'}"
 
 
 def _int_query(request: web.Request, name: str, default: int) -> int:

@@ -101,7 +101,7 @@ def fieldbus(gw: Gateway) -> dict[str, Any]:
         out["modbus"] = {
             "address": list(server.address) if server.address else None,
             "tls_address": list(server.tls_address) if server.tls_address else None,
-            "clients": sorted(c.who.removeprefix("modbus ") for c in server.connections),
+            "clients": sorted(c.source.peer or c.source.detail for c in server.connections),
             "max_clients": server.config.max_clients,
         }
     node = gw.canopen_node

@@ -163,15 +163,16 @@ class Engine(SyncRules):
         self._start_program(p, program, by)
         self._kick()
 
-    def cycle_start(self) -> None:
-        """Fieldbus command 1: resume after a feed hold, or start ``main`` in process 1."""
+    def cycle_start(self, by: str = "api") -> None:
+        """Command 1: resume after a feed hold, or start ``main`` in process 1 (``by``: who
+        gave the command, as its input's source says)."""
         if any(p.held for p in self.processes.values()):
             self.hold(False)
             return
         p1 = self.processes[1]
         if self.settings.main and p1.loaded is None and p1.alarm is None:
             try:
-                self.start(self.settings.main, 1, by="fieldbus")
+                self.start(self.settings.main, 1, by=by)
             except (ProgramError, ProgramNotFoundError) as exc:
                 self._alarm(p1, AlarmCode.PROGRAM_NOT_FOUND
                             if isinstance(exc, ProgramNotFoundError)
@@ -351,7 +352,7 @@ class Engine(SyncRules):
         """Record an image write in the trace (the gateway forwards the image's changes)."""
         self.last_change = self.now
         p = self._writer_proc
-        if p is not None and who.startswith(f"P{p.number} "):  # at the writing block
+        if p is not None:  # a program's write (write_image): at the writing block
             self._record(ev.Write, self.now, p.number, self._writer_where, name, value, who)
         else:
             self._record(ev.Write, self.now, 0, None, name, value, who)

@@ -58,7 +58,7 @@ class Start(NamedTuple):
     proc: int
     where: Where | None
     prog: str
-    by: int | str  # a process number, "operator" or "fieldbus"
+    by: int | str  # a process number (an EXE), or the input's source ("web 127.0.0.1", ...)
 
     @property
     def kind(self) -> str:

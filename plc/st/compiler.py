@@ -195,6 +195,11 @@ class E:
     exact: bool = True
 
 
+def nc_where(span: n.Span) -> str:
+    """``FILE:LINE`` of a statement acting on the NC, as its commands are attributed."""
+    return f"{span.file.replace(chr(92), '/').rsplit('/', 1)[-1]}:{span.line}"
+
+
 @dataclass(frozen=True, slots=True)
 class Place:
     """Something that can be read and perhaps written."""
@@ -717,7 +722,7 @@ class Compiler:
                     raise self.error(StCode.EXTERNAL_SENDER, f"process {e.const} is not "
                                      "external: the PLC sends only in the name of an external "
                                      "process ([[nc.process]] external = true)", arg.span)
-        self.out.emit(f"_NC_SEND({codes[0]}, {codes[1]})", s.span)
+        self.out.emit(f"_NC_SEND({codes[0]}, {codes[1]}, {nc_where(s.span)!r})", s.span)
 
     def members(self, fb: FbOf) -> dict[str, tuple[str, Type]]:
         if fb.std:
@@ -1156,8 +1161,11 @@ class Scope:
                           "RESET and SEND", var.span)
         name = first.name.upper()
         if name in NC_OUTPUTS and len(sels) == 1:
-            code = f"_NCO[{NC_OUTPUTS[name]}]"
-            return Place(code, "BOOL", lambda v: f"{code} = {v}")
+            slot = NC_OUTPUTS[name]
+            code, at = f"_NCO[{slot}]", nc_where(var.span)
+            # The output's value, and where the logic set it: the command it gives is
+            # attributed "plc FILE:LINE".
+            return Place(code, "BOOL", lambda v: f"{code} = {v}; _NCW[{slot}] = {at!r}")
         place: Place | None = None
         if name == "EVENTS" and len(sels) == 1:
             place = Place("_NCE", "UDINT", None, "NC.EVENTS is an input")
@@ -1295,7 +1303,8 @@ class Logic:
         self._filename = f"<ncgate-st {id(self):x}>"
         self.namespace: dict[str, Any] = dict(HELPERS)
         self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
-                              _NCO=[False, False, False], _NC_SEND=lambda s, t: None)
+                              _NCO=[False, False, False], _NCW=["", "", ""],
+                              _NC_SEND=lambda s, t, w: None)
         code = compile(source, self._filename, "exec")
         exec(code, self.namespace)
         self.programs: dict[str, dict[str, ProgramVar]] = {}

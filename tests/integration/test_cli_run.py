@@ -57,7 +57,7 @@ async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int
         code = await proc.wait()
     log = "".join(lines) + rest
     assert code == 0, log
-    assert "P1 starts PROG91 (by operator)" in log
+    assert "P1 starts PROG91 (by api nc.autostart)" in log
     assert f"event loop: {loop}" in log
     assert "connected" in log and "stopped" in log
     assert "Traceback" not in log and "Task was destroyed" not in log
@@ -198,7 +198,7 @@ async def test_run_logs_every_sync_event_in_a_line(tmp_path: Path) -> None:
                 lines.append(line)
         return next(line for line in lines if text in line)
 
-    await line_with("P1 starts PROG91 (by operator)")
+    await line_with("P1 starts PROG91 (by api nc.autostart)")
     await line_with("P1 EXE PROG92 in P2 at PROG91.nc:4 N1")
     await line_with("P2 waits at PROG92.nc:8 N40 for SA10=1 (now 0)")
     client = AsyncModbusTcpClient("127.0.0.1", port=port)
@@ -240,10 +240,10 @@ async def test_run_quiet_says_warnings_only_and_records_the_session(tmp_path: Pa
     assert "WARNING ncgate: P1 ALARM AL101 at ZERO.nc:2 N2: division by zero" in log
     assert " INFO " not in log, log  # -q: warnings and errors only
     lines = [json.loads(line) for line in record.read_text().splitlines()]
-    assert lines[0]["ncgate_record"] == 1 and lines[0]["config"] == str(config)
+    assert lines[0]["ncgate_record"] == 2 and lines[0]["config"] == str(config)
     assert lines[0]["overrides"]["nc.autostart"] is True
     starts = [line for line in lines if line.get("input") == "start"]
-    assert starts == [{"input": "start", "t": starts[0]["t"], "prog": "ZERO", "proc": 1,
-                       "by": "operator"}]
+    assert starts == [{"input": "start", "t": starts[0]["t"], "who": "api nc.autostart",
+                       "peer": None, "prog": "ZERO", "proc": 1}]
     assert any(line.get("event") == "alarm" for line in lines)
     assert "stop" in lines[-1]

@@ -8,9 +8,12 @@ from pathlib import Path
 import pytest
 
 from ncgate.gateway import Gateway, ProcessAlarmError, WaitIdleTimeout, load_config
+from ncgate.inputs import Source, SourceKind
 from ncgate.interpreter.engine import events as ev
 
 from ..conftest import EXAMPLES
+
+TEST_PLC = Source(SourceKind.API, "test PLC")
 
 FREE_PORT = {"modbus.port": 0}
 
@@ -26,13 +29,13 @@ async def test_scheme3_with_the_test_playing_the_plc() -> None:
         await gw.wait_state(2, "WAIT_COND", timeout_s=10)
         status = gw.status(2)
         assert status.wait is not None and status.wait.cond == "SA10=1" and status.n == 40
-        gw.write("SA10", 1, who="test PLC")
+        gw.write("SA10", 1, source=TEST_PLC)
         await gw.wait_idle(timeout_s=20)
         events = gw.trace
     write = next(i for i, e in enumerate(events) if e["event"] == "write" and e["var"] == "SA10")
     resume = next(i for i, e in enumerate(events) if e["event"] == "resume" and e["proc"] == 2
                   and e["n"] == 40)
-    assert events[write]["who"] == "test PLC" and write < resume
+    assert events[write]["who"] == "api test PLC" and write < resume
     assert events[resume]["by"] == "cond"
     ends = [(e["proc"], e["how"]) for e in events if e["event"] == "end"]
     assert sorted(ends) == [(1, "M30"), (2, "REL"), (2, "REL"), (3, "REL"), (3, "REL")]
@@ -46,7 +49,7 @@ async def test_a_write_wakes_its_wait_at_once(tmp_path: Path) -> None:
     async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
         await gw.start()
         await gw.wait_state(1, "WAIT_COND", timeout_s=5)
-        gw.write("SK7", 3, who="test PLC")
+        gw.write("SK7", 3, source=TEST_PLC)
         assert gw.status(1).state.name == "IDLE"  # resumed and ended, before any await
         await gw.wait_idle(timeout_s=5)
         write, resume = (next(e for e in gw.trace if e["event"] == kind)
@@ -88,7 +91,7 @@ async def test_command_word_and_external_snd(tmp_path: Path) -> None:
         gw.send(4, 1)
         await gw.wait_idle(timeout_s=5)
         starts = [e["by"] for e in gw.trace if e["event"] == "start"]
-        assert starts == ["fieldbus"]
+        assert starts == ["api"]
         assert [e["by"] for e in gw.trace if e["event"] == "resume"] == [4]
 
 

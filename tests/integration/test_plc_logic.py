@@ -15,6 +15,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from ncgate.config import load_config
 from ncgate.config.script import Script
 from ncgate.gateway import Gateway
+from ncgate.gateway.door import Door
 from ncgate.gateway.sim import run_sim
 from ncgate.gateway.testing.canopen_kit import CanopenMaster
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
@@ -275,7 +276,7 @@ def test_scans_keep_their_grid_and_count_the_ones_the_loop_missed(tmp_path: Path
     engine = runtime.engine
     lateness = {0.02: 0.035}  # the scan due at 20 ms runs with the wall clock at 55 ms
     scanned: list[float] = []
-    started = start_plc(config, engine, runtime.image, closed=False,
+    started = start_plc(config, runtime, Door(runtime), closed=False,
                         wall=lambda: engine.now + lateness.get(round(engine.now, 3), 0.0))
     assert started is not None
     plc, _ = started

@@ -18,6 +18,7 @@ from ncgate.gateway.record import replay as run_replay
 from ncgate.gateway.testing import replay
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.inputs import Command, CommandKind, Var, Writes
 
 
 @pytest.fixture
@@ -52,12 +53,23 @@ async def test_a_recorded_session_replays_and_matches(cell: Path, tmp_path: Path
     await record_session(cell, record)
     recording = read_record(record)
     assert recording.header["config"] == str(cell)
-    assert set(recording.header["programs"]) == {
+    # The files the session used, and only those: the config, then each program it read.
+    assert set(recording.header["files"]) == {str(cell)}
+    assert set(recording.programs) == {
         str((cell.parent / "programs" / n).resolve()) for n in
         ("PROG91.nc", "PROG92.nc", "PROG93.nc")}
-    kinds = [(i["input"], i.get("word"), i.get("changes")) for i in recording.inputs]
-    assert kinds == [("command", 1, None), ("write", None, [["SA", 10, "bit", 1]])]
-    assert all(i["who"].startswith("modbus 127.0.0.1:") for i in recording.inputs)
+    inputs = [i.input for i in recording.inputs]
+    assert inputs == [Command(CommandKind.CYCLE_START, None, inputs[0].source),
+                      Writes(((Var("SA", 10, "bit"), 1),), inputs[1].source)]
+    assert all(str(i.source).startswith("modbus 127.0.0.1:") for i in inputs)
+    # Each input's line comes before the events it caused.
+    lines = [json.loads(line) for line in record.read_text().splitlines()]
+    command = next(n for n, line in enumerate(lines) if line.get("input") == "command")
+    first_start = next(n for n, line in enumerate(lines) if line.get("event") == "start")
+    write = next(n for n, line in enumerate(lines) if line.get("input") == "write")
+    sa10 = next(n for n, line in enumerate(lines)
+                if line.get("event") == "write" and line["var"] == "SA10")
+    assert command < first_start and write < sa10
     assert recording.stop is not None
     assert recording.events[-1]["event"] == "end"
 
@@ -127,7 +139,9 @@ async def test_a_record_cut_by_a_kill_replays_up_to_its_last_whole_line(
     record.write_text(cut_text)
     recording = read_record(record)
     assert recording.stop is None
-    assert len(recording.events) + len(recording.inputs) == len(cut) - 2
+    whole = [json.loads(line) for line in cut[1:-1]]
+    assert len(recording.events) + len(recording.inputs) == sum(
+        1 for line in whole if "seq" in line or "input" in line)
     result = run_replay(record)
     assert result.divergence is None, result.divergence
 
@@ -135,8 +149,9 @@ async def test_a_record_cut_by_a_kill_replays_up_to_its_last_whole_line(
 @pytest.mark.parametrize(("text", "said"), [
     ("", "empty"),
     ('{"seq": 1}\n', "not an ncgate session record"),
-    ('{"ncgate_record": 1}\nnot json\n{"stop": 1}\n', ":2: not a JSON line"),
-    ('{"ncgate_record": 1}\n{"what": 1}\n', ":2: neither an input"),
+    ('{"ncgate_record": 1}\n', "format 1, from an older ncgate"),
+    ('{"ncgate_record": 2}\nnot json\n{"stop": 1}\n', ":2: not a JSON line"),
+    ('{"ncgate_record": 2}\n{"what": 1}\n', ":2: neither an input"),
 ])
 def test_a_file_that_is_not_a_record_is_a_usage_error(
         tmp_path: Path, text: str, said: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -149,6 +164,58 @@ def test_a_file_that_is_not_a_record_is_a_usage_error(
 def test_replay_goes_without_a_program_or_a_script(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     record = tmp_path / "r.jsonl"
-    record.write_text(json.dumps({"ncgate_record": 1}) + "\n")
+    record.write_text(json.dumps({"ncgate_record": 2}) + "\n")
     assert main(["sim", "PROG91", "--replay", str(record)]) == 2
     assert "--replay takes its programs" in capsys.readouterr().err
+
+
+# -- a record that never lies ---------------------------------------------------------------
+
+GOOD = {"t": 0.5, "who": "modbus 127.0.0.1:40312", "peer": "127.0.0.1:40312"}
+MALFORMED = [
+    ({"input": "teleport", **GOOD}, 'unknown kind "teleport"'),
+    ({"input": "write", **GOOD}, '"changes" is missing'),
+    ({"input": "write", **GOOD, "changes": [["SA", "10", "bit", 1]]}, "not [area, index"),
+    ({"input": "write", **GOOD, "changes": [["XY", 1, "bit", 1]]}, "names no image variable"),
+    ({"input": "write", **GOOD, "changes": [["SA", 99999, "bit", 1]]}, "outside the image"),
+    ({"input": "command", **GOOD, "command": "launch"}, '"command": expected cycle_start'),
+    ({"input": "command", **GOOD}, '"command" is missing'),
+    ({"input": "snd", **GOOD, "from": "4", "to": 1}, '"from": expected a process number'),
+    ({"input": "start", **GOOD, "proc": 1}, '"prog" is missing'),
+    ({"input": "alarm", **GOOD, "code": 150}, '"message" is missing'),
+    ({"input": "command", **GOOD, "t": "soon", "command": "reset"}, '"t": expected a time'),
+    ({"input": "command", **GOOD, "who": "martian", "command": "reset"}, '"who"'),
+    ({"seq": 1, "t": 0.0, "event": "start", "prog": "A"}, '"proc" is missing'),
+    ({"seq": 1, "t": "0", "event": "start", "proc": 1}, '"t": expected a time'),
+    ({"seq": 1, "t": 0.0, "event": "explode", "proc": 1}, 'unknown event "explode"'),
+]
+
+
+@pytest.mark.parametrize(("line", "said"), MALFORMED)
+def test_a_malformed_line_is_an_error_naming_its_line(
+        cell: Path, tmp_path: Path, line: dict[str, object], said: str,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    record = tmp_path / "r.jsonl"
+    header = {"ncgate_record": 2, "config": str(cell), "overrides": {}, "files": {}}
+    fine = {"input": "command", **GOOD, "command": "cycle_start", "process": None}
+    record.write_text("".join(json.dumps(x) + "\n" for x in (header, fine, line,
+                                                             {"stop": 1.0})))
+    assert main(["sim", "--replay", str(record)]) == 2  # never a traceback, never a match
+    err = capsys.readouterr().err
+    assert f"{record}:3: " in err and said in err, err
+
+
+async def test_every_prefix_of_a_session_replays_as_a_match(cell: Path,
+                                                            tmp_path: Path) -> None:
+    """Cut at every line, as kill -9 or a full disk may: what is left replays, matches up to
+    the cut and never crashes; a cut record never claims more than it saw."""
+    record = tmp_path / "session.jsonl"
+    await record_session(cell, record)
+    lines = record.read_text().splitlines(keepends=True)
+    assert len(lines) > 40
+    prefix = tmp_path / "prefix.jsonl"
+    for n in range(1, len(lines) + 1):
+        prefix.write_text("".join(lines[:n]))
+        result = run_replay(prefix)
+        assert result.divergence is None, (n, lines[n - 1], result.divergence)
+        assert result.warnings == []

@@ -95,7 +95,7 @@ def test_scheme3_two_cycles() -> None:
     # P2 waits at N40 for SA10 = 1 from the PLC (script: 0.5 s after P2 starts waiting).
     wait_40 = index(ev, event="wait", proc=2, n=40)
     assert ev[wait_40]["on"] == {"cond": "SA10=1", "value": 0}
-    write_sa10 = index(ev, event="write", var="SA10", value=1, who="script")
+    write_sa10 = index(ev, event="write", var="SA10", value=1, who="script write[0]")
     assert ev[write_sa10]["t"] == pytest.approx(ev[wait_40]["t"] + 0.5)
     resume_40 = index(ev, event="resume", proc=2, n=40)
     assert write_sa10 < resume_40 and ev[resume_40]["by"] == "cond"
@@ -132,7 +132,7 @@ def test_section4() -> None:
     assert result.exit_status == 0
     ev = result.events
     starts = [(e["proc"], e["prog"], e["by"]) for e in ev if e["event"] == "start"]
-    assert starts == [(1, "PR90", "operator"), (2, "PR98", 1), (3, "PR99", 1), (2, "PR100", 1),
+    assert starts == [(1, "PR90", "script"), (2, "PR98", 1), (3, "PR99", 1), (2, "PR100", 1),
                       (3, "PR101", 1)]
     # PR99 does not pass N1 before PR90's N7 SND.
     snd7 = index(ev, event="snd", proc=1, n=7, to=3)

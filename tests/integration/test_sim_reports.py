@@ -126,7 +126,7 @@ def test_several_programs_start_each_in_its_own_process(
                  "--trace", str(tmp_path / "t.jsonl")]) == 0
     events = [json.loads(line) for line in (tmp_path / "t.jsonl").read_text().splitlines()]
     starts = [(e["proc"], e["prog"], e["by"]) for e in events if e["event"] == "start"]
-    assert starts == [(1, "A", "operator"), (2, "B", "operator"), (3, "C", "operator")]
+    assert starts == [(1, "A", "script"), (2, "B", "script"), (3, "C", "script")]
     assert [e["t"] for e in events if e["event"] == "end" and e["proc"] == 1] == [1.2]
     capsys.readouterr()
     # More programs than processes, or one for an external process: a usage error.

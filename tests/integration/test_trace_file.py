@@ -12,10 +12,13 @@ from pathlib import Path
 
 from ncgate.gateway import Gateway, load_config
 from ncgate.gateway.tracefile import TraceFile
+from ncgate.inputs import Source, SourceKind
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.trace import Trace
 
 from ..conftest import EXAMPLES
+
+TEST_PLC = Source(SourceKind.API, "test PLC")
 
 
 def lines_of(*paths: Path) -> list[dict[str, object]]:
@@ -67,7 +70,7 @@ async def test_gateway_keeps_a_window_in_memory_and_everything_on_disk(tmp_path:
     async with Gateway(config) as gw:
         await gw.start("PROG91")
         await gw.wait_state(2, "WAIT_COND", timeout_s=10)
-        gw.write("SA10", 1, who="test PLC")
+        gw.write("SA10", 1, source=TEST_PLC)
         await gw.wait_idle(timeout_s=20)
         window = gw.trace
         last_seq = gw.runtime.trace.seq

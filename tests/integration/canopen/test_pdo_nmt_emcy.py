@@ -48,7 +48,7 @@ async def test_pdos_flow_only_in_operational(gw: Gateway, master: Master) -> Non
     assert bytes(gw.image.sa[:8]) == bytes(range(1, 9))
     assert bytes(gw.image.k[:8]) == bytes(range(11, 19))
     who = {e["who"] for e in gw.trace if e["event"] == "write"}
-    assert who == {"canopen 0x210", "canopen 0x310"}
+    assert who == {"canopen RPDO1 0x210", "canopen RPDO2 0x310"}
     master.nmt(0x80)  # back to pre-operational: no more PDOs
     await master.upload(0x1000, 0)  # the NMT command has been handled by now
     master.network.send_message(0x210, bytes(8))

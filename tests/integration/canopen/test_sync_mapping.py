@@ -118,7 +118,7 @@ async def test_synchronous_rpdo_is_applied_at_the_next_sync(gw: Gateway, master:
     await master.barrier()
     assert gw.read("SA0.BY") == 0x07
     writes = [e for e in gw.trace if e["event"] == "write" and e["var"].startswith("SA")]
-    assert {e["who"] for e in writes} == {"canopen 0x210"}
+    assert {e["who"] for e in writes} == {"canopen RPDO1 0x210"}
 
 
 async def test_sync_cob_id_moves(gw: Gateway, master: Master) -> None:

@@ -61,4 +61,4 @@ async def test_the_documented_recipe_gives_a_working_operator(cell: Path) -> Non
         finally:
             client.close()
         assert gw.read("SYVAR0") == 42
-        assert any("role Operator" in e["who"] for e in gw.trace if e["event"] == "write")
+        assert any(e["who"] == "modbus-tls Operator" for e in gw.trace if e["event"] == "write")

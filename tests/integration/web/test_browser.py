@@ -148,7 +148,7 @@ def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
                             for row in d.find_elements(By.CSS_SELECTOR, "#log tbody tr")))
         until(browser, "a longer timeline",
               lambda d: len(d.find_elements(By.CSS_SELECTOR, "#timeline rect.seg")) > segments)
-        assert run.wait_for("P2 resumes at PROG92.nc:8 N40 (by cond, written by web)")
+        assert run.wait_for("P2 resumes at PROG92.nc:8 N40 (by cond, written by web 127.0.0.1)")
 
         # The server goes away: the page says so, and comes back by itself with the new run.
         run.stop()

@@ -97,19 +97,19 @@ async def test_a_write_is_stored_as_web_and_releases_the_wait(
     code, body = await post(http, "/api/write", {"var": "sa10", "value": 1})
     assert (code, body) == (200, {"var": "SA10", "value": 1})
     assert gw.read("SA10") == 1
-    assert gw.image.last_writer("SA", 10, "bit") == "web"
+    assert gw.image.last_writer("SA", 10, "bit") == "web 127.0.0.1"
     resumed = [e for e in gw.trace if e["event"] == "resume" and e["proc"] == 2]
     assert resumed and resumed[0]["by"] == "cond"
     async with http.get("/api/status") as r:
         status = await r.json()
-    assert status["image"]["writers"]["SA"]["10"] == "web"
+    assert status["image"]["writers"]["SA"]["10"] == "web 127.0.0.1"
 
 
 @pytest.mark.parametrize(("body", "status", "said"), [
     ({"var": "SA5000", "value": 1}, 422, "outside the image"),
     ({"var": "SA10", "value": 2}, 422, "SA10"),
     ({"var": "SK3", "value": 256}, 422, "0..255"),
-    ({"var": "E1", "value": 1}, 422, "E parameters"),
+    ({"var": "E1", "value": 1}, 422, "not an image variable"),
     ({"var": "SA10", "value": True}, 400, "whole number"),
     ({"var": "SA10", "value": 1.5}, 400, "whole number"),
     ({"value": 1}, 400, "var"),
@@ -142,7 +142,7 @@ async def test_a_body_that_is_not_json_is_refused(gw: Gateway,
 async def test_commands_start_hold_and_reset(gw: Gateway, http: aiohttp.ClientSession) -> None:
     assert await post(http, "/api/command", {"command": "start"}) == (200, {"command": "start"})
     await gw.wait_state(2, "WAIT_COND")
-    assert gw.trace[0]["event"] == "start" and gw.trace[0]["by"] == "fieldbus"
+    assert gw.trace[0]["event"] == "start" and gw.trace[0]["by"] == "web 127.0.0.1"
     assert (await post(http, "/api/command", {"command": "hold"}))[0] == 200
     assert all(p.held for p in gw.engine.processes.values() if not p.external)
     assert (await post(http, "/api/command", {"command": "reset"}))[0] == 200
@@ -156,7 +156,7 @@ async def test_start_a_program_in_a_process(gw: Gateway, http: aiohttp.ClientSes
                             {"command": "start", "program": "PROG93", "process": 3})
     assert code == 200, body
     starts = [e for e in gw.trace if e["event"] == "start"]
-    assert (starts[0]["proc"], starts[0]["prog"], starts[0]["by"]) == (3, "PROG93", "operator")
+    assert (starts[0]["proc"], starts[0]["prog"], starts[0]["by"]) == (3, "PROG93", "web 127.0.0.1")
     code, body = await post(http, "/api/command",
                             {"command": "start", "program": "PROG93", "process": 3})
     assert code == 409 and "busy" in body["error"]

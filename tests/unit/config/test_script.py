@@ -8,6 +8,7 @@ import pytest
 
 from ncgate.config import ConfigError, load_config
 from ncgate.config.script import load_script
+from ncgate.gateway.door import Door
 from ncgate.gateway.sim import ScriptPlayer
 from ncgate.gateway.wiring import build_runtime
 
@@ -74,5 +75,5 @@ def test_entries_are_validated_against_the_config(tmp_path: Path, text: str,
     path = write(tmp_path, text)
     runtime = build_runtime(load_config(None), closed=True)
     with pytest.raises(ConfigError) as caught:
-        ScriptPlayer(runtime, load_script(path))
+        ScriptPlayer(runtime, load_script(path), Door(runtime))
     assert message in str(caught.value)

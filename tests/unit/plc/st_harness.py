@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from ncgate.errors import InputRefused, Reason
 from ncgate.plc.image import IOImage
 from ncgate.plc.scan import NcSnapshot, PlcRuntime
 from ncgate.plc.st.compiler import Context, compile_logic
@@ -20,6 +21,7 @@ class RecordingNc:
     event_count: int = 0
     last: tuple[int, int, int] = (0, 0, 0)
     commands: list[int] = field(default_factory=list)
+    where: list[str] = field(default_factory=list)  # FILE:LINE of each command
     sends: list[tuple[int, int]] = field(default_factory=list)
     faults: list[str] = field(default_factory=list)
     hazards: list[str] = field(default_factory=list)
@@ -34,12 +36,13 @@ class RecordingNc:
     def last_snd(self) -> tuple[int, int, int]:
         return self.last
 
-    def command(self, word: int) -> None:
+    def command(self, word: int, where: str = "") -> None:
         self.commands.append(word)
+        self.where.append(where)
 
-    def send(self, sender: int, target: int) -> None:
+    def send(self, sender: int, target: int, where: str = "") -> None:
         if self.refuse_sends:
-            raise ValueError(f"process {target} runs no program")
+            raise InputRefused(Reason.NOT_RUNNING, f"process {target} runs no program")
         self.sends.append((sender, target))
 
     def fault(self, message: str) -> None:

@@ -1,0 +1,188 @@
+"""The one door into the cell: validates a typed input (:mod:`ncgate.inputs`), records it,
+then applies it to the engine and the image.
+
+Every adapter reaches the engine through here -- Modbus, CANopen, the console and a Python
+program through :meth:`ncgate.gateway.Gateway.apply` (which adds the wall clock), the PLC
+logic's NC outputs, the sim script and a replayed record directly, on the virtual clock.
+``tests/test_door.py`` lists the call sites and fails when another way in appears.
+
+The order is the contract:
+
+1. **validate** everything (the variable inside the image, the value in range, the process
+   able to take it, the program found and checked): a refusal raises
+   :class:`~ncgate.errors.InputRefused` and nothing of the input is applied or recorded;
+2. bring the engine to the input's time (``sync``: the wall clock in ``run``);
+3. **record** it (``run --record``): the record's input line comes before every trace event
+   it causes, so a record cut anywhere never holds an effect without its cause.  Inputs of
+   the PLC logic are not recorded: a replay runs the same logic, which gives them again;
+4. **apply** it, attributed to ``str(input.source)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from ncgate.errors import InputRefused, Reason
+from ncgate.inputs import (
+    Command,
+    CommandKind,
+    FieldbusAlarm,
+    Input,
+    Snd,
+    SourceKind,
+    Start,
+    Var,
+    Write,
+    Writes,
+)
+from ncgate.interpreter.codes import AlarmCode
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from ncgate.plc.image import ImageAddressError, ImageValueError
+
+if TYPE_CHECKING:
+    from ncgate.gateway.wiring import Runtime
+    from ncgate.plc.scan import PlcRuntime
+
+Recorder = Callable[[Input, float], None]
+ImageChange = tuple[str, int, str, int]
+
+
+class Door:
+    """Applies inputs to one runtime (``run``'s, a ``sim``'s or a replay's)."""
+
+    def __init__(self, runtime: Runtime, plc: Callable[[], PlcRuntime | None] = lambda: None,
+                 sync: Callable[[], None] | None = None) -> None:
+        """``plc``: the PLC logic a reset restarts after a FAULT (asked at each reset);
+        ``sync``: brings the engine's clock to now before an input acts (the wall clock)."""
+        self.runtime = runtime
+        self._plc = plc
+        self._sync = sync
+        self.recorder: Recorder | None = None  # run --record: told before the effect
+
+    # -- the one entry ------------------------------------------------------------------------
+
+    def apply(self, item: Input) -> None:
+        """Validate, record and apply ``item``; InputRefused (nothing applied) otherwise."""
+        if isinstance(item, Write):
+            self._writes(((item.var, item.value),), item)
+        elif isinstance(item, Writes):
+            self._writes(item.changes, item)
+        elif isinstance(item, Command):
+            self._command(item)
+        elif isinstance(item, Snd):
+            self._snd(item)
+        elif isinstance(item, Start):
+            self._start(item)
+        elif isinstance(item, FieldbusAlarm):
+            self._alarm(item)
+        else:
+            raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
+
+    def _enter(self, item: Input) -> None:
+        """Validated: now, the record, then the effect."""
+        if self._sync is not None:
+            self._sync()
+        if self.recorder is not None and item.source.kind is not SourceKind.PLC:
+            self.recorder(item, self.runtime.engine.now)
+
+    # -- each kind ------------------------------------------------------------------------------
+
+    def image_changes(self, changes: tuple[tuple[Var, int], ...]) -> list[ImageChange]:
+        """The image writes of ``changes``, each checked against the image."""
+        image = self.runtime.image
+        out = []
+        for var, value in changes:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise InputRefused(Reason.BAD_VALUE, f"{var}: expected a whole number, got "
+                                   f"{value!r}")
+            try:
+                image.check(var.area, var.index, var.view, value)
+            except ImageAddressError as exc:
+                raise InputRefused(Reason.OUTSIDE_IMAGE, str(exc)) from None
+            except ImageValueError as exc:
+                raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
+            out.append((var.area, var.index, var.view, value))
+        return out
+
+    def _writes(self, changes: tuple[tuple[Var, int], ...], item: Write | Writes) -> None:
+        planned = self.image_changes(changes)
+        if not planned:
+            return
+        self._enter(item)
+        self.runtime.image.write(planned, str(item.source))
+
+    def _process(self, number: int) -> None:
+        processes = self.runtime.engine.processes
+        if isinstance(number, bool) or not isinstance(number, int) or number not in processes:
+            raise InputRefused(Reason.UNKNOWN_PROCESS, f"no process {number!r} (1.."
+                               f"{len(processes)})")
+
+    def _command(self, item: Command) -> None:
+        try:
+            kind = CommandKind(item.kind)
+        except ValueError:
+            raise InputRefused(Reason.BAD_VALUE, f"command {item.kind!r}: 1 cycle start, "
+                               "2 feed hold, 3 reset") from None
+        if item.process is not None:
+            self._process(item.process)
+            raise InputRefused(Reason.UNSUPPORTED, f"{kind.label} of one process: this "
+                               "version commands the whole cell (process null)")
+        self._enter(item)
+        engine = self.runtime.engine
+        if kind is CommandKind.CYCLE_START:
+            engine.cycle_start(by=str(item.source))
+        elif kind is CommandKind.FEED_HOLD:
+            engine.hold(True)
+        else:
+            engine.reset()
+            plc = self._plc()
+            if plc is not None:  # a reset also restarts a faulted PLC
+                plc.restart()
+
+    def _snd(self, item: Snd) -> None:
+        engine = self.runtime.engine
+        self._process(item.sender)
+        self._process(item.target)
+        if not engine.processes[item.sender].external:
+            raise InputRefused(Reason.NOT_EXTERNAL, f"SND from {item.sender}: only an "
+                               "external process sends from outside (nc.external)")
+        target = engine.processes[item.target]
+        if not target.external and (target.loaded is None or target.alarm is not None):
+            raise InputRefused(Reason.NOT_RUNNING, f"SND to process {item.target}, which "
+                               "runs no program")
+        self._enter(item)
+        engine.external_snd(item.sender, item.target)
+
+    def _start(self, item: Start) -> None:
+        runtime = self.runtime
+        name = item.program or runtime.config.nc.main
+        if not name:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no program named and no nc.main "
+                               "configured")
+        self._process(item.process)
+        p = runtime.engine.processes[item.process]
+        if p.external:
+            raise InputRefused(Reason.EXTERNAL_PROCESS, f"process {item.process} is external:"
+                               " it runs no part program")
+        if p.loaded is not None or p.alarm is not None:
+            raise InputRefused(Reason.BUSY, f"process {item.process} is busy "
+                               f"({p.state.name})")
+        try:  # load (parse and check) before the clock is read: it starts when it is ready
+            runtime.store.load(name, None, item.process)
+        except ProgramNotFoundError as exc:
+            raise InputRefused(Reason.PROGRAM_NOT_FOUND, str(exc)) from exc
+        except ProgramError as exc:
+            raise InputRefused(Reason.PROGRAM_INVALID, str(exc)) from exc
+        self._enter(dataclasses.replace(item, program=name))  # recorded by its name
+        runtime.engine.start(name, item.process, by=str(item.source))
+
+    def _alarm(self, item: FieldbusAlarm) -> None:
+        try:
+            code = AlarmCode(item.code)
+        except ValueError:
+            raise InputRefused(Reason.BAD_VALUE, f"AL{item.code!r}: no such alarm "
+                               "(docs/diagnostics.md)") from None
+        self._enter(item)
+        self.runtime.engine.fieldbus_alarm(code, item.message)

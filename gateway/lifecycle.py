@@ -1,0 +1,20 @@
+"""The one life cycle of the gateway's adapters.
+
+Every adapter that serves a protocol -- the Modbus server (plain and TLS), the CANopen node
+(with its hub), the web console -- is an :class:`Adapter`: ``await start()`` begins serving,
+``await close()`` stops it and cancels every task, timer and callback it scheduled (also from
+other threads).  :class:`~ncgate.gateway.Gateway` starts them in order and pushes each close
+on one :class:`contextlib.AsyncExitStack`, so a failing start closes what was started and a
+failing close does not skip the others.  The resources without a protocol (the PLC scan,
+the trace file, the session record, the wall clock) close on the same stack.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+
+class Adapter(Protocol):
+    async def start(self) -> None: ...
+
+    async def close(self) -> None: ...

@@ -1,0 +1,203 @@
+"""The one typed interface into the cell: every input from outside the engine.
+
+Modbus, CANopen, the web console, the PLC logic, the sim script, a replayed record and a
+Python program all translate what they receive into one of these frozen values and hand it to
+:meth:`ncgate.gateway.Gateway.apply` (on the virtual clock: the same
+:class:`ncgate.gateway.door.Door`).  Each carries its :class:`Source`; ``str(source)`` --
+the kind, then a detail after a space -- is what the trace's ``by``/``who``, the run log, the
+session record and the console show for it::
+
+    from ncgate.inputs import Command, CommandKind, Source, Write
+    gw.apply(Write("SA10", 1))                          # source: api
+    gw.apply(Command(CommandKind.CYCLE_START, source=Source.parse("web 127.0.0.1")))
+
+A refusal raises :class:`ncgate.errors.InputRefused` with a :class:`ncgate.errors.Reason`;
+nothing of a refused input is applied.  Imports only ``ncgate.errors``: every layer may name
+these types.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from dataclasses import dataclass, field
+from typing import Final
+
+from ncgate.errors import InputRefused, Reason
+
+
+class SourceKind(enum.StrEnum):
+    """Who an input comes from: the first word of every attribution."""
+
+    MODBUS = "modbus"
+    MODBUS_TLS = "modbus-tls"
+    CANOPEN = "canopen"
+    WEB = "web"
+    PLC = "plc"
+    SCRIPT = "script"
+    REPLAY = "replay"
+    API = "api"
+
+
+@dataclass(frozen=True, slots=True)
+class Source:
+    """An input's origin: ``kind`` and a ``detail`` (the peer address, the TLS role, the
+    PLC's file:line, the script entry...).  ``peer`` is the network address when the detail
+    does not say it (a TLS client named by its role), for the record and the log."""
+
+    kind: SourceKind
+    detail: str = ""
+    peer: str | None = field(default=None, compare=False)
+
+    def __str__(self) -> str:
+        return f"{self.kind.value} {self.detail}" if self.detail else self.kind.value
+
+    @classmethod
+    def parse(cls, text: str, peer: str | None = None) -> Source:
+        """The inverse of ``str()``: ``"modbus 127.0.0.1:40312"`` -> Source(MODBUS, ...)."""
+        kind, _, detail = text.strip().partition(" ")
+        try:
+            return cls(SourceKind(kind), detail.strip(), peer)
+        except ValueError:
+            known = ", ".join(k.value for k in SourceKind)
+            raise InputRefused(Reason.BAD_VALUE, f"{text!r}: not a source (the first word "
+                               f"is one of {known})") from None
+
+
+API: Final = Source(SourceKind.API)
+
+_VAR = re.compile(r"(SYVAR|SA|SK)(\d+)(?:\.(BY|IN|BL))?", re.IGNORECASE)
+
+
+@dataclass(frozen=True, slots=True)
+class Var:
+    """An image variable (spec 1.3): area ``SA``/``SK``/``SYVAR``, index, view ``bit``/``BY``/
+    ``IN``.  ``str()`` is its name as programs write it (``SA10``, ``SK2.IN``, ``SYVAR1``)."""
+
+    area: str
+    index: int
+    view: str
+
+    @classmethod
+    def parse(cls, text: str) -> Var:
+        """``"SA10"``, ``"sa1.by"``, ``"SK2"``, ``"SK2.IN"``, ``"SYVAR5"``; InputRefused
+        (UNKNOWN_VARIABLE) otherwise.  Whether it lies inside the image is the door's to
+        say (the image's size is the config's)."""
+        m = _VAR.fullmatch(text.strip())
+        if m is None:
+            raise InputRefused(Reason.UNKNOWN_VARIABLE,
+                               f"{text!r} is not an image variable (SA10, SA1.BY, SA2.IN, "
+                               "SK3, SK4.IN, SYVAR5)")
+        area, index, view = m.group(1).upper(), int(m.group(2)), (m.group(3) or "").upper()
+        if area == "SYVAR":
+            if view not in ("", "IN"):
+                raise InputRefused(Reason.UNKNOWN_VARIABLE,
+                                   f"{text!r}: a SYVAR is a 16-bit word, it has no .{view}")
+            return cls(area, index, "IN")
+        if area == "SA":
+            return cls(area, index, "bit" if view in ("", "BL") else view)
+        if view == "BL":
+            raise InputRefused(Reason.UNKNOWN_VARIABLE,
+                               f"{text!r}: the K packet has no bits (SK3, SK3.IN)")
+        return cls(area, index, view or "BY")
+
+    @classmethod
+    def of(cls, var: Var | str) -> Var:
+        return var if isinstance(var, Var) else cls.parse(var)
+
+    def __str__(self) -> str:
+        a, i, v = self.area, self.index, self.view
+        if a == "SYVAR" or (a == "SA" and v == "bit") or (a == "SK" and v == "BY"):
+            return f"{a}{i}"
+        return f"{a}{i}.{v}"
+
+    @property
+    def address(self) -> tuple[str, int, str]:
+        """(area, index, view), as :class:`ncgate.plc.image.IOImage` takes it."""
+        return (self.area, self.index, self.view)
+
+
+def _var(value: Var | str) -> Var:
+    return Var.of(value)
+
+
+@dataclass(frozen=True, slots=True)
+class Write:
+    """One image variable written to a value."""
+
+    var: Var
+    value: int
+    source: Source = API
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.var, Var):
+            object.__setattr__(self, "var", _var(self.var))
+
+
+@dataclass(frozen=True, slots=True)
+class Writes:
+    """Several image variables written as one (one fieldbus request): all or nothing."""
+
+    changes: tuple[tuple[Var, int], ...]
+    source: Source = API
+
+    @classmethod
+    def of(cls, changes: dict[str, int] | list[tuple[Var | str, int]],
+           source: Source = API) -> Writes:
+        items = changes.items() if isinstance(changes, dict) else changes
+        return cls(tuple((_var(v), value) for v, value in items), source)
+
+
+class CommandKind(enum.IntEnum):
+    """The command word of the fieldbus maps (spec 3.2): its number is the word's value."""
+
+    CYCLE_START = 1
+    FEED_HOLD = 2
+    RESET = 3
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """Cycle start, feed hold or reset; ``process=None``: the whole cell."""
+
+    kind: CommandKind
+    process: int | None = None
+    source: Source = API
+
+
+@dataclass(frozen=True, slots=True)
+class Snd:
+    """An SND in the name of an external process ``sender`` (the fieldbus's mailbox)."""
+
+    sender: int
+    target: int
+    source: Source = API
+
+
+@dataclass(frozen=True, slots=True)
+class Start:
+    """The operator's program start: ``program`` (None: the config's main) in ``process``."""
+
+    program: str | None = None
+    process: int = 1
+    source: Source = API
+
+
+@dataclass(frozen=True, slots=True)
+class FieldbusAlarm:
+    """An alarm of the fieldbus side (process 0 in the trace), e.g. a lost CANopen master.
+    ``code`` is an alarm number of docs/diagnostics.md (150: master lost)."""
+
+    code: int
+    message: str
+    source: Source = API
+
+
+Input = Write | Writes | Command | Snd | Start | FieldbusAlarm
+
+__all__ = ["API", "Command", "CommandKind", "FieldbusAlarm", "Input", "InputRefused",
+           "Reason", "Snd", "Source", "SourceKind", "Start", "Var", "Write", "Writes"]
