@@ -1,13 +1,16 @@
 """The root of every exception ncgate raises.
 
-Each package has one root of its own under it, which also subclasses the fitting builtin
-(CONTRIBUTING.md, as lark and python-can do), so callers can catch as narrowly as they like::
+Each package has one root of its own under it, and the specific exceptions callers meet also
+subclass the fitting builtin (CONTRIBUTING.md, as lark and python-can do), so callers can
+catch as narrowly as they like::
 
     NcgateError
     ├── ConfigError (ValueError)                  ncgate.config: file + dotted key
-    ├── PlcError                                  ncgate.plc: the I/O image
+    ├── PlcError                                  ncgate.plc: the image and the logic
     │   ├── ImageAddressError (IndexError)
-    │   └── ImageValueError (ValueError)
+    │   ├── ImageValueError (ValueError)
+    │   ├── LogicError (SyntaxError): ST diagnostics; PlcFault (RuntimeError)
+    │   └── PlcPathError (KeyError): a PLC variable path that names nothing
     ├── InterpreterError                          ncgate.interpreter
     │   ├── ProgramError → ProgramSyntaxError (SyntaxError): diagnostics with spans
     │   ├── ProgramNotFoundError (FileNotFoundError)
@@ -15,6 +18,8 @@ Each package has one root of its own under it, which also subclasses the fitting
     ├── InputRefused                              an outside input refused (a Reason)
     └── GatewayError                              ncgate.gateway
         ├── UsageError (ValueError): bad command-line input, exit status 2
+        │   └── RecordError: a session record's line that is not one
+        ├── ListenError (OSError): a port that cannot be listened on
         ├── WaitIdleTimeout (TimeoutError)
         ├── ProcessAlarmError (RuntimeError)
         ├── ModbusError: a request answered with an exception code

@@ -12,8 +12,8 @@ session record and the console show for it::
     gw.apply(Command(CommandKind.CYCLE_START, source=Source.parse("web 127.0.0.1")))
 
 A refusal raises :class:`ncgate.errors.InputRefused` with a :class:`ncgate.errors.Reason`;
-nothing of a refused input is applied.  Imports only ``ncgate.errors``: every layer may name
-these types.
+nothing of a refused input is applied.  Imports only ``ncgate.errors``; the gateway and users
+import it (the engine, the PLC and the config stay below it: tests/test_layering.py).
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
-"""The dependency rules of STYLE.md, checked on the source: they fail when a rule breaks.
+"""The dependency rules of ARCHITECTURE.md, checked on the source: they fail when a rule breaks.
 
 - everything is imported as ``ncgate.…``: no top-level ``config``, ``plc``, ``gateway`` or
   ``interpreter`` (they install as sub-packages of ``ncgate``);
 - interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config; its engine
   imports no dialect's front end;
-- plc: stdlib + lark, for its Structured Text compiler, as the design card says (+
+- plc: stdlib + lark, for its Structured Text compiler (+
   ``ncgate.errors``); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports

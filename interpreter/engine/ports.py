@@ -1,5 +1,5 @@
-"""What the engine needs from outside, stated as protocols (STYLE: LinuxCNC's canonical
-interface), and what a dialect's front end may ask of the engine.
+"""What the engine needs from outside, stated as protocols (as LinuxCNC's canonical
+interface does; ARCHITECTURE.md), and what a dialect's front end may ask of the engine.
 
 Outward: the gateway wires real implementations in -- ``ncgate.plc.image.IOImage`` is an
 :class:`ImagePort`, the gateway's program store a :class:`ProgramLoader`.  Variables are
