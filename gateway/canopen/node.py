@@ -188,6 +188,7 @@ class CanopenNode:
         for handle in list(self._pending):
             handle.cancel()
         self._pending.clear()
+        self._refusals.flush()
         if self._hub is not None:
             self._hub.shutdown()
             self._hub.server_close()

@@ -12,6 +12,24 @@ from collections.abc import Callable
 import canopen
 from canopen.objectdictionary import ODVariable
 from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
+from canopen.sdo.constants import (
+    EXPEDITED,
+    NO_MORE_DATA,
+    REQUEST_ABORTED,
+    REQUEST_BLOCK_DOWNLOAD,
+    REQUEST_BLOCK_UPLOAD,
+    REQUEST_DOWNLOAD,
+    REQUEST_SEGMENT_DOWNLOAD,
+    REQUEST_SEGMENT_UPLOAD,
+    REQUEST_UPLOAD,
+    RESPONSE_ABORTED,
+    RESPONSE_DOWNLOAD,
+    RESPONSE_SEGMENT_DOWNLOAD,
+    RESPONSE_SEGMENT_UPLOAD,
+    RESPONSE_UPLOAD,
+    SIZE_SPECIFIED,
+    TOGGLE_BIT,
+)
 from canopen.sdo.exceptions import SdoAbortedError
 from canopen.sdo.server import SdoServer
 
@@ -37,6 +55,8 @@ log = logging.getLogger("ncgate.canopen")
 
 SEGMENTED_TIMEOUT_S = 1.0
 
+
+CCS_MASK = 0xE0  # the command specifier's bits of an SDO request's first byte
 
 class SdoService(SdoServer):
     """The SDO server (CiA 301 7.2.4) with the transfer state of its own.
@@ -80,27 +100,27 @@ class SdoService(SdoServer):
 
     def _serve(self, request: bytes) -> None:
         command = request[0]
-        ccs = command & 0xE0
-        if ccs == 0x80:  # the client aborts: close, no answer
+        ccs = command & CCS_MASK
+        if ccs == REQUEST_ABORTED:  # the client aborts: close, no answer
             self._mode = None
             return
-        if ccs in (0x20, 0x40):  # initiate download / upload: a new transfer
+        if ccs in (REQUEST_DOWNLOAD, REQUEST_UPLOAD):  # initiate: a new transfer
             self._mode = None
             index, subindex = struct.unpack_from("<HB", request, 1)
             self._where = (index, subindex)
-            if ccs == 0x40:
+            if ccs == REQUEST_UPLOAD:
                 self._initiate_upload(index, subindex)
             else:
                 self._initiate_download(command, request, index, subindex)
             return
-        if ccs == 0x60 and self._mode == "upload":
+        if ccs == REQUEST_SEGMENT_UPLOAD and self._mode == "upload":
             self._upload_segment(command)
             return
-        if ccs == 0x00 and self._mode == "download":
+        if ccs == REQUEST_SEGMENT_DOWNLOAD and self._mode == "download":
             self._download_segment(command, request)
             return
         # A segment with no such transfer open, a block transfer, or no such command.
-        if ccs in (0xA0, 0xC0, 0xE0):  # these carry an index: name it
+        if ccs in (REQUEST_BLOCK_UPLOAD, REQUEST_BLOCK_DOWNLOAD, CCS_MASK):  # with an index
             self._where = struct.unpack_from("<HB", request, 1)
         self._mode = None
         raise SdoAbortedError(ABORT_INVALID_COMMAND_SPECIFIER)
@@ -110,21 +130,24 @@ class SdoService(SdoServer):
         if not data:
             raise SdoAbortedError(ABORT_NO_DATA_AVAILABLE)  # no data available
         if len(data) <= 4:
-            self.send_response(struct.pack("<BHB", 0x43 | (4 - len(data)) << 2, index,
-                                           subindex) + data.ljust(4, b"\0"))
+            command = RESPONSE_UPLOAD | EXPEDITED | SIZE_SPECIFIED | (4 - len(data)) << 2
+            self.send_response(struct.pack("<BHB", command, index, subindex)
+                               + data.ljust(4, b"\0"))
             return
         self._mode, self._buffer_, self._toggle_ = "upload", bytearray(data), 0
-        self.send_response(struct.pack("<BHBL", 0x41, index, subindex, len(data)))
+        self.send_response(struct.pack("<BHBL", RESPONSE_UPLOAD | SIZE_SPECIFIED, index,
+                                       subindex, len(data)))
 
     def _upload_segment(self, command: int) -> None:
-        if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)  # toggle bit not alternated
+        if command & TOGGLE_BIT != self._toggle_:
+            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)
         chunk = bytes(self._buffer_[:7])
         del self._buffer_[:7]
         last = not self._buffer_
-        self.send_response(bytes((self._toggle_ | (7 - len(chunk)) << 1 | int(last),))
+        self.send_response(bytes((RESPONSE_SEGMENT_UPLOAD | self._toggle_
+                                  | (7 - len(chunk)) << 1 | (NO_MORE_DATA if last else 0),))
                            + chunk.ljust(7, b"\0"))
-        self._toggle_ ^= 0x10
+        self._toggle_ ^= TOGGLE_BIT
         if last:
             self._mode = None
 
@@ -134,22 +157,23 @@ class SdoService(SdoServer):
         obj = node.object_for(index, subindex)
         if not obj.writable:
             raise SdoAbortedError(ABORT_WRITE_READONLY)
-        if command & 0x02:  # expedited
-            size = 4 - (command >> 2 & 0x3) if command & 0x01 else 4
+        if command & EXPEDITED:
+            size = 4 - (command >> 2 & 0x3) if command & SIZE_SPECIFIED else 4
             node.set_data(index, subindex, request[4:4 + size], check_writable=True)
-            self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+            self.send_response(struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex))
             return
-        self._size = struct.unpack_from("<L", request, 4)[0] if command & 0x01 else None
+        self._size = (struct.unpack_from("<L", request, 4)[0] if command & SIZE_SPECIFIED
+                      else None)
         if self._size is not None:
             node.check_size(obj, self._size)  # a number of the wrong size: refused now
         self._mode, self._buffer_, self._toggle_ = "download", bytearray(), 0
-        self.send_response(struct.pack("<BHB4x", 0x60, index, subindex))
+        self.send_response(struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex))
 
     def _download_segment(self, command: int, request: bytes) -> None:
-        if command & 0x10 != self._toggle_:
-            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)  # toggle bit not alternated
+        if command & TOGGLE_BIT != self._toggle_:
+            raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)
         self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
-        if command & 0x01:  # the last segment
+        if command & NO_MORE_DATA:  # the last segment
             data = bytes(self._buffer_)
             if self._size is not None and len(data) != self._size:
                 raise SdoAbortedError(ABORT_LENGTH_NOT_MATCHED)  # not what it announced
@@ -158,14 +182,14 @@ class SdoService(SdoServer):
             node.check_size(node.object_for(index, subindex), len(data))
             node.set_data(index, subindex, data, check_writable=True)
             self._mode = None
-        self.send_response(bytes((0x20 | self._toggle_,)) + bytes(7))
-        self._toggle_ ^= 0x10
+        self.send_response(bytes((RESPONSE_SEGMENT_DOWNLOAD | self._toggle_,)) + bytes(7))
+        self._toggle_ ^= TOGGLE_BIT
 
     def _abort_transfer(self, code: int) -> None:
         """Answer with an abort naming the transfer's object, and close it."""
         self._mode = None
         index, subindex = self._where
-        self.send_response(struct.pack("<BHBL", 0x80, index, subindex, code))
+        self.send_response(struct.pack("<BHBL", RESPONSE_ABORTED, index, subindex, code))
 
     def _stop_timer(self) -> None:
         if self._timer is not None:

@@ -18,6 +18,7 @@ from typing import Any
 from ncgate.config import Config
 from ncgate.config.loader import DEFAULT_WEB_PORT
 from ncgate.gateway.app import Gateway
+from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
@@ -84,34 +85,6 @@ HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace h
 LOG_LINES_PER_S = 100
 
 
-class LineBudget:
-    """At most ``per_s`` lines a second; the lines left out are counted and said once."""
-
-    def __init__(self, loop: asyncio.AbstractEventLoop, per_s: int) -> None:
-        self.loop, self.per_s = loop, per_s
-        self.window = -1.0
-        self.used = self.skipped = 0
-        self._timer: asyncio.TimerHandle | None = None
-
-    def take(self) -> bool:
-        now = self.loop.time()
-        if now - self.window >= 1.0:
-            self.window, self.used = now, 0
-        if self.used < self.per_s:
-            self.used += 1
-            return True
-        self.skipped += 1
-        if self._timer is None:
-            self._timer = self.loop.call_at(self.window + 1.0, self._say)
-        return False
-
-    def _say(self) -> None:
-        self._timer = None
-        log.info("... %d more sync events not logged in the last second (the trace and the "
-                 "web console have every one)", self.skipped)
-        self.skipped = 0
-
-
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
                 record: str | None = None, overrides: dict[str, Any] | None = None) -> None:
     stop = stop if stop is not None else asyncio.Event()
@@ -125,7 +98,9 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
     hazards_logged: set[tuple[int, object]] = set()
     debug = functools.partial(log.isEnabledFor, logging.DEBUG)
     info = functools.partial(log.isEnabledFor, logging.INFO)
-    budget = LineBudget(loop, LOG_LINES_PER_S)
+    budget = RateLimitedLog(log, level=logging.INFO, burst=LOG_LINES_PER_S,
+                            held="... %d more sync events not logged in the last second (the "
+                                 "trace and the web console have every one)")
 
     def on_event(event: Event) -> None:
         if isinstance(event, ev.Hazard):

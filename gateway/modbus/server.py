@@ -59,6 +59,7 @@ from ncgate.gateway.modbus.codes import (
     REFUSAL,
     TARGET_NO_RESPONSE,
 )
+from ncgate.gateway.modbus.codes import FunctionCode as FC
 from ncgate.gateway.modbus.map import ModbusMap, Table
 from ncgate.gateway.modbus.security import TlsSession
 from ncgate.gateway.ratelimit import RateLimitedLog
@@ -80,9 +81,12 @@ _ADDRESS_COUNT = struct.Struct(">HH")
 # A read-registers answer PDU of n registers: function code, byte count, the registers.
 _REGISTERS: Final = [struct.Struct(f">BB{n}H") for n in range(126)]
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
-_READ_LIMITS: Final = {1: 2000, 2: 2000, 3: 125, 4: 125}
-SERVED: Final = frozenset({1, 2, 3, 4, 5, 6, 15, 16, 22, 23, 43})
-WRITES: Final = frozenset({5, 6, 15, 16, 22, 23})
+_READ_LIMITS: Final[dict[int, int]] = {FC.READ_COILS: 2000, FC.READ_DISCRETE_INPUTS: 2000,
+                        FC.READ_HOLDING_REGISTERS: 125, FC.READ_INPUT_REGISTERS: 125}
+SERVED: Final = frozenset(FC)
+WRITES: Final = frozenset({FC.WRITE_SINGLE_COIL, FC.WRITE_SINGLE_REGISTER,
+                           FC.WRITE_MULTIPLE_COILS, FC.WRITE_MULTIPLE_REGISTERS,
+                           FC.MASK_WRITE_REGISTER, FC.READ_WRITE_MULTIPLE_REGISTERS})
 MEI_DEVICE_ID: Final = 0x0E  # FC43's "read device identification"
 CONFORMITY: Final = 0x82  # regular identification, stream and individual access
 
@@ -99,23 +103,23 @@ def validate(pdu: bytes) -> None:
         quantity = pdu[3] << 8 | pdu[4]
         if not 1 <= quantity <= _READ_LIMITS[fc]:
             raise ModbusError(ILLEGAL_VALUE, f"quantity {quantity}")
-    elif fc in (5, 6):
+    elif fc in (FC.WRITE_SINGLE_COIL, FC.WRITE_SINGLE_REGISTER):
         if n != 5:
             raise ModbusError(ILLEGAL_VALUE, "length")
-    elif fc in (15, 16):
+    elif fc in (FC.WRITE_MULTIPLE_COILS, FC.WRITE_MULTIPLE_REGISTERS):
         if n < 6:
             raise ModbusError(ILLEGAL_VALUE, "length")
         quantity = pdu[3] << 8 | pdu[4]
-        limit, per = (1968, None) if fc == 15 else (123, 2)
+        limit, per = (1968, None) if fc == FC.WRITE_MULTIPLE_COILS else (123, 2)
         if not 1 <= quantity <= limit:
             raise ModbusError(ILLEGAL_VALUE, f"quantity {quantity}")
         expected = (quantity + 7) // 8 if per is None else quantity * 2
         if pdu[5] != expected or n != 6 + expected:
             raise ModbusError(ILLEGAL_VALUE, "byte count")
-    elif fc == 22:
+    elif fc == FC.MASK_WRITE_REGISTER:
         if n != 7:
             raise ModbusError(ILLEGAL_VALUE, "length")
-    elif fc == 43:
+    elif fc == FC.ENCAPSULATED_INTERFACE:
         if n < 2 or pdu[1] != MEI_DEVICE_ID:  # 0x0D (CANopen reference) is not served
             raise ModbusError(ILLEGAL_FUNCTION, "MEI type other than 0x0E")
         if n != 4 or not 1 <= pdu[2] <= 4:
@@ -168,14 +172,14 @@ class RequestHandler:
         self.served += 1
         if unit not in self.unit_ids:
             return exception_pdu(fc, TARGET_NO_RESPONSE)
-        if fc in (3, 4) and len(pdu) == 5:
+        if fc in (FC.READ_HOLDING_REGISTERS, FC.READ_INPUT_REGISTERS) and len(pdu) == 5:
             # The pollers' hot path: validate's rules for a read (the quantity from the same
             # _READ_LIMITS, then the address), no pymodbus objects, the answer packed at once.
             # Ahead of validate, it is worth 4 % of poller throughput (bench/modbus.py).
             address, count = _ADDRESS_COUNT.unpack_from(pdu, 1)
             if not 1 <= count <= _READ_LIMITS[fc]:
                 return exception_pdu(fc, ILLEGAL_VALUE)
-            table = Table.HOLDING if fc == 3 else Table.INPUT
+            table = Table.HOLDING if fc == FC.READ_HOLDING_REGISTERS else Table.INPUT
             try:
                 regs = self.map.read_registers(self.backend, table, address, count)
             except ModbusError as exc:
@@ -183,7 +187,7 @@ class RequestHandler:
             return cast(bytes, _REGISTERS[count].pack(fc, 2 * count, *regs))
         try:
             validate(pdu)  # (an FC3/FC4 of another length: 03)
-            if fc == 43:
+            if fc == FC.ENCAPSULATED_INTERFACE:
                 return self._device_identification(pdu[2], pdu[3])
             if writable is not None and fc in WRITES and not writable:
                 raise ModbusError(ILLEGAL_FUNCTION, "this client's role may not write")
@@ -230,13 +234,15 @@ class RequestHandler:
     def _authorise(self, fc: int, request: Any, writable: frozenset[str]) -> None:
         """Exception 01 unless the role may write every region the request writes (after
         the address check: an unmapped address is still 02)."""
-        if fc in (5, 15):
-            table, address, count = Table.COILS, request.address, 1 if fc == 5 else request.count
-        elif fc == 23:
+        if fc in (FC.WRITE_SINGLE_COIL, FC.WRITE_MULTIPLE_COILS):
+            count = 1 if fc == FC.WRITE_SINGLE_COIL else request.count
+            table, address = Table.COILS, request.address
+        elif fc == FC.READ_WRITE_MULTIPLE_REGISTERS:
             table, address, count = (Table.HOLDING, request.write_address,
                                      len(request.write_registers))
         else:
-            count = 1 if fc in (6, 22) else request.count
+            count = (1 if fc in (FC.WRITE_SINGLE_REGISTER, FC.MASK_WRITE_REGISTER)
+                     else request.count)
             table, address = Table.HOLDING, request.address
         for region, _, _ in self.map.segments(table, address, count):
             if region.name not in writable:
@@ -245,32 +251,32 @@ class RequestHandler:
 
     def _execute(self, fc: int, request: Any, pdu: bytes, who: Source) -> bytes:
         m, backend = self.map, self.backend
-        if fc == 1:
+        if fc == FC.READ_COILS:
             bits = m.read_bits(backend, Table.COILS, request.address, request.count)
             return _pdu(ReadCoilsResponse(bits=bits))
-        if fc == 2:
+        if fc == FC.READ_DISCRETE_INPUTS:
             bits = m.read_bits(backend, Table.DISCRETE_INPUTS, request.address, request.count)
             return _pdu(ReadDiscreteInputsResponse(bits=bits))
-        if fc == 5:
+        if fc == FC.WRITE_SINGLE_COIL:
             m.region(Table.COILS, request.address, 1)  # the address first (libmodbus)
             raw = pdu[3:5]  # pymodbus keeps only bool(value): check the bytes themselves
             if raw not in (b"\x00\x00", b"\xff\x00"):
                 raise ModbusError(ILLEGAL_VALUE, "FC5 value must be 0x0000 or 0xFF00")
             m.write_bits(backend, request.address, [raw == b"\xff\x00"], who)
             return _pdu(WriteSingleCoilResponse(address=request.address, bits=[raw != b"\0\0"]))
-        if fc == 6:
+        if fc == FC.WRITE_SINGLE_REGISTER:
             m.write_registers(backend, request.address, list(request.registers), who)
             return _pdu(WriteSingleRegisterResponse(address=request.address,
                                                     registers=list(request.registers)))
-        if fc == 15:
+        if fc == FC.WRITE_MULTIPLE_COILS:
             m.write_bits(backend, request.address, list(request.bits), who)
             return _pdu(WriteMultipleCoilsResponse(address=request.address,
                                                    count=request.count))
-        if fc == 16:
+        if fc == FC.WRITE_MULTIPLE_REGISTERS:
             m.write_registers(backend, request.address, list(request.registers), who)
             return _pdu(WriteMultipleRegistersResponse(address=request.address,
                                                        count=request.count))
-        if fc == 22:
+        if fc == FC.MASK_WRITE_REGISTER:
             (current,) = m.read_registers(backend, Table.HOLDING, request.address, 1)
             value = (current & request.and_mask) | (request.or_mask & ~request.and_mask & 0xFFFF)
             m.check_register_values(request.address, [value])
@@ -550,6 +556,7 @@ class ModbusServer:
         return host, bound
 
     async def close(self) -> None:
+        self.refusals.flush()  # the count of lines held back, said before the end
         if not self._servers:
             return
         for server in self._servers:

@@ -1,8 +1,8 @@
 """The SND log window (issue 10, finding 7): a poller reads what it missed, at any rate.
 
-The layout checked here is the one `ncgate map` and the README's map table document: at `modbus.map.snd_log` (input
-200) the newest sequence number (u32), then the last 16 SNDs newest first, six registers each:
-sequence (u32), sender, target, block N, id.
+The layout checked here is the one `ncgate map` and the README's map table document: at
+`modbus.map.snd_log` (input 200) the newest sequence number (u32), then the last 16 SNDs
+newest first, six registers each: sequence (u32), sender, target, block N, id.
 """
 
 from __future__ import annotations
