@@ -357,6 +357,13 @@ class ModbusTlsConfig:
         return self.cert is not None
 
 
+class Evict(enum.Enum):
+    """``modbus.evict``: who makes room when a client connects at ``max_clients``."""
+
+    IDLEST = "idlest"  # a connection that never completed a request (or TLS handshake)
+    REFUSE = "refuse"  # nobody: the newcomer is refused
+
+
 @dataclass(frozen=True, slots=True)
 class ModbusConfig:
     enabled: bool = setting(True, "serve Modbus TCP")
@@ -368,6 +375,10 @@ class ModbusConfig:
     strict_unit_id: bool = setting(False, "answer unit id 0 with exception 0x0B unless it is "
                                    "listed in unit_ids")
     max_clients: int = setting(16, "connections at once", lo=1, hi=10_000)
+    evict: Evict = setting(Evict.IDLEST, 'at max_clients: "idlest" closes the connection '
+                           "that never completed a request (or TLS handshake), longest "
+                           'connected, to make room (none such: the newcomer is refused); '
+                           '"refuse" always refuses the newcomer')
     idle_timeout_s: float = setting(60.0, "close a connection silent this long", lo=0,
                                     positive=True)
     read_only: bool = setting(False, "refuse every write")

@@ -46,7 +46,7 @@ from pymodbus.pdu.register_message import (
     WriteSingleRegisterResponse,
 )
 
-from ncgate.config import ModbusConfig
+from ncgate.config import Evict, ModbusConfig
 from ncgate.errors import InputRefused
 from ncgate.gateway import identity
 from ncgate.gateway.errors import ModbusError, listen_error
@@ -73,6 +73,11 @@ PARTIAL_FRAME_TIMEOUT_S: Final = 5.0
 # which reading resumes (a client that sends and never reads cannot make us buffer for it).
 WRITE_HIGH_WATER: Final = 256 * 1024
 WRITE_LOW_WATER: Final = 64 * 1024
+# Requests of one connection answered in one loop turn before the others get theirs, and the
+# backlog of unanswered requests above which (and below which again) its reading pauses.
+FRAMES_PER_TURN: Final = 16
+BACKLOG_HIGH: Final = 16 * 1024
+BACKLOG_LOW: Final = 4 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
 
 
@@ -311,6 +316,12 @@ class _Connection(asyncio.Protocol):
         self.partial_since: float | None = None
         self.timer: asyncio.TimerHandle | None = None
         self.paused = False  # the client does not read its answers (backpressure)
+        self.connected_at = self.last_activity
+        # When it last completed a request (None: never -- a socket that only connected).
+        self.completed_at: float | None = None
+        self.backlogged = False  # reading paused: a backlog of requests waits its turns
+        self.turn: asyncio.Handle | None = None  # the next turn of _process, when one is due
+        self.drain_mark = 0  # answers unsent at the last idle check (paused: is it reading?)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
@@ -325,14 +336,18 @@ class _Connection(asyncio.Protocol):
             return
         self.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER, low=WRITE_LOW_WATER)
         if len(server.connections) >= server.config.max_clients:
-            # At the limit the connection idle longest makes room (as PLC Modbus servers
-            # do): idle sockets cannot lock everyone else out.
-            idlest = min(server.connections, key=lambda c: c.last_activity)
-            server.refusals.note(f"{idlest.who} closed for {self.who}: "
+            room = server.make_room(self)
+            if room is None:
+                server.refusals.note(f"{self.who} refused: {len(server.connections)} clients "
+                                     "already (max_clients), none of them idle")
+                self.transport.abort()
+                return
+            server.refusals.note(f"{room.who} closed for {self.who}: "
                                  f"{len(server.connections)} clients already (max_clients)")
-            idlest.evict()
+            room.evict()
         server.connections.add(self)
-        log.info("%s connected (%d clients)", self.who, len(server.connections))
+        server.connections_changed.set()
+        server.chatter.note(f"{self.who} connected ({len(server.connections)} clients)")
         if self.tls is not None:
             self.writable = frozenset()  # nothing until the handshake names a role
             # The handshake has the 5 s of a partial frame.
@@ -341,29 +356,45 @@ class _Connection(asyncio.Protocol):
         else:
             self._arm(server.config.idle_timeout_s)
 
+    @property
+    def proven(self) -> bool:
+        """Completed a request, or a TLS handshake: a client, not just a socket."""
+        return self.completed_at is not None or (self.tls is not None and self.tls.established)
+
     def pause_writing(self) -> None:
         """Answers not yet sent passed the high-water mark: answer and read no more requests
         from this client until it reads its answers (the others are served meanwhile)."""
         self.paused = True
-        if self.transport is not None and not self.transport.is_closing():
-            self.transport.pause_reading()
+        self._reading()
 
     def resume_writing(self) -> None:
         self.paused = False
-        if self.transport is not None and not self.transport.is_closing():
-            self.transport.resume_reading()
-            self._process()  # what arrived before the pause
+        self._reading()
+        self._process()  # what arrived before the pause
+
+    def _reading(self) -> None:
+        """Read while the client reads its answers and its backlog is small."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
+        if self.paused or self.backlogged:
+            transport.pause_reading()
+        else:
+            transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self in self.server.connections:
             self.server.connections.discard(self)
-            log.info("%s disconnected", self.who)
+            self.server.chatter.note(f"{self.who} disconnected")
             self.server.connections_changed.set()
             if not self.server.connections:
                 self.server.all_closed.set()
         if self.timer is not None:
             self.timer.cancel()
             self.timer = None
+        if self.turn is not None:
+            self.turn.cancel()
+            self.turn = None
 
     def evict(self) -> None:
         """Out of the count at once (its connection_lost comes later), and closed."""
@@ -374,11 +405,11 @@ class _Connection(asyncio.Protocol):
 
     def close(self, why: str) -> None:
         if self.transport is not None and not self.transport.is_closing():
-            log.info("%s closed: %s", self.who, why)
+            self.server.chatter.note(f"{self.who} closed: {why}")
             self.transport.abort()
 
     def data_received(self, data: bytes) -> None:
-        self.last_activity = self.loop.time()
+        self.last_activity = now = self.loop.time()
         tls = self.tls
         if tls is None and not self.buffer and not self.paused and len(data) >= 8:
             # The common case, one whole request in one segment, answered without the
@@ -390,6 +421,7 @@ class _Connection(asyncio.Protocol):
                 assert self.transport is not None
                 self.transport.write(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
                 self.partial_since = None
+                self.completed_at = now
                 return
         if tls is not None:
             was_established = tls.established
@@ -410,7 +442,8 @@ class _Connection(asyncio.Protocol):
                 self.close("the client closed the TLS session")
                 return
         self.buffer += data
-        self._process()
+        if self.turn is None:  # else its next turn, already due, takes it
+            self._process()
 
     def _flush_tls(self) -> None:
         assert self.tls is not None and self.transport is not None
@@ -432,17 +465,24 @@ class _Connection(asyncio.Protocol):
         self.source = Source(SourceKind.MODBUS_TLS, role or "(no role)", self.source.peer)
         self.who = f"{self.source} {self.source.peer}"
         self.partial_since = None
-        log.info("%s: %s established", self.who, self.tls.version())
+        self.server.chatter.note(f"{self.who}: {self.tls.version()} established")
 
     def _process(self) -> None:
-        """Answer every complete frame in the buffer, in order, unless the client stopped
-        reading its answers (then the rest waits in the buffer until it does)."""
+        """Answer the complete frames in the buffer, in order, at most FRAMES_PER_TURN in one
+        loop turn (then the next turn is due after everyone else's: a pipelining client gets
+        its share and stalls nobody), unless the client stopped reading its answers (then the
+        rest waits in the buffer until it does).  A backlog above BACKLOG_HIGH stops reading
+        from the client until its turns have brought it under BACKLOG_LOW."""
+        self.turn = None
         buffer = self.buffer
         handle = self.handle
         out: list[bytes] = []
         size = 0
-        answered = False
+        answered = 0
         while len(buffer) >= 7 and not self.paused:
+            if answered >= FRAMES_PER_TURN:
+                self.turn = self.loop.call_soon(self._process)
+                break
             tid, protocol, length, unit = _MBAP.unpack_from(buffer)
             if protocol != 0 or not 2 <= length <= 254:
                 if out:
@@ -456,16 +496,22 @@ class _Connection(asyncio.Protocol):
             del buffer[:end]
             answer = handle(unit, pdu, self.source, self.writable)
             out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
-            answered = True
+            answered += 1
             size += len(answer) + 7
             if size >= WRITE_LOW_WATER:  # in batches: the transport may pause us on a write
                 self._send(out)
                 out, size = [], 0
         if out:
             self._send(out)
+        backlogged = len(buffer) > (BACKLOG_LOW if self.backlogged else BACKLOG_HIGH)
+        if backlogged != self.backlogged:
+            self.backlogged = backlogged
+            self._reading()
         if answered:
+            self.completed_at = self.loop.time()
             self.partial_since = None  # each frame has its own 5 s, from its first byte
-        if not buffer or self.paused:  # nothing begun, or a paused client: not timed
+        if not buffer or self.paused or self.turn is not None:  # nothing begun, a paused
+            # client, or whole frames waiting for their turn: not timed
             self.partial_since = None
         elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
             self.partial_since = self.last_activity
@@ -492,10 +538,15 @@ class _Connection(asyncio.Protocol):
                     else "partial frame")
             self.close(f"{what} not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
             return
+        if self.paused and self.transport.get_write_buffer_size() < self.drain_mark:
+            self.last_activity = now  # answers still unsent, but the client is reading them
+        self.drain_mark = self.transport.get_write_buffer_size()
         if now - self.last_activity >= idle:
             self.close(f"idle for {idle:g} s")
             return
         next_check = self.last_activity + idle - now
+        if self.paused:  # look again soon whether the client reads what it is sent
+            next_check = min(next_check, 1.0)
         if self.partial_since is not None:
             next_check = min(next_check, self.partial_since + PARTIAL_FRAME_TIMEOUT_S - now)
         self._arm(max(next_check, 0.001))
@@ -509,14 +560,35 @@ class ModbusServer:
         self.handler = RequestHandler(mmap, backend, frozenset(config.unit_ids),
                                       config.strict_unit_id)
         self.refusals = RateLimitedLog(log)
+        # Per-connection INFO lines (connected, disconnected, closed): a connect flood gives
+        # a few lines a second and a count, not a line per socket.
+        self.chatter = RateLimitedLog(log, level=logging.INFO, burst=10)
         self.connections: set[_Connection] = set()
         self.all_closed = asyncio.Event()
-        self.connections_changed = asyncio.Event()  # set when a connection goes
+        self.connections_changed = asyncio.Event()  # set when a connection comes or goes
         self._servers: list[asyncio.Server] = []
         self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
         # (host, port) of the plain Modbus/TCP listener and of the TLS one (None: off).
         self.address: tuple[str, int] | None = None
         self.tls_address: tuple[str, int] | None = None
+
+    def make_room(self, newcomer: _Connection) -> _Connection | None:
+        """Whom to close at ``max_clients`` so that ``newcomer`` may stay, or None: refuse it.
+
+        Never a client that completed a request within the idle window (or a TLS client
+        whose handshake is done) for a socket that has done nothing yet: first the socket
+        connected longest ago that never completed a request nor a handshake; then, for a
+        plain newcomer, the client idle longest beyond the idle window."""
+        if self.config.evict is Evict.REFUSE:
+            return None
+        unproven = [c for c in self.connections if not c.proven]
+        if unproven:
+            return min(unproven, key=lambda c: c.connected_at)
+        now = newcomer.loop.time()
+        window = self.config.idle_timeout_s
+        idle = [c for c in self.connections if (c.completed_at or c.connected_at) < now - window
+                and not (c.tls is not None and c.tls.established)]
+        return min(idle, key=lambda c: c.completed_at or c.connected_at) if idle else None
 
     def allowed(self, host: str) -> bool:
         if not self._allow:
@@ -527,9 +599,11 @@ class ModbusServer:
             return False
         return any(address in net for net in self._allow)
 
-    async def wait_connections(self, at_most: int) -> None:
-        """Until at most ``at_most`` connections are open."""
-        while len(self.connections) > at_most:
+    async def wait_connections(self, at_most: int | None = None,
+                               at_least: int | None = None) -> None:
+        """Until at most ``at_most`` (and at least ``at_least``) connections are open."""
+        while ((at_most is not None and len(self.connections) > at_most)
+               or (at_least is not None and len(self.connections) < at_least)):
             self.connections_changed.clear()
             await self.connections_changed.wait()
 
@@ -556,7 +630,8 @@ class ModbusServer:
         return host, bound
 
     async def close(self) -> None:
-        self.refusals.flush()  # the count of lines held back, said before the end
+        self.refusals.flush()  # the counts of lines held back, said before the end
+        self.chatter.flush()
         if not self._servers:
             return
         for server in self._servers:

@@ -18,22 +18,46 @@ GOOD = pdu(4, "HH", 0, 1)
 
 
 @pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 3}], indirect=True)
-async def test_at_max_clients_the_connection_idle_longest_makes_room(
+async def test_at_max_clients_a_silent_socket_makes_room_never_a_client(
         ncgate_gateway: Gateway) -> None:
-    """Issue 10.6: idle sockets cannot lock everyone out; the newcomer is served."""
+    """Idle sockets cannot lock everyone out, and cannot knock a client off either: a socket
+    that never completed a request makes room; with none such, the newcomer is refused."""
     address = ncgate_gateway.modbus_address
-    clients = [await Raw.open(*address) for _ in range(3)]
-    for c in clients:  # clients[0] asked first: it has been idle longest
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    clients = [await Raw.open(*address) for _ in range(2)]
+    for c in clients:
         assert (await c.ask(GOOD))[0] == 4
+    silent = await Raw.open(*address)  # connects, never asks
+    await server.wait_connections(at_least=3)
     newcomer = await Raw.open(*address)
     assert (await newcomer.ask(GOOD))[0] == 4
-    assert await clients[0].closed_by_peer(timeout_s=5.0)
-    for c in clients[1:]:  # the others are untouched
+    assert await silent.closed_by_peer(timeout_s=5.0)
+    # Every connection has completed a request now: the next socket is refused.
+    late = await Raw.open(*address)
+    assert await late.closed_by_peer(timeout_s=5.0)
+    for c in (*clients, newcomer):  # the clients are untouched
         assert (await c.ask(GOOD))[0] == 4
-    server = ncgate_gateway.modbus_server
-    assert server is not None and len(server.connections) == 3
-    for c in (*clients[1:], newcomer):
+    assert len(server.connections) == 3
+    for c in (*clients, newcomer):
         c.close()
+
+
+@pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 2,
+                                            "modbus.evict": "refuse"}], indirect=True)
+async def test_evict_refuse_keeps_even_a_silent_socket(ncgate_gateway: Gateway) -> None:
+    address = ncgate_gateway.modbus_address
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    client = await Raw.open(*address)
+    assert (await client.ask(GOOD))[0] == 4
+    silent = await Raw.open(*address)
+    await server.wait_connections(at_least=2)
+    late = await Raw.open(*address)
+    assert await late.closed_by_peer(timeout_s=5.0)
+    assert (await client.ask(GOOD))[0] == 4 and len(server.connections) == 2
+    client.close()
+    silent.close()
 
 
 @pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 2}], indirect=True)
