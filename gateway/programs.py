@@ -4,108 +4,77 @@ It is the engine's :class:`~ncgate.interpreter.engine.ports.ProgramLoader`.  A p
 parsed and checked (for the process it will run in) once per file version, and only the
 latest version of a file is kept (a program edited all shift long does not pile up); a program
 with errors never starts -- the loader raises with every diagnostic, and the runtime turns that
-into an alarm of the calling process.
+into an alarm of the calling process.  How a file is read and checked is the dialect's
+(:class:`~ncgate.interpreter.dialect.ProgramReader`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config
-from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
-from ncgate.interpreter.isg.checker import IsgCheckContext, check_file
-from ncgate.interpreter.isg.parser import IsgFile, IsgProgram
-from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
-from ncgate.interpreter.nc110.parser import Program
+from ncgate.interpreter.dialect import DialectOptions, ExternalBinding, Version
+from ncgate.interpreter.dialects import dialect_of, parse_condition
+from ncgate.interpreter.engine.ports import ProgramText
 from ncgate.interpreter.settings import Dialect
-from ncgate.interpreter.storage import Storage
+from ncgate.interpreter.storage import Storage, file_version
 
 
 def storage_of(config: Config) -> Storage:
     return Storage(config.nc.storage.devices, config.nc.storage.default)
 
 
-def check_context(config: Config, storage: Storage, runs_in: Iterable[int]) -> CheckContext:
-    return CheckContext(
-        processes=config.nc.processes,
-        external=config.nc.external,
-        runs_in=frozenset(runs_in),
-        limits=Limits(config.nc.e_params, config.plc.syvars, config.plc.sa_bits,
-                      config.plc.k_bytes),
-        find_program=lambda name, device: storage.find(name, device) is not None,
-        has_device=storage.has_device,
-    )
+def external_bindings(config: Config) -> dict[str, ExternalBinding]:
+    """``[nc.ve]`` as a dialect reads it: NAME -> image variable and sync."""
+    out = {}
+    for name, ve in config.nc.ve.items():
+        text = ve.map.upper()
+        if text.startswith("K"):  # K12: the K packet's byte 12, as SK12
+            text = "S" + text
+        (area, index, view), _, _ = parse_condition(f"{text}=0")
+        out[name] = ExternalBinding(area, index, view, ve.sync, ve.map)
+    return out
 
 
-def isg_context(config: Config) -> IsgCheckContext:
-    from ncgate.gateway.wiring import external_bindings
-
-    return IsgCheckContext(config.nc.processes, config.nc.e_params,
-                           config.nc.isg.signal_params, external_bindings(config))
+def dialect_options(config: Config, dialect: Dialect | None = None) -> DialectOptions:
+    """What the dialect (the config's, unless named) is told of the config: ``[nc]``, the
+    image's sizes, ``[nc.ve]`` and its own table ``[nc.<dialect>]``."""
+    nc = config.nc
+    own = getattr(nc, (dialect or nc.dialect).value, None)
+    return DialectOptions(
+        processes=nc.processes, external=nc.external, e_params=nc.e_params,
+        syvars=config.plc.syvars, sa_bits=config.plc.sa_bits, k_bytes=config.plc.k_bytes,
+        main=nc.main, lazy_parse=nc.lazy_parse, variables=external_bindings(config),
+        own=dataclasses.asdict(own) if own is not None else {})
 
 
 class ProgramStore:
     def __init__(self, config: Config) -> None:
         self.config = config
         self.storage = storage_of(config)
-        self.dialect = config.nc.dialect
+        self.dialect = dialect_of(config.nc.dialect)
+        self._reader = self.dialect.reader(dialect_options(config), self.storage)
         # (file, process) -> (the version it was read at, the checked program)
-        self._cache: dict[tuple[Path, int], tuple[tuple[int, int], Program | IsgProgram]] = {}
-        # ISG: file -> (version, the parsed file, its diagnostics)
-        self._files: dict[Path, tuple[tuple[int, int], IsgFile, list[Diagnostic]]] = {}
+        self._cache: dict[tuple[Path, int], tuple[Version, ProgramText]] = {}
         # Told of every program file read (again, when it changed): the session record
         # hashes the files a session used.
         self.loaded: list[Callable[[Path], None]] = []
 
-    def _located(self, name: str, device: str | None) -> tuple[Path, tuple[int, int]]:
-        """The file of program ``name`` and its version (mtime, size)."""
+    def channels(self, name: str) -> tuple[int, ...]:
+        """The processes program ``name`` starts in when run on its own (an ISG file's
+        sections); () when it names none."""
+        return self._reader.channels(name)
+
+    def load(self, name: str, device: str | None, process: int) -> ProgramText:
         path = self.storage.locate(name, device)
-        stat = path.stat()
-        return path, (stat.st_mtime_ns, stat.st_size)
-
-    def isg_file(self, name: str, device: str | None = None) -> IsgFile:
-        """An ISG file by program name, parsed and checked once per version."""
-        return self._isg_entry(*self._located(name, device))[1]
-
-    def _isg_entry(self, path: Path, version: tuple[int, int]
-                   ) -> tuple[tuple[int, int], IsgFile, list[Diagnostic]]:
-        cached = self._files.get(path)
-        if cached is None or cached[0] != version:
-            source = IsgFile.from_path(path, display=path.name)
-            cached = (version, source, check_file(source, isg_context(self.config)))
-            self._files[path] = cached
-        return cached
-
-    def load(self, name: str, device: str | None, process: int) -> Program | IsgProgram:
-        path, version = self._located(name, device)
+        version = file_version(path)
         cached = self._cache.get((path, process))
         if cached is not None and cached[0] == version:
             return cached[1]
-        if self.dialect is Dialect.ISG:
-            program: Program | IsgProgram = self._check_section(path, version, process)
-        else:
-            program = Program.from_path(path, display=path.name)
-            # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
-            if not self.config.nc.lazy_parse:
-                diagnostics = check_program(
-                    program, check_context(self.config, self.storage, {process}))
-                errors = [d for d in diagnostics if d.is_error]
-                if errors:
-                    raise ProgramSyntaxError(errors)
+        program = self._reader.load(path, version, process)
         self._cache[(path, process)] = (version, program)
         for listener in self.loaded:
             listener(path)
-        return program
-
-    def _check_section(self, path: Path, version: tuple[int, int], process: int
-                       ) -> IsgProgram:
-        _, source, diagnostics = self._isg_entry(path, version)
-        program = source.program(process)
-        # A section is a program: only its own errors (and a file-wide one) keep it from
-        # starting.
-        lo = program.section.header + 1 if program.section else 1
-        errors = [d for d in diagnostics if d.is_error and lo <= d.span.line <= program.end]
-        if errors:
-            raise ProgramSyntaxError(errors)
         return program

@@ -27,10 +27,9 @@ from ncgate.gateway.wiring import (
 )
 from ncgate.inputs import Snd, Source, SourceKind, Start, Var, Write
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Process, ProcessState, run_virtual
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
-from ncgate.interpreter.nc110.nodes import CompareOp
-from ncgate.interpreter.settings import Dialect
 from ncgate.plc.image import PlcError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -127,7 +126,7 @@ class ScriptPlayer:
             else:
                 area, index, view = trigger.var
                 handle = self.runtime.image.wait(area, index, view,
-                                                 CompareOp(trigger.op).against(trigger.value),
+                                                 comparison(trigger.op, trigger.value),
                                                  functools.partial(self._triggered, entry))
                 if handle is None:
                     self._triggered(entry)
@@ -178,10 +177,9 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     door = Door(runtime, lambda: runtime.plc)
     player = ScriptPlayer(runtime, script, door)
     engine = runtime.engine
-    if config.nc.dialect is Dialect.ISG and len(mains) == 1:
-        # Spec 5.1: one sectioned file starts every section in its channel at t = 0.
-        sections = runtime.store.isg_file(mains[0]).sections
-        starts = [(mains[0], section.channel) for section in sections] or [(mains[0], 1)]
+    if len(mains) == 1:
+        # Spec 5.1 (ISG): one sectioned file starts every section in its channel at t = 0.
+        starts = [(mains[0], channel) for channel in runtime.store.channels(mains[0]) or (1,)]
     else:
         starts = [(name, number) for number, name in enumerate(mains, start=1)]
     for name, number in starts:

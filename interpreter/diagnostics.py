@@ -9,10 +9,25 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ncgate.errors import NcgateError, render_diagnostic
 from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity
-from ncgate.interpreter.nc110.nodes import Span
+
+
+class Span(NamedTuple):
+    """Where a node stands: file, line and column, 1-based.
+
+    A NamedTuple rather than a dataclass: one is built for every node of every line, and a
+    tuple builds fastest; it is immutable all the same.
+    """
+
+    file: str
+    line: int
+    column: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}"
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,7 +10,6 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from ncgate.interpreter.diagnostics import ProgramNotFoundError
-from ncgate.interpreter.nc110.parser import program_name
 
 PROGRAM_SUFFIXES = ("", ".nc", ".txt")
 
@@ -47,3 +46,14 @@ class Storage:
             where = (device or self.default).upper()
             raise ProgramNotFoundError(f"program {name} is not on {where}")
         return found
+
+
+def program_name(path: Path) -> str:
+    """Program name = file name without its extension (spec 1.1)."""
+    return path.stem if path.suffix.lower() in (".nc", ".txt") else path.name
+
+
+def file_version(path: Path) -> tuple[int, int]:
+    """A file's (mtime_ns, size): a program is read and checked once per version."""
+    stat = path.stat()
+    return stat.st_mtime_ns, stat.st_size

@@ -9,7 +9,10 @@
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports
   aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
-  test kit are leaves that nothing else in the gateway imports.
+  test kit are leaves that nothing else in the gateway imports;
+- a dialect is one folder: outside ``interpreter/<dialect>/`` and the registry
+  (``interpreter/dialects.py``) nothing imports a dialect's package or branches on a member of
+  ``Dialect``.
 """
 
 from __future__ import annotations
@@ -17,9 +20,13 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
+
+from ncgate.interpreter.dialects import dialect_of
+from ncgate.interpreter.settings import Dialect
 
 ROOT = Path(__file__).resolve().parent.parent
 STDLIB = set(sys.stdlib_module_names)
@@ -145,6 +152,81 @@ def test_the_dialects_share_only_the_span() -> None:
     for path in sources("interpreter/nc110"):
         assert not any(allowed(n, {"ncgate.interpreter.isg"})
                        for n in imports_of(path, module_name(path))), path
+
+
+# A dialect is one folder (ARCHITECTURE.md, "Where a new dialect goes"): only its folder and
+# the registry name it; everything else asks the registry for a DialectPlugin.
+DIALECT_PACKAGES = {f"ncgate.interpreter.{d.value}" for d in Dialect}
+REGISTRY = ROOT / "interpreter" / "dialects.py"
+
+
+def dialect_mentions(path: Path, module: str | None = None) -> set[str]:
+    """Where a file names a dialect: an import of a dialect's package, a ``Dialect.<MEMBER>``
+    compared, matched or used as a key, or a comparison with a dialect's name (``== "isg"``)."""
+    tree = ast.parse(path.read_text(), str(path))
+    found = {f"imports {n}" for n in imports_of(path, module) if allowed(n, DIALECT_PACKAGES)}
+
+    def member(node: ast.AST | None) -> bool:
+        return (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                and node.value.id == "Dialect" and node.attr in Dialect.__members__)
+
+    def name(node: ast.AST | None) -> bool:
+        return (isinstance(node, ast.Constant)
+                and node.value in {d.value for d in Dialect} | set(Dialect.__members__))
+
+    for node in ast.walk(tree):
+        tested: list[ast.AST | None] = []
+        if isinstance(node, ast.Compare):
+            tested = [node.left, *node.comparators]
+        elif isinstance(node, ast.MatchValue):
+            tested = [node.value]
+        elif isinstance(node, ast.Dict):
+            tested = list(node.keys)
+        for operand in tested:
+            if member(operand) or (not isinstance(node, ast.Dict) and name(operand)):
+                found.add(f"line {node.lineno}: {ast.unparse(operand)}")
+    return found
+
+
+def test_only_a_dialects_folder_and_the_registry_name_it() -> None:
+    """Outside ``interpreter/<dialect>/`` and ``interpreter/dialects.py`` nothing imports a
+    dialect's package or branches on a member of ``Dialect``: the gateway, the CLI and the
+    simulator ask ``dialects.dialect_of(...)``, so a new dialect is its folder and its line in
+    ``Dialect``."""
+    folders = {ROOT / "interpreter" / d.value for d in Dialect}
+    offenders = {
+        f"{path.relative_to(ROOT)}: {mention}"
+        for folder in PACKAGES
+        for path in sources(folder)
+        if path != REGISTRY and not any(path.is_relative_to(f) for f in folders)
+        for mention in dialect_mentions(path, module_name(path))
+    }
+    assert not offenders
+
+
+def test_every_dialect_is_registered_by_its_folder() -> None:
+    """Each member of ``Dialect`` is found in its folder, and that folder is packaged."""
+    packages = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "packages"]
+    for member in Dialect:
+        plugin = dialect_of(member)
+        assert plugin.name is member and dialect_of(member.value) is plugin
+        assert (ROOT / "interpreter" / member.value / "dialect.py").is_file()
+        assert f"ncgate.interpreter.{member.value}" in packages, member
+
+
+def test_the_dialect_rule_sees_a_violation(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.py"
+    bad.write_text("from ncgate.interpreter.isg.parser import IsgFile\n"
+                   "from ncgate.interpreter.settings import Dialect\n"
+                   "if config.nc.dialect is Dialect.ISG: pass\n"
+                   "if name == 'nc110': pass\n"
+                   "table = {Dialect.NC110: 1}\n"
+                   "match d:\n    case Dialect.ISG: pass\n"
+                   "default = Dialect.NC110  # a default is no branch\n")
+    assert dialect_mentions(bad, "ncgate.gateway.bad") == {
+        "imports ncgate.interpreter.isg.parser", "line 3: Dialect.ISG", "line 4: 'nc110'",
+        "line 5: Dialect.NC110", "line 7: Dialect.ISG"}
 
 
 def test_importing_the_interpreter_loads_no_other_package() -> None:

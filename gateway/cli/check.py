@@ -7,27 +7,23 @@ storage device MP0, so that the programs it EXEs are looked for beside it.
 Which process runs a program, for the checks that need it (a process waiting for itself, …):
 ``--process`` when given; otherwise what the programs say -- the config's main program runs in
 process 1, and ``(EXE,n,NAME)`` with a constant n runs NAME in process n.  The main program is
-read for that even when it is not among the files checked.
+read for that even when it is not among the files checked.  (That is NC-110's rule; an ISG
+section runs in its channel.  The dialect checks its files: ``DialectPlugin.check``.)
 """
 
 from __future__ import annotations
 
-import contextlib
 import glob
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ncgate.config import Config, StorageConfig, load_config
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.programs import check_context, isg_context, storage_of
-from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
-from ncgate.interpreter.isg.checker import check_file
-from ncgate.interpreter.isg.parser import IsgFile
-from ncgate.interpreter.nc110.checker import check_program
-from ncgate.interpreter.nc110.nodes import Exe, Num
-from ncgate.interpreter.nc110.parser import Program, program_name
+from ncgate.gateway.programs import dialect_options, storage_of
+from ncgate.interpreter.diagnostics import Diagnostic
+from ncgate.interpreter.dialects import dialect_of
 from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES
 from ncgate.plc.st.compiler import compile_logic
@@ -87,21 +83,6 @@ def config_for(path: Path, explicit: Config | None) -> Config:
     return replace(default, nc=replace(default.nc, storage=StorageConfig({"MP0": folder}, "MP0")))
 
 
-def process_assignments(programs: Iterable[Program], main: str) -> dict[str, set[int]]:
-    """Program name (upper case) -> the processes the programs start it in."""
-    runs: dict[str, set[int]] = defaultdict(set)
-    runs[main.upper()].add(1)
-    for program in programs:
-        blocks, _ = program.parse_all()
-        for block in blocks:
-            if block is None:
-                continue
-            for item in block.items:
-                if isinstance(item, Exe) and isinstance(item.process, Num):
-                    runs[item.program.upper()].add(int(item.process.value))
-    return runs
-
-
 def check_files(
     files: Sequence[Path], config: Config | None = None, process: int | None = None,
     dialect: Dialect | None = None,
@@ -120,43 +101,11 @@ def check_files(
         paths = [p for p in group if p.suffix.lower() != LOGIC_SUFFIX]
         if not paths:
             continue
-        if (dialect or cfg.nc.dialect) is Dialect.ISG:
-            reports.update(check_isg(paths, cfg))
-            continue
-        storage = storage_of(cfg)
-        programs: dict[Path, Program] = {}
-        for path in paths:
-            try:
-                programs[path] = Program.from_path(path)
-            except ProgramSyntaxError as exc:  # not UTF-8: its report is that diagnostic
-                reports[path] = FileReport(path, exc.diagnostics)
-        known = {program.name.upper() for program in programs.values()}
-        context_programs = list(programs.values())
-        main_path = storage.find(cfg.nc.main)
-        if main_path is not None and program_name(main_path).upper() not in known:
-            # A main program that is not UTF-8 starts nothing we could infer from.
-            with contextlib.suppress(ProgramSyntaxError):
-                context_programs.append(Program.from_path(main_path))
-        runs = process_assignments(context_programs, cfg.nc.main)
-        for path, program in programs.items():
-            runs_in = {process} if process is not None else runs.get(program.name.upper(), set())
-            diagnostics = check_program(program, check_context(cfg, storage, runs_in))
-            reports[path] = FileReport(path, tuple(diagnostics))
+        which = dialect or cfg.nc.dialect
+        found = dialect_of(which).check(paths, dialect_options(cfg, which), storage_of(cfg),
+                                        process)
+        reports.update((path, FileReport(path, tuple(found[path]))) for path in paths)
     return [reports[p] for p in files]
-
-
-def check_isg(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
-    """ISG programs (spec 5): each file with its sections, against the config's channels,
-    signal parameters and [nc.ve]."""
-    context = isg_context(config)
-    out = {}
-    for path in files:
-        try:
-            diagnostics = check_file(IsgFile.from_path(path, display=str(path)), context)
-        except ProgramSyntaxError as exc:  # not UTF-8
-            diagnostics = list(exc.diagnostics)
-        out[path] = FileReport(path, tuple(diagnostics))
-    return out
 
 
 def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:

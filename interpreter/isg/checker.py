@@ -13,8 +13,8 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
 from ncgate.interpreter.codes import DiagnosticCode
-from ncgate.interpreter.diagnostics import Diagnostic, did_you_mean
-from ncgate.interpreter.isg.frontend import ExternalBinding
+from ncgate.interpreter.diagnostics import Diagnostic, Span, did_you_mean
+from ncgate.interpreter.dialect import ExternalBinding
 from ncgate.interpreter.isg.nodes import (
     Assign,
     Binary,
@@ -35,7 +35,6 @@ from ncgate.interpreter.isg.nodes import (
     Word,
 )
 from ncgate.interpreter.isg.parser import IsgFile
-from ncgate.interpreter.nc110.nodes import Span
 
 
 @dataclass(frozen=True, slots=True)

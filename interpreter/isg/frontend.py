@@ -24,6 +24,7 @@ from typing import Final
 
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm, fmt_number
+from ncgate.interpreter.dialect import ExternalBinding
 from ncgate.interpreter.engine.actions import ItemKind, Step
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
@@ -56,17 +57,6 @@ NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
 _AXES: Final = frozenset("XYZ")
 _ARC: Final = frozenset("IJK")
-
-
-@dataclass(frozen=True, slots=True)
-class ExternalBinding:
-    """A ``V.E.`` variable: where it lives in the image, and whether access is synchronous."""
-
-    area: str
-    index: int
-    view: str
-    sync: bool
-    text: str  # as configured: "SYVAR5"
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ncgate.interpreter.nc110.nodes import Span
+from ncgate.interpreter.diagnostics import Span
 
 # ---- expressions ----------------------------------------------------------------------------
 

@@ -27,6 +27,7 @@ from ncgate.interpreter.diagnostics import (
     LineError,
     ProgramNotFoundError,
     ProgramSyntaxError,
+    Span,
     did_you_mean,
 )
 from ncgate.interpreter.isg.nodes import (
@@ -52,7 +53,6 @@ from ncgate.interpreter.isg.nodes import (
     WaitSignal,
     Word,
 )
-from ncgate.interpreter.nc110.nodes import Span
 
 COMMANDS: Final = ("SIGNAL", "WAIT", "FLUSH", "VAR", "ENDVAR")
 CONTROLS: Final = ("IF", "ELSE", "ENDIF", "WHILE", "ENDWHILE")

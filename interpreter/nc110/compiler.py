@@ -96,6 +96,9 @@ class NC110:
                 dynamic = True
         return frozenset(targets), dynamic
 
+    def attach(self, host: BlockHost, reset_listeners: list[Callable[[], None]]) -> None:
+        """NC-110 registers no actions of its own and keeps no state beside the engine's."""
+
 
 class _BlockCompiler:
     """Turns one block into the decoder's ops (closures over the host)."""

@@ -11,7 +11,9 @@ import enum
 import operator
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, fields
-from typing import Any, Final, NamedTuple, TypeVar, dataclass_transform
+from typing import Any, Final, TypeVar, dataclass_transform
+
+from ncgate.interpreter.diagnostics import Span as Span  # shared by every dialect
 
 _T = TypeVar("_T")
 
@@ -41,21 +43,6 @@ def value_object(cls: type[_T]) -> type[_T]:
     init.__qualname__ = f"{dc.__qualname__}.__init__"
     dc.__init__ = init
     return dc  # type: ignore[no-any-return]
-
-
-class Span(NamedTuple):
-    """Where a node stands: file, line and column, 1-based.
-
-    A NamedTuple rather than a dataclass: one is built for every node of every line, and a
-    tuple builds fastest; it is immutable all the same.
-    """
-
-    file: str
-    line: int
-    column: int
-
-    def __str__(self) -> str:
-        return f"{self.file}:{self.line}:{self.column}"
 
 
 class VarKind(enum.Enum):

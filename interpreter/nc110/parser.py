@@ -65,6 +65,7 @@ from ncgate.interpreter.nc110.nodes import (
     WaitProc,
     Word,
 )
+from ncgate.interpreter.storage import program_name as program_name  # (spec 1.1)
 
 WORD_LETTERS: Final = frozenset("ABCDFGHIJKLMOPQRSTUVWXYZ")
 
@@ -703,9 +704,3 @@ class Program:
                     except LineError as exc:
                         diagnostics.append(exc.diagnostic)
         return blocks, diagnostics
-
-
-
-def program_name(path: Path) -> str:
-    """Program name = file name without its extension (spec 1.1)."""
-    return path.stem if path.suffix.lower() in (".nc", ".txt") else path.name

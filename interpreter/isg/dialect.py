@@ -1,0 +1,96 @@
+"""TwinCAT CNC / ISG as the runtime's dialect (spec 5): what
+:mod:`ncgate.interpreter.dialects` finds for ``nc.dialect = "isg"``.
+
+A file holds a program per channel (its ``%`` sections; a file without them runs in any
+channel).  It is parsed and checked once per version, and a section is kept from starting only
+by its own errors (and a file-wide one).  The engine runs with the buffer effect, and the
+operator may start any channel.  Its own settings are ``[nc.isg]`` (``max_events``,
+``signal_params``); ``[nc.ve]`` names its ``V.E.`` variables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
+from ncgate.interpreter.dialect import (
+    DialectOptions,
+    DialectPlugin,
+    ProgramReader,
+    Version,
+)
+from ncgate.interpreter.isg.checker import IsgCheckContext, check_file
+from ncgate.interpreter.isg.frontend import IsgFrontEnd, IsgOptions
+from ncgate.interpreter.isg.parser import IsgFile, IsgProgram
+from ncgate.interpreter.settings import Dialect
+from ncgate.interpreter.storage import Storage, file_version
+
+
+def isg_options(options: DialectOptions) -> IsgOptions:
+    return IsgOptions(**options.own, external=options.variables)
+
+
+def check_context(options: DialectOptions) -> IsgCheckContext:
+    return IsgCheckContext(options.processes, options.e_params,
+                           isg_options(options).signal_params, options.variables)
+
+
+class _Reader:
+    def __init__(self, options: DialectOptions, storage: Storage) -> None:
+        self.context = check_context(options)
+        self.storage = storage
+        # file -> (version, the parsed file, its diagnostics): its sections share them
+        self._files: dict[Path, tuple[Version, IsgFile, list[Diagnostic]]] = {}
+
+    def _entry(self, path: Path, version: Version) -> tuple[Version, IsgFile, list[Diagnostic]]:
+        cached = self._files.get(path)
+        if cached is None or cached[0] != version:
+            source = IsgFile.from_path(path, display=path.name)
+            cached = (version, source, check_file(source, self.context))
+            self._files[path] = cached
+        return cached
+
+    def load(self, path: Path, version: Version, process: int) -> IsgProgram:
+        _, source, diagnostics = self._entry(path, version)
+        program = source.program(process)
+        # A section is a program: only its own errors (and a file-wide one) keep it from
+        # starting.
+        lo = program.section.header + 1 if program.section else 1
+        errors = [d for d in diagnostics if d.is_error and lo <= d.span.line <= program.end]
+        if errors:
+            raise ProgramSyntaxError(errors)
+        return program
+
+    def channels(self, name: str) -> tuple[int, ...]:
+        path = self.storage.locate(name, None)
+        _, source, _ = self._entry(path, file_version(path))
+        return tuple(section.channel for section in source.sections)
+
+
+class IsgDialect:
+    name = Dialect.ISG
+    buffered = True  # the buffer effect (spec 5.4)
+    any_process_starts = True  # the operator starts channel by channel
+
+    def front_end(self, options: DialectOptions) -> IsgFrontEnd:
+        return IsgFrontEnd(isg_options(options))
+
+    def reader(self, options: DialectOptions, storage: Storage) -> ProgramReader:
+        return _Reader(options, storage)
+
+    def check(self, paths: Sequence[Path], options: DialectOptions, storage: Storage,
+              process: int | None) -> Mapping[Path, Sequence[Diagnostic]]:
+        """Each file with its sections, against the channels, signal parameters and
+        ``[nc.ve]`` (a section's channel is its own: ``process`` is not needed)."""
+        context = check_context(options)
+        out: dict[Path, Sequence[Diagnostic]] = {}
+        for path in paths:
+            try:
+                out[path] = check_file(IsgFile.from_path(path, display=str(path)), context)
+            except ProgramSyntaxError as exc:  # not UTF-8
+                out[path] = exc.diagnostics
+        return out
+
+
+DIALECT: DialectPlugin = IsgDialect()

@@ -1,0 +1,114 @@
+"""NC-110 / NC-200 as the runtime's dialect (spec 1): what :mod:`ncgate.interpreter.dialects`
+finds for ``nc.dialect = "nc110"``.
+
+A file is one program; it is checked for the process it runs in, and ``ncgate check`` infers
+that process from the programs themselves: the main program runs in process 1, and
+``(EXE,n,NAME)`` with a constant ``n`` runs NAME in process n.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections import defaultdict
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
+from ncgate.interpreter.dialect import (
+    DialectOptions,
+    DialectPlugin,
+    ProgramReader,
+    Version,
+)
+from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
+from ncgate.interpreter.nc110.compiler import NC110
+from ncgate.interpreter.nc110.nodes import Exe, Num
+from ncgate.interpreter.nc110.parser import Program
+from ncgate.interpreter.settings import Dialect
+from ncgate.interpreter.storage import Storage, program_name
+
+
+def check_context(options: DialectOptions, storage: Storage,
+                  runs_in: Iterable[int]) -> CheckContext:
+    return CheckContext(
+        processes=options.processes,
+        external=options.external,
+        runs_in=frozenset(runs_in),
+        limits=Limits(options.e_params, options.syvars, options.sa_bits, options.k_bytes),
+        find_program=lambda name, device: storage.find(name, device) is not None,
+        has_device=storage.has_device,
+    )
+
+
+def process_assignments(programs: Iterable[Program], main: str) -> dict[str, set[int]]:
+    """Program name (upper case) -> the processes the programs start it in."""
+    runs: dict[str, set[int]] = defaultdict(set)
+    runs[main.upper()].add(1)
+    for program in programs:
+        blocks, _ = program.parse_all()
+        for block in blocks:
+            if block is None:
+                continue
+            for item in block.items:
+                if isinstance(item, Exe) and isinstance(item.process, Num):
+                    runs[item.program.upper()].add(int(item.process.value))
+    return runs
+
+
+class _Reader:
+    def __init__(self, options: DialectOptions, storage: Storage) -> None:
+        self.options = options
+        self.storage = storage
+
+    def load(self, path: Path, version: Version, process: int) -> Program:
+        program = Program.from_path(path, display=path.name)
+        # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
+        if not self.options.lazy_parse:
+            diagnostics = check_program(
+                program, check_context(self.options, self.storage, {process}))
+            errors = [d for d in diagnostics if d.is_error]
+            if errors:
+                raise ProgramSyntaxError(errors)
+        return program
+
+    def channels(self, name: str) -> tuple[int, ...]:
+        return ()  # a file is one program: it runs where it is started
+
+
+class Nc110Dialect:
+    name = Dialect.NC110
+    buffered = False
+    any_process_starts = False
+
+    def front_end(self, options: DialectOptions) -> NC110:
+        return NC110()
+
+    def reader(self, options: DialectOptions, storage: Storage) -> ProgramReader:
+        return _Reader(options, storage)
+
+    def check(self, paths: Sequence[Path], options: DialectOptions, storage: Storage,
+              process: int | None) -> Mapping[Path, Sequence[Diagnostic]]:
+        """The files are checked together: which process runs each is inferred from them
+        all and the main program (read for that even when it is not among them)."""
+        out: dict[Path, Sequence[Diagnostic]] = {}
+        programs: dict[Path, Program] = {}
+        for path in paths:
+            try:
+                programs[path] = Program.from_path(path)
+            except ProgramSyntaxError as exc:  # not UTF-8: its report is that diagnostic
+                out[path] = exc.diagnostics
+        known = {program.name.upper() for program in programs.values()}
+        context_programs = list(programs.values())
+        main_path = storage.find(options.main)
+        if main_path is not None and program_name(main_path).upper() not in known:
+            # A main program that is not UTF-8 starts nothing we could infer from.
+            with contextlib.suppress(ProgramSyntaxError):
+                context_programs.append(Program.from_path(main_path))
+        runs = process_assignments(context_programs, options.main)
+        for path, program in programs.items():
+            runs_in = {process} if process is not None else runs.get(program.name.upper(), set())
+            out[path] = check_program(program, check_context(options, storage, runs_in))
+        return out
+
+
+DIALECT: DialectPlugin = Nc110Dialect()
