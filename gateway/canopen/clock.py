@@ -18,6 +18,7 @@ import asyncio
 import heapq
 import itertools
 import threading
+import time
 from collections.abc import Callable
 from typing import Protocol
 
@@ -54,7 +55,9 @@ class LoopClock:
         self._thread = threading.get_ident()
 
     def monotonic(self) -> float:
-        return self.loop.time()
+        # Not loop.time(): uvloop's has a millisecond's resolution, too coarse for a 2 ms
+        # inhibit time.  asyncio's loop.time() is this same clock.
+        return time.monotonic_ns() / 1e9
 
     def call_later(self, delay_s: float, fn: Callable[[], None]) -> Timer:
         timer = Timer(fn)

@@ -32,6 +32,7 @@ import concurrent.futures
 import logging
 import struct
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -46,6 +47,7 @@ from ncgate.gateway.canopen import pdo, store
 from ncgate.gateway.canopen.clock import Clock, LoopClock
 from ncgate.gateway.canopen.codes import (
     ABORT_APPLICATION_DEVICE_STATE,
+    ABORT_GENERAL_ERROR,
     ABORT_INVALID_VALUE,
     ABORT_READ_WRITEONLY,
     ABORT_STORE_APPLICATION,
@@ -67,7 +69,7 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
-from ncgate.gateway.canopen.sdo import Device
+from ncgate.gateway.canopen.sdo import Deferred, Device
 from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
@@ -152,6 +154,7 @@ class CanopenNode:
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         self.node.stored = self._on_stored
+        self.node.defer = self._defer
         self.network.subscribe(0, self._on_nmt)  # after canopen's own NMT handler
         self.pdos.configure_all()
         self._configure_heartbeats()
@@ -241,12 +244,12 @@ class CanopenNode:
             self._refusals.note(f"{source}: RPDO not applied: {exc}")
 
     def getter(self, index: int, subindex: int) -> Callable[[], int]:
-        """A mapped object's value, read on the loop (for a TPDO frame)."""
+        """A mapped object's value for a TPDO frame, from the loop or the receive thread (a
+        SYNC's TPDOs are built there): the image from the snapshot the loop publishes, the
+        rest from single reads of what the engine holds."""
         engine = self.backend.engine
         if index < COMMAND:
-            area, i, view = image_target(index, subindex)
-            read = self.backend.image.read
-            return lambda: read(area, i, view)
+            return lambda: self._image_value(index, subindex)
         if STATUS_BASE <= index < LAST_SND and subindex == 1:
             k = index - STATUS_BASE + 1
             return lambda: int(engine.processes[k].state)
@@ -277,6 +280,32 @@ class CanopenNode:
             if future.cancel():
                 raise
             return future.result()
+
+    def _defer(self, work: Callable[[], None], done: Callable[[int | None], None],
+               wanted: Callable[[], bool], timeout_s: float = 2.0) -> None:
+        """An SDO write's work, on the loop; ``done`` gets its outcome there.  Not done at all
+        when the master moved on meanwhile (``wanted()`` false), or past ``timeout_s`` (the
+        master has long given up: it gets an abort, and nothing is applied)."""
+        deadline = time.monotonic() + timeout_s
+
+        def run() -> None:
+            if not wanted():
+                return
+            if time.monotonic() > deadline:
+                done(ABORT_GENERAL_ERROR)
+                return
+            try:
+                work()
+            except SdoAbortedError as exc:
+                done(exc.code)
+                return
+            except Exception:  # a bug of ours: the master gets an abort, not silence
+                log.exception("SDO write failed on the loop")
+                done(ABORT_GENERAL_ERROR)
+                return
+            done(None)
+
+        self.call_soon(run)
 
     def call_soon(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` on the loop soon, from any thread; tracked, and dropped once closed."""
@@ -451,7 +480,10 @@ class CanopenNode:
                 raise SdoAbortedError(ABORT_INVALID_VALUE)
             self.call_soon(lambda: self._run_command(value))
             return
-        self._on_loop(lambda: self._write(index, subindex, value))
+        if index == COMMAND and subindex == 2:
+            self._command(2, value)  # the mailbox's sender: checked here, then stored
+            return
+        raise Deferred(lambda: self._write(index, subindex, value))  # answered from the loop
 
     def _on_stored(self, index: int, subindex: int) -> None:
         """After a write was stored (CAN thread): put it into effect before the answer."""

@@ -181,6 +181,9 @@ def check_sync_cob_id(cob: int) -> None:
 
 # ---- the runtime --------------------------------------------------------------------------
 
+# A SYNC handled later than one SYNC period (and at least this) after it arrived is stale.
+SYNC_WINDOW_MIN_S = 0.1
+
 class Host(Protocol):
     """What the PDOs need of the node."""
 
@@ -303,6 +306,9 @@ class Pdos:
         self.done = 0
         self.sent = 0  # TPDO frames
         self.lost_snds = 0  # SND frames that fell out of a full queue
+        self.sync_dropped = 0  # synchronous TPDOs not sent: their SYNC was handled too late
+        self._last_sync_stamp = 0.0
+        self._sync_period = 0.0  # between the last two SYNCs (their frames' time stamps)
         self._lost_logged = 0.0
 
     # -- configuration (receive thread for RPDOs and SYNC, loop for TPDOs) ------------------
@@ -446,6 +452,12 @@ class Pdos:
 
     def _inhibit_over(self, t: Tpdo) -> None:
         t.inhibit_timer = None
+        # A loop whose timers have a millisecond's resolution (uvloop) may fire a hair
+        # early: the inhibit time is kept on the clock's own (nanosecond) reckoning.
+        wait = t.last_t + t.inhibit_s - self.host.clock.monotonic()
+        if wait > 0:
+            t.inhibit_timer = self.host.clock.call_later(wait, lambda: self._inhibit_over(t))
+            return
         self._transmit(t)
 
     def _transmit(self, t: Tpdo) -> None:
@@ -483,6 +495,10 @@ class Pdos:
 
     def _event_due(self, t: Tpdo) -> None:
         t.event_timer = None
+        wait = t.last_t + t.event_s - self.host.clock.monotonic()
+        if wait > 0:  # fired early (a coarse loop clock): not yet
+            t.event_timer = self.host.clock.call_later(wait, lambda: self._event_due(t))
+            return
         t.force = True
         self._ready(t)
 
@@ -519,29 +535,35 @@ class Pdos:
                 self.done += 1
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """At a SYNC (receive thread): the synchronous TPDOs send what they sample now --
+        here, from the values the loop published, so a busy loop never delays them -- then
+        the RPDO data received since the last SYNC is handed to the loop (inputs sampled,
+        outputs actuated).  A SYNC this thread got to only after the next one was due (it
+        was held up), and at least SYNC_WINDOW_MIN_S late, sends nothing: its TPDOs are
+        dropped and counted (``sync_dropped``), never sent late in a burst."""
         if not self.host.operational:
             return
+        now = time.time()  # python-can stamps frames with the wall clock
+        period = self._sync_period
+        if self._last_sync_stamp and timestamp > self._last_sync_stamp:
+            self._sync_period = timestamp - self._last_sync_stamp
+        self._last_sync_stamp = timestamp
         counter = data[0] if data else None
+        stale = bool(timestamp) and now - timestamp > max(period, SYNC_WINDOW_MIN_S)
+        for t in list(self.tpdos.values()):
+            if t.valid and t.type <= 240:
+                self._sync_tpdo(t, counter, send=not stale)
         batches = list(self._sync_pending.values())
         self._sync_pending.clear()
         self.handed += len(batches)
-        self.host.call_soon(lambda: self._sync(counter, batches))
+        if batches:
+            self.host.call_soon(lambda: self._apply(batches))
 
-    def _sync(self, counter: int | None,
-              batches: list[tuple[list[tuple[str, int, str, int]], Source]]) -> None:
-        """At a SYNC: the synchronous TPDOs send what they sample now, then the RPDO data
-        received since the last SYNC is applied (inputs sampled, outputs actuated)."""
-        if self.host.operational:
-            for t in self.tpdos.values():
-                if t.valid and t.type <= 240:
-                    self._sync_tpdo(t, counter)
-        self._apply(batches)
-
-    def _sync_tpdo(self, t: Tpdo, counter: int | None) -> None:
+    def _sync_tpdo(self, t: Tpdo, counter: int | None, send: bool = True) -> None:
         if t.type == 0:
             if t.sync_due:
                 t.sync_due = False
-                self._send(t, t.frame())
+                self._sync_send(t, send)
             return
         if not t.started:
             if t.sync_start and counter is not None:
@@ -553,4 +575,15 @@ class Pdos:
         t.sync_count += 1
         if t.sync_count >= t.type:
             t.sync_count = 0
-            self._send(t, t.frame())
+            self._sync_send(t, send)
+
+    def _sync_send(self, t: Tpdo, send: bool) -> None:
+        if not send:
+            self.sync_dropped += 1
+            return
+        try:
+            data = t.frame()
+        except Exception:  # a value the loop was changing at this instant: not sent
+            self.sync_dropped += 1
+            return
+        self._send(t, data)

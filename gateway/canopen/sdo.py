@@ -58,6 +58,16 @@ SEGMENTED_TIMEOUT_S = 1.0
 
 CCS_MASK = 0xE0  # the command specifier's bits of an SDO request's first byte
 
+class Deferred(Exception):
+    """Raised by a write callback whose work must run on the loop: the answer follows from
+    there when the work is done, and the receive thread goes on meanwhile (heartbeats,
+    SYNCs, other SDOs are never held up behind the loop)."""
+
+    def __init__(self, work: Callable[[], None]) -> None:
+        super().__init__("deferred to the loop")
+        self.work = work
+
+
 class SdoService(SdoServer):
     """The SDO server (CiA 301 7.2.4) with the transfer state of its own.
 
@@ -78,6 +88,7 @@ class SdoService(SdoServer):
         self._buffer_: bytearray = bytearray()
         self._toggle_ = 0
         self._size: int | None = None  # the size a segmented download announced
+        self._requests = 0  # requests served: a deferred answer is for the latest only
         self._where = (0, 0)  # the open (or last) transfer's index and sub-index
         self._timer: Timer | None = None
 
@@ -86,6 +97,7 @@ class SdoService(SdoServer):
             return  # no SDO service in STOPPED (CiA 301)
         request = bytes(data).ljust(8, b"\0")
         with self._lock:
+            self._requests += 1  # a write still waiting for the loop is not answered now
             self._stop_timer()
             try:
                 self._serve(request)
@@ -159,8 +171,13 @@ class SdoService(SdoServer):
             raise SdoAbortedError(ABORT_WRITE_READONLY)
         if command & EXPEDITED:
             size = 4 - (command >> 2 & 0x3) if command & SIZE_SPECIFIED else 4
-            node.set_data(index, subindex, request[4:4 + size], check_writable=True)
-            self.send_response(struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex))
+            answer = struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex)
+            try:
+                node.set_data(index, subindex, request[4:4 + size], check_writable=True)
+            except Deferred as deferred:
+                self._answer_later(deferred, answer)
+                return
+            self.send_response(answer)
             return
         self._size = (struct.unpack_from("<L", request, 4)[0] if command & SIZE_SPECIFIED
                       else None)
@@ -180,10 +197,39 @@ class SdoService(SdoServer):
             index, subindex = self._where
             node = self._gateway_node
             node.check_size(node.object_for(index, subindex), len(data))
-            node.set_data(index, subindex, data, check_writable=True)
+            answer = bytes((RESPONSE_SEGMENT_DOWNLOAD | self._toggle_,)) + bytes(7)
             self._mode = None
+            self._toggle_ ^= TOGGLE_BIT
+            try:
+                node.set_data(index, subindex, data, check_writable=True)
+            except Deferred as deferred:
+                self._answer_later(deferred, answer)
+                return
+            self.send_response(answer)
+            return
         self.send_response(bytes((RESPONSE_SEGMENT_DOWNLOAD | self._toggle_,)) + bytes(7))
         self._toggle_ ^= TOGGLE_BIT
+
+    def _answer_later(self, deferred: Deferred, answer: bytes) -> None:
+        """The write's work runs on the loop; its answer (or abort) is sent from there --
+        unless the master has moved on meanwhile (a new request, its own abort), when
+        nothing of it is done and nothing answered."""
+        request = self._requests
+        where = self._where
+
+        def current() -> bool:
+            return self._requests == request
+
+        def done(code: int | None) -> None:
+            with self._lock:
+                if not current():
+                    return
+                if code is None:
+                    self.send_response(answer)
+                else:
+                    self.send_response(struct.pack("<BHBL", RESPONSE_ABORTED, *where, code))
+
+        self._gateway_node.defer(deferred.work, done, current)
 
     def _abort_transfer(self, code: int) -> None:
         """Answer with an abort naming the transfer's object, and close it."""
@@ -218,6 +264,16 @@ class SdoService(SdoServer):
             self._stop_timer()
 
 
+def _run_now(work: Callable[[], None], done: Callable[[int | None], None],
+             wanted: Callable[[], bool]) -> None:
+    try:
+        work()
+    except SdoAbortedError as exc:
+        done(exc.code)
+        return
+    done(None)
+
+
 class Device(canopen.LocalNode):
     """A LocalNode with our SDO server and the value-range checks of spec 3.3."""
 
@@ -230,6 +286,10 @@ class Device(canopen.LocalNode):
         # value controls (a PDO, the SYNC, the heartbeat consumer).
         self.stored: Callable[[int, int], None] = lambda index, subindex: None
         self.read_hooks: list[Callable[..., int | None]] = []  # add_read_callback's, for get_data
+        # Runs a deferred write's work (the gateway: on its loop) and reports the outcome:
+        # defer(work, done(abort code or None), still_wanted()).
+        self.defer: Callable[[Callable[[], None], Callable[[int | None], None],
+                              Callable[[], bool]], None] = _run_now
 
     def add_read_callback(self, callback: Callable[..., int | None]) -> None:
         super().add_read_callback(callback)

@@ -5,6 +5,7 @@ a clock the test moves (never slept for)."""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from pathlib import Path
 
 import canopen
@@ -13,7 +14,7 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
-from ncgate.gateway.canopen.clock import ManualClock
+from ncgate.gateway.canopen.clock import ManualClock, Timer
 from ncgate.gateway.canopen.dictionary import write_eds
 
 from .conftest import Master, u8
@@ -293,3 +294,26 @@ async def _to_thread(fn: object) -> None:
     import asyncio
 
     await asyncio.to_thread(fn)  # type: ignore[arg-type]
+
+
+class CoarseClock(ManualClock):
+    """A loop clock like uvloop's: a timer of a millisecond or more may fire up to half a
+    millisecond early (its timers have a millisecond's resolution); time itself is exact."""
+
+    def call_later(self, delay_s: float, fn: Callable[[], None]) -> Timer:
+        return super().call_later(delay_s - 0.0005 if delay_s >= 0.001 else delay_s, fn)
+
+
+@pytest.mark.parametrize("clock", [CoarseClock()], indirect=False)
+async def test_inhibit_time_is_kept_on_a_coarse_loop_clock(clocked: Gateway, master: Master,
+                                                           clock: ManualClock) -> None:
+    await master.while_disabled(0x1800, 3, struct.pack("<H", 20))  # 2 ms
+    await operational(master)
+    assert await master.next(TPDO1) == bytes(4)
+    await p1_waits_for_sa10(clocked)
+    await master.barrier()
+    clock.advance(0.0015)  # the 2 ms timer fires here, early
+    await master.barrier()
+    assert master.frames[TPDO1].empty()  # not before the inhibit time is over
+    clock.advance(0.0005)
+    assert await master.next(TPDO1) == bytes((3, 3, 0, 0))
