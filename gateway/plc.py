@@ -39,7 +39,9 @@ log = logging.getLogger("ncgate.plc")
 PLC_REGISTERS = ("state (0 stopped, 1 running, 2 fault)", "scans (hi)", "scans (lo)",
                  "last scan µs (hi)", "last scan µs (lo)", "max scan µs (hi)",
                  "max scan µs (lo)", "overruns (hi)", "overruns (lo)",
-                 "fault source line (0: none)")
+                 "fault source line (0: none)", "last scan lateness µs (hi)",
+                 "last scan lateness µs (lo)", "max scan lateness µs (hi)",
+                 "max scan lateness µs (lo)")
 
 
 def logic_context(config: Config) -> Context:
@@ -115,8 +117,11 @@ class ScanDriver:
 
     def __init__(self, engine: Engine, runtime: PlcRuntime, scan_ms: int, *,
                  wall: Callable[[], float] | None = None, closed: bool = False,
-                 stall_s: float = 60.0) -> None:
+                 stall_s: float = 60.0, scale: float = 1.0) -> None:
+        """``wall``: machine time now by the wall clock (``run``); ``scale``: the time scale
+        that turns the scans' lateness back into wall-clock time."""
         self.engine = engine
+        self.scale = scale
         self.runtime = runtime
         self.period = scan_ms / 1000.0
         self.wall = wall
@@ -128,6 +133,17 @@ class ScanDriver:
 
     def _scan(self) -> None:
         engine, period = self.engine, self.period
+        status = self.runtime.status
+        if self.wall is not None:
+            now = self.wall()
+            if self.k == 0:
+                # The first scan is on time whenever the gateway got round to it (starting
+                # the fieldbus may take a while): the scans count from here.
+                self.t0 = max(self.t0, now)
+            # On the wall clock, as the scan's own time is: machine time / time scale.
+            lateness = max(0, round((now - (self.t0 + self.k * period)) * 1e6 / self.scale))
+            status.last_lateness_us = lateness
+            status.max_lateness_us = max(status.max_lateness_us, lateness)
         due = self.t0 + self.k * period
         self.runtime.scan(round(due * 1000))
         self.k += 1
@@ -135,7 +151,7 @@ class ScanDriver:
             late = self.wall() - (self.t0 + self.k * period)
             if late >= period:  # the loop came a whole period late or more: skip, count
                 missed = int(late // period)
-                self.runtime.status.overruns += missed
+                status.overruns += missed
                 self.k += missed
         if self.closed and engine.stalled and engine.next_timer() is None and (
                 engine.now - engine.last_change >= self.stall_s):
@@ -175,9 +191,11 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
                               f"RETAIN values in {path}: {exc}") from None
     engine = runtime.engine
     logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door), order,
-                               plc.loop_limit, store)
+                               plc.loop_limit, store,
+                               watchdog_ms=0 if closed else plc.watchdog_ms)
     runtime.plc = logic_runtime
     driver = ScanDriver(engine, logic_runtime, plc.scan_ms, wall=wall, closed=closed,
+                        scale=config.nc.time_scale,
                         stall_s=config.nc.stall_s)
     log.info("PLC logic: %s, scan %d ms, programs %s", ", ".join(p.name for p in plc.logic),
              plc.scan_ms, ", ".join(order))
@@ -194,6 +212,9 @@ def plc_registers(status: PlcStatus | None) -> list[int]:
         regs += [value >> 16, value & 0xFFFF]
     fault = status.fault
     regs.append(fault.span.line & 0xFFFF if fault is not None and fault.span else 0)
+    for late in (status.last_lateness_us, status.max_lateness_us):
+        late = min(late, 0xFFFFFFFF)
+        regs += [late >> 16, late & 0xFFFF]
     return regs
 
 

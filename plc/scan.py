@@ -73,6 +73,14 @@ class PlcPathError(PlcError, KeyError):
     def __str__(self) -> str:  # a KeyError would quote its message
         return str(self.args[0]) if self.args else ""
 
+
+GUARD_CHUNK = 1024  # loop iterations between two looks at the limit and the watchdog
+
+
+class WatchdogExpired(IterationGuard):
+    """The scan ran longer than ``plc.watchdog_ms``: raised inside the logic, so that the
+    fault names the line it was executing."""
+
 @dataclass
 class PlcStatus:
     state: PlcState = PlcState.STOPPED
@@ -81,18 +89,26 @@ class PlcStatus:
     max_scan_us: int = 0
     overruns: int = 0
     fault: PlcFault | None = None
+    # How late the scans began against their due time (on the wall clock, in `run`).
+    last_lateness_us: int = 0
+    max_lateness_us: int = 0
 
 
 class PlcRuntime:
     """Compiled logic + its program instances + the scan."""
 
     def __init__(self, logic: Logic, image: IOImage, nc: NcPort, order: Sequence[str],
-                 loop_limit: int = 100_000, retain: RetainStore | None = None) -> None:
+                 loop_limit: int = 100_000, retain: RetainStore | None = None,
+                 watchdog_ms: int = 0) -> None:
+        """``watchdog_ms``: a scan running longer (wall clock) is stopped: FAULT (0: off)."""
         self.logic = logic
         self.image = image
         self.nc = nc
         self.order = [name.upper() for name in order]
         self.loop_limit = loop_limit
+        self.watchdog_ms = watchdog_ms
+        self._deadline_ns = 0  # this scan's watchdog deadline (perf_counter_ns; 0: none)
+        self._granted = 0  # loop iterations handed out to this scan so far
         self.retain = retain
         self.status = PlcStatus()
         ns = logic.namespace
@@ -105,6 +121,7 @@ class PlcRuntime:
             (sender, target, where))
         self._outputs: list[bool] = ns["_NCO"]
         self._outputs_at: list[str] = ns["_NCW"]
+        ns["_guard"] = self._guard
         self._last_outputs = [False, False, False]
         self._retained = [(p, v) for p, table in logic.programs.items()
                           for v in table.values() if v.retain]
@@ -159,7 +176,12 @@ class PlcRuntime:
             ns["_NCE"] = nc.events() & 0xFFFFFFFF
             ns["_NCL"] = nc.last_snd()
         ns["_NOW"] = now_ms
-        ns["_LEFT"] = self.loop_limit
+        # Loop iterations are handed out GUARD_CHUNK at a time: between chunks the guard
+        # looks at the iteration limit and the watchdog's clock.
+        self._granted = min(GUARD_CHUNK, self.loop_limit)
+        ns["_LEFT"] = self._granted
+        self._deadline_ns = (started + self.watchdog_ms * 1_000_000 if self.watchdog_ms
+                             else 0)
         self._sends.clear()
         try:
             for program in self._runs:
@@ -216,10 +238,24 @@ class PlcRuntime:
                 self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
         self._sends.clear()
 
+    def _guard(self) -> None:
+        """Called by the compiled logic when its loop iterations ran out: the iteration
+        limit and the watchdog are checked, then another chunk is handed out."""
+        if self._deadline_ns and time.perf_counter_ns() > self._deadline_ns:
+            raise WatchdogExpired("the scan watchdog expired")
+        if self._granted >= self.loop_limit:
+            raise IterationGuard("the loop iteration guard ran out")
+        chunk = min(GUARD_CHUNK, self.loop_limit - self._granted)
+        self._granted += chunk
+        self._ns["_LEFT"] = chunk - 1  # the iteration that called is one of them
+
     def _fault(self, exc: BaseException) -> None:
         span, line = self.logic.locate(exc.__traceback__)
         message = str(exc)
-        if isinstance(exc, IterationGuard):
+        if isinstance(exc, WatchdogExpired):
+            message = (f"the scan ran longer than the watchdog's {self.watchdog_ms} ms "
+                       "(plc.watchdog_ms)")
+        elif isinstance(exc, IterationGuard):
             message = (f"more than {self.loop_limit} loop iterations in one scan "
                        "(plc.loop_limit)")
         elif isinstance(exc, RecursionError):

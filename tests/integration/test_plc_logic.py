@@ -303,3 +303,45 @@ def test_programs_run_in_the_configured_order(tmp_path: Path) -> None:
     config_file.write_text('[plc]\nlogic = "two.st"\nprograms = ["first", "thrid"]\n')
     with pytest.raises(ConfigError, match=r"plc\.programs\[1\]: no PROGRAM thrid"):
         run_sim(load_config(config_file), "MAIN", Script(None, ()))
+
+
+def test_the_first_scan_is_on_time_however_late_the_gateway_got_to_it(tmp_path: Path) -> None:
+    from ncgate.gateway.plc import start_plc
+    from ncgate.gateway.wiring import build_runtime
+
+    """Starting the fieldbus took 200 ms: the scans count from the first one, none is skipped
+    as an overrun and the PLC's timers do not start behind the NC."""
+    (tmp_path / "p.st").write_text("PROGRAM p VAR n : DINT; END_VAR n := n + 1; END_PROGRAM")
+    (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "p.st"\nscan_ms = 10\n')
+    config = load_config(tmp_path / "ncgate.toml")
+    runtime = build_runtime(config, closed=False)
+    engine = runtime.engine
+    started = start_plc(config, runtime, Door(runtime), closed=False,
+                        wall=lambda: engine.now + (0.2 if engine.now == 0.0 else 0.0))
+    assert started is not None
+    plc, _ = started
+    scanned: list[float] = []
+    plc.scan_listeners.append(lambda: scanned.append(round(engine.now, 3)))
+    engine.advance_to(0.25)
+    assert scanned == [0.0, 0.21, 0.22, 0.23, 0.24, 0.25]
+    assert plc.status.overruns == 0 and plc.status.max_lateness_us == 0
+
+
+async def test_a_scan_past_the_watchdog_faults_at_its_line(tmp_path: Path) -> None:
+    (tmp_path / "p.st").write_text(
+        "PROGRAM p\nVAR i : DINT; n : DINT; END_VAR\n"
+        "FOR i := 1 TO 50000000 DO\n  n := n + 1;\nEND_FOR;\nEND_PROGRAM\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[plc]\nlogic = "p.st"\nscan_ms = 10\nwatchdog_ms = 20\nloop_limit = 100000000\n')
+    cfg = load_config(tmp_path / "ncgate.toml",
+                      overrides={"modbus.port": 0, "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        with pytest.raises(PlcFaulted):  # the fault wakes the watch (no polling)
+            await PlcWatch(gw).until("p.n", test=lambda _: False, timeout_s=10)
+        fault = gw.plc.status.fault
+        scans = gw.plc.status.scans
+        alarms = [e for e in gw.trace if e["event"] == "alarm"]
+    assert fault is not None and fault.span is not None and fault.span.line in (3, 4)
+    assert "watchdog's 20 ms (plc.watchdog_ms)" in str(fault)
+    assert alarms and alarms[0]["code"] == "AL160" and "watchdog" in alarms[0]["message"]
+    assert scans == 0  # the scan that ran over never completed
