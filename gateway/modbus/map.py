@@ -136,9 +136,10 @@ class ModbusMap:
                    "uint16", "command: 1 cycle start, 2 feed hold, 3 reset (reads 0)"),
             Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
-            Region(Table.INPUT, 0, 8, Kind.INFO, "r", "uint16",
+            Region(Table.INPUT, 0, 9, Kind.INFO, "r", "uint16",
                    "0 map version, 1 process count, 2-3 event counter (u32), "
-                   "4-7 last SND: sender, target, block N, event number (low 16 bits)"),
+                   "4-7 last SND: sender, target, block N, event number (low 16 bits), "
+                   "8 how far the engine is behind the clock (ms of machine time; 0: on time)"),
             Region(Table.INPUT, self.STATUS_BASE, self.STATUS_STRIDE * processes,
                    Kind.PROCESS_STATUS, "r", "record",
                    f"process k at {self.STATUS_BASE}+20(k-1)+0..17: "
@@ -227,18 +228,20 @@ class ModbusMap:
         if kind in (Kind.COMMAND, Kind.MAILBOX):
             return [0] * count
         if kind is Kind.INFO:
-            return self._info(backend.engine)[first:first + count]
+            return self._info(backend)[first:first + count]
         if kind is Kind.SND_LOG:
             return snd_log_registers(backend.engine)[first:first + count]
         if kind is Kind.PLC_STATUS:
             return plc_registers(backend.plc_status)[first:first + count]
         return self._status_registers(backend.engine, address, count)
 
-    def _info(self, engine: Engine) -> list[int]:
+    def _info(self, backend: Backend) -> list[int]:
+        engine = backend.engine
         counter = engine.trace.counter
         sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
         return [MAP_VERSION, len(engine.processes), counter >> 16 & 0xFFFF, counter & 0xFFFF,
-                sender, target, n & 0xFFFF, number & 0xFFFF]
+                sender, target, n & 0xFFFF, number & 0xFFFF,
+                min(round(backend.lag_s * 1000), 0xFFFF)]
 
     def _status_registers(self, engine: Engine, address: int, count: int) -> list[int]:
         cache: dict[int, list[int]] = {}

@@ -24,10 +24,12 @@ lives in ``ncgate.gateway.modbus.map``.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
 import logging
 import ssl
 import struct
+import time
 from collections.abc import Callable
 from typing import Any, Final, cast
 
@@ -66,6 +68,12 @@ from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import Source, SourceKind
 
+try:  # a socket's unsent bytes in the kernel (Linux: SIOCOUTQ): a slow reader is seen reading
+    import fcntl
+    import termios
+except ImportError:  # pragma: no cover - not on this platform: the transport's buffer only
+    fcntl = termios = None  # type: ignore[assignment]
+
 log = logging.getLogger("ncgate.modbus")
 
 PARTIAL_FRAME_TIMEOUT_S: Final = 5.0
@@ -73,9 +81,11 @@ PARTIAL_FRAME_TIMEOUT_S: Final = 5.0
 # which reading resumes (a client that sends and never reads cannot make us buffer for it).
 WRITE_HIGH_WATER: Final = 256 * 1024
 WRITE_LOW_WATER: Final = 64 * 1024
-# Requests of one connection answered in one loop turn before the others get theirs, and the
-# backlog of unanswered requests above which (and below which again) its reading pauses.
+# Requests of one connection answered in one loop turn before the others get theirs (at most
+# this many, and no more once TURN_S of the loop's time went to them), and the backlog of
+# unanswered requests above which (and below which again) its reading pauses.
 FRAMES_PER_TURN: Final = 16
+TURN_S: Final = 0.0005
 BACKLOG_HIGH: Final = 16 * 1024
 BACKLOG_LOW: Final = 4 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
@@ -365,12 +375,27 @@ class _Connection(asyncio.Protocol):
         """Answers not yet sent passed the high-water mark: answer and read no more requests
         from this client until it reads its answers (the others are served meanwhile)."""
         self.paused = True
+        self.drain_mark = self._unsent()
         self._reading()
 
     def resume_writing(self) -> None:
         self.paused = False
         self._reading()
         self._process()  # what arrived before the pause
+
+    def _unsent(self) -> int:
+        """Answers not yet read by the client: the transport's buffer and the kernel's send
+        queue (Linux: SIOCOUTQ), so that a slow reader is seen reading."""
+        transport = self.transport
+        if transport is None:
+            return 0
+        unsent = transport.get_write_buffer_size()
+        sock = transport.get_extra_info("socket")
+        if sock is not None and termios is not None and hasattr(termios, "TIOCOUTQ"):
+            with contextlib.suppress(OSError, ValueError):
+                queued = fcntl.ioctl(sock.fileno(), termios.TIOCOUTQ, b"\0\0\0\0")
+                unsent += struct.unpack("i", queued)[0]
+        return unsent
 
     def _reading(self) -> None:
         """Read while the client reads its answers and its backlog is small."""
@@ -468,19 +493,21 @@ class _Connection(asyncio.Protocol):
         self.server.chatter.note(f"{self.who}: {self.tls.version()} established")
 
     def _process(self) -> None:
-        """Answer the complete frames in the buffer, in order, at most FRAMES_PER_TURN in one
-        loop turn (then the next turn is due after everyone else's: a pipelining client gets
-        its share and stalls nobody), unless the client stopped reading its answers (then the
-        rest waits in the buffer until it does).  A backlog above BACKLOG_HIGH stops reading
-        from the client until its turns have brought it under BACKLOG_LOW."""
+        """Answer the complete frames in the buffer, in order, at most FRAMES_PER_TURN (or
+        TURN_S of the loop's time) in one loop turn (then the next turn is due after everyone
+        else's: a pipelining client gets its share and stalls nobody), unless the client
+        stopped reading its answers (then the rest waits in the buffer until it does).  A
+        backlog above BACKLOG_HIGH stops reading from the client until its turns have brought
+        it under BACKLOG_LOW."""
         self.turn = None
         buffer = self.buffer
         handle = self.handle
         out: list[bytes] = []
         size = 0
         answered = 0
+        turn_ends = time.perf_counter() + TURN_S
         while len(buffer) >= 7 and not self.paused:
-            if answered >= FRAMES_PER_TURN:
+            if answered >= FRAMES_PER_TURN or (answered and time.perf_counter() > turn_ends):
                 self.turn = self.loop.call_soon(self._process)
                 break
             tid, protocol, length, unit = _MBAP.unpack_from(buffer)
@@ -538,15 +565,18 @@ class _Connection(asyncio.Protocol):
                     else "partial frame")
             self.close(f"{what} not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
             return
-        if self.paused and self.transport.get_write_buffer_size() < self.drain_mark:
+        unsent = self._unsent()
+        if self.paused and unsent < self.drain_mark:
             self.last_activity = now  # answers still unsent, but the client is reading them
-        self.drain_mark = self.transport.get_write_buffer_size()
+        self.drain_mark = unsent
+        # Answering its requests is activity too: a backlog being served is not silence.
+        self.last_activity = max(self.last_activity, self.completed_at or 0.0)
         if now - self.last_activity >= idle:
             self.close(f"idle for {idle:g} s")
             return
         next_check = self.last_activity + idle - now
         if self.paused:  # look again soon whether the client reads what it is sent
-            next_check = min(next_check, 1.0)
+            next_check = min(next_check, idle / 4)
         if self.partial_since is not None:
             next_check = min(next_check, self.partial_since + PARTIAL_FRAME_TIMEOUT_S - now)
         self._arm(max(next_check, 0.001))

@@ -62,3 +62,32 @@ async def test_a_connect_flood_knocks_no_client_off(
     for s in sockets:
         s.close()
     poller.close()
+
+
+@pytest.mark.parametrize("ncgate_config", [{"modbus.idle_timeout_s": 1.0}], indirect=True)
+async def test_a_slow_reader_is_not_closed_as_idle(ncgate_gateway: Gateway,
+                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """A client whose answers back up (the server pauses it) but who keeps reading them is
+    active: the idle timeout is for silent clients."""
+    import asyncio
+    import socket
+
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    host, port = ncgate_gateway.modbus_address
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # answers back up at once
+    sock.setblocking(False)
+    await asyncio.get_running_loop().sock_connect(sock, (host, port))
+    reader, writer = await asyncio.open_connection(sock=sock)
+    request = pdu(3, "HH", 0, 125)  # 257-byte answers
+    writer.write(b"".join(mbap(i & 0xFFFF, 1, request) for i in range(20_000)))
+    (connection,) = server.connections
+    read = 0
+    began = asyncio.get_running_loop().time()
+    while asyncio.get_running_loop().time() - began < 3.0:  # three idle timeouts
+        read += len(await reader.read(8192))
+        await asyncio.sleep(0.05)  # the stimulus: a slow reader's pace
+    assert connection in server.connections and connection.paused, read
+    assert not any("idle for" in r.getMessage() for r in caplog.records)
+    writer.close()
