@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import secrets
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
@@ -33,6 +35,7 @@ from ncgate.gateway.lifecycle import Adapter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import ScanDriver, start_plc
+from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
@@ -98,6 +101,8 @@ class Gateway:
         self._cold = cold
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
         self._stack: contextlib.AsyncExitStack | None = None
+        self._loading: set[asyncio.Task[None]] = set()  # starts waiting for their program
+        self._refusals = RateLimitedLog(logging.getLogger("ncgate"))
         self.door: Door  # set on entry: the one way in (:meth:`apply`)
 
     async def __aenter__(self) -> Gateway:
@@ -129,6 +134,7 @@ class Gateway:
                                  stall_s=self.config.nc.stall_s)
         self._runtime, self._driver = runtime, driver
         stack.callback(self._stop_clock)
+        stack.callback(self._stop_loading)
         self.door = Door(runtime, lambda: runtime.plc, sync=self._sync_clock)
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
@@ -140,11 +146,6 @@ class Gateway:
             trace.subscribe(recorder.event)
             runtime.store.loaded.append(recorder.program)
             self.door.recorder = recorder.input
-        plc = start_plc(self.config, runtime, self.door, closed=False, wall=driver.now,
-                        cold=self._cold)
-        if plc is not None:
-            self._plc = plc
-            stack.callback(self._stop_plc, plc)
         adapters: list[Adapter] = []
         if self.config.modbus.enabled:
             self._modbus = ModbusServer(self.config.modbus, self.map, self)
@@ -161,8 +162,19 @@ class Gateway:
             stack.push_async_callback(adapter.close)
         if self._console is not None and self._console.address is None:
             self._console = None  # an unset port that was taken: run goes on without it
+        # The PLC scans from here: its first scan is due once the fieldbus is up, not while
+        # the adapters start (which would make the next scans late from the start).
+        plc = start_plc(self.config, runtime, self.door, closed=False, wall=driver.now,
+                        cold=self._cold)
+        if plc is not None:
+            self._plc = plc
+            stack.callback(self._stop_plc, plc)
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
+
+    def _stop_loading(self) -> None:
+        for task in list(self._loading):
+            task.cancel()  # its reading thread is a daemon: it ends with the process
 
     def _stop_clock(self) -> None:
         if self._driver is not None:
@@ -259,6 +271,12 @@ class Gateway:
         return self._plc[0]
 
     @property
+    def lag_s(self) -> float:
+        """How far (machine seconds) the engine is behind the wall clock: 0 while it keeps
+        ``nc.time_scale``; more when the loop has no time for what is due (a write storm)."""
+        return self._driver.lag_s if self._driver is not None else 0.0
+
+    @property
     def plc_status(self) -> PlcStatus | None:
         """The PLC's status (None: no logic), for the fieldbus status objects."""
         return self._plc[0].status if self._plc is not None else None
@@ -266,8 +284,11 @@ class Gateway:
     # -- acting as the operator and as a PLC -----------------------------------------------
 
     def _sync_clock(self) -> None:
+        """Bring the engine to now before an input acts: what was due before it happens
+        first, at its own time (jumping the clock past due timers would start what follows
+        them late, and a write storm would slow the machine down)."""
         assert self._driver is not None
-        self.engine.set_time(self._driver.now())
+        self._driver.catch_up()
 
     def _settle(self) -> None:
         """Run what an outside input made runnable, at the input's time."""
@@ -277,16 +298,84 @@ class Gateway:
     def apply(self, item: Input) -> None:
         """The one way into the cell (:mod:`ncgate.inputs`): validate ``item``, record it,
         apply it at the wall clock's now and run what it made runnable.  Raises
-        :class:`~ncgate.errors.InputRefused` (nothing applied) with a reason."""
+        :class:`~ncgate.errors.InputRefused` (nothing applied) with a reason.
+
+        A start (or a cycle start) of a program not read yet is read and checked off the
+        loop first (the fieldbus is served meanwhile); then the input acts, and a refusal
+        of it then is logged.  :meth:`apply_async` waits for that and raises it."""
         if self._driver is None:
             raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+        load = self._load_needed(item)
+        if load is not None:
+            self.door.precheck(item)  # what can be refused without the program: at once
+            task = asyncio.get_running_loop().create_task(self._load_then_apply(item, *load))
+            self._loading.add(task)
+            task.add_done_callback(self._loaded)
+            return
         self.door.apply(item)
+        self._settle()
+
+    def _loaded(self, task: asyncio.Task[None]) -> None:
+        self._loading.discard(task)
+        if self._driver is not None:
+            self._driver.changed.set()  # a waiter on "every process idle" looks again
+
+    async def apply_async(self, item: Input) -> None:
+        """:meth:`apply`, after reading a program it starts off the loop: a refusal is
+        raised here (the console's and :meth:`start`'s way)."""
+        load = self._load_needed(item)
+        if load is not None:
+            await self._load(*load)
+        self.door.apply(item)
+        self._settle()
+
+    def _load_needed(self, item: Input) -> tuple[str, int] | None:
+        """(program, process) when ``item`` starts a program the store has not read yet."""
+        if isinstance(item, Start):
+            name, process = item.program or self.config.nc.main, item.process
+        elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
+            engine = self.engine
+            p1 = engine.processes.get(1)
+            if (any(p.held for p in engine.processes.values()) or p1 is None
+                    or p1.loaded is not None or p1.alarm is not None):
+                return None  # resumes a hold, or starts nothing
+            name, process = self.config.nc.main, 1
+        else:
+            return None
+        if not name or self.runtime.store.ready(name, process):
+            return None
+        return name, process
+
+    async def _load(self, name: str, process: int) -> None:
+        """Read and check a program in a thread of its own (a daemon: a SIGTERM does not
+        wait for it); its outcome, a failure too, is kept for the start that follows."""
+        store = self.runtime.store
+        done = asyncio.get_running_loop().create_future()
+
+        def finish() -> None:
+            if not done.done():
+                done.set_result(None)
+
+        def work() -> None:
+            store.preload(name, process)
+            with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
+                done.get_loop().call_soon_threadsafe(finish)
+
+        threading.Thread(target=work, name=f"ncgate load {name}", daemon=True).start()
+        await done
+
+    async def _load_then_apply(self, item: Input, name: str, process: int) -> None:
+        await self._load(name, process)
+        try:
+            self.door.apply(item)
+        except InputRefused as exc:
+            self._refusals.note(f"{item.source}: {type(item).__name__.lower()} refused: {exc}")
         self._settle()
 
     async def start(self, name: str | None = None, process: int = 1,
                     source: Source = API) -> None:
         """The operator's SPG: start NAME (default: the config's main) in a process."""
-        self.apply(Start(name, process, source))
+        await self.apply_async(Start(name, process, source))
 
     def write(self, var: str, value: int, source: Source = API) -> None:
         """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``)."""
@@ -338,7 +427,7 @@ class Gateway:
                               for p in engine.processes.values()):
                 raise ProcessAlarmError("\n".join(
                     f"P{p.number} {p.alarm[1]}" for p in alarms if p.alarm))
-            return engine.all_idle and not engine.has_runnable
+            return engine.all_idle and not engine.has_runnable and not self._loading
 
         await self._until(idle, timeout_s, "every process IDLE")
 

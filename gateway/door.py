@@ -155,7 +155,13 @@ class Door:
         self._enter(item)
         engine.external_snd(item.sender, item.target)
 
-    def _start(self, item: Start) -> None:
+    def precheck(self, item: Input) -> None:
+        """What of ``item`` can be refused before its program is read (a start: the program
+        named, the process able to take it); InputRefused, or nothing."""
+        if isinstance(item, Start):
+            self._start_check(item)
+
+    def _start_check(self, item: Start) -> str:
         runtime = self.runtime
         name = item.program or runtime.config.nc.main
         if not name:
@@ -169,6 +175,11 @@ class Door:
         if p.loaded is not None or p.alarm is not None:
             raise InputRefused(Reason.BUSY, f"process {item.process} is busy "
                                f"({p.state.name})")
+        return name
+
+    def _start(self, item: Start) -> None:
+        runtime = self.runtime
+        name = self._start_check(item)
         try:  # load (parse and check) before the clock is read: it starts when it is ready
             runtime.store.load(name, None, item.process)
         except ProgramNotFoundError as exc:

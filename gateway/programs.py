@@ -11,10 +11,12 @@ into an alarm of the calling process.  How a file is read and checked is the dia
 from __future__ import annotations
 
 import dataclasses
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config
+from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.dialect import DialectOptions, ExternalBinding, Version
 from ncgate.interpreter.dialects import dialect_of, parse_condition
 from ncgate.interpreter.engine.ports import ProgramText
@@ -56,11 +58,15 @@ class ProgramStore:
         self.storage = storage_of(config)
         self.dialect = dialect_of(config.nc.dialect)
         self._reader = self.dialect.reader(dialect_options(config), self.storage)
-        # (file, process) -> (the version it was read at, the checked program)
-        self._cache: dict[tuple[Path, int], tuple[Version, ProgramText]] = {}
-        # Told of every program file read (again, when it changed): the session record
-        # hashes the files a session used.
+        # (file, process) -> (the version it was read at, the checked program, or what was
+        # wrong with it: a failure is kept too, so a start after a failed preload does not
+        # read the file again on the loop)
+        self._cache: dict[tuple[Path, int], tuple[Version, ProgramText | Exception]] = {}
+        self._lock = threading.Lock()  # preload() reads in a thread of its own
+        # Told (on the loop, by load()) of every program file read, again when it changed:
+        # the session record hashes the files a session used.
         self.loaded: list[Callable[[Path], None]] = []
+        self._announced: dict[Path, Version] = {}
 
     def channels(self, name: str) -> tuple[int, ...]:
         """The processes program ``name`` starts in when run on its own (an ISG file's
@@ -70,11 +76,46 @@ class ProgramStore:
     def load(self, name: str, device: str | None, process: int) -> ProgramText:
         path = self.storage.locate(name, device)
         version = file_version(path)
-        cached = self._cache.get((path, process))
+        result = self._read(path, version, process)
+        if self._announced.get(path) != version:
+            self._announced[path] = version
+            for listener in self.loaded:
+                listener(path)
+        if isinstance(result, Exception):
+            raise result.with_traceback(None)  # kept: no traceback piles up on it
+        return result
+
+    def _read(self, path: Path, version: Version, process: int) -> ProgramText | Exception:
+        with self._lock:
+            cached = self._cache.get((path, process))
         if cached is not None and cached[0] == version:
             return cached[1]
-        program = self._reader.load(path, version, process)
-        self._cache[(path, process)] = (version, program)
-        for listener in self.loaded:
-            listener(path)
-        return program
+        result: ProgramText | Exception
+        try:
+            result = self._reader.load(path, version, process)
+        except (ProgramError, ProgramNotFoundError) as exc:
+            result = exc
+        with self._lock:
+            self._cache[(path, process)] = (version, result)
+        return result
+
+    def ready(self, name: str, process: int) -> bool:
+        """Read already, as the file is now (then :meth:`load` costs a stat): a start of it
+        can act at once."""
+        try:
+            path = self.storage.locate(name, None)
+            version = file_version(path)
+        except (ProgramNotFoundError, OSError):
+            return True  # nothing to read: the start says so at once
+        with self._lock:
+            cached = self._cache.get((path, process))
+        return cached is not None and cached[0] == version
+
+    def preload(self, name: str, process: int) -> None:
+        """Read and check ``name`` for ``process`` now (any thread), keeping the program or
+        what is wrong with it for the :meth:`load` that follows on the loop."""
+        try:
+            path = self.storage.locate(name, None)
+            self._read(path, file_version(path), process)
+        except (ProgramNotFoundError, OSError):
+            pass  # the load on the loop says so

@@ -8,8 +8,16 @@ write and the wake.  ``nc.time_scale`` makes simulated time pass faster than the
 from __future__ import annotations
 
 import asyncio
+import logging
 
 from ncgate.interpreter.engine import Engine
+
+log = logging.getLogger("ncgate")
+LAG_WARN_S = 0.1  # wall seconds behind the clock that are worth a warning
+LAG_WARN_EVERY_S = 60.0  # at most one such warning a minute
+# Blocks (and timers) the engine runs in one turn of the loop before the fieldbus gets one:
+# about a millisecond of a dense dwell loop (nc.slice_blocks may be smaller).
+TURN_BLOCKS = 1_000
 
 
 class WallClockDriver:
@@ -29,6 +37,13 @@ class WallClockDriver:
         self._timer_at: float | None = None
         self._soon: asyncio.Handle | None = None
         self.changed = asyncio.Event()
+        self._turn = min(TURN_BLOCKS, engine.settings.slice_blocks)
+        # How far (machine seconds) the engine is behind the clock: work that was due is not
+        # done yet because the loop had no time for it (a write storm).  Shown in the status
+        # (Modbus info register 8, the console) and warned about once a minute.
+        self.lag_s = 0.0
+        self.max_lag_s = 0.0
+        self._lag_warned_at = float("-inf")
         engine.on_kick = self.kick
         engine.on_timer = lambda t: self.kick()
 
@@ -36,9 +51,18 @@ class WallClockDriver:
         """Simulated seconds since the driver started."""
         return (self.loop.time() - self.t0) * self.scale
 
+    def catch_up(self) -> None:
+        """Fire what is due up to now (a slice of it: the rest on the next turns), so that an
+        input from outside acts after everything that was due before it."""
+        now = self.now()
+        if self.engine.advance_to(now, self._turn):
+            self.kick()
+            self._note_lag(now - self.engine.now)
+        self._arm()
+
     def settle(self) -> None:
         """Run (a slice of) what an outside input made runnable, now; the rest soon."""
-        self.engine.run_until_blocked(self.engine.settings.slice_blocks)
+        self.engine.run_until_blocked(self._turn)
         self.kick()
 
     def kick(self) -> None:
@@ -51,11 +75,26 @@ class WallClockDriver:
         # A loop timer may fire a hair early: never let time run backwards past what is due.
         # At most a slice of blocks at a time: a loop with no motion must leave the event
         # loop free to serve the fieldbus and signals; the rest runs on the next turn.
-        if self.engine.advance_to(max(self.now(), due), self.engine.settings.slice_blocks):
+        now = max(self.now(), due)
+        if self.engine.advance_to(now, self._turn):
             self.kick()
+            self._note_lag(now - self.engine.now)
+        elif self.lag_s:
+            self.lag_s = 0.0
         self._arm()
         self._arm_stall()
         self.changed.set()
+
+    def _note_lag(self, lag: float) -> None:
+        self.lag_s = max(0.0, lag)
+        self.max_lag_s = max(self.max_lag_s, self.lag_s)
+        wall = self.loop.time()
+        if (self.lag_s / self.scale >= LAG_WARN_S
+                and wall - self._lag_warned_at >= LAG_WARN_EVERY_S):
+            self._lag_warned_at = wall
+            log.warning("the engine is %.3f s of machine time behind the clock (nc.time_scale "
+                        "%g): the loop is too busy to keep it; what is due runs late, in order",
+                        self.lag_s, self.scale)
 
     def _arm(self) -> None:
         t = self.engine.next_timer()

@@ -85,4 +85,7 @@ class Backend(Protocol):
     def apply(self, item: Input) -> None: ...
 
     @property
+    def lag_s(self) -> float: ...  # machine seconds the engine is behind the clock
+
+    @property
     def plc_status(self) -> PlcStatus | None: ...

@@ -105,13 +105,16 @@ async def test_refusals_are_typed_and_store_nothing(tmp_path: Path) -> None:
             Reason.NOT_EXTERNAL: lambda: gw.send(2, 1),
             Reason.NOT_RUNNING: lambda: gw.send(4, 1),
             Reason.PROGRAM_NOT_FOUND: lambda: gw.apply(Start("NOPE", 1)),
-            Reason.PROGRAM_INVALID: lambda: gw.apply(Start("BAD", 1)),
+
             Reason.UNSUPPORTED: lambda: gw.apply(Command(CommandKind.RESET, 2)),
         }
         for reason, act in refused.items():
             with pytest.raises(InputRefused) as caught:
                 act()
             assert caught.value.reason is reason, (reason, caught.value)
+        with pytest.raises(InputRefused) as caught:  # read off the loop, then refused
+            await gw.apply_async(Start("BAD", 1))
+        assert caught.value.reason is Reason.PROGRAM_INVALID
         with pytest.raises(InputRefused, match="not an input"):
             gw.apply("SA10=1")  # type: ignore[arg-type]
         with pytest.raises(InputRefused) as caught:

@@ -348,7 +348,7 @@ class WebConsole:
                                f'"process": 1..{processes}}}')
             item = Start(program, process, source)
         try:
-            self.gw.apply(item)
+            await self.gw.apply_async(item)  # a program is read off the loop
         except InputRefused as exc:
             raise ApiError(HTTP_STATUS[exc.reason], str(exc)) from None
         if isinstance(item, Start):

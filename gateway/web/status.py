@@ -30,6 +30,7 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "main": gw.config.nc.main,
         "dialect": gw.config.nc.dialect.value,
         "held": any(p.held for p in engine.processes.values()),
+        "lag_s": round(gw.lag_s, 6),  # behind the clock (machine s): 0 while on time
         "processes": [process(gw, number) for number in engine.processes],
         "plc": plc(gw),
         "fieldbus": fieldbus(gw),
@@ -89,7 +90,8 @@ def plc(gw: Gateway) -> dict[str, Any] | None:
                               "value": value, "retain": var.retain})
     return {"state": status.state.name, "scans": status.scans,
             "last_scan_us": status.last_scan_us, "max_scan_us": status.max_scan_us,
-            "overruns": status.overruns,
+            "overruns": status.overruns, "last_lateness_us": status.last_lateness_us,
+            "max_lateness_us": status.max_lateness_us,
             "fault": str(status.fault) if status.fault is not None else None,
             "variables": variables}
 

@@ -265,6 +265,10 @@ class Engine(SyncRules):
             self.run_until_blocked(blocks)
             if self._unfinished:
                 return True
+        # The slice counts across timers too: a dense loop of dwells is thousands of timers
+        # of a couple of blocks each, and must leave the event loop free between slices.
+        budget_at = None if blocks is None else self._decoded + blocks
+        fired = 0
         while (timer := self._timers.pop_due(t)) is not None:
             callback = timer.callback
             assert callback is not None
@@ -277,6 +281,11 @@ class Engine(SyncRules):
             self.run_until_blocked(blocks)
             if self._unfinished:
                 return True
+            fired += 1
+            if budget_at is not None and blocks is not None and (
+                    self._decoded >= budget_at or fired >= blocks):
+                later = self._timers.next_time()  # more due: the next call goes on from here
+                return later is not None and later <= t
         if t > self.now:
             self.now = t
         self.run_until_blocked(blocks)

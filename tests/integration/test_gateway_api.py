@@ -167,3 +167,52 @@ async def test_an_endless_loop_without_limit_can_be_reset_by_the_fieldbus(
         assert gw.status(1).state.name == "RUNNING" and blocks > 0
         gw.command(3)  # reset, as a PLC would write it
         await gw.wait_idle(timeout_s=5)
+
+
+async def test_the_engine_says_when_it_falls_behind_its_clock(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A dwell loop far denser than the loop can run at this time scale: the engine cannot
+    keep nc.time_scale, and says so -- in the status, Modbus info register 8, and a WARNING
+    (once a minute).  After a reset it keeps time again and the lag is 0."""
+    from ncgate.gateway.modbus.map import Table
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 1000.0\n')
+    (tmp_path / "A.nc").write_text('"L" N1(DLY,0.001)\nN2(BNC,L)\n')
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
+        assert gw.lag_s == 0.0
+        await gw.start()
+        driver = gw._driver
+        assert driver is not None
+        async with asyncio.timeout(10):
+            while gw.lag_s < 200.0:  # 0.2 s of the wall clock behind: worth a warning
+                driver.changed.clear()
+                await driver.changed.wait()
+        (lag_ms,) = gw.map.read_registers(gw, Table.INPUT, 8, 1)
+        assert lag_ms > 0
+        gw.command(3)  # reset: nothing is due any more
+        driver.changed.clear()
+        await driver.changed.wait()
+        assert gw.lag_s == 0.0 and driver.max_lag_s > 0.0
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len([w for w in warnings if "behind the clock" in w]) == 1
+
+
+async def test_a_big_program_is_read_off_the_loop(tmp_path: Path) -> None:
+    """A cycle start of a 2 MB main: while it is read and checked, the fieldbus is served
+    (Modbus answers come in before the program starts), and then it starts."""
+    from ncgate.gateway.testing.modbus_kit import VirtualPLC
+
+    lines = [f"N{n % 9999}G1X{n % 500}Y{(n * 7) % 500}F60000\n" for n in range(100_000)]
+    (tmp_path / "BIG.nc").write_text("".join(lines) + "M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "BIG"\n')
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.command(1)  # answered at once: the program is read in a thread
+        answered_before_start = 0
+        async with asyncio.timeout(60):
+            while gw.engine.processes[1].loaded is None:
+                await plc.status(1)  # a Modbus round trip through the gateway's loop
+                answered_before_start += 1
+        assert answered_before_start >= 3, answered_before_start
+        (start,) = [e for e in gw.trace if e["event"] == "start"]
+        assert start["prog"] == "BIG" and start["by"].startswith("modbus 127.0.0.1:")

@@ -95,7 +95,8 @@ function write(variable, value) { return post("/api/write", { var: variable, val
 
 // ---- rendering ----------------------------------------------------------------------------
 function render() {
-  $("#clock").textContent = "t = " + status.t.toFixed(3) + " s" + (status.held ? " (feed hold)" : "");
+  const lag = status.lag_s ? " (engine " + status.lag_s.toFixed(3) + " s behind the clock)" : "";
+  $("#clock").textContent = "t = " + status.t.toFixed(3) + " s" + (status.held ? " (feed hold)" : "") + lag;
   $("#source").textContent = status.config;
   for (const b of document.querySelectorAll("nav button, nav select")) {
     b.disabled = status.web.read_only;
