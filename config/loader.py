@@ -131,6 +131,10 @@ def _web_port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
     return _port_number(r, t["port"], key) if "port" in t else None
 
 
+def _watchdog(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
+    return r.int_(t.get("watchdog_ms", 5 * done["scan_ms"]), key, 0, 3_600_000)
+
+
 def _optional_str(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     name = key.rsplit(".", 1)[1]
     return r.str_(t[name], key) if name in t else None
@@ -316,6 +320,9 @@ class PlcConfig:
                            "in sim, nc.time_scale on the wall clock in run)", lo=1, hi=60_000)
     loop_limit: int = setting(100_000, "loop iterations one scan may run before the PLC "
                               "faults (the iteration guard)", lo=1, hi=100_000_000)
+    watchdog_ms: int = setting(50, "a scan that runs longer (wall-clock ms) is stopped and the "
+                               "PLC goes to FAULT naming the line it was executing (default "
+                               "5 x scan_ms; 0: off)", parse=_watchdog)
     retain_file: Path | None = setting(
         None, "where VAR RETAIN values are kept (default: ncgate-plc-retain.sqlite next to "
         "the config)", parse=_optional_path)
@@ -333,7 +340,7 @@ class ModbusMapConfig:
     status: int = setting(100, "input base of the per-process status blocks", lo=0, hi=65535)
     snd_log: int = setting(200, "input base of the SND log (the last 16 SNDs, 98 registers)",
                            lo=0, hi=65535)
-    plc_status: int = setting(300, "input base of the PLC status (10 registers)", lo=0,
+    plc_status: int = setting(300, "input base of the PLC status (14 registers)", lo=0,
                               hi=65535)
     read_only: frozenset[str] = setting(frozenset(), "regions clients may not write: "
                                         + ", ".join(MAP_REGIONS), parse=_read_only_regions)
@@ -659,7 +666,7 @@ def _check_config(r: _Reader, config: Config) -> None:
     holding = [("k_bytes", m.k_bytes, plc.k_bytes), ("syvars", m.syvars, plc.syvars),
                ("sa_bytes", m.sa_bytes, plc.sa_bits // 8), ("command", m.command, 3)]
     status = [("status", m.status, 20 * nc.processes), ("snd_log", m.snd_log, 98),
-              ("plc_status", m.plc_status, 10), ("info", 0, 8)]
+              ("plc_status", m.plc_status, 14), ("info", 0, 9)]
     for regions in (holding, status):
         for i, (name, start, count) in enumerate(regions):
             if start + count > 65536:

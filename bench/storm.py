@@ -1,0 +1,470 @@
+"""One cell under every abuse in turn (issue: the cell stays on time under any load).
+
+Each phase starts `ncgate run` afresh as its own process with the same cell: PLC logic
+scanning every 10 ms of the wall clock (scan_ms is machine time: 100 at time_scale 10), an
+SND/WAI loop (10 ms dwell) at time_scale 10, a CANopen master in this process reaching the
+node through the gateway's loopback hub (python-can-remote): its heartbeat every 100 ms (the
+node consumes it with 300 ms), SYNC every 10 ms with TPDO1 on every SYNC (type 1) -- and a
+200 Hz Modbus poller (FC4: the PLC status block, whose last scan lateness it samples).  The
+first phase is quiet; each other adds one abuse for its duration, run by a process of its own
+(the measuring process stays quiet):
+
+- flood:     one client writes 20,000 pipelined FC1 requests (1,024 coils) in one go;
+- no-read:   8 clients send requests and never read an answer;
+- connects:  300 silent TCP connects a second;
+- load:      the console starts a 10 MB program in process 3;
+- streams:   50 console event streams (SSE), read as they come;
+- storm:     4 clients writing FC6 as fast as they can (about 30,000 writes/s wanted).
+
+Per phase it prints the poller's round trip p50/p99/max, the PLC scan's max lateness and
+overruns (of scans due), SYNC->TPDO p99/max and TPDOs missing, false master-lost alarms
+(AL150 while the master's heartbeat went on), the share of due NC round trips kept, the time
+SIGTERM took to end the gateway (sent while the abuse goes on), and each figure's ratio to
+the quiet phase.  Targets under every abuse: poller p99 <= 5 ms and max <= 50 ms, PLC
+lateness max <= 20 ms and overruns <= 1 %, no false master-lost, SYNC->TPDO max <= 10 ms,
+NC round trips >= 95 % of due, SIGTERM <= 1 s.
+
+    .venv/bin/python bench/storm.py                 # every phase, 6 s each
+    .venv/bin/python bench/storm.py --phases quiet,flood --seconds 10
+
+The SYNC->TPDO delay includes the hub's websocket hop both ways (a master on real CAN would
+not have it): compare the phases with the quiet one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import multiprocessing
+import multiprocessing.synchronize
+import os
+import signal
+import socket
+import struct
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import can
+
+MAIN = '(EXE,2,PEER)\n"L"\nN1(SND,2)\nN2(WAI,2)\nN3(DLY,0.01)\nN4(BNC,L)\n'
+PEER = '"L"\nN1(WAI,1)\nN2(SND,1)\nN3(BNC,L)\n'
+LOGIC = """PROGRAM scan
+VAR t : ARRAY[0..9] OF TON; i : INT; n : DINT; END_VAR
+n := n + 1;
+FOR i := 0 TO 9 DO t[i](IN := NOT t[i].Q, PT := T#50ms); SA[900 + i] := t[i].Q; END_FOR
+SYVAR[200] := DINT_TO_INT(n MOD 30000);
+END_PROGRAM
+"""
+TIME_SCALE = 10.0
+DWELL_S = 0.01  # machine seconds per round trip of the SND/WAI loop
+NODE, MASTER = 1, 0x7F
+LOG = open(os.environ.get("STORM_LOG", os.devnull), "a")  # noqa: SIM115 - the run's log
+SPAWN = multiprocessing.get_context("spawn")
+PHASES = ("quiet", "flood", "no-read", "connects", "load", "streams", "storm")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def write_cell(folder: Path, port: int, hub: int, web: int) -> Path:
+    (folder / "LOOP.nc").write_text(MAIN)
+    (folder / "PEER.nc").write_text(PEER)
+    (folder / "scan.st").write_text(LOGIC)
+    config = folder / "ncgate.toml"
+    config.write_text(
+        f'[nc]\nmain = "LOOP"\nautostart = true\ntime_scale = {TIME_SCALE}\n'
+        f'[nc.storage]\nMP0 = "."\n[modbus]\nport = {port}\nmax_clients = 32\n'
+        f'[plc]\nlogic = "scan.st"\nscan_ms = {round(10 * TIME_SCALE)}\n'
+        f'[canopen]\nnode_id = {NODE}\nchannel = "storm-{os.getpid()}-{port}"\nhub = true\n'
+        f'hub_port = {hub}\nheartbeat_ms = 0\non_master_lost = "none"\n'
+        f'[web]\nport = {web}\n[trace]\nfile = "trace.jsonl"\n')
+    return config
+
+
+def big_program(folder: Path, megabytes: int = 10) -> None:
+    line = "N{n}G1X{x}Y{y}F6000\n"
+    with open(folder / "BIG.nc", "w") as out:
+        size, n = 0, 0
+        while size < megabytes * 1_000_000:
+            text = line.format(n=n % 9999, x=n % 500, y=(n * 7) % 500)
+            out.write(text)
+            size += len(text)
+            n += 1
+        out.write("M30\n")
+
+
+def mbap(tid: int, pdu: bytes) -> bytes:
+    return struct.pack(">HHHB", tid & 0xFFFF, 0, len(pdu) + 1, 1) + pdu
+
+
+async def ask(reader: asyncio.StreamReader, writer: asyncio.StreamWriter, pdu: bytes,
+              tid: int = 1) -> bytes:
+    writer.write(mbap(tid, pdu))
+    header = await reader.readexactly(7)
+    return await reader.readexactly(struct.unpack(">H", header[4:6])[0] - 1)
+
+
+async def wait_listening(port: int, deadline_s: float = 30.0) -> None:
+    end = time.perf_counter() + deadline_s
+    while True:
+        try:
+            _, writer = await asyncio.open_connection("127.0.0.1", port)
+            writer.close()
+            return
+        except OSError:
+            if time.perf_counter() > end:
+                raise
+            await asyncio.sleep(0.05)  # the gateway is starting: nothing to wait on
+
+
+# -- the measurements ----------------------------------------------------------------------
+
+async def poller(port: int, stop: asyncio.Event, rtts: list[float],
+                 lateness: list[int]) -> None:
+    """200 Hz, as a dashboard polls: the PLC status block (FC4 at 300), whose last scan's
+    lateness it samples."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    request = struct.pack(">BHH", 4, 300, 14)
+    next_at = time.perf_counter()
+    tid = 0
+    while not stop.is_set():
+        tid += 1
+        t = time.perf_counter()
+        body = await ask(reader, writer, request, tid)
+        rtts.append(time.perf_counter() - t)
+        regs = struct.unpack(">14H", body[2:30])
+        lateness.append(regs[10] << 16 | regs[11])
+        next_at += 0.005  # 200 Hz
+        await asyncio.sleep(max(0.0, next_at - time.perf_counter()))
+    writer.close()
+
+
+class Master(threading.Thread):
+    """SYNC every 10 ms and the heartbeat every 100 ms through the hub; TPDO1 arrivals."""
+
+    def __init__(self, hub: int) -> None:
+        super().__init__(daemon=True)
+        self.bus = can.Bus(interface="remote", channel=f"ws://127.0.0.1:{hub}/",
+                           bitrate=500000, receive_own_messages=False)
+        self.stop = threading.Event()
+        self.delays: list[float] = []
+        self.syncs = 0
+        self.tpdos = 0
+        self._last_sync = 0.0
+        self._reader = threading.Thread(target=self._read, daemon=True)
+
+    def sdo_write(self, index: int, sub: int, data: bytes) -> None:
+        command = 0x23 | (4 - len(data)) << 2
+        self.bus.send(can.Message(arbitration_id=0x600 + NODE, is_extended_id=False,
+                                  data=struct.pack("<BHB", command, index, sub)
+                                  + data.ljust(4, b"\0")))
+        end = time.perf_counter() + 2.0
+        while time.perf_counter() < end:
+            msg = self.bus.recv(0.1)
+            if msg is not None and msg.arbitration_id == 0x580 + NODE:
+                if msg.data[0] == 0x80:
+                    raise RuntimeError(f"SDO {index:04X}:{sub} aborted")
+                return
+        raise RuntimeError(f"no SDO answer for {index:04X}:{sub}")
+
+    def configure(self) -> None:
+        self.sdo_write(0x1016, 1, struct.pack("<I", MASTER << 16 | 300))  # consume 300 ms
+        self.sdo_write(0x1800, 2, b"\x01")  # TPDO1 on every SYNC
+        self.bus.send(can.Message(arbitration_id=0, is_extended_id=False,
+                                  data=bytes((0x01, NODE))))  # NMT start
+
+    def _read(self) -> None:
+        try:
+            self._receive()
+        except Exception:  # the gateway is gone (SIGTERM at the end of a phase)
+            self.stop.set()
+
+    def _receive(self) -> None:
+        while not self.stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is not None and msg.arbitration_id == 0x180 + NODE:
+                self.tpdos += 1
+                if self._last_sync:
+                    self.delays.append(time.perf_counter() - self._last_sync)
+
+    def run(self) -> None:
+        self._reader.start()
+        try:
+            self._send()
+        except Exception:  # the gateway is gone (SIGTERM at the end of a phase)
+            self.stop.set()
+
+    def _send(self) -> None:
+        next_sync = next_beat = time.perf_counter()
+        while not self.stop.is_set():
+            now = time.perf_counter()
+            if now >= next_beat:
+                self.bus.send(can.Message(arbitration_id=0x700 + MASTER, is_extended_id=False,
+                                          data=b"\x05"))
+                next_beat += 0.1
+            if now >= next_sync:
+                self._last_sync = time.perf_counter()
+                self.bus.send(can.Message(arbitration_id=0x80, is_extended_id=False, data=b""))
+                self.syncs += 1
+                next_sync += 0.01
+            time.sleep(max(0.0, min(next_sync, next_beat) - time.perf_counter()))
+
+    def close(self) -> None:
+        self.stop.set()
+        self.join(2)
+        self._reader.join(2)
+        try:
+            self.bus.shutdown()
+        except Exception:  # the hub went with the gateway: nothing left to close
+            self.bus._is_shutdown = True  # (python-can's flag: no second try at exit)
+
+
+async def plc_status(port: int) -> tuple[int, int, int]:
+    """(scans, overruns, max lateness µs) from the PLC status registers (input 300..)."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    body = await ask(reader, writer, struct.pack(">BHH", 4, 300, 14))
+    writer.close()
+    regs = struct.unpack(">14H", body[2:30])
+    return (regs[1] << 16 | regs[2], regs[7] << 16 | regs[8], regs[12] << 16 | regs[13])
+
+
+# -- the abuses ----------------------------------------------------------------------------
+
+async def flood(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    request = struct.pack(">BHH", 1, 0, 1024)
+    writer.write(b"".join(mbap(i, request) for i in range(20_000)))
+    try:
+        while not stop.is_set():
+            if not await reader.read(1 << 16):
+                break
+    finally:
+        writer.close()
+
+
+async def no_read(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    writers = []
+    for _ in range(8):
+        _, writer = await asyncio.open_connection("127.0.0.1", port)
+        writers.append(writer)
+    request = b"".join(mbap(i, struct.pack(">BHH", 3, 0, 125)) for i in range(64))
+    while not stop.is_set():
+        for writer in writers:
+            if not writer.is_closing() and writer.transport.get_write_buffer_size() < 1 << 20:
+                writer.write(request)
+        await asyncio.sleep(0.005)  # the load's own pace
+    for writer in writers:
+        writer.close()
+
+
+async def connects(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    sockets: list[asyncio.StreamWriter] = []
+    while not stop.is_set():
+        try:
+            _, writer = await asyncio.open_connection("127.0.0.1", port)
+            sockets.append(writer)
+        except OSError:
+            pass
+        if len(sockets) > 200:
+            sockets.pop(0).close()
+        await asyncio.sleep(1 / 300)  # 300 connects a second
+    for writer in sockets:
+        writer.close()
+
+
+async def load(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    body = json.dumps({"command": "start", "program": "BIG", "process": 3}).encode()
+    reader, writer = await asyncio.open_connection("127.0.0.1", web)
+    writer.write(b"POST /api/command HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: "
+                 b"application/json\r\nContent-Length: " + str(len(body)).encode()
+                 + b"\r\nConnection: close\r\n\r\n" + body)
+    await reader.read()
+    writer.close()
+    await stop.wait()
+
+
+async def streams(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    async def one() -> None:
+        reader, writer = await asyncio.open_connection("127.0.0.1", web)
+        writer.write(b"GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        while not stop.is_set() and await reader.read(1 << 16):
+            pass
+        writer.close()
+    tasks = [asyncio.create_task(one()) for _ in range(50)]
+    await stop.wait()
+    for task in tasks:
+        task.cancel()
+
+
+async def storm(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
+    async def client(c: int) -> None:
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        tid = 0
+        while not stop.is_set():
+            batch = []
+            for _ in range(64):
+                tid += 1
+                batch.append(mbap(tid, struct.pack(">BHH", 6, 1000 + c, tid & 0x7FFF)))
+            writer.write(b"".join(batch))
+            for _ in range(64):
+                header = await reader.readexactly(7)
+                await reader.readexactly(struct.unpack(">H", header[4:6])[0] - 1)
+        writer.close()
+    await asyncio.gather(*(client(c) for c in range(4)))
+
+
+ABUSES: dict[str, Callable[[int, int, Path, asyncio.Event], Awaitable[None]]] = {
+    "flood": flood, "no-read": no_read, "connects": connects, "load": load,
+    "streams": streams, "storm": storm}
+
+
+def abuse_process(name: str, port: int, web: int, folder: str,
+                  stop: multiprocessing.synchronize.Event) -> None:
+    """The abuse, in a process of its own: the measuring process stays quiet."""
+    async def main() -> None:
+        done = asyncio.Event()
+        task = asyncio.create_task(ABUSES[name](port, web, Path(folder), done))
+        await asyncio.to_thread(stop.wait)  # the other process's flag
+        done.set()
+        task.cancel()
+        with contextlib.suppress(BaseException):
+            await task
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(main())
+
+
+# -- one phase -----------------------------------------------------------------------------
+
+async def phase(name: str, seconds: float) -> dict[str, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        port, hub, web = free_port(), free_port(), free_port()
+        config = write_cell(folder, port, hub, web)
+        if name == "load":
+            big_program(folder)
+        gateway = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "ncgate", "run", "--config", str(config), "-q",
+            stdout=asyncio.subprocess.DEVNULL, stderr=LOG, cwd=tmp)
+        master: Master | None = None
+        try:
+            await wait_listening(port)
+            master = Master(hub)
+            await asyncio.to_thread(master.configure)
+            master.start()
+            stop = asyncio.Event()
+            abuse_stop = SPAWN.Event()
+            rtts: list[float] = []
+            late: list[int] = []
+            polling = asyncio.create_task(poller(port, stop, rtts, late))
+            await asyncio.sleep(1.0)  # warm-up: the measured window starts after it
+            rtts.clear()
+            late.clear()
+            master.delays.clear()
+            syncs0, tpdos0 = master.syncs, master.tpdos
+            scans0, overruns0, _ = await plc_status(port)
+            t0 = time.perf_counter()
+            abuse = (SPAWN.Process(target=abuse_process,
+                                   args=(name, port, web, str(folder), abuse_stop))
+                     if name in ABUSES else None)
+            if abuse is not None:
+                abuse.start()
+            await asyncio.sleep(seconds)  # the phase's length is what is measured
+            stop.set()
+            await polling
+            scans, overruns, _ = await plc_status(port)
+            lateness_us = max(late, default=0)  # the scans the poller saw, in the window
+            syncs, tpdos = master.syncs - syncs0, master.tpdos - tpdos0
+            delays = list(master.delays)
+            elapsed = time.perf_counter() - t0
+            # SIGTERM while the abuse goes on
+            sent = time.perf_counter()
+            gateway.send_signal(signal.SIGTERM)
+            await asyncio.wait_for(gateway.wait(), 30)
+            sigterm_s = time.perf_counter() - sent
+            abuse_stop.set()
+            if abuse is not None:
+                await asyncio.to_thread(abuse.join, 10)
+                if abuse.is_alive():
+                    abuse.kill()
+        finally:
+            if master is not None:
+                master.close()
+            if gateway.returncode is None:
+                gateway.kill()
+                await gateway.wait()
+        events = [json.loads(line) for line in (folder / "trace.jsonl").read_text().splitlines()]
+    lost = sum(1 for e in events if e["event"] == "alarm" and e.get("code") == "AL150")
+    t_end = max((e["t"] for e in events), default=0.0)
+    window = elapsed * TIME_SCALE  # machine seconds of the measured window
+    snds = sum(1 for e in events if e["event"] == "snd" and e["proc"] == 1
+               and e["t"] >= t_end - window)
+    due = window / DWELL_S
+    rtts.sort()
+    delays.sort()
+    due_scans = max(1, scans - scans0 + overruns - overruns0)
+
+    def pct(values: list[float], q: float) -> float:
+        return values[min(len(values) - 1, int(q * len(values)))] if values else float("nan")
+
+    return {
+        "poll_p50": pct(rtts, 0.5) * 1e3, "poll_p99": pct(rtts, 0.99) * 1e3,
+        "poll_max": (rtts[-1] if rtts else float("nan")) * 1e3,
+        "plc_late": lateness_us / 1e3, "overrun_pct": 100 * (overruns - overruns0) / due_scans,
+        "tpdo_p99": pct(delays, 0.99) * 1e3, "tpdo_max": (delays[-1] if delays else
+                                                          float("nan")) * 1e3,
+        "tpdo_missing": max(0, syncs - tpdos), "lost": lost,
+        "nc_kept_pct": 100 * min(1.0, snds / due), "sigterm_s": sigterm_s,
+        "polls": len(rtts),
+    }
+
+
+COLUMNS = [("poll_p50", "poll p50 ms", 5.0e9), ("poll_p99", "poll p99 ms", 5.0),
+           ("poll_max", "poll max ms", 50.0), ("plc_late", "PLC late max ms", 20.0),
+           ("overrun_pct", "overruns %", 1.0), ("tpdo_p99", "SYNC>TPDO p99 ms", 1e9),
+           ("tpdo_max", "SYNC>TPDO max ms", 10.0), ("tpdo_missing", "TPDOs missing", 1e9),
+           ("lost", "false lost", 0.0), ("nc_kept_pct", "NC kept %", -95.0),
+           ("sigterm_s", "SIGTERM s", 1.0)]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--phases", default=",".join(PHASES))
+    args = parser.parse_args()
+    names = [p.strip() for p in args.phases.split(",") if p.strip()]
+    if "quiet" not in names:
+        names.insert(0, "quiet")
+    results: dict[str, dict[str, float]] = {}
+    for name in names:
+        results[name] = asyncio.run(phase(name, args.seconds))
+    quiet = results["quiet"]
+    print(f"bench/storm.py: {args.seconds:g} s a phase, time_scale {TIME_SCALE:g}, "
+          f"PLC scan 10 ms, SYNC 10 ms, heartbeat 100 ms (consumer 300 ms), poller 200 Hz")
+    print("phase     " + "".join(f"{label:>18}" for _, label, _ in COLUMNS))
+    missed = []
+    for name, r in results.items():
+        cells = []
+        for key, _, target in COLUMNS:
+            value = r[key]
+            ratio = f" ({value / quiet[key]:.1f}x)" if quiet[key] and name != "quiet" else ""
+            cells.append(f"{value:>10.2f}{ratio:>8}")
+            bad = value < -target if target < 0 else value > target
+            if bad:
+                missed.append(f"{name}: {key} {value:.2f} (target "
+                              f"{'>=' if target < 0 else '<='} {abs(target):g})")
+        print(f"{name:<10}" + "".join(cells))
+    print("targets missed: " + ("; ".join(missed) if missed else "none"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
