@@ -102,6 +102,7 @@ class Gateway:
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
         self._stack: contextlib.AsyncExitStack | None = None
         self._loading: set[asyncio.Task[None]] = set()  # starts waiting for their program
+        self._load_waits: set[asyncio.Future[None]] = set()  # programs being read
         self._refusals = RateLimitedLog(logging.getLogger("ncgate"))
         self.door: Door  # set on entry: the one way in (:meth:`apply`)
 
@@ -175,6 +176,8 @@ class Gateway:
     def _stop_loading(self) -> None:
         for task in list(self._loading):
             task.cancel()  # its reading thread is a daemon: it ends with the process
+        for waiting in list(self._load_waits):
+            waiting.cancel()
 
     def _stop_clock(self) -> None:
         if self._driver is not None:
@@ -195,6 +198,7 @@ class Gateway:
     async def __aexit__(self, exc_type: type[BaseException] | None,
                         exc: BaseException | None, tb: TracebackType | None) -> None:
         stack, self._stack = self._stack, None
+        self._stop_loading()  # first: a console request waiting for a program ends now
         try:
             if stack is not None:
                 await stack.aclose()
@@ -351,6 +355,8 @@ class Gateway:
         wait for it); its outcome, a failure too, is kept for the start that follows."""
         store = self.runtime.store
         done = asyncio.get_running_loop().create_future()
+        self._load_waits.add(done)
+        done.add_done_callback(self._load_waits.discard)
 
         def finish() -> None:
             if not done.done():

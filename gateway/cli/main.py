@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import sys
 import traceback
 from collections.abc import Sequence
@@ -23,6 +25,7 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_BUG = 70  # EX_SOFTWARE (sysexits.h): an internal error
+SWITCH_INTERVAL_S = 0.0005
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -306,6 +309,11 @@ def _run(args: argparse.Namespace) -> int:
     overrides = _overrides(args)
     config = load_config(args.config, overrides=overrides)
     record = str(Path(args.record).resolve()) if args.record else None
+    # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
+    # a program being read: a thread that wants the GIL gets it within half a millisecond,
+    # not CPython's default 5 ms, so none of them makes another late (measured with
+    # bench/storm.py: the flood and load phases).
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
@@ -381,4 +389,14 @@ def _examples() -> int:
 
 
 def entry_point() -> None:
-    sys.exit(main())
+    status = main()
+    if sys.argv[1:2] == ["run"]:
+        # The gateway has stopped: every connection is closed and every file written.
+        # What is left is the interpreter freeing the heap object by object (seconds for a
+        # 10 MB program) and waiting for a program still being read: a SIGTERM must end the
+        # process within a second, so it ends here.
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    sys.exit(status)

@@ -65,6 +65,22 @@ _MOTION_WORDS: Final = frozenset(AXES) | {"I", "J", "K", "R"}
 _EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)", re.IGNORECASE)
 
 
+def exe_scan(program: Program) -> tuple[frozenset[int], bool]:
+    """The processes ``program``'s EXEs start and whether one is not a constant, from the
+    text (a program parsed lazily must not be parsed whole for this); kept on the program,
+    so that reading it (off the loop) does this once."""
+    if program.exe_scan is None:
+        targets: set[int] = set()
+        dynamic = False
+        for m in _EXE_ARG.finditer("\n".join(program.lines)):
+            if m.group(1).isdigit():
+                targets.add(int(m.group(1)))
+            else:
+                dynamic = True
+        program.exe_scan = (frozenset(targets), dynamic)
+    return program.exe_scan
+
+
 class NC110:
     """The NC-110 dialect as the engine's :class:`~ncgate.interpreter.engine.ports.FrontEnd`."""
 
@@ -85,16 +101,8 @@ class NC110:
         return CompiledBlock(tuple(ops), where, bool(block.items) or block.number is not None)
 
     def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
-        """From the text: a program that is parsed lazily must not be parsed whole here."""
         assert isinstance(program, Program)
-        targets: set[int] = set()
-        dynamic = False
-        for m in _EXE_ARG.finditer("\n".join(program.lines)):
-            if m.group(1).isdigit():
-                targets.add(int(m.group(1)))
-            else:
-                dynamic = True
-        return frozenset(targets), dynamic
+        return exe_scan(program)
 
     def attach(self, host: BlockHost, reset_listeners: list[Callable[[], None]]) -> None:
         """NC-110 registers no actions of its own and keeps no state beside the engine's."""

@@ -21,7 +21,7 @@ from ncgate.interpreter.dialect import (
     Version,
 )
 from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
-from ncgate.interpreter.nc110.compiler import NC110
+from ncgate.interpreter.nc110.compiler import NC110, exe_scan
 from ncgate.interpreter.nc110.nodes import Exe, Num
 from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.settings import Dialect
@@ -69,6 +69,7 @@ class _Reader:
             errors = [d for d in diagnostics if d.is_error]
             if errors:
                 raise ProgramSyntaxError(errors)
+        exe_scan(program)  # here, not when it starts (a 10 MB text takes a while)
         return program
 
     def channels(self, name: str) -> tuple[int, ...]:

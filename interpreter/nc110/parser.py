@@ -602,11 +602,15 @@ class Program:
     fast pre-scan, so a decoder can jump before the blocks in between were ever parsed.
     """
 
-    __slots__ = ("_blocks", "file", "label_lines", "labels", "lines", "name", "notes")
+    __slots__ = ("_blocks", "exe_scan", "file", "label_lines", "labels", "lines", "name",
+                 "notes")
 
     def __init__(self, name: str, file: str, text: str) -> None:
         self.name = name
         self.file = file
+        # The processes its EXEs name, and whether one is not a constant: read from the text
+        # once (the compiler's exe_targets), where the program is read (off the loop).
+        self.exe_scan: tuple[frozenset[int], bool] | None = None
         if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
             text = text[1:]
         lines = text.split("\n")

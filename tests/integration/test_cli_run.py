@@ -247,3 +247,27 @@ async def test_run_quiet_says_warnings_only_and_records_the_session(tmp_path: Pa
                        "peer": None, "prog": "ZERO", "proc": 1}]
     assert any(line.get("event") == "alarm" for line in lines)
     assert "stop" in lines[-1]
+
+
+async def test_sigterm_stops_run_while_a_big_program_is_read(tmp_path: Path) -> None:
+    """A cycle start of an 8 MB main is answered at once (the program is read off the loop);
+    a SIGTERM right after stops the gateway cleanly before the program ever starts -- it
+    does not wait for the reading, nor for the interpreter to free it."""
+    lines = [f"N{n % 9999}G1X{n % 500}Y{(n * 7) % 500}F6000\n" for n in range(400_000)]
+    (tmp_path / "BIG.nc").write_text("".join(lines) + "M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "BIG"\n[nc.storage]\nMP0 = "."\n[modbus]\nport = 0\n'
+                      '[canopen]\nenabled = false\n')
+    proc, port, lines_before = await start_run(config, "--no-web")
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    assert await client.connect()
+    await client.write_register(2000, 1, device_id=1)  # cycle start: answered at once
+    client.close()
+    proc.send_signal(signal.SIGTERM)
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines_before) + rest
+    assert code == 0 and "stopped" in log, log
+    assert "P1 starts BIG" not in log, log  # stopped while it was still being read
