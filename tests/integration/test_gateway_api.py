@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 from pathlib import Path
 
 import pytest
@@ -216,3 +217,23 @@ async def test_a_big_program_is_read_off_the_loop(tmp_path: Path) -> None:
         assert answered_before_start >= 3, answered_before_start
         (start,) = [e for e in gw.trace if e["event"] == "start"]
         assert start["prog"] == "BIG" and start["by"].startswith("modbus 127.0.0.1:")
+
+
+async def test_a_write_storm_does_not_slow_the_machine(tmp_path: Path) -> None:
+    """Inputs bring the engine to now by running what was due before them, each at its own
+    time: a dwell loop under a storm of writes keeps exactly its 10 ms a round (machine
+    time), instead of starting each dwell when a write happened to jump the clock."""
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 20.0\n')
+    (tmp_path / "A.nc").write_text('"L" N1(DLY,0.01)\nN2E1=E1+1\nN3SYVAR1=E1\nN4(BNC,L)\n')
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
+        await gw.start()
+        loop = asyncio.get_running_loop()
+        end = loop.time() + 0.5
+        while loop.time() < end:  # the storm: writes as fast as they come, for 0.5 s
+            for _ in range(50):
+                gw.write("SK1", 1)
+            await asyncio.sleep(0)  # the loop runs the engine's timers between bursts
+        rounds = [e["t"] for e in gw.trace if e["event"] == "write" and e["var"] == "SYVAR1"]
+    assert len(rounds) > 20
+    gaps = {round(b - a, 6) for a, b in itertools.pairwise(rounds)}
+    assert gaps == {0.01}, sorted(gaps)[-5:]

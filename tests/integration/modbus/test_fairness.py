@@ -91,3 +91,29 @@ async def test_a_slow_reader_is_not_closed_as_idle(ncgate_gateway: Gateway,
     assert connection in server.connections and connection.paused, read
     assert not any("idle for" in r.getMessage() for r in caplog.records)
     writer.close()
+
+
+async def test_clients_that_never_read_do_not_hold_up_a_poller(
+        ncgate_gateway: Gateway) -> None:
+    address = ncgate_gateway.modbus_address
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    poller = await Raw.open(*address)
+    assert (await poller.ask(READ))[0] == 3
+    request = pdu(3, "HH", 0, 125)  # 257-byte answers that nobody reads
+    greedy = [await Raw.open(*address) for _ in range(8)]
+    await server.wait_connections(at_least=9)
+    before = server.handler.served
+    for client in greedy:  # 40,000 requests in all, then the poller's
+        client.writer.write(b"".join(mbap(i & 0xFFFF, 1, request) for i in range(5_000)))
+    assert (await poller.ask(READ))[0] == 3
+    # The poller's answer waited for a turn or two of each of the others, never for their
+    # whole backlogs.
+    served_first = server.handler.served - before - 1
+    assert served_first < 2_000, served_first
+    for _ in range(20):  # and so it stays while they go on not reading
+        before = server.handler.served
+        assert (await poller.ask(READ))[0] == 3
+        assert server.handler.served - before < 2_000
+    for client in (*greedy, poller):
+        client.close()
