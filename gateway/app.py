@@ -51,6 +51,7 @@ from ncgate.inputs import (
     Start,
     Var,
     Write,
+    Writes,
 )
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
@@ -335,6 +336,9 @@ class Gateway:
 
     def _load_needed(self, item: Input) -> tuple[str, int] | None:
         """(program, process) when ``item`` starts a program the store has not read yet."""
+        kind = type(item)
+        if kind is Writes or kind is Write:
+            return None  # the fieldbus's every request: at once
         if isinstance(item, Start):
             name, process = item.program or self.config.nc.main, item.process
         elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:

@@ -65,18 +65,19 @@ class Door:
 
     def apply(self, item: Input) -> None:
         """Validate, record and apply ``item``; InputRefused (nothing applied) otherwise."""
-        if isinstance(item, Write):
-            self._writes(((item.var, item.value),), item)
-        elif isinstance(item, Writes):
-            self._writes(item.changes, item)
-        elif isinstance(item, Command):
-            self._command(item)
-        elif isinstance(item, Snd):
-            self._snd(item)
-        elif isinstance(item, Start):
-            self._start(item)
-        elif isinstance(item, FieldbusAlarm):
-            self._alarm(item)
+        kind = type(item)
+        if kind is Writes:  # the fieldbus's every request: first
+            self._writes(item.changes, item)  # type: ignore[union-attr, arg-type]
+        elif kind is Write:
+            self._writes(((item.var, item.value),), item)  # type: ignore[union-attr, arg-type]
+        elif kind is Command:
+            self._command(item)  # type: ignore[arg-type]
+        elif kind is Snd:
+            self._snd(item)  # type: ignore[arg-type]
+        elif kind is Start:
+            self._start(item)  # type: ignore[arg-type]
+        elif kind is FieldbusAlarm:
+            self._alarm(item)  # type: ignore[arg-type]
         else:
             raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
 
@@ -111,7 +112,7 @@ class Door:
         if not planned:
             return
         self._enter(item)
-        self.runtime.image.write(planned, str(item.source))
+        self.runtime.image.write(planned, str(item.source), checked=True)
 
     def _process(self, number: int) -> None:
         processes = self.runtime.engine.processes

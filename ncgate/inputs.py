@@ -19,6 +19,7 @@ import it (the engine, the PLC and the config stay below it: tests/test_layering
 from __future__ import annotations
 
 import enum
+import functools
 import re
 from dataclasses import dataclass, field
 from typing import Final
@@ -48,9 +49,14 @@ class Source:
     kind: SourceKind
     detail: str = ""
     peer: str | None = field(default=None, compare=False)
+    text: str = field(default="", init=False, repr=False, compare=False)  # str(), made once
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "text", f"{self.kind.value} {self.detail}" if self.detail
+                           else self.kind.value)
 
     def __str__(self) -> str:
-        return f"{self.kind.value} {self.detail}" if self.detail else self.kind.value
+        return self.text
 
     @classmethod
     def parse(cls, text: str, peer: str | None = None) -> Source:
@@ -104,6 +110,13 @@ class Var:
     @classmethod
     def of(cls, var: Var | str) -> Var:
         return var if isinstance(var, Var) else cls.parse(var)
+
+    @staticmethod
+    @functools.lru_cache(maxsize=8192)
+    def at(area: str, index: int, view: str) -> Var:
+        """The variable at (area, index, view), made once: a fieldbus names the same few
+        thousand variables in every request."""
+        return Var(area, index, view)
 
     def __str__(self) -> str:
         a, i, v = self.area, self.index, self.view

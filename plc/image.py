@@ -124,15 +124,18 @@ class IOImage:
             raise ImageValueError(
                 f"{_name(area, index, view)} holds {low}..{high}, not {value!r}")
 
-    def write(self, changes: Iterable[tuple[str, int, str, int]], writer: str) -> list[Change]:
+    def write(self, changes: Iterable[tuple[str, int, str, int]], writer: str,
+              checked: bool = False) -> list[Change]:
         """Store every value, then wake the waits they satisfy.  All or nothing.
 
         Returns what actually changed.  Listeners hear every value written, changed or not
         (a program writing SYVAR1=0 twice wrote twice); only changes wake waits.
+        ``checked``: the caller has run :meth:`check` on every change (the gateway's door).
         """
         items = list(changes)
-        for area, index, view, value in items:
-            self.check(area, index, view, value)
+        if not checked:
+            for area, index, view, value in items:
+                self.check(area, index, view, value)
         done: list[Change] = []
         written: list[Change] = []
         touched: set[_Key] = set()

@@ -238,7 +238,7 @@ class CanopenNode:
     def apply(self, changes: Sequence[tuple[str, int, str, int]], source: Source) -> None:
         """An RPDO's writes (on the loop); a refusal is logged, rate-limited."""
         try:
-            self.backend.apply(Writes(tuple((Var(a, i, v), value) for a, i, v, value in changes),
+            self.backend.apply(Writes(tuple((Var.at(a, i, v), value) for a, i, v, value in changes),
                                       source))
         except InputRefused as exc:
             self._refusals.note(f"{source}: RPDO not applied: {exc}")

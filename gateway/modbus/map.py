@@ -260,7 +260,8 @@ class ModbusMap:
         region = self.region(Table.COILS, address, len(values))  # one region: the coils
         if "w" not in region.access:
             raise ModbusError(ILLEGAL_ADDRESS, "read-only")
-        backend.apply(Writes(tuple((Var("SA", address + i, "bit"), int(v))
+        at = Var.at
+        backend.apply(Writes(tuple((at("SA", address + i, "bit"), int(v))
                                    for i, v in enumerate(values)), source))
 
     def _image_changes(self, address: int, values: Sequence[int]
@@ -281,13 +282,13 @@ class ModbusMap:
             first = start - region.start
             chunk = values[start - address:start - address + count]
             if kind is Kind.SYVARS:
-                changes += [(Var("SYVAR", first + i, "IN"), v - 0x10000 if v & 0x8000 else v)
-                            for i, v in enumerate(chunk)]
+                changes += [(Var.at("SYVAR", first + i, "IN"),
+                             v - 0x10000 if v & 0x8000 else v) for i, v in enumerate(chunk)]
                 continue
             if any(v > 255 for v in chunk):
                 raise ModbusError(ILLEGAL_VALUE, f"{kind.value} hold 0..255")
             area = "SK" if kind is Kind.K_BYTES else "SA"
-            changes += [(Var(area, first + i, "BY"), v) for i, v in enumerate(chunk)]
+            changes += [(Var.at(area, first + i, "BY"), v) for i, v in enumerate(chunk)]
         return changes
 
     def write_registers(self, backend: Backend, address: int, values: Sequence[int],

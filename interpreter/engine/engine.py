@@ -305,6 +305,11 @@ class Engine(SyncRules):
         return all(p.loaded is None and p.alarm is None for p in self.processes.values())
 
     @property
+    def has_unfinished(self) -> bool:
+        """A run limited in blocks left work at the current time (it goes first)."""
+        return self._unfinished
+
+    @property
     def has_runnable(self) -> bool:
         return bool(self._runnable)
 
