@@ -72,11 +72,13 @@ def exe_scan(program: Program) -> tuple[frozenset[int], bool]:
     if program.exe_scan is None:
         targets: set[int] = set()
         dynamic = False
-        for m in _EXE_ARG.finditer("\n".join(program.lines)):
-            if m.group(1).isdigit():
-                targets.add(int(m.group(1)))
-            else:
-                dynamic = True
+        lines = program.lines
+        for first in range(0, len(lines), 2048):  # in pieces: no long call holds the GIL
+            for m in _EXE_ARG.finditer("\n".join(lines[first:first + 2048])):
+                if m.group(1).isdigit():
+                    targets.add(int(m.group(1)))
+                else:
+                    dynamic = True
         program.exe_scan = (frozenset(targets), dynamic)
     return program.exe_scan
 

@@ -593,6 +593,17 @@ _LOOKALIKE_CHARS: Final = "\u0410\u0412\u0415\u041a\u041c\u041d\u041e\u0420\u042
 _LOOKALIKES: Final = str.maketrans(_LOOKALIKE_CHARS, "ABEKMHOPCTXabekmhopctx")
 _CYRILLIC: Final = re.compile(f"[{_LOOKALIKE_CHARS}]")
 _LABELS: Final = re.compile(r'^[ \t]*(?:/[ \t]*)?"([^"\n]*)"', re.MULTILINE)
+_PIECE: Final = 1 << 16  # characters of a text split or searched in one call
+
+
+def _spans(text: str) -> Iterator[tuple[int, int]]:
+    """``text`` in line-aligned pieces of about _PIECE characters: (start, end) each."""
+    start, size = 0, len(text)
+    while start < size:
+        end = text.find("\n", min(start + _PIECE, size))
+        end = size if end < 0 else end + 1
+        yield start, end
+        start = end
 
 
 class Program:
@@ -613,23 +624,31 @@ class Program:
         self.exe_scan: tuple[frozenset[int], bool] | None = None
         if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
             text = text[1:]
-        lines = text.split("\n")
-        if lines and lines[-1] == "":
-            lines.pop()
+        # A long text is split and searched a line-aligned piece at a time: no single call
+        # into C holds the interpreter long while the loop serves the fieldbus beside the
+        # thread that reads the program.
+        spans = list(_spans(text))
+        lines: list[str] = []
+        for start, end in spans:
+            piece = text[start:end].split("\n")
+            if text[end - 1] == "\n":
+                piece.pop()  # the "" after the piece's last newline
+            lines += piece
         self.lines: list[str] = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
         # Diagnostics of the file as a whole, found before any block is parsed.
         self.notes: list[Diagnostic] = []
-        if _CYRILLIC.search(text):
+        if any(_CYRILLIC.search(text, start, end) for start, end in spans):
             self._latinise()
         self.labels: dict[str, int] = {}
         self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
         line_no, last = 0, 0
-        for m in _LABELS.finditer(text):
-            line_no += text.count("\n", last, m.start())
-            last = m.start()
-            self.label_lines.append((m.group(1), line_no))
-            # A jump's name had its look-alikes read as Latin: so has the label it names.
-            self.labels.setdefault(m.group(1).upper().translate(_LOOKALIKES), line_no)
+        for start, end in spans:
+            for m in _LABELS.finditer(text, start, end):
+                line_no += text.count("\n", last, m.start())
+                last = m.start()
+                self.label_lines.append((m.group(1), line_no))
+                # A jump's name had its look-alikes read as Latin: so has the label it names.
+                self.labels.setdefault(m.group(1).upper().translate(_LOOKALIKES), line_no)
         self._blocks: list[Block | None] = [None] * len(self.lines)
 
     def _latinise(self) -> None:
