@@ -310,9 +310,9 @@ class Gateway:
         of it then is logged.  :meth:`apply_async` waits for that and raises it."""
         if self._driver is None:
             raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+        self.door.precheck(item)  # what can be refused without the program: at once
         load = self._load_needed(item)
         if load is not None:
-            self.door.precheck(item)  # what can be refused without the program: at once
             task = asyncio.get_running_loop().create_task(self._load_then_apply(item, *load))
             self._loading.add(task)
             task.add_done_callback(self._loaded)
@@ -328,6 +328,7 @@ class Gateway:
     async def apply_async(self, item: Input) -> None:
         """:meth:`apply`, after reading a program it starts off the loop: a refusal is
         raised here (the console's and :meth:`start`'s way)."""
+        self.door.precheck(item)
         load = self._load_needed(item)
         if load is not None:
             await self._load(*load)
@@ -404,7 +405,8 @@ class Gateway:
 
     def command(self, word: int | CommandKind, source: Source = API) -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
-        if isinstance(word, bool) or word not in tuple(CommandKind):
+        if (type(word) is not int and type(word) is not CommandKind) or word not in tuple(
+                CommandKind):
             raise InputRefused(Reason.BAD_VALUE, f"command {word!r}: 1 cycle start, 2 feed "
                                "hold, 3 reset")
         self.apply(Command(CommandKind(word), None, source))

@@ -94,7 +94,11 @@ class Door:
         """The image writes of ``changes``, each checked against the image."""
         image = self.runtime.image
         out = []
+        if not isinstance(changes, tuple) or not changes:
+            raise InputRefused(Reason.BAD_VALUE, "a write names one variable or more")
         for var, value in changes:
+            if not isinstance(var, Var):
+                var = Var.of(var)
             if isinstance(value, bool) or not isinstance(value, int):
                 raise InputRefused(Reason.BAD_VALUE, f"{var}: expected a whole number, got "
                                    f"{value!r}")
@@ -122,6 +126,8 @@ class Door:
 
     def _command(self, item: Command) -> None:
         try:
+            if type(item.kind) is not CommandKind and type(item.kind) is not int:
+                raise ValueError(item.kind)
             kind = CommandKind(item.kind)
         except ValueError:
             raise InputRefused(Reason.BAD_VALUE, f"command {item.kind!r}: 1 cycle start, "
@@ -159,11 +165,15 @@ class Door:
     def precheck(self, item: Input) -> None:
         """What of ``item`` can be refused before its program is read (a start: the program
         named, the process able to take it); InputRefused, or nothing."""
-        if isinstance(item, Start):
+        if type(item) is Start:
             self._start_check(item)
 
     def _start_check(self, item: Start) -> str:
         runtime = self.runtime
+        if item.program is not None and (not isinstance(item.program, str)
+                                         or not item.program.strip()):
+            raise InputRefused(Reason.BAD_VALUE, f"program {item.program!r}: a name, or None "
+                               "for nc.main")
         name = item.program or runtime.config.nc.main
         if not name:
             raise InputRefused(Reason.NOT_CONFIGURED, "no program named and no nc.main "
@@ -191,7 +201,12 @@ class Door:
         runtime.engine.start(name, item.process, by=str(item.source))
 
     def _alarm(self, item: FieldbusAlarm) -> None:
+        if not isinstance(item.message, str):
+            raise InputRefused(Reason.BAD_VALUE, f"an alarm's message is a text, not "
+                               f"{item.message!r}")
         try:
+            if type(item.code) is not int and type(item.code) is not AlarmCode:
+                raise ValueError(item.code)
             code = AlarmCode(item.code)
         except ValueError:
             raise InputRefused(Reason.BAD_VALUE, f"AL{item.code!r}: no such alarm "

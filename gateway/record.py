@@ -61,11 +61,13 @@ from ncgate.inputs import (
     Write,
     Writes,
 )
+from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import run_virtual
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict
 
 FORMAT = 2
+ALARMS = frozenset(int(code) for code in AlarmCode)  # what an "alarm" input may carry
 # What is compared, per process, and the fields that must agree besides the block.
 COMPARED: dict[str, tuple[str, ...]] = {
     "start": ("prog", "by"), "wait": ("on",), "resume": ("by",), "snd": ("to",),
@@ -181,8 +183,9 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         kinds = {k.label: k for k in CommandKind}
         if name not in kinds:
             raise ValueError(f'"command": expected {", ".join(kinds)}, got {json.dumps(name)}')
-        process = _field(item, "process", int, "a process number or null", optional=True)
-        return t, Command(kinds[name], process, source)
+        if item.get("process") is not None:
+            raise ValueError('"process": a recorded command is for the cell (null)')
+        return t, Command(kinds[name], None, source)
     if kind == "snd":
         return t, Snd(_field(item, "from", int, "a process number"),
                       _field(item, "to", int, "a process number"), source)
@@ -190,8 +193,10 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         return t, Start(_field(item, "prog", str, "a program name"),
                         _field(item, "proc", int, "a process number"), source)
     if kind == "alarm":
-        return t, FieldbusAlarm(_field(item, "code", int, "an alarm number"),
-                                _field(item, "message", str, "a text"), source)
+        code = _field(item, "code", int, "an alarm number")
+        if code not in ALARMS:
+            raise ValueError(f'"code": {code} is no alarm of the fieldbus side')
+        return t, FieldbusAlarm(code, _field(item, "message", str, "a text"), source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
                      "alarm)")
 
@@ -290,7 +295,8 @@ def read_record(path: str | Path) -> Recording:
     for number, line in enumerate(lines, start=1):
         try:
             item = json.loads(line)
-        except json.JSONDecodeError:
+        except (ValueError, RecursionError):  # JSONDecodeError, or a number or nesting
+            # past what Python reads: not a line run --record writes either way
             if number == len(lines) and not text.endswith("\n"):
                 break  # a tail cut by a crash of the writer: replay up to it
             raise RecordError(f"{path}:{number}: not a JSON line") from None
@@ -325,6 +331,18 @@ def read_record(path: str | Path) -> Recording:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
         raise RecordError(f"{path}: empty: not an ncgate session record")
+    last = 0.0
+    for recorded in recording.inputs:
+        if recorded.t < last - 1e-6:
+            raise RecordError(f"{path}:{recorded.line}: an input at t={recorded.t} after one "
+                              f"at t={last}: a record's inputs come in time order")
+        last = recorded.t
+    if recording.stop is not None:
+        latest = max([i.t for i in recording.inputs] + [e["t"] for e in recording.events],
+                     default=0.0)
+        if latest > recording.stop + 1e-6:
+            raise RecordError(f"{path}:{len(lines)}: the stop at t={recording.stop} comes "
+                              f"before what was recorded (t={latest})")
     return recording
 
 
@@ -366,9 +384,12 @@ def replay(path: str | Path, config: str | Path | None = None,
     header = recording.header
     overrides = header.get("overrides") or {}
     source = config if config is not None else header.get("config")
-    if not isinstance(overrides, dict) or not isinstance(source, str | Path | None):
-        raise RecordError(f"{recording.path}:1: the header's config or overrides are not "
-                          "what run --record writes")
+    scale = header.get("time_scale")
+    if not isinstance(overrides, dict) or not isinstance(source, str | Path | None) or (
+            scale is not None and (isinstance(scale, bool) or not isinstance(scale, int | float)
+                                   or not math.isfinite(scale) or scale <= 0)):
+        raise RecordError(f"{recording.path}:1: the header's config, overrides or time "
+                          "scale are not what run --record writes")
     try:
         cfg = load_config(source, overrides=dict(overrides))
     except ConfigError as exc:
@@ -399,6 +420,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     warnings += _changed(recording.programs, program_now)
     start_plc(cfg, runtime, door, closed=True)
     end = recording.end
+    refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order
         t = recorded.t
         run_virtual(engine, t)
@@ -407,7 +429,11 @@ def replay(path: str | Path, config: str | Path | None = None,
         try:
             door.apply(recorded.input)
         except InputRefused as exc:
-            # Refused here though the session took it: the divergence shows in the trace.
+            # The session took it (it was recorded after its checks): refused here, the
+            # replay is not the session any more.
+            refused = refused or (recorded.t, f"replay diverges at the input of line "
+                                  f"{recorded.line} (t={recorded.t:.3f}): the session took "
+                                  f"it, the replay refuses it: {exc}")
             engine.note_hazard(0, f"replay: the input of line {recorded.line} was refused: "
                                f"{exc}")
         engine.run_until_blocked()
@@ -417,6 +443,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
                                    tolerance_ms / 1000.0, cut=recording.stop is None)
+    if refused is not None and divergence is None:
+        divergence = refused[1]
     return ReplayResult(recording, runtime, warnings, divergence, compared)
 
 

@@ -52,8 +52,17 @@ class Source:
     text: str = field(default="", init=False, repr=False, compare=False)  # str(), made once
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "text", f"{self.kind.value} {self.detail}" if self.detail
-                           else self.kind.value)
+        try:
+            kind = SourceKind(self.kind)
+        except ValueError:
+            raise InputRefused(Reason.BAD_VALUE, f"{self.kind!r} is not a source kind ("
+                               f"{', '.join(k.value for k in SourceKind)})") from None
+        if not isinstance(self.detail, str):
+            raise InputRefused(Reason.BAD_VALUE, f"a source's detail is a text, not "
+                               f"{self.detail!r}")
+        object.__setattr__(self, "kind", kind)
+        object.__setattr__(self, "text", f"{kind.value} {self.detail}" if self.detail
+                           else kind.value)
 
     def __str__(self) -> str:
         return self.text
@@ -61,6 +70,9 @@ class Source:
     @classmethod
     def parse(cls, text: str, peer: str | None = None) -> Source:
         """The inverse of ``str()``: ``"modbus 127.0.0.1:40312"`` -> Source(MODBUS, ...)."""
+        if not isinstance(text, str):
+            raise InputRefused(Reason.BAD_VALUE, f"{text!r}: a source is a text such as "
+                               "\"modbus 127.0.0.1:40312\"")
         kind, _, detail = text.strip().partition(" ")
         try:
             return cls(SourceKind(kind), detail.strip(), peer)
@@ -72,7 +84,7 @@ class Source:
 
 API: Final = Source(SourceKind.API)
 
-_VAR = re.compile(r"(SYVAR|SA|SK)(\d+)(?:\.(BY|IN|BL))?", re.IGNORECASE)
+_VAR = re.compile(r"(SYVAR|SA|SK)([0-9]{1,9})(?:\.(BY|IN|BL))?", re.IGNORECASE)
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,7 +101,7 @@ class Var:
         """``"SA10"``, ``"sa1.by"``, ``"SK2"``, ``"SK2.IN"``, ``"SYVAR5"``; InputRefused
         (UNKNOWN_VARIABLE) otherwise.  Whether it lies inside the image is the door's to
         say (the image's size is the config's)."""
-        m = _VAR.fullmatch(text.strip())
+        m = _VAR.fullmatch(text.strip()) if isinstance(text, str) else None
         if m is None:
             raise InputRefused(Reason.UNKNOWN_VARIABLE,
                                f"{text!r} is not an image variable (SA10, SA1.BY, SA2.IN, "
@@ -106,6 +118,12 @@ class Var:
             raise InputRefused(Reason.UNKNOWN_VARIABLE,
                                f"{text!r}: the K packet has no bits (SK3, SK3.IN)")
         return cls(area, index, view or "BY")
+
+    def __post_init__(self) -> None:
+        if (self.area not in ("SA", "SK", "SYVAR") or self.view not in ("bit", "BY", "IN")
+                or type(self.index) is not int):
+            raise InputRefused(Reason.UNKNOWN_VARIABLE, f"({self.area!r}, {self.index!r}, "
+                               f"{self.view!r}) is not an image variable")
 
     @classmethod
     def of(cls, var: Var | str) -> Var:
@@ -153,6 +171,16 @@ class Writes:
 
     changes: tuple[tuple[Var, int], ...]
     source: Source = API
+
+    def __post_init__(self) -> None:
+        try:
+            if all(type(var) is Var for var, _ in self.changes):
+                return  # the fieldbus's way (Var.at): nothing to convert
+            changes = tuple((Var.of(var), value) for var, value in self.changes)
+        except (TypeError, ValueError):
+            raise InputRefused(Reason.BAD_VALUE, "changes: expected (variable, value) "
+                               "pairs") from None
+        object.__setattr__(self, "changes", changes)
 
     @classmethod
     def of(cls, changes: dict[str, int] | list[tuple[Var | str, int]],

@@ -148,3 +148,36 @@ def test_inputs_are_frozen_values() -> None:
     with pytest.raises(AttributeError):
         write.value = 2  # type: ignore[misc]
     assert {Snd(4, 1), Snd(4, 1)} == {Snd(4, 1)}
+
+
+def test_odd_inputs_are_refused_never_a_bare_exception() -> None:
+    """Whatever a Python caller hands the door, the answer is InputRefused (a review of the
+    door found AttributeErrors, TypeErrors and ValueErrors here)."""
+    for make in (lambda: Write(123, 1), lambda: Write(None, 1),  # type: ignore[arg-type]
+                 lambda: Writes.of({5: 1}),  # type: ignore[dict-item]
+                 lambda: Writes(None),  # type: ignore[arg-type]
+                 lambda: Source.parse(5),  # type: ignore[arg-type]
+                 lambda: Source("bogus"),  # type: ignore[arg-type]
+                 lambda: Var("SA", True, "bit"), lambda: Var("SA", "1", "bit"),  # type: ignore[arg-type]
+                 lambda: Var("SA", 1.0, "bit"),  # type: ignore[arg-type]
+                 lambda: Var.parse("SA" + "9" * 5000),
+                 lambda: Var.parse("SA\u0661\u0661")):  # Arabic-Indic digits are not digits here
+        with pytest.raises(InputRefused):
+            make()
+    assert Writes((("SA10", 1),)).changes == ((Var("SA", 10, "bit"), 1),)  # converted
+
+
+async def test_odd_commands_starts_and_alarms_are_refused(tmp_path: Path) -> None:
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
+    (tmp_path / "A.nc").write_text("N1(WAI,SA10=1)\nN2M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides=FREE)
+    async with Gateway(cfg) as gw:
+        for item in (Command(True), Command(1.0), Start(123, 2), Start("", 2),  # type: ignore[arg-type]
+                     FieldbusAlarm(150, None), FieldbusAlarm(True, "x")):  # type: ignore[arg-type]
+            with pytest.raises(InputRefused) as caught:
+                gw.apply(item)
+            assert caught.value.reason is Reason.BAD_VALUE, item
+        for word in (1.0, True, 4):
+            with pytest.raises(InputRefused):
+                gw.command(word)  # type: ignore[arg-type]
+        assert not gw.trace  # nothing of any of them happened

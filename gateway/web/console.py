@@ -346,6 +346,9 @@ class WebConsole:
                     or not 1 <= process <= processes):
                 raise ApiError(400, f'expected {{"command": "start", "program": NAME, '
                                f'"process": 1..{processes}}}')
+            if any(c in program for c in "/\\") or program.startswith("."):
+                raise ApiError(400, f'"program": a program\'s name on the storage devices, '
+                               f"not a path: {program!r}")
             item = Start(program, process, source)
         try:
             await self.gw.apply_async(item)  # a program is read off the loop

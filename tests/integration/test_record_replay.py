@@ -188,7 +188,26 @@ MALFORMED = [
     ({"seq": 1, "t": 0.0, "event": "start", "prog": "A"}, '"proc" is missing'),
     ({"seq": 1, "t": "0", "event": "start", "proc": 1}, '"t": expected a time'),
     ({"seq": 1, "t": 0.0, "event": "explode", "proc": 1}, 'unknown event "explode"'),
+    # What the live door would have refused can never have been recorded.
+    ({"input": "command", **GOOD, "command": "reset", "process": 1}, "for the cell (null)"),
+    ({"input": "alarm", **GOOD, "code": 99999, "message": "x"}, "no alarm"),
+    ({"input": "command", **GOOD, "t": 0.1, "command": "reset"}, "in time order"),
 ]
+
+
+def test_a_stop_before_what_was_recorded_and_deep_nesting_are_malformed(
+        cell: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    header = {"ncgate_record": 2, "config": str(cell), "overrides": {}, "files": {}}
+    fine = {"input": "command", **GOOD, "command": "cycle_start", "process": None}
+    huge = '{"input": "alarm", "t": 0.5, "who": "api", "code": ' + "9" * 5000 + "}"
+    for tail, said in (([json.dumps({"stop": 0.1})], "comes before what was recorded"),
+                       (["[" * 100_000 + "]" * 100_000, json.dumps({"stop": 1.0})],
+                        "not a JSON line"),
+                       ([huge, json.dumps({"stop": 1.0})], "not a JSON line")):
+        record = tmp_path / "r.jsonl"
+        record.write_text("\n".join([json.dumps(header), json.dumps(fine), *tail]) + "\n")
+        assert main(["sim", "--replay", str(record)]) == 2
+        assert said in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("line", "said"), MALFORMED)
