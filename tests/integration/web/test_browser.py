@@ -29,6 +29,7 @@ if CHROMIUM is None or CHROMEDRIVER is None:
                                   "chromium chromium-driver); CI runs these tests")
 else:
     from selenium import webdriver
+    from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
@@ -109,15 +110,23 @@ def browser() -> Iterator[Any]:
 
 def until(driver: Any, what: str, check: Any) -> Any:
     try:
-        return WebDriverWait(driver, WAIT_S).until(lambda d: check(d))
+        # The page redraws a lane on every status message: an element read just as it was
+        # replaced is read again at the next poll, not taken for the page's answer.
+        return WebDriverWait(driver, WAIT_S, ignored_exceptions=(
+            StaleElementReferenceException,)).until(lambda d: check(d))
     except Exception as exc:
         page = driver.find_element(By.TAG_NAME, "body").text
         raise AssertionError(f"the page never showed {what}:\n{page}") from exc
 
 
 def text(driver: Any, css: str) -> str:
-    found = driver.find_elements(By.CSS_SELECTOR, css)
-    return found[0].text if found else ""
+    for _ in range(5):  # an element replaced as it is read (the page redraws): find it again
+        try:
+            found = driver.find_elements(By.CSS_SELECTOR, css)
+            return found[0].text if found else ""
+        except StaleElementReferenceException:
+            continue
+    return ""
 
 
 def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
