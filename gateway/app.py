@@ -29,7 +29,7 @@ from ncgate.config import Config, load_config
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.canopen.clock import Clock
 from ncgate.gateway.canopen.node import CanopenNode
-from ncgate.gateway.door import Door
+from ncgate.gateway.door import Door, command_kind
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
 from ncgate.gateway.lifecycle import Adapter
 from ncgate.gateway.modbus.map import ModbusMap
@@ -39,7 +39,7 @@ from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
-from ncgate.gateway.wiring import Runtime, build_runtime, variable_name
+from ncgate.gateway.wiring import Runtime, build_runtime
 from ncgate.inputs import (
     API,
     Command,
@@ -53,6 +53,7 @@ from ncgate.inputs import (
     Write,
     Writes,
 )
+from ncgate.inputs import var_name as variable_name
 from ncgate.interpreter.engine import Engine, Process, ProcessState, ProcessStatus
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, Trace
@@ -343,12 +344,10 @@ class Gateway:
         if isinstance(item, Start):
             name, process = item.program or self.config.nc.main, item.process
         elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
-            engine = self.engine
-            p1 = engine.processes.get(1)
-            if (any(p.held for p in engine.processes.values()) or p1 is None
-                    or p1.loaded is not None or p1.alarm is not None):
+            main = self.engine.cycle_start_program()
+            if main is None:
                 return None  # resumes a hold, or starts nothing
-            name, process = self.config.nc.main, 1
+            name, process = main, 1
         else:
             return None
         if not name or self.runtime.store.ready(name, process):
@@ -405,11 +404,7 @@ class Gateway:
 
     def command(self, word: int | CommandKind, source: Source = API) -> None:
         """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
-        if (type(word) is not int and type(word) is not CommandKind) or word not in tuple(
-                CommandKind):
-            raise InputRefused(Reason.BAD_VALUE, f"command {word!r}: 1 cycle start, 2 feed "
-                               "hold, 3 reset")
-        self.apply(Command(CommandKind(word), None, source))
+        self.apply(Command(command_kind(word), None, source))
 
     # -- waiting ------------------------------------------------------------------------------
 

@@ -21,8 +21,9 @@ The order is the contract:
 from __future__ import annotations
 
 import dataclasses
+import enum
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from ncgate.errors import InputRefused, Reason
 from ncgate.inputs import (
@@ -46,6 +47,27 @@ if TYPE_CHECKING:
     from ncgate.plc.scan import PlcRuntime
 
 Recorder = Callable[[Input, float], None]
+E = TypeVar("E", bound=enum.IntEnum)
+
+
+def _member(kind: type[E], value: object) -> E | None:
+    """``value`` as a member of the int enum ``kind``: an int or a member, never a bool or a
+    float that happens to equal one; None when it is none of them."""
+    if type(value) is not int and type(value) is not kind:
+        return None
+    try:
+        return kind(value)
+    except ValueError:
+        return None
+
+
+def command_kind(value: object) -> CommandKind:
+    """A command word (1 cycle start, 2 feed hold, 3 reset); InputRefused otherwise."""
+    kind = _member(CommandKind, value)
+    if kind is None:
+        raise InputRefused(Reason.BAD_VALUE, f"command {value!r}: 1 cycle start, 2 feed "
+                           "hold, 3 reset")
+    return kind
 ImageChange = tuple[str, int, str, int]
 
 
@@ -94,11 +116,9 @@ class Door:
         """The image writes of ``changes``, each checked against the image."""
         image = self.runtime.image
         out = []
-        if not isinstance(changes, tuple) or not changes:
+        if not changes:
             raise InputRefused(Reason.BAD_VALUE, "a write names one variable or more")
         for var, value in changes:
-            if not isinstance(var, Var):
-                var = Var.of(var)
             if isinstance(value, bool) or not isinstance(value, int):
                 raise InputRefused(Reason.BAD_VALUE, f"{var}: expected a whole number, got "
                                    f"{value!r}")
@@ -113,8 +133,6 @@ class Door:
 
     def _writes(self, changes: tuple[tuple[Var, int], ...], item: Write | Writes) -> None:
         planned = self.image_changes(changes)
-        if not planned:
-            return
         self._enter(item)
         self.runtime.image.write(planned, str(item.source), checked=True)
 
@@ -125,13 +143,7 @@ class Door:
                                f"{len(processes)})")
 
     def _command(self, item: Command) -> None:
-        try:
-            if type(item.kind) is not CommandKind and type(item.kind) is not int:
-                raise ValueError(item.kind)
-            kind = CommandKind(item.kind)
-        except ValueError:
-            raise InputRefused(Reason.BAD_VALUE, f"command {item.kind!r}: 1 cycle start, "
-                               "2 feed hold, 3 reset") from None
+        kind = command_kind(item.kind)
         if item.process is not None:
             self._process(item.process)
             raise InputRefused(Reason.UNSUPPORTED, f"{kind.label} of one process: this "
@@ -204,12 +216,9 @@ class Door:
         if not isinstance(item.message, str):
             raise InputRefused(Reason.BAD_VALUE, f"an alarm's message is a text, not "
                                f"{item.message!r}")
-        try:
-            if type(item.code) is not int and type(item.code) is not AlarmCode:
-                raise ValueError(item.code)
-            code = AlarmCode(item.code)
-        except ValueError:
+        code = _member(AlarmCode, item.code)
+        if code is None:
             raise InputRefused(Reason.BAD_VALUE, f"AL{item.code!r}: no such alarm "
-                               "(docs/diagnostics.md)") from None
+                               "(docs/diagnostics.md)")
         self._enter(item)
         self.runtime.engine.fieldbus_alarm(code, item.message)

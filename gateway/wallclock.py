@@ -60,10 +60,7 @@ class WallClockDriver:
         if (due is None or due > now) and not engine.has_unfinished:
             engine.set_time(now)  # nothing was due: the common case of a write storm
             return
-        if engine.advance_to(now, self._turn):
-            self.kick()
-            self._note_lag(now - engine.now)
-        self._arm()
+        self._advance(now)
 
     def settle(self) -> None:
         """Run (a slice of) what an outside input made runnable, now; the rest soon."""
@@ -80,15 +77,19 @@ class WallClockDriver:
         # A loop timer may fire a hair early: never let time run backwards past what is due.
         # At most a slice of blocks at a time: a loop with no motion must leave the event
         # loop free to serve the fieldbus and signals; the rest runs on the next turn.
-        now = max(self.now(), due)
+        self._advance(max(self.now(), due))
+        self._arm_stall()
+        self.changed.set()
+
+    def _advance(self, now: float) -> None:
+        """A turn of the engine up to ``now``; what it leaves is the next turn's, and how
+        far behind the clock that leaves the engine is its lag."""
         if self.engine.advance_to(now, self._turn):
             self.kick()
             self._note_lag(now - self.engine.now)
         elif self.lag_s:
             self.lag_s = 0.0
         self._arm()
-        self._arm_stall()
-        self.changed.set()
 
     def _note_lag(self, lag: float) -> None:
         self.lag_s = max(0.0, lag)

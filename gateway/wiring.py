@@ -11,6 +11,7 @@ from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore, dialect_options
 from ncgate.gateway.programs import external_bindings as external_bindings
 from ncgate.inputs import Input
+from ncgate.inputs import var_name as variable_name
 from ncgate.interpreter.dialect import DialectFrontEnd
 from ncgate.interpreter.dialects import ImageVar as ImageVar
 from ncgate.interpreter.dialects import dialect_of
@@ -64,12 +65,6 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
 
     image.subscribe(on_write)  # type: ignore[arg-type]
     return Runtime(config, image, store, engine, trace)
-
-
-def variable_name(area: str, index: int, view: str) -> str:
-    if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
-        return f"{area}{index}"
-    return f"{area}{index}.{view}"
 
 
 class Backend(Protocol):

@@ -137,15 +137,19 @@ class Var:
         return Var(area, index, view)
 
     def __str__(self) -> str:
-        a, i, v = self.area, self.index, self.view
-        if a == "SYVAR" or (a == "SA" and v == "bit") or (a == "SK" and v == "BY"):
-            return f"{a}{i}"
-        return f"{a}{i}.{v}"
+        return var_name(self.area, self.index, self.view)
 
     @property
     def address(self) -> tuple[str, int, str]:
         """(area, index, view), as :class:`ncgate.plc.image.IOImage` takes it."""
         return (self.area, self.index, self.view)
+
+
+def var_name(area: str, index: int, view: str) -> str:
+    """A variable's name as programs write it: ``SA10``, ``SK2.IN``, ``SYVAR1``."""
+    if area == "SYVAR" or (area == "SA" and view == "bit") or (area == "SK" and view == "BY"):
+        return f"{area}{index}"
+    return f"{area}{index}.{view}"
 
 
 def _var(value: Var | str) -> Var:
@@ -174,7 +178,7 @@ class Writes:
 
     def __post_init__(self) -> None:
         try:
-            if all(type(var) is Var for var, _ in self.changes):
+            if type(self.changes) is tuple and all(type(var) is Var for var, _ in self.changes):
                 return  # the fieldbus's way (Var.at): nothing to convert
             changes = tuple((Var.of(var), value) for var, value in self.changes)
         except (TypeError, ValueError):

@@ -169,14 +169,25 @@ class Engine(SyncRules):
         if any(p.held for p in self.processes.values()):
             self.hold(False)
             return
-        p1 = self.processes[1]
-        if self.settings.main and p1.loaded is None and p1.alarm is None:
+        main = self.cycle_start_program()
+        if main is not None:
+            p1 = self.processes[1]
             try:
-                self.start(self.settings.main, 1, by=by)
+                self.start(main, 1, by=by)
             except (ProgramError, ProgramNotFoundError) as exc:
                 self._alarm(p1, AlarmCode.PROGRAM_NOT_FOUND
                             if isinstance(exc, ProgramNotFoundError)
                             else AlarmCode.PROGRAM_INVALID, first_line(exc), None)
+
+    def cycle_start_program(self) -> str | None:
+        """The program a cycle start would start in process 1 now; None when it resumes a
+        feed hold or starts nothing."""
+        if any(p.held for p in self.processes.values()):
+            return None
+        p1 = self.processes.get(1)
+        if self.settings.main and p1 is not None and p1.loaded is None and p1.alarm is None:
+            return self.settings.main
+        return None
 
     def hold(self, on: bool = True) -> None:
         """Feed hold: motion stops where it is; ``hold(False)`` resumes it."""
