@@ -41,7 +41,6 @@ import multiprocessing
 import multiprocessing.synchronize
 import os
 import signal
-import socket
 import struct
 import sys
 import tempfile
@@ -51,6 +50,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import can
+from memory import free_port, wait_listening  # bench/memory.py: the same way to start a run
 
 MAIN = '(EXE,2,PEER)\n"L"\nN1(SND,2)\nN2(WAI,2)\nN3(DLY,0.01)\nN4(BNC,L)\n'
 PEER = '"L"\nN1(WAI,1)\nN2(SND,1)\nN3(BNC,L)\n'
@@ -67,12 +67,6 @@ NODE, MASTER = 1, 0x7F
 LOG = open(os.environ.get("STORM_LOG", os.devnull), "a")  # noqa: SIM115 - the run's log
 SPAWN = multiprocessing.get_context("spawn")
 PHASES = ("quiet", "flood", "no-read", "connects", "load", "streams", "storm")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def write_cell(folder: Path, port: int, hub: int, web: int) -> Path:
@@ -111,19 +105,6 @@ async def ask(reader: asyncio.StreamReader, writer: asyncio.StreamWriter, pdu: b
     writer.write(mbap(tid, pdu))
     header = await reader.readexactly(7)
     return await reader.readexactly(struct.unpack(">H", header[4:6])[0] - 1)
-
-
-async def wait_listening(port: int, deadline_s: float = 30.0) -> None:
-    end = time.perf_counter() + deadline_s
-    while True:
-        try:
-            _, writer = await asyncio.open_connection("127.0.0.1", port)
-            writer.close()
-            return
-        except OSError:
-            if time.perf_counter() > end:
-                raise
-            await asyncio.sleep(0.05)  # the gateway is starting: nothing to wait on
 
 
 # -- the measurements ----------------------------------------------------------------------

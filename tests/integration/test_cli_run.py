@@ -36,6 +36,17 @@ async def start_run(config: Path, *more: str
                 return proc, int(found.group(1)), lines
 
 
+async def stop_run(proc: asyncio.subprocess.Process, lines: list[str],
+                   sig: int = signal.SIGTERM, timeout_s: float = 20.0) -> tuple[int, str]:
+    """Signal ``ncgate run`` and wait for it to end: its exit status, and its whole log."""
+    proc.send_signal(sig)
+    assert proc.stdout is not None
+    async with asyncio.timeout(timeout_s):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    return code, "".join(lines) + rest
+
+
 @pytest.mark.parametrize("loop", ["asyncio", "uvloop"])  # uvloop: the 'fast' extra, in 'test'
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int,
@@ -50,12 +61,7 @@ async def test_run_serves_and_stops_cleanly_on_a_signal(tmp_path: Path, sig: int
     r = await client.read_input_registers(0, count=2, device_id=1)
     assert r.registers == [1, 5]
     client.close()
-    proc.send_signal(sig)
-    assert proc.stdout is not None
-    async with asyncio.timeout(20):
-        rest = (await proc.stdout.read()).decode()
-        code = await proc.wait()
-    log = "".join(lines) + rest
+    code, log = await stop_run(proc, lines, sig)
     assert code == 0, log
     assert "P1 starts PROG91 (by api nc.autostart)" in log
     assert f"event loop: {loop}" in log
@@ -123,12 +129,7 @@ async def test_a_runaway_program_leaves_modbus_answering_and_sigterm_working(
         r = await client.read_input_registers(0, count=2, device_id=1)
         assert r.registers == [1, 5]
     client.close()
-    proc.send_signal(signal.SIGTERM)
-    assert proc.stdout is not None
-    async with asyncio.timeout(20):
-        rest = (await proc.stdout.read()).decode()
-        code = await proc.wait()
-    log = "".join(lines) + rest
+    code, log = await stop_run(proc, lines)
     assert code == 0, log[-2000:]
     assert "Traceback" not in log
 
@@ -263,11 +264,6 @@ async def test_sigterm_stops_run_while_a_big_program_is_read(tmp_path: Path) -> 
     assert await client.connect()
     await client.write_register(2000, 1, device_id=1)  # cycle start: answered at once
     client.close()
-    proc.send_signal(signal.SIGTERM)
-    assert proc.stdout is not None
-    async with asyncio.timeout(30):
-        rest = (await proc.stdout.read()).decode()
-        code = await proc.wait()
-    log = "".join(lines_before) + rest
+    code, log = await stop_run(proc, lines_before, timeout_s=30)
     assert code == 0 and "stopped" in log, log
     assert "P1 starts BIG" not in log, log  # stopped while it was still being read
