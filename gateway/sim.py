@@ -1,14 +1,16 @@
 """``ncgate sim``: a closed simulation on the virtual clock (spec 4.1, 2.5, 4.3).
 
 MAIN runs in process 1; the script plays the PLC; the run ends when every process is idle,
-at ``--until``, or with a stall (nothing runnable, no timer, no scripted input left).
+at ``--until``, or with a stall (nothing runnable, no timer, no scripted input left).  With
+``--until``, idle processes do not end the run while the PLC logic runs or a scripted input is
+still to come: the PLC may press cycle start for the next part (docs/decisions.md).
 """
 
 from __future__ import annotations
 
 import functools
 import io
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TextIO
 
@@ -28,9 +30,12 @@ from ncgate.gateway.wiring import (
 from ncgate.inputs import Snd, Source, SourceKind, Start, Var, Write
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.dialects import comparison
-from ncgate.interpreter.engine import Process, ProcessState, run_virtual
+from ncgate.interpreter.engine import Engine, Process, ProcessState, run_virtual
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
 from ncgate.plc.image import PlcError
+from ncgate.plc.scan import PlcState
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -40,6 +45,13 @@ class SimResult:
     outcome: str  # "idle", "until", "stall", "alarm", "interrupted"
     exit_status: int
     runtime: Runtime
+    plc_alarms: int = 0  # alarms of the PLC/fieldbus side (process 0: AL160, a PLC fault)
+
+    @property
+    def alarms(self) -> int:
+        """Every alarm of the run, the processes' and the PLC's."""
+        return self.plc_alarms + sum(p.stats.alarms
+                                     for p in self.runtime.engine.processes.values())
 
     @property
     def events(self) -> list[EventDict]:
@@ -70,6 +82,7 @@ class ScriptPlayer:
         self.script = script
         self.door = door
         self._state_watch: list[tuple[StateTrigger, ScriptEntry]] = []
+        self.due = 0  # entries armed on the clock and not fired yet
         for entry in script.entries:
             self._validate(entry)
         runtime.engine.state_listeners.append(self._on_state)
@@ -116,6 +129,7 @@ class ScriptPlayer:
         engine = self.runtime.engine
         for entry in self.script.entries:
             if entry.at is not None:
+                self.due += 1
                 engine.call_at(entry.at, functools.partial(self._fire, entry))
                 continue
             trigger = self._parse_when(entry)
@@ -140,6 +154,7 @@ class ScriptPlayer:
 
     def _triggered(self, entry: ScriptEntry) -> None:
         engine = self.runtime.engine
+        self.due += 1
         engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry))
 
     def _write(self, entry: ScriptEntry) -> Write:
@@ -150,6 +165,7 @@ class ScriptPlayer:
         return item
 
     def _fire(self, entry: ScriptEntry) -> None:
+        self.due -= 1
         source = Source(SourceKind.SCRIPT, entry.key)
         try:
             if entry.set is not None:
@@ -189,21 +205,53 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             if isinstance(exc.__cause__, ProgramError | ProgramNotFoundError):
                 raise exc.__cause__ from None
             raise UsageError(str(exc)) from None
+    plc_alarms = 0
+
+    def count_plc_alarm(event: Event) -> None:
+        nonlocal plc_alarms
+        if isinstance(event, ev.Alarm) and event.proc == 0:
+            plc_alarms += 1
+
+    runtime.trace.subscribe(count_plc_alarm)
     player.arm()
     start_plc(config, runtime, door, closed=True)
+
+    def active() -> bool:
+        """Something may still start a program: the PLC logic's scan, a scripted input."""
+        plc = runtime.plc
+        return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING)
+
     try:
-        outcome = run_virtual(engine, until)
+        outcome = _run_to_end(engine, until, active)
     except KeyboardInterrupt:  # Ctrl-C: what happened so far is still reported and written
         engine.finish_stats()
-        return SimResult("interrupted", EXIT_FAILED, runtime)
+        return SimResult("interrupted", EXIT_FAILED, runtime, plc_alarms)
     engine.finish_stats()
-    alarms = any(p.stats.alarms for p in engine.processes.values())
+    process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():
         engine.record_stall()
-        return SimResult("stall", EXIT_FAILED, runtime)
-    if alarms:  # "blocked" with nobody blocked: every process left is in ALARM
-        return SimResult("alarm", EXIT_FAILED, runtime)
-    return SimResult(outcome, EXIT_OK, runtime)
+        return SimResult("stall", EXIT_FAILED, runtime, plc_alarms)
+    if process_alarms:  # "blocked" with nobody blocked: every process left is in ALARM
+        return SimResult("alarm", EXIT_FAILED, runtime, plc_alarms)
+    # Any alarm is exit 1 (README): a PLC fault (AL160) is one, though no process stopped.
+    return SimResult(outcome, EXIT_FAILED if plc_alarms else EXIT_OK, runtime, plc_alarms)
+
+
+def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool]) -> str:
+    """``run_virtual``, except that with ``until`` every process being idle does not end the
+    run while ``active()``: the clock moves on to the next timer (the PLC's next scan, the
+    next scripted input), which may start a program again."""
+    while True:
+        outcome = run_virtual(engine, until)
+        if outcome != "idle" or until is None or not active():
+            return outcome
+        t = engine.next_timer()
+        if t is None:
+            return outcome
+        if t > until:
+            engine.set_time(until)
+            return "until"
+        engine.advance_to(t)
 
 
 def summary_table(result: SimResult) -> str:
@@ -251,7 +299,7 @@ def report(result: SimResult, out: TextIO) -> None:
         out.write(f"[{first['t']:.3f}] P{first['proc']} hazard{where}{n}: "
                   f"{first['message']}{times}\n")
     out.write(summary_table(result))
-    alarms = sum(p.stats.alarms for p in engine.processes.values())
+    alarms = result.alarms
     verdict = {"idle": "every program ended", "until": "stopped at --until",
                "stall": "stall", "alarm": "ended with alarms",
                "interrupted": "interrupted (Ctrl-C)"}[result.outcome]
@@ -264,7 +312,8 @@ def _describe(event: EventDict) -> str:
     t = f"{event['t']:.3f}"
     if event["event"] == "alarm":
         where = f" {event['prog']}:{event['line']}" if event.get("prog") else ""
-        return f"[{t}] P{event['proc']} alarm {event['code']}{where}: {event['message']}"
+        who = f"P{event['proc']}" if event["proc"] else "PLC"  # process 0: the PLC's side
+        return f"[{t}] {who} alarm {event['code']}{where}: {event['message']}"
     if event["event"] == "deadlock":
         return f"[{t}] {event['message']}"
     lines = [f"[{t}] stall: every process is blocked and nothing can change"]
