@@ -7,9 +7,10 @@ caret under the column, like a compiler.  Must not import ``plc`` or ``gateway``
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Final, NamedTuple
 
 from ncgate.errors import NcgateError, render_diagnostic
 from ncgate.interpreter.codes import AlarmCode, DiagnosticCode, Severity
@@ -63,6 +64,36 @@ def fmt_number(value: float | None) -> str:
     if value is None:
         return "?"
     return str(int(value)) if value == int(value) else f"{value:g}"
+
+
+# A line of a program ends at LF, CR LF or a lone CR, in both dialects: files from old
+# controls and some DOS-era editors end lines with CR alone, and a file read as one long
+# block would hide every block after the first.  Only these three: a form feed or U+2028 in
+# a comment does not start a line, so line numbers agree with what an editor shows.
+LINE_END: Final = re.compile(r"\r\n?|\n")
+
+
+def split_lines(text: str) -> list[str]:
+    """The lines of a program text; a line end at the very end opens no empty line."""
+    lines = LINE_END.split(text)
+    if lines[-1] == "":
+        lines.pop()
+    return lines
+
+
+def not_utf8(data: bytes, exc: UnicodeDecodeError, file: str) -> Diagnostic:
+    """NC015 at the first byte that is not UTF-8: its line (LF, CR LF or CR ends one), its
+    column in characters, and its line as the text shows it (the bad bytes as U+FFFD)."""
+    pos = exc.start
+    head = data[:pos]
+    start = max(head.rfind(b"\n"), head.rfind(b"\r")) + 1
+    found = re.compile(rb"[\r\n]").search(data, pos)
+    end = found.start() if found else len(data)
+    line = head.count(b"\n") + head.count(b"\r") - head.count(b"\r\n") + 1
+    column = len(data[start:pos].decode("utf-8", "replace")) + 1
+    return Diagnostic(DiagnosticCode.NOT_UTF8,
+                      f"byte 0x{data[pos]:02x} is not UTF-8: save the program as UTF-8",
+                      Span(file, line, column), data[start:end].decode("utf-8", "replace"))
 
 
 def did_you_mean(word: str, candidates: Iterable[str]) -> str | None:

@@ -29,6 +29,8 @@ from ncgate.interpreter.diagnostics import (
     ProgramSyntaxError,
     Span,
     did_you_mean,
+    not_utf8,
+    split_lines,
 )
 from ncgate.interpreter.isg.nodes import (
     Assign,
@@ -547,15 +549,12 @@ class IsgFile:
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
-            line = raw[:exc.start].count(b"\n") + 1
-            raise ProgramSyntaxError([Diagnostic(
-                DiagnosticCode.NOT_UTF8, f"byte 0x{raw[exc.start]:02X} is not UTF-8",
-                Span(name, line, 1), "")]) from None
+            raise ProgramSyntaxError([not_utf8(raw, exc, name)]) from None
         return cls.from_text(text, name, path.stem)
 
     @classmethod
     def from_text(cls, text: str, file: str, name: str | None = None) -> IsgFile:
-        lines = text.splitlines()
+        lines = split_lines(text)
         blocks: list[Block | None] = []
         diagnostics: list[Diagnostic] = []
         in_var: Span | None = None

@@ -33,10 +33,12 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
 from ncgate.interpreter.diagnostics import (
+    LINE_END,
     Diagnostic,
     LineError,
     ProgramSyntaxError,
     did_you_mean,
+    not_utf8,
 )
 from ncgate.interpreter.nc110.nodes import (
     Assign,
@@ -606,6 +608,21 @@ def _spans(text: str) -> Iterator[tuple[int, int]]:
         start = end
 
 
+def _lf_only(text: str) -> str:
+    """``text`` with each CR LF and each lone CR made one LF (diagnostics.LINE_END), so that the
+    splitting, the label scan and the line counts below see LF alone.  Piece by piece, a CR LF
+    never cut in two: no one call into C holds the interpreter long on a long file."""
+    pieces: list[str] = []
+    start, size = 0, len(text)
+    while start < size:
+        end = min(start + _PIECE, size)
+        if end < size and text[end - 1] == "\r" and text[end] == "\n":
+            end += 1
+        pieces.append(LINE_END.sub("\n", text[start:end]))
+        start = end
+    return "".join(pieces)
+
+
 class Program:
     """A program's text, parsed block by block on demand.
 
@@ -624,6 +641,8 @@ class Program:
         self.exe_scan: tuple[frozenset[int], bool] | None = None
         if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
             text = text[1:]
+        if "\r" in text:
+            text = _lf_only(text)
         # A long text is split and searched a line-aligned piece at a time: no single call
         # into C holds the interpreter long while the loop serves the fieldbus beside the
         # thread that reads the program.
@@ -634,7 +653,7 @@ class Program:
             if text[end - 1] == "\n":
                 piece.pop()  # the "" after the piece's last newline
             lines += piece
-        self.lines: list[str] = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+        self.lines: list[str] = lines
         # Diagnostics of the file as a whole, found before any block is parsed.
         self.notes: list[Diagnostic] = []
         if any(_CYRILLIC.search(text, start, end) for start, end in spans):
@@ -689,15 +708,7 @@ class Program:
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            start = data.rfind(b"\n", 0, exc.start) + 1
-            end = data.find(b"\n", exc.start)
-            source = data[start:end if end >= 0 else len(data)].decode("utf-8", "replace")
-            line = data.count(b"\n", 0, exc.start) + 1
-            column = len(data[start:exc.start].decode("utf-8", "replace")) + 1
-            raise ProgramSyntaxError([Diagnostic(
-                DiagnosticCode.NOT_UTF8,
-                f"byte 0x{data[exc.start]:02x} is not UTF-8: save the program as UTF-8",
-                _new_tuple(Span, (shown, line, column)), source.rstrip("\r"))]) from None
+            raise ProgramSyntaxError([not_utf8(data, exc, shown)]) from None
         return cls(program_name(p), shown, text)
 
     def __len__(self) -> int:

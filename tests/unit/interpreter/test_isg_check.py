@@ -105,3 +105,23 @@ def test_a_program_with_errors_never_starts(tmp_path: Path) -> None:
         run_sim(config, "BAD", load_script(None))
     assert raised.value.diagnostics[0].code.code == "IS006"
     assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2
+
+
+def test_a_cr_only_file_has_one_block_a_line_and_only_cr_lf_and_crlf_end_lines() -> None:
+    text = ("%channel1\rP1 = 5\rG01 X10 F300\r\n#SIGAL [ID1]\r"
+            "M30 (a form feed \f or \u2028 ends no line)\r")
+    source = IsgFile.from_text(text, "p.nc")
+    assert len(source.lines) == 5
+    assert [(d.code.code, d.span.line, d.span.column) for d in source.diagnostics] == [
+        ("IS002", 4, 1)]
+
+
+def test_a_bad_byte_in_a_cr_only_isg_file_is_nc015_at_its_line_and_column(
+        tmp_path: Path) -> None:
+    path = tmp_path / "P.nc"
+    path.write_bytes(b"%channel1\rG01 X10 F300\rP1 = 2 (\xff)\rM30\r")
+    with pytest.raises(ProgramSyntaxError) as raised:
+        IsgFile.from_path(path, "P.nc")
+    (d,) = raised.value.diagnostics
+    assert (d.code.code, d.span.line, d.span.column, d.source_line) == (
+        "NC015", 3, 9, "P1 = 2 (\ufffd)")
