@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import functools
 import io
+import signal
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TextIO
+from typing import Any, TextIO
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.script import Script, ScriptEntry
@@ -46,6 +47,7 @@ class SimResult:
     exit_status: int
     runtime: Runtime
     plc_alarms: int = 0  # alarms of the PLC/fieldbus side (process 0: AL160, a PLC fault)
+    interrupted_by: str = ""  # "Ctrl-C" or "SIGTERM" when the outcome is "interrupted"
 
     @property
     def alarms(self) -> int:
@@ -178,10 +180,13 @@ class ScriptPlayer:
 
 
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
-            until: float | None = None) -> SimResult:
+            until: float | None = None, *, signals: bool = False) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
+
+    Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
+    ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
 
     Raises ProgramError/ProgramNotFoundError if a program cannot start, UsageError if one
     cannot run in its process (too many programs, an external process)."""
@@ -221,11 +226,18 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         plc = runtime.plc
         return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING)
 
+    previous: Any = None
     try:
+        if signals:  # installed inside the try: a SIGTERM from now on is always reported
+            previous = signal.signal(signal.SIGTERM, _terminated)
         outcome = _run_to_end(engine, until, active)
-    except KeyboardInterrupt:  # Ctrl-C: what happened so far is still reported and written
+    except KeyboardInterrupt as exc:  # what happened so far is still reported and written
         engine.finish_stats()
-        return SimResult("interrupted", EXIT_FAILED, runtime, plc_alarms)
+        by = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
+        return SimResult("interrupted", EXIT_FAILED, runtime, plc_alarms, by)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     engine.finish_stats()
     process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():
@@ -235,6 +247,14 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         return SimResult("alarm", EXIT_FAILED, runtime, plc_alarms)
     # Any alarm is exit 1 (README): a PLC fault (AL160) is one, though no process stopped.
     return SimResult(outcome, EXIT_FAILED if plc_alarms else EXIT_OK, runtime, plc_alarms)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during ``run_sim(signals=True)``: the run ends as it does on Ctrl-C."""
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise Terminated
 
 
 def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool]) -> str:
@@ -302,7 +322,7 @@ def report(result: SimResult, out: TextIO) -> None:
     alarms = result.alarms
     verdict = {"idle": "every program ended", "until": "stopped at --until",
                "stall": "stall", "alarm": "ended with alarms",
-               "interrupted": "interrupted (Ctrl-C)"}[result.outcome]
+               "interrupted": f"interrupted ({result.interrupted_by})"}[result.outcome]
     if alarms and result.outcome != "alarm":
         verdict += f", {alarms} alarm{'s' if alarms > 1 else ''}"
     out.write(f"simulated {engine.now:.3f} s: {verdict}\n")

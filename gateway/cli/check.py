@@ -108,6 +108,19 @@ def check_files(
     return [reports[p] for p in files]
 
 
+def other_dialect(paths: Sequence[Path], config: Config, which: Dialect) -> Dialect | None:
+    """Another dialect that reads every one of ``paths`` without an error, which ``which``
+    did not: the files are most likely in that language (an ISG file given to NC-110)."""
+    for other in Dialect:
+        if other is which:
+            continue
+        found = dialect_of(other).check(list(paths), dialect_options(config, other),
+                                        storage_of(config), None)
+        if not any(d.is_error for path in paths for d in found.get(path, ())):
+            return other
+    return None
+
+
 def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
     """Structured Text files, checked together (one may use another's function blocks)
     against the config's image sizes and processes, as ``[plc] logic`` loads them."""

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ncgate import __version__
-from ncgate.config import default_script_path, load_config
+from ncgate.config import Config, default_script_path, load_config
 from ncgate.errors import NcgateError
 from ncgate.gateway.cli.check import check_files, expand, storage_files
 from ncgate.gateway.errors import UsageError
@@ -67,6 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the main program (default: the config's nc.main); more than one: "
                      "each starts in its own process, in order")
     sim.add_argument("--config", metavar="C", help="config file (default: built-in)")
+    sim.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                     help="set any config key, as with run (e.g. --set nc.lookahead=0)")
+    sim.add_argument("--dialect", choices=[d.value for d in Dialect],
+                     help="the programs' language (default: the config's nc.dialect)")
     sim.add_argument("--example", metavar="NAME", help="run an installed example: its config, "
                      "its script and its main program (see 'ncgate examples')")
     sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML); "
@@ -196,7 +200,26 @@ def _check(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
+    if errors and dialect is None:
+        _suggest_check_dialect([r.path for r in reports if r.errors], config)
     return EXIT_FAILED if errors else EXIT_OK
+
+
+def _suggest_check_dialect(paths: Sequence[Path], config: Config | None) -> None:
+    from ncgate.gateway.cli.check import LOGIC_SUFFIX, config_for, other_dialect
+
+    readable: dict[str, list[str]] = {}
+    for path in paths:
+        if path.suffix.lower() == LOGIC_SUFFIX:
+            continue
+        cfg = config_for(path, config)
+        other = other_dialect([path], cfg, cfg.nc.dialect)
+        if other is not None:
+            readable.setdefault(other.value, []).append(path.name)
+    for name, files in readable.items():
+        print(f"ncgate check: {', '.join(files)} read(s) without error as {name}: give "
+              f"--dialect {name} (or set nc.dialect = \"{name}\" in the config)",
+              file=sys.stderr)
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -218,10 +241,19 @@ def _sim(args: argparse.Namespace) -> int:
         args.config = str(example.config)
         args.script = args.script or (str(example.script) if example.script else None)
         args.main = args.main or [example.main]
-    config = load_config(args.config)
+    overrides = _set_overrides(args.set)
+    if args.dialect:
+        overrides["nc.dialect"] = args.dialect
+    config = load_config(args.config, overrides=overrides)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
-    result = run_sim(config, args.main or config.nc.main, script, args.until)
+    mains = args.main or [config.nc.main]
+    try:
+        result = run_sim(config, mains, script, args.until, signals=True)
+    except ProgramError as exc:
+        print(str(exc), file=sys.stderr)
+        _suggest_dialect(mains, config, "sim")
+        return EXIT_USAGE
     report(result, sys.stdout)
     if args.trace:
         with open(args.trace, "w", encoding="utf-8") as out:
@@ -263,12 +295,27 @@ def _replay(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides."""
+def _suggest_dialect(names: Sequence[str], config: Config, command: str) -> None:
+    """After a program's errors: say so when another dialect reads the files cleanly."""
+    from ncgate.gateway.cli.check import other_dialect
+    from ncgate.gateway.programs import storage_of
+
+    storage = storage_of(config)
+    paths = [path for name in names if (path := storage.find(name)) is not None]
+    other = other_dialect(paths, config, config.nc.dialect) if paths else None
+    if other is not None:
+        files = ", ".join(p.name for p in paths)
+        print(f"ncgate {command}: {files} reads without error as {other.value}: give "
+              f"--dialect {other.value} (or set nc.dialect = \"{other.value}\" in the config)",
+              file=sys.stderr)
+
+
+def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` as config overrides: the value is TOML, a bare word a string."""
     import tomllib
 
     out: dict[str, Any] = {}
-    for item in args.set:
+    for item in items:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise UsageError(f"--set {item!r}: expected KEY=VALUE, e.g. nc.time_scale=10")
@@ -277,6 +324,12 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
         except tomllib.TOMLDecodeError:
             value = text  # a bare word: a string (--set nc.main=PROG91)
         out[key.strip()] = value
+    return out
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides."""
+    out = _set_overrides(args.set)
     if args.port is not None:
         out["modbus.port"] = args.port
     if args.web:

@@ -18,7 +18,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ncgate.config import Config
+from ncgate.config import Config, ConfigError
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import COMMAND_WORDS, ILLEGAL_ADDRESS, ILLEGAL_VALUE
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
@@ -91,6 +91,12 @@ PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait 
                      "SNDs received (lo)", "blocks executed (hi)", "blocks executed (lo)",
                      "X µm (hi)", "X µm (lo)", "Y µm (hi)", "Y µm (lo)", "Z µm (hi)",
                      "Z µm (lo)")
+# The config key that places each movable region (modbus.map.*), in the order a clash is
+# reported; "info" (input 0..8) does not move.
+_LAYOUT_KEYS = {Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars", Kind.SA_BYTES: "sa_bytes",
+                Kind.COMMAND: "command", Kind.MAILBOX: "command",
+                Kind.PROCESS_STATUS: "status", Kind.SND_LOG: "snd_log",
+                Kind.PLC_STATUS: "plc_status", Kind.INFO: "info"}
 _WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
             ProcessState.WAIT_EXE}
 
@@ -110,8 +116,7 @@ class ModbusMap:
             layout.k_bytes, layout.syvars, layout.sa_bytes)
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
         self.STATUS_BASE = layout.status
-        self.SND_LOG_BASE = layout.snd_log
-        self.PLC_BASE = layout.plc_status
+        self.SND_LOG_BASE, self.PLC_BASE = layout.input_bases(processes)
         sa_bytes = plc.sa_bits // 8
         every = config.modbus.read_only
 
@@ -156,8 +161,35 @@ class ModbusMap:
         ]
         # (table, address, count) -> its segments: a bounded cache of the ranges clients read.
         self._pieces: dict[tuple[Table, int, int], list[tuple[Region, int, int]]] = {}
-        # No overlap check here: the config loader refuses overlapping regions and names the
-        # key (modbus.map.*), and a Config comes from the loader.
+        self._check_layout()
+
+    def _check_layout(self) -> None:
+        """Refuse regions that overlap or run past 65535, naming the key that moves one.
+
+        Here and not in the config loader: only a served map must fit, so ``check`` and
+        ``sim`` take a config (16 processes, a moved region) whose map would not."""
+        source = str(self.config.source) if self.config.source else "<built-in default>"
+        for table in Table:
+            # Each region under the key that moves it (the mailbox moves with the command);
+            # the info block is fixed, so it is named last and never blamed.
+            placed: dict[str, tuple[int, int]] = {}
+            for r in self.regions:
+                if r.table is table and r.kind in _LAYOUT_KEYS:
+                    key = _LAYOUT_KEYS[r.kind]
+                    start, end = placed.get(key, (r.start, r.end))
+                    placed[key] = (min(start, r.start), max(end, r.end))
+            order = sorted(placed, key=list(_LAYOUT_KEYS.values()).index)
+            for i, name in enumerate(order):
+                start, end = placed[name]
+                if end > 65536:
+                    raise ConfigError(f"{source}: modbus.map.{name}: {start}..{end - 1} runs "
+                                      "past address 65535")
+                for other in order[i + 1:]:
+                    o_start, o_end = placed[other]
+                    if start < o_end and o_start < end:
+                        raise ConfigError(
+                            f"{source}: modbus.map.{name}: {name} ({start}..{end - 1}) "
+                            f"overlaps {other} ({o_start}..{o_end - 1})")
 
     def region(self, table: Table, address: int, count: int) -> Region:
         """The one region holding the whole range, or ModbusError(02)."""

@@ -5,12 +5,17 @@ run; the wording of errors; the built-in cell's first run."""
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from ncgate.gateway.cli.main import main
 
+from ..conftest import EXAMPLES
 from ..helpers import write_cell
 
 FAULTY = """PROGRAM main
@@ -91,3 +96,63 @@ def test_sim_with_a_script_entry_still_to_come_runs_to_until(
     writes = [(e["t"], e["var"]) for e in events_of(tmp_path / "t.jsonl")
               if e["event"] == "write"]
     assert writes == [(20.0, "SYVAR3")]
+
+
+# -- item 12: sim --set, --dialect, SIGTERM ----------------------------------------------------
+
+
+def test_sim_sets_config_keys_like_run(tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n',
+               {"A": "N1M30\n", "B": "N1G1X10F600\nN2M30\n"})
+    assert main(["sim", "--config", str(tmp_path / "ncgate.toml"), "--set", "nc.main=B",
+                 "--set", "nc.rapid_mm_min=5000", "--trace", str(tmp_path / "t.jsonl")]) == 0
+    assert [e["prog"] for e in events_of(tmp_path / "t.jsonl") if e["event"] == "start"] == ["B"]
+    assert main(["sim", "--config", str(tmp_path / "ncgate.toml"),
+                 "--set", "nc.lookahead=-1"]) == 2
+    assert "nc.lookahead: expected an integer" in capsys.readouterr().err
+
+
+def test_sim_runs_an_isg_file_with_dialect_and_suggests_it_without(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "PATHS.nc").write_text((EXAMPLES / "isg_paths" / "PATHS.nc").read_text())
+    (tmp_path / "ncgate.toml").write_text('[nc]\nprocesses = 3\n[nc.storage]\nMP0 = "."\n')
+    config = str(tmp_path / "ncgate.toml")
+    assert main(["sim", "PATHS", "--config", config]) == 2
+    err = capsys.readouterr().err
+    assert "error NC002" in err
+    assert "PATHS.nc reads without error as isg: give --dialect isg" in err
+    assert main(["sim", "PATHS", "--config", config, "--dialect", "isg"]) == 0
+    assert "every program ended" in capsys.readouterr().out
+    assert main(["check", str(tmp_path / "PATHS.nc"), "--config", config]) == 1
+    assert "give --dialect isg" in capsys.readouterr().err
+
+
+def test_sigterm_ends_sim_with_its_summary_and_trace(tmp_path: Path) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\nblock_time_ms = 250\n[nc.storage]\nMP0 = "."\n',
+               {"A": '"L"\nN1(DIS,"tick")\nN2(BNC,L)\n'})
+    trace = tmp_path / "t.jsonl"
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "sim", "--config",
+                             str(tmp_path / "ncgate.toml"), "--trace", str(trace)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Nothing to wait on but the other process's state: poll until it catches SIGTERM
+        # (the SigCgt mask in /proc), which it does only once the simulation is running.
+        deadline = time.monotonic() + 30
+        while not catches_sigterm(proc.pid):
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, err
+    assert out.rstrip().endswith("interrupted (SIGTERM)"), out
+    assert "Traceback" not in err
+    assert any(e["event"] == "display" for e in events_of(trace))
+
+
+def catches_sigterm(pid: int) -> bool:
+    status = Path(f"/proc/{pid}/status").read_text()
+    mask = next(line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:"))
+    return bool(int(mask, 16) >> (signal.SIGTERM - 1) & 1)

@@ -80,14 +80,7 @@ number = 2
         ("[modbus]\nunit_ids = []", "modbus.unit_ids: expected a non-empty list"),
         ("[canopen]\nnode_id = 128", "canopen.node_id: expected an integer 1..127, got 128"),
         ("nc = 3", "nc: expected a table, got 3"),
-        ("[plc]\nk_bytes = 1024", "modbus.map.k_bytes: k_bytes (0..1023) overlaps syvars"),
-        ("[modbus.map]\ncommand = 1254", "modbus.map.syvars: syvars (1000..1255) overlaps "
-         "command (1254..1256)"),
-        ("[modbus.map]\nstatus = 5", "modbus.map.status: status (5..104) overlaps info"),
-        ("[modbus.map]\nsnd_log = 150", "modbus.map.status: status (100..199) overlaps snd_log "
-         "(150..247)"),
         ("[modbus.map]\nread_only = [\"coils\"]", "modbus.map.read_only: expected a list of"),
-        ("[modbus.map]\nsa_bytes = 65500", "modbus.map.sa_bytes: 65500..65627 runs past"),
         ("[modbus]\nallow = [\"not an ip\"]", "modbus.allow[0]: expected an IP address"),
     ],
 )
