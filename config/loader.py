@@ -15,6 +15,7 @@ Stdlib only, and the interpreter's leaf module of settings (the SND policy is de
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import enum
 import importlib.util
 import ipaddress
@@ -36,6 +37,9 @@ DEFAULT_MODBUS_PORT = 5020
 DEFAULT_TLS_PORT = 802  # mbaps, Modbus/TCP Security
 DEFAULT_WEB_PORT = 8080  # the console's port when web.port is not set
 MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
+
+
+BUILT_IN = "<built-in default>"  # the name of the built-in config in messages
 
 
 class ConfigError(NcgateError, ValueError):
@@ -496,16 +500,23 @@ def default_script_path() -> Path:
 
 
 def load_config(
-    path: str | Path | None = None, overrides: Mapping[str, Any] | None = None
+    path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+    origins: Mapping[str, str] | None = None, *, serving: bool = True,
 ) -> Config:
-    """Load a config file (None: the built-in default), then apply dotted-key overrides."""
+    """Load a config file (None: the built-in default), then apply dotted-key overrides.
+
+    An error in an overridden key names where the override came from, not the file:
+    ``origins`` maps a dotted key to it (``"--port"``); any other override is ``--set``.
+    ``serving=False``: the caller opens no server (``check``, ``sim``), so what only a
+    server needs is not checked (the console's bind beyond loopback without a token)."""
     source = Path(path) if path is not None else default_config_path()
     raw = read_toml(source)
+    given = {dotted: (origins or {}).get(dotted, "--set") for dotted in overrides or {}}
     for dotted, value in (overrides or {}).items():
-        _set_dotted(raw, dotted, value)
-    reader = _Reader(str(source) if path is not None else "<built-in default>", source.parent)
+        _set_dotted(raw, dotted, value, given[dotted])
+    reader = _Reader(str(source) if path is not None else BUILT_IN, source.parent, given)
     config: Config = reader.section(Config, raw, "")
-    _check_config(reader, config)
+    _check_config(reader, config, serving)
     return dataclasses.replace(config, source=source if path is not None else None)
 
 
@@ -515,6 +526,12 @@ def read_toml(source: Path) -> dict[str, Any]:
         return tomllib.loads(source.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{source}: no such file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{source}: is a folder, not a config file (give its TOML file, "
+                          f"e.g. {source / 'ncgate.toml'})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{source}: not UTF-8 text ({exc.reason} at byte "
+                          f"{exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: {exc}") from exc
 
@@ -542,11 +559,14 @@ def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
     return out
 
 
-def _set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:
+def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> None:
     *parents, last = dotted.split(".")
     table = raw
-    for name in parents:
+    for i, name in enumerate(parents):
         table = table.setdefault(name, {})
+        if not isinstance(table, dict):
+            above = ".".join(parents[:i + 1])
+            raise ConfigError(f"{origin}: {dotted}: {above} is a value, not a table")
     table[last] = value
 
 
@@ -564,12 +584,26 @@ def _section_type(f: dataclasses.Field[Any]) -> type | None:
 class _Reader:
     """Reads one table at a time, naming the dotted key of anything wrong."""
 
-    def __init__(self, file: str, base: Path) -> None:
+    def __init__(self, file: str, base: Path, given: Mapping[str, str] | None = None) -> None:
         self.file = file
         self.base = base
+        self.given = given or {}  # overridden dotted key -> where it was given (--set)
 
     def fail(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.file}: {key}: {message}")
+        return ConfigError(f"{self._origin(key)}: {key}: {message}")
+
+    def _origin(self, key: str) -> str:
+        """The override that set ``key`` (or a table above it, or a key below it), else the
+        file."""
+        for dotted, origin in self.given.items():
+            if key == dotted or key.startswith((f"{dotted}.", f"{dotted}[")) or \
+                    dotted.startswith(f"{key}."):
+                return origin
+        if self.given and self.file == BUILT_IN:
+            # The built-in default is sound on its own: what went wrong came with the
+            # overrides (--web 0.0.0.0:8080 without a token fails on web.token).
+            return " ".join(sorted(set(self.given.values())))
+        return self.file
 
     def section(self, cls: type, raw: Any, key: str,
                 hi: Mapping[str, int] | None = None) -> Any:
@@ -598,7 +632,9 @@ class _Reader:
             raise self.fail(key, f"expected a table, got {raw!r}")
         for name in raw:
             if name not in known:
-                raise self.fail(f"{key}.{name}" if key else name, "unknown key")
+                near = difflib.get_close_matches(name, sorted(known), n=1)
+                hint = f" (did you mean {near[0]}?)" if near else ""
+                raise self.fail(f"{key}.{name}" if key else name, f"unknown key{hint}")
         return raw
 
     def _value(self, f: dataclasses.Field[Any], value: Any, key: str, hi: Any) -> Any:
@@ -647,7 +683,7 @@ class _Reader:
 # ---- checks across keys ----------------------------------------------------------------------
 
 
-def _check_config(r: _Reader, config: Config) -> None:
+def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
     nc, plc, canopen = config.nc, config.plc, config.canopen
     for name, ve in nc.ve.items():
         found = _VE_MAP.match(ve.map)
@@ -675,7 +711,7 @@ def _check_config(r: _Reader, config: Config) -> None:
                          f"K bytes, got {plc.k_bytes}")
     _check_tls(r, config.modbus.tls)
     web = config.web
-    if web.enabled and not is_loopback(web.host) and not web.token:
+    if serving and web.enabled and not is_loopback(web.host) and not web.token:
         raise r.fail("web.token", f"the console listens on {web.host}, beyond this "
                      "machine: set a token (or web.host = \"127.0.0.1\")")
     if web.token is not None and len(web.token) < 8:

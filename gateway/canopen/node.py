@@ -70,6 +70,7 @@ from ncgate.gateway.canopen.dictionary import (
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
 from ncgate.gateway.canopen.sdo import Deferred, Device
+from ncgate.gateway.errors import listen_error
 from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
@@ -173,8 +174,11 @@ class CanopenNode:
         """Serve our bus to other processes: each websocket client of the hub gets a bus of
         its own on our interface and channel (python-can-remote)."""
         cfg = self.config.canopen
-        hub = RemoteServer(host=cfg.hub_host, port=cfg.hub_port, interface=cfg.interface,
-                           channel=cfg.channel, bitrate=cfg.bitrate)
+        try:
+            hub = RemoteServer(host=cfg.hub_host, port=cfg.hub_port, interface=cfg.interface,
+                               channel=cfg.channel, bitrate=cfg.bitrate)
+        except OSError as exc:  # name the key to change, as for the other ports
+            raise listen_error(exc, "canopen.hub_port", cfg.hub_host, cfg.hub_port) from None
         thread = threading.Thread(target=hub.serve_forever, name="ncgate can-remote hub",
                                   daemon=True)
         thread.start()

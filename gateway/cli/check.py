@@ -77,8 +77,8 @@ def config_for(path: Path, explicit: Config | None) -> Config:
         return explicit
     beside = path.parent / CONFIG_BESIDE
     if beside.is_file():
-        return load_config(beside)
-    default = load_config(None)
+        return load_config(beside, serving=False)
+    default = load_config(None, serving=False)
     folder = path.parent.resolve()
     return replace(default, nc=replace(default.nc, storage=StorageConfig({"MP0": folder}, "MP0")))
 

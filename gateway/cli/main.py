@@ -14,7 +14,6 @@ from typing import Any
 from ncgate import __version__
 from ncgate.config import Config, default_script_path, load_config
 from ncgate.errors import NcgateError
-from ncgate.gateway.cli.check import check_files, expand, storage_files
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.interpreter.diagnostics import ProgramError
@@ -172,21 +171,24 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
+    from ncgate.gateway.cli.check import check_files, expand, storage_files
+
     if args.example:
         if args.config or args.files:
             raise UsageError("--example goes without --config and FILE")
         example = find_example(args.example)
         args.files = [str(example.folder)]
-    config = load_config(args.config) if args.config else None
+    # check opens no server: what only a server needs (the console's bind) is not its concern
+    config = load_config(args.config, serving=False) if args.config else None
     if args.files:
         files = expand(args.files)
     else:
-        default = config or load_config(None)
+        default = config or load_config(None, serving=False)
         files = storage_files(default) + list(default.plc.logic)
     if not files:
         raise UsageError("no program to check")
     if args.process is not None:
-        count = (config or load_config(None)).nc.processes
+        count = (config or load_config(None, serving=False)).nc.processes
         if not 1 <= args.process <= count:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
@@ -244,7 +246,7 @@ def _sim(args: argparse.Namespace) -> int:
     overrides = _set_overrides(args.set)
     if args.dialect:
         overrides["nc.dialect"] = args.dialect
-    config = load_config(args.config, overrides=overrides)
+    config = load_config(args.config, overrides=overrides, serving=False)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
     mains = args.main or [config.nc.main]
@@ -327,22 +329,28 @@ def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides."""
+def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]]:
+    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides, and
+    the option each key came from (an error names it)."""
     out = _set_overrides(args.set)
+    origins: dict[str, str] = {}
     if args.port is not None:
         out["modbus.port"] = args.port
+        origins["modbus.port"] = "--port"
     if args.web:
         host, sep, port = args.web.rpartition(":")
         if not sep or not port.isdigit() or not host:
             raise UsageError(f"--web {args.web!r}: expected HOST:PORT, e.g. 127.0.0.1:8080")
         out["web.host"] = host.strip("[]")
         out["web.port"] = int(port)
+        origins["web.host"] = origins["web.port"] = "--web"
     if args.no_web:
         out["web.enabled"] = False
+        origins["web.enabled"] = "--no-web"
     if args.trace:
         out["trace.file"] = str(Path(args.trace).resolve())
-    return out
+        origins["trace.file"] = "--trace"
+    return out, origins
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -359,8 +367,8 @@ def _run(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.getLogger("ncgate").setLevel(
         logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO)
-    overrides = _overrides(args)
-    config = load_config(args.config, overrides=overrides)
+    overrides, origins = _overrides(args)
+    config = load_config(args.config, overrides=overrides, origins=origins)
     record = str(Path(args.record).resolve()) if args.record else None
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within half a millisecond,
@@ -392,7 +400,7 @@ def _map(args: argparse.Namespace) -> int:
     from ncgate.gateway.canopen.dictionary import dictionary_rows
     from ncgate.gateway.modbus.map import ModbusMap
 
-    config = load_config(args.config)
+    config = load_config(args.config, serving=False)  # map and eds open no server
     buses = [args.bus] if args.bus else (["modbus"] if args.format == "csv" else
                                          ["modbus", "canopen"])
     rows = dictionary_rows(config) if "canopen" in buses else []
@@ -425,7 +433,7 @@ def _map(args: argparse.Namespace) -> int:
 def _eds(args: argparse.Namespace) -> int:
     from ncgate.gateway.canopen.dictionary import write_eds
 
-    write_eds(load_config(args.config), args.output)
+    write_eds(load_config(args.config, serving=False), args.output)
     print(f"wrote {args.output}", file=sys.stderr)
     return EXIT_OK
 

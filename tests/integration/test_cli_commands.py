@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -156,3 +157,79 @@ def catches_sigterm(pid: int) -> bool:
     status = Path(f"/proc/{pid}/status").read_text()
     mask = next(line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:"))
     return bool(int(mask, 16) >> (signal.SIGTERM - 1) & 1)
+
+
+# -- item 14: the wording of errors ------------------------------------------------------------
+
+
+def test_a_taken_hub_port_names_canopen_hub_port(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "ncgate", "run", "--no-web", "--port", "0",
+             "--set", "canopen.hub=true", "--set", f"canopen.hub_port={port}",
+             "--set", f"canopen.channel=hub-{tmp_path.name}"],
+            capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert f"canopen.hub_port: cannot listen on 127.0.0.1:{port}" in done.stderr
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (["sim", "--set", "nc.lookahead=-1"], "ncgate sim: --set: nc.lookahead: expected an integer"),
+    (["sim", "--set", "nc.main.x=1"], "ncgate sim: --set: nc.main.x: nc.main is a value, not"),
+    (["run", "--port", "70000"], "ncgate run: --port: modbus.port: expected an integer"),
+    (["run", "--web", "0.0.0.0:18080"], "ncgate run: --web: web.token: the console listens on"),
+    (["sim", "--set", "nc.lookahed=0"], "--set: nc.lookahed: unknown key (did you mean "
+                                        "lookahead?)"),
+])
+def test_an_override_that_fails_is_blamed_on_its_option(
+        capsys: pytest.CaptureFixture[str], args: list[str], said: str) -> None:
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert said in err
+    assert "built-in default" not in err and "Traceback" not in err
+
+
+def test_a_mistyped_key_in_a_file_suggests_the_nearest(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "ncgate.toml").write_text('[nc]\nlookahed = 0\n[modbus]\nprot = 502\n')
+    assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2
+    assert "nc.lookahed: unknown key (did you mean lookahead?)" in capsys.readouterr().err
+    (tmp_path / "ncgate.toml").write_text('[modbus]\nprot = 502\n')
+    assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2
+    assert "modbus.prot: unknown key (did you mean port?)" in capsys.readouterr().err
+
+
+def test_a_folder_given_as_config_is_said_in_a_sentence(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for command in ("sim", "check", "run", "map"):
+        assert main([command, "--config", str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert f"{tmp_path}: is a folder, not a config file" in err, err
+        assert "Errno" not in err
+
+
+def test_check_and_sim_do_not_refuse_a_console_bind_they_never_open(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                         '[web]\nhost = "0.0.0.0"\n', {"A": "N1M30\n"})
+    config = str(tmp_path / "ncgate.toml")
+    assert main(["sim", "--config", config]) == 0
+    assert main(["check", "--config", config]) == 0
+    assert main(["map", "--config", config]) == 0
+    capsys.readouterr()
+    assert main(["run", "--config", config]) == 2  # run serves it: a token is needed
+    assert "web.token: the console listens on 0.0.0.0" in capsys.readouterr().err
+
+
+def test_version_answers_without_importing_the_gateway() -> None:
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "ncgate", "--version"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.startswith("ncgate "), done
+    imported = {line.split("|")[-1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:")}
+    assert "ncgate.gateway.cli.main" in imported  # the measure sees the command's imports
+    assert not imported & {"ncgate.gateway.app", "pymodbus", "canopen", "can", "aiohttp",
+                           "lark", "ncgate.interpreter.engine"}

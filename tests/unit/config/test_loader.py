@@ -106,8 +106,11 @@ def test_missing_file(tmp_path: Path) -> None:
 def test_overrides_by_dotted_key_are_validated_too() -> None:
     cfg = load_config(None, overrides={"modbus.port": 0, "nc.processes": 3})
     assert cfg.modbus.port == 0 and cfg.nc.processes == 3
-    with pytest.raises(ConfigError, match=r"<built-in default>: nc.lookahead"):
+    # An override's error names where it came from, not the file it overrides (issue 25.14).
+    with pytest.raises(ConfigError, match=r"^--set: nc.lookahead: expected an integer"):
         load_config(None, overrides={"nc.lookahead": -1})
+    with pytest.raises(ConfigError, match=r"^--port: modbus.port: expected an integer"):
+        load_config(None, overrides={"modbus.port": -1}, origins={"modbus.port": "--port"})
 
 
 def test_docs_config_md_is_generated_from_the_schema() -> None:
