@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from ncgate.interpreter.diagnostics import LINE_END
 from ncgate.interpreter.nc110 import parser
 
 LINES = st.sampled_from(['N1G1X1', '"L"', ' /"A B"', '', 'x\r', '"', 'N2(BNC,L)', '"Q" N5',
@@ -15,6 +16,7 @@ LINES = st.sampled_from(['N1G1X1', '"L"', ' /"A B"', '', 'x\r', '"', 'N2(BNC,L)'
 
 
 def whole(text: str) -> tuple[list[str], list[tuple[str, int]]]:
+    text = LINE_END.sub("\n", text)  # LF, CR LF and a lone CR each end a line
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
@@ -24,11 +26,11 @@ def whole(text: str) -> tuple[list[str], list[tuple[str, int]]]:
         line_no += text.count("\n", last, m.start())
         last = m.start()
         labels.append((m.group(1), line_no))
-    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines], labels
+    return lines, labels
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(LINES, max_size=40), st.sampled_from(["", "\n", "\r\n", "\n\n"]))
+@given(st.lists(LINES, max_size=40), st.sampled_from(["", "\n", "\r\n", "\n\n", "\r", "\r\r\n"]))
 def test_pieces_give_what_the_whole_text_gives(lines: list[str], end: str) -> None:
     text = "\n".join(lines) + end
     with pytest.MonkeyPatch.context() as patch:
