@@ -43,6 +43,10 @@ class DiagnosticCode(enum.Enum):
     WRITE_TO_PLC_PACKET = ("NC032", Severity.ERROR, "a program writing SA or SK (PLC-owned)")
     BIT_VALUE = ("NC033", Severity.ERROR, "a bit compared with a value other than 0 or 1")
     FEED_NOT_POSITIVE = ("NC034", Severity.ERROR, "a feed (F) of zero or less")
+    REPEATED_WORD = ("NC035", Severity.ERROR,
+                     "an address twice in one block (X10X20, F100F5000, G1G1)")
+    MODAL_CONFLICT = ("NC036", Severity.ERROR,
+                      "two G or M codes of one modal group in one block (G0G1, M3M5)")
     UNKNOWN_LABEL = ("NC040", Severity.ERROR, "a jump to a label the program does not define")
     DUPLICATE_LABEL = ("NC041", Severity.ERROR, "a label defined twice")
     UNBALANCED_REPEAT = ("NC042", Severity.ERROR, "RPT without ERP, or ERP without RPT")
@@ -53,6 +57,8 @@ class DiagnosticCode(enum.Enum):
     UNMODELLED_CODE = ("NW002", Severity.WARNING, "an NC-110 code the simulator keeps inert")
     CONDITION_NEVER_HOLDS = ("NW003", Severity.WARNING, "a WAI value outside the variable's range")
     CYRILLIC_LOOKALIKE = ("NW004", Severity.WARNING, "Cyrillic look-alikes read as Latin (Е4)")
+    UNKNOWN_G_OR_M = ("NW005", Severity.WARNING,
+                      "a G or M code the language does not know (G999, M1.5): no effect")
     # -- the ISG dialect (spec 5) ---------------------------------------------------------
     ISG_SYNTAX = ("IS001", Severity.ERROR, "ISG: an item where the block syntax does not allow it")
     ISG_UNKNOWN_COMMAND = ("IS002", Severity.ERROR, "ISG: a #command or $word not in the dialect")
@@ -80,9 +86,18 @@ class DiagnosticCode(enum.Enum):
                               "ISG: a P parameter outside P0..nc.e_params-1")
     ISG_BAD_REMOVE = ("IS016", Severity.ERROR,
                       "ISG: #SIGNAL REMOVE with ID and IDMIN/IDMAX, or IDMAX without IDMIN")
+    ISG_REPEATED_WORD = ("IS017", Severity.ERROR, "ISG: an address twice in one block (X10 X20)")
+    ISG_MODAL_CONFLICT = ("IS018", Severity.ERROR,
+                          "ISG: two G or M codes of one modal group in one block (G00 G01)")
+    ISG_SYNC_READ_IN_TRC = ("IS019", Severity.ERROR,
+                            "ISG: a synchronous V.E. read while cutter compensation (G41/G42) "
+                            "is on (the control's error 20651)")
     ISG_BUFFERED_SELF_SIGNAL = ("IW001", Severity.WARNING,
                                 "ISG: a #WAIT for this channel's own #SIGNAL SYN with no #FLUSH "
                                 "between: the buffer effect deadlocks it")
+    ISG_UNKNOWN_G_OR_M = ("IW002", Severity.WARNING,
+                          "ISG: a G or M code the subset does not implement (G41, G999): "
+                          "no effect")
 
     @property
     def code(self) -> str:

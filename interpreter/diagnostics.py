@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final, NamedTuple
 
@@ -60,10 +60,13 @@ def render_all(diagnostics: Iterable[Diagnostic]) -> str:
 
 
 def fmt_number(value: float | None) -> str:
-    """A value as a message shows it: whole numbers without a point."""
+    """A value as a message shows it: whole numbers without a point, and at most six
+    significant digits once it is that large (1e+300, never its 301 digits; inf, nan)."""
     if value is None:
         return "?"
-    return str(int(value)) if value == int(value) else f"{value:g}"
+    if abs(value) < 1e15 and value == int(value):
+        return str(int(value))
+    return f"{value:g}"
 
 
 # A line of a program ends at LF, CR LF or a lone CR, in both dialects: files from old
@@ -108,6 +111,49 @@ def did_you_mean(word: str, candidates: Iterable[str]) -> str | None:
         if len(cand) == len(word) and sorted(cand.upper()) == sorted(word.upper()):
             return cand
     return None
+
+
+class WordUse(NamedTuple):
+    """A word of a block as the repeat rule sees it: its letter, its value when the text
+    gives it (None when a variable or an expression does), and where it stands."""
+
+    letter: str
+    number: float | None
+    text: str  # the word as written: X10, XE1, G01
+    span: Span
+
+
+def word_clashes(words: Sequence[WordUse], groups: Mapping[str, Mapping[float, str]],
+                 ) -> Iterator[tuple[WordUse, WordUse, str | None]]:
+    """The words of one block that a control refuses: ``(word, the earlier one, group)``.
+
+    A letter that is not in ``groups`` (X, F, T, ...) stands once a block: its second word is a
+    repeat (group None), as on every control -- rs274ngc refuses "multiple X words", and a
+    last-wins reading would move to X20 where the programmer may have meant X10.  G and M
+    words may stand several times (G90 G1 G17), but not twice with one code, nor two codes of
+    one modal group (``groups[letter][code]`` names it): those clash with their group's name.
+    A G or M word whose value a variable gives is not known here and clashes with nothing.
+    Each letter and each group is reported once, at its second word, so a block of 80,000 X
+    words gives one diagnostic, not 79,999."""
+    first: dict[object, WordUse] = {}
+    reported: set[object] = set()
+    for word in words:
+        table = groups.get(word.letter)
+        if table is None:
+            key: object = word.letter
+            group = None
+        elif word.number is None:
+            continue
+        else:
+            group = table.get(word.number)
+            key = (word.letter, group if group is not None else word.number)
+            earlier = first.get(key)
+            if earlier is not None and earlier.number == word.number:
+                group = None  # the same code twice: a repeat, whatever its group
+        earlier = first.setdefault(key, word)
+        if earlier is not word and key not in reported:
+            reported.add(key)
+            yield word, earlier, group
 
 
 class InterpreterError(NcgateError):
@@ -158,3 +204,15 @@ class RuntimeAlarm(InterpreterError):
         super().__init__(message)
         self.code = code
         self.message = message
+
+
+def clash_message(word: WordUse, earlier: WordUse, group: str | None) -> str:
+    """The message of one of :func:`word_clashes`' findings (the same in both dialects)."""
+    where = f"{earlier.text} at column {earlier.span.column}"
+    if group is None and word.number is not None and word.number == earlier.number:
+        return f"{word.text} is already in this block ({where}): write it once"
+    if group is None:
+        return (f"{word.text}: {word.letter} is already in this block ({where}); a block "
+                f"takes one {word.letter} word")
+    return (f"{word.text} and {earlier.text} (column {earlier.span.column}) are both {group} "
+            "codes; a block takes one code of each modal group")

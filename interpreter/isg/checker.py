@@ -3,17 +3,27 @@
 Syntax errors come from the parser; this adds what needs the configuration or the whole
 program: channels and parameter indices in range, ``V.E.`` names declared in ``[nc.ve]`` and
 not PLC-owned when written, ``V.P.`` variables read but never given a value, ``#WAIT SYN`` with
-parameters, constant signal numbers and counts, and the buffer-effect warning.  Must not import
-``plc`` or ``gateway``.
+parameters, constant signal numbers and counts, the buffer-effect warning, a repeated address
+or two codes of one modal group in a block, G codes the subset does not implement, and a
+synchronous ``V.E.`` read under cutter compensation.  Must not import ``plc`` or ``gateway``.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from typing import Final
 
 from ncgate.interpreter.codes import DiagnosticCode
-from ncgate.interpreter.diagnostics import Diagnostic, Span, did_you_mean
+from ncgate.interpreter.diagnostics import (
+    Diagnostic,
+    Span,
+    WordUse,
+    clash_message,
+    did_you_mean,
+    word_clashes,
+)
 from ncgate.interpreter.dialect import ExternalBinding
 from ncgate.interpreter.isg.nodes import (
     Assign,
@@ -35,6 +45,24 @@ from ncgate.interpreter.isg.nodes import (
     Word,
 )
 from ncgate.interpreter.isg.parser import IsgFile
+
+# The subset's G codes (docs/isg.md) by modal group, and G40-G42: the control's tool radius
+# compensation, which ncgate does not model (G41/G42 warn IW002; G40, which switches it off,
+# needs no word) but whose state decides IS019.
+_TRC_ON: Final = frozenset((41, 42))
+G_GROUPS: Final[Mapping[float, str]] = {
+    **dict.fromkeys((0, 1, 2, 3), "motion"),
+    **dict.fromkeys((90, 91), "distance (G90/G91)"),
+    **dict.fromkeys((40, 41, 42), "cutter compensation"),
+}
+G_IMPLEMENTED: Final = frozenset((0, 1, 2, 3, 90, 91))
+M_GROUPS: Final[Mapping[float, str]] = {
+    **dict.fromkeys((0, 1, 2, 30), "program stop and end"),
+    **dict.fromkeys((3, 4, 5), "spindle"),
+    6: "tool change",
+}
+WORD_GROUPS: Final[Mapping[str, Mapping[float, str]]] = {"G": G_GROUPS, "M": M_GROUPS}
+_WORD_TEXT: Final = re.compile(r"[A-Za-z]\s*(?:\[[^\]]*\]?|[-+]?(?:V\.[A-Za-z]\.\w+|P\d+|[\d.]+))")
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,11 +107,68 @@ class _Checker:
         blocks = [b for b in self.source.blocks[first:end] if b is not None]
         given = self._given(blocks)
         buffered: dict[int, Span] = {}  # #SIGNAL SYN to this channel since the last #FLUSH
+        # The G41/G42 that switched cutter compensation on, in the order the blocks are
+        # written (a G40 switches it off); None while it is off.
+        trc: Word | None = None
         for block in blocks:
+            words: list[Word] = []
             for item in block.items:
                 self._item(item, given)
                 self._buffer(item, buffered)
+                if isinstance(item, Word):
+                    words.append(item)
+            if trc is not None:
+                self._sync_reads(block, trc)
+            if words:
+                trc = self._words(words, trc)
         return self.out
+
+    def _words(self, words: list[Word], trc: Word | None) -> Word | None:
+        """IW002, IS017, IS018 for a block's words; the cutter compensation after it."""
+        uses: list[WordUse] = []
+        for w in words:
+            number = w.value.value if isinstance(w.value, Num) else None
+            line = self.source.lines[w.span.line - 1]
+            found = _WORD_TEXT.match(line, w.span.column - 1)
+            uses.append(WordUse(w.letter, number, found.group() if found else w.letter, w.span))
+            if number is None:
+                continue
+            if w.letter == "G" and number not in G_IMPLEMENTED and number != 40:
+                what = ("cutter compensation is not modelled: the tool centre follows the "
+                        "programmed contour" if number in _TRC_ON else
+                        "not a G code of the subset (G00 G01 G02 G03 G90 G91): it has no effect")
+                self.diag(DiagnosticCode.ISG_UNKNOWN_G_OR_M, f"{uses[-1].text}: {what}", w.span)
+            elif w.letter == "M" and number != int(number):
+                self.diag(DiagnosticCode.ISG_UNKNOWN_G_OR_M,
+                          f"{uses[-1].text} is not an M code: M takes a whole number", w.span)
+            if w.letter == "G" and number in _TRC_ON:
+                trc = w
+            elif w.letter == "G" and number == 40:
+                trc = None
+        for word, earlier, group in word_clashes(uses, WORD_GROUPS):
+            code = (DiagnosticCode.ISG_REPEATED_WORD if group is None
+                    else DiagnosticCode.ISG_MODAL_CONFLICT)
+            self.diag(code, clash_message(word, earlier, group), word.span)
+        return trc
+
+    def _sync_reads(self, block: Block, trc: Word) -> None:
+        """IS019: the control refuses a synchronous V.E. read (an implicit #FLUSH WAIT) while
+        tool radius compensation is on (seed 004: error 20651) -- it cannot empty the buffer
+        that compensation computes the path from.  Decided in the order the blocks are
+        written: a G41/G42 above without a G40 between."""
+        for item in block.items:
+            for e in _expressions(item):
+                for node in _walk(e):
+                    if not isinstance(node, ExternalVar):
+                        continue
+                    binding = self.context.external.get(node.name)
+                    if binding is not None and binding.sync:
+                        number = trc.value.value if isinstance(trc.value, Num) else 41
+                        self.diag(DiagnosticCode.ISG_SYNC_READ_IN_TRC,
+                                  f"V.E.{node.name} is read synchronously while cutter "
+                                  f"compensation is on (G{number:g} on line {trc.span.line}): "
+                                  "the control stops with error 20651; read it before the "
+                                  "G41/G42, after the G40, or make it sync = false", node.span)
 
     def _given(self, blocks: list[Block]) -> set[str]:
         """The V.P. names a program gives a value somewhere (assignment, #VAR, #WAIT)."""

@@ -11,13 +11,19 @@ Must not import ``plc`` or ``gateway``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, Final
 
 from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import DiagnosticCode
-from ncgate.interpreter.diagnostics import Diagnostic, did_you_mean
+from ncgate.interpreter.diagnostics import (
+    Diagnostic,
+    WordUse,
+    clash_message,
+    did_you_mean,
+    word_clashes,
+)
 from ncgate.interpreter.nc110.nodes import (
     Assign,
     Binary,
@@ -46,6 +52,27 @@ from ncgate.interpreter.nc110.nodes import (
     value_object,
 )
 from ncgate.interpreter.nc110.parser import Program
+
+# The G and M codes of the language (docs/language.md), by modal group as rs274ngc groups
+# them: two of one group in a block is NC036.  G4, cutter compensation and the canned cycles
+# are known but kept without effect (docs/decisions.md); a G code outside this table is NW005.
+_MOTION = "motion"
+G_GROUPS: Final[Mapping[float, str]] = {
+    **dict.fromkeys((0, 1, 2, 3, *range(80, 90)), _MOTION),
+    **dict.fromkeys((17, 18, 19), "plane"),
+    **dict.fromkeys((90, 91), "distance (G90/G91)"),
+    **dict.fromkeys((40, 41, 42), "cutter compensation"),
+    4: "dwell",
+}
+# M codes are the machine's own functions, handed to the PLC on a real control (M100 is a
+# machine builder's): any whole number is accepted.  These groups are the ones a control
+# refuses to see twice in a block.
+M_GROUPS: Final[Mapping[float, str]] = {
+    **dict.fromkeys((0, 1, 2, 30), "program stop and end"),
+    **dict.fromkeys((3, 4, 5), "spindle"),
+    6: "tool change",
+}
+WORD_GROUPS: Final[Mapping[str, Mapping[float, str]]] = {"G": G_GROUPS, "M": M_GROUPS}
 
 
 @value_object
@@ -136,15 +163,19 @@ class _Checker:
         for block in blocks:
             if block is None:
                 continue
+            words = 0
             for item in block.items:
                 kind = type(item)
-                if kind is Word:  # most items: only an E parameter or a feed needs a look
-                    if type(item.value) is VarRef or item.letter == "F":  # type: ignore[union-attr]
+                if kind is Word:  # most items: only an E parameter, F, G or M needs a look
+                    words += 1
+                    if type(item.value) is VarRef or item.letter in "FGM":  # type: ignore[union-attr]
                         self.word(item)  # type: ignore[arg-type]
                     continue
                 handler = dispatch.get(kind)
                 if handler is not None:
                     handler(self, item)
+            if words > 1:
+                self.block_words(block)
         for unclosed in self.repeats:
             self.report(DiagnosticCode.UNBALANCED_REPEAT, "(RPT) without a matching (ERP)",
                         unclosed.span)
@@ -189,11 +220,33 @@ class _Checker:
     # -- items --------------------------------------------------------------------------------
 
     def word(self, item: Word) -> None:
-        if isinstance(item.value, VarRef):
-            self.var(item.value)
-        elif item.letter == "F" and item.value <= 0:
-            self.report(DiagnosticCode.FEED_NOT_POSITIVE,
-                        f"F{item.text}: a feed must be positive (mm/min)", item.span)
+        value = item.value
+        if isinstance(value, VarRef):
+            self.var(value)
+        elif item.letter == "F":
+            if value <= 0:
+                self.report(DiagnosticCode.FEED_NOT_POSITIVE,
+                            f"F{item.text}: a feed must be positive (mm/min)", item.span)
+        elif item.letter == "G" and value not in G_GROUPS:
+            self.report(DiagnosticCode.UNKNOWN_G_OR_M,
+                        f"G{item.text} is not a G code of the language: it has no effect "
+                        "(known: G0 G1 G2 G3 G17 G18 G19 G90 G91; kept: G4 G40-G42 G80-G89)",
+                        item.span)
+        elif item.letter == "M" and value != int(value):
+            self.report(DiagnosticCode.UNKNOWN_G_OR_M,
+                        f"M{item.text} is not an M code: M takes a whole number",
+                        item.span)
+
+    def block_words(self, block: Block) -> None:
+        """NC035/NC036: a repeated address, or two codes of one modal group (diagnostics.
+        word_clashes); the second word's column."""
+        uses = [WordUse(w.letter, w.value if type(w.value) is float else None,
+                        f"{w.letter}{w.text}", w.span)
+                for w in block.items if type(w) is Word]
+        for word, earlier, group in word_clashes(uses, WORD_GROUPS):
+            code = (DiagnosticCode.REPEATED_WORD if group is None
+                    else DiagnosticCode.MODAL_CONFLICT)
+            self.report(code, clash_message(word, earlier, group), word.span)
 
     def assign(self, item: Assign) -> None:
         target = item.target

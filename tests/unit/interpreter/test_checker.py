@@ -118,3 +118,33 @@ def test_all_errors_of_a_file_in_source_order() -> None:
     text = "N1(WAI,SA10>0)\nN2GXY\nN3(EXE,9,P)\nN4(WAI,SA12=1\n"
     assert [code for code, _, _ in diagnose(text)] == [
         C.COMPARE_BIT_ORDER, C.WORD_WITHOUT_VALUE, C.PROCESS_OUT_OF_RANGE, C.MISSING_CLOSE_PAREN]
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    # The blocks: each was last-wins, silently.
+    ("G1X10X20F100", [(C.REPEATED_WORD, 6)]),
+    ("G1X10F100F5000", [(C.REPEATED_WORD, 10)]),
+    ("G1G0X10F100", [(C.MODAL_CONFLICT, 3)]),
+    ("G1G1X10F100", [(C.REPEATED_WORD, 3)]),
+    ("G90G91X1", [(C.MODAL_CONFLICT, 4)]), ("G17G18", [(C.MODAL_CONFLICT, 4)]),
+    ("G1G81X1F100", [(C.MODAL_CONFLICT, 3)]),
+    ("N1 M3 M5", [(C.MODAL_CONFLICT, 7)]), ("N1 M6 M6", [(C.REPEATED_WORD, 7)]),
+    ("N1 M0 M30", [(C.MODAL_CONFLICT, 7)]),
+    ("XE1XE2", [(C.REPEATED_WORD, 4)]), ("T1.1T2.1", [(C.REPEATED_WORD, 5)]),
+    # Reported once a letter: a block of many X words is one diagnostic, at the second X.
+    ("G1" + "X1Y2" * 50 + "F100", [(C.REPEATED_WORD, 7), (C.REPEATED_WORD, 9)]),
+    # What a control accepts: G codes of different groups, M codes of different groups or
+    # the machine's own, one of each address.
+    ("N1G90G1G17X10Y5Z1F100", []), ("N1G0G40X0", []), ("N1T1.1M6M3S1000M8M100", []),
+    ("N1 G1 X1 (SND,2) (SND,3)", []), ("N1GE1GE2X1F100", []),
+])
+def test_a_block_takes_one_word_an_address_and_one_code_a_modal_group(
+        text: str, expected: list[tuple[C, int]]) -> None:
+    assert [(code, col) for code, _, col in diagnose(text)] == expected
+
+
+@pytest.mark.parametrize(("text", "column"), [("N1G999X1", 3), ("N1G1.5X1", 3), ("N1M1.5", 3),
+                                              ("N1G20", 3)])
+def test_a_g_or_m_code_the_language_does_not_know_is_a_warning(text: str, column: int) -> None:
+    assert diagnose(text) == [(C.UNKNOWN_G_OR_M, 1, column)]
+    assert diagnose("N1G0G1G2G3G4G17G18G19G40G41G42G80G81G89G90G91".replace("G", "\nG")) == []

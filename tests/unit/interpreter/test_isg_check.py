@@ -125,3 +125,37 @@ def test_a_bad_byte_in_a_cr_only_isg_file_is_nc015_at_its_line_and_column(
     (d,) = raised.value.diagnostics
     assert (d.code.code, d.span.line, d.span.column, d.source_line) == (
         "NC015", 3, 9, "P1 = 2 (\ufffd)")
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("G01 X10 X20 F300", [("IS017", 1, 9)]),
+    ("G01 X10 F100 F5000", [("IS017", 1, 14)]),
+    ("G01 G00 X10 F300", [("IS018", 1, 5)]),
+    ("G01 G01 X10 F300", [("IS017", 1, 5)]),
+    ("G90 G91 XP1", [("IS018", 1, 5)]),
+    ("X[P1 + 1] X[P2]", [("IS017", 1, 11)]),
+    ("M03 M05", [("IS018", 1, 5)]),
+    # G codes of different groups, M codes of different groups or the machine's own.
+    ("G90 G01 X10 Y5 F300 M03 M08 M100", []),
+])
+def test_a_block_takes_one_word_an_address_and_one_code_a_modal_group(
+        text: str, expected: list[tuple[str, int, int]]) -> None:
+    assert check(text) == expected
+
+
+@pytest.mark.parametrize(("text", "column"), [("G999 X1", 1), ("N10 G41 X1 F300", 5),
+                                              ("G17", 1), ("M1.5", 1)])
+def test_a_g_code_the_subset_does_not_implement_is_a_warning(text: str, column: int) -> None:
+    assert check(text) == [("IW002", 1, column)]
+
+
+def test_a_synchronous_read_under_cutter_compensation_is_the_controls_error_20651() -> None:
+    text = ("%channel1\nN10 P1 = V.E.IN1\nN20 G42 G01 X10 F300\nN30 P2 = V.E.IN1 + 1\n"
+            "N35 $IF V.E.IN1 == 1\nN36 $ENDIF\nN40 P3 = V.E.LAMP\nN50 G40 X0\n"
+            "N60 P4 = V.E.IN1\nM30\n")
+    assert check(text) == [("IW002", 3, 5), ("IS019", 4, 10), ("IS019", 5, 9)]
+    message = next(d.message for d in check_file(
+        IsgFile.from_text(text, "p.nc"),
+        IsgCheckContext(3, 1000, 10, external_bindings(load_config(None, {"nc.ve": VE}))))
+        if d.code.code == "IS019")
+    assert "20651" in message and "line 3" in message
