@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ncgate.errors import NcgateError
-from ncgate.interpreter.settings import Dialect, SndPolicy
+from ncgate.interpreter.settings import AXES, BLOCK_S, TRAVEL_MM, Dialect, SndPolicy
 
 MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
@@ -173,6 +173,16 @@ def _read_only_regions(r: _Reader, t: dict[str, Any], key: str, done: dict[str, 
     return frozenset(read_only)
 
 
+def _travel(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    name = key.rsplit(".", 1)[1]
+    value = t.get(name, list(TRAVEL_MM))
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+            and value[0] < value[1]):
+        raise r.fail(key, f"expected [min, max] with min < max (inf for no limit), got {value!r}")
+    return (float(value[0]), float(value[1]))
+
+
 def _map_base(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int | None:
     name = key.rsplit(".", 1)[1]  # unset: laid out for nc.processes (input_bases)
     return r.int_(t[name], key, 0, 65535) if name in t else None
@@ -271,6 +281,30 @@ class VeConfig:
                          "time")
 
 
+def _limit(axis: str) -> Any:
+    unit = "degrees" if axis in "ABC" else "mm"
+    return setting(TRAVEL_MM, f"soft travel limits of {axis}, [min, max] in {unit}: a block "
+                   "that would move past one is an alarm at decode (AL131)", parse=_travel)
+
+
+@dataclass(frozen=True, slots=True)
+class LimitsConfig:
+    """Soft limits a block is checked against where it is decoded (docs/runtime.md)."""
+
+    X: tuple[float, float] = _limit("X")
+    Y: tuple[float, float] = _limit("Y")
+    Z: tuple[float, float] = _limit("Z")
+    U: tuple[float, float] = _limit("U")
+    V: tuple[float, float] = _limit("V")
+    W: tuple[float, float] = _limit("W")
+    A: tuple[float, float] = _limit("A")
+    B: tuple[float, float] = _limit("B")
+    C: tuple[float, float] = _limit("C")
+    block_s: float = setting(BLOCK_S, "the longest one block's motion, dwell or tool change "
+                             "may take, in seconds: longer is an alarm at decode (AL132)",
+                             lo=0, positive=True)
+
+
 @dataclass(frozen=True, slots=True)
 class NcConfig:
     processes: int = setting(5, "how many processes (channels)", lo=1, hi=MAX_PROCESSES)
@@ -305,6 +339,7 @@ class NcConfig:
     storage: StorageConfig = setting(doc="[nc.storage]", factory=StorageConfig)
     process: tuple[ProcessConfig, ...] = setting((), "[[nc.process]]: per-process settings",
                                                  parse=_processes)
+    limits: LimitsConfig = setting(doc="[nc.limits]", factory=LimitsConfig)
     isg: IsgConfig = setting(doc="[nc.isg]", factory=IsgConfig)
     ve: Mapping[str, VeConfig] = setting(
         doc="[nc.ve]: ISG V.E. variables, NAME = { map = \"SYVAR5\", sync = true }",
@@ -313,6 +348,15 @@ class NcConfig:
     @property
     def external(self) -> frozenset[int]:
         return frozenset(p.number for p in self.process if p.external)
+
+    # The engine's names for [nc.limits] (RuntimeSettings takes [nc]'s keys by name).
+    @property
+    def travel_limits(self) -> tuple[tuple[float, float], ...]:
+        return tuple(getattr(self.limits, axis) for axis in AXES)
+
+    @property
+    def block_limit_s(self) -> float:
+        return self.limits.block_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -697,6 +741,9 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
         if index >= size:
             raise r.fail(f"nc.ve.{name}.map", f"{ve.map} is outside the image (plc.sa_bits, "
                          "plc.k_bytes, plc.syvars)")
+    if nc.tool_change_s > nc.limits.block_s:
+        raise r.fail("nc.tool_change_s", f"{nc.tool_change_s:g} s is longer than a block may "
+                     f"take (nc.limits.block_s = {nc.limits.block_s:g})")
     if plc.sa_bits % 8:
         raise r.fail("plc.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
     if canopen.enabled:
@@ -765,8 +812,8 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 
 _SECTIONS.update({cls.__name__: cls for cls in (
-    StorageConfig, NcConfig, IsgConfig, PlcConfig, ModbusMapConfig, ModbusTlsConfig, ModbusConfig,
-    CanopenConfig, TraceConfig, WebConfig)})
+    StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
+    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, WebConfig)})
 
 
 def config_markdown() -> str:
@@ -775,9 +822,9 @@ def config_markdown() -> str:
              "Generated from `config/loader.py` (the dataclasses are the schema; "
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
-             "`[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, `[modbus.roles]`, "
-             "`[canopen]`, `[trace]`, `[web]`); an unknown key or a bad value is an error "
-             "naming the file and the dotted key. Paths are relative "
+             "`[nc.limits]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
+             "`[modbus.roles]`, `[canopen]`, `[trace]`, `[web]`); an unknown key or a bad "
+             "value is an error naming the file and the dotted key. Paths are relative "
              "to the config file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):

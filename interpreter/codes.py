@@ -129,6 +129,8 @@ class AlarmCode(enum.IntEnum):
     UNKNOWN_LABEL = 122
     REPEAT_MISMATCH = 123
     NO_FEED = 130
+    SOFT_LIMIT = 131  # a move past an axis's soft travel limit (nc.limits.X ..)
+    BLOCK_TOO_LONG = 132  # a move or dwell longer than nc.limits.block_s
     DEADLOCK = 140
     ORPHAN_WAIT = 141
     STALL = 142

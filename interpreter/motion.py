@@ -3,6 +3,11 @@
 G0 at the rapid rate, G1/G2/G3 at the modal feed (mm/min), arcs by their true length from
 I/J/K (or R) in the active plane, with a helical component along the third axis.  G90/G91
 absolute/incremental, G17/G18/G19 planes.  Positions are in mm.
+
+A move is checked where it is decoded, as a control checks its soft limits: an end point past
+an axis's travel limit is AL131 and a move that would take longer than a block may is AL132
+(``RuntimeSettings.travel_limits``, ``block_limit_s``; docs/runtime.md).  Nothing absurd
+reaches the queue, the clock or the fieldbus.
 """
 
 from __future__ import annotations
@@ -12,8 +17,8 @@ from dataclasses import dataclass, field
 
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm, fmt_number
+from ncgate.interpreter.settings import AXES, RuntimeSettings
 
-AXES = "XYZUVWABC"
 # An I/J/K arc's end must lie on the circle through its start (as LinuxCNC and real controls
 # check): the two radii may differ by this much, absolute or relative, whichever is larger.
 ARC_TOLERANCE_MM = 0.002
@@ -60,13 +65,22 @@ class Move:
 
 
 def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
-              rapid_mm_min: float) -> Move | None:
-    """The move a block's axis words make from the modal state (updates the position)."""
+              settings: RuntimeSettings) -> Move | None:
+    """The move a block's axis words make from the modal state (updates the position);
+    RuntimeAlarm AL131 past a soft travel limit, AL132 for a move longer than a block may
+    take."""
     start = tuple(modal.position)
     end = list(start)
+    limits = settings.travel_limits
     for letter, value in axes.items():
         i = AXIS_INDEX[letter]
         end[i] = value if modal.absolute else start[i] + value
+        lo, hi = limits[i]
+        if not lo <= end[i] <= hi:  # NaN too
+            raise RuntimeAlarm(AlarmCode.SOFT_LIMIT,
+                               f"{letter}{fmt_number(end[i])} is past the soft travel limit "
+                               f"{letter}{fmt_number(lo if end[i] < lo else hi)} "
+                               f"(nc.limits.{letter})")
     is_arc = modal.motion in (2, 3) and (arc or axes)
     if not axes and not is_arc:
         return None
@@ -75,7 +89,7 @@ def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
     else:
         length = math.dist(start[:6], end[:6]) or math.dist(start[6:], end[6:])
     if modal.motion == 0:
-        rate = rapid_mm_min
+        rate = settings.rapid_mm_min
     else:
         if not modal.feed_mm_min:
             raise RuntimeAlarm(AlarmCode.NO_FEED,
@@ -84,8 +98,18 @@ def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
     duration = length / rate * 60.0
     if not math.isfinite(duration):  # coordinates near the limits of a double
         raise RuntimeAlarm(AlarmCode.VALUE_OUT_OF_RANGE, "the move is too long to represent")
+    check_duration(duration, settings, f"the move ({fmt_number(length)} mm at "
+                   f"{fmt_number(rate)} mm/min)")
     modal.position = end
     return Move(start, tuple(end), length, duration)
+
+
+def check_duration(seconds: float, settings: RuntimeSettings, what: str) -> None:
+    """AL132 when one block's motion or dwell would take longer than ``block_limit_s``."""
+    if not seconds <= settings.block_limit_s:
+        raise RuntimeAlarm(AlarmCode.BLOCK_TOO_LONG,
+                           f"{what} would take {fmt_number(seconds)} s, more than "
+                           f"nc.limits.block_s = {fmt_number(settings.block_limit_s)} s")
 
 
 def _arc_length(modal: Modal, start: tuple[float, ...], end: list[float],

@@ -8,6 +8,16 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Final
+
+AXES: Final = "XYZUVWABC"  # the axis words, in the order of a position
+# The soft travel limits of every axis unless configured: +-100 m (A, B, C: +-100,000 degrees).
+# Far past any machine, so a program's real moves never meet them; what they stop is a typo or
+# a runaway value (X1E300, TAN(90)) that would otherwise "run" and show nonsense positions.
+TRAVEL_MM: Final = (-100_000.0, 100_000.0)
+# The longest one block's motion, dwell or tool change may take unless configured: a day.  A
+# real block takes seconds to hours; F0.0000001 would take two centuries.
+BLOCK_S: Final = 86_400.0
 
 
 class SndPolicy(enum.Enum):
@@ -47,6 +57,11 @@ class RuntimeSettings:
     runaway_blocks: int = 100_000
     # Processing time of each block, in milliseconds (0: blocks take no time).
     block_time_ms: float = 0.0
+    # Soft travel limits, (min, max) for each axis of AXES in order, in mm (A, B, C: degrees):
+    # a block that would move an axis past one is an alarm at decode (AL131).
+    travel_limits: tuple[tuple[float, float], ...] = (TRAVEL_MM,) * len(AXES)
+    # A block whose motion, dwell or tool change would take longer is an alarm (AL132).
+    block_limit_s: float = BLOCK_S
     # The interpolator takes a block only from a full buffer (lookahead blocks), or once the
     # decoder has reached the end, a flush or a synchronous read: ISG's buffer effect.
     buffered: bool = False

@@ -413,7 +413,16 @@ def process_registers(engine: Engine, k: int) -> list[int]:
     for value in (s.snd_sent, s.snd_received, s.blocks):
         regs += [value >> 16 & 0xFFFF, value & 0xFFFF]
     for mm in s.position[:3]:
-        um = round(mm * 1000) & 0xFFFFFFFF
+        um = _int32(mm * 1000) & 0xFFFFFFFF
         regs += [um >> 16, um & 0xFFFF]
     return regs
+
+
+def _int32(value: float) -> int:
+    """A value as an int32 register pair holds it: rounded, and saturated at the register's
+    bounds rather than wrapped (a position past +-2,147 m reads as the bound, never as a
+    position of the other sign, and an infinite one does not fail the read)."""
+    if value != value:  # NaN: no position to show
+        return 0
+    return round(min(max(value, -0x8000_0000), 0x7FFF_FFFF))
 

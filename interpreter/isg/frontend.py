@@ -445,7 +445,7 @@ class _BlockCompiler:
                     axes[letter] = v
                 elif letter in _ARC:
                     arc[letter] = v
-            move = plan_move(modal, axes, arc, settings.rapid_mm_min)
+            move = plan_move(modal, axes, arc, settings)
             if move is None:
                 return NEXT
             return queue_motion(p, [QueueItem(ItemKind.MOVE, move.duration_s, where, move)])

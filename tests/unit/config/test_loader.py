@@ -82,6 +82,13 @@ number = 2
         ("nc = 3", "nc: expected a table, got 3"),
         ("[modbus.map]\nread_only = [\"coils\"]", "modbus.map.read_only: expected a list of"),
         ("[modbus]\nallow = [\"not an ip\"]", "modbus.allow[0]: expected an IP address"),
+        ("[nc.limits]\nX = 5", "nc.limits.X: expected [min, max] with min < max"),
+        ("[nc.limits]\nC = [10, -10]", "nc.limits.C: expected [min, max] with min < max"),
+        ("[nc.limits]\nY = [0, true]", "nc.limits.Y: expected [min, max]"),
+        ("[nc.limits]\nQ = [0, 1]", "nc.limits.Q: unknown key"),
+        ("[nc.limits]\nblock_s = 0", "nc.limits.block_s: expected a number > 0, got 0"),
+        ("[nc]\ntool_change_s = 100\n[nc.limits]\nblock_s = 60",
+         "nc.tool_change_s: 100 s is longer than a block may take (nc.limits.block_s = 60)"),
     ],
 )
 def test_bad_values_name_file_and_dotted_key(tmp_path: Path, text: str, message: str) -> None:
@@ -135,3 +142,15 @@ def test_every_key_of_the_schema_is_read_and_unknown_ones_are_refused(tmp_path: 
         path = write(tmp_path, f"[{section}]\n{needed}{name}_typo = 1\n")
         with pytest.raises(ConfigError, match=rf"{section}\.{name}_typo: unknown key"):
             load_config(path)
+
+
+def test_nc_limits_reach_the_engine_by_axis(tmp_path: Path) -> None:
+    from ncgate.gateway.wiring import runtime_settings
+
+    path = write(tmp_path, "[nc.limits]\nX = [-5, 5.5]\nC = [-inf, inf]\nblock_s = 60")
+    settings = runtime_settings(load_config(path), closed=True)
+    assert settings.travel_limits[0] == (-5.0, 5.5)
+    assert settings.travel_limits[1] == (-100_000.0, 100_000.0)  # Y: the default, +-100 m
+    assert settings.travel_limits[8] == (-float("inf"), float("inf"))  # C: no limit
+    assert settings.block_limit_s == 60.0
+    assert runtime_settings(load_config(None), closed=True).block_limit_s == 86_400.0

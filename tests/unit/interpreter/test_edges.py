@@ -124,9 +124,10 @@ def test_a_computed_overflow_is_an_alarm_at_its_block(block: str) -> None:
 
 
 def test_a_move_too_long_to_represent_is_an_alarm() -> None:
+    # Past the soft travel limit first (AL131); with no limits it is AL103 (test_limits.py).
     sim = simulate({"A": f"N1E1={'1' + '0' * 307}\nN2G1XE1F1\nN3M30\n"})
     alarm = sim.first("alarm")
-    assert (alarm["code"], alarm["line"]) == ("AL103", 2)
+    assert (alarm["code"], alarm["line"]) == ("AL131", 2)
 
 
 def test_a_feed_of_zero_or_less_is_nc034_or_an_alarm() -> None:
