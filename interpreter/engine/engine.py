@@ -13,7 +13,7 @@ items in simulated time.  A ``#`` block is queued as one item whose actions act 
 interpolator reaches it.
 
 The rooms: ``states`` (enums and records), ``process`` (one process), ``timers``, ``actions``
-(what compiled blocks hand over), ``sync`` (the EXE/REL/WAI/SND rules, mixed in here),
+(what compiled blocks hand over), ``sync`` (the EXE/REL/WAI/SND rules, a part the engine owns),
 ``deadlock`` (the pure search), ``events``/``trace`` (what happened), ``clock`` (the virtual
 clock), ``ports`` (what the engine needs, and what a front end may ask of it).
 
@@ -46,8 +46,8 @@ from ncgate.interpreter.engine.events import Blocked, FlushOn, WaitOn
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Process, QueueItem
 from ncgate.interpreter.engine.states import (
+    ALLOWED,
     RUNNING_STATES,
-    STATE_OF_WAIT,
     WAITING_STATES,
     DecoderHold,
     ProcessState,
@@ -56,8 +56,9 @@ from ncgate.interpreter.engine.states import (
     WaitKind,
     WaitRecord,
     Where,
+    derive_state,
 )
-from ncgate.interpreter.engine.sync import SyncRules, first_line
+from ncgate.interpreter.engine.sync import Sync, first_line
 from ncgate.interpreter.engine.timers import Timer, TimerHeap
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.settings import RuntimeSettings
@@ -67,7 +68,7 @@ ActionHandler = Callable[[Process, Stage, Any, Where], bool]
 _new = tuple.__new__  # a NamedTuple without its generated __new__ (the SND/WAI hot path)
 
 
-class Engine(SyncRules):
+class Engine:
     """Processes, their synchronisation, the motion queues and the timer heap."""
 
     def __init__(self, settings: RuntimeSettings, image: ImagePort, loader: ProgramLoader,
@@ -97,15 +98,19 @@ class Engine(SyncRules):
         # By (file, process): the latest version of each, with its compiled blocks.
         self._loaded: dict[tuple[str, int], LoadedProgram] = {}
         self.last_change = 0.0  # the time of the last state change or image write
-        self._init_sync()
+        # The EXE/REL/WAI/SND rules and their state (sync.py): a part, not a base class.  The
+        # SND/WAI hot path calls it directly (the front end binds wait_process and send once).
+        self.sync = sync = Sync(self)
+        self.wait_process = sync.wait_process
+        self.send = sync.send
         # Actions by type: what a compiled block may ask the engine to do.  A dialect's own
         # actions come in through register_action.
         self._actions: dict[type, ActionHandler] = {
             WriteSyvar: self._do_write_syvar,
-            WaitProcess: lambda p, s, a, w: self.wait_process(p, s, a.process, a.code, w),
-            WaitCondition: self._wait_condition,
-            Send: lambda p, s, a, w: self.send(p, s, a.process, a.code, w),
-            Execute: self._execute,
+            WaitProcess: lambda p, s, a, w: sync.wait_process(p, s, a.process, a.code, w),
+            WaitCondition: sync.wait_condition,
+            Send: lambda p, s, a, w: sync.send(p, s, a.process, a.code, w),
+            Execute: sync.execute,
             ShowText: self._show_text,
         }
         # Hooks for drivers and the gateway.
@@ -127,8 +132,8 @@ class Engine(SyncRules):
 
     def check_wait(self, p: Process, wait: WaitRecord) -> None:
         """After a wait began: an orphan wait, or a deadlock through ``p``, is an alarm."""
-        if not self._check_orphan(p, wait):
-            self._check_deadlock(p)
+        if not self.sync.check_orphan(p, wait):
+            self.sync.check_deadlock(p)
 
     def alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
         self._alarm(p, code, message, where)
@@ -233,7 +238,7 @@ class Engine(SyncRules):
                 self._record(ev.End, self.now, p.number, where, "reset")
             self._update_state(p)
         self._runnable.clear()
-        self._clear_sync()
+        self.sync.clear()
         for listener in list(self.reset_listeners):
             listener()
 
@@ -373,12 +378,46 @@ class Engine(SyncRules):
             held=p.held,
         )
 
+    # ---- the sync rules' part of the API (sync.py) ------------------------------------------
+
+    def external_snd(self, sender: int, target: int) -> None:
+        """An SND in the name of external process ``sender`` (fieldbus mailbox, script)."""
+        self.sync.external_snd(sender, target)
+
+    def write_syvar(self, p: Process, index: int, value: int, where: Where,
+                    stage: Stage = Stage.DECODER) -> None:
+        self.sync.write_syvar(p, index, value, where, stage)
+
+    def write_image(self, p: Process, area: str, index: int, view: str, value: int,
+                    where: Where) -> None:
+        self.sync.write_image(p, area, index, view, value, where)
+
+    def count_signal(self, sender: Process, target: int, ident: int, where: Where) -> None:
+        self.sync.count_signal(sender, target, ident, where)
+
+    @property
+    def last_snd(self) -> tuple[int, int, int, int] | None:
+        """The last SND delivered: sender, target, N, its number on the event counter."""
+        return self.sync.last_snd
+
+    @property
+    def snd_log(self) -> deque[tuple[int, int, int, int, int]]:
+        """The last SND_LOG SNDs: (sequence, sender, target, N, id), newest last."""
+        return self.sync.snd_log
+
+    @property
+    def snd_seq(self) -> int:
+        return self.sync.snd_seq
+
+    def _process(self, number: int) -> Process:
+        return self.sync.process(number)
+
     def note_write(self, name: str, value: int, who: str) -> None:
         """Record an image write in the trace (the gateway forwards the image's changes)."""
         self.last_change = self.now
-        p = self._writer_proc
+        p = self.sync.writer_proc
         if p is not None:  # a program's write (write_image): at the writing block
-            self._record(ev.Write, self.now, p.number, self._writer_where, name, value, who)
+            self._record(ev.Write, self.now, p.number, self.sync.writer_where, name, value, who)
         else:
             self._record(ev.Write, self.now, 0, None, name, value, who)
 
@@ -411,6 +450,8 @@ class Engine(SyncRules):
         self._update_state(p)
         self._make_runnable(p)
 
+    start_program = _start_program  # sync.SyncHost
+
     def _make_runnable(self, p: Process) -> None:
         if not p.queued:
             p.queued = True
@@ -422,6 +463,8 @@ class Engine(SyncRules):
         if self._runnable and not self._running and self.on_kick is not None:
             self.on_kick()
 
+    kick = _kick  # sync.SyncHost
+
     def _schedule(self, delay: float, callback: Callable[[], None]) -> Timer:
         t = self.now + delay
         timer = self._timers.push(t, callback)
@@ -430,22 +473,6 @@ class Engine(SyncRules):
         return timer
 
     # ---- state --------------------------------------------------------------------------
-
-    def _derive_state(self, p: Process) -> ProcessState:
-        if p.alarm is not None:
-            return ProcessState.ALARM
-        if p.loaded is None:
-            return ProcessState.IDLE
-        if p.held:
-            return ProcessState.HOLD
-        # The interpolator's wait is the one the machine feels (spec 2.4).
-        if p.int_wait is not None:
-            return STATE_OF_WAIT[p.int_wait.kind]
-        if p.dec_wait is not None:
-            return STATE_OF_WAIT[p.dec_wait.kind]
-        if p.int_item is not None and p.int_item.kind == ItemKind.DWELL:
-            return ProcessState.DWELL
-        return ProcessState.RUNNING
 
     def _account(self, p: Process) -> None:
         spent = self.now - p.state_since
@@ -457,8 +484,11 @@ class Engine(SyncRules):
         p.state_since = self.now
 
     def _update_state(self, p: Process) -> None:
-        state = self._derive_state(p)
+        state = derive_state(p)  # the state table's rules (states.STATE_RULES)
         if state is not p.state:
+            if (p.state, state) not in ALLOWED:
+                raise AssertionError(f"P{p.number}: {p.state.name} -> {state.name} is not in "
+                                     "the state table (states.TRANSITIONS)")
             self.last_change = self.now
             self._account(p)
             old, p.state = p.state, state
@@ -639,7 +669,7 @@ class Engine(SyncRules):
             if self._buffered and p.int_item is None and not self._buffer_open(p):
                 if not p.starved:  # its state is its decoder's; the deadlock search asks
                     p.starved = True
-                    self._check_deadlock(p)
+                    self.sync.check_deadlock(p)
                 return
             p.starved = False
             item = p.queue[0]
@@ -702,7 +732,7 @@ class Engine(SyncRules):
             self._end_program(p)
         else:
             self._update_state(p)
-            self._check_deadlock(p)
+            self.sync.check_deadlock(p)
 
     def _run_sync_item(self, p: Process, item: QueueItem) -> bool:
         """Run a # block's actions from ``p.sync_i``; False when one of them blocks."""
@@ -806,7 +836,7 @@ class Engine(SyncRules):
         p.loaded = None
         self._record(ev.End, self.now, p.number, where, how)
         self._update_state(p)
-        self._became_free(p)
+        self.sync.became_free(p)
 
     def _cancel_pending(self, p: Process) -> None:
         """Its waits, its motion timer and its block-time timer: nothing of it fires later."""
@@ -821,7 +851,7 @@ class Engine(SyncRules):
         if p.alarm is not None:
             return
         self._cancel_pending(p)
-        self._forget_waiter(p)
+        self.sync.forget_waiter(p)
         loaded = p.loaded
         p.clear()
         p.loaded = loaded
@@ -829,5 +859,5 @@ class Engine(SyncRules):
         p.stats.alarms += 1
         self._record(ev.Alarm, self.now, p.number, where, code, message)
         self._update_state(p)
-        self._became_free(p)
+        self.sync.became_free(p)
 

@@ -1,17 +1,22 @@
 """States and records: what a process is doing and why (spec 2.1, 2.2.6), as enums and
-dataclasses.  Everything else in the engine speaks these types; nothing here acts."""
+dataclasses, and the state table the engine runs: :data:`STATE_RULES` (how a process's state
+follows from what it is doing) and :data:`TRANSITIONS` (every change of state the engine may
+make, and what causes it).  ARCHITECTURE.md prints both, from :func:`state_table_markdown` (a
+test keeps it so).  Everything else in the engine speaks these types."""
 
 from __future__ import annotations
 
 import enum
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Final, NamedTuple
 
 from ncgate.interpreter.diagnostics import fmt_number
+from ncgate.interpreter.engine.actions import ItemKind
 
 if TYPE_CHECKING:
     from ncgate.interpreter.engine.ports import Cancellable
+    from ncgate.interpreter.engine.process import Process
     from ncgate.interpreter.engine.timers import Timer
 
 Where = tuple[str, int, int | None]  # program file, line, N
@@ -153,3 +158,135 @@ class ProcessStatus:
     @property
     def wait_target(self) -> int:
         return self.wait.target if self.wait else 0
+
+
+# ---- the state table ------------------------------------------------------------------------
+
+class StateRule(NamedTuple):
+    """A process whose ``test`` holds is in the state ``state`` gives; the first rule whose
+    test holds wins.  Both are Python expressions over the process ``p``: the rules are
+    compiled into one function (:func:`compile_state_rules`), because the engine derives a
+    state on every wait and every resume (the SND/WAI hot path)."""
+
+    states: tuple[ProcessState, ...]  # what the rule can decide (for the printed table)
+    when: str
+    test: str
+    state: str
+
+
+_WAITS = (ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
+          ProcessState.WAIT_EXE)
+
+# A process's state is derived, never stored by hand: Engine._update_state runs these rules.
+STATE_RULES: Final = (
+    StateRule((ProcessState.ALARM,), "an alarm is pending (until a reset)",
+              "p.alarm is not None", "ALARM"),
+    StateRule((ProcessState.IDLE,), "no program is loaded (an external process always)",
+              "p.loaded is None", "IDLE"),
+    StateRule((ProcessState.HOLD,), "a feed hold is on", "p.held", "HOLD"),
+    StateRule(_WAITS, "the interpolator waits (the wait the machine feels, spec 2.4): the "
+              "state of its wait kind (FLUSH shows as WAIT_COND)",
+              "p.int_wait is not None", "STATE_OF_WAIT[p.int_wait.kind]"),
+    StateRule(_WAITS, "the decoder waits: the state of its wait kind",
+              "p.dec_wait is not None", "STATE_OF_WAIT[p.dec_wait.kind]"),
+    StateRule((ProcessState.DWELL,), "the interpolator runs a dwell (`DLY`, `G4`)",
+              "p.int_item is not None and p.int_item.kind == DWELL_ITEM", "DWELL"),
+    StateRule((ProcessState.RUNNING,), "otherwise", "True", "RUNNING"),
+)
+
+
+def compile_state_rules(rules: tuple[StateRule, ...]) -> Callable[[Process], ProcessState]:
+    """The rules as one function ``derive(p)``: each rule an ``if`` in the table's order."""
+    lines = ["def derive(p):"]
+    for rule in rules:
+        lines += [f"    if {rule.test}:", f"        return {rule.state}"]
+    lines.append("    raise AssertionError('no state rule decides')")
+    names: dict[str, object] = {s.name: s for s in ProcessState}
+    names.update(STATE_OF_WAIT=STATE_OF_WAIT, DWELL_ITEM=ItemKind.DWELL)
+    exec(compile("\n".join(lines), "<states.STATE_RULES>", "exec"), names)
+    derive: Callable[[Process], ProcessState] = names["derive"]  # type: ignore[assignment]
+    return derive
+
+
+derive_state: Final = compile_state_rules(STATE_RULES)
+
+
+class Transition(NamedTuple):
+    """``cause`` takes a process from any state of ``from_`` to one of ``to``."""
+
+    from_: tuple[ProcessState, ...]
+    cause: str
+    to: tuple[ProcessState, ...]
+
+
+_S = ProcessState
+_BUSY = (_S.RUNNING, *_WAITS, _S.DWELL, _S.HOLD)  # a program is loaded and no alarm
+# k is the process, n the one its code names.  Rows whose `to` is the state it was in (an
+# SND delivered at once) say what happens without a change; the engine checks every change
+# it makes against this table (Engine._update_state).
+TRANSITIONS: Final = (
+    Transition((_S.IDLE,), "`Start` input; cycle start with `nc.main` (P1); `(EXE,k,P)` from "
+               "another process; the first EXE waiting for k when k becomes free",
+               (_S.RUNNING,)),
+    Transition((_S.IDLE,), "a program starts while a feed hold is on", (_S.HOLD,)),
+    Transition((_S.IDLE,), "a cycle start whose main program cannot be loaded "
+               "(AL120, AL121)", (_S.ALARM,)),
+    Transition((_S.RUNNING,), "`(WAI,n)`: no SND from n pending and no latched token; "
+               "ISG `#WAIT` for a signal not yet stored", (_S.WAIT_PROC,)),
+    Transition((_S.RUNNING,), "`(WAI,n)`: n waits in `(SND,k)`, or a token n→k is latched "
+               "(delivered; n resumes)", (_S.RUNNING,)),
+    Transition((_S.RUNNING,), "`(WAI,var op value)` that does not hold now; ISG `#FLUSH` or "
+               "a synchronous `V.E.` read with blocks still buffered (wait kind FLUSH)",
+               (_S.WAIT_COND,)),
+    Transition((_S.RUNNING,), "`(SND,n)`, rendezvous, n not in `(WAI,k)`", (_S.WAIT_SND,)),
+    Transition((_S.RUNNING,), "`(SND,n)`: n external, n in `(WAI,k)`, or `nc.snd = "
+               "\"latched\"` (a latch records a `hazard`)", (_S.RUNNING,)),
+    Transition((_S.RUNNING,), "`(EXE,n,P)`, n busy", (_S.WAIT_EXE,)),
+    Transition((_S.RUNNING,), "the interpolator starts a dwell", (_S.DWELL,)),
+    Transition((_S.DWELL,), "the dwell time has passed", (_S.RUNNING,)),
+    Transition((_S.WAIT_PROC,), "n executes `(SND,k)`; an external SND from n arrives; (ISG) "
+               "every signal the wait needs has arrived", (_S.RUNNING,)),
+    Transition((_S.WAIT_COND,), "a write makes the condition true (inside that write); "
+               "(FLUSH) the interpolator has drained the buffer", (_S.RUNNING,)),
+    Transition((_S.WAIT_SND,), "n executes `(WAI,k)`", (_S.RUNNING,)),
+    Transition((_S.WAIT_EXE,), "n becomes free and k is first in line (P starts in n)",
+               (_S.RUNNING,)),
+    Transition((*_WAITS, _S.DWELL, _S.RUNNING), "one stage's wait or dwell ends or begins "
+               "while the other stage waits: the state of the one the machine feels "
+               "(STATE_RULES)", (*_WAITS, _S.DWELL, _S.RUNNING)),
+    Transition((_S.RUNNING, _S.DWELL, *_WAITS), "feed hold (command 2)", (_S.HOLD,)),
+    Transition((_S.HOLD,), "cycle start (command 1): the state it would have without the "
+               "hold", (_S.RUNNING, _S.DWELL, *_WAITS)),
+    Transition(_BUSY, "REL, M30, M02 or end of file, once its motion queue has drained",
+               (_S.IDLE,)),
+    Transition(_BUSY, "a runtime error in a block (its code); `(SND,n)` to an idle process "
+               "or one in ALARM, or n ends while k waits in `(SND,n)` (AL111); `(EXE,n,P)` "
+               "with n = k or external, or P not loadable (AL112, AL113, AL120, AL121); a "
+               "wait that closes a cycle of waiting processes (AL140, every member); an "
+               "orphan wait (AL141); `nc.wait_timeout_s` (AL143); `nc.runaway_blocks` "
+               "(AL144)", (_S.ALARM,)),
+    Transition((*_BUSY, _S.ALARM), "reset (command 3): queues, waits and tokens discarded",
+               (_S.IDLE,)),
+)
+
+# Every change of state the table allows: (from, to), from != to.
+ALLOWED: Final = frozenset((a, b) for t in TRANSITIONS for a in t.from_ for b in t.to if a != b)
+
+
+def state_table_markdown() -> str:
+    """The two tables as ARCHITECTURE.md prints them."""
+    def names(states: tuple[ProcessState, ...]) -> str:
+        if set(states) == set(_BUSY):
+            return "any with a program (not ALARM)"
+        if set(states) == {*_BUSY, _S.ALARM}:
+            return "any with a program"
+        if set(states) == set(_WAITS):
+            return "WAIT_* (by kind)"
+        return ", ".join(s.name for s in states)
+
+    lines = ["| order | state | when |", "|---|---|---|"]
+    lines += [f"| {i} | {names(r.states)} | {r.when} |" for i, r in enumerate(STATE_RULES, 1)]
+    lines += ["", "| state | cause | next state |", "|---|---|---|"]
+    lines += [f"| {names(t.from_)} | {t.cause} | {names(t.to)} |" for t in TRANSITIONS]
+    return "\n".join(lines) + "\n"
+

@@ -24,14 +24,17 @@ The rules, as transitions (k is the process executing the code, n the one it nam
     An external process k (the fieldbus) sends (SND,n): delivered if n waits for k, else
     latched (it cannot be made to wait) with a `hazard` event.
 
-The engine core (``engine.py``) provides the waits, alarms and program starts these rules use;
-what it must provide is declared below.
+:class:`Sync` holds the state these rules keep (who waits for whom, latched tokens, EXE
+queues, the SND log) and is a part of the :class:`~.engine.Engine`, which owns it and calls it.
+The engine core provides the waits, alarms and program starts the rules use: what it must
+provide is :class:`SyncHost`.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Protocol
 
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import (
@@ -52,44 +55,66 @@ from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
 SND_LOG = 16  # entries of the SND log the fieldbus shows
 
 
-class SyncRules:
-    """EXE/REL/WAI/SND between processes (a part of :class:`Engine`)."""
+class SyncHost(Protocol):
+    """What the rules need of the engine core (the :class:`~.engine.Engine` is one)."""
 
-    # ---- provided by the engine core ----------------------------------------------------
-    settings: RuntimeSettings
-    image: ImagePort
-    loader: ProgramLoader
-    trace: Trace
-    processes: dict[int, Process]
-    now: float
-    _record: Callable[..., None]
+    @property
+    def settings(self) -> RuntimeSettings: ...
 
-    def _begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None:
-        raise NotImplementedError
+    @property
+    def image(self) -> ImagePort: ...
 
-    def _finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
-        raise NotImplementedError
+    @property
+    def loader(self) -> ProgramLoader: ...
 
-    def _alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None:
-        raise NotImplementedError
+    @property
+    def trace(self) -> Trace: ...
 
-    def _start_program(self, p: Process, program: ProgramText, by: str | int) -> None:
-        raise NotImplementedError
+    @property
+    def processes(self) -> Mapping[int, Process]: ...
 
-    def _kick(self) -> None:
-        raise NotImplementedError
+    @property
+    def now(self) -> float: ...
+
+    def begin_wait(self, p: Process, stage: Stage, wait: WaitRecord) -> None: ...
+
+    def finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None: ...
+
+    def alarm(self, p: Process, code: AlarmCode, message: str, where: Where | None) -> None: ...
+
+    def start_program(self, p: Process, program: ProgramText, by: str | int) -> None: ...
+
+    def kick(self) -> None: ...
+
+
+class Sync:
+    """EXE/REL/WAI/SND between processes: the rules above and the state they keep."""
+
+    def __init__(self, host: SyncHost) -> None:
+        self._host = host
+        # Bound once: the SND/WAI hot path reads these on every exchange.
+        self.settings = host.settings
+        self.image = host.image
+        self.loader = host.loader
+        self.trace = host.trace
+        self.processes = host.processes
+        self._record: Callable[..., None] = host.trace.record
+        self._begin_wait = host.begin_wait
+        self._finish_wait = host.finish_wait
+        self._alarm = host.alarm
+        self._start_program = host.start_program
+        self._kick = host.kick
 
     # ---- state --------------------------------------------------------------------------
 
-    def _init_sync(self) -> None:
         self._proc_waiters: dict[tuple[int, int], Process] = {}  # (waited-for, waiter)
         self._snd_pending: dict[tuple[int, int], Process] = {}  # (sender, target)
         # Latched SNDs not yet taken: (sender, target) -> where each was sent from (None: by
         # the fieldbus), oldest first.
         self._tokens: dict[tuple[int, int], deque[Where | None]] = {}
         self._exe_waiters: dict[int, deque[tuple[Process, ProgramText, str]]] = {}
-        self._writer_proc: Process | None = None
-        self._writer_where: Where | None = None  # the block of the write under way
+        self.writer_proc: Process | None = None
+        self.writer_where: Where | None = None  # the block of the write under way
         # The last SND delivered: sender, target, N, its number on the event counter.
         self.last_snd: tuple[int, int, int, int] | None = None
         # The SND log (the Modbus window of the last SND_LOG): (sequence, sender, target, N,
@@ -98,13 +123,14 @@ class SyncRules:
         self.snd_seq = 0
         self.snd_log: deque[tuple[int, int, int, int, int]] = deque(maxlen=SND_LOG)
 
-    def _clear_sync(self) -> None:
+    def clear(self) -> None:
+        """A reset: nobody waits, no token is latched, no EXE is queued."""
         self._proc_waiters.clear()
         self._snd_pending.clear()
         self._tokens.clear()
         self._exe_waiters.clear()
 
-    def _forget_waiter(self, p: Process) -> None:
+    def forget_waiter(self, p: Process) -> None:
         """P is in ALARM: it waits for nobody any more."""
         for key in [k for k, q in self._proc_waiters.items() if q is p]:
             del self._proc_waiters[key]
@@ -134,11 +160,11 @@ class SyncRules:
                 del self._tokens[(n, p.number)]
             self._deliver_snd(sender, p, None, where=sent_from, external=sent_from is None)
             return True
-        wait = WaitRecord(WaitKind.PROC, n, code, where, self.now, stage)
+        wait = WaitRecord(WaitKind.PROC, n, code, where, self._host.now, stage)
         self._proc_waiters[(n, p.number)] = p
         self._begin_wait(p, stage, wait)
-        if not self._check_orphan(p, wait):
-            self._check_deadlock(p)
+        if not self.check_orphan(p, wait):
+            self.check_deadlock(p)
         return False
 
     def _end_wait_proc(self, p: Process, sender: int) -> None:
@@ -163,22 +189,22 @@ class SyncRules:
             return True
         if self.settings.snd is SndPolicy.LATCHED:
             self._tokens.setdefault((p.number, n), deque()).append(where)
-            self._record(ev.Hazard, self.now, p.number, where,
+            self._record(ev.Hazard, self._host.now, p.number, where,
                          f"SND to P{n} before P{n} waits for P{p.number}: on the real control "
                          "this ordering is a race")
             return True
-        wait = WaitRecord(WaitKind.SND, n, code, where, self.now, stage)
+        wait = WaitRecord(WaitKind.SND, n, code, where, self._host.now, stage)
         self._snd_pending[(p.number, n)] = p
         self._begin_wait(p, stage, wait)
-        self._check_deadlock(p)
+        self.check_deadlock(p)
         return False
 
     def external_snd(self, sender: int, target: int) -> None:
         """An SND in the name of external process ``sender`` (fieldbus mailbox, script)."""
-        s = self._process(sender)
+        s = self.process(sender)
         if not s.external:
             raise ValueError(f"process {sender} is not external")
-        t = self._process(target)
+        t = self.process(target)
         if t.external:
             self._deliver_snd(s, t, None, external=True)
             return
@@ -190,7 +216,7 @@ class SyncRules:
         else:
             # An external sender cannot be made to wait: latch it, and say it is a race.
             self._tokens.setdefault((sender, target), deque()).append(None)
-            self._record(ev.Hazard, self.now, sender, None,
+            self._record(ev.Hazard, self._host.now, sender, None,
                          f"SND from external P{sender} to P{target} before P{target} waits "
                          "for it: latched")
         self._kick()
@@ -221,16 +247,16 @@ class SyncRules:
         # the value the event counter takes with it.
         self.last_snd = (sender.number, target.number, n, (self.trace.counter + 1) & 0xFFFFFFFF)
         self._log_snd(sender.number, target.number, n)
-        self._record(ev.Snd, self.now, sender.number, where, target.number)
+        self._record(ev.Snd, self._host.now, sender.number, where, target.number)
 
     # ---- WAI,var op value -----------------------------------------------------------------
 
-    def _wait_condition(self, p: Process, stage: Stage, cond: WaitCondition,
+    def wait_condition(self, p: Process, stage: Stage, cond: WaitCondition,
                         where: Where) -> bool:
         if p.queue and stage is Stage.DECODER:
             self._acts_early(p, f"(WAI,{cond.text})", where)
         area, index, view = cond.area, cond.index, cond.view
-        wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self.now, stage,
+        wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self._host.now, stage,
                           cond=cond.text)
 
         def satisfied() -> None:
@@ -261,13 +287,13 @@ class SyncRules:
                     where: Where) -> None:
         """A program's write of an image variable, in the name of its block (the trace's
         ``write`` event names the process and the block)."""
-        self._writer_proc = p
-        self._writer_where = where
+        self.writer_proc = p
+        self.writer_where = where
         try:
             n = f" N{where[2]}" if where[2] is not None else f" line {where[1]}"
             self.image.write([(area, index, view, value)], f"P{p.number}{n}")
         finally:
-            self._writer_proc = None
+            self.writer_proc = None
 
     def _acts_early(self, p: Process, code: str, where: Where) -> None:
         """A plain (not #) SND, WAI or SYVAR write acts when the decoder reaches it (spec 2.4),
@@ -275,14 +301,14 @@ class SyncRules:
         before that motion ends.  Legal (manual 1.4), but rarely what was meant: say so."""
         _, line, n = p.queue[0].where
         above = f"N{n}" if n is not None else f"line {line}"
-        self._record(ev.Hazard, self.now, p.number, where,
+        self._record(ev.Hazard, self._host.now, p.number, where,
                      f"{code} acted at decode time while motion programmed above it ({above}) "
                      "was still queued; mark the block # to act in motion order, or set "
                      "nc.lookahead = 0")
 
     # ---- EXE --------------------------------------------------------------------------------
 
-    def _execute(self, p: Process, stage: Stage, exe: Execute, where: Where) -> bool:
+    def execute(self, p: Process, stage: Stage, exe: Execute, where: Where) -> bool:
         n, name, code = exe.process, exe.program, exe.code
         if n == p.number:
             raise RuntimeAlarm(AlarmCode.EXE_ON_SELF,
@@ -299,16 +325,16 @@ class SyncRules:
             raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID,
                                f"program {name} does not check: {first_line(exc)}") from None
         if target.loaded is None and target.alarm is None:
-            self._record(ev.Exe, self.now, p.number, where, n, program.name)
+            self._record(ev.Exe, self._host.now, p.number, where, n, program.name)
             self._start_program(target, program, p.number)
             return True
-        wait = WaitRecord(WaitKind.EXE, n, code, where, self.now, stage)
+        wait = WaitRecord(WaitKind.EXE, n, code, where, self._host.now, stage)
         self._exe_waiters.setdefault(n, deque()).append((p, program, code))
         self._begin_wait(p, stage, wait)
-        self._check_deadlock(p)
+        self.check_deadlock(p)
         return False
 
-    def _process(self, number: int) -> Process:
+    def process(self, number: int) -> Process:
         p = self.processes.get(number)
         if p is None:
             raise ValueError(f"process {number} is not configured (1..{len(self.processes)})")
@@ -323,7 +349,7 @@ class SyncRules:
 
     # ---- a process becomes free ---------------------------------------------------------
 
-    def _became_free(self, p: Process) -> None:
+    def became_free(self, p: Process) -> None:
         """P is IDLE (or in ALARM): tokens to it go, its SND partners and EXE waiters move."""
         for key in [k for k in self._tokens if k[1] == p.number]:
             del self._tokens[key]
@@ -340,17 +366,17 @@ class SyncRules:
             if waiters:
                 q, program, _ = waiters.popleft()
                 wait = _wait_of(q, WaitKind.EXE)
-                self._record(ev.Exe, self.now, q.number, wait.where, p.number, program.name)
+                self._record(ev.Exe, self._host.now, q.number, wait.where, p.number, program.name)
                 self._start_program(p, program, q.number)
                 self._finish_wait(q, wait, p.number)
         for q in self.processes.values():
             for wait in (q.dec_wait, q.int_wait):
                 if wait is not None and wait.kind is WaitKind.PROC:
-                    self._check_orphan(q, wait)
+                    self.check_orphan(q, wait)
 
     # ---- deadlocks and orphans (the search itself: deadlock.py) ----------------------------
 
-    def _check_orphan(self, p: Process, wait: WaitRecord) -> bool:
+    def check_orphan(self, p: Process, wait: WaitRecord) -> bool:
         for number in (wait.targets if wait.targets is not None else (wait.target,)):
             if not number:  # a broadcast signal wait: anyone may send it
                 continue
@@ -367,17 +393,17 @@ class SyncRules:
             return True
         return False
 
-    def _check_deadlock(self, start: Process) -> None:
+    def check_deadlock(self, start: Process) -> None:
         cycle = deadlock.find_cycle(start, self.processes)
         if cycle is None:
             return
         message = deadlock.describe_cycle(start, cycle)
         blocked = tuple(Blocked(p.number, *w.where, w.code) for p, w in cycle)
-        self._record(ev.Deadlock, self.now, 0, None, blocked, message)
+        self._record(ev.Deadlock, self._host.now, 0, None, blocked, message)
         # Every member is the deadlock: none of them may first be alarmed as the partner of
         # another (an SND to a process in ALARM), so none of them waits for anyone any more.
         for p, _ in cycle:
-            self._forget_waiter(p)
+            self.forget_waiter(p)
         for p, wait in cycle:
             self._alarm(p, AlarmCode.DEADLOCK, message, wait.where)
 
