@@ -17,6 +17,7 @@ from typing import Final
 
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import ProgramSyntaxError, RuntimeAlarm, fmt_number
+from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.actions import (
     Action,
     Execute,
@@ -33,7 +34,12 @@ from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
 from ncgate.interpreter.engine.states import Stage, Where
 from ncgate.interpreter.motion import Move, check_duration, plan_move
-from ncgate.interpreter.nc110.evaluate import compile_expr, reads_image, round_half_away
+from ncgate.interpreter.nc110.evaluate import (
+    compile_expr,
+    reads_image,
+    round_half_away,
+    syvars_read,
+)
 from ncgate.interpreter.nc110.formatter import format_item
 from ncgate.interpreter.nc110.nodes import (
     RELATIONS,
@@ -132,6 +138,8 @@ class _BlockCompiler:
         ops: list[Op] = []
         if self.host.settings.sync_reads and self._reads_image(items):
             ops.append(self.host.flush)
+        if not (self.host.settings.sync_reads and self._reads_image(items)):
+            ops.extend(self._own_write_reads(items, block.synced))
         if block.synced:
             ops.extend(self._assign_op(a) for a in assigns if a.target.kind is VarKind.E)
             ops.append(self._synced_op(assigns, waits, words, dwells, codes))
@@ -146,6 +154,53 @@ class _BlockCompiler:
         ops.extend(self._code_op(c) for c in codes)
         ops.extend(self._end_words(words))
         return ops
+
+    def _own_write_reads(self, items: tuple[Item, ...], synced: bool) -> list[Op]:
+        """A hazard op for a block that reads, at decode time, a SYVAR that a # block above
+        writes in motion order and has not written yet: the decoder reads the value from
+        before that write (spec 2.4).  Legal, like a plain SND after motion, but rarely what
+        was meant.  A # block's WAI condition is tested in motion order and is no such read;
+        with nc.sync_reads the decoder waits for the motion first (the flush above)."""
+        read: set[int] = set()
+        for item in items:
+            exprs: list[Expr] = []
+            if isinstance(item, Assign):
+                exprs = [item.expr]
+            elif isinstance(item, Branch):
+                exprs = [item.left, item.right]
+            elif isinstance(item, Repeat):
+                exprs = [item.count]
+            elif isinstance(item, Dwell):
+                exprs = [item.seconds]
+            elif isinstance(item, Display):
+                exprs = list(item.args)
+            elif isinstance(item, WaitCond):
+                exprs = [item.value] if synced else [item.var, item.value]
+            for expr in exprs:
+                read.update(syvars_read(expr))
+        if not read:
+            return []
+        indexes = frozenset(read)
+        record = self.host.record
+        where = self.where
+
+        def own_write(p: Process) -> Step:
+            for i, queued in enumerate(p.queue):
+                pending = queued.actions
+                if queued.kind is not ItemKind.SYNC or not pending:
+                    continue
+                for action in pending[p.sync_i:] if i == 0 else pending:
+                    if type(action) is WriteSyvar and action.index in indexes:
+                        _, line, n = queued.where
+                        above = f"N{n}" if n is not None else f"line {line}"
+                        record(ev.Hazard, p.number, where,
+                               f"SYVAR{action.index} read at decode time while this process's "
+                               f"# write of it ({above}) was still queued: it reads the value "
+                               "from before that write; read it in a # block, or set "
+                               "nc.sync_reads = true")
+                        return NEXT
+            return NEXT
+        return [own_write]
 
     @staticmethod
     def _reads_image(items: tuple[Item, ...]) -> bool:
@@ -365,7 +420,9 @@ class _BlockCompiler:
     def _code_op(self, item: Item) -> Op:
         if isinstance(item, Snd):
             return self._exchange_op(item, self.host.send)
-        if isinstance(item, Exe | Display):
+        if isinstance(item, Exe):
+            return self._early_exe(item, self._action_op(self._code_action(item)))
+        if isinstance(item, Display):
             return self._action_op(self._code_action(item))
         if isinstance(item, Rel):
             return self._end_op("REL")
@@ -387,6 +444,26 @@ class _BlockCompiler:
             p.repeats.pop()
             return NEXT
         return end_repeat
+
+    def _early_exe(self, item: Exe, act: Op) -> Op:
+        """A plain (not #) EXE acts when the decoder reaches it (spec 2.4), as a plain SND,
+        WAI or SYVAR write does: with motion above it still queued, the program starts
+        before that motion ends.  The engine records those as hazards; this is the same
+        hazard, in the same words, for an EXE."""
+        record = self.host.record
+        where = self.where
+        code = format_item(item)
+
+        def exe(p: Process) -> Step:
+            if p.queue:
+                _, line, n = p.queue[0].where
+                above = f"N{n}" if n is not None else f"line {line}"
+                record(ev.Hazard, p.number, where,
+                       f"{code} acted at decode time while motion programmed above it "
+                       f"({above}) was still queued; mark the block # to act in motion order, "
+                       "or set nc.lookahead = 0")
+            return act(p)
+        return exe
 
     def _jump_op(self, item: Jump | Branch) -> Op:
         target = self.program.labels.get(item.label.upper())

@@ -9,7 +9,7 @@ square root of a negative number) raise :class:`RuntimeAlarm`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from ncgate.interpreter.codes import AlarmCode
@@ -98,6 +98,20 @@ def reads_image(expr: Expr) -> bool:
     if isinstance(expr, Call):
         return reads_image(expr.arg)
     return False
+
+
+def syvars_read(expr: Expr) -> Iterator[int]:
+    """The SYVAR indexes an expression reads."""
+    if isinstance(expr, VarRef):
+        if expr.kind is VarKind.SYVAR:
+            yield expr.index
+    elif isinstance(expr, Unary):
+        yield from syvars_read(expr.operand)
+    elif isinstance(expr, Binary):
+        yield from syvars_read(expr.left)
+        yield from syvars_read(expr.right)
+    elif isinstance(expr, Call):
+        yield from syvars_read(expr.arg)
 
 
 def round_half_away(value: float) -> int:

@@ -312,3 +312,36 @@ def test_blocks_counter_and_programs_run() -> None:
     stats = sim.engine.processes[1].stats
     assert stats.blocks == 1 + 1 + 3 * 2 + 1  # N1, N2, 3x(N3, N4), N5
     assert stats.programs == 1
+
+
+def test_a_plain_exe_after_motion_is_a_hazard_like_a_plain_snd() -> None:
+    # N2's EXE starts B at decode time, while N1's move is still queued: on the machine B
+    # starts before X10 is reached.  A # EXE acts in motion order, with no hazard.
+    programs = {"A": "N1G1X10F600\nN2(EXE,2,B)\nN3M30\n", "B": "N1(REL)\n"}
+    sim = simulate(programs)
+    (hazard,) = sim.events("hazard")
+    assert (hazard["proc"], hazard["t"], hazard["n"]) == (1, 0.0, 2)
+    assert hazard["message"].startswith("(EXE,2,B) acted at decode time while motion "
+                                        "programmed above it (N1) was still queued")
+    assert sim.first("exe", proc=1)["t"] == 0.0
+    synced = simulate({"A": "N1G1X10F600\nN2#(EXE,2,B)\nN3M30\n", "B": "N1(REL)\n"})
+    assert synced.events("hazard") == [] and synced.first("exe", proc=1)["t"] == 1.0
+    assert simulate({"A": "N1(EXE,2,B)\nN2G1X10F600\nN3M30\n", "B": "N1(REL)\n"}).events(
+        "hazard") == []
+
+
+def test_a_decode_time_read_of_the_processs_own_queued_hash_write_is_a_hazard() -> None:
+    # N2 writes SYVAR1 in motion order (t = 1); N3 reads it when the decoder reaches it (t = 0)
+    # and so reads the value before N2's write.  A read of another SYVAR, or with
+    # nc.sync_reads (the decoder first waits for the motion), is no hazard.
+    text = "N1G1X10F600\nN2#SYVAR1=5\nN3E1=SYVAR1+SYVAR2\nN4(BEQ,SYVAR1,5,L)\n\"L\"N5M30\n"
+    sim = simulate({"A": text})
+    hazards = [(e["n"], e["t"]) for e in sim.events("hazard")]
+    assert hazards == [(3, 0.0), (4, 0.0)]
+    assert sim.events("hazard")[0]["message"].startswith(
+        "SYVAR1 read at decode time while this process's # write of it (N2) was still queued")
+    assert sim.engine.processes[1].E[1] == 0  # the old value: what the hazard warns about
+    assert simulate({"A": text.replace("SYVAR1+", "SYVAR3+").replace(",SYVAR1,", ",SYVAR3,")}
+                    ).events("hazard") == []
+    flushed = simulate({"A": text}, sync_reads=True)
+    assert flushed.events("hazard") == [] and flushed.engine.processes[1].E[1] == 5
