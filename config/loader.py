@@ -378,7 +378,8 @@ class PlcConfig:
                                "5 x scan_ms; 0: off)", parse=_watchdog)
     retain_file: Path | None = setting(
         None, "where VAR RETAIN values are kept (default: ncgate-plc-retain.sqlite next to "
-        "the config)", parse=_optional_path)
+        "the config; for the built-in config or one inside an installed package, in "
+        "~/.local/state/ncgate/: docs/decisions.md)", parse=_optional_path)
 
 
 @dataclass(frozen=True, slots=True)
@@ -492,7 +493,9 @@ class CanopenConfig:
         "and \"hold\" (feed hold), \"reset\" (reset the processes) or \"none\"")
     store_file: Path | None = setting(
         None, "where 0x1010 keeps the communication parameters (default: "
-        "ncgate-canopen-node<id>.json next to the config)", parse=_optional_path)
+        "ncgate-canopen-node<id>.json next to the config; for the built-in config or one "
+        "inside an installed package, in ~/.local/state/ncgate/: docs/decisions.md)",
+        parse=_optional_path)
 
 
 @dataclass(frozen=True, slots=True)

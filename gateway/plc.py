@@ -21,6 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config, ConfigError
+from ncgate.config.state import state_folder
 from ncgate.gateway.door import Door
 from ncgate.gateway.wiring import Runtime
 from ncgate.inputs import Command, CommandKind, FieldbusAlarm, Snd, Source, SourceKind
@@ -181,12 +182,12 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
     store = None
     if not closed and any(v.retain for table in logic.programs.values()
                           for v in table.values()):
-        path = plc.retain_file or default_path(config.source)
+        path = plc.retain_file or default_path(state_folder(config.source))
         try:
             store = RetainStore(path)
             if cold:
                 store.clear()
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, OSError) as exc:  # OSError: its folder cannot be made
             raise ConfigError(f"{config.source or '<config>'}: plc.retain_file: cannot keep "
                               f"RETAIN values in {path}: {exc}") from None
     engine = runtime.engine

@@ -21,8 +21,9 @@ from typing import Any
 SCHEMA = "CREATE TABLE IF NOT EXISTS retain (name TEXT PRIMARY KEY, type TEXT, value TEXT)"
 
 
-def default_path(config_source: Path | None) -> Path:
-    folder = config_source.parent if config_source is not None else Path.cwd()
+def default_path(folder: Path) -> Path:
+    """The file when ``plc.retain_file`` is not set, in the config's state folder
+    (``ncgate.config.state.state_folder``: beside the user's config, never in a package)."""
     return folder / "ncgate-plc-retain.sqlite"
 
 
@@ -31,6 +32,7 @@ class RetainStore:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)  # a fresh state folder
         self._db = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")

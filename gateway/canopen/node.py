@@ -42,6 +42,7 @@ from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config, MasterLost
+from ncgate.config.state import state_folder
 from ncgate.errors import InputRefused
 from ncgate.gateway.canopen import pdo, store
 from ncgate.gateway.canopen.clock import Clock, LoopClock
@@ -117,8 +118,8 @@ class CanopenNode:
         self._clock = clock
         self.pdos = pdo.Pdos(self)
         self.heartbeats: HeartbeatConsumer | None = None
-        self.store_path = config.canopen.store_file or store.default_path(config.source,
-                                                                          self.node_id)
+        self.store_path = config.canopen.store_file or store.default_path(
+            state_folder(config.source), self.node_id)
         self._alarmed = False  # an EMCY for a process alarm went out and was not reset
         self._master_lost: set[int] = set()
         self._hub: RemoteServer | None = None

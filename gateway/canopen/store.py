@@ -3,8 +3,9 @@
 A master writes the signature "save" to 0x1010 (sub 1 all, sub 2 communication) and the
 node keeps the communication parameters (0x1000..0x1FFF) it was given -- PDO COB-IDs,
 types, mappings, SYNC COB-ID, heartbeat times -- in a file next to the config
-(``canopen.store_file``).  They are the node's power-on values from then on: at start and
-after reset node / reset communication.  "load" written to 0x1011 removes the file: the
+(``canopen.store_file``; for the built-in config or one inside a package, in the per-user
+state folder: ``ncgate.config.state``).  They are the node's power-on values from then on:
+at start and after reset node / reset communication.  "load" written to 0x1011 removes the file: the
 defaults return with the next reset, as CiA 301 says.
 
 The file is written whole or not at all: a temporary file in the same folder, flushed and
@@ -31,8 +32,9 @@ FORMAT = "ncgate-canopen-parameters/1"
 Parameters = dict[int, dict[int, bytes]]
 
 
-def default_path(config_source: Path | None, node_id: int) -> Path:
-    folder = config_source.parent if config_source is not None else Path.cwd()
+def default_path(folder: Path, node_id: int) -> Path:
+    """The file when ``canopen.store_file`` is not set, in the config's state folder
+    (``ncgate.config.state.state_folder``: beside the user's config, never in a package)."""
     return folder / f"ncgate-canopen-node{node_id}.json"
 
 

@@ -23,7 +23,10 @@ that advice, and nothing else: it never breaks a test run that does not use them
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
+import os
+import tempfile
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,6 +34,8 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from ncgate.config import Config, load_config
+from ncgate.gateway.canopen.store import default_path as store_path
+from ncgate.plc.retain import default_path as retain_path
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
@@ -47,15 +52,71 @@ except ImportError:  # the ncgate[pytest] extra is not installed
 
 
 def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Config:
-    """A config for a test: the file (None: built-in) with Modbus (and Modbus/TCP Security,
-    if configured) on free ports and the CANopen node on a virtual CAN channel of its own (so
-    tests never hear each other)."""
-    channel = f"ncgate-test-{next(_channels)}"
-    return load_config(path, overrides={"modbus.port": 0, "modbus.tls.port": 0,
-                                        "canopen.channel": channel, **overrides})
+    """A config for a test: the file (None: built-in; a relative path is relative to the
+    test file's folder) with every port the gateway opens free (``modbus.port``,
+    ``modbus.tls.port``, ``canopen.hub_port``, ``web.port``: 0), its CANopen node on a
+    virtual CAN channel of its own (so tests, and pytest-xdist workers, never hear each
+    other), and every file the gateway writes (``plc.retain_file``, ``canopen.store_file``,
+    ``trace.file`` when set) in the test's ``tmp_path``, unless ``overrides`` names it: RETAIN
+    values and a 0x1010 "save" last as long as the test (two configs made in one test share
+    them), never into the next test or run.
+
+    Outside a test (at import, in a session fixture) a relative path is relative to the
+    current folder and the files go into a new temporary folder of the session."""
+    test = _current.request
+    if path is not None and test is not None and not Path(path).is_absolute():
+        path = test.path.parent / path
+    channel = f"ncgate-test-{os.environ.get('PYTEST_XDIST_WORKER', 'main')}-{next(_channels)}"
+    config = load_config(path, overrides={"modbus.port": 0, "modbus.tls.port": 0,
+                                          "canopen.hub_port": 0, "web.port": 0,
+                                          "canopen.channel": channel, **overrides})
+    folder = _files_folder()
+    plc, canopen, trace = config.plc, config.canopen, config.trace
+    if "plc.retain_file" not in overrides:
+        plc = dataclasses.replace(plc, retain_file=retain_path(folder))
+    if "canopen.store_file" not in overrides:
+        canopen = dataclasses.replace(canopen,
+                                      store_file=store_path(folder, canopen.node_id))
+    if trace.file is not None and "trace.file" not in overrides:
+        trace = dataclasses.replace(trace, file=folder / trace.file.name)
+    return dataclasses.replace(config, plc=plc, canopen=canopen, trace=trace)
 
 
 _channels = itertools.count(1)
+
+
+class _Current:
+    """The test being set up or run (the autouse fixture below), for ncgate_test_config,
+    which is a plain function: its tmp_path is asked for only when a config is made."""
+
+    request: pytest.FixtureRequest | None = None
+    session_tmp: pytest.TempPathFactory | None = None
+
+
+_current = _Current()
+
+
+def _files_folder() -> Path:
+    if _current.request is not None:
+        tmp_path: Path = _current.request.getfixturevalue("tmp_path")
+        return tmp_path
+    if _current.session_tmp is not None:
+        return _current.session_tmp.mktemp("ncgate")
+    return Path(tempfile.mkdtemp(prefix="ncgate-test-"))
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _ncgate_session_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    _current.session_tmp = tmp_path_factory
+    yield
+    _current.session_tmp = None
+
+
+@pytest.fixture(autouse=True)
+def _ncgate_current_test(request: pytest.FixtureRequest) -> Iterator[None]:
+    _current.request = request
+    yield
+    _current.request = None
 
 
 @pytest.fixture

@@ -17,7 +17,8 @@ import canopen
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from ncgate.config import Config
+from ncgate.config import Config, load_config
+from ncgate.config.state import state_folder
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen import store
 from ncgate.gateway.canopen.clock import ManualClock
@@ -205,7 +206,8 @@ async def test_stored_parameters_apply_at_start(master: Master, ncgate_config: C
 
 async def test_a_store_file_that_does_not_fit_is_ignored(master: Master,
                                                          ncgate_config: Config) -> None:
-    path = store.default_path(ncgate_config.source, ncgate_config.canopen.node_id)
+    path = ncgate_config.canopen.store_file
+    assert path is not None
     store.save(path, {0x1A07: {0: b"\x01"}})  # no such object here
     async with Gateway(ncgate_config):
         assert await master.upload(0x1802, 1) == u32(0xC0000390)
@@ -298,7 +300,9 @@ def test_store_path_follows_config(tmp_path: Path) -> None:
     cfg = tmp_path / "cell" / "ncgate.toml"
     cfg.parent.mkdir()
     cfg.write_text("[canopen]\nnode_id = 9\n")
-    assert ncgate_test_config(cfg).canopen.store_file is None
-    assert store.default_path(cfg, 9) == cfg.parent / "ncgate-canopen-node9.json"
+    assert load_config(cfg).canopen.store_file is None
+    assert store.default_path(state_folder(cfg), 9) == cfg.parent / "ncgate-canopen-node9.json"
     cfg.write_text('[canopen]\nstore_file = "state/co.json"\n')
-    assert ncgate_test_config(cfg).canopen.store_file == (cfg.parent / "state/co.json").resolve()
+    assert load_config(cfg).canopen.store_file == (cfg.parent / "state/co.json").resolve()
+    # The test kit keeps it in the test's own folder, whatever the config says.
+    assert ncgate_test_config(cfg).canopen.store_file == tmp_path / "ncgate-canopen-node16.json"
