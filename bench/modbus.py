@@ -214,7 +214,9 @@ def memory() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         config = Path(tmp) / "ncgate.toml"
         config.write_text("[modbus]\nport = 0\n")  # the default config, on a free port
-        run = subprocess.Popen([sys.executable, "-m", "ncgate", "run", "--config", str(config)],
+        # --allow-missing: the bench serves Modbus only; its folder holds no PROG91.
+        run = subprocess.Popen([sys.executable, "-m", "ncgate", "run", "--config", str(config),
+                                "--allow-missing"],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         assert run.stdout is not None
         port = 0

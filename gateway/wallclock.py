@@ -46,6 +46,7 @@ class WallClockDriver:
         self._lag_warned_at = float("-inf")
         engine.on_kick = self.kick
         engine.on_timer = lambda t: self.kick()
+        engine.clock = self.now  # a status read sees the position now, not at the last input
 
     def now(self) -> float:
         """Simulated seconds since the driver started."""
@@ -151,3 +152,4 @@ class WallClockDriver:
                 handle.cancel()
         self.engine.on_kick = None
         self.engine.on_timer = None
+        self.engine.clock = None

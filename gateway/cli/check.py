@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ncgate.config import Config, StorageConfig, load_config
+from ncgate.config.loader import BUILT_IN
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.programs import dialect_options, storage_of
 from ncgate.interpreter.diagnostics import Diagnostic
@@ -140,6 +141,34 @@ def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]
             for d in exc.diagnostics:
                 found.setdefault(d.span.file, []).append(d)
     return {path: FileReport(path, tuple(found[str(path)])) for path in files}
+
+
+def missing_devices(config: Config) -> dict[str, str]:
+    """The storage devices whose folder does not exist: device -> what to say of it."""
+    where = config.source or BUILT_IN
+    return {name: f"{where}: nc.storage.{name}: no such folder: {folder}"
+            for name, folder in config.nc.storage.devices.items() if not folder.is_dir()}
+
+
+def start_problems(config: Config) -> tuple[list[str], list[FileReport]]:
+    """What keeps ``run`` from running its configured programs: a storage folder that does
+    not exist, a main program that is not on its device, and the main program's ``check``
+    diagnostics (with ``nc.lazy_parse`` a program is read only as it runs, so only found).
+    Returns the problems said in words, and the main program's report if it has errors."""
+    problems = list(missing_devices(config).values())
+    storage = storage_of(config)
+    main = config.nc.main
+    path = storage.find(main)
+    if path is None:
+        device = config.nc.storage.default
+        folder = config.nc.storage.devices.get(device)
+        problems.append(f"{config.source or BUILT_IN}: nc.main: program {main} is not on "
+                        f"{device} ({folder})")
+        return problems, []
+    if config.nc.lazy_parse:
+        return problems, []
+    reports = [r for r in check_files([path], config) if r.errors]
+    return problems, reports
 
 
 def storage_files(config: Config) -> list[Path]:

@@ -115,6 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
     loud.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
     run.add_argument("--cold", action="store_true", help="start the PLC logic without its "
                      "stored VAR RETAIN values (they are cleared)")
+    run.add_argument("--allow-missing", action="store_true", help="start even when the main "
+                     "program is missing or has errors, or a storage folder does not exist "
+                     "(a cell whose programs arrive later); default: refuse, with the "
+                     "diagnostics of 'ncgate check'")
 
     map_ = commands.add_parser("map", help="print the Modbus map in force",
                                description="The Modbus map in force, with 0-based and 1-based "
@@ -184,6 +188,7 @@ def _check(args: argparse.Namespace) -> int:
         files = expand(args.files)
     else:
         default = config or load_config(None, serving=False)
+        _require_default_device(default)
         files = storage_files(default) + list(default.plc.logic)
     if not files:
         raise UsageError("no program to check")
@@ -247,6 +252,7 @@ def _sim(args: argparse.Namespace) -> int:
     if args.dialect:
         overrides["nc.dialect"] = args.dialect
     config = load_config(args.config, overrides=overrides, serving=False)
+    _require_default_device(config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
     mains = args.main or [config.nc.main]
@@ -295,6 +301,15 @@ def _replay(args: argparse.Namespace) -> int:
     print(f"the replay matches: {result.compared} events of the processes, in the same order, "
           f"within {args.tolerance_ms:g} ms")
     return EXIT_OK
+
+
+def _require_default_device(config: Config) -> None:
+    """The folder of the default storage device exists (else no program can be found)."""
+    from ncgate.gateway.cli.check import missing_devices
+
+    missing = missing_devices(config).get(config.nc.storage.default)
+    if missing is not None:
+        raise UsageError(missing)
 
 
 def _suggest_dialect(names: Sequence[str], config: Config, command: str) -> None:
@@ -369,6 +384,8 @@ def _run(args: argparse.Namespace) -> int:
         logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO)
     overrides, origins = _overrides(args)
     config = load_config(args.config, overrides=overrides, origins=origins)
+    if not args.allow_missing and not _programs_ready(config):
+        return EXIT_USAGE
     record = str(Path(args.record).resolve()) if args.record else None
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within half a millisecond,
@@ -391,6 +408,24 @@ def _run(args: argparse.Namespace) -> int:
         logging.getLogger("ncgate").info("event loop: asyncio")
         asyncio.run(serve(config, cold=args.cold, record=record, overrides=overrides))
     return EXIT_OK
+
+
+def _programs_ready(config: Config) -> bool:
+    """Whether ``run`` can run its configured programs; if not, say why (as ``check`` does)
+    and how to start anyway.  Otherwise the first sign would be an alarm at cycle start."""
+    from ncgate.gateway.cli.check import start_problems
+
+    problems, reports = start_problems(config)
+    for report in reports:
+        for diagnostic in report.diagnostics:
+            print(diagnostic.render(), file=sys.stderr)
+    for problem in problems:
+        print(f"ncgate run: {problem}", file=sys.stderr)
+    if not problems and not reports:
+        return True
+    print("ncgate run: not started: the configured programs cannot run (give --allow-missing "
+          "to start anyway, for a cell whose programs arrive later)", file=sys.stderr)
+    return False
 
 
 def _map(args: argparse.Namespace) -> int:

@@ -60,7 +60,9 @@ def process(gw: Gateway, number: int) -> dict[str, Any]:
                                                 "n": w.where[2]}}
     alarm = None
     if s.alarm_message is not None:
-        alarm = {"code": AlarmCode(s.alarm_code).label, "message": s.alarm_message}
+        alarm = {"code": AlarmCode(s.alarm_code).label, "message": s.alarm_message,
+                 "where": ({"prog": s.alarm_where[0], "line": s.alarm_where[1],
+                            "n": s.alarm_where[2]} if s.alarm_where is not None else None)}
     return {"number": number, "state": s.state.name, "external": s.external,
             "program": s.program, "line": s.line, "n": s.n, "block": block,
             "held": s.held, "blocks": s.blocks, "snd_sent": s.snd_sent,

@@ -57,6 +57,7 @@ from ncgate.interpreter.engine.states import (
     WaitRecord,
     Where,
     derive_state,
+    describe_where,
 )
 from ncgate.interpreter.engine.sync import Sync, first_line
 from ncgate.interpreter.engine.timers import Timer, TimerHeap
@@ -116,6 +117,10 @@ class Engine:
         # Hooks for drivers and the gateway.
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
+        # The driver's clock, for what a status read shows between the engine's own moments
+        # (the position along a move): the engine's time moves only when something is due
+        # or an input arrives.  None: the engine's own time (the virtual clock).
+        self.clock: Callable[[], float] | None = None
         self.state_listeners: list[Callable[[Process, ProcessState], None]] = []
         self.reset_listeners: list[Callable[[], None]] = []  # a dialect's own state to clear
 
@@ -366,8 +371,11 @@ class Engine:
     def status(self, number: int) -> ProcessStatus:
         p = self._process(number)
         wait = p.int_wait if p.int_wait is not None else p.dec_wait
-        _, line, n = p.where
-        alarm_code, alarm_message = (p.alarm[0], p.alarm[1]) if p.alarm else (0, None)
+        alarm_code, alarm_message, alarm_where = p.alarm if p.alarm else (0, None, None)
+        # In ALARM the process stays where the alarm struck, until a reset.
+        _, line, n = alarm_where if alarm_where is not None else p.where
+        if alarm_message is not None and alarm_where is not None:
+            alarm_message = f"{describe_where(alarm_where)}: {alarm_message}"
         return ProcessStatus(
             number=p.number, state=p.state, external=p.external,
             program=p.loaded.program.name if p.loaded else None, line=line, n=n, wait=wait,
@@ -375,7 +383,7 @@ class Engine:
             snd_sent=p.stats.snd_sent, snd_received=p.stats.snd_received,
             blocks=p.stats.blocks, position=self._position(p),
             motion_active=p.motion_active,
-            held=p.held,
+            held=p.held, alarm_where=alarm_where,
         )
 
     # ---- the sync rules' part of the API (sync.py) ------------------------------------------
@@ -503,7 +511,8 @@ class Engine:
             if p.int_remaining is not None:
                 done = 1.0 - (p.int_remaining / item.duration if item.duration else 0.0)
             elif item.duration > 0:
-                done = min(1.0, max(0.0, (self.now - p.int_started) / item.duration))
+                now = self.now if self.clock is None else max(self.now, self.clock())
+                done = min(1.0, max(0.0, (now - p.int_started) / item.duration))
             else:
                 done = 1.0
             return tuple(a + (b - a) * done for a, b in zip(move.start, move.end, strict=True))

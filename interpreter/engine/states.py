@@ -22,6 +22,12 @@ if TYPE_CHECKING:
 Where = tuple[str, int, int | None]  # program file, line, N
 
 
+def describe_where(where: Where) -> str:
+    """``DZ.nc:3 N30`` (no N: ``DZ.nc:3``)."""
+    file, line, n = where
+    return f"{file}:{line} N{n}" if n is not None else f"{file}:{line}"
+
+
 class ProcessState(enum.IntEnum):
     """Spec 2.1; the value is the code on the fieldbus."""
 
@@ -101,9 +107,7 @@ class WaitRecord:
     note: Callable[[], str | None] | None = None
 
     def describe(self, proc: int) -> str:
-        file, line, n = self.where
-        number = f" N{n}" if n is not None else ""
-        return f"P{proc} {file}:{line}{number} {self.code}"
+        return f"P{proc} {describe_where(self.where)} {self.code}"
 
     def reason(self) -> str:
         if self.text is not None:
@@ -143,13 +147,14 @@ class ProcessStatus:
     n: int | None
     wait: WaitRecord | None
     alarm_code: int
-    alarm_message: str | None
+    alarm_message: str | None  # with the alarm's place first: "DZ.nc:3 N30: division by zero"
     snd_sent: int
     snd_received: int
     blocks: int
     position: tuple[float, ...]
     motion_active: bool
     held: bool
+    alarm_where: Where | None = None  # where the alarm struck (line and n are its line and N)
 
     @property
     def wait_kind(self) -> WaitKind:

@@ -233,3 +233,49 @@ def test_version_answers_without_importing_the_gateway() -> None:
     assert "ncgate.gateway.cli.main" in imported  # the measure sees the command's imports
     assert not imported & {"ncgate.gateway.app", "pymodbus", "canopen", "can", "aiohttp",
                            "lark", "ncgate.interpreter.engine"}
+
+
+# -- item 13: run refuses programs it cannot run; a missing MP0 is said ------------------------
+
+
+@pytest.mark.parametrize(("programs", "said"), [
+    ({}, "nc.main: program A is not on MP0"),
+    ({"A": "N1G1X10F600\nN2(WAI,SA1=)\nN3M30\n"}, "A.nc:2:"),
+    ({"A": "N1(EXE,2,B)\nN2M30\n"}, "error NC050: program B not found"),
+])
+def test_run_refuses_a_main_program_it_cannot_run(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], programs: dict[str, str],
+        said: str) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n', programs)
+    assert main(["run", "--config", str(tmp_path / "ncgate.toml"), "--no-web"]) == 2
+    err = capsys.readouterr().err
+    assert said in err
+    assert "not started" in err and "--allow-missing" in err
+
+
+def test_run_refuses_a_missing_storage_folder(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\nMP2 = "later"\n',
+               {"A": "N1M30\n"})
+    assert main(["run", "--config", str(tmp_path / "ncgate.toml"), "--no-web"]) == 2
+    assert f"nc.storage.MP2: no such folder: {tmp_path / 'later'}" in capsys.readouterr().err
+
+
+async def test_run_with_allow_missing_starts_a_cell_whose_programs_arrive_later(
+        tmp_path: Path) -> None:
+    from .test_cli_run import start_run, stop_run
+
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[modbus]\nport = 0\n'
+                         '[canopen]\nenabled = false\n', {})
+    proc, _, lines = await start_run(tmp_path / "ncgate.toml", "--no-web", "--allow-missing")
+    code, log = await stop_run(proc, lines)
+    assert code == 0, log
+
+
+@pytest.mark.parametrize("command", [["sim"], ["check"]])
+def test_check_and_sim_say_when_mp0_does_not_exist(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "gone"\n', {"A": "N1M30\n"})
+    assert main([*command, "--config", str(tmp_path / "ncgate.toml")]) == 2
+    assert f"nc.storage.MP0: no such folder: {tmp_path / 'gone'}" in capsys.readouterr().err
+

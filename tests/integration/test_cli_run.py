@@ -259,7 +259,9 @@ async def test_sigterm_stops_run_while_a_big_program_is_read(tmp_path: Path) -> 
     config = tmp_path / "ncgate.toml"
     config.write_text('[nc]\nmain = "BIG"\n[nc.storage]\nMP0 = "."\n[modbus]\nport = 0\n'
                       '[canopen]\nenabled = false\n')
-    proc, port, lines_before = await start_run(config, "--no-web")
+    # --allow-missing: run does not check the main program at start, so the cycle start is
+    # the first to read it (checking it at start takes seconds for 8 MB).
+    proc, port, lines_before = await start_run(config, "--no-web", "--allow-missing")
     client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
     assert await client.connect()
     await client.write_register(2000, 1, device_id=1)  # cycle start: answered at once
