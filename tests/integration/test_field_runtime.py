@@ -38,9 +38,9 @@ async def test_an_alarm_keeps_its_block_line_and_file_in_the_live_status(
         finally:
             client.close()
         host, port = gw.web_address
-        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
-            async with http.get("/api/status") as r:
-                lane = (await r.json())["processes"][0]
+        async with (aiohttp.ClientSession(f"http://{host}:{port}") as http,
+                    http.get("/api/status") as r):
+            lane = (await r.json())["processes"][0]
     assert regs == [int(ProcessState.ALARM), 30, 3, 0, 0, int(AlarmCode.DIVISION_BY_ZERO)]
     assert (lane["line"], lane["n"], lane["block"]) == (3, 30, "N30E2=5/E1")
     assert lane["alarm"]["where"] == {"prog": "DZ.nc", "line": 3, "n": 30}
@@ -70,5 +70,5 @@ async def test_the_position_registers_move_during_a_move_with_no_input(tmp_path:
         finally:
             client.close()
     assert len(seen) >= 3, f"X stood at {seen} for 20,000 reads"
-    assert seen == sorted(seen) and 0 <= seen[0] and seen[-1] < 100_000
+    assert seen == sorted(seen) and seen[0] >= 0 and seen[-1] < 100_000
     assert state is ProcessState.RUNNING  # the move was under way, nothing else moved it
