@@ -63,9 +63,7 @@ def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Conf
 
     Outside a test (at import, in a session fixture) a relative path is relative to the
     current folder and the files go into a new temporary folder of the session."""
-    test = _current.request
-    if path is not None and test is not None and not Path(path).is_absolute():
-        path = test.path.parent / path
+    path = from_test_folder(path)
     channel = f"ncgate-test-{os.environ.get('PYTEST_XDIST_WORKER', 'main')}-{next(_channels)}"
     config = load_config(path, overrides={"modbus.port": 0, "modbus.tls.port": 0,
                                           "canopen.hub_port": 0, "web.port": 0,
@@ -94,6 +92,17 @@ class _Current:
 
 
 _current = _Current()
+
+
+def from_test_folder(path: str | Path | None) -> Path | None:
+    """A relative path as relative to the folder of the current test's file (outside a
+    test: as it is, relative to the current folder)."""
+    if path is None:
+        return None
+    test = _current.request
+    if test is None or Path(path).is_absolute():
+        return Path(path)
+    return test.path.parent / path
 
 
 def _files_folder() -> Path:
