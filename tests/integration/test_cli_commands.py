@@ -279,3 +279,30 @@ def test_check_and_sim_say_when_mp0_does_not_exist(
     assert main([*command, "--config", str(tmp_path / "ncgate.toml")]) == 2
     assert f"nc.storage.MP0: no such folder: {tmp_path / 'gone'}" in capsys.readouterr().err
 
+
+# -- item 15: the built-in cell runs its own programs without a hazard --------------------------
+
+
+def test_the_built_in_cell_runs_its_programs_without_a_hazard(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sim", "PROG91"]) == 0
+    out = capsys.readouterr().out
+    assert " hazard " not in out
+    assert out.rstrip().endswith("every program ended")
+    assert main(["check"]) == 0  # the built-in storage: PROG91/92/93, no diagnostic
+    assert "3 file(s) checked: 0 error(s), 0 warning(s)" in capsys.readouterr().err
+
+
+def test_the_hazard_example_shows_one_hazard_on_purpose(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    trace = tmp_path / "t.jsonl"
+    assert main(["sim", "--example", "hazard", "--trace", str(trace)]) == 0
+    out = capsys.readouterr().out
+    assert [line for line in out.splitlines() if " hazard " in line] == [
+        "[0.000] P1 hazard HAZ1.nc:4 N3: (SND,2) acted at decode time while motion programmed "
+        "above it (N2) was still queued; mark the block # to act in motion order, or set "
+        "nc.lookahead = 0"]
+    snds = [(e["t"], e["n"]) for e in events_of(trace) if e["event"] == "snd"]
+    assert snds == [(0.0, 3), (1.0, 4)]  # the plain N3 at decode time, the # N4 in motion
+    assert main(["sim", "--example", "hazard", "--set", "nc.lookahead=0"]) == 0
+    assert " hazard " not in capsys.readouterr().out
