@@ -19,8 +19,10 @@ def product_code_text() -> str:
 
 
 def revision_text() -> str:
-    """MajorMinorRevision as Modbus shows it: "1.0"."""
-    return f"{REVISION >> 16}.{REVISION & 0xFFFF}"
+    """MajorMinorRevision (FC43 object 0x02): the software version, the text CANopen's
+    0x100A gives, so that both fieldbuses name the same release.  (0x1018:3, REVISION, is
+    the revision of the map and dictionary, a number CiA 301 defines on its own.)"""
+    return __version__
 
 
 def model_name() -> str:

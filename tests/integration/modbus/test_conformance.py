@@ -267,11 +267,12 @@ async def test_device_identification_as_hmis_ask_for_it(ncgate_gateway: Gateway)
     await client.connect()
     try:
         basic = await client.read_device_information(read_code=1, object_id=0, device_id=1)
-        assert basic.information == {0: b"ncgate", 1: b"NCGT", 2: b"1.0"}
+        assert basic.information == {0: b"ncgate", 1: b"NCGT", 2: __version__.encode()}
         assert basic.conformity == 0x82 and basic.more_follows == 0
         regular = await client.read_device_information(read_code=2, object_id=0, device_id=1)
         assert regular.information == {
-            0: b"ncgate", 1: b"NCGT", 2: b"1.0", 4: b"ncgate CNC co-simulator gateway",
+            0: b"ncgate", 1: b"NCGT", 2: __version__.encode(),
+            4: b"ncgate CNC co-simulator gateway",
             5: f"ncgate {__version__}".encode(), 6: b"test cell"}
         one = await client.read_device_information(read_code=4, object_id=6, device_id=1)
         assert one.information == {6: b"test cell"}
@@ -281,7 +282,7 @@ async def test_device_identification_as_hmis_ask_for_it(ncgate_gateway: Gateway)
         client.close()
     od = build_dictionary(ncgate_gateway.config)
     assert od[0x1018][2].default == int.from_bytes(b"NCGT", "big")  # the same product code
-    assert od[0x1018][3].default >> 16 == 1 and od[0x1018][3].default & 0xFFFF == 0  # "1.0"
+    assert od[0x1018][3].default >> 16 == 1 and od[0x1018][3].default & 0xFFFF == 0  # map 1.0
 
 
 async def test_device_identification_errors(ncgate_gateway: Gateway, raw: Raw) -> None:
