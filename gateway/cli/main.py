@@ -208,29 +208,16 @@ def _check(args: argparse.Namespace) -> int:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
     if errors and dialect is None:
-        _suggest_check_dialect([r.path for r in reports if r.errors], config)
+        from ncgate.gateway.cli.check import LOGIC_SUFFIX, config_for
+
+        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in reports
+                                   if r.errors and r.path.suffix.lower() != LOGIC_SUFFIX])
     return EXIT_FAILED if errors else EXIT_OK
-
-
-def _suggest_check_dialect(paths: Sequence[Path], config: Config | None) -> None:
-    from ncgate.gateway.cli.check import LOGIC_SUFFIX, config_for, other_dialect
-
-    readable: dict[str, list[str]] = {}
-    for path in paths:
-        if path.suffix.lower() == LOGIC_SUFFIX:
-            continue
-        cfg = config_for(path, config)
-        other = other_dialect([path], cfg, cfg.nc.dialect)
-        if other is not None:
-            readable.setdefault(other.value, []).append(path.name)
-    for name, files in readable.items():
-        print(f"ncgate check: {', '.join(files)} read(s) without error as {name}: give "
-              f"--dialect {name} (or set nc.dialect = \"{name}\" in the config)",
-              file=sys.stderr)
 
 
 def _sim(args: argparse.Namespace) -> int:
     from ncgate.config.script import load_script
+    from ncgate.gateway.programs import storage_of
     from ncgate.gateway.sim import report, run_sim, write_trace
     from ncgate.gateway.timeline import write_gantt
 
@@ -260,7 +247,9 @@ def _sim(args: argparse.Namespace) -> int:
         result = run_sim(config, mains, script, args.until, signals=True)
     except ProgramError as exc:
         print(str(exc), file=sys.stderr)
-        _suggest_dialect(mains, config, "sim")
+        storage = storage_of(config)
+        _suggest_dialect("sim", [(path, config) for name in mains
+                                 if (path := storage.find(name)) is not None])
         return EXIT_USAGE
     report(result, sys.stdout)
     if args.trace:
@@ -312,18 +301,20 @@ def _require_default_device(config: Config) -> None:
         raise UsageError(missing)
 
 
-def _suggest_dialect(names: Sequence[str], config: Config, command: str) -> None:
-    """After a program's errors: say so when another dialect reads the files cleanly."""
+def _suggest_dialect(command: str, files: Sequence[tuple[Path, Config]]) -> None:
+    """After a program's errors: when another dialect reads a file without one, the file is
+    most likely in that language (an ISG file given to NC-110); say which --dialect to give."""
     from ncgate.gateway.cli.check import other_dialect
-    from ncgate.gateway.programs import storage_of
 
-    storage = storage_of(config)
-    paths = [path for name in names if (path := storage.find(name)) is not None]
-    other = other_dialect(paths, config, config.nc.dialect) if paths else None
-    if other is not None:
-        files = ", ".join(p.name for p in paths)
-        print(f"ncgate {command}: {files} reads without error as {other.value}: give "
-              f"--dialect {other.value} (or set nc.dialect = \"{other.value}\" in the config)",
+    readable: dict[str, list[str]] = {}
+    for path, config in files:
+        other = other_dialect([path], config, config.nc.dialect)
+        if other is not None:
+            readable.setdefault(other.value, []).append(path.name)
+    for name, found in readable.items():
+        verb = "reads" if len(found) == 1 else "read"
+        print(f"ncgate {command}: {', '.join(found)} {verb} without error as {name}: give "
+              f"--dialect {name} (or set nc.dialect = \"{name}\" in the config)",
               file=sys.stderr)
 
 
