@@ -175,7 +175,11 @@ class _Checker:
                 if handler is not None:
                     handler(self, item)
             if words > 1:
-                self.block_words(block)
+                # Only a letter that stands twice can clash (two G codes are two G's): the
+                # common block, one word a letter, skips building the clash check's records.
+                letters = [i.letter for i in block.items if type(i) is Word]
+                if len(set(letters)) < len(letters):
+                    self.block_words(block)
         for unclosed in self.repeats:
             self.report(DiagnosticCode.UNBALANCED_REPEAT, "(RPT) without a matching (ERP)",
                         unclosed.span)
