@@ -552,16 +552,17 @@ def load_config(
 ) -> Config:
     """Load a config file (None: the built-in default), then apply dotted-key overrides.
 
-    An error in an overridden key names where the override came from, not the file:
-    ``origins`` maps a dotted key to it (``"--port"``); any other override is ``--set``.
+    ``origins`` maps an overridden dotted key to where it came from (``"--set"``,
+    ``"--port"``): an error in that key names it instead of the file.
     ``serving=False``: the caller opens no server (``check``, ``sim``), so what only a
     server needs is not checked (the console's bind beyond loopback without a token)."""
     source = Path(path) if path is not None else default_config_path()
     raw = read_toml(source)
-    given = {dotted: (origins or {}).get(dotted, "--set") for dotted in overrides or {}}
+    file = str(source) if path is not None else BUILT_IN
+    given = dict(origins or {})
     for dotted, value in (overrides or {}).items():
-        _set_dotted(raw, dotted, value, given[dotted])
-    reader = _Reader(str(source) if path is not None else BUILT_IN, source.parent, given)
+        _set_dotted(raw, dotted, value, given.get(dotted, file))
+    reader = _Reader(file, source.parent, given)
     config: Config = reader.section(Config, raw, "")
     _check_config(reader, config, serving)
     return dataclasses.replace(config, source=source if path is not None else None)

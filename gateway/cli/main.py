@@ -236,9 +236,11 @@ def _sim(args: argparse.Namespace) -> int:
         args.script = args.script or (str(example.script) if example.script else None)
         args.main = args.main or [example.main]
     overrides = _set_overrides(args.set)
+    origins = dict.fromkeys(overrides, "--set")
     if args.dialect:
         overrides["nc.dialect"] = args.dialect
-    config = load_config(args.config, overrides=overrides, serving=False)
+        origins["nc.dialect"] = "--dialect"
+    config = load_config(args.config, overrides=overrides, origins=origins, serving=False)
     _require_default_device(config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
     script = load_script(args.script if args.script or args.config else default_script_path())
@@ -339,7 +341,7 @@ def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]
     """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides, and
     the option each key came from (an error names it)."""
     out = _set_overrides(args.set)
-    origins: dict[str, str] = {}
+    origins = dict.fromkeys(out, "--set")
     if args.port is not None:
         out["modbus.port"] = args.port
         origins["modbus.port"] = "--port"
