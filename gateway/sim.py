@@ -226,6 +226,14 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         plc = runtime.plc
         return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING)
 
+    def plc_may_start(n: int) -> bool:
+        """The PLC logic's NC.START is a cycle start: nc.main in process 1 (orphan check)."""
+        plc = runtime.plc
+        return (n == 1 and engine.settings.main is not None and plc is not None
+                and plc.status.state is PlcState.RUNNING)
+
+    engine.sync.outside_starts = plc_may_start
+
     previous: Any = None
     try:
         if signals:  # installed inside the try: a SIGTERM from now on is always reported

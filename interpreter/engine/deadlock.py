@@ -12,8 +12,10 @@ deadlock; the engine alarms every member with one message naming each blocking b
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
+from ncgate.interpreter.engine.actions import Execute
+from ncgate.interpreter.engine.ports import ProgramText
 from ncgate.interpreter.engine.process import Process
 from ncgate.interpreter.engine.states import WaitKind, WaitRecord
 
@@ -88,26 +90,49 @@ def describe_cycle(start: Process, cycle: list[tuple[Process, WaitRecord]]) -> s
     return "; ".join([message, *dict.fromkeys(notes)])
 
 
+Scan = tuple[frozenset[int], bool, frozenset[tuple[int, str]]]  # targets, dynamic, calls
+
+
 def can_be_started(n: int, waiter: Process, processes: Mapping[int, Process],
-                   exe_pending: Callable[[int], bool], closed: bool,
-                   main: str | None, any_starts: bool = False) -> bool:
-    """Whether anything can still start a program in idle process ``n``: an EXE waiting for
-    it, a running program that names it (or names processes by variables), or -- outside a
-    closed simulation -- the fieldbus's cycle start for process 1 (any process, where the
-    operator starts each one: ``any_starts``)."""
-    if exe_pending(n):
+                   queued: Iterable[ProgramText], outside: Callable[[int], bool],
+                   scan: Callable[[ProgramText], Scan],
+                   load: Callable[[str, int], ProgramText | None]) -> bool:
+    """Whether anything can still start a program in idle process ``n``:
+
+    - the outside (``outside(n)``: an operator's start, a script's, the PLC's cycle start);
+    - an EXE of ``n`` already in the waiter's motion queue (a ``#`` EXE it passed);
+    - a program that runs in another process, or waits in an EXE queue (``queued``), and
+      starts ``n`` -- or starts a program that does, and so on: the EXE chains are
+      followed through the programs they name (``load``; None: not loadable);
+    - such a program that names a process by a variable (it may be any).
+    """
+    if outside(n):
         return True
-    if not closed and (any_starts or (n == 1 and main)):
-        return True
-    for q in processes.values():
-        if q is waiter or q.loaded is None or q.alarm is not None:
-            continue
-        if n in q.loaded.exe_targets or q.loaded.dynamic_exe:
+    for item in (waiter.int_item, *waiter.queue):
+        if item is not None and item.actions and any(
+                isinstance(a, Execute) and a.process == n for a in item.actions):
             return True
+    todo = [q.loaded.program for q in processes.values()
+            if q is not waiter and q.loaded is not None and q.alarm is None]
+    todo.extend(queued)
+    followed: set[tuple[int, str]] = set()
+    while todo:
+        targets, dynamic, calls = scan(todo.pop())
+        if dynamic or n in targets:
+            return True
+        for k, name in calls:
+            key = (k, name.upper())
+            if key in followed:
+                continue
+            followed.add(key)
+            program = load(name, k)
+            if program is not None:
+                todo.append(program)
     return False
 
 
 def orphan_message(waiter: Process, wait: WaitRecord, target: int | None = None) -> str:
     target = wait.target if target is None else target
     return (f"orphan wait: {wait.describe(waiter.number)} waits for P{target}, which runs "
-            f"no program and which no running program can start")
+            f"no program, which no running or queued program can start (their EXEs "
+            f"followed), and which nothing outside may start")

@@ -150,3 +150,6 @@ class FrontEnd(Protocol):
 
     def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
         """The processes the program may start, and whether it names others by variables."""
+
+    def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
+        """The (process, program name) of each EXE that names its process by a constant."""

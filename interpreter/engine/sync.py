@@ -46,7 +46,7 @@ from ncgate.interpreter.engine import deadlock
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.actions import Execute, WaitCondition
 from ncgate.interpreter.engine.events import Blocked
-from ncgate.interpreter.engine.ports import ImagePort, ProgramLoader, ProgramText
+from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import Process
 from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where
 from ncgate.interpreter.engine.trace import Trace
@@ -72,6 +72,9 @@ class SyncHost(Protocol):
 
     @property
     def processes(self) -> Mapping[int, Process]: ...
+
+    @property
+    def front_end(self) -> FrontEnd: ...
 
     @property
     def now(self) -> float: ...
@@ -104,6 +107,13 @@ class Sync:
         self._alarm = host.alarm
         self._start_program = host.start_program
         self._kick = host.kick
+        # Whether something outside the programs may still start a program in a process (an
+        # orphan wait is one nothing can end).  Open cell (run, the Gateway API): the
+        # operator may start any process (console Start, Gateway.start), so yes.  Closed
+        # (sim, replay): no, unless the simulator says so (a script's start to come, the
+        # PLC logic's cycle start) by setting this.
+        self.outside_starts: Callable[[int], bool] = (
+            (lambda n: False) if host.settings.closed else (lambda n: True))
 
     # ---- state --------------------------------------------------------------------------
 
@@ -383,15 +393,29 @@ class Sync:
             target = self.processes[number]
             if target.external or target.loaded is not None or target.alarm is not None:
                 continue
-            if deadlock.can_be_started(number, p, self.processes,
-                                       lambda n: bool(self._exe_waiters.get(n)),
-                                       self.settings.closed, self.settings.main,
-                                       self.settings.any_process_starts):
+            queued = [program for waiters in self._exe_waiters.values()
+                      for _, program, _ in waiters]
+            if self._exe_waiters.get(number) or deadlock.can_be_started(
+                    number, p, self.processes, queued, self.outside_starts, self._scan,
+                    self._load_quietly):
                 continue
             self._alarm(p, AlarmCode.ORPHAN_WAIT, deadlock.orphan_message(p, wait, number),
                         wait.where)
             return True
         return False
+
+    def _scan(self, program: ProgramText) -> deadlock.Scan:
+        front_end = self._host.front_end
+        targets, dynamic = front_end.exe_targets(program)
+        return targets, dynamic, front_end.exe_calls(program)
+
+    def _load_quietly(self, name: str, process: int) -> ProgramText | None:
+        """A program an EXE names, for the orphan check: None when it cannot be loaded (its
+        EXE will be the alarm, when it runs)."""
+        try:
+            return self.loader.load(name, None, process)
+        except (ProgramError, ProgramNotFoundError):
+            return None
 
     def check_deadlock(self, start: Process) -> None:
         cycle = deadlock.find_cycle(start, self.processes)

@@ -115,6 +115,9 @@ class IsgFrontEnd:
     def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
         return frozenset(), False  # an ISG program starts no other channel
 
+    def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
+        return frozenset()
+
 
 class _BlockCompiler:
     def __init__(self, host: BlockHost, board: SignalBoard, options: IsgOptions,

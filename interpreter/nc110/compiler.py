@@ -69,24 +69,39 @@ from ncgate.interpreter.settings import AXES
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
 _MOTION_WORDS: Final = frozenset(AXES) | {"I", "J", "K", "R"}
-_EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)", re.IGNORECASE)
+_EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)(?:\s*,\s*([^,)\s]*))?",
+                             re.IGNORECASE)
 
 
 def exe_scan(program: Program) -> tuple[frozenset[int], bool]:
     """The processes ``program``'s EXEs start and whether one is not a constant, from the
     text (a program parsed lazily must not be parsed whole for this); kept on the program,
     so that reading it (off the loop) does this once."""
+    targets, dynamic, _ = _exe_scan(program)
+    return targets, dynamic
+
+
+def exe_calls(program: Program) -> frozenset[tuple[int, str]]:
+    """The (process, program) pairs of ``program``'s EXEs with a constant process (the
+    orphan-wait check follows them: a program that starts one that starts another)."""
+    return _exe_scan(program)[2]
+
+
+def _exe_scan(program: Program) -> tuple[frozenset[int], bool, frozenset[tuple[int, str]]]:
     if program.exe_scan is None:
         targets: set[int] = set()
+        calls: set[tuple[int, str]] = set()
         dynamic = False
         lines = program.lines
         for first in range(0, len(lines), 2048):  # in pieces: no long call holds the GIL
             for m in _EXE_ARG.finditer("\n".join(lines[first:first + 2048])):
                 if m.group(1).isdigit():
                     targets.add(int(m.group(1)))
+                    if m.group(2):
+                        calls.add((int(m.group(1)), m.group(2)))
                 else:
                     dynamic = True
-        program.exe_scan = (frozenset(targets), dynamic)
+        program.exe_scan = (frozenset(targets), dynamic, frozenset(calls))
     return program.exe_scan
 
 
@@ -112,6 +127,10 @@ class NC110:
     def exe_targets(self, program: ProgramText) -> tuple[frozenset[int], bool]:
         assert isinstance(program, Program)
         return exe_scan(program)
+
+    def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
+        assert isinstance(program, Program)
+        return exe_calls(program)
 
     def attach(self, host: BlockHost, reset_listeners: list[Callable[[], None]]) -> None:
         """NC-110 registers no actions of its own and keeps no state beside the engine's."""

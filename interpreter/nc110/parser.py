@@ -638,7 +638,7 @@ class Program:
         self.file = file
         # The processes its EXEs name, and whether one is not a constant: read from the text
         # once (the compiler's exe_targets), where the program is read (off the loop).
-        self.exe_scan: tuple[frozenset[int], bool] | None = None
+        self.exe_scan: tuple[frozenset[int], bool, frozenset[tuple[int, str]]] | None = None
         if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
             text = text[1:]
         if "\r" in text:

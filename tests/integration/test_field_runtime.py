@@ -72,3 +72,20 @@ async def test_the_position_registers_move_during_a_move_with_no_input(tmp_path:
     assert len(seen) >= 3, f"X stood at {seen} for 20,000 reads"
     assert seen == sorted(seen) and seen[0] >= 0 and seen[-1] < 100_000
     assert state is ProcessState.RUNNING  # the move was under way, nothing else moved it
+
+
+async def test_on_the_gateway_a_wait_for_a_process_the_operator_may_start_is_no_orphan(
+        tmp_path: Path) -> None:
+    """Seed 000 section 4: the operator starts each process.  P1 waits for P3, which no
+    program starts; on the gateway that is not AL141 -- the operator starts L3 by hand, and
+    P1 goes on."""
+    path = _cell(tmp_path, {"L1": "N1(WAI,3)\nN2M30\n", "L3": "N1(SND,1)\nN2M30\n"})
+    cfg = load_config(path, overrides={"modbus.enabled": False, "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        await gw.start("L1", 1)
+        await gw.wait_state(1, "WAIT_PROC", timeout_s=10)
+        await gw.start("L3", 3)  # the operator's start of P3
+        await gw.wait_idle(timeout_s=10)
+        trace = gw.trace
+    assert [e for e in trace if e["event"] == "alarm"] == []
+    assert next(e for e in trace if e["event"] == "resume" and e["proc"] == 1)["by"] == 3

@@ -120,6 +120,42 @@ def test_wait_on_an_idle_process_that_another_will_start_is_no_orphan() -> None:
     assert sim.first("resume", proc=1) == {**sim.first("resume", proc=1), "t": 1.0, "by": 3}
 
 
+def test_an_exe_chain_through_programs_not_yet_loaded_is_no_orphan() -> None:
+    """Issue 25's cell: P1 waits for P3, which only L4 -- started by L2's queued # EXE --
+    starts.  The check follows the chain L2 -> L4 -> L3 instead of alarming at t = 0."""
+    programs = {"L1": "N1(EXE,2,L2)\nN2(WAI,3)\nN3M30\n",
+                "L2": "N1G1X10F600\nN2#(EXE,4,L4)\nN3M30\n",
+                "L4": "N1(EXE,3,L3)\nN2M30\n",
+                "L3": "N1(SND,1)\nN2M30\n"}
+    sim = simulate(programs, main="L1")
+    assert sim.outcome == "idle" and sim.events("alarm") == []
+    assert sim.first("resume", proc=1)["by"] == 3
+
+
+def test_an_exe_queued_for_a_busy_process_counts_with_its_chain() -> None:
+    """P2 is busy; P1's EXE of L2 waits in the queue, and L2 starts L3 in P3: P4's wait for
+    P3 is no orphan while that EXE is queued."""
+    programs = {"A": "N1(EXE,2,B)\nN2(EXE,4,D)\nN3(EXE,2,L2)\nN4M30\n",
+                "B": "N1(DLY,1)\nN2M30\n",
+                "D": "N1(WAI,3)\nN2M30\n",
+                "L2": "N1(EXE,3,L3)\nN2M30\n",
+                "L3": "N1(SND,4)\nN2M30\n"}
+    sim = simulate(programs)
+    assert sim.outcome == "idle" and sim.events("alarm") == []
+
+
+def test_an_orphan_is_still_found_when_no_chain_reaches_the_process() -> None:
+    """The chain followed to its end (L2 -> L4 -> L5, and L5 names L2 again) starts P4 and
+    P5 only: P3 is an orphan, found at once."""
+    programs = {"L1": "N1(EXE,2,L2)\nN2(WAI,3)\nN3M30\n",
+                "L2": "N1(EXE,4,L4)\nN2M30\n", "L4": "N1G1X1F60\nN2(EXE,5,L5)\nN3M30\n",
+                "L5": "N1(DLY,1)\nN2(EXE,2,L2)\nN3M30\n"}
+    sim = simulate(programs, main="L1", until=10.0)
+    alarm = sim.first("alarm", proc=1)
+    assert alarm["code"] == "AL141" and alarm["t"] == 0.0
+    assert "which no running or queued program can start" in alarm["message"]
+
+
 def test_stall_when_nothing_can_change() -> None:
     sim = simulate({"A": "N1(WAI,SA10=1)\nN2M30\n"})
     assert sim.outcome == "blocked"
