@@ -50,6 +50,7 @@ class DiagnosticCode(enum.Enum):
     UNKNOWN_LABEL = ("NC040", Severity.ERROR, "a jump to a label the program does not define")
     DUPLICATE_LABEL = ("NC041", Severity.ERROR, "a label defined twice")
     UNBALANCED_REPEAT = ("NC042", Severity.ERROR, "RPT without ERP, or ERP without RPT")
+    REPEAT_TOO_DEEP = ("NC043", Severity.ERROR, "RPT bodies nested deeper than 16 levels")
     PROGRAM_NOT_FOUND = ("NC050", Severity.ERROR, "EXE of a program missing from its device")
     UNKNOWN_DEVICE = ("NC051", Severity.ERROR, "EXE naming a storage device not configured")
     # -- warnings -------------------------------------------------------------------------
@@ -59,6 +60,8 @@ class DiagnosticCode(enum.Enum):
     CYRILLIC_LOOKALIKE = ("NW004", Severity.WARNING, "Cyrillic look-alikes read as Latin (Е4)")
     UNKNOWN_G_OR_M = ("NW005", Severity.WARNING,
                       "a G or M code the language does not know (G999, M1.5): no effect")
+    JUMP_INTO_REPEAT = ("NW006", Severity.WARNING,
+                        "a jump from outside an RPT body into it: its ERP has no RPT running")
     # -- the ISG dialect (spec 5) ---------------------------------------------------------
     ISG_SYNTAX = ("IS001", Severity.ERROR, "ISG: an item where the block syntax does not allow it")
     ISG_UNKNOWN_COMMAND = ("IS002", Severity.ERROR, "ISG: a #command or $word not in the dialect")

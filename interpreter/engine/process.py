@@ -77,7 +77,7 @@ class Process:
         self.pc = 0
         self.op_i = 0
         self.block: CompiledBlock | None = None
-        self.repeats: list[list[int]] = []  # [line of the RPT, repetitions left]
+        self.repeats: list[list[int]] = []  # [RPT's line index, repetitions left, ERP's]
         self.dec_block: DecoderHold | None = None  # None: the decoder may run
         self.dec_wait: WaitRecord | None = None
         self.end_how: str | None = None

@@ -492,6 +492,11 @@ class _BlockCompiler:
         def jump(p: Process) -> Step:
             if target is None:
                 raise RuntimeAlarm(AlarmCode.UNKNOWN_LABEL, f'label "{label}" is not defined')
+            # A jump out of an RPT body ends that repeat: its frame goes (a loop that jumps
+            # back to its RPT would otherwise stack a frame a turn, without bound).
+            repeats = p.repeats
+            while repeats and not repeats[-1][0] < target <= repeats[-1][2]:
+                repeats.pop()
             p.pc = target
             p.block = None
             return JUMP
@@ -512,15 +517,19 @@ class _BlockCompiler:
         index = self.index
         program = self.program
 
+        erp: list[int] = []  # the matching ERP's line index, found once
+
         def repeat(p: Process) -> Step:
             n = count(p)
             if n < 0:
                 raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, f"(RPT,{n}): a negative count")
+            if not erp:
+                erp.append(_matching_erp(program, index))
             if n == 0:  # repeated no time: on after the matching (ERP)
-                p.pc = _matching_erp(program, index) + 1
+                p.pc = erp[0] + 1
                 p.block = None
                 return JUMP
-            p.repeats.append([index, n])
+            p.repeats.append([index, n, erp[0]])
             return NEXT
         return repeat
 

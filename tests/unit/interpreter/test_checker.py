@@ -99,6 +99,24 @@ def test_unbalanced_repeats() -> None:
         (C.UNBALANCED_REPEAT, 1, 1), (C.UNBALANCED_REPEAT, 2, 1)]
 
 
+def test_repeats_nest_at_most_16_deep() -> None:
+    nested = "".join("(RPT,2)\n" for _ in range(16)) + "".join("(ERP)\n" for _ in range(16))
+    assert diagnose(nested) == []
+    deeper = "(RPT,2)\n" + nested + "(ERP)\n"
+    assert diagnose(deeper) == [(C.REPEAT_TOO_DEEP, 17, 1)]
+
+
+def test_a_jump_into_an_rpt_body_from_outside_it_is_flagged() -> None:
+    # Back into a finished body (from after its ERP), and in from before its RPT.
+    text = '(RPT,2)\n"IN"\nG1X1F100\n(ERP)\n(BNC,IN)\n'
+    assert diagnose(text) == [(C.JUMP_INTO_REPEAT, 5, 1)]
+    assert diagnose('(BNC,IN)\n(RPT,2)\n"IN"\n(ERP)\n') == [(C.JUMP_INTO_REPEAT, 1, 1)]
+    # Inside its own body, to its RPT line, or past the ERP: no warning.
+    assert diagnose('(RPT,2)\n"IN"\nG1X1F100\n(BNC,IN)\n(ERP)\n') == []
+    assert diagnose('"L"(RPT,2)\nG91G1X0.001F6000\n(BNC,L)\n(ERP)\n') == []
+    assert diagnose('(RPT,2)\n(BNC,OUT)\n(ERP)\n"OUT"\n') == []
+
+
 def test_exe_program_and_device_must_exist_when_storage_is_known() -> None:
     ctx = {
         "find_program": lambda name, device: name.upper() == "PROG92",

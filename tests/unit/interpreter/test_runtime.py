@@ -11,7 +11,7 @@ from ncgate.interpreter.engine import ProcessState, WaitKind
 from ncgate.interpreter.engine.states import Stage
 from ncgate.interpreter.settings import SndPolicy
 
-from ...helpers import simulate
+from ...helpers import make_sim, simulate
 
 
 def test_early_snd_blocks_the_sender_under_rendezvous() -> None:
@@ -309,6 +309,29 @@ def test_assignment_rounds_half_away_from_zero() -> None:
     sim = simulate({"A": "N1E8=10.3+20.7\nN2SYVAR2=E8\nN3SYVAR3=-2.5\nN4SYVAR4=2.5\n"})
     values = [e["value"] for e in sim.events("write")]
     assert values == [31, -3, 3]
+
+
+def test_a_jump_out_of_an_rpt_body_ends_its_repeat() -> None:
+    """Issue 25: a loop that jumps back to its RPT stacked one repeat frame a turn (388 MB
+    after 40 simulated s).  Leaving the body pops the frame: the stack stays one deep."""
+    sim = make_sim({"A": '"L"(RPT,2)\nG91G1X0.001F6000\n(BNC,L)\n(ERP)\nM30\n'})
+    sim.engine.start("A")
+    depths = []
+    for until in range(1, 6):
+        sim.run(until=float(until))
+        depths.append(len(sim.engine.processes[1].repeats))
+    assert sim.engine.status(1).blocks > 1_000  # it looped
+    assert depths == [1] * 5
+
+
+def test_a_jump_out_of_nested_repeats_then_their_erp_counts_right() -> None:
+    """Jumping out of an inner body to the outer body's ERP ends the inner repeat only: the
+    outer one still repeats its count (3 x E1 += 1)."""
+    text = ('(RPT,3)\n(RPT,5)\nE1=E1+1\n(BNC,NEXT)\n(ERP)\n"NEXT"\n(ERP)\n'
+            "SYVAR1=E1\nM30\n")
+    sim = simulate({"A": text})
+    assert sim.outcome == "idle" and sim.image.read("SYVAR", 1, "IN") == 3
+    assert sim.engine.processes[1].repeats == []
 
 
 def test_repeat_and_branches() -> None:
