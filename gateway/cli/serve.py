@@ -22,7 +22,7 @@ from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
-from ncgate.interpreter.engine.states import WaitKind
+from ncgate.interpreter.engine.states import WaitKind, describe_where
 
 log = logging.getLogger("ncgate")
 
@@ -72,8 +72,9 @@ def describe(event: Event) -> str | None:
     if isinstance(event, ev.Deadlock):
         return event.message
     if isinstance(event, ev.Stall):
-        return "stall: " + "; ".join(f"P{b.proc} {b.prog}:{b.line} {b.reason}"
-                                     for b in event.blocked)
+        return "stall: " + "; ".join(
+            f"P{b.proc} {describe_where((b.prog, b.line, b.n))} {b.reason}"
+            for b in event.blocked)
     if isinstance(event, ev.Hazard):
         return f"P{proc} hazard{at}: {event.message}"
     return None

@@ -344,10 +344,26 @@ class Engine:
             if wait is not None:
                 note = wait.note() if wait.note is not None else None
                 reason = f"{wait.code} {wait.reason()}" + (f"; {note}" if note else "")
+                reason += self._alarmed_partners(wait)
                 out.append(Blocked(p.number, *wait.where, reason))
             else:
                 out.append(Blocked(p.number, *p.where, "blocked"))
         return tuple(out)
+
+    def _alarmed_partners(self, wait: WaitRecord) -> str:
+        """"; P2 is in ALARM AL101 at DZ.nc:3 N30: division by zero" for each process the
+        wait is on that is in ALARM: what ends a stall is that alarm's reset."""
+        if wait.kind not in (WaitKind.PROC, WaitKind.SND, WaitKind.EXE):
+            return ""
+        out = ""
+        for number in wait.targets if wait.targets is not None else (wait.target,):
+            q = self.processes.get(number)
+            if q is None or q.alarm is None:
+                continue
+            code, message, where = q.alarm
+            at = f" at {describe_where(where)}" if where is not None else ""
+            out += f"; P{number} is in ALARM {AlarmCode(code).label}{at}: {message}"
+        return out
 
     @property
     def stalled(self) -> bool:

@@ -258,12 +258,16 @@ class SignalBoard:
                     if act.params:
                         self._store(p, act, got, where)
                     return True
+        on = act.on
+        if channels and len(missing) < len(set(channels)):
+            # Some signals were already there: the wait event names only those still awaited.
+            on = ev.SignalOn(act.id, tuple(missing), act.level)
         pending = Pending(self, p, act, None, missing, got)
         # Positional (this is on every WAIT that waits): kind, target, code, where, since,
         # stage, cond, value, writer, handle, timeout, probe, on, text, targets, note.
         record = WaitRecord(_PROC, missing[0] if missing else 0, act.code, where,
                             self.host.now, stage, None, None, None, pending, None, None,
-                            act.on, pending.reason, tuple(missing), pending.note)
+                            on, pending.reason, tuple(missing), pending.note)
         pending.record = record
         key = (act.id, p.number if missing else 0)
         queue = self._waiting.get(key)

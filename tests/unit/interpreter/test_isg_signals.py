@@ -317,3 +317,25 @@ N40 M30
                                              "N10 G01 X100 F6000\nN11 G01 X200"),
                      processes=2, config="lookahead = 2")
     assert [(e["proc"], e["t"]) for e in events(result, "end")] == [(2, 0.5), (1, 2.0)]
+
+
+def test_a_wait_event_names_only_the_channels_still_awaited(tmp_path: Path) -> None:
+    """Channel 2's signal is stored before channel 1 waits: the wait is for channel 3 only,
+    and its trace event says so (it listed both)."""
+    result = isg_sim(tmp_path, """%channel1
+N10 G01 X100 F6000
+N20 #FLUSH
+N30 #WAIT [ID1 CH2 CH3]
+M30
+%channel2
+N10 #SIGNAL [ID1 CH1]
+M30
+%channel3
+N10 G01 X100 F3000
+N20 #FLUSH
+N30 #SIGNAL [ID1 CH1]
+M30
+""")
+    wait = next(e for e in events(result, "wait") if e["proc"] == 1 and e["n"] == 30)
+    assert wait["on"]["from"] == [3]
+    assert not events(result, "alarm")

@@ -404,3 +404,23 @@ def test_a_decode_time_read_of_the_processs_own_queued_hash_write_is_a_hazard() 
                     ).events("hazard") == []
     flushed = simulate({"A": text}, sync_reads=True)
     assert flushed.events("hazard") == [] and flushed.engine.processes[1].E[1] == 5
+
+
+def test_a_stall_on_a_process_in_alarm_names_that_alarm() -> None:
+    """P1 waits for an SND from P2, which is in ALARM: what ends the stall is that alarm's
+    reset, so the report says which alarm, and where."""
+    programs = {"A": "N1(EXE,2,B)\nN2(WAI,2)\nN3M30\n", "B": "N1E1=0\nN2E2=5/E1\nN3(SND,1)\n"}
+    sim = simulate(programs)
+    assert sim.outcome == "blocked"
+    (blocked,) = sim.engine.blocked()
+    assert blocked.proc == 1 and blocked.reason.endswith(
+        "; P2 is in ALARM AL101 at B.nc:2 N2: division by zero")
+
+
+def test_the_run_logs_stall_line_keeps_the_n_numbers() -> None:
+    from ncgate.gateway.cli.serve import describe
+    from ncgate.interpreter.engine import events as ev
+
+    sim = simulate({"A": "N1G1X1F60\nN7(WAI,SA10=1)\nN8M30\n"})
+    stall = ev.Stall(1, sim.engine.now, 0, None, sim.engine.blocked())
+    assert describe(stall) == "stall: P1 A.nc:2 N7 (WAI,SA10=1) waits for SA10=1 (now 0)"
