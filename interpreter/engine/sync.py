@@ -48,7 +48,7 @@ from ncgate.interpreter.engine.actions import Execute, WaitCondition
 from ncgate.interpreter.engine.events import Blocked
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import Process
-from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where
+from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where, describe_where
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
 
@@ -362,7 +362,12 @@ class Sync:
     def became_free(self, p: Process) -> None:
         """P is IDLE (or in ALARM): tokens to it go, its SND partners and EXE waiters move."""
         for key in [k for k in self._tokens if k[1] == p.number]:
-            del self._tokens[key]
+            state = "is in ALARM" if p.alarm is not None else "ended its program"
+            for sent_from in self._tokens.pop(key):
+                at = f" at {describe_where(sent_from)}" if sent_from is not None else ""
+                self._record(ev.Hazard, self._host.now, key[0], sent_from,
+                             f"latched SND from P{key[0]}{at} to P{p.number} discarded: "
+                             f"P{p.number} {state} before a WAI took it")
         for (sender, target), q in list(self._snd_pending.items()):
             if target == p.number:
                 del self._snd_pending[(sender, target)]

@@ -156,7 +156,7 @@ class _BlockCompiler:
                                                      Dwell | InertCode)]
         ops: list[Op] = []
         if self.host.settings.sync_reads and self._reads_image(items):
-            ops.append(self.host.flush)
+            ops.append(self._sync_read_op())
         if not (self.host.settings.sync_reads and self._reads_image(items)):
             ops.extend(self._own_write_reads(items, block.synced))
         if block.synced:
@@ -463,6 +463,16 @@ class _BlockCompiler:
             p.repeats.pop()
             return NEXT
         return end_repeat
+
+    def _sync_read_op(self) -> Op:
+        """nc.sync_reads: a block that reads the image first waits for the motion queued
+        before it -- a FLUSH wait, traced (wait, resume) and shown like ISG's #FLUSH."""
+        flush_wait = self.host.flush_wait
+        where = self.where
+
+        def sync_read(p: Process) -> Step:
+            return NEXT if flush_wait(p, where, "(sync read)") else WAIT_NEXT
+        return sync_read
 
     def _early_exe(self, item: Exe, act: Op) -> Op:
         """A plain (not #) EXE acts when the decoder reaches it (spec 2.4), as a plain SND,

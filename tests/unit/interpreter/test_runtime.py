@@ -248,6 +248,10 @@ def test_sync_reads_wait_for_the_motion_queue() -> None:
     for sync, expected in ((False, 0), (True, 7)):
         sim = simulate_with_write(programs, sync_reads=sync)
         assert sim.first("write", var="SYVAR2")["value"] == expected
+    # The wait is in the trace, as a wait for the interpolator, from N2 until N1's move ends.
+    wait = sim.first("wait", proc=1)
+    assert (wait["t"], wait["n"], wait["on"]) == (0.0, 2, {"flush": True})
+    assert sim.first("resume", proc=1)["t"] == 1.0
 
 
 def simulate_with_write(programs: dict[str, str], **settings: object):  # type: ignore[no-untyped-def]
@@ -424,3 +428,15 @@ def test_the_run_logs_stall_line_keeps_the_n_numbers() -> None:
     sim = simulate({"A": "N1G1X1F60\nN7(WAI,SA10=1)\nN8M30\n"})
     stall = ev.Stall(1, sim.engine.now, 0, None, sim.engine.blocked())
     assert describe(stall) == "stall: P1 A.nc:2 N7 (WAI,SA10=1) waits for SA10=1 (now 0)"
+
+
+def test_a_latched_snd_discarded_because_its_target_ended_is_a_hazard_in_the_trace() -> None:
+    """Under latched SNDs, P1's SND to P2 waits as a token; P2 ends without taking it: the
+    token is dropped, and the trace says so (it said nothing)."""
+    programs = {"A": "N1(EXE,2,B)\nN2(SND,2)\nN3M30\n", "B": "N1G1X1F600\nN2M30\n"}
+    sim = simulate(programs, snd=SndPolicy.LATCHED)
+    assert sim.outcome == "idle"
+    dropped = [e for e in sim.events("hazard") if "discarded" in e["message"]]
+    assert [(e["proc"], e["n"], e["t"]) for e in dropped] == [(1, 2, 0.1)]
+    assert dropped[0]["message"] == ("latched SND from P1 at A.nc:2 N2 to P2 discarded: P2 "
+                                     "ended its program before a WAI took it")
