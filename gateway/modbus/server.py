@@ -197,9 +197,12 @@ class RequestHandler:
             table = Table.HOLDING if fc == FC.READ_HOLDING_REGISTERS else Table.INPUT
             try:
                 regs = self.map.read_registers(self.backend, table, address, count)
+                return cast(bytes, _REGISTERS[count].pack(fc, 2 * count, *regs))
             except ModbusError as exc:
                 return exception_pdu(fc, exc.code)
-            return cast(bytes, _REGISTERS[count].pack(fc, 2 * count, *regs))
+            except Exception:  # a bug of ours (a value that does not pack): 04, not a close
+                log.exception("modbus: read %s from %s failed", pdu.hex(), source)
+                return exception_pdu(fc, DEVICE_FAILURE)
         try:
             validate(pdu)  # (an FC3/FC4 of another length: 03)
             if fc == FC.ENCAPSULATED_INTERFACE:

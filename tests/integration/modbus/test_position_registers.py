@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from ncgate.gateway import Gateway
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
@@ -59,3 +61,33 @@ async def test_a_position_too_large_for_any_integer_reads_as_the_bound(tmp_path:
     positions = await _positions(tmp_path, "isg", "-inf", "inf",
                                  "G01 X1E306 Y-1E306 F1E308\nM30\n")
     assert positions == (2_147_483_647, -2_147_483_648, 0)
+
+
+async def test_a_read_that_fails_inside_the_gateway_answers_04_and_keeps_the_connection(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whatever goes wrong while a register read is answered (a bug of ours, as the
+    OverflowError was), the poller gets exception 04 and its connection stays: the next read
+    is answered."""
+    from pymodbus.client import AsyncModbusTcpClient
+
+    from ncgate.gateway.modbus import map as modbus_map
+
+    cell = write_cell(tmp_path, CELL.format(dialect="nc110", lo="-inf", hi="inf"),
+                      {"MOVE": "N1M30\n"})
+    async with Gateway(ncgate_test_config(cell / "ncgate.toml")) as gw:
+        real = modbus_map.process_registers
+
+        def failing(engine: object, k: int) -> list[int]:
+            return [1 << 40, *real(engine, k)[1:]]  # type: ignore[arg-type]
+
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            monkeypatch.setattr(modbus_map, "process_registers", failing)
+            failed = await client.read_input_registers(100, count=4, device_id=1)
+            monkeypatch.setattr(modbus_map, "process_registers", real)
+            answered = await client.read_input_registers(100, count=4, device_id=1)
+        finally:
+            client.close()
+    assert failed.isError() and failed.exception_code == 4
+    assert not answered.isError() and answered.registers[0] == 0  # IDLE
