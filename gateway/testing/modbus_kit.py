@@ -47,6 +47,8 @@ class PlcSeen:
     max_scan_us: int
     overruns: int
     fault_line: int
+    late_us: int = 0  # how late the last scan started
+    max_late_us: int = 0  # the largest lateness since the PLC started
 
 
 class VirtualPLC:
@@ -156,10 +158,10 @@ class VirtualPLC:
                                   f"(it is {now.name})") from None
 
     async def plc_status(self) -> PlcSeen:
-        """The PLC status block (input registers ``modbus.map.plc_status``..+9)."""
-        r = await self._input(self.map.PLC_BASE, 10)
+        """The PLC status block (input registers ``modbus.map.plc_status``..+13)."""
+        r = await self._input(self.map.PLC_BASE, 14)
         return PlcSeen(PlcState(r[0]), r[1] << 16 | r[2], r[3] << 16 | r[4], r[5] << 16 | r[6],
-                       r[7] << 16 | r[8], r[9])
+                       r[7] << 16 | r[8], r[9], r[10] << 16 | r[11], r[12] << 16 | r[13])
 
     async def command(self, word: int) -> None:
         """1 cycle start, 2 feed hold, 3 reset."""

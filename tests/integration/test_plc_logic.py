@@ -125,6 +125,10 @@ async def test_a_fault_is_raised_and_cleared_over_modbus(tmp_path: Path) -> None
             assert await plc.get("SYVAR2") == 25
             seen = await plc.plc_status()
             assert (seen.state, seen.fault_line) == (PlcState.RUNNING, 0)
+            # The lateness pair is the block's last four registers, as the PLC reports it.
+            status = gw.plc_status  # read after: its largest lateness is no smaller
+            assert status is not None and seen.late_us <= seen.max_late_us
+            assert seen.max_late_us <= status.max_lateness_us
             await plc.set("SYVAR1", 0)  # again: outputs hold at the last good scan's
             with pytest.raises(PlcFaulted):
                 await watch.until("main.q", -1)
