@@ -320,6 +320,8 @@ class Gateway:
             return
         self.door.apply(item)
         self._settle()
+        if type(item) is Start or type(item) is Command:
+            self._read_ahead(item)
 
     def _loaded(self, task: asyncio.Task[None]) -> None:
         self._loading.discard(task)
@@ -332,9 +334,11 @@ class Gateway:
         self.door.precheck(item)
         load = self._load_needed(item)
         if load is not None:
-            await self._load(*load)
+            await self._load(*load)  # and reads ahead of its EXEs
         self.door.apply(item)
         self._settle()
+        if load is None and (type(item) is Start or type(item) is Command):
+            self._read_ahead(item)
 
     def _load_needed(self, item: Input) -> tuple[str, int] | None:
         """(program, process) when ``item`` starts a program the store has not read yet."""
@@ -370,9 +374,25 @@ class Gateway:
             store.preload(name, process)
             with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
                 done.get_loop().call_soon_threadsafe(finish)
+            store.read_ahead(name, process)  # then what its EXEs will start, meanwhile
 
         threading.Thread(target=work, name=f"ncgate load {name}", daemon=True).start()
         await done
+
+    def _read_ahead(self, item: Input) -> None:
+        """After a start of a program that was read already: read what its EXEs start, in
+        a thread of its own (an EXE on the loop then finds its program read)."""
+        if isinstance(item, Start):
+            name, process = item.program or self.config.nc.main, item.process
+        elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
+            name, process = self.config.nc.main, 1
+        else:
+            return
+        if not name:
+            return
+        store = self.runtime.store
+        threading.Thread(target=store.read_ahead, args=(name, process),
+                         name=f"ncgate read-ahead {name}", daemon=True).start()
 
     async def _load_then_apply(self, item: Input, name: str, process: int) -> None:
         await self._load(name, process)

@@ -52,6 +52,9 @@ def dialect_options(config: Config, dialect: Dialect | None = None) -> DialectOp
         own=dataclasses.asdict(own) if own is not None else {})
 
 
+READ_AHEAD = 64  # programs read ahead of the EXEs of one started program, at most
+
+
 class ProgramStore:
     def __init__(self, config: Config) -> None:
         self.config = config
@@ -67,6 +70,10 @@ class ProgramStore:
         # the session record hashes the files a session used.
         self.loaded: list[Callable[[Path], None]] = []
         self._announced: dict[Path, Version] = {}
+        # The (process, program) of a program's EXEs (the front end's exe_calls, set by the
+        # wiring): what read_ahead follows.
+        self.calls: Callable[[ProgramText], frozenset[tuple[int, str]]] = (
+            lambda program: frozenset())
 
     def channels(self, name: str) -> tuple[int, ...]:
         """The processes program ``name`` starts in when run on its own (an ISG file's
@@ -119,3 +126,31 @@ class ProgramStore:
             self._read(path, file_version(path), process)
         except (ProgramNotFoundError, OSError):
             pass  # the load on the loop says so
+
+    def read_ahead(self, name: str, process: int, limit: int = READ_AHEAD) -> int:
+        """Read (any thread) the programs ``name``'s EXEs start, and those theirs start, up to
+        ``limit`` programs: an EXE on the loop then finds its program read (a real control
+        has its programs in memory).  Returns how many were read now."""
+        todo = [(name, process)]
+        seen = {(name.upper(), process)}
+        read = 0
+        while todo and len(seen) <= limit:
+            current, k = todo.pop()
+            try:
+                path = self.storage.locate(current, None)
+                version = file_version(path)
+                with self._lock:
+                    cached = self._cache.get((path, k))
+                if cached is None or cached[0] != version:
+                    read += 1
+                program = self._read(path, version, k)
+            except (ProgramNotFoundError, OSError):
+                continue  # the EXE says so, when it runs
+            if isinstance(program, Exception):
+                continue
+            for callee_process, callee in self.calls(program):
+                key = (callee.upper(), callee_process)
+                if key not in seen:
+                    seen.add(key)
+                    todo.append((callee, callee_process))
+        return read

@@ -57,6 +57,7 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     front_end = front_end_of(config)
     engine = Engine(runtime_settings(config, closed), image, store, front_end, trace)
     front_end.attach(engine, engine.reset_listeners)
+    store.calls = front_end.exe_calls  # what the gateway reads ahead of a program's EXEs
 
     def on_write(changes: list[Change] | tuple[Change, ...], writer: str) -> None:
         for change in changes:

@@ -237,3 +237,49 @@ async def test_a_write_storm_does_not_slow_the_machine(tmp_path: Path) -> None:
     assert len(rounds) > 20
     gaps = {round(b - a, 6) for a, b in itertools.pairwise(rounds)}
     assert gaps == {0.01}, sorted(gaps)[-5:]
+
+
+async def test_the_programs_an_exe_starts_are_read_ahead_off_the_loop(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A started program's EXE chain (A -> BIG -> C) is read in a thread while A runs, so
+    the EXEs find their programs read: nothing of BIG or C is read on the loop, where 2 MB
+    would stall every fieldbus client (issue 24)."""
+    import threading
+
+    from ncgate.gateway.programs import ProgramStore
+
+    lines = [f"N{n % 9999}G1X{n % 500}Y{(n * 7) % 500}F60000\n" for n in range(100_000)]
+    (tmp_path / "BIG.nc").write_text("N1(EXE,3,C)\n" + "".join(lines) + "M30\n")
+    (tmp_path / "C.nc").write_text("N1M30\n")
+    (tmp_path / "A.nc").write_text("N1(WAI,SA5=1)\nN2(EXE,2,BIG)\nN3M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
+    read_on: dict[str, str] = {}
+    real_read = ProgramStore._read
+
+    def spy(self: ProgramStore, path: Path, version: object, process: int) -> object:
+        result = real_read(self, path, version, process)  # type: ignore[arg-type]
+        read_on.setdefault(path.stem, threading.current_thread().name)
+        return result
+
+    monkeypatch.setattr(ProgramStore, "_read", spy)
+    c_started = asyncio.Event()
+
+    def listen(event: ev.Event) -> None:
+        if isinstance(event, ev.Start) and event.proc == 3:
+            c_started.set()
+
+    config = load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)
+    async with Gateway(config, listeners=[listen]) as gw:
+        await gw.start()  # A is read in a thread, which then reads ahead of A's EXEs
+        for reader in [t for t in threading.enumerate() if t.name == "ncgate load A"]:
+            await asyncio.to_thread(reader.join, 60)  # (gone already: it is done)
+        store = gw.runtime.store
+        assert store.ready("BIG", 2) and store.ready("C", 3)
+        assert gw.status(1).state.name == "WAIT_COND"  # A has not reached its EXE yet
+        gw.write("SA5", 1)
+        async with asyncio.timeout(30):
+            await c_started.wait()
+        starts = [(e["proc"], e["prog"]) for e in gw.trace if e["event"] == "start"]
+    assert starts == [(1, "A"), (2, "BIG"), (3, "C")]
+    main = threading.main_thread().name
+    assert read_on["BIG"] != main and read_on["C"] != main, read_on
