@@ -26,14 +26,12 @@ from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
     """The engine's settings: every one of them that ``[nc]`` holds, by the same name; the
-    dialect adds what it needs of the engine (ISG: the buffer effect and operator starts in
-    every channel, spec 5)."""
+    dialect adds what it needs of the engine (ISG: the buffer effect, spec 5.4)."""
     nc = config.nc
     names = {f.name for f in dataclasses.fields(RuntimeSettings)} & set(dir(nc))
     dialect = dialect_of(nc.dialect)
     return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed,
-                           buffered=dialect.buffered,
-                           any_process_starts=dialect.any_process_starts)
+                           buffered=dialect.buffered)
 
 
 def front_end_of(config: Config) -> DialectFrontEnd:

@@ -93,11 +93,6 @@ class DialectPlugin(Protocol):
     def buffered(self) -> bool:
         """The engine's buffer effect (``RuntimeSettings.buffered``)."""
 
-    @property
-    def any_process_starts(self) -> bool:
-        """Outside a closed simulation any process may be started by the operator
-        (``RuntimeSettings.any_process_starts``)."""
-
     def front_end(self, options: DialectOptions) -> DialectFrontEnd: ...
 
     def reader(self, options: DialectOptions, storage: Storage) -> ProgramReader: ...

@@ -65,6 +65,3 @@ class RuntimeSettings:
     # The interpolator takes a block only from a full buffer (lookahead blocks), or once the
     # decoder has reached the end, a flush or a synchronous read: ISG's buffer effect.
     buffered: bool = False
-    # Outside a closed simulation the operator may start a program in any process (ISG:
-    # channel by channel), so a wait for an idle process is no orphan there.
-    any_process_starts: bool = False

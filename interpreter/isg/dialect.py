@@ -71,7 +71,6 @@ class _Reader:
 class IsgDialect:
     name = Dialect.ISG
     buffered = True  # the buffer effect (spec 5.4)
-    any_process_starts = True  # the operator starts channel by channel
 
     def front_end(self, options: DialectOptions) -> IsgFrontEnd:
         return IsgFrontEnd(isg_options(options))

@@ -79,7 +79,6 @@ class _Reader:
 class Nc110Dialect:
     name = Dialect.NC110
     buffered = False
-    any_process_starts = False
 
     def front_end(self, options: DialectOptions) -> NC110:
         return NC110()
