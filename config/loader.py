@@ -767,6 +767,9 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
                      "machine: set a token (or web.host = \"127.0.0.1\")")
     if web.token is not None and len(web.token) < 8:
         raise r.fail("web.token", "expected at least 8 characters")
+    if web.token is not None and web.token != web.token.strip():
+        # A browser or curl sends the token as typed: one pasted with a space never matches.
+        raise r.fail("web.token", "has spaces or line breaks around it; remove them")
     # The Modbus map's regions are checked against each other where Modbus is served
     # (ModbusMap), so that `check` and `sim` take a config whose map would not fit.
 

@@ -52,6 +52,16 @@ STATUS_EVERY_S = 0.25  # a stream's status at most this often (and when anything
 PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients keep it
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
+# On every answer, the page's included: nothing of another origin runs in it, no other site
+# may frame it (a framed console takes a click on a decoy as the operator's: clickjacking),
+# no answer is sniffed as another type, no address leaks in a Referer.  The page has no
+# inline script or style, so the strictest CSP holds (a real-browser test loads it).
+SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; frame-ancestors 'none'",
+    "X-Frame-Options": "DENY",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
 COMMANDS = {"start": 1, "hold": 2, "reset": 3}
 # Why the door refused an input -> the HTTP status the API answers (the JSON body says the
 # reason in words).  Total: a test checks that every Reason has a row.
@@ -109,6 +119,7 @@ class WebConsole:
         the key."""
         loop = asyncio.get_running_loop()
         app = web.Application(middlewares=[self._guard], client_max_size=BODY_LIMIT)
+        app.on_response_prepare.append(_secure)
         app.router.add_get("/", self._asset("index.html"))
         for name in ASSETS:
             app.router.add_get(f"/static/{name}", self._asset(name))
@@ -267,7 +278,7 @@ class WebConsole:
             status_at = written_at = -1e9
             loop = asyncio.get_running_loop()
             await self._send(response, "retry: 1000\n\n")
-            while not feed.closed:
+            while not feed.closed and not _gone(request):
                 parts = []
                 now = loop.time()
                 if now - status_at >= STATUS_EVERY_S:  # first: it names the session
@@ -306,6 +317,8 @@ class WebConsole:
             body = await request.json()
         except (ValueError, UnicodeDecodeError):
             raise ApiError(400, "the body is not JSON") from None
+        except RecursionError:  # [[[[...: deeper than the parser's stack
+            raise ApiError(400, "the body is nested too deeply") from None
         if not isinstance(body, dict):
             raise ApiError(400, "expected a JSON object")
         return body
@@ -360,6 +373,16 @@ class WebConsole:
                                       "process": process})
         log.info("web %s: %s", request.remote, command)
         return web.json_response({"command": command})
+
+
+async def _secure(request: web.Request, response: web.StreamResponse) -> None:
+    response.headers.update(SECURITY_HEADERS)
+
+
+def _gone(request: web.Request) -> bool:
+    """The client closed its connection (aiohttp does not cancel a handler for that)."""
+    transport = request.transport
+    return transport is None or transport.is_closing()
 
 
 def _source(request: web.Request) -> Source:

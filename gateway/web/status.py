@@ -7,11 +7,15 @@ here (the HTTP side is :mod:`ncgate.gateway.web.console`).
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import TYPE_CHECKING, Any
 
 from ncgate import __version__
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import ProcessState
+from ncgate.plc.st.compiler import ProgramVar
+from ncgate.plc.st.types import ArrayOf, FbOf, Type
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
@@ -85,17 +89,35 @@ def plc(gw: Gateway) -> dict[str, Any] | None:
                 value = runtime.read(f"{name}.{var.display}")
             except KeyError:
                 continue
-            if not isinstance(value, bool | int | float | str | list):
-                # A function block instance: its outputs are read by path (gw.plc.read).
-                value = str(var.type)
             variables.append({"path": f"{name}.{var.display}", "type": str(var.type),
-                              "value": value, "retain": var.retain})
+                              "value": plain(value, var.type, runtime.logic.fb_vars),
+                              "retain": var.retain})
     return {"state": status.state.name, "scans": status.scans,
             "last_scan_us": status.last_scan_us, "max_scan_us": status.max_scan_us,
             "overruns": status.overruns, "last_lateness_us": status.last_lateness_us,
             "max_lateness_us": status.max_lateness_us,
             "fault": str(status.fault) if status.fault is not None else None,
             "variables": variables}
+
+
+def plain(value: Any, t: Type, fb_vars: dict[str, dict[str, ProgramVar]]) -> Any:
+    """A PLC value as JSON has it, whatever its ST type: an array a list, a function block
+    instance an object of its members (a TON's ``IN``, ``PT``, ``Q``, ``ET``; a user block's
+    variables), a REAL that is not finite its name (JSON has no inf or NaN)."""
+    if isinstance(value, bool | int | str) or value is None:
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, list | tuple):
+        element = t.element if isinstance(t, ArrayOf) else t
+        return [plain(item, element, fb_vars) for item in value]
+    if isinstance(t, FbOf) and not t.std and t.name in fb_vars:
+        return {var.display: plain(getattr(value, f"v_{key}", None), var.type, fb_vars)
+                for key, var in fb_vars[t.name].items()}
+    if dataclasses.is_dataclass(value):  # a standard block: its IEC members, not its state
+        return {f.name: plain(getattr(value, f.name), "", fb_vars)
+                for f in dataclasses.fields(value) if not f.name.startswith("_")}
+    return str(value)  # nothing the compiler makes today; said rather than a 500
 
 
 def fieldbus(gw: Gateway) -> dict[str, Any]:

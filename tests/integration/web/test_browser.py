@@ -101,6 +101,7 @@ def browser() -> Iterator[Any]:
     for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
                 "--window-size=1400,1200"):
         options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
     try:
         yield driver
@@ -199,5 +200,32 @@ def test_feed_hold_and_starting_a_program_from_the_form(browser: Any, web_port: 
         # Starting it again: the process is busy; the page says why.
         browser.find_element(By.CSS_SELECTOR, "#start-form button").click()
         until(browser, "the refusal", lambda d: "process 3 is busy" in text(d, "#message"))
+    finally:
+        run.stop()
+
+
+def test_the_page_runs_under_its_csp_and_no_other_site_may_frame_it(browser: Any,
+                                                                     web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-4")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live page", lambda d: text(d, "#conn") == "live"
+              and len(d.find_elements(By.CSS_SELECTOR, ".lane")) == 5
+              and d.find_elements(By.CSS_SELECTOR, "#start-program option"))
+        browser.find_element(By.ID, "btn-start").click()
+        until(browser, "P2 waiting, drawn on the timeline",
+              lambda d: text(d, "#lane-2 .state") == "WAIT_COND"
+              and d.find_elements(By.CSS_SELECTOR, "#timeline rect.seg"))
+        logged = [entry["message"] for entry in browser.get_log("browser")]
+        assert not [line for line in logged if "Content Security Policy" in line
+                    or "Refused" in line], logged
+        # Another site frames the console (clickjacking): the browser refuses to show it.
+        browser.get(f"data:text/html,<iframe src='http://127.0.0.1:{web_port}/'></iframe>")
+        browser.switch_to.frame(0)
+        shown = until(browser, "the frame loaded", lambda d: d.execute_script(
+            "return document.readyState === 'complete' && document.URL !== 'about:blank'"
+            " && document.URL"))
+        assert shown.startswith("chrome-error:"), shown  # refused: the browser's error page
+        assert not browser.find_elements(By.ID, "conn")
     finally:
         run.stop()

@@ -16,6 +16,7 @@ import pytest
 from ncgate.config import ConfigError
 from ncgate.gateway import Gateway
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.gateway.testing.plc_kit import PlcWatch
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
 from ...conftest import EXAMPLES
@@ -84,7 +85,7 @@ async def test_status_shows_the_plc_its_variables_and_the_modbus_clients(
         assert watch["cell.cycles"]["type"] == "INT"
         assert watch["cell.cycles"]["value"] == gw.plc.read("cell.cycles") == 2
         assert watch["cell.total"]["retain"] is True
-        assert watch["cell.answer"]["value"] == "TON"  # a function block: read it by path
+        assert watch["cell.answer"]["value"] == {"IN": False, "PT": 500, "Q": False, "ET": 0}
         clients = status["fieldbus"]["modbus"]["clients"]
         assert len(clients) == 1 and clients[0].startswith("127.0.0.1:")
         assert status["image"]["writers"]["SA"]["10"] == "plc"
@@ -98,7 +99,8 @@ async def test_a_write_is_stored_as_web_and_releases_the_wait(
     assert (code, body) == (200, {"var": "SA10", "value": 1})
     assert gw.read("SA10") == 1
     assert gw.image.last_writer("SA", 10, "bit") == "web 127.0.0.1"
-    resumed = [e for e in gw.trace if e["event"] == "resume" and e["proc"] == 2]
+    resumed = [e for e in gw.trace if e["event"] == "resume" and e["proc"] == 2
+               and e["n"] == 40]
     assert resumed and resumed[0]["by"] == "cond"
     async with http.get("/api/status") as r:
         status = await r.json()
@@ -343,3 +345,142 @@ async def test_streams_beyond_max_streams_are_refused() -> None:
             async with http.get("/api/stream") as second:
                 assert second.status == 503
                 assert "max_streams" in (await second.json())["error"]
+
+
+# -- safe to leave open (issue 30 item 2) -----------------------------------------------------
+
+SECURITY = {"Content-Security-Policy": "default-src 'self'; frame-ancestors 'none'",
+            "X-Frame-Options": "DENY", "X-Content-Type-Options": "nosniff",
+            "Referrer-Policy": "no-referrer"}
+
+
+async def test_every_answer_carries_the_security_headers(gw: Gateway,
+                                                         http: aiohttp.ClientSession) -> None:
+    answers = []
+    for path in ("/", "/static/app.js", "/static/style.css", "/api/status", "/api/events",
+                 "/api/programs", "/api/timeline.svg", "/api/nothing"):
+        async with http.get(path) as r:
+            answers.append((path, r.status, r.headers))
+    async with http.post("/api/write", json={"var": "SA10", "value": 2}) as r:
+        answers.append(("POST /api/write", r.status, r.headers))
+    async with http.get("/api/status", headers={"Host": "evil.example"}) as r:
+        answers.append(("foreign host", r.status, r.headers))
+    async with http.get("/api/stream") as r:
+        answers.append(("/api/stream", r.status, r.headers))
+    assert [status for _, status, _ in answers] == [200] * 7 + [404, 422, 403, 200]
+    for path, _, headers in answers:
+        assert {k: headers.get(k) for k in SECURITY} == SECURITY, path
+
+
+def test_a_token_with_spaces_around_it_is_a_config_error(tmp_path: Path) -> None:
+    from ncgate.config import load_config
+
+    path = tmp_path / "ncgate.toml"
+    path.write_text('[web]\ntoken = " s3cret-token"\n')
+    with pytest.raises(ConfigError, match=r"ncgate\.toml.*web\.token: has spaces"):
+        load_config(path)
+    path.write_text('[web]\ntoken = "s3cret-token\\n"\n')
+    with pytest.raises(ConfigError, match=r"web\.token: has spaces"):
+        load_config(path)
+
+
+EVERY_TYPE = """\
+FUNCTION_BLOCK pulse
+VAR_INPUT
+  go : BOOL;
+END_VAR
+VAR_OUTPUT
+  count : INT;
+END_VAR
+VAR
+  t : TON;
+END_VAR
+t(IN := go, PT := T#20ms);
+IF t.Q THEN count := count + 1; END_IF
+END_FUNCTION_BLOCK
+
+PROGRAM every
+VAR
+  b : BOOL := TRUE; si : SINT := -5; i : INT := -300; di : DINT := 70000;
+  us : USINT := 5; ui : UINT := 60000; ud : UDINT := 4000000000;
+  by : BYTE := 16#FF; w : WORD := 16#FFFF; dw : DWORD := 16#FFFFFFFF;
+  r : REAL := 1.5; lr : LREAL := 2.25; tm : TIME := T#1s500ms;
+  zero : REAL; inf : REAL;
+  ints : ARRAY[1..3] OF INT;
+  t : ARRAY[2..15] OF TON;
+  edge : R_TRIG; fall : F_TRIG; tof1 : TOF; tp1 : TP;
+  up : CTU; down : CTD; both : CTUD; sr1 : SR; rs1 : RS;
+  mine : pulse;
+  many : ARRAY[0..1] OF pulse;
+END_VAR
+
+t[3](IN := TRUE, PT := T#10ms);
+ints[2] := 7;
+mine(go := TRUE);
+many[1](go := TRUE);
+END_PROGRAM
+"""
+
+
+async def test_every_st_type_the_plc_supports_serialises(tmp_path: Path) -> None:
+    """`t : ARRAY[2..15] OF TON;` made /api/status 500: every elementary type, TIME, arrays,
+    every standard block, a user block and an array of them, each as JSON with its members."""
+    (tmp_path / "every.st").write_text(EVERY_TYPE)
+    config = ncgate_test_config(**{"web.port": 0, "plc.logic": str(tmp_path / "every.st"),
+                                   "plc.retain_file": str(tmp_path / "r.sqlite")})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        await PlcWatch(gw).until("every.many[1].count", test=lambda count: count >= 1)
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/status") as r:
+            assert r.status == 200
+            text = await r.text()
+    watch = {v["path"][6:]: v["value"] for v in json.loads(text)["plc"]["variables"]}
+    assert {name: watch[name] for name in ("b", "si", "ud", "dw", "r", "tm", "ints")} == {
+        "b": True, "si": -5, "ud": 4000000000, "dw": 0xFFFFFFFF, "r": 1.5, "tm": 1500,
+        "ints": [0, 7, 0]}
+    assert len(watch["t"]) == 14 and watch["t"][0] == {"IN": False, "PT": 0, "Q": False,
+                                                       "ET": 0}
+    assert watch["t"][1]["IN"] is True and watch["t"][1]["PT"] == 10  # t[3]
+    assert set(watch["t"][1]) == {"IN", "PT", "Q", "ET"}
+    assert watch["edge"] == {"CLK": False, "Q": False}
+    assert set(watch["both"]) == {"CU", "CD", "R", "LD", "PV", "QU", "QD", "CV"}
+    for name in ("fall", "tof1", "tp1", "up", "down", "sr1", "rs1"):
+        assert isinstance(watch[name], dict) and watch[name], name
+    assert watch["mine"]["go"] is True and set(watch["mine"]) == {"go", "count", "t"}
+    assert watch["mine"]["t"]["PT"] == 20
+    assert watch["many"][0]["go"] is False and watch["many"][1]["go"] is True
+    assert watch["many"][1]["count"] >= 1
+
+
+@pytest.mark.parametrize(("body", "status"), [
+    (b"[" * 8000 + b"]" * 8000, 400),                      # deeper than the parser's stack
+    (b'{"var": "SA10", "value": ' + b"[" * 5000 + b"]" * 5000 + b"}", 400),
+    (b'{"var": "SA10", "value": 1, "pad": "' + b"x" * 100_000 + b'"}', 413),
+])
+async def test_a_deeply_nested_or_huge_body_is_400_or_413(
+        gw: Gateway, http: aiohttp.ClientSession, body: bytes, status: int) -> None:
+    async with http.post("/api/write", data=body,
+                         headers={"Content-Type": "application/json"}) as r:
+        assert r.status == status
+        assert (await r.json())["error"]
+    assert gw.read("SA10") == 0
+
+
+async def test_a_stream_slot_frees_when_its_client_leaves() -> None:
+    async with await console(**{"web.max_streams": 1}) as gw:
+        web = gw.web_console
+        assert web is not None
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with http.get("/api/stream") as first:
+                await next_of(read_sse(first), "status")
+                assert web.streams == 1
+                first.connection.transport.close()  # the tab is closed: no more reading
+            # A server learns that a peer left only from its socket: poll the count (well
+            # under the 15 s of a ping, which is when the slot used to free).
+            async with asyncio.timeout(5):
+                while web.streams:  # noqa: ASYNC110
+                    await asyncio.sleep(0.02)
+            async with http.get("/api/stream") as second:
+                assert second.status == 200
