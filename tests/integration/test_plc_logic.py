@@ -218,7 +218,8 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
     count = 0
     spin_seen = 0
     for _ in range(4):
-        proc, port, _ = await start_run(config)
+        # --allow-missing: the cell is its PLC logic alone; its folder holds no main program.
+        proc, port, _ = await start_run(config, "--allow-missing")
         client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
         assert await client.connect()
         try:
@@ -240,7 +241,7 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
             proc.kill()
             await proc.wait()
         assert proc.returncode == -9
-        probe_proc, probe_port, _ = await start_run(config)
+        probe_proc, probe_port, _ = await start_run(config, "--allow-missing")
         probe = AsyncModbusTcpClient("127.0.0.1", port=probe_port, retries=0)
         assert await probe.connect()
         try:
@@ -253,7 +254,7 @@ async def test_retain_survives_kill_9_between_two_writes(tmp_path: Path) -> None
             probe_proc.kill()
             await probe_proc.wait()
     # --cold: the stored values are dropped
-    proc, port, _ = await start_run(config, "--cold")
+    proc, port, _ = await start_run(config, "--cold", "--allow-missing")
     client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
     assert await client.connect()
     try:

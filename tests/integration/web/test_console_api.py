@@ -307,33 +307,38 @@ async def next_of(stream: AsyncIterator[tuple[str, str, str]], kind: str
     raise AssertionError(f"the stream ended before a {kind} event")
 
 
-async def test_the_stream_sends_status_then_events_as_they_happen(
-        gw: Gateway, http: aiohttp.ClientSession) -> None:
-    async with http.get("/api/stream") as r:
-        assert r.status == 200 and r.content_type == "text/event-stream"
-        stream = read_sse(r)
-        _, status = await next_of(stream, "status")
-        assert status["session"] == gw.session
-        await gw.start()
-        ident, batch = await next_of(stream, "events")
-        assert batch["missed"] == 0
-        assert batch["events"][0] == gw.trace[0]
-        seen = list(batch["events"])
-        while not any(e["event"] == "wait" and e["proc"] == 2 for e in seen):
-            ident, batch = await next_of(stream, "events")
-            seen += batch["events"]
-        assert int(ident) == seen[-1]["seq"]
-        assert seen == gw.trace[:len(seen)]
-    # A page opened now gets what the ring holds, from the first event on.
-    async with http.get("/api/stream") as r:
-        _, batch = await next_of(read_sse(r), "events")
-        assert batch["events"][:len(seen)] == seen
-    # A page that reconnects says where it was (Last-Event-ID): it gets the rest, not again
-    # what it had.
-    gw.write("SA10", 1)
-    async with http.get("/api/stream", headers={"Last-Event-ID": ident}) as r:
-        _, batch = await next_of(read_sse(r), "events")
-        assert batch["events"][0]["seq"] == int(ident) + 1
+async def test_the_stream_sends_status_then_events_as_they_happen() -> None:
+    # The built-in cell at the control's look-ahead: P2 waits at t = 0, so the stream has
+    # events at once (with the built-in lookahead 0 its first wait comes after seconds of
+    # motion; this test is about the stream, not the cell's timing).
+    async with await console(**{"nc.lookahead": 16}) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with http.get("/api/stream") as r:
+                assert r.status == 200 and r.content_type == "text/event-stream"
+                stream = read_sse(r)
+                _, status = await next_of(stream, "status")
+                assert status["session"] == gw.session
+                await gw.start()
+                ident, batch = await next_of(stream, "events")
+                assert batch["missed"] == 0
+                assert batch["events"][0] == gw.trace[0]
+                seen = list(batch["events"])
+                while not any(e["event"] == "wait" and e["proc"] == 2 for e in seen):
+                    ident, batch = await next_of(stream, "events")
+                    seen += batch["events"]
+                assert int(ident) == seen[-1]["seq"]
+                assert seen == gw.trace[:len(seen)]
+            # A page opened now gets what the ring holds, from the first event on.
+            async with http.get("/api/stream") as r:
+                _, batch = await next_of(read_sse(r), "events")
+                assert batch["events"][:len(seen)] == seen
+            # A page that reconnects says where it was (Last-Event-ID): it gets the rest, not again
+            # what it had.
+            gw.write("SA10", 1)
+            async with http.get("/api/stream", headers={"Last-Event-ID": ident}) as r:
+                _, batch = await next_of(read_sse(r), "events")
+                assert batch["events"][0]["seq"] == int(ident) + 1
 
 
 async def test_streams_beyond_max_streams_are_refused() -> None:
