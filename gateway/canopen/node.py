@@ -341,6 +341,9 @@ class CanopenNode:
         if node not in (0, self.node_id):
             return
         if command in (0x81, 0x82):  # reset node / reset communication
+            # The SDO server restarts with the node: a transfer open before the reset is
+            # gone, without an abort (the master that reset the node knows).
+            self.node.sdo.reset()  # type: ignore[attr-defined]
             self._reset_communication()
             if command == 0x81:
                 # Reset node also restores the node's own application values: the SND sender
@@ -351,6 +354,9 @@ class CanopenNode:
         elif command == 0x01:
             self.call_soon(self.pdos.entered_operational)
         elif command in (0x02, 0x80):
+            # Here, on the receive thread that buffers them, before the next SYNC can apply
+            # them: synchronous RPDO data received in OPERATIONAL is stale once it is left.
+            self.pdos.discard_sync_rpdos()
             self.call_soon(self.pdos.left_operational)
 
     def _reset_communication(self) -> None:

@@ -376,6 +376,11 @@ class Pdos:
             if t.valid:
                 self._begin(t)
 
+    def discard_sync_rpdos(self) -> None:
+        """Leaving OPERATIONAL (receive thread): synchronous RPDO data not yet applied is
+        dropped, as CANopenNode's CO_RPDO_process does; the next SYNC applies nothing of it."""
+        self._sync_pending.clear()
+
     def left_operational(self) -> None:
         for t in self.tpdos.values():
             t.idle()

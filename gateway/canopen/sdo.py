@@ -259,6 +259,15 @@ class SdoService(SdoServer):
         finally:
             self._lock.release()
 
+    def reset(self) -> None:
+        """An NMT reset (node or communication): every transfer ends, silently -- no
+        abort now, none at the timeout, no answer to a write still waiting for the loop
+        (nor is its work done: ``_answer_later``'s ``current()`` is false from now on)."""
+        with self._lock:
+            self._requests += 1
+            self._stop_timer()
+            self._mode = None
+
     def close(self) -> None:
         with self._lock:
             self._stop_timer()
