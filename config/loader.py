@@ -99,8 +99,16 @@ def _processes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) ->
         if process.number == 1 and process.external:
             raise r.fail(f"{item}.external", "process 1 runs the main program: it cannot be "
                          "external")
+        if process.external and process.main:
+            raise r.fail(f"{item}.main", "an external process runs no part program")
+        if process.number == 1 and process.main:
+            raise r.fail(f"{item}.main", "process 1's is nc.main")
         out[process.number] = process
     return tuple(out[n] for n in sorted(out))
+
+
+def _process_main(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
+    return r.str_(t["main"], key) if "main" in t else ""
 
 
 def _port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
@@ -251,6 +259,8 @@ def _external(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
 class ProcessConfig:
     number: int = setting(0, "the process (1..nc.processes)", lo=1)
     external: bool = setting(False, "runs no part program: a PLC plays it over the fieldbus")
+    main: str = setting("", "the program a cycle start of this process starts (none by "
+                        "default; process 1's is nc.main)", parse=_process_main)
 
 
 @dataclass(frozen=True, slots=True)
@@ -348,6 +358,11 @@ class NcConfig:
     @property
     def external(self) -> frozenset[int]:
         return frozenset(p.number for p in self.process if p.external)
+
+    @property
+    def mains(self) -> tuple[tuple[int, str], ...]:
+        """(process, program) for each process's own main (process 2 up; 1's is nc.main)."""
+        return tuple((p.number, p.main) for p in self.process if p.main)
 
     # The engine's names for [nc.limits] (RuntimeSettings takes [nc]'s keys by name).
     @property

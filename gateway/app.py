@@ -318,10 +318,10 @@ class Gateway:
             self._loading.add(task)
             task.add_done_callback(self._loaded)
             return
+        starts = self._program_of(item) if type(item) is Start or type(item) is Command else None
         self.door.apply(item)
         self._settle()
-        if type(item) is Start or type(item) is Command:
-            self._read_ahead(item)
+        self._read_ahead(starts)
 
     def _loaded(self, task: asyncio.Task[None]) -> None:
         self._loading.discard(task)
@@ -335,28 +335,36 @@ class Gateway:
         load = self._load_needed(item)
         if load is not None:
             await self._load(*load)  # and reads ahead of its EXEs
+        starts = self._program_of(item) if load is None else None
         self.door.apply(item)
         self._settle()
-        if load is None and (type(item) is Start or type(item) is Command):
-            self._read_ahead(item)
+        self._read_ahead(starts)
+
+    def _program_of(self, item: Input) -> tuple[str, int] | None:
+        """(program, process) when ``item`` would start a program now."""
+        if isinstance(item, Start):
+            name, process = item.program or self.config.nc.main, item.process
+        elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
+            number = 1 if item.process is None else item.process
+            if number not in self.engine.processes:
+                return None  # refused by the door
+            main = self.engine.cycle_start_program(item.process)
+            if main is None:
+                return None  # resumes a hold, or starts nothing
+            name, process = main, number
+        else:
+            return None
+        return (name, process) if name else None
 
     def _load_needed(self, item: Input) -> tuple[str, int] | None:
         """(program, process) when ``item`` starts a program the store has not read yet."""
         kind = type(item)
         if kind is Writes or kind is Write:
             return None  # the fieldbus's every request: at once
-        if isinstance(item, Start):
-            name, process = item.program or self.config.nc.main, item.process
-        elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
-            main = self.engine.cycle_start_program()
-            if main is None:
-                return None  # resumes a hold, or starts nothing
-            name, process = main, 1
-        else:
+        program = self._program_of(item)
+        if program is None or self.runtime.store.ready(*program):
             return None
-        if not name or self.runtime.store.ready(name, process):
-            return None
-        return name, process
+        return program
 
     async def _load(self, name: str, process: int) -> None:
         """Read and check a program in a thread of its own (a daemon: a SIGTERM does not
@@ -379,20 +387,13 @@ class Gateway:
         threading.Thread(target=work, name=f"ncgate load {name}", daemon=True).start()
         await done
 
-    def _read_ahead(self, item: Input) -> None:
+    def _read_ahead(self, program: tuple[str, int] | None) -> None:
         """After a start of a program that was read already: read what its EXEs start, in
         a thread of its own (an EXE on the loop then finds its program read)."""
-        if isinstance(item, Start):
-            name, process = item.program or self.config.nc.main, item.process
-        elif isinstance(item, Command) and item.kind is CommandKind.CYCLE_START:
-            name, process = self.config.nc.main, 1
-        else:
+        if program is None:
             return
-        if not name:
-            return
-        store = self.runtime.store
-        threading.Thread(target=store.read_ahead, args=(name, process),
-                         name=f"ncgate read-ahead {name}", daemon=True).start()
+        threading.Thread(target=self.runtime.store.read_ahead, args=program,
+                         name=f"ncgate read-ahead {program[0]}", daemon=True).start()
 
     async def _load_then_apply(self, item: Input, name: str, process: int) -> None:
         await self._load(name, process)
@@ -422,9 +423,11 @@ class Gateway:
         """An SND in the name of external process ``sender``."""
         self.apply(Snd(sender, target, source))
 
-    def command(self, word: int | CommandKind, source: Source = API) -> None:
-        """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset."""
-        self.apply(Command(command_kind(word), None, source))
+    def command(self, word: int | CommandKind, source: Source = API,
+                process: int | None = None) -> None:
+        """The command word of spec 3.2: 1 cycle start, 2 feed hold, 3 reset -- of the cell,
+        or of one ``process``."""
+        self.apply(Command(command_kind(word), process, source))
 
     # -- waiting ------------------------------------------------------------------------------
 

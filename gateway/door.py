@@ -144,21 +144,23 @@ class Door:
 
     def _command(self, item: Command) -> None:
         kind = command_kind(item.kind)
-        if item.process is not None:
-            self._process(item.process)
-            raise InputRefused(Reason.UNSUPPORTED, f"{kind.label} of one process: this "
-                               "version commands the whole cell (process null)")
-        self._enter(item)
+        process = item.process
         engine = self.runtime.engine
+        if process is not None:
+            self._process(process)
+            if engine.processes[process].external:
+                raise InputRefused(Reason.EXTERNAL_PROCESS, f"{kind.label} of process "
+                                   f"{process}: it is external, it runs no part program")
+        self._enter(item)
         if kind is CommandKind.CYCLE_START:
-            engine.cycle_start(by=str(item.source))
+            engine.cycle_start(by=str(item.source), process=process)
         elif kind is CommandKind.FEED_HOLD:
-            engine.hold(True)
+            engine.hold(True, process)
         else:
-            engine.reset()
+            engine.reset(process)
             plc = self._plc()
-            if plc is not None:  # a reset also restarts a faulted PLC
-                plc.restart()
+            if plc is not None and process is None:  # a reset of the cell also restarts a
+                plc.restart()  # faulted PLC
 
     def _snd(self, item: Snd) -> None:
         engine = self.runtime.engine

@@ -11,7 +11,8 @@ The record is JSON Lines, in the order things happened:
 - an *input* line for everything that came through the door from outside the cell, with its
   machine time and its source (``who``: the trace's attribution; ``peer``: the address):
   ``{"input": "write", "t", "who", "peer", "changes": [[area, index, view, value], ...]}``,
-  ``"command"`` (``command``: cycle_start | feed_hold | reset, ``process``: null),
+  ``"command"`` (``command``: cycle_start | feed_hold | reset, ``process``: a number, or
+  null for the cell),
   ``"snd"`` (``from``, ``to``), ``"start"`` (``prog``, ``proc``), ``"alarm"`` (``code``: the
   alarm number, ``message``).  The PLC logic's inputs are not recorded: the replay runs the
   same logic;
@@ -183,9 +184,9 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         kinds = {k.label: k for k in CommandKind}
         if name not in kinds:
             raise ValueError(f'"command": expected {", ".join(kinds)}, got {json.dumps(name)}')
-        if item.get("process") is not None:
-            raise ValueError('"process": a recorded command is for the cell (null)')
-        return t, Command(kinds[name], None, source)
+        process = _field(item, "process", int, "a process number, or null for the cell",
+                         optional=True)
+        return t, Command(kinds[name], process, source)
     if kind == "snd":
         return t, Snd(_field(item, "from", int, "a process number"),
                       _field(item, "to", int, "a process number"), source)

@@ -49,6 +49,9 @@ class RuntimeSettings:
     e_params: int = 1000
     optional_skip: bool = False
     main: str | None = None
+    # The program a cycle start of one process starts, for processes 2 up ([[nc.process]]
+    # main); process 1's is ``main``.
+    mains: tuple[tuple[int, str], ...] = ()
     # Closed simulation: nothing outside can start a program (orphan-wait detection).
     closed: bool = True
     # Blocks one process decodes before the others (and, under run, the fieldbus) get a turn.

@@ -44,6 +44,16 @@ TARGET_NO_RESPONSE: Final = ExceptionCode.GATEWAY_TARGET_NO_RESPONSE
 # The command word's values (holding register 2000 by default): the door's CommandKind.
 COMMAND_WORDS: Final = {kind.value: kind for kind in CommandKind}
 
+
+def command_word(word: int) -> tuple[CommandKind, int | None] | None:
+    """The command register's word: the command in the low byte (1 cycle start, 2 feed
+    hold, 3 reset), the process in the high byte (0: the cell, as 1/2/3 always meant;
+    ``0x0201``: cycle start of process 2).  None: not a command."""
+    kind = COMMAND_WORDS.get(word & 0xFF)
+    if kind is None:
+        return None
+    return kind, (word >> 8) or None
+
 # Why the door refused an input -> the exception code the client gets.  Total: a test checks
 # that every Reason has a row.
 REFUSAL: Final[dict[Reason, ExceptionCode]] = {

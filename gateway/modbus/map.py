@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from ncgate.config import Config, ConfigError
 from ncgate.gateway.errors import ModbusError
-from ncgate.gateway.modbus.codes import COMMAND_WORDS, ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import Command, Snd, Source, Var, Writes
@@ -334,9 +334,11 @@ class ModbusMap:
         kind = region.kind
         if kind is Kind.COMMAND:
             (word,) = values
-            if word not in COMMAND_WORDS:
-                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset")
-            backend.apply(Command(COMMAND_WORDS[word], None, source))
+            command = command_word(word)
+            if command is None:
+                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset "
+                                  "(high byte: the process, 0 for the cell)")
+            backend.apply(Command(command[0], command[1], source))  # refusals: REFUSAL
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:
                 raise ModbusError(ILLEGAL_ADDRESS, "the mailbox takes sender and target in one "

@@ -173,35 +173,47 @@ class Engine:
         self._start_program(p, program, by)
         self._kick()
 
-    def cycle_start(self, by: str = "api") -> None:
-        """Command 1: resume after a feed hold, or start ``main`` in process 1 (``by``: who
-        gave the command, as its input's source says)."""
-        if any(p.held for p in self.processes.values()):
-            self.hold(False)
+    def cycle_start(self, by: str = "api", process: int | None = None) -> None:
+        """Command 1: resume after a feed hold, or start the main program (``by``: who gave
+        the command, as its input's source says).  Of the cell (``process`` None): resume
+        every held process, or start ``main`` in process 1.  Of one process: resume it if
+        held, or start its own main (``[[nc.process]] main``; process 1: ``main``)."""
+        if self._any_held(process):
+            self.hold(False, process)
             return
-        main = self.cycle_start_program()
+        number = 1 if process is None else process
+        main = self.cycle_start_program(process)
         if main is not None:
-            p1 = self.processes[1]
+            p = self.processes[number]
             try:
-                self.start(main, 1, by=by)
+                self.start(main, number, by=by)
             except (ProgramError, ProgramNotFoundError) as exc:
-                self._alarm(p1, AlarmCode.PROGRAM_NOT_FOUND
+                self._alarm(p, AlarmCode.PROGRAM_NOT_FOUND
                             if isinstance(exc, ProgramNotFoundError)
                             else AlarmCode.PROGRAM_INVALID, first_line(exc), None)
 
-    def cycle_start_program(self) -> str | None:
-        """The program a cycle start would start in process 1 now; None when it resumes a
-        feed hold or starts nothing."""
-        if any(p.held for p in self.processes.values()):
+    def cycle_start_program(self, process: int | None = None) -> str | None:
+        """The program a cycle start (of the cell, or of ``process``) would start now; None
+        when it resumes a feed hold or starts nothing."""
+        if self._any_held(process):
             return None
-        p1 = self.processes.get(1)
-        if self.settings.main and p1 is not None and p1.loaded is None and p1.alarm is None:
-            return self.settings.main
+        number = 1 if process is None else process
+        p = self.processes.get(number)
+        main = self.settings.main if number == 1 else dict(self.settings.mains).get(number)
+        if main and p is not None and p.loaded is None and p.alarm is None and not p.external:
+            return main
         return None
 
-    def hold(self, on: bool = True) -> None:
-        """Feed hold: motion stops where it is; ``hold(False)`` resumes it."""
-        for p in self.processes.values():
+    def _any_held(self, process: int | None) -> bool:
+        if process is None:
+            return any(p.held for p in self.processes.values())
+        return self.processes[process].held
+
+    def hold(self, on: bool = True, process: int | None = None) -> None:
+        """Feed hold (of the cell, or of one process): motion stops where it is;
+        ``hold(False)`` resumes it."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        for p in targets:
             if p.external or p.held == on:
                 continue
             if on:
@@ -227,11 +239,18 @@ class Engine:
         whose heartbeat stopped; it stops no process by itself."""
         self._record(ev.Alarm, self.now, 0, None, code, message)
 
-    def reset(self) -> None:
-        """Clear every alarm, discard queues, waits and tokens; every process to IDLE."""
-        for p in self.processes.values():
+    def reset(self, process: int | None = None) -> None:
+        """Command 3.  Of the cell: clear every alarm, discard queues, waits and tokens;
+        every process to IDLE.  Of one process: that process to IDLE (its alarm, program,
+        queue, waits and E parameters), and what the others had with it as when its program
+        ends (tokens to it dropped, a rendezvous SND to it an alarm, an EXE waiting for it
+        starts); a dialect's stored signals stay (a reset of the cell clears them)."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        for p in targets:
             was_busy = p.loaded is not None or p.alarm is not None
             self._cancel_pending(p)
+            if process is not None:
+                self.sync.forget_waiter(p)
             where = p.where
             p.clear()
             p.loaded = None
@@ -242,7 +261,13 @@ class Engine:
             if was_busy:
                 self._record(ev.End, self.now, p.number, where, "reset")
             self._update_state(p)
+        if process is not None:  # (if it is in the run queue, the decoder skips it there)
+            self.sync.became_free(self.processes[process])
+            self._kick()
+            return
         self._runnable.clear()
+        for p in self.processes.values():
+            p.queued = False  # (else a start after the reset would never be run)
         self.sync.clear()
         for listener in list(self.reset_listeners):
             listener()

@@ -189,7 +189,8 @@ MALFORMED = [
     ({"seq": 1, "t": "0", "event": "start", "proc": 1}, '"t": expected a time'),
     ({"seq": 1, "t": 0.0, "event": "explode", "proc": 1}, 'unknown event "explode"'),
     # What the live door would have refused can never have been recorded.
-    ({"input": "command", **GOOD, "command": "reset", "process": 1}, "for the cell (null)"),
+    ({"input": "command", **GOOD, "command": "reset", "process": "two"},
+     '"process": expected a process number, or null for the cell'),
     ({"input": "alarm", **GOOD, "code": 99999, "message": "x"}, "no alarm"),
     ({"input": "command", **GOOD, "t": 0.1, "command": "reset"}, "in time order"),
 ]

@@ -440,3 +440,18 @@ def test_a_latched_snd_discarded_because_its_target_ended_is_a_hazard_in_the_tra
     assert [(e["proc"], e["n"], e["t"]) for e in dropped] == [(1, 2, 0.1)]
     assert dropped[0]["message"] == ("latched SND from P1 at A.nc:2 N2 to P2 discarded: P2 "
                                      "ended its program before a WAI took it")
+
+
+def test_a_reset_of_one_process_frees_it_for_the_exe_waiting_on_it() -> None:
+    """P1's EXE waits for busy P2; a reset of P2 alone ends B and starts C there, as B's
+    end would; P1 was never reset."""
+    programs = {"A": "N1(EXE,2,B)\nN2(EXE,2,C)\nN3(WAI,2)\nN4M30\n",
+                "B": "N1(WAI,SA1=1)\nN2M30\n", "C": "N1(SND,1)\nN2M30\n"}
+    sim = make_sim(programs)
+    sim.engine.start("A")
+    sim.engine.call_at(1.0, lambda: sim.engine.reset(2))
+    sim.run()
+    assert sim.outcome == "idle" and sim.events("alarm") == []
+    ends = [(e["proc"], e["how"]) for e in sim.events("end")]
+    assert ends[0] == (2, "reset") and sorted(ends[1:]) == [(1, "M30"), (2, "M30")]
+    assert sim.first("start", prog="C")["t"] == 1.0

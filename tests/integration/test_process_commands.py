@@ -1,0 +1,112 @@
+"""Commands of one process (issue 27, item 1): cycle start, feed hold and reset of process k,
+over the Modbus command register (high byte: the process) and the Python API, beside the
+cell's 1/2/3, which keep their meaning."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pymodbus.client import AsyncModbusTcpClient
+
+from ncgate.gateway import Gateway, load_config
+from ncgate.inputs import CommandKind
+from ncgate.interpreter.engine import ProcessState
+
+COMMAND = 2000  # holding register 2000: the command word (modbus.map.command)
+
+CELL = """[nc]
+main = "A"
+[nc.storage]
+MP0 = "."
+[[nc.process]]
+number = 2
+main = "B"
+[[nc.process]]
+number = 4
+external = true
+"""
+
+
+def _cell(tmp_path: Path) -> Path:
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1(WAI,SA1=1)\nN2M30\n")
+    # A 10 s move, then the interpolator's wait (#: in motion order): RUNNING while it moves.
+    (tmp_path / "B.nc").write_text("N1G1X100F600\nN2#(WAI,SA2=1)\nN3M30\n")
+    return tmp_path / "ncgate.toml"
+
+
+async def test_modbus_commands_one_process_by_the_high_byte(tmp_path: Path) -> None:
+    cfg = load_config(_cell(tmp_path), overrides={"modbus.port": 0, "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            async def word(value: int) -> int:
+                """The exception code (0: written)."""
+                answer = await client.write_register(COMMAND, value, device_id=1)
+                return answer.exception_code if answer.isError() else 0
+
+            assert await word(0x0201) == 0  # cycle start of process 2: its own main, B
+            await gw.wait_state(2, "RUNNING", timeout_s=10)
+            assert gw.status(1).state is ProcessState.IDLE  # the cell's main did not start
+            assert await word(0x0202) == 0  # feed hold of process 2 only
+            await gw.wait_state(2, "HOLD", timeout_s=10)
+            assert await word(1) == 0  # the cell's cycle start: resumes the held process 2
+            await gw.wait_state(2, "RUNNING", timeout_s=10)
+            assert gw.status(1).state is ProcessState.IDLE
+            assert await word(1) == 0  # nothing held: starts nc.main in process 1
+            await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+            assert await word(0x0203) == 0  # reset of process 2 only
+            await gw.wait_state(2, "IDLE", timeout_s=10)
+            assert gw.status(1).state is ProcessState.WAIT_COND  # P1 goes on waiting
+            # Not a process, or an external one: refused (ILLEGAL DATA VALUE), nothing done.
+            assert await word(0x0901) == 3
+            assert await word(0x0401) == 3
+            assert await word(0x0204) == 3  # not a command
+        finally:
+            client.close()
+        ends = [(e["proc"], e["how"]) for e in gw.trace if e["event"] == "end"]
+        starts = [(e["proc"], e["prog"]) for e in gw.trace if e["event"] == "start"]
+    assert starts == [(2, "B"), (1, "A")]
+    assert ends == [(2, "reset")]
+
+
+async def test_the_api_commands_one_process(tmp_path: Path) -> None:
+    cfg = load_config(_cell(tmp_path), overrides={"modbus.enabled": False,
+                                                  "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        gw.command(CommandKind.CYCLE_START)  # the cell: P1's A
+        await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+        gw.command(CommandKind.CYCLE_START, process=2)
+        await gw.wait_state(2, "RUNNING", timeout_s=10)
+        gw.command(CommandKind.FEED_HOLD, process=1)  # P1 holds; P2 keeps moving
+        await gw.wait_state(1, "HOLD", timeout_s=10)
+        assert gw.status(2).state is ProcessState.RUNNING
+        gw.command(CommandKind.RESET, process=1)
+        await gw.wait_state(1, "IDLE", timeout_s=10)
+        assert gw.status(2).state is ProcessState.RUNNING  # untouched by P1's reset
+        gw.command(CommandKind.RESET)  # the cell
+        await gw.wait_state(2, "IDLE", timeout_s=10)
+        ends = [(e["proc"], e["how"]) for e in gw.trace if e["event"] == "end"]
+    assert ends == [(1, "reset"), (2, "reset")]
+
+
+async def test_a_session_with_commands_of_one_process_replays(tmp_path: Path) -> None:
+    """The record keeps the process of a command; the replay gives it to the same process and
+    matches (before, a command for one process was a malformed record)."""
+    from ncgate.gateway.record import replay
+
+    cfg = load_config(_cell(tmp_path), overrides={"modbus.enabled": False,
+                                                  "canopen.enabled": False})
+    record = tmp_path / "session.jsonl"
+    async with Gateway(cfg, cold=True, record=record) as gw:
+        gw.command(CommandKind.CYCLE_START, process=2)
+        await gw.wait_state(2, "RUNNING", timeout_s=10)
+        gw.command(CommandKind.FEED_HOLD, process=2)
+        await gw.wait_state(2, "HOLD", timeout_s=10)
+        gw.command(CommandKind.RESET, process=2)
+        await gw.wait_state(2, "IDLE", timeout_s=10)
+    lines = record.read_text().splitlines()
+    assert sum('"process": 2' in line for line in lines if '"input"' in line) == 3
+    result = replay(record)
+    assert result.divergence is None and result.compared > 0, result.divergence
