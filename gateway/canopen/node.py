@@ -157,6 +157,7 @@ class CanopenNode:
         self.node.add_write_callback(self._on_write)
         self.node.stored = self._on_stored
         self.node.defer = self._defer
+        self.node.stored_form = pdo.stored_form
         self.network.subscribe(0, self._on_nmt)  # after canopen's own NMT handler
         self.pdos.configure_all()
         self._configure_heartbeats()

@@ -72,6 +72,7 @@ from ncgate.inputs import Source, SourceKind
 log = logging.getLogger("ncgate.canopen")
 
 NOT_VALID, NO_RTR, EXTENDED = 0x80000000, 0x40000000, 0x20000000
+ID_29_BITS = 0x1FFFF800  # bits 11..28: part of a 29-bit identifier only
 EVENT_TYPES = (254, 255)
 SND_QUEUE = 256
 
@@ -117,7 +118,7 @@ def check_write(device: Device, index: int, subindex: int, value: int) -> None:
     valid = not param(device, comm, 1) & NOT_VALID
     if comm == index:
         if subindex == 1:
-            _check_cob_id(param(device, index, 1), value, transmit)
+            _check_cob_id(param(device, index, 1), value)
         elif subindex == 2:
             if not (value <= 240 or value in EVENT_TYPES):
                 raise SdoAbortedError(ABORT_INVALID_VALUE)  # RTR-only or reserved: not honoured
@@ -159,12 +160,12 @@ def mapped_bits(device: Device, entry: int, transmit: bool) -> int:
     return bits
 
 
-def _check_cob_id(current: int, cob: int, transmit: bool) -> None:
-    """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise)."""
-    if cob & EXTENDED:
-        raise SdoAbortedError(ABORT_INVALID_VALUE)  # 29-bit identifiers are not supported
-    if transmit and not cob & NO_RTR:
-        # canopen drops remote frames, so the node cannot answer an RTR: it says so.
+def _check_cob_id(current: int, cob: int) -> None:
+    """CiA 301 7.5.2.35/36: the PDO COB-ID rules (abort 0x06090030 otherwise).  A TPDO's
+    bit 30 written clear (RTR allowed) is accepted and stored set (:func:`stored_form`)."""
+    if cob & (EXTENDED | ID_29_BITS):
+        # 29-bit identifiers are not supported; with bit 29 clear, bits 11..28 are 0
+        # (stored, they would be masked away: the PDO would go out on another id).
         raise SdoAbortedError(ABORT_INVALID_VALUE)
     valid_now, valid_then = not current & NOT_VALID, not cob & NOT_VALID
     if valid_now and valid_then and (cob ^ current) & 0x1FFFFFFF:
@@ -174,9 +175,20 @@ def _check_cob_id(current: int, cob: int, transmit: bool) -> None:
 
 
 def check_sync_cob_id(cob: int) -> None:
-    """0x1005: the node consumes SYNC and produces none (bit 30), 11-bit ids only."""
-    if cob & (NO_RTR | EXTENDED):
+    """0x1005: the node consumes SYNC and produces none (bit 30), 11-bit ids only (bits
+    11..29 clear), and no identifier CiA 301 table 3 restricts (7.3.5): a SYNC on 0x610
+    would make every SDO request a SYNC."""
+    if cob & (NO_RTR | EXTENDED | ID_29_BITS) or restricted(cob & 0x7FF):
         raise SdoAbortedError(ABORT_INVALID_VALUE)
+
+
+def stored_form(index: int, subindex: int, data: bytes) -> bytes:
+    """What the node stores for an accepted write: a TPDO COB-ID always with bit 30 set,
+    since the node answers no RTR (written clear by a master's ``PdoMap.save()`` that did
+    not read the map first; CANopenNode stores it so too)."""
+    if TPDO_COMMUNICATION <= index < TPDO_COMMUNICATION + PDO_COUNT and subindex == 1:
+        return (int.from_bytes(data, "little") | NO_RTR).to_bytes(4, "little")
+    return data
 
 
 # ---- the runtime --------------------------------------------------------------------------
@@ -261,6 +273,9 @@ class Tpdo:
         self.sync_count = 0
         self.started = False  # a SYNC start value was met
         self.sync_due = False  # type 0: a change since the last SYNC
+        # type 0: the frame as of its last transmission (or when it came to life); a SYNC
+        # sends it again only when what it maps differs from this
+        self.reference: bytes | None = None
 
     @property
     def valid(self) -> bool:
@@ -277,6 +292,7 @@ class Tpdo:
                 timer.cancel()
         self.inhibit_timer = self.event_timer = None
         self.pending, self.force, self.sync_due = None, False, False
+        self.reference = None
         self.last = None  # the next frame is news, whatever went before
         self.queue.clear()
         self.sync_count, self.started = 0, False
@@ -389,6 +405,8 @@ class Pdos:
         """A TPDO comes to life: an event-driven one says where things stand (unless all it
         maps is the last SND: it speaks of SNDs only), and its event timer starts."""
         assert t.layout is not None
+        if t.type == 0:
+            t.reference = t.frame()  # what a change is a change from
         if t.type in EVENT_TYPES:
             if not t.layout.only_snd:
                 t.pending = t.frame()
@@ -428,7 +446,10 @@ class Pdos:
 
     def _change(self, t: Tpdo) -> None:
         if t.type == 0:
-            t.sync_due = True
+            # A write of the same value, or of bytes this TPDO does not map, is no change of
+            # its data (CiA 301 7.2.2.2: acyclic synchronous, "after an event").
+            if t.frame() != t.reference:
+                t.sync_due = True
         elif t.type in EVENT_TYPES:
             data = t.frame()
             if data != (t.pending if t.pending is not None else t.last):
@@ -568,7 +589,7 @@ class Pdos:
         if t.type == 0:
             if t.sync_due:
                 t.sync_due = False
-                self._sync_send(t, send)
+                self._sync_send(t, send, unless=t.reference)  # not if changed back
             return
         if not t.started:
             if t.sync_start and counter is not None:
@@ -582,7 +603,7 @@ class Pdos:
             t.sync_count = 0
             self._sync_send(t, send)
 
-    def _sync_send(self, t: Tpdo, send: bool) -> None:
+    def _sync_send(self, t: Tpdo, send: bool, unless: bytes | None = None) -> None:
         if not send:
             self.sync_dropped += 1
             return
@@ -591,4 +612,8 @@ class Pdos:
         except Exception:  # a value the loop was changing at this instant: not sent
             self.sync_dropped += 1
             return
+        if unless is not None and data == unless:
+            return
         self._send(t, data)
+        if t.type == 0:
+            t.reference = data

@@ -170,7 +170,12 @@ class SdoService(SdoServer):
         if not obj.writable:
             raise SdoAbortedError(ABORT_WRITE_READONLY)
         if command & EXPEDITED:
-            size = 4 - (command >> 2 & 0x3) if command & SIZE_SPECIFIED else 4
+            if command & SIZE_SPECIFIED:
+                size = 4 - (command >> 2 & 0x3)
+            elif obj.data_type in NUMBER_TYPES and len(obj) <= 32:
+                size = len(obj) // 8  # size not indicated: the object's own (CiA 301 7.2.4.3.3)
+            else:
+                size = 4
             answer = struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex)
             try:
                 node.set_data(index, subindex, request[4:4 + size], check_writable=True)
@@ -299,6 +304,8 @@ class Device(canopen.LocalNode):
         # defer(work, done(abort code or None), still_wanted()).
         self.defer: Callable[[Callable[[], None], Callable[[int | None], None],
                               Callable[[], bool]], None] = _run_now
+        # What an accepted write stores (the node: a TPDO COB-ID with bit 30 set).
+        self.stored_form: Callable[[int, int, bytes], bytes] = lambda index, sub, data: data
 
     def add_read_callback(self, callback: Callable[..., int | None]) -> None:
         super().add_read_callback(callback)
@@ -359,5 +366,6 @@ class Device(canopen.LocalNode):
                 if not (obj.min or 0) <= value <= obj.max:
                     raise SdoAbortedError(ABORT_INVALID_VALUE)
             raise SdoAbortedError(ABORT_LENGTH_NOT_MATCHED)
-        super().set_data(index, subindex, data, check_writable)
+        super().set_data(index, subindex, self.stored_form(index, subindex, data),
+                         check_writable)
         self.stored(index, subindex)

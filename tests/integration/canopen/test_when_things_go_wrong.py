@@ -4,14 +4,20 @@
 
 from __future__ import annotations
 
+import asyncio
+import json
 import queue
 import struct
+import sys
+from pathlib import Path
 
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
+from ncgate.config import Config
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.clock import ManualClock
+from ncgate.gateway.canopen.dictionary import write_eds
 
 from .conftest import Master, abort_code, u8, u16
 
@@ -85,3 +91,128 @@ async def test_reset_node_ends_a_segmented_download_silently(gw: Gateway,
     segment = bytes((0x0B,)) + u16(300) + bytes(5)  # the last segment: 2 bytes
     assert abort_code(await master.raw_sdo(segment)) == 0x05040001
     assert await master.upload(0x1017, 0) == u16(0)  # the power-on value
+
+
+# -- 3. TPDO type 0: at the SYNC after a change of its own data ----------------------------------
+
+async def test_tpdo_type_0_sends_only_after_its_mapped_data_changed(gw: Gateway,
+                                                                   master: Master) -> None:
+    await master.download(0x1A02, 1, u32(0x20000108))  # TPDO3 maps SA byte 0
+    await master.download(0x1A02, 0, u8(1))
+    await master.download(0x1802, 2, u8(0))
+    await master.download(0x1802, 1, u32(0x40000390))
+    master.listen(TPDO3)
+    master.nmt(0x01)
+    await master.download(0x2000, 1, u8(0))  # the same value
+    await master.download(0x2000, 3, u8(9))  # a byte it does not map
+    master.network.send_message(0x210, bytes(8))  # an RPDO that changes none of its bytes
+    for _ in range(3):
+        await master.barrier()
+        master.sync()
+    await master.barrier()
+    assert master.frames[TPDO3].empty()
+    await master.download(0x2000, 1, u8(5))  # its data changes
+    master.network.send_message(0x210, bytes((5,)) + bytes(7))  # and a repeat of it
+    await master.barrier()
+    master.sync()
+    assert await master.next(TPDO3) == b"\x05"
+    master.sync()  # no change since
+    await master.download(0x2000, 1, u8(6))
+    await master.download(0x2000, 1, u8(5))  # changed, and changed back before the SYNC
+    master.sync()
+    await master.barrier()
+    assert master.frames[TPDO3].empty()
+
+
+# -- 4. restricted COB-IDs and bits 11..28 ------------------------------------------------------
+
+@pytest.mark.parametrize(("index", "sub", "values", "why"), [
+    (0x1005, 0, [0x000], "SYNC on the NMT id"),
+    (0x1005, 0, [0x610], "SYNC on this node's SDO request id"),
+    (0x1005, 0, [0x701], "SYNC on a heartbeat id"),
+    (0x1005, 0, [0xA80], "SYNC with bit 11 set"),
+    (0x1400, 1, [0x80000210, 0x40000A10], "RPDO id with bit 11 set"),
+    (0x1400, 1, [0x80000210, 0x80000A10], "a disabled RPDO id with bit 11 set"),
+    (0x1802, 1, [0xC0000B90], "a disabled TPDO id with bit 11 set"),
+    (0x1801, 1, [0xC0000290, 0x50000290], "TPDO id with bit 28 set"),
+])
+async def test_restricted_cob_ids_and_bits_11_to_28_are_refused(
+        gw: Gateway, master: Master, index: int, sub: int, values: list[int], why: str) -> None:
+    *first, refused = values
+    for value in first:
+        await master.download(index, sub, u32(value))
+    stored = await master.upload(index, sub)
+    assert await sdo_error(master.download(index, sub, u32(refused))) == 0x06090030, why
+    assert await master.upload(index, sub) == stored
+
+
+async def test_a_sync_cob_id_outside_table_3_is_taken(gw: Gateway, master: Master) -> None:
+    await master.download(0x1005, 0, u32(0x081))
+    assert await master.upload(0x1005, 0) == u32(0x081)
+
+
+# -- 5. expedited download without size; a TPDO COB-ID written with RTR allowed ------------------
+
+async def test_expedited_download_without_size_takes_the_objects_size(gw: Gateway,
+                                                                      master: Master) -> None:
+    # command 0x22: expedited, size not indicated; the bytes past the object's are filler
+    request = struct.pack("<BHB", 0x22, 0x1017, 0) + u16(300) + b"\xaa\xbb"
+    assert (await master.raw_sdo(request))[0] == 0x60
+    assert await master.upload(0x1017, 0) == u16(300)
+    request = struct.pack("<BHB", 0x22, 0x2000, 1) + b"\x07\xaa\xbb\xcc"  # U8: SA byte 0
+    assert (await master.raw_sdo(request))[0] == 0x60
+    assert gw.read("SA0") == 1 and gw.read("SA1") == 1 and gw.read("SA2") == 1
+    request = struct.pack("<BHB", 0x22, 0x1400, 1) + u32(0x80000210)  # U32, as before
+    assert (await master.raw_sdo(request))[0] == 0x60
+
+
+async def test_a_tpdo_saved_without_reading_its_map_first_is_accepted(gw: Gateway,
+                                                                      master: Master) -> None:
+    tpdo = master.node.tpdo[3]
+    tpdo.clear()
+    tpdo.add_variable(0x2000, 1)
+    tpdo.cob_id, tpdo.trans_type, tpdo.enabled = 0x390, 254, True
+    assert tpdo.rtr_allowed  # what PdoMap.save() writes: bit 30 clear
+    await asyncio.to_thread(tpdo.save)
+    assert await master.upload(0x1802, 1) == u32(0x40000390)  # read back with bit 30 set
+    master.listen(TPDO3)
+    master.nmt(0x01)
+    assert await master.next(TPDO3) == b"\x00"  # where things stand
+    await master.download(0x2000, 1, u8(3))
+    assert await master.next(TPDO3) == b"\x03"
+
+
+HUB_MASTER = """
+import json, sys, canopen
+network = canopen.Network()
+network.NOTIFIER_CYCLE = 0.05
+network.connect(interface="remote", channel=sys.argv[1], bitrate=500000)
+node = canopen.RemoteNode(16, sys.argv[2])          # the node's EDS, as a tool has it
+network.add_node(node)
+tpdo = node.tpdo[4]
+tpdo.clear()
+tpdo.add_variable(0x2500, 1)                        # process 1 state
+tpdo.cob_id, tpdo.trans_type, tpdo.enabled = 0x490, 255, True
+tpdo.save()                                         # bit 30 clear: RTR allowed
+cob = int.from_bytes(node.sdo.upload(0x1803, 1), "little")
+print(json.dumps({"cob": cob}), flush=True)
+network.disconnect()
+"""
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.hub": True, "canopen.hub_port": 0}],
+                         indirect=True)
+async def test_a_tool_in_another_process_saves_a_tpdo_through_the_hub(
+        gw: Gateway, ncgate_config: Config, tmp_path: Path) -> None:
+    node = gw.canopen_node
+    assert node is not None and node.hub_address is not None
+    host, port = node.hub_address
+    eds = tmp_path / "node.eds"
+    write_eds(ncgate_config, str(eds))
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-c", HUB_MASTER, f"ws://{host}:{port}/", str(eds),
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    async with asyncio.timeout(30):
+        out, err = await proc.communicate()
+    assert proc.returncode == 0, err.decode()
+    assert json.loads(out) == {"cob": 0x40000490}
