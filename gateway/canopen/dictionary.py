@@ -222,11 +222,37 @@ def write_eds(config: Config, path: str) -> None:
     }
     text = io.StringIO()
     export_eds(od, text, file_info=file_info)
-    # canopen adds its own "EdsVersion" beside CiA 306's "EDSVersion": keep one.
-    lines = [line for line in text.getvalue().splitlines(keepends=True)
-             if not line.startswith("EdsVersion=")]
     with open(path, "w", encoding="utf-8") as out:
-        out.writelines(lines)
+        out.writelines(_cia306(text.getvalue().splitlines(keepends=True)))
+
+
+# The dummy types an RPDO may map to skip bytes (pdo.py's _DUMMY_BITS): 0x0002..0x0007.
+DUMMIES = range(0x0002, 0x0008)
+
+
+def _cia306(lines: list[str]) -> list[str]:
+    """canopen's EDS, put right where it strays from CiA 306 (eds-utils' ``eds-validate``
+    checks these): ``PDOMapping`` is a boolean written ``0``/``1`` (canopen writes
+    ``0x0``/``0x1``); ``[DummyUsage]`` says which dummies the RPDOs accept (canopen writes 1
+    only for dummies in the dictionary, and the node has none to read); a mapping entry's
+    default is a full UNSIGNED32 (``0x00000000``, not ``0x00``).  canopen's own
+    ``EdsVersion`` beside CiA 306's ``EDSVersion`` goes: one is kept."""
+    out, section = [], ""
+    for line in lines:
+        if line.startswith("EdsVersion="):
+            continue
+        if line.startswith("["):
+            section = line.strip()[1:-1]
+        key, _, value = line.rstrip("\n").partition("=")
+        if key == "PDOMapping":
+            line = f"PDOMapping={int(value, 0)}\n"
+        elif section == "DummyUsage" and key.startswith("Dummy"):
+            line = f"{key}={int(int(key[5:], 16) in DUMMIES)}\n"
+        elif (key == "DefaultValue" and section[:2] in ("16", "1A")
+              and section[4:7] == "sub" and int(section[7:], 16) != 0):
+            line = f"DefaultValue=0x{int(value, 0):08X}\n"  # a mapping entry
+        out.append(line)
+    return out
 
 
 def build_dictionary(config: Config) -> ObjectDictionary:

@@ -583,10 +583,12 @@ class CanopenNode:
         if node_id not in self._master_lost:
             return
         self._master_lost.discard(node_id)
-        log.warning("CANopen: the heartbeat of node %d is back (the processes stay as they "
-                    "are: cycle start resumes a hold)", node_id)
-        if self._error_register() == 0 and not self.stopped:
-            self.node.emcy.reset(0)
+        log.warning("CANopen: the heartbeat of node %d is back (%s)", node_id,
+                    _BACK[self.config.canopen.on_master_lost])
+        if not self.stopped:
+            # The heartbeat error is over: EMCY 0x0000 with the register as it is now (CiA
+            # 301 7.2.7.1), so a master sees a process alarm that remains (register bit 0).
+            self.node.emcy.reset(self._error_register())
 
     # -- PDO triggers and EMCY (loop) -------------------------------------------------------
 
@@ -611,6 +613,16 @@ class CanopenNode:
                     self.node.emcy.reset(0)
         elif isinstance(event, ev.Snd | ev.Signal):  # a signal counts like an SND (spec 5.6)
             self.pdos.snd()
+
+
+# What the log says when a lost master's heartbeat comes back, by canopen.on_master_lost.
+_BACK = {
+    MasterLost.HOLD: "the processes stay as they are: cycle start resumes the hold",
+    MasterLost.RESET: "the processes were reset when it was lost: a cycle start runs the "
+                      "main program again",
+    MasterLost.NONE: "nothing was done when it was lost (canopen.on_master_lost = \"none\"): "
+                     "the processes ran on",
+}
 
 
 def _last_snd(engine: Engine) -> tuple[int, int, int, int]:

@@ -132,8 +132,12 @@ def check_write(device: Device, index: int, subindex: int, value: int) -> None:
     if subindex == 0:
         if value > MAX_MAPPED:
             raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
-        bits = sum(mapped_bits(device, param(device, index, s), transmit)
-                   for s in range(1, value + 1))
+        entries = [param(device, index, s) for s in range(1, value + 1)]
+        if 0 in entries:
+            # more objects than entries written: CiA 301 7.5.2.37 "number and length of
+            # the objects to be mapped would exceed PDO length" (CANopenNode answers so)
+            raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
+        bits = sum(mapped_bits(device, entry, transmit) for entry in entries)
         if bits > 64:
             raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
         return
