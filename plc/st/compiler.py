@@ -21,8 +21,10 @@ outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan
 from __future__ import annotations
 
 import math
+import sys
 import types as pytypes
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,6 +78,25 @@ NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "IDLE": (6, "BOOL"), "HELD": (7, "BOOL")}
 NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
 NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2}
+
+# Limits of the Python the logic compiles to (CPython 3.11): 100 levels of indentation, 20
+# nested loops in one function, 200 nested parentheses, an `elif` chain of a few thousand
+# branches (10,000 run the parser out of memory), an operator chain of ~3,000 terms (the
+# compiler's recursion limit).  The generated code stays far inside them: a block nested
+# deeper than HOIST_INDENT levels, or inside HOIST_LOOPS loops, of one Python function is
+# moved into a helper function of its own; an IF or CASE chain is split every CHAIN_BRANCHES
+# branches; an operator chain is cut every CHAIN_OPS operators into a temporary.  Below
+# those sizes the code is what it always was (bench/plc.py: no cost).
+HOIST_INDENT = 24
+HOIST_LOOPS = 8
+CHAIN_BRANCHES = 64
+CHAIN_OPS = 16
+# What the language itself allows (ST031 beyond): statements nested this deep, and
+# expressions nested this deep not counting a chain of operators (a + b + c ... is depth 1).
+MAX_NESTING = 512
+MAX_EXPR_DEPTH = 64
+# Loop and return codes a helper function hands back to the Python function that called it.
+EXIT_CODE, RETURN_CODE, CONTINUE_CODE = 1, 2, 3
 
 
 class PlcFault(PlcError, RuntimeError):
@@ -264,10 +285,10 @@ class Problems(Exception):
 # ---- the compiler ------------------------------------------------------------------------------
 
 class _Emitter:
-    def __init__(self) -> None:
+    def __init__(self, indent: int = 0) -> None:
         self.lines: list[str] = []
         self.spans: list[n.Span | None] = []
-        self.indent = 0
+        self.indent = indent
 
     def emit(self, text: str, span: n.Span | None) -> None:
         self.lines.append("    " * self.indent + text)
@@ -282,6 +303,10 @@ class Compiler:
         self.pous: dict[str, PouInfo] = {}
         self.out = _Emitter()
         self._temp = 0
+        self._depth = 0  # expression nesting, not counting operator chains
+        self._frames = 0  # helper functions made so far (frame 0: a POU's own function)
+        self.helpers: list[_Emitter] = []  # of PROGRAMs and FBs: module-level functions
+        self._local_helpers: list[_Emitter] = []  # of the FUNCTION being compiled: closures
         self.reads_nc = False  # a scan takes the NC's status only for logic that reads it
 
     # -- reporting --------------------------------------------------------------------------
@@ -452,6 +477,9 @@ class Compiler:
                 self._function(key, info)
             else:
                 self._class(key, info)
+        for helper in self.helpers:
+            out.lines += helper.lines
+            out.spans += helper.spans
         return "\n".join(out.lines) + "\n", out.spans
 
     def _class(self, key: str, info: PouInfo) -> None:
@@ -477,15 +505,21 @@ class Compiler:
         params = ", ".join(f"v_{k}={_init_code(v.type, v.initial)}" for k, v in info.inputs)
         out.emit(f"def F_{key}({params}):", info.pou.span)
         out.indent += 1
+        helpers_at = len(out.lines)
         for k, v in info.vars.items():
             if v.section != "VAR_INPUT":
                 out.emit(f"v_{k} = {_init_code(v.type, v.initial)}", v.span)
+        self._local_helpers = []
         self._body(info, Scope(self, info, ""))
         out.emit(f"return v_{key}", None)
         out.indent -= 1
+        for helper in reversed(self._local_helpers):  # defined first, called later
+            out.lines[helpers_at:helpers_at] = helper.lines
+            out.spans[helpers_at:helpers_at] = helper.spans
 
     def _body(self, info: PouInfo, scope: Scope) -> None:
         out = self.out
+        scope.frame_base = out.indent
         guard_at = len(out.lines)
         out.emit("global _LEFT", None)
         for k, v in info.vars.items():
@@ -511,14 +545,88 @@ class Compiler:
             except Problems:
                 continue
 
-    def block(self, body: Sequence[n.Stmt], scope: Scope) -> None:
+    def block(self, body: Sequence[n.Stmt], scope: Scope, span: n.Span) -> None:
+        """The statements of an IF, ELSE or CASE arm, one level in."""
+        self.nested(lambda: self.stmts(body, scope), scope, span)
+
+    def nested(self, emit: Callable[[], None], scope: Scope, span: n.Span) -> None:
         out = self.out
         out.indent += 1
-        start = len(out.lines)
-        self.stmts(body, scope)
-        if len(out.lines) == start:
-            out.emit("pass", None)
-        out.indent -= 1
+        try:
+            self.content(emit, scope, span)
+        finally:
+            out.indent -= 1
+
+    def content(self, emit: Callable[[], None], scope: Scope, span: n.Span) -> None:
+        """Emit a block's lines at the current indent -- or, deep in the function, a call of
+        a helper function that holds them (HOIST_INDENT)."""
+        out = self.out
+        if scope.nesting >= MAX_NESTING:
+            raise self.error(StCode.UNSUPPORTED, f"statements nested more than {MAX_NESTING} "
+                             "deep", span)
+        scope.nesting += 1
+        try:
+            if out.indent - scope.frame_base >= HOIST_INDENT or scope.frame_loops >= HOIST_LOOPS:
+                self.hoist(emit, scope)
+                return
+            start = len(out.lines)
+            emit()
+            if len(out.lines) == start:
+                out.emit("pass", None)
+        finally:
+            scope.nesting -= 1
+
+    def hoist(self, emit: Callable[[], None], scope: Scope) -> None:
+        """The block as a helper function: a module-level function of ``self`` for a PROGRAM
+        or FB, a closure (``nonlocal`` variables) in a FUNCTION.  EXIT, CONTINUE and RETURN
+        inside it return a code that the caller acts on (``flow``)."""
+        caller = self.out
+        info = scope.info
+        local = info is not None and info.pou.kind == "FUNCTION"
+        self._frames += 1
+        name = f"_B{self._frames}"
+        params = ", ".join(([] if local else ["self"]) + scope.live)
+        helper = _Emitter(1 if local else 0)
+        helper.emit(f"def {name}({params}):", None)
+        helper.indent += 1
+        helper.emit("global _LEFT", None)
+        if local and info is not None:
+            helper.emit("nonlocal " + ", ".join(f"v_{k}" for k in info.vars), None)
+        saved = (scope.frame, scope.frame_base, scope.frame_loops, scope.codes)
+        scope.frame, scope.frame_base, scope.frame_loops = self._frames, helper.indent, 0
+        scope.codes = set()
+        self.out = helper
+        try:
+            start = len(helper.lines)
+            emit()
+            if len(helper.lines) == start:
+                helper.emit("pass", None)
+            codes = scope.codes
+        finally:
+            self.out = caller
+            scope.frame, scope.frame_base, scope.frame_loops, scope.codes = saved
+        (self._local_helpers if local else self.helpers).append(helper)
+        if not codes:
+            caller.emit(f"{name}({params})", None)
+            return
+        caller.emit(f"_r = {name}({params})", None)
+        for code in sorted(codes):
+            caller.emit(f"if _r == {code}:", None)
+            caller.indent += 1
+            for line in self.flow(code, scope):
+                caller.emit(line, None)
+            caller.indent -= 1
+
+    def flow(self, code: int, scope: Scope) -> list[str]:
+        """The lines of an EXIT, CONTINUE or RETURN in the current Python function."""
+        if code != RETURN_CODE and scope.loops and scope.loops[-1][0] == scope.frame:
+            return ["break"] if code == EXIT_CODE else [*scope.loops[-1][1], "continue"]
+        if code == RETURN_CODE and scope.frame == 0:
+            pou = scope.info.pou if scope.info is not None else None
+            return [f"return v_{pou.key}" if pou is not None and pou.kind == "FUNCTION"
+                    else "return"]
+        scope.codes.add(code)
+        return [f"return {code}"]
 
     def stmt(self, s: n.Stmt, scope: Scope) -> None:
         out = self.out
@@ -531,13 +639,17 @@ class Compiler:
         elif isinstance(s, n.CallStmt):
             self.call_stmt(s, scope)
         elif isinstance(s, n.If):
-            for i, (cond, body) in enumerate(s.branches):
+            chain, rest = s.branches[:CHAIN_BRANCHES], s.branches[CHAIN_BRANCHES:]
+            for i, (cond, body) in enumerate(chain):
                 c = self.condition(cond, scope)
                 out.emit(f"{'if' if i == 0 else 'elif'} {c}:", _span_of(cond))
-                self.block(body, scope)
-            if s.otherwise is not None:
+                self.block(body, scope, span)
+            if rest:  # the next CHAIN_BRANCHES ELSIFs, one level in
                 out.emit("else:", span)
-                self.block(s.otherwise, scope)
+                self.block((n.If(rest, s.otherwise, rest[0][0].span),), scope, span)
+            elif s.otherwise is not None:
+                out.emit("else:", span)
+                self.block(s.otherwise, scope, span)
         elif isinstance(s, n.Case):
             self.case(s, scope)
         elif isinstance(s, n.For):
@@ -550,13 +662,13 @@ class Compiler:
             out.emit("while True:", span)
             self.loop_body(s.body, scope, span, until=s.cond)
         elif isinstance(s, n.Exit):
-            if not scope.loop_depth:
+            if not scope.loops:
                 raise self.error(StCode.EXIT_OUTSIDE_LOOP, "EXIT outside a loop", span)
-            out.emit("break", span)
+            for line in self.flow(EXIT_CODE, scope):
+                out.emit(line, span)
         elif isinstance(s, n.Return):
-            pou = scope.info.pou if scope.info is not None else None
-            out.emit(f"return v_{pou.key}" if pou is not None and pou.kind == "FUNCTION"
-                     else "return", span)
+            for line in self.flow(RETURN_CODE, scope):
+                out.emit(line, span)
 
     def loop_body(self, body: Sequence[n.Stmt], scope: Scope, span: n.Span,
                   until: n.Expr | None = None, step: str | None = None) -> None:
@@ -565,14 +677,18 @@ class Compiler:
         out.indent += 1
         out.emit("_LEFT -= 1", span)
         out.emit("if _LEFT < 0: _guard()", span)
-        scope.loop_depth += 1
+        test = self.condition(until, scope) if until is not None else None
+        # What CONTINUE does before it goes back to the top: a FOR steps, a REPEAT tests.
+        scope.loops.append((scope.frame, [step] if step is not None else
+                            [f"if {test}: break"] if test is not None else []))
+        scope.frame_loops += 1
         try:
-            self.stmts(body, scope)
+            self.content(lambda: self.stmts(body, scope), scope, span)
         finally:
-            scope.loop_depth -= 1
+            scope.loops.pop()
+            scope.frame_loops -= 1
         if until is not None:
-            c = self.condition(until, scope)
-            out.emit(f"if {c}: break", _span_of(until))
+            out.emit(f"if {test}: break", _span_of(until))
         if step is not None:
             out.emit(step, span)
         out.indent -= 1
@@ -592,13 +708,21 @@ class Compiler:
                              f"{sel.type}", _span_of(s.selector))
         t = self.temp()
         out.emit(f"{t} = {sel.code}", s.span)
-        seen: set[int] = set()
+        scope.live.append(t)  # a helper function holding later arms takes it as a parameter
+        try:
+            self._arms(s, s.arms, t, sel.type, set(), scope)
+        finally:
+            scope.live.pop()
+
+    def _arms(self, s: n.Case, arms: Sequence[tuple[tuple[n.CaseLabel, ...], tuple[n.Stmt, ...]]],
+              t: str, selector: Type, seen: set[int], scope: Scope) -> None:
+        out = self.out
         first = True
-        for labels, body in s.arms:
+        for labels, body in arms[:CHAIN_BRANCHES]:
             tests = []
             for label in labels:
-                lo = self._label(label.lo, sel.type)
-                hi = self._label(label.hi, sel.type) if label.hi is not None else None
+                lo = self._label(label.lo, selector)
+                hi = self._label(label.hi, selector) if label.hi is not None else None
                 values = {lo} if hi is None else set(range(lo, hi + 1)) if hi - lo < 4096 \
                     else set()
                 if values & seen:
@@ -609,13 +733,14 @@ class Compiler:
             out.emit(f"{'if' if first else 'elif'} {' or '.join(tests) or 'False'}:",
                      labels[0].span if labels else s.span)
             first = False
-            self.block(body, scope)
-        if s.otherwise is not None:
-            if first:
-                out.emit("if True:", s.span)
-            else:
-                out.emit("else:", s.span)
-            self.block(s.otherwise, scope)
+            self.block(body, scope, s.span)
+        rest = arms[CHAIN_BRANCHES:]
+        if rest:  # the next CHAIN_BRANCHES arms, one level in
+            out.emit("else:", s.span)
+            self.nested(lambda: self._arms(s, rest, t, selector, seen, scope), scope, s.span)
+        elif s.otherwise is not None:
+            out.emit("if True:" if first else "else:", s.span)
+            self.block(s.otherwise, scope, s.span)
 
     def _label(self, lit: n.Literal, selector: Type) -> int:
         t = lit.type or ANY_INT
@@ -775,11 +900,45 @@ class Compiler:
                 raise self.error(StCode.TYPE_MISMATCH, f"{_show(x)} is a {place.type} "
                                  "instance, not a value (read a member: .Q)", x.span)
             return E(place.read, place.type)
-        if isinstance(x, n.Unary):
-            return self.unary(x, scope)
-        if isinstance(x, n.Binary):
-            return self.binary(x, scope)
-        return self.call(x, scope)
+        if self._depth >= MAX_EXPR_DEPTH:
+            raise self.error(StCode.UNSUPPORTED, f"an expression nested more than "
+                             f"{MAX_EXPR_DEPTH} deep (a chain of operators counts once): "
+                             "split it with a variable", _span_of(x))
+        self._depth += 1
+        try:
+            if isinstance(x, n.Unary):
+                return self.unary(x, scope)
+            if isinstance(x, n.Binary):
+                return self.chain(x, scope)
+            return self.call(x, scope)
+        finally:
+            self._depth -= 1
+
+    def chain(self, x: n.Binary, scope: Scope) -> E:
+        """A chain of binary operators, left to right, without recursion along it: the
+        parser makes ``a + b + c`` ``(a + b) + c``, a tree as deep as the chain is long.
+        Every CHAIN_OPS operators the value so far goes into a temporary, in a tuple
+        evaluated in order -- ``(_t1 := a + ... + p, _t1 + q ...)[-1]`` -- so the Python stays
+        shallow, and AND/OR still skip what they skipped (the left operand comes first)."""
+        spine = []
+        node: n.Expr = x
+        while isinstance(node, n.Binary):
+            spine.append(node)
+            node = node.left
+        acc = self.expr(node, scope)
+        done: list[str] = []
+        ops = 0
+        for op in reversed(spine):
+            acc = self.binary(op, acc, self.expr(op.right, scope))
+            ops += 1
+            if ops >= CHAIN_OPS and acc.const is None:
+                t = self.temp()
+                done.append(f"{t} := {acc.code}")
+                acc = E(t, acc.type, None, acc.exact)
+                ops = 0
+        if done:
+            acc = E(f"({', '.join(done)}, {acc.code})[-1]", acc.type, None, acc.exact)
+        return acc
 
     def literal(self, x: n.Literal) -> E:
         t = x.type
@@ -819,8 +978,7 @@ class Compiler:
                      limits(str(e.type))[1])
         return E(f"(-{e.code})", e.type, None, not is_int(e.type) and e.type != "TIME")
 
-    def binary(self, x: n.Binary, scope: Scope) -> E:
-        a, b = self.expr(x.left, scope), self.expr(x.right, scope)
+    def binary(self, x: n.Binary, a: E, b: E) -> E:
         op = x.op
         if op in ("AND", "OR", "XOR"):
             if a.type == "BOOL" and b.type == "BOOL":
@@ -1044,8 +1202,17 @@ class Scope:
         self.info = info
         self.prefix = prefix
         self.loop_vars: list[str] = []
-        self.loop_depth = 0
         self.loops_used = False
+        # The enclosing loops: the Python function each is in, and what its CONTINUE runs.
+        self.loops: list[tuple[int, list[str]]] = []
+        # The Python function being written (0: the POU's own, else a helper's number),
+        # the indent its body starts at, the loops open in it, the codes it may return.
+        self.frame = 0
+        self.frame_base = 1
+        self.frame_loops = 0
+        self.codes: set[int] = set()
+        self.nesting = 0
+        self.live: list[str] = []  # temporaries a helper function must be given
 
     def place(self, var: n.Var, write: bool) -> Place:
         c = self.c
@@ -1265,18 +1432,15 @@ def _tname(t: Type) -> str:
 def _calls(body: Iterable[n.Stmt]) -> set[str]:
     """Every function called in a body (for the recursion check)."""
     found: set[str] = set()
-
-    def walk(x: Any) -> None:
+    stack: list[Any] = [tuple(body)]  # no recursion: a tree may be 10,000 deep
+    while stack:
+        x = stack.pop()
         if isinstance(x, n.Call):
             found.add(x.name.upper())
         if isinstance(x, tuple | list):
-            for item in x:
-                walk(item)
+            stack.extend(x)
         elif hasattr(x, "__dataclass_fields__") and not isinstance(x, n.Span):
-            for name in x.__dataclass_fields__:
-                walk(getattr(x, name))
-
-    walk(tuple(body))
+            stack.extend(getattr(x, name) for name in x.__dataclass_fields__)
     return found
 
 
@@ -1341,11 +1505,35 @@ class Logic:
         return None, ""
 
 
+@contextmanager
+def _room_to_recurse(frames: int) -> Iterator[None]:
+    """The checker recurses along the nesting of statements (MAX_NESTING) and expressions
+    (MAX_EXPR_DEPTH), a few frames a level: more than Python's default 1,000.  Python
+    calls do not use the C stack in 3.11, so a higher limit is safe."""
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(old, frames))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(old)
+
+
 def compile_logic(files: Sequence[n.SourceFile], context: Context | None = None) -> Logic:
     """Check and compile; raises :class:`LogicError` with every diagnostic found."""
     compiler = Compiler(files, context or Context())
-    source, spans = compiler.compile()
+    with _room_to_recurse(10 * MAX_NESTING + 10 * MAX_EXPR_DEPTH + 2000):
+        source, spans = compiler.compile()
     if compiler.diagnostics:
         raise LogicError(sorted(compiler.diagnostics,
                                 key=lambda d: (d.span.file, d.span.line, d.span.column)))
-    return Logic(files, compiler, source, spans)
+    try:
+        return Logic(files, compiler, source, spans)
+    except (SyntaxError, RecursionError, MemoryError) as exc:
+        # A limit of Python's compiler the generated code was not kept inside: never a
+        # traceback, the statement it came from.
+        line = exc.lineno if isinstance(exc, SyntaxError) and exc.lineno else len(spans)
+        span = next((s for s in reversed(spans[:line]) if s is not None), None) or (
+            files[0].pous[0].span if files and files[0].pous else n.Span("?", 1, 1))
+        raise LogicError([StDiagnostic(StCode.UNSUPPORTED, "a statement too large or too "
+                                       "deeply nested to compile: split it", span,
+                                       compiler._source(span))]) from None

@@ -12,8 +12,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from lark import Lark, Token, Transformer, v_args
+from lark import Lark, Token, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+from lark.visitors import Transformer_NonRecursive
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
@@ -81,7 +82,10 @@ def _span(file: str, item: Any) -> n.Span:
 
 
 @v_args(meta=True)
-class _Build(Transformer[Token, Any]):
+class _Build(Transformer_NonRecursive[Token, Any]):
+    """The tree -> nodes.  Non-recursive: a chain of 10,000 operators is a tree 10,000 deep
+    (lark's LALR parser builds it without recursion; the default Transformer would not)."""
+
     def __init__(self, file: str) -> None:
         super().__init__()
         self.file = file

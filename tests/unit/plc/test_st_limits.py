@@ -1,0 +1,223 @@
+"""No input gives a traceback (issue 29): the sizes generated I/O code reaches compile and
+run -- a chain of 10,000 operators, 200 nested IFs and loops, 1,000 ELSIFs and CASE arms --
+what is beyond the language's limits is ST031 at its position, and a seeded fuzz of
+generated and then mutated programs finds each of them loads or gets coded diagnostics."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from ncgate.plc.scan import PlcState
+from ncgate.plc.st.compiler import compile_logic
+from ncgate.plc.st.diagnostics import LogicError, StCode
+from ncgate.plc.st.parser import parse_source
+
+from .st_harness import Plc, program
+
+
+def load_error(source: str) -> tuple[str, int, int]:
+    with pytest.raises(LogicError) as caught:
+        compile_logic([parse_source(source, "deep.st")])
+    first = caught.value.diagnostics[0]
+    return first.code.code, first.span.line, first.span.column
+
+
+def test_a_sum_of_10000_terms_runs() -> None:
+    terms = " + ".join(["one"] * 10_000)
+    plc = Plc(program(f"s := {terms};", "one : DINT := 1; s : DINT;")).scan()
+    assert plc["main.s"] == 10_000
+
+
+def test_a_300_term_or_interlock_and_a_10000_term_and_run() -> None:
+    ors = " OR ".join(f"b[{k}]" for k in range(1, 301))
+    ands = " AND ".join(["t"] * 10_000)
+    plc = Plc(program(f"b[300] := TRUE; any := {ors}; all := {ands} AND f;\n"
+                      f"none := {ors.replace('b[300]', 'f')};",
+                      "b : ARRAY[1..300] OF BOOL; t : BOOL := TRUE; f, any, all, none : BOOL;"))
+    plc.scan()
+    assert (plc["main.any"], plc["main.all"], plc["main.none"]) == (True, False, False)
+
+
+def test_a_chain_keeps_left_to_right_order_and_and_still_guards_what_follows() -> None:
+    # i <= 3 AND v[i] > 0 never reads v[4] (the operand after a FALSE is not evaluated,
+    # 7.3.2): a chain cut into temporaries must still stop at the first FALSE.
+    guard = " AND ".join(["ok"] * 40)
+    plc = Plc(program(f"i := 4; r := {guard} AND i <= 3 AND v[i] > 0 AND {guard};",
+                      "v : ARRAY[1..3] OF INT; i : INT; ok : BOOL := TRUE; r : BOOL;")).scan()
+    assert plc.runtime.status.state is PlcState.RUNNING and plc["main.r"] is False
+
+
+def test_200_nested_ifs_run_every_level() -> None:
+    body = "IF n >= 0 THEN n := n + 1;\n" * 200 + " END_IF\n" * 200
+    plc = Plc(program(body, "n : INT;")).scan()
+    assert plc["main.n"] == 200
+
+
+def test_200_nested_loops_with_exit_and_return_in_a_function() -> None:
+    # Each WHILE runs its body once (i counts 0 -> 1); the innermost adds 1 to f three
+    # times; RETURN from 200 loops deep ends the function; EXIT leaves one loop.
+    levels = 200
+    func = ("FUNCTION f : DINT VAR_INPUT stop : DINT; END_VAR VAR i : ARRAY[1..200] OF INT;"
+            " k : INT; END_VAR\n"
+            + "".join(f"i[{d}] := 0; WHILE i[{d}] < 1 DO i[{d}] := i[{d}] + 1;\n"
+                      for d in range(1, levels + 1))
+            + "FOR k := 1 TO 3 DO f := f + 1; IF f = stop THEN RETURN; END_IF END_FOR\n"
+            + " END_WHILE\n" * levels + "f := f + 10;\nEND_FUNCTION\n")
+    prog = ("PROGRAM main VAR full, cut, n : DINT; END_VAR\nfull := f(0); cut := f(2);\n"
+            + "WHILE TRUE DO n := n + 1;\n" * levels + " EXIT; END_WHILE\n" * levels
+            + "END_PROGRAM\n")
+    plc = Plc(func + prog).scan()
+    assert (plc["main.full"], plc["main.cut"], plc["main.n"]) == (13, 2, 200)
+
+
+def test_1000_elsifs_and_1000_case_arms_pick_their_branch() -> None:
+    elsifs = "".join(f"ELSIF x = {k} THEN a := {k * 2};\n" for k in range(1, 1000))
+    arms = "".join(f"{k}: c := {k * 3};\n" for k in range(1000))
+    plc = Plc(program(f"x := 777;\nIF x = 0 THEN a := -1;\n{elsifs}END_IF\n"
+                      f"CASE x OF\n{arms}ELSE c := -1; END_CASE\n"
+                      "CASE x + 1000 OF\n" + arms + "ELSE e := -1; END_CASE",
+                      "x, a, c, e : DINT;")).scan()
+    assert (plc["main.a"], plc["main.c"], plc["main.e"]) == (1554, 2331, -1)
+
+
+@pytest.mark.parametrize(("source", "line", "column"), [
+    (program("b := " + "NOT " * 10_000 + "b;", "b : BOOL;"), 5, 6 + 4 * 64),
+    (program("x := " + "x + (" * 1000 + "x" + ")" * 1000 + ";", "x : DINT;"), 5, 8 + 5 * 64),
+    (program("IF x > 0 THEN\n" * 600 + "x := 0;" + " END_IF" * 600, "x : DINT;"), 517, 1),
+], ids=["10000-NOTs", "1000-nested-parentheses-right", "600-nested-IFs"])
+def test_nesting_beyond_the_limits_is_st031_where_it_starts(source: str, line: int,
+                                                            column: int) -> None:
+    assert load_error(source) == ("ST031", line, column)
+
+
+def test_10000_parentheses_around_one_value_are_just_that_value() -> None:
+    plc = Plc(program("x := " + "(" * 10_000 + "41 + 1" + ")" * 10_000 + ";", "x : INT;"))
+    assert plc.scan()["main.x"] == 42
+
+
+# ---- the fuzz --------------------------------------------------------------------------------
+
+DECLS = "a, i : INT; b, c : BOOL; r : REAL; v : ARRAY[1..4] OF INT; t : TON; cnt : CTU;"
+# Token soup for mutations: keywords, operators, odd literals, punctuation.
+SOUP = ["IF", "THEN", "ELSE", "END_IF", "FOR", "TO", "BY", "DO", "END_FOR", "WHILE",
+        "END_WHILE", "REPEAT", "UNTIL", "END_REPEAT", "CASE", "OF", "END_CASE", "EXIT",
+        "RETURN", "CONTINUE", "VAR", "END_VAR", ":=", "=>", ";", ":", ",", "(", ")", "[", "]",
+        ".", "..", "+", "-", "*", "/", "**", "MOD", "AND", "OR", "XOR", "NOT", "<", ">=", "<>",
+        "0", "-1", "32767", "65536", "1e39", "1.5", "16#FF", "2#102", "1__0", "T#5ms3s",
+        "T#1.5s500ms", "T#30d", "DINT#-16#10", "INT#40000", "REAL#1e39", "TRUE", "(*", "*)",
+        "/*", "*/", "//", "{", "}", "'s'", "$", "by", "do", "TYPE", "STRUCT", "SIN(", "LN(",
+        "EXPT(", "REAL_TO_INT(", "TRUNC(", "ABS(", "MUX(", "SA[", "SYVAR[", "NC.P[1].", "t.Q",
+        "t(IN := ", "f(", "v[", "i", "x", "a", "r", "tm"]
+
+
+class Fuzz:
+    """Mostly well-typed programs (INT, BOOL and REAL expressions kept apart), then, for
+    most, a few words deleted, inserted or replaced from SOUP."""
+
+    def __init__(self, seed: int) -> None:
+        self.rng = random.Random(seed)
+
+    def num(self, depth: int = 0) -> str:
+        r = self.rng
+        if depth > 1 or r.random() < 0.45:
+            return r.choice(["a", "i", "v[i]", "v[2]", "cnt.CV", "SYVAR[1]", "NC.P[1].STATE",
+                             "3", "-7", "32767", "INT#-3"])
+        a, b = self.num(depth + 1), self.num(depth + 1)
+        return r.choice([f"({a} + {b})", f"{a} - {b}", f"({a} * {b})", f"({a} / {b})",
+                         f"{a} MOD {b}", f"-{a}", f"ABS({a})", f"MIN({a}, {b})",
+                         f"LIMIT({a}, {b}, 3)", f"SEL({self.cond(depth + 1)}, {a}, {b})",
+                         f"MUX({a}, 1, 2)", f"REAL_TO_INT({self.real(depth + 1)})",
+                         " + ".join([a] * r.randrange(2, 8))])
+
+    def real(self, depth: int = 0) -> str:
+        r = self.rng
+        if depth > 1 or r.random() < 0.45:
+            return r.choice(["r", "2.5", "1.0E3", "0.0", "INT_TO_REAL(a)"])
+        a, b = self.real(depth + 1), self.real(depth + 1)
+        return r.choice([f"({a} + {b})", f"({a} * {b})", f"({a} / {b})", f"({a} ** {b})",
+                         f"SQRT({a})", f"EXPT({a}, {b})", f"SIN({a})", f"LN({a})"])
+
+    def cond(self, depth: int = 0) -> str:
+        r = self.rng
+        if depth > 1 or r.random() < 0.45:
+            return r.choice(["b", "c", "TRUE", "t.Q", "SA[3]", "NC.P[2].IDLE"])
+        a, b = self.cond(depth + 1), self.cond(depth + 1)
+        return r.choice([f"{a} AND {b}", f"({a} OR {b})", f"{a} XOR {b}", f"NOT {a}",
+                         f"({self.num(depth + 1)} < {self.num(depth + 1)})",
+                         f"{self.num(depth + 1)} = {self.num(depth + 1)}",
+                         f"{self.real(depth + 1)} >= {self.real(depth + 1)}"])
+
+    def stmts(self, depth: int = 0) -> str:
+        r = self.rng
+        out = []
+        for _ in range(r.randrange(1, 3)):
+            kind = r.choice(["num", "num", "bool", "real"] + (
+                ["if", "case", "for", "while", "repeat"] if depth < 1 else []) + [
+                "call", "jump"])
+            if kind == "num":
+                out.append(f"{r.choice(['a', 'i', 'v[i]', 'SYVAR[0]'])} := {self.num()};")
+            elif kind == "bool":
+                out.append(f"{r.choice(['b', 'c', 'SA[2]', 'NC.START'])} := {self.cond()};")
+            elif kind == "real":
+                out.append(f"r := {self.real()};")
+            elif kind == "if":
+                out.append(f"IF {self.cond()} THEN {self.stmts(depth + 1)} ELSIF "
+                           f"{self.cond()} THEN {self.stmts(depth + 1)} ELSE "
+                           f"{self.stmts(depth + 1)} END_IF")
+            elif kind == "case":
+                out.append(f"CASE {self.num()} OF 1: {self.stmts(depth + 1)} 2..5, 9: "
+                           f"{self.stmts(depth + 1)} ELSE {self.stmts(depth + 1)} END_CASE")
+            elif kind == "for":
+                out.append(f"FOR i := {self.num()} TO {self.num()} BY "
+                           f"{r.choice(['1', '-2', 'a'])} DO {self.stmts(depth + 1)} END_FOR")
+            elif kind == "while":
+                out.append(f"WHILE {self.cond()} DO {self.stmts(depth + 1)} END_WHILE")
+            elif kind == "repeat":
+                out.append(f"REPEAT {self.stmts(depth + 1)} UNTIL {self.cond()} END_REPEAT")
+            elif kind == "call":
+                out.append(r.choice(["t(IN := b, PT := T#20ms);", "cnt(CU := b, PV := 3);",
+                                     f"t(IN := {self.cond()}, PT := T#5ms, Q => c);"]))
+            else:
+                out.append(r.choice(["EXIT;", "CONTINUE;", "RETURN;"]))
+        return "\n".join(out)
+
+    def source(self) -> str:
+        r = self.rng
+        text = (f"PROGRAM main\nVAR\n{DECLS}\nEND_VAR\n{self.stmts()}\nEND_PROGRAM\n")
+        if r.random() < 0.5:  # mutate
+            words = text.split(" ")
+            for _ in range(r.randrange(1, 4)):
+                k = r.randrange(len(words))
+                action = r.random()
+                if action < 0.3:
+                    del words[k]
+                elif action < 0.7:
+                    words.insert(k, r.choice(SOUP))
+                else:
+                    words[k] = r.choice(SOUP)
+            text = " ".join(words)
+        return text
+
+
+@pytest.mark.parametrize("seed", range(4))  # 4 x 550: 2,200 programs a run
+def test_generated_programs_load_or_get_coded_diagnostics_with_positions(seed: int) -> None:
+    loaded = refused = 0
+    for k in range(550):
+        fuzz = Fuzz(seed * 1000 + k)
+        source = fuzz.source()
+        lines = source.count("\n") + 1
+        try:
+            plc = Plc(source, loop_limit=500)
+        except LogicError as exc:
+            refused += 1
+            assert exc.diagnostics, source
+            for d in exc.diagnostics:
+                assert isinstance(d.code, StCode), source
+                assert 1 <= d.span.line <= lines and d.span.column >= 1, (d.render(), source)
+            continue
+        loaded += 1
+        plc.scan(2)  # a runtime error is a FAULT, and nothing escapes the scan
+        assert plc.runtime.status.state in (PlcState.RUNNING, PlcState.FAULT)
+    assert loaded > 60 and refused > 60, (loaded, refused)  # both kinds are exercised
