@@ -107,6 +107,17 @@ def _processes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) ->
     return tuple(out[n] for n in sorted(out))
 
 
+def _image_input(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
+    """An image variable named by a key (SA100, SK3, SYVAR5, SA2.BY): '' when not given."""
+    name = key.rpartition(".")[2]
+    if name not in t:
+        return ""
+    text = r.str_(t[name], key)
+    if _VE_MAP.match(text) is None:
+        raise r.fail(key, f"expected SA<n>, SA<n>.BY, SK<n>, SK<n>.IN or SYVAR<n>, got {text!r}")
+    return text.upper()
+
+
 def _process_main(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
     return r.str_(t["main"], key) if "main" in t else ""
 
@@ -342,6 +353,12 @@ class NcConfig:
     cell: str = setting("ncgate cell", "the cell's name, as fieldbus masters see it (Modbus "
                         "device identification: UserApplicationName)")
     autostart: bool = setting(False, "run: start main at once (else on cycle start)")
+    feed_hold_input: str = setting(
+        "", "a PLC interlock as a level (e.g. \"SA100\", door open): while it is set, motion "
+        "holds and a cycle start is refused (empty: none)", parse=_image_input)
+    cycle_start_inhibit_input: str = setting(
+        "", "while this image variable is set, a cycle start is refused (empty: none)",
+        parse=_image_input)
     e_params: int = setting(1000, "E parameters per process (E0..)", lo=1, hi=100_000)
     optional_skip: bool = setting(False, "skip blocks that start with /")
     lazy_parse: bool = setting(False, "start a program before it is parsed whole; a bad block "
@@ -748,8 +765,11 @@ class _Reader:
 
 def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
     nc, plc, canopen = config.nc, config.plc, config.canopen
-    for name, ve in nc.ve.items():
-        found = _VE_MAP.match(ve.map)
+    in_image = [(f"nc.ve.{name}.map", ve.map) for name, ve in nc.ve.items()]
+    in_image += [(f"nc.{key}", getattr(nc, key))
+                 for key in ("feed_hold_input", "cycle_start_inhibit_input") if getattr(nc, key)]
+    for key, text in in_image:
+        found = _VE_MAP.match(text)
         assert found is not None
         area, index, view = found.group(1).upper(), int(found.group(2)), found.group(3)
         size = {"SYVAR": plc.syvars, "SA": plc.sa_bits, "SK": plc.k_bytes, "K": plc.k_bytes}[area]
@@ -758,8 +778,8 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
         if view and view.upper() == "IN":
             size -= 1  # two bytes
         if index >= size:
-            raise r.fail(f"nc.ve.{name}.map", f"{ve.map} is outside the image (plc.sa_bits, "
-                         "plc.k_bytes, plc.syvars)")
+            raise r.fail(key, f"{text} is outside the image (plc.sa_bits, plc.k_bytes, "
+                         "plc.syvars)")
     if nc.tool_change_s > nc.limits.block_s:
         raise r.fail("nc.tool_change_s", f"{nc.tool_change_s:g} s is longer than a block may "
                      f"take (nc.limits.block_s = {nc.limits.block_s:g})")

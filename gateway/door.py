@@ -66,7 +66,7 @@ def command_kind(value: object) -> CommandKind:
     kind = _member(CommandKind, value)
     if kind is None:
         raise InputRefused(Reason.BAD_VALUE, f"command {value!r}: 1 cycle start, 2 feed "
-                           "hold, 3 reset")
+                           "hold, 3 reset, 4 restart the PLC")
     return kind
 ImageChange = tuple[str, int, str, int]
 
@@ -82,6 +82,11 @@ class Door:
         self._plc = plc
         self._sync = sync
         self.recorder: Recorder | None = None  # run --record: told before the effect
+        self._hold_input = next((var for what, var in runtime.interlocks
+                                 if what == "feed hold"), None)
+        self._hold_level = 0
+        if self._hold_input is not None:
+            runtime.image.subscribe(self._feed_hold_input)
 
     # -- the one entry ------------------------------------------------------------------------
 
@@ -146,6 +151,11 @@ class Door:
         kind = command_kind(item.kind)
         process = item.process
         engine = self.runtime.engine
+        if kind is CommandKind.RESTART_PLC:
+            self._restart_plc(item)
+            return
+        if kind is CommandKind.CYCLE_START:
+            self._interlocks(kind)
         if process is not None:
             self._process(process)
             if engine.processes[process].external:
@@ -161,6 +171,37 @@ class Door:
             plc = self._plc()
             if plc is not None and process is None:  # a reset of the cell also restarts a
                 plc.restart()  # faulted PLC
+
+    def _restart_plc(self, item: Command) -> None:
+        """The PLC logic starts again after a FAULT (a running one is left alone); the NC
+        processes and their waits are untouched."""
+        if item.process is not None:
+            raise InputRefused(Reason.BAD_VALUE, "a restart of the PLC is the cell's "
+                               "(process null)")
+        plc = self._plc()
+        if plc is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
+        self._enter(item)
+        plc.restart()
+
+    def _feed_hold_input(self, changes: object, writer: str) -> None:
+        """The feed-hold input (nc.feed_hold_input) rose, by any write of its bit, byte or
+        word: the cell holds, as on a feed hold.  It resumes with a cycle start once the input
+        is clear -- a machine does not move by itself when its door closes."""
+        var = self._hold_input
+        assert var is not None
+        level = self.runtime.image.read(var.area, var.index, var.view)
+        if level and not self._hold_level:
+            self.runtime.engine.hold(True)
+        self._hold_level = level
+
+    def _interlocks(self, kind: CommandKind) -> None:
+        """A cycle start while a PLC interlock input is set is refused, saying which."""
+        image = self.runtime.image
+        for key, var in self.runtime.interlocks:
+            if image.read(var.area, var.index, var.view):
+                raise InputRefused(Reason.INTERLOCK, f"{kind.label}: {key} input {var} is "
+                                   "set")
 
     def _snd(self, item: Snd) -> None:
         engine = self.runtime.engine

@@ -10,7 +10,7 @@ from typing import Protocol
 from ncgate.config import Config
 from ncgate.gateway.programs import ProgramStore, dialect_options
 from ncgate.gateway.programs import external_bindings as external_bindings
-from ncgate.inputs import Input
+from ncgate.inputs import Input, Var
 from ncgate.inputs import var_name as variable_name
 from ncgate.interpreter.dialect import DialectFrontEnd
 from ncgate.interpreter.dialects import ImageVar as ImageVar
@@ -46,6 +46,9 @@ class Runtime:
     engine: Engine
     trace: Trace
     plc: PlcRuntime | None = None  # the PLC logic, when [plc] logic names any
+    # The PLC's interlock inputs, levels ("feed hold", nc.feed_hold_input; "cycle start
+    # inhibit"): while one is set, a cycle start is refused (the door asks).
+    interlocks: tuple[tuple[str, Var], ...] = ()
 
 
 def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> Runtime:
@@ -63,7 +66,15 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
                               change.value, writer)
 
     image.subscribe(on_write)  # type: ignore[arg-type]
-    return Runtime(config, image, store, engine, trace)
+    interlocks = tuple((what, _image_var(text)) for what, text in (
+        ("feed hold", config.nc.feed_hold_input),
+        ("cycle start inhibit", config.nc.cycle_start_inhibit_input)) if text)
+    return Runtime(config, image, store, engine, trace, interlocks=interlocks)
+
+
+def _image_var(text: str) -> Var:
+    """An image variable as the config names it (``K12`` is the K packet's byte: SK12)."""
+    return Var.parse("S" + text if text.upper().startswith("K") else text)
 
 
 class Backend(Protocol):

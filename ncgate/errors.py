@@ -56,6 +56,7 @@ class Reason(enum.StrEnum):
     PROGRAM_NOT_FOUND = "program not found"
     PROGRAM_INVALID = "program invalid"  # does not parse or check: the diagnostics say why
     ROLE_FORBIDS = "role forbids"  # the client's role may not do this
+    INTERLOCK = "interlock"  # a PLC interlock input is set (nc.feed_hold_input, ...)
     UNSUPPORTED = "unsupported"  # a form of input this version does not take
 
 

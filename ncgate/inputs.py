@@ -199,6 +199,7 @@ class CommandKind(enum.IntEnum):
     CYCLE_START = 1
     FEED_HOLD = 2
     RESET = 3
+    RESTART_PLC = 4  # the PLC logic after a FAULT, the NC processes untouched (the cell's)
 
     @property
     def label(self) -> str:
@@ -207,7 +208,8 @@ class CommandKind(enum.IntEnum):
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """Cycle start, feed hold or reset; ``process=None``: the whole cell."""
+    """Cycle start, feed hold, reset or a restart of the PLC logic; ``process=None``: the
+    whole cell (a PLC restart is always the cell's)."""
 
     kind: CommandKind
     process: int | None = None

@@ -336,8 +336,8 @@ class ModbusMap:
             (word,) = values
             command = command_word(word)
             if command is None:
-                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset "
-                                  "(high byte: the process, 0 for the cell)")
+                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset, "
+                                  "4 restart the PLC (high byte: the process, 0 for the cell)")
             backend.apply(Command(command[0], command[1], source))  # refusals: REFUSAL
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:

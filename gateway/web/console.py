@@ -74,6 +74,7 @@ HTTP_STATUS: dict[Reason, int] = {
     Reason.EXTERNAL_PROCESS: 409,
     Reason.NOT_EXTERNAL: 422,
     Reason.BUSY: 409,
+    Reason.INTERLOCK: 409,
     Reason.NOT_RUNNING: 409,
     Reason.NOT_CONFIGURED: 409,
     Reason.PROGRAM_NOT_FOUND: 404,
