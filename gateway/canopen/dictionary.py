@@ -48,6 +48,10 @@ MAX_MAPPED = 8  # objects per PDO (granularity 8: whole bytes, at most 8 of them
 CONSUMER_ENTRIES = 4  # 0x1016: nodes whose heartbeat the node watches
 
 SYNC_COB_ID, STORE, RESTORE, CONSUMER_HEARTBEAT = 0x1005, 0x1010, 0x1011, 0x1016
+ERROR_BEHAVIOUR = 0x1029
+# 0x1029:1, what a communication error (the master's heartbeat lost) does to the NMT state
+# (CiA 301 7.5.2.32): 0 pre-operational (from OPERATIONAL only), 1 no change, 2 stopped.
+TO_PRE_OPERATIONAL, NO_STATE_CHANGE, TO_STOPPED = 0, 1, 2
 RPDO_COMMUNICATION, RPDO_MAPPING = 0x1400, 0x1600
 TPDO_COMMUNICATION, TPDO_MAPPING = 0x1800, 0x1A00
 
@@ -301,6 +305,10 @@ def build_dictionary(config: Config) -> ObjectDictionary:
                              names=("all parameters", "communication parameters")))
     od.add_object(_array("Consumer heartbeat time", CONSUMER_HEARTBEAT, CONSUMER_ENTRIES,
                          "Consumer heartbeat time", UNSIGNED32, "rw", default=0, pdo=False))
+    # Error behaviour: CiA 301's default reaction to a communication error, pre-operational.
+    od.add_object(_array("Error behaviour", ERROR_BEHAVIOUR, 1, "", UNSIGNED8, "rw",
+                         default=TO_PRE_OPERATIONAL, pdo=False,
+                         names=("Communication error",)))
     _pdos(od, config)
     # Manufacturer area.
     od.add_object(_array("SA bytes", SA_BYTES, plc.sa_bits // 8, "SA byte", UNSIGNED8, "rw"))

@@ -58,12 +58,16 @@ from ncgate.gateway.canopen.dictionary import (
     COMMAND,
     CONSUMER_ENTRIES,
     CONSUMER_HEARTBEAT,
+    ERROR_BEHAVIOUR,
     LAST_SND,
+    NO_STATE_CHANGE,
     PLC_STATUS,
     RESTORE,
     STATUS_BASE,
     STORE,
     SYNC_COB_ID,
+    TO_PRE_OPERATIONAL,
+    TO_STOPPED,
     TPDO_COMMUNICATION,
     TPDO_MAPPING,
     build_dictionary,
@@ -482,6 +486,9 @@ class CanopenNode:
                 check_entries(entries)
             elif index in (STORE, RESTORE):
                 self._store_command(index, number)
+            elif index == ERROR_BEHAVIOUR and subindex == 1 and number not in (
+                    TO_PRE_OPERATIONAL, NO_STATE_CHANGE, TO_STOPPED):
+                raise SdoAbortedError(ABORT_INVALID_VALUE)  # reserved or manufacturer's
             return
         value = od.decode_raw(data)
         assert isinstance(value, int)
@@ -574,10 +581,27 @@ class CanopenNode:
         if not self.stopped:
             self.node.emcy.send(EMCY_HEARTBEAT, self._error_register(),
                                   struct.pack("<B4x", node_id))
+        self._communication_error()
         if reaction is MasterLost.HOLD:
             self.backend.apply(Command(CommandKind.FEED_HOLD, None, source))
         elif reaction is MasterLost.RESET:
             self.backend.apply(Command(CommandKind.RESET, None, source))
+
+    def _communication_error(self) -> None:
+        """0x1029:1, the NMT state's reaction to a communication error, after its EMCY
+        (CiA 301 7.5.2.32); the processes' reaction is canopen.on_master_lost's."""
+        behaviour = pdo.param(self.node, ERROR_BEHAVIOUR, 1)
+        if behaviour == TO_PRE_OPERATIONAL and self.operational:
+            command, state = 0x80, "PRE-OPERATIONAL"
+        elif behaviour == TO_STOPPED and not self.stopped:
+            command, state = 0x02, "STOPPED"
+        else:
+            return
+        log.warning("CANopen: communication error: the node goes %s (0x1029:1 = %d)", state,
+                    behaviour)
+        self.node.nmt.send_command(command)
+        self.pdos.discard_sync_rpdos()
+        self.pdos.left_operational()
 
     def _on_master_back(self, node_id: int) -> None:
         if node_id not in self._master_lost:

@@ -328,3 +328,49 @@ async def test_the_heartbeat_back_resets_its_error_and_keeps_a_process_alarm_in_
     clocked.command(3)  # the reset clears the alarm: error reset, register 0
     code, register = struct.unpack_from("<HB", await master.next(EMCY))
     assert (code, register) == (0x0000, 0x00)
+
+
+# -- 8. 0x1029 error behaviour: the NMT state's reaction to a communication error -----------------
+
+async def lose_the_master(master: Master, clock: ManualClock) -> None:
+    """Operational, watching node 1 for 200 ms; its one heartbeat, then silence."""
+    await master.download(0x1016, 1, u32(MASTER_ID << 16 | 200))
+    await master.download(0x1017, 0, u16(10))  # the node's own heartbeat shows its state
+    master.nmt(0x01)
+    await master.until(BOOT, b"\x05")
+    await heartbeat(master)
+    clock.advance(0.2)
+    code, _ = struct.unpack_from("<HB", await master.next(EMCY))
+    assert code == 0x8130  # the EMCY goes out first, in the state the node was in
+
+
+@pytest.mark.parametrize(("behaviour", "state"), [(None, b"\x7f"), (0, b"\x7f"), (2, b"\x04")],
+                         ids=["default", "pre-operational", "stopped"])
+async def test_a_lost_master_changes_the_nmt_state_as_0x1029_says(
+        clocked: Gateway, master: Master, clock: ManualClock, behaviour: int | None,
+        state: bytes) -> None:
+    if behaviour is not None:
+        await master.download(0x1029, 1, u8(behaviour))
+    await lose_the_master(master, clock)
+    await master.until(BOOT, state)  # the node's heartbeat: its new state
+    assert [e["code"] for e in clocked.trace if e["event"] == "alarm"] == ["AL150"]
+    assert all(p.held for p in clocked.engine.processes.values() if not p.external)
+
+
+async def test_0x1029_no_state_change_keeps_the_node_operational(
+        clocked: Gateway, master: Master, clock: ManualClock) -> None:
+    await master.download(0x1029, 1, u8(1))
+    await lose_the_master(master, clock)
+    master.network.send_message(0x210, bytes((9,)) + bytes(7))  # RPDO1, at once
+    await master.barrier()
+    assert await master.upload(0x2000, 1) == u8(9)  # still OPERATIONAL: PDOs are served
+    assert clocked.canopen_node is not None and clocked.canopen_node.operational
+
+
+@pytest.mark.parametrize("value", [3, 0x7F, 0x80])
+async def test_0x1029_takes_only_the_reactions_the_node_has(gw: Gateway, master: Master,
+                                                            value: int) -> None:
+    assert await master.upload(0x1029, 0) == u8(1)
+    assert await master.upload(0x1029, 1) == u8(0)  # CiA 301: pre-operational
+    assert await sdo_error(master.download(0x1029, 1, u8(value))) == 0x06090030
+    assert await master.upload(0x1029, 1) == u8(0)
