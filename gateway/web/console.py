@@ -49,6 +49,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("ncgate.web")
 
 STATUS_EVERY_S = 0.25  # a stream's status at most this often (and when anything changed)
+MESSAGE_BYTES = 64 * 1024  # a stream's message (one data line) at most this long
 PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients keep it
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
@@ -107,7 +108,7 @@ class WebConsole:
         self._feed: EventFeed | None = None
         self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
-        self._status_cache: tuple[tuple[int, int, int], float, str] | None = None
+        self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
         self._assets = {name: resources.files("ncgate.gateway.web").joinpath(
             "static", name).read_bytes() for name in ASSETS}
         self._loopback = is_loopback(config.host)
@@ -242,21 +243,26 @@ class WebConsole:
         write_gantt(self.gw.trace, config.processes, out, external=config.external)
         return web.Response(text=out.getvalue(), content_type="image/svg+xml")
 
-    def _status_text(self) -> str:
-        """The status as JSON, built at most once per STATUS_EVERY_S for every stream."""
+    def _status_parts(self) -> dict[str, str]:
+        """The status as JSON parts (each top-level key, and the image's ``sa``, ``k``,
+        ``syvar`` and ``writers`` apart), built at most once per STATUS_EVERY_S for every
+        stream; a stream sends the parts that changed since it last sent them."""
         gw = self.gw
         key = (gw.runtime.trace.seq, gw.image.generation, int(gw.engine.now * 1000))
         now = asyncio.get_running_loop().time()
         cached = self._status_cache
         if cached is None or (cached[0] != key and now - cached[1] >= STATUS_EVERY_S / 2):
-            cached = (key, now, json.dumps(status(gw), separators=(",", ":")))
+            cached = (key, now, status_parts(status(gw)))
             self._status_cache = cached
         return cached[2]
 
     async def _stream(self, request: web.Request) -> web.StreamResponse:
-        """Server-sent events: ``status`` (the whole status, when it changed, at most every
-        STATUS_EVERY_S) and ``events`` (new trace events, as they come, with ``id`` = the
-        last seq so that a reconnecting page resumes where it was)."""
+        """Server-sent events, coalesced for each client: ``status`` (what changed since
+        the last one -- the first is whole -- at most every STATUS_EVERY_S) and ``events``
+        (the trace events since the last batch, at most one batch per feed.BATCH_S, with
+        ``id`` = the last seq so that a reconnecting page resumes where it was).  No message
+        is longer than MESSAGE_BYTES but a single status part: a client that connects to a
+        full ring, or falls behind, gets its events in several messages."""
         feed = self._feed
         assert feed is not None
         if self.streams >= self.config.max_streams:
@@ -275,27 +281,28 @@ class WebConsole:
             await response.prepare(request)
             # A new page gets what the ring holds (its timeline and log start filled).
             position = max(since, 0)
-            sent_status = ""
+            sent: dict[str, str] = {}  # the status parts this client has
             status_at = written_at = -1e9
             loop = asyncio.get_running_loop()
             await self._send(response, "retry: 1000\n\n")
             while not feed.closed and not _gone(request):
-                parts = []
+                messages: list[str] = []
                 now = loop.time()
                 if now - status_at >= STATUS_EVERY_S:  # first: it names the session
-                    text = self._status_text()
-                    if text != sent_status:
-                        parts.append(f"event: status\ndata: {text}\n\n")
-                        sent_status, status_at = text, now
+                    changed = {name: text for name, text in self._status_parts().items()
+                               if sent.get(name) != text}
+                    if changed:
+                        messages += status_messages(changed)
+                        sent.update(changed)
+                        status_at = now
                 texts, missed = feed.since(position)
                 if texts:
                     position += missed + len(texts)
-                    parts.append(f"id: {position}\nevent: events\ndata: {{\"missed\":{missed},"
-                                 f"\"events\":[{','.join(texts)}]}}\n\n")
-                if not parts and now - written_at >= PING_S:
-                    parts.append(": ping\n\n")
-                if parts:
-                    await self._send(response, "".join(parts))
+                    messages += event_messages(texts, missed, position)
+                if not messages and now - written_at >= PING_S:
+                    messages.append(": ping\n\n")
+                if messages:
+                    await self._send(response, "".join(messages))
                     written_at = now
                 await feed.wait(STATUS_EVERY_S)
         except (ConnectionResetError, TimeoutError):
@@ -374,6 +381,63 @@ class WebConsole:
                                       "process": process})
         log.info("web %s: %s", request.remote, command)
         return web.json_response({"command": command})
+
+
+def status_parts(whole: dict[str, Any]) -> dict[str, str]:
+    """The status as JSON texts by part: ``"t"``, ``"processes"``, ... and ``"image.sa"``,
+    ``"image.k"``, ...: the image's writers change without its bits, and its bits often."""
+    parts = {name: json.dumps(value, separators=(",", ":"))
+             for name, value in whole.items() if name != "image"}
+    for name, value in whole.get("image", {}).items():
+        parts[f"image.{name}"] = json.dumps(value, separators=(",", ":"))
+    return parts
+
+
+def status_messages(parts: dict[str, str]) -> list[str]:
+    """``event: status`` messages holding these parts, packed up to MESSAGE_BYTES each (a
+    part is never split): ``{"t": ..., "image": {"sa": ...}}``, to be merged by the page."""
+    messages: list[str] = []
+    top: list[str] = []
+    image: list[str] = []
+    size = 0
+
+    def close() -> None:
+        nonlocal top, image, size
+        items = top + ([f'"image":{{{",".join(image)}}}'] if image else [])
+        if items:
+            messages.append(f"event: status\ndata: {{{','.join(items)}}}\n\n")
+        top, image, size = [], [], 0
+
+    for name, text in parts.items():
+        area, _, sub = name.partition(".")
+        item = f'"{sub or area}":{text}'
+        if size and size + len(item) > MESSAGE_BYTES:
+            close()
+        (image if sub else top).append(item)
+        size += len(item) + 1
+    close()
+    return messages
+
+
+def event_messages(texts: list[str], missed: int, position: int) -> list[str]:
+    """``event: events`` messages of these events (the last one's seq is ``position``), up
+    to MESSAGE_BYTES each; ``id`` is the seq of each message's last event, ``missed`` is in
+    the first."""
+    chunks: list[list[str]] = [[]]
+    size = 0
+    for text in texts:
+        if chunks[-1] and size + len(text) + 1 > MESSAGE_BYTES - 64:  # 64: the envelope
+            chunks.append([])
+            size = 0
+        chunks[-1].append(text)
+        size += len(text) + 1
+    messages = []
+    seq = position - len(texts)
+    for number, chunk in enumerate(chunks):
+        seq += len(chunk)
+        messages.append(f'id: {seq}\nevent: events\ndata: {{"missed":'
+                        f'{missed if number == 0 else 0},"events":[{",".join(chunk)}]}}\n\n')
+    return messages
 
 
 async def _secure(request: web.Request, response: web.StreamResponse) -> None:

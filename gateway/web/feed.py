@@ -1,8 +1,11 @@
 """The live stream's source: trace events for every console client, kept once.
 
-A trace listener only appends the typed event (it is on the path of every SND and WAI); once
-per turn of the loop the new events are rendered to JSON, kept in one shared ring, and every
-waiting stream is woken.  A stream keeps only its position (a sequence number): memory does
+A trace listener only appends the typed event (it is on the path of every SND and WAI); at
+most once per BATCH_S (at once when the last batch is older) the new events are rendered to
+JSON, kept in one shared ring, and every waiting stream is woken.  So a stream sends at most
+one batch of events per BATCH_S whatever the rate: a PLC that writes 2,000 times a second
+gives a page 20 messages, not 2,000 (one message per write put the page minutes behind).
+A stream keeps only its position (a sequence number): memory does
 not grow with clients or with time, and a client that reads slowly -- or not at all -- holds
 nobody else up; if it falls out of the ring it is told how many events it missed.
 
@@ -19,6 +22,7 @@ from collections import deque
 from ncgate.interpreter.engine.events import Event, as_dict
 
 RING = 5000  # events kept for streams that connect or fall behind
+BATCH_S = 0.05  # events reach the streams at most this often (bench/console_browser.py)
 
 
 class EventFeed:
@@ -28,6 +32,7 @@ class EventFeed:
         self._ring: deque[tuple[int, str]] = deque(maxlen=keep)  # (seq, JSON)
         self._flush: asyncio.Handle | None = None
         self._tick: asyncio.Future[None] | None = None
+        self._flushed_at = -1e9  # loop time of the last flush
         self.seq = 0  # the last event rendered
         self.closed = False
 
@@ -35,10 +40,13 @@ class EventFeed:
         """The trace listener."""
         self._pending.append(event)
         if self._flush is None:
-            self._flush = self._loop.call_soon(self.flush)
+            due = self._flushed_at + BATCH_S - self._loop.time()
+            self._flush = (self._loop.call_later(due, self.flush) if due > 0 else
+                           self._loop.call_soon(self.flush))
 
     def flush(self) -> None:
         self._flush = None
+        self._flushed_at = self._loop.time()
         pending, self._pending = self._pending, []
         for event in pending:
             self._ring.append((event.seq, json.dumps(as_dict(event), separators=(",", ":"))))

@@ -30,6 +30,7 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "version": __version__,
         "session": gw.session,
         "t": round(engine.now, 6),
+        "time_scale": gw.config.nc.time_scale,  # machine s per wall s: the page's clock runs
         "config": str(gw.config.source) if gw.config.source else "built-in default",
         "main": gw.config.nc.main,
         "dialect": gw.config.nc.dialect.value,

@@ -10,10 +10,14 @@ const el = (tag, cls, text) => {
   return e;
 };
 const SVG = "http://www.w3.org/2000/svg";
-const KEEP = 3000;          // events the page keeps (log and timeline)
+const KEEP = 3000;          // events the page keeps (the timeline's)
+const LOG_ROWS = 300;       // rows the event log shows, newest first
 const WINDOW_S = 30;        // the timeline shows the last WINDOW_S seconds of machine time
+const TICK_MS = 250;        // the timeline is redrawn on this clock, never per message
 let token = sessionStorage.getItem("ncgate-token") || "";
 let session = null, lastSeq = -1, status = null, events = [], source = null;
+let pending = {};           // the status parts received but not drawn yet
+let timelineDirty = false, timelineAt = 0;
 const kinds = new Set();
 
 // ---- the stream -------------------------------------------------------------------------
@@ -28,22 +32,34 @@ function connect() {
       setTimeout(connect, 2000);
     }  // otherwise the browser reconnects by itself (retry: 1000)
   };
+  // A status message holds what changed since the last one (the first one of a stream holds
+  // everything, perhaps in several messages): merged here, and only those parts redrawn.
   source.addEventListener("status", (e) => {
     const s = JSON.parse(e.data);
-    if (session !== null && s.session !== session) resetSession();
-    session = s.session;
-    status = s;
+    if (s.session !== undefined) {
+      if (session !== null && s.session !== session) resetSession();
+      session = s.session;
+    }
+    if (status === null) status = {};
+    if (s.t !== undefined) statusAt = performance.now();
+    for (const [k, v] of Object.entries(s)) {
+      if (k === "image") status.image = Object.assign(status.image || {}, v);
+      else status[k] = v;
+      pending[k] = true;
+    }
     render();
   });
   source.addEventListener("events", (e) => {
     const batch = JSON.parse(e.data);
-    for (const ev of batch.events) addEvent(ev);
+    const fresh = [];
+    for (const ev of batch.events) if (addEvent(ev)) fresh.push(ev);
     if (events.length > KEEP) events.splice(0, events.length - KEEP);
-    renderLog();
-    if (!$("#pause").checked) renderTimeline();
+    appendLog(fresh);
+    timelineDirty = true;
   });
 }
 function setConn(up) {
+  live = up;
   const c = $("#conn");
   c.textContent = up ? "live" : "reconnecting…";
   c.className = up ? "up" : "down";
@@ -51,10 +67,12 @@ function setConn(up) {
 function resetSession() {  // the gateway restarted: its events start again at 1
   events = [];
   lastSeq = -1;
+  status = null;
   $("#log tbody").replaceChildren();
+  timelineDirty = true;
 }
 function addEvent(ev) {
-  if (ev.seq <= lastSeq) return;
+  if (ev.seq <= lastSeq) return false;
   lastSeq = ev.seq;
   events.push(ev);
   if (!kinds.has(ev.event)) {
@@ -63,6 +81,7 @@ function addEvent(ev) {
     o.value = ev.event;
     $("#filter-kind").append(o);
   }
+  return true;
 }
 
 // ---- acting -------------------------------------------------------------------------------
@@ -95,17 +114,20 @@ function write(variable, value) { return post("/api/write", { var: variable, val
 
 // ---- rendering ----------------------------------------------------------------------------
 function render() {
-  const lag = status.lag_s ? " (engine " + status.lag_s.toFixed(3) + " s behind the clock)" : "";
-  $("#clock").textContent = "t = " + status.t.toFixed(3) + " s" + (status.held ? " (feed hold)" : "") + lag;
+  if (!status.processes || !status.image || !status.web || !status.fieldbus) return;
+  const parts = pending;
+  pending = {};
+  renderClock();
   $("#source").textContent = status.config;
   for (const b of document.querySelectorAll("nav button, nav select")) {
     b.disabled = status.web.read_only;
   }
   if (status.web.token && !token) $("#token").hidden = false;
-  renderLanes();
-  renderImage();
-  renderPlc();
-  renderFieldbus();
+  if (parts.processes) renderLanes();
+  if (parts.image) renderImage();
+  if (parts.plc) renderPlc();
+  if (parts.fieldbus) renderFieldbus();
+  if (!parts.processes) return;
   const procs = $("#start-process");
   if (procs.options.length !== status.processes.length) {
     procs.replaceChildren();
@@ -159,6 +181,7 @@ function cells(box, count, make) {
   }
   return box.children;
 }
+let drawnSa = "", drawnSaBy = [];
 function renderImage() {
   const img = status.image;
   const sa = cells($("#sa"), img.sa.length, (i) => {
@@ -167,15 +190,19 @@ function renderImage() {
     c.addEventListener("click", () => write("SA" + i, c.classList.contains("on") ? 0 : 1));
     return c;
   });
+  if (sa.length !== drawnSaBy.length) { drawnSa = ""; drawnSaBy = new Array(sa.length); }
   for (let i = 0; i < img.sa.length; i++) {
+    const who = img.writers.SA[i];
+    if (img.sa[i] === drawnSa[i] && who === drawnSaBy[i]) continue;  // as drawn
+    drawnSaBy[i] = who;
     const on = img.sa[i] === "1";
     const c = sa[i];
     c.classList.toggle("on", on);
     c.textContent = i % 8 === 0 ? String(i) : "";
-    const who = img.writers.SA[i];
     c.title = "SA" + i + " = " + (on ? 1 : 0) + (who ? " (last written by " + who + ")" : "");
     c.classList.toggle("ext", !!who && who !== "plc");
   }
+  drawnSa = img.sa;
   bytes($("#k"), img.k, "SK", img.writers.SK, 255);
   bytes($("#syvar"), img.syvar, "SYVAR", img.writers.SYVAR, 32767);
 }
@@ -191,10 +218,12 @@ function bytes(box, values, name, writers, max) {
   });
   for (let i = 0; i < values.length; i++) {
     const c = all[i];
+    const who = writers[i];
+    if (c.dataset.value === String(values[i]) && c.dataset.who === (who || "")) continue;
+    c.dataset.who = who || "";
     c.dataset.value = values[i];
     c.textContent = values[i];
     c.classList.toggle("nz", values[i] !== 0);
-    const who = writers[i];
     c.title = name + i + " = " + values[i] + (who ? " (last written by " + who + ")" : "");
   }
 }
@@ -238,35 +267,61 @@ function describe(ev) {
   }
   return parts.join(", ");
 }
-function renderLog() {
-  const proc = $("#filter-proc").value, kind = $("#filter-kind").value;
-  const body = $("#log tbody");
-  const rows = [];
-  for (let i = events.length - 1; i >= 0 && rows.length < 300; i--) {
-    const ev = events[i];
-    if ((proc && String(ev.proc) !== proc) || (kind && ev.event !== kind)) continue;
-    const r = el("tr", ev.event === "alarm" || ev.event === "deadlock" ? "alarm" : "");
-    const where = ev.prog ? ev.prog + ":" + ev.line + (ev.n !== null && ev.n !== undefined ? " N" + ev.n : "") : "";
-    r.append(el("td", null, ev.seq), el("td", null, ev.t.toFixed(3)), el("td", null, ev.proc),
-             el("td", null, ev.event), el("td", null, where), el("td", null, describe(ev)));
-    rows.push(r);
+function logRow(ev) {
+  const r = el("tr", ev.event === "alarm" || ev.event === "deadlock" ? "alarm" : "");
+  let where = "";
+  if (ev.prog) {
+    where = ev.prog;
+    if (ev.line !== undefined && ev.line !== null) where += ":" + ev.line;
+    if (ev.n !== undefined && ev.n !== null) where += " N" + ev.n;
   }
-  body.replaceChildren(...rows);
+  r.append(el("td", null, ev.seq), el("td", null, ev.t.toFixed(3)), el("td", null, ev.proc),
+           el("td", null, ev.event), el("td", null, where), el("td", null, describe(ev)));
+  return r;
+}
+function shown(ev) {
+  const proc = $("#filter-proc").value, kind = $("#filter-kind").value;
+  return !((proc && String(ev.proc) !== proc) || (kind && ev.event !== kind));
+}
+// The log is append-only: a batch's rows go on top, the oldest beyond LOG_ROWS go; the whole
+// table is built again only when a filter changes.
+function appendLog(fresh) {
+  const rows = [];
+  for (let i = fresh.length - 1; i >= 0 && rows.length < LOG_ROWS; i--) {
+    if (shown(fresh[i])) rows.push(logRow(fresh[i]));
+  }
+  if (!rows.length) return;
+  const body = $("#log tbody");
+  body.prepend(...rows);
+  while (body.childElementCount > LOG_ROWS) body.lastElementChild.remove();
+}
+function renderLog() {
+  const rows = [];
+  for (let i = events.length - 1; i >= 0 && rows.length < LOG_ROWS; i--) {
+    if (shown(events[i])) rows.push(logRow(events[i]));
+  }
+  $("#log tbody").replaceChildren(...rows);
 }
 $("#filter-proc").addEventListener("change", renderLog);
 $("#filter-kind").addEventListener("change", renderLog);
 
+let timelineWidth = 0;
+window.addEventListener("resize", () => { timelineWidth = 0; timelineDirty = true; });
 const COLOURS = { run: "#66bb6a", wait: "#ffb74d", alarm: "#e57373" };
 function renderTimeline() {
   const svg = $("#timeline");
-  const n = status ? status.processes.length : 5;
-  const laneH = 20, top = 14, width = svg.clientWidth || 900, left = 34;
+  const n = status && status.processes ? status.processes.length : 5;
+  // The width is read on a resize only: reading it here would force a layout of the whole
+  // page (its log included) on every tick -- 80 ms at 2,000 writes/s.
+  if (!timelineWidth) timelineWidth = svg.clientWidth || 900;
+  const laneH = 20, top = 14, width = timelineWidth, left = 34;
   svg.setAttribute("height", top + (n + 1) * laneH + 4);
-  const end = Math.max(status ? status.t : 0, events.length ? events[events.length - 1].t : 0);
+  const end = Math.max(machineNow(), events.length ? events[events.length - 1].t : 0);
   const start = Math.max(0, end - WINDOW_S);
   const x = (t) => left + (width - left - 6) * (t - start) / Math.max(end - start, 1e-6);
   const y = (p) => top + (p === 0 ? n : p - 1) * laneH;
   const parts = [];
+  const marks = new Map();  // one mark per 3 pixels: thousands of writes a second stay cheap
   const open = {};  // process -> [state, since]
   const segment = (p, kind, t0, t1) => {
     if (t1 < start) return;
@@ -295,14 +350,18 @@ function renderTimeline() {
       l.setAttribute("stroke", ev.event === "snd" ? "#1565c0" : "#6a1b9a");
       parts.push(l);
     } else if (ev.event === "write" && p === 0) {
-      const m = document.createElementNS(SVG, "circle");
-      m.setAttribute("class", "mark");
-      m.setAttribute("cx", x(ev.t)); m.setAttribute("cy", y(0) + laneH / 2); m.setAttribute("r", 3);
-      m.setAttribute("fill", "#455a64");
-      const title = document.createElementNS(SVG, "title");
-      title.textContent = ev.var + " = " + ev.value + " by " + ev.who;
-      m.append(title);
-      parts.push(m);
+      const px = Math.round(x(ev.t) / 3) * 3;  // a mark's radius: closer ones are one
+      let m = marks.get(px);
+      if (!m) {
+        m = document.createElementNS(SVG, "circle");
+        m.setAttribute("class", "mark");
+        m.setAttribute("cx", px); m.setAttribute("cy", y(0) + laneH / 2); m.setAttribute("r", 3);
+        m.setAttribute("fill", "#455a64");
+        m.append(document.createElementNS(SVG, "title"));
+        marks.set(px, m);
+        parts.push(m);
+      }
+      m.firstChild.textContent = ev.var + " = " + ev.value + " by " + ev.who;  // the last
     }
   }
   for (const [p, was] of Object.entries(open)) if (was) segment(Number(p), was[0], was[1], end);
@@ -317,7 +376,31 @@ function renderTimeline() {
   axis.textContent = start.toFixed(1) + " s … " + end.toFixed(1) + " s";
   parts.push(axis);
   svg.replaceChildren(...parts);
+  timelineDirty = false;
+  timelineAt = performance.now();
 }
+
+// ---- the clock --------------------------------------------------------------------------------
+// Machine time runs on with the wall clock (times time_scale) whether or not anything
+// happens: the header, the timeline's axis and the waits' durations move every second from
+// the last status's t, not only when a message comes.
+let statusAt = 0, live = false;
+function renderClock() {
+  const lag = status.lag_s ? " (engine " + status.lag_s.toFixed(3) + " s behind the clock)" : "";
+  $("#clock").textContent = "t = " + machineNow().toFixed(1) + " s" +
+    (status.held ? " (feed hold)" : "") + lag;
+}
+function machineNow() {
+  if (!status || status.t === undefined) return 0;
+  const since = live ? (performance.now() - statusAt) / 1000 : 0;
+  return status.t + since * (status.time_scale || 1);
+}
+function tick() {
+  if (status && status.t !== undefined) renderClock();
+  if ($("#pause").checked) return;
+  if (timelineDirty || performance.now() - timelineAt >= 1000) renderTimeline();
+}
+setInterval(tick, TICK_MS);
 
 async function loadPrograms() {
   try {

@@ -7,6 +7,7 @@ tests are skipped with that reason -- never in CI, where a missing browser is a 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -14,6 +15,7 @@ import socket
 import subprocess
 import sys
 import threading
+import urllib.request
 from collections.abc import Iterator
 from typing import Any
 
@@ -227,5 +229,63 @@ def test_the_page_runs_under_its_csp_and_no_other_site_may_frame_it(browser: Any
             " && document.URL"))
         assert shown.startswith("chrome-error:"), shown  # refused: the browser's error page
         assert not browser.find_elements(By.ID, "conn")
+    finally:
+        run.stop()
+
+
+def post_write(port: int, var: str, value: int) -> None:
+    """A write through the console's HTTP API (as a script or another tab would)."""
+    request = urllib.request.Request(
+        f"http://127.0.0.1:{port}/api/write", method="POST",
+        data=json.dumps({"var": var, "value": value}).encode(),
+        headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=WAIT_S) as answer:
+        assert answer.status == 200
+
+
+def log_rows(driver: Any) -> list[Any]:
+    return driver.find_elements(By.CSS_SELECTOR, "#log tbody tr")
+
+
+def test_the_event_log_takes_new_rows_on_top_and_keeps_those_it_has(browser: Any,
+                                                                      web_port: int) -> None:
+    """It rebuilt its 300 rows (and the timeline) on every message: minutes behind at 100
+    writes a second.  Now a batch's rows go on top and the rows it has stay as they are."""
+    run = start_run(web_port, "ncgate-browser-5")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        for value in range(1, 101):
+            post_write(web_port, "SYVAR5", value)
+        until(browser, "the 100th write on top", lambda d: "SYVAR5, value 100," in
+              text(d, "#log tbody tr:first-child"))
+        kept = log_rows(browser)[0]
+        for value in range(101, 351):
+            post_write(web_port, "SYVAR5", value)
+        until(browser, "the 350th write on top", lambda d: "SYVAR5, value 350," in
+              text(d, "#log tbody tr:first-child"))
+        rows = log_rows(browser)
+        assert len(rows) == 300  # bounded: the oldest went
+        seqs = [int(row.find_element(By.TAG_NAME, "td").text) for row in rows]
+        assert seqs == sorted(seqs, reverse=True) and seqs[0] - seqs[-1] == 299
+        # The row drawn before is the same element, not a copy drawn again.
+        assert "SYVAR5, value 100," in kept.text and kept in rows
+    finally:
+        run.stop()
+
+
+def test_the_clock_and_the_timeline_move_on_when_nothing_happens(browser: Any,
+                                                                 web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-6")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live"
+              and text(d, "#timeline text:last-child"))
+        # No program runs and nobody writes: no event comes, yet time goes on.
+        clock, axis = text(browser, "#clock"), text(browser, "#timeline text:last-child")
+        until(browser, "the clock moving", lambda d: text(d, "#clock") != clock)
+        until(browser, "the timeline's axis moving",
+              lambda d: text(d, "#timeline text:last-child") != axis)
+        assert not log_rows(browser)
     finally:
         run.stop()

@@ -4,6 +4,7 @@ token, the Origin and Host checks, read-only, the live stream, and refusing a pu
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 import socket
 from collections.abc import AsyncIterator
@@ -25,7 +26,9 @@ TOKEN = "s3cret-token"
 
 
 async def console(**overrides: Any) -> Gateway:
-    return Gateway(ncgate_test_config(**{"web.port": 0, **overrides}), console=True)
+    # Ten times the machine's pace: the built-in cell's P2 reaches N40 at 18 s machine time.
+    return Gateway(ncgate_test_config(**{"web.port": 0, "nc.time_scale": 10.0, **overrides}),
+                   console=True)
 
 
 @pytest.fixture
@@ -270,7 +273,8 @@ async def test_a_taken_default_port_leaves_the_console_off_a_configured_one_is_a
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        config = ncgate_test_config()
+        config = ncgate_test_config()  # web.port unset, as run has it (the kit sets 0)
+        config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=None))
         async with Gateway(config, console=True, web_default_port=port) as gw:
             assert gw.web_console is None
             await gw.start()  # the rest of the gateway runs
@@ -489,3 +493,47 @@ async def test_a_stream_slot_frees_when_its_client_leaves() -> None:
                     await asyncio.sleep(0.02)
             async with http.get("/api/stream") as second:
                 assert second.status == 200
+
+
+# -- live at any rate (issue 30 item 1) --------------------------------------------------------
+
+async def test_a_page_that_connects_to_a_full_ring_gets_it_in_bounded_messages(
+        gw: Gateway, http: aiohttp.ClientSession) -> None:
+    from ncgate.gateway.web.console import MESSAGE_BYTES
+    from ncgate.gateway.web.feed import RING
+
+    for i in range(RING + 100):  # SYVARs: a full ring of writes, some 100 bytes each
+        gw.write(f"SYVAR{i % 50}", i % 30000)
+    longest, seqs, missed = 0, [], 0
+    async with http.get("/api/stream") as r:
+        async with asyncio.timeout(10):
+            async for raw in r.content:
+                longest = max(longest, len(raw))
+                if raw.startswith(b"data: {\"missed\""):
+                    batch = json.loads(raw[6:])
+                    missed += batch["missed"]
+                    seqs += [e["seq"] for e in batch["events"]]
+                    if seqs[-1] == gw.runtime.trace.seq:
+                        break
+    assert longest <= MESSAGE_BYTES
+    assert seqs == list(range(gw.runtime.trace.seq - RING + 1, gw.runtime.trace.seq + 1))
+    assert missed == gw.runtime.trace.seq - RING
+
+
+async def test_the_stream_sends_events_in_batches_not_one_message_per_write(
+        gw: Gateway, http: aiohttp.ClientSession) -> None:
+    writes = 300
+    async with http.get("/api/stream") as r:
+        stream = read_sse(r)
+        await next_of(stream, "status")
+        first = gw.runtime.trace.seq + 1
+        for i in range(writes):  # one write a turn of the loop, as a fast fieldbus client
+            gw.write("SYVAR3", i)
+            await asyncio.sleep(0)
+        messages, seen = 0, 0
+        while seen < writes:
+            _, batch = await next_of(stream, "events")
+            messages += 1
+            seen += sum(1 for e in batch["events"] if e["seq"] >= first)
+    # One message a write put a page minutes behind; a batch per 50 ms is a handful here.
+    assert messages <= writes // 10, messages
