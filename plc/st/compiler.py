@@ -21,6 +21,7 @@ outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan
 from __future__ import annotations
 
 import math
+import struct
 import sys
 import types as pytypes
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -153,13 +154,39 @@ def _fdiv(a: float, b: float) -> float:
     return a / b
 
 
+_SINGLE = struct.Struct("<f")
+
+
+def _f32(value: float) -> float:
+    """A REAL result: rounded to IEEE 754 single precision, to nearest, ties to even (the
+    double result of one +, -, *, / or SQRT rounded once is the single one: 53 >= 2*24+2).
+    Beyond single's range it is an error, as IEC 61131-3 says of a result outside its type
+    (an infinity would spread silently through a machine's logic)."""
+    try:
+        return _SINGLE.unpack(_SINGLE.pack(value))[0]  # type: ignore[no-any-return]
+    except OverflowError:
+        raise OverflowError(f"{float(value):g} is outside REAL's range (IEEE single, "
+                            "+-3.4E38)") from None
+
+
+def _f64(value: float) -> float:
+    """An LREAL result: already IEEE double; an overflow to infinity is an error."""
+    if math.isinf(value) or math.isnan(value):
+        raise OverflowError("the result is outside LREAL's range (IEEE double, +-1.8E308)")
+    return value
+
+
 def _pow(a: float, b: float) -> float:
     try:
         result = float(a) ** b
     except ZeroDivisionError:
-        raise ZeroDivisionError("0 ** a negative power") from None
+        raise ValueError(f"EXPT: {float(a):g} to the negative power {float(b):g} has no "
+                         "value") from None
+    except OverflowError:
+        raise OverflowError(f"EXPT: {float(a):g} to the power {float(b):g} is outside the "
+                            "range of its type") from None
     if isinstance(result, complex):
-        raise ValueError(f"{a} ** {b} has no real value")
+        raise ValueError(f"EXPT: {float(a):g} to the power {float(b):g} has no real value")
     return float(result)
 
 
@@ -169,19 +196,24 @@ def _sqrt(a: float) -> float:
     return math.sqrt(a)
 
 
-def _r2i(value: float, bits: int, signed: bool) -> int:
-    """REAL -> integer: rounded half to even (IEC), then wrapped."""
+def _r2i(value: float, lo: int, hi: int, type_name: str) -> int:
+    """REAL -> integer: rounded half to even (IEC 61131-3, 6.6.2.5.6); a value outside the
+    integer type is an error (a conversion error of IEC's), not a wrap."""
     if math.isnan(value) or math.isinf(value):
         raise ValueError(f"{value} has no integer value")
-    v = round(value) & ((1 << bits) - 1)
-    return v - (1 << bits) if signed and v >> (bits - 1) else v
+    v = round(value)
+    if not lo <= v <= hi:
+        raise OverflowError(f"{value:g} does not fit in {type_name} ({lo}..{hi})")
+    return v
 
 
 def _trunc(value: float) -> int:
     if math.isnan(value) or math.isinf(value):
         raise ValueError(f"{value} has no integer value")
-    v = int(value) & 0xFFFFFFFF
-    return v - (1 << 32) if v >> 31 else v
+    v = int(value)
+    if not -(1 << 31) <= v < 1 << 31:
+        raise OverflowError(f"TRUNC({value:g}) does not fit in DINT")
+    return v
 
 
 def _mux(k: int, values: tuple[Any, ...]) -> Any:
@@ -196,11 +228,14 @@ def _guard() -> None:
 
 HELPERS: dict[str, Any] = {
     "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
-    "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard,
+    "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard, "_f32": _f32,
+    "_f64": _f64,
     "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
 _BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD"}
+# Integers a REAL holds exactly (24-bit mantissa): their conversion needs no rounding.
+_EXACT_IN_REAL = ("SINT", "INT", "USINT", "UINT", "BYTE", "WORD")
 
 
 # ---- expressions and places ---------------------------------------------------------------
@@ -243,6 +278,8 @@ def wrap_code(code: str, t: Type) -> str:
 
 
 def const_code(value: Any, t: Type) -> str:
+    if t == "REAL":
+        return repr(_f32(value))
     if t in REALS or t == ANY_REAL:
         return repr(float(value))
     if t == "BOOL":
@@ -252,6 +289,12 @@ def const_code(value: Any, t: Type) -> str:
 
 def wrap_value(value: int, t: Type) -> int:
     return stdlib.wrap(value, "DINT" if t == "TIME" else str(t))
+
+
+def real_code(code: str, t: Type) -> str:
+    """The code of an arithmetic result of type ``t``: rounded to single for REAL, checked
+    for overflow for LREAL, as it is for an integer type (wrapped where stored)."""
+    return f"_f32({code})" if t == "REAL" else f"_f64({code})" if t == "LREAL" else code
 
 
 # ---- signatures ------------------------------------------------------------------------------
@@ -433,6 +476,8 @@ class Compiler:
             raise self.error(StCode.NOT_CONSTANT, "an initial value is a constant",
                              _span_of(expr))
         self.coerce(e, t, _span_of(expr))
+        if t == "REAL":
+            return _f32(e.const)
         if t in REALS:
             return float(e.const)
         if t == "BOOL":
@@ -866,21 +911,24 @@ class Compiler:
         if e.type == t:
             if isinstance(t, ArrayOf):
                 return f"list({e.code})"
-            if isinstance(t, str) and is_int(t) and not e.exact:
+            if isinstance(t, str) and (is_int(t) or t == "TIME") and not e.exact:
                 return wrap_code(e.code, t)
             return e.code
         if e.type in (ANY_INT, ANY_REAL) and e.const is not None and isinstance(t, str):
             if t in INTS and e.type == ANY_INT:
                 lo, hi = limits(t)
+                if not e.exact:  # a constant expression: computed exactly, wrapped here
+                    return repr(wrap_value(e.const, t))
                 if not lo <= e.const <= hi:
                     raise self.error(StCode.CONSTANT_RANGE, f"{e.const} does not fit in {t} "
                                      f"({lo}..{hi})", span)
                 return repr(int(e.const))
             if t in REALS:
-                return repr(float(e.const))
+                return self._real_const(e.const, t, span)
         if widens(e.type, t):
             if t in REALS and not is_real(e.type):
-                return f"float({e.code})"
+                return (f"float({e.code})" if t == "LREAL" or e.type in _EXACT_IN_REAL
+                        else f"_f32({e.code})")
             return wrap_code(e.code, t) if not e.exact else e.code
         hint = ""
         if isinstance(e.type, str) and isinstance(t, str) and e.type in ELEMENTARY \
@@ -890,6 +938,25 @@ class Compiler:
             hint = " (write a duration: T#100ms)"
         raise self.error(StCode.TYPE_MISMATCH, f"{_tname(e.type)} where {t} is expected"
                          + hint, span)
+
+    def _real_const(self, value: Any, t: Type, span: n.Span) -> str:
+        """A constant where a REAL or LREAL is expected: rounded to the type (a REAL
+        literal 0.1 is single precision's 0.100000001490116...), or ST021 beyond its range."""
+        try:
+            return repr(_f32(value) if t == "REAL" else _f64(float(value)))
+        except OverflowError:
+            raise self.error(StCode.CONSTANT_RANGE, f"{value} does not fit in {t}",
+                             span) from None
+
+    def real_operand(self, e: E, t: Type, span: n.Span) -> str:
+        """An operand of an operator computing in REAL or LREAL, converted to it."""
+        if t not in REALS or e.type == t:
+            return e.code
+        if e.const is not None and e.type in (ANY_INT, ANY_REAL):
+            return self._real_const(e.const, t, span)
+        if t == "REAL" and e.type not in _EXACT_IN_REAL and e.type != "REAL":
+            return f"_f32({e.code})"
+        return e.code
 
     def expr(self, x: n.Expr, scope: Scope) -> E:
         if isinstance(x, n.Literal):
@@ -947,12 +1014,20 @@ class Compiler:
             if kind == ANY_INT and abs(int(x.value)) >= 1 << 32:
                 raise self.error(StCode.CONSTANT_RANGE, f"{x.value} is too large (at most "
                                  "32 bits)", x.span)
+            if kind == ANY_REAL and math.isinf(x.value):
+                raise self.error(StCode.CONSTANT_RANGE, "a real literal beyond LREAL's range",
+                                 x.span)
             return E(repr(x.value), kind, x.value)
-        if t in INTS:
-            lo, hi = limits(t)
+        if t in INTS or t == "TIME":
+            lo, hi = limits("DINT" if t == "TIME" else t)
             if not lo <= x.value <= hi:
-                raise self.error(StCode.CONSTANT_RANGE, f"{x.value} does not fit in {t} "
-                                 f"({lo}..{hi})", x.span)
+                shown = f"{x.value} ms" if t == "TIME" else x.value
+                limit = (f"{lo}..{hi}" if t != "TIME" else
+                         "32-bit ms: T#-24d20h31m23s648ms..T#24d20h31m23s647ms")
+                raise self.error(StCode.CONSTANT_RANGE, f"{shown} does not fit in {t} "
+                                 f"({limit})", x.span)
+        if t in REALS:
+            return E(self._real_const(x.value, t, x.span), t, x.value)
         return E(const_code(x.value, t), t, x.value)
 
     def unary(self, x: n.Unary, scope: Scope) -> E:
@@ -973,9 +1048,10 @@ class Compiler:
         if x.op == "+":
             return e
         if e.const is not None:
-            return E(repr(-e.const), e.type, -e.const, e.type in (ANY_INT, ANY_REAL) or
-                     not is_int(e.type) or limits(str(e.type))[0] <= -e.const <=
-                     limits(str(e.type))[1])
+            if e.type in (ANY_INT, ANY_REAL):
+                return E(repr(-e.const), e.type, -e.const, e.exact)
+            return E(const_code(-e.const, e.type), e.type, -e.const, not is_int(e.type) or
+                     limits(str(e.type))[0] <= -e.const <= limits(str(e.type))[1])
         return E(f"(-{e.code})", e.type, None, not is_int(e.type) and e.type != "TIME")
 
     def binary(self, x: n.Binary, a: E, b: E) -> E:
@@ -1001,13 +1077,18 @@ class Compiler:
                 raise self.error(StCode.TYPE_MISMATCH, f"{op} between {_tname(a.type)} and "
                                  f"{_tname(b.type)}", x.span)
             py = {"=": "==", "<>": "!="}.get(op, op)
+            t = common(a.type, b.type) if is_num(a.type) and is_num(b.type) else None
+            if t in REALS:  # compared as that type: REAL 0.1 = 0.1 is TRUE
+                return E(f"({self.real_operand(a, t, x.span)} {py} "
+                         f"{self.real_operand(b, t, x.span)})", "BOOL")
             return E(f"({a.code} {py} {b.code})", "BOOL")
         if op == "**":
             if not (is_num(a.type) and is_num(b.type)):
                 raise self.error(StCode.TYPE_MISMATCH, f"** of {_tname(a.type)} and "
                                  f"{_tname(b.type)}", x.span)
             t = "LREAL" if "LREAL" in (a.type, b.type) else "REAL"
-            return E(f"_pow({a.code}, {b.code})", t)
+            return E(real_code(f"_pow({self.real_operand(a, t, x.span)}, "
+                               f"{self.real_operand(b, t, x.span)})", t), t)
         # + - * / MOD
         if "TIME" in (a.type, b.type):
             return self._time_arith(x, a, b)
@@ -1022,16 +1103,23 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, "MOD takes integers", x.span)
         if a.const is not None and b.const is not None and t in (ANY_INT, ANY_REAL):
             value = _fold(op, a.const, b.const, real)
-            return E(repr(value), t, value)
+            if real and math.isinf(value):
+                raise self.error(StCode.CONSTANT_RANGE, f"{op} of {a.const} and {b.const} "
+                                 "is beyond LREAL's range", x.span)
+            # A folded integer is computed exactly and wraps where it is stored, as the
+            # same expression of variables does: i := 32767 + 1 stores -32768.
+            return E(repr(value), t, value, real)
+        ac, bc = (self.real_operand(a, t, x.span), self.real_operand(b, t, x.span)) if real \
+            else (a.code, b.code)
         if op == "/":
-            code = f"_fdiv({a.code}, {b.code})" if real else f"_idiv({a.code}, {b.code})"
+            code = f"_fdiv({ac}, {bc})" if real else f"_idiv({ac}, {bc})"
             if b.const is not None and real:
-                code = f"({a.code} / {b.code})"
+                code = f"({ac} / {bc})"
         elif op == "MOD":
-            code = f"_mod({a.code}, {b.code})"
+            code = f"_mod({ac}, {bc})"
         else:
-            code = f"({a.code} {op} {b.code})"
-        return E(code, t, None, real)
+            code = f"({ac} {op} {bc})"
+        return E(real_code(code, t), t, None, real)
 
     def _time_arith(self, x: n.Binary, a: E, b: E) -> E:
         op = x.op
@@ -1118,14 +1206,16 @@ class Compiler:
                 return E(f"abs({a.code})", a.type, None, not is_int(a.type))
             if key == "TRUNC":
                 return E(f"_trunc({a.code})", "DINT")
-            return E(f"_sqrt({a.code})", "LREAL" if a.type == "LREAL" else "REAL")
+            rt: Type = "LREAL" if a.type == "LREAL" else "REAL"
+            return E(real_code(f"_sqrt({self.real_operand(a, rt, x.span)})", rt), rt)
         if key == "EXPT":
             a, b = self._args(x, scope, 2)
             if not (is_num(a.type) and is_num(b.type)):
                 raise self.error(StCode.TYPE_MISMATCH, f"EXPT of {_tname(a.type)} and "
                                  f"{_tname(b.type)}", x.span)
-            return E(f"_pow({a.code}, {b.code})", "LREAL" if "LREAL" in (a.type, b.type)
-                     else "REAL")
+            rt = "LREAL" if "LREAL" in (a.type, b.type) else "REAL"
+            return E(real_code(f"_pow({self.real_operand(a, rt, x.span)}, "
+                               f"{self.real_operand(b, rt, x.span)})", rt), rt)
         if key in ("MIN", "MAX"):
             values = self._args(x, scope, None, 2)
             t = self._same(x, values)
@@ -1182,13 +1272,16 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
                              f"{_tname(a.type)}", x.span)
         code = a.code
+        if a.const is not None and a.type in (ANY_INT, ANY_REAL) and src in REALS:
+            code = self._real_const(a.const, src, x.span)
         if dst in REALS:
-            return E(f"float({code})", dst)
+            exact = dst == "LREAL" or src in _EXACT_IN_REAL or src == "REAL" or src == "BOOL"
+            return E(f"float({code})" if exact else f"_f32({code})", dst)
         if dst == "BOOL":
             return E(f"({code} != 0)", "BOOL")
         if src in REALS or a.type == ANY_REAL:
-            size, signed = stdlib.INTEGER_TYPES["DINT" if dst == "TIME" else dst]
-            return E(f"_r2i({code}, {size}, {signed})", dst)
+            lo, hi = limits("DINT" if dst == "TIME" else dst)
+            return E(f"_r2i({code}, {lo}, {hi}, {dst!r})", dst)
         if src == "BOOL":
             return E(f"int({code})", dst)
         return E(code, dst, None, False)

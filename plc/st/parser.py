@@ -21,6 +21,12 @@ from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
 
 _TIME_PART = re.compile(r"([0-9][0-9_]*(?:\.[0-9]+)?)(d|h|ms|m|s)_?", re.IGNORECASE)
 _MS = {"d": 86_400_000, "h": 3_600_000, "m": 60_000, "s": 1000, "ms": 1}
+_UNITS = ("d", "h", "m", "s", "ms")  # a duration's units, in the order IEC writes them
+_UNIT_LIMIT = {"h": 24, "m": 60, "s": 60, "ms": 1000}  # below the first unit (6.3.3)
+# IEC 61131-3, 6.3.2: a single '_' between digits (and after the base's '#').
+_DECIMAL = re.compile(r"[0-9](_?[0-9])*")
+_BASED = {2: re.compile(r"_?[01](_?[01])*"), 8: re.compile(r"_?[0-7](_?[0-7])*"),
+          16: re.compile(r"_?[0-9A-Fa-f](_?[0-9A-Fa-f])*")}
 # What people call the grammar's punctuation, for "expected ..." in a syntax error.
 _SHOWN = {"SEMICOLON": "';'", "COLON": "':'", "LPAR": "'('", "RPAR": "')'", "COMMA": "','",
           "LSQB": "'['", "RSQB": "']'", "DOT": "'.'", "NAME": "a name", "INT": "a number"}
@@ -39,22 +45,43 @@ class BadLiteral(ValueError):
 
 
 def parse_number(text: str) -> int:
-    """``1_000``, ``16#FF``, ``2#1010`` -> int."""
-    text = text.replace("_", "")
+    """``1_000``, ``16#FF``, ``2#1010`` -> int; ValueError for ``1__000``, ``1_``, ``2#102``."""
     if "#" in text:
         base, digits = text.split("#", 1)
-        return int(digits, int(base))
-    return int(text)
+        pattern = _BASED.get(int(base)) if base.isdigit() else None
+        if pattern is None or not pattern.fullmatch(digits):
+            raise ValueError(f"{text} is not a base-{base} number (one '_' at most between "
+                             "digits)")
+        return int(digits.replace("_", ""), int(base))
+    if not _DECIMAL.fullmatch(text):
+        raise ValueError(f"{text} is not a number (one '_' at most between digits)")
+    return int(text.replace("_", ""))
 
 
 def parse_time(text: str) -> int:
-    """``T#1s500ms`` -> 1500 (milliseconds, rounded)."""
+    """``T#1s500ms`` -> 1500 (milliseconds, rounded).  IEC 61131-3, 6.3.3: the units in the
+    order d h m s ms, each once; only the last may have a fraction; only the first may
+    overflow (``T#25h`` but not ``T#1h75m``).  ValueError otherwise."""
     body = text.split("#", 1)[1]
     sign = -1 if body.startswith("-") else 1
     body = body.lstrip("+-")
+    parts = _TIME_PART.findall(body)
     total = 0.0
-    for value, unit in _TIME_PART.findall(body):
-        total += float(value.replace("_", "")) * _MS[unit.lower()]
+    last = -1
+    for i, (value, unit) in enumerate(parts):
+        unit = unit.lower()
+        order = _UNITS.index(unit)
+        if order <= last:
+            raise ValueError(f"{text}: the units go d, h, m, s, ms, each once")
+        if not _DECIMAL.fullmatch(value.split(".")[0]):
+            raise ValueError(f"{text}: one '_' at most between digits")
+        if "." in value and i != len(parts) - 1:
+            raise ValueError(f"{text}: only the last unit may have a fraction")
+        number = float(value.replace("_", ""))
+        if i > 0 and unit in _UNIT_LIMIT and number >= _UNIT_LIMIT[unit]:
+            raise ValueError(f"{text}: {value}{unit} overflows into the unit before it")
+        last = order
+        total += number * _MS[unit]
     return sign * round(total)
 
 
@@ -68,6 +95,8 @@ def parse_typed(text: str) -> tuple[str, bool | int | float]:
             raise ValueError(f"BOOL# takes TRUE, FALSE, 0 or 1, not {raw}")
         return type_name, value
     sign = -1 if raw.startswith("-") else 1
+    if raw[:1] in "+-" and "#" in raw:
+        raise ValueError(f"{text}: a based number takes no sign (IEC 61131-3, 6.3.2)")
     raw = raw.lstrip("+-")
     if type_name in ("REAL", "LREAL"):
         return type_name, sign * (float(raw.replace("_", "")) if "#" not in raw
@@ -151,8 +180,14 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.ArrayType(lo, hi, n.NamedType(str(elem), _span(self.file, elem)),
                            self._s(meta, children))
 
+    def _number(self, token: Token) -> int:
+        try:
+            return parse_number(str(token))
+        except ValueError as exc:
+            raise BadLiteral(token, str(exc)) from None
+
     def bound(self, meta: Any, children: list[Token]) -> int:
-        value = parse_number(str(children[-1]))
+        value = self._number(children[-1])
         return -value if len(children) == 2 else value
 
     def array_init(self, meta: Any, children: list[tuple[int, n.Expr]]) -> n.ArrayInit:
@@ -162,7 +197,7 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return (1, children[0])
 
     def init_repeat(self, meta: Any, children: list[Any]) -> tuple[int, n.Expr]:
-        return (parse_number(str(children[0])), children[1])
+        return (self._number(children[0]), children[1])
 
     # -- statements --------------------------------------------------------------------------
 
@@ -227,7 +262,7 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         if token.type == "TYPED_LIT":
             type_name, value = self._typed(token)
         else:
-            type_name, value = None, parse_number(str(token))
+            type_name, value = None, self._number(token)
         if isinstance(value, bool | float):
             raise BadLiteral(token, f"a CASE label is a whole number, not {token}")
         return n.Literal(-value if negative else value, type_name, span)
@@ -275,11 +310,16 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.Index(children[0], children[0].span)
 
     def int_lit(self, meta: Any, children: list[Token]) -> n.Literal:
-        return n.Literal(parse_number(str(children[0])), None, _span(self.file, children[0]))
+        return n.Literal(self._number(children[0]), None, _span(self.file, children[0]))
 
     def real_lit(self, meta: Any, children: list[Token]) -> n.Literal:
-        return n.Literal(float(str(children[0]).replace("_", "")), None,
-                         _span(self.file, children[0]))
+        text = str(children[0])
+        mantissa = text.split("e")[0].split("E")[0]
+        whole, _, fraction = mantissa.partition(".")
+        if not (_DECIMAL.fullmatch(whole) and _DECIMAL.fullmatch(fraction)):
+            raise BadLiteral(children[0], f"{text} is not a number (one '_' at most between "
+                             "digits)")
+        return n.Literal(float(text.replace("_", "")), None, _span(self.file, children[0]))
 
     def _typed(self, token: Token) -> tuple[str, bool | int | float]:
         try:
@@ -292,7 +332,11 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.Literal(value, type_name, _span(self.file, children[0]))
 
     def time_lit(self, meta: Any, children: list[Token]) -> n.Literal:
-        return n.Literal(parse_time(str(children[0])), "TIME", _span(self.file, children[0]))
+        try:
+            value = parse_time(str(children[0]))
+        except ValueError as exc:
+            raise BadLiteral(children[0], str(exc)) from None
+        return n.Literal(value, "TIME", _span(self.file, children[0]))
 
     def bool_lit(self, meta: Any, children: list[Token]) -> n.Literal:
         return n.Literal(str(children[0]).upper() == "TRUE", "BOOL",
@@ -346,7 +390,9 @@ def parse_source(text: str, file: str) -> n.SourceFile:
             line = len(lines) or 1
             raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected "
                        f"{_expected(exc)}", line, len(lines[-1]) + 1 if lines else 1) from None
-        raise fail(StCode.UNEXPECTED_TOKEN, f"unexpected {str(token)!r}; expected "
+        keyword = " (a keyword, not a name)" if "NAME" in exc.expected and \
+            str(token).upper() == token.type else ""
+        raise fail(StCode.UNEXPECTED_TOKEN, f"unexpected {str(token)!r}{keyword}; expected "
                    f"{_expected(exc)}", token.line or 1, token.column or 1) from None
     except UnexpectedInput as exc:  # pragma: no cover - the three above are all lark raises
         raise fail(StCode.UNEXPECTED_TOKEN, str(exc), exc.line, exc.column) from None
