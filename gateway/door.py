@@ -66,7 +66,8 @@ def command_kind(value: object) -> CommandKind:
     kind = _member(CommandKind, value)
     if kind is None:
         raise InputRefused(Reason.BAD_VALUE, f"command {value!r}: 1 cycle start, 2 feed "
-                           "hold, 3 reset, 4 restart the PLC")
+                           "hold, 3 reset, 4 restart the PLC, 5 step, 6/7 single block "
+                           "on/off")
     return kind
 ImageChange = tuple[str, int, str, int]
 
@@ -154,7 +155,7 @@ class Door:
         if kind is CommandKind.RESTART_PLC:
             self._restart_plc(item)
             return
-        if kind is CommandKind.CYCLE_START:
+        if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
             self._interlocks(kind)
         if process is not None:
             self._process(process)
@@ -166,6 +167,10 @@ class Door:
             engine.cycle_start(by=str(item.source), process=process)
         elif kind is CommandKind.FEED_HOLD:
             engine.hold(True, process)
+        elif kind is CommandKind.STEP:
+            engine.step(process)
+        elif kind is CommandKind.SINGLE_BLOCK_ON or kind is CommandKind.SINGLE_BLOCK_OFF:
+            engine.single_block(kind is CommandKind.SINGLE_BLOCK_ON, process)
         else:
             engine.reset(process)
             plc = self._plc()

@@ -200,6 +200,9 @@ class CommandKind(enum.IntEnum):
     FEED_HOLD = 2
     RESET = 3
     RESTART_PLC = 4  # the PLC logic after a FAULT, the NC processes untouched (the cell's)
+    STEP = 5  # exactly one more block, then stop (STEP)
+    SINGLE_BLOCK_ON = 6  # stop after each block until a cycle start
+    SINGLE_BLOCK_OFF = 7
 
     @property
     def label(self) -> str:

@@ -47,8 +47,9 @@ COMMAND_WORDS: Final = {kind.value: kind for kind in CommandKind}
 
 def command_word(word: int) -> tuple[CommandKind, int | None] | None:
     """The command register's word: the command in the low byte (1 cycle start, 2 feed
-    hold, 3 reset, 4 restart the PLC logic), the process in the high byte (0: the cell, as
-    1/2/3 always meant; ``0x0201``: cycle start of process 2).  None: not a command."""
+    hold, 3 reset, 4 restart the PLC logic, 5 step, 6 single block on, 7 off), the process in
+    the high byte (0: the cell, as 1/2/3 always meant; ``0x0201``: cycle start of process
+    2).  None: not a command."""
     kind = COMMAND_WORDS.get(word & 0xFF)
     if kind is None:
         return None

@@ -337,7 +337,8 @@ class ModbusMap:
             command = command_word(word)
             if command is None:
                 raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset, "
-                                  "4 restart the PLC (high byte: the process, 0 for the cell)")
+                                  "4 restart the PLC, 5 step, 6/7 single block on/off (high "
+                                  "byte: the process, 0 for the cell)")
             backend.apply(Command(command[0], command[1], source))  # refusals: REFUSAL
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:

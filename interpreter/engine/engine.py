@@ -181,6 +181,8 @@ class Engine:
         if self._any_held(process):
             self.hold(False, process)
             return
+        if self._release_steps(process):
+            return
         number = 1 if process is None else process
         main = self.cycle_start_program(process)
         if main is not None:
@@ -194,8 +196,9 @@ class Engine:
 
     def cycle_start_program(self, process: int | None = None) -> str | None:
         """The program a cycle start (of the cell, or of ``process``) would start now; None
-        when it resumes a feed hold or starts nothing."""
-        if self._any_held(process):
+        when it resumes a feed hold or a single block, or starts nothing."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        if any(p.held or p.dec_block is DecoderHold.STEP for p in targets):
             return None
         number = 1 if process is None else process
         p = self.processes.get(number)
@@ -203,6 +206,42 @@ class Engine:
         if main and p is not None and p.loaded is None and p.alarm is None and not p.external:
             return main
         return None
+
+    def _release_steps(self, process: int | None) -> bool:
+        """Processes stopped after a block (single block) run their next block: True when
+        there was one."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        released = False
+        for p in targets:
+            if p.dec_block is DecoderHold.STEP:
+                p.dec_block = None
+                self._update_state(p)
+                self._make_runnable(p)
+                released = True
+        return released
+
+    def single_block(self, on: bool, process: int | None = None) -> None:
+        """Single-block mode of one process or the cell: after each block the process stops
+        (STEP) until a cycle start; off, a process stopped so goes on."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        for p in targets:
+            if not p.external:
+                p.single_block = on
+        if not on:
+            self._release_steps(process)
+
+    def step(self, process: int | None = None) -> None:
+        """Exactly one more block: a process stopped after a block runs its next one and stops
+        again; a running one stops after the block it is in."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        for p in targets:
+            if p.loaded is None or p.alarm is not None or p.external:
+                continue
+            p.step_once = True
+            if p.dec_block is DecoderHold.STEP:
+                p.dec_block = None
+                self._update_state(p)
+                self._make_runnable(p)
 
     def _any_held(self, process: int | None) -> bool:
         if process is None:
@@ -615,6 +654,11 @@ class Engine:
                 p.block = None
                 if block.counted:  # blocks as the statistics count them: not empty lines
                     budget -= 1
+                    if p.single_block or p.step_once:  # stop here until a cycle start
+                        p.step_once = False
+                        p.dec_block = DecoderHold.STEP
+                        self._update_state(p)
+                        return
                     if block_time:  # the block takes its processing time
                         p.dec_block = DecoderHold.BLOCK_TIME
                         p.dec_timer = self._schedule(block_time,

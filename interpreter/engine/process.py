@@ -68,6 +68,7 @@ class Process:
         self.state_since = 0.0
         self.alarm: tuple[int, str, Where | None] | None = None
         self.held = False
+        self.single_block = False  # stop after each block (a mode: kept over programs)
         self.actual: list[float] = list(self.modal.position)  # the interpolator's position
         self.queued = False  # in the engine's run queue
         self.clear()
@@ -93,6 +94,7 @@ class Process:
         self.starved = False
         self.sync_i = 0
         self.dec_timer: Timer | None = None  # nc.block_time_ms: the block's processing time
+        self.step_once = False  # a step: stop after the next block, single block or not
         # Runaway detection: blocks decoded since the engine last stood still (its epoch).
         self.spin = 0
         self.spin_epoch = -1

@@ -40,6 +40,7 @@ class ProcessState(enum.IntEnum):
     DWELL = 6
     HOLD = 7
     ALARM = 8
+    STEP = 9  # single block: stopped after a block, until a cycle start or a step
 
 
 class WaitKind(enum.IntEnum):
@@ -68,6 +69,7 @@ class DecoderHold(enum.Enum):
     FLUSH = "flush"  # until the motion queue is empty (lookahead 0, sync_reads)
     DONE = "done"  # reached the end; the program ends when the queue drains
     BLOCK_TIME = "block_time"  # nc.block_time_ms: the last block's processing time runs
+    STEP = "step"  # single block: stopped after a block until a cycle start or a step
 
 
 STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
@@ -75,7 +77,8 @@ STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                         WaitKind.SND: ProcessState.WAIT_SND,
                         WaitKind.EXE: ProcessState.WAIT_EXE,
                         WaitKind.FLUSH: ProcessState.WAIT_COND}
-RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD})
+RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD,
+                                   ProcessState.STEP})
 WAITING_STATES: Final = frozenset(STATE_OF_WAIT.values())
 
 
@@ -189,6 +192,9 @@ STATE_RULES: Final = (
     StateRule((ProcessState.IDLE,), "no program is loaded (an external process always)",
               "p.loaded is None", "IDLE"),
     StateRule((ProcessState.HOLD,), "a feed hold is on", "p.held", "HOLD"),
+    StateRule((ProcessState.STEP,), "single block: it stopped after a block whose motion has "
+              "run, until a cycle start or a step",
+              "p.dec_block is STEP_HOLD and p.int_item is None and not p.queue", "STEP"),
     StateRule(_WAITS, "the interpolator waits (the wait the machine feels, spec 2.4): the "
               "state of its wait kind (FLUSH shows as WAIT_COND)",
               "p.int_wait is not None", "STATE_OF_WAIT[p.int_wait.kind]"),
@@ -207,7 +213,8 @@ def compile_state_rules(rules: tuple[StateRule, ...]) -> Callable[[Process], Pro
         lines += [f"    if {rule.test}:", f"        return {rule.state}"]
     lines.append("    raise AssertionError('no state rule decides')")
     names: dict[str, object] = {s.name: s for s in ProcessState}
-    names.update(STATE_OF_WAIT=STATE_OF_WAIT, DWELL_ITEM=ItemKind.DWELL)
+    names.update(STATE_OF_WAIT=STATE_OF_WAIT, DWELL_ITEM=ItemKind.DWELL,
+                 STEP_HOLD=DecoderHold.STEP)
     exec(compile("\n".join(lines), "<states.STATE_RULES>", "exec"), names)
     derive: Callable[[Process], ProcessState] = names["derive"]  # type: ignore[assignment]
     return derive
@@ -225,7 +232,7 @@ class Transition(NamedTuple):
 
 
 _S = ProcessState
-_BUSY = (_S.RUNNING, *_WAITS, _S.DWELL, _S.HOLD)  # a program is loaded and no alarm
+_BUSY = (_S.RUNNING, *_WAITS, _S.DWELL, _S.HOLD, _S.STEP)  # a program loaded, no alarm
 # k is the process, n the one its code names.  Rows whose `to` is the state it was in (an
 # SND delivered at once) say what happens without a change; the engine checks every change
 # it makes against this table (Engine._update_state).
@@ -259,9 +266,12 @@ TRANSITIONS: Final = (
     Transition((*_WAITS, _S.DWELL, _S.RUNNING), "one stage's wait or dwell ends or begins "
                "while the other stage waits: the state of the one the machine feels "
                "(STATE_RULES)", (*_WAITS, _S.DWELL, _S.RUNNING)),
-    Transition((_S.RUNNING, _S.DWELL, *_WAITS), "feed hold (command 2)", (_S.HOLD,)),
+    Transition((_S.RUNNING, _S.DWELL, *_WAITS), "single block (or a step): the block's last "
+               "op is done and its motion has run", (_S.STEP,)),
+    Transition((_S.STEP,), "cycle start or step: the next block", (_S.RUNNING,)),
+    Transition((_S.RUNNING, _S.DWELL, *_WAITS, _S.STEP), "feed hold (command 2)", (_S.HOLD,)),
     Transition((_S.HOLD,), "cycle start (command 1): the state it would have without the "
-               "hold", (_S.RUNNING, _S.DWELL, *_WAITS)),
+               "hold", (_S.RUNNING, _S.DWELL, *_WAITS, _S.STEP)),
     Transition(_BUSY, "REL, M30, M02 or end of file, once its motion queue has drained",
                (_S.IDLE,)),
     Transition(_BUSY, "a runtime error in a block (its code); `(SND,n)` to an idle process "

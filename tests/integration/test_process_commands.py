@@ -110,3 +110,37 @@ async def test_a_session_with_commands_of_one_process_replays(tmp_path: Path) ->
     assert sum('"process": 2' in line for line in lines if '"input"' in line) == 3
     result = replay(record)
     assert result.divergence is None and result.compared > 0, result.divergence
+
+
+async def test_single_block_and_step_over_modbus(tmp_path: Path) -> None:
+    """Command words 6/7 switch single block (of one process with its high byte), 5 steps;
+    the status register shows STEP (9) between blocks."""
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1E1=1\nN2E1=2\nN3E1=3\nN4M30\n")
+    (tmp_path / "B.nc").write_text("N1M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.port": 0,
+                                                           "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            async def word(value: int) -> None:
+                assert not (await client.write_register(COMMAND, value, device_id=1)).isError()
+
+            async def state() -> int:
+                return (await client.read_input_registers(100, count=1,
+                                                          device_id=1)).registers[0]
+
+            await word(0x0106)  # single block on, process 1
+            await word(1)  # cycle start: A runs N1 and stops
+            await gw.wait_state(1, "STEP", timeout_s=10)
+            assert await state() == int(ProcessState.STEP) == 9
+            assert gw.engine.processes[1].E[1] == 1.0
+            await word(5)  # step: N2 (the write's answer comes after the step has run)
+            await gw.wait_state(1, "STEP", timeout_s=10)
+            assert gw.engine.processes[1].E[1] == 2.0
+            await word(0x0107)  # single block off: A runs to its end
+            await gw.wait_idle(timeout_s=10)
+        finally:
+            client.close()
+        assert gw.engine.processes[1].E[1] == 3.0

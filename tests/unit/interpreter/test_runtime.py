@@ -455,3 +455,43 @@ def test_a_reset_of_one_process_frees_it_for_the_exe_waiting_on_it() -> None:
     ends = [(e["proc"], e["how"]) for e in sim.events("end")]
     assert ends[0] == (2, "reset") and sorted(ends[1:]) == [(1, "M30"), (2, "M30")]
     assert sim.first("start", prog="C")["t"] == 1.0
+
+
+def test_single_block_stops_after_each_block_until_a_cycle_start() -> None:
+    """Single block: the process stops (STEP) after each block, a move completing first; a
+    WAI still waits; each cycle start runs one block more."""
+    sim = make_sim({"A": "N1G1X10F600\nN2E1=5\nN3(WAI,SA1=1)\nN4M30\n"})
+    engine = sim.engine
+    engine.single_block(True)
+    engine.start("A")
+    sim.run()
+    # N1's move ran to its end (1 s), then the process stopped before N2.
+    assert engine.status(1).state is ProcessState.STEP and engine.now == 1.0
+    assert engine.processes[1].E[1] == 0.0
+    engine.cycle_start()
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP and engine.processes[1].E[1] == 5.0
+    engine.cycle_start()  # N3 waits, single block or not
+    sim.run()
+    assert engine.status(1).state is ProcessState.WAIT_COND
+    sim.image.write([("SA", 1, "bit", 1)], "plc")
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP  # after N3: the wait is the block
+    engine.single_block(False)  # off: it goes on by itself
+    sim.run()
+    assert engine.status(1).state is ProcessState.IDLE
+
+
+def test_a_step_runs_exactly_one_block_of_a_running_program() -> None:
+    sim = make_sim({"A": "N1E1=1\nN2E1=2\nN3E1=3\nN4M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.step(1)  # running, not in single block: it stops after the block it is in
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP and engine.processes[1].E[1] == 1.0
+    engine.step(1)
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP and engine.processes[1].E[1] == 2.0
+    engine.cycle_start()  # not in single block: it runs to its end
+    sim.run()
+    assert engine.status(1).state is ProcessState.IDLE and engine.processes[1].E[1] == 3.0
