@@ -117,16 +117,18 @@ def _relative(v: ODVariable, offset: int) -> None:
 
 
 def _communication(name: str, index: int, cob: ODVariable, transmit: bool) -> ODRecord:
-    """PDO communication parameter (CiA 301 7.5.2.35/36): an RPDO has COB-ID and type, a
-    TPDO also inhibit time, event timer and SYNC start value (sub 4 is reserved)."""
+    """PDO communication parameter (CiA 301 7.5.2.35/36): an RPDO has COB-ID, type and
+    event timer (its deadline monitoring), a TPDO also inhibit time and SYNC start value
+    (sub 4 is reserved; an RPDO has no sub 3 either)."""
     record = ODRecord(name, index)
     record.add_member(_var("Highest sub-index supported", index, 0, UNSIGNED8, "const",
-                           6 if transmit else 2))
+                           6 if transmit else 5))
     record.add_member(cob)
     record.add_member(_var("Transmission type", index, 2, UNSIGNED8, "rw", 255))
     if transmit:
         record.add_member(_var("Inhibit time", index, 3, UNSIGNED16, "rw", 0))
-        record.add_member(_var("Event timer", index, 5, UNSIGNED16, "rw", 0))
+    record.add_member(_var("Event timer", index, 5, UNSIGNED16, "rw", 0))
+    if transmit:
         record.add_member(_var("SYNC start value", index, 6, UNSIGNED8, "rw", 0))
     return record
 

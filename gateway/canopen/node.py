@@ -63,6 +63,7 @@ from ncgate.gateway.canopen.dictionary import (
     NO_STATE_CHANGE,
     PLC_STATUS,
     RESTORE,
+    RPDO_COMMUNICATION,
     STATUS_BASE,
     STORE,
     SYNC_COB_ID,
@@ -126,6 +127,8 @@ class CanopenNode:
             state_folder(config.source), self.node_id)
         self._alarmed = False  # an EMCY for a process alarm went out and was not reset
         self._master_lost: set[int] = set()
+        self._rpdo_lost: set[int] = set()  # RPDOs whose deadline ran out (0x14xx:5)
+        self._rpdo_length: set[int] = set()  # RPDOs in a length error (EMCY 0x8210/0x8220)
         self._hub: RemoteServer | None = None
         # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
@@ -445,7 +448,8 @@ class CanopenNode:
 
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
-        lost = REGISTER_GENERIC | REGISTER_COMMUNICATION if self._master_lost else 0
+        lost = (REGISTER_GENERIC | REGISTER_COMMUNICATION
+                if self._master_lost or self._rpdo_lost or self._rpdo_length else 0)
         return int(alarms) | lost
 
     def _read(self, index: int, subindex: int) -> int:
@@ -570,17 +574,52 @@ class CanopenNode:
     # -- the master's heartbeat (loop) ------------------------------------------------------
 
     def _on_master_lost(self, node_id: int, ms: int) -> None:
-        reaction = self.config.canopen.on_master_lost
         self._master_lost.add(node_id)
-        what = {MasterLost.NONE: "no reaction (canopen.on_master_lost = \"none\")",
-                MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
-        source = Source(SourceKind.CANOPEN, f"heartbeat of node {node_id}")
-        self.backend.apply(FieldbusAlarm(
-            AlarmCode.MASTER_LOST,
-            f"CANopen: no heartbeat from node {node_id} for {ms} ms (0x1016); {what}", source))
+        self._lost(f"no heartbeat from node {node_id} for {ms} ms (0x1016)",
+                   Source(SourceKind.CANOPEN, f"heartbeat of node {node_id}"),
+                   EMCY_HEARTBEAT, node_id)
+
+    def rpdo_timeout(self, n: int, ms: int) -> None:
+        """RPDO n's deadline ran out (loop): the master's heartbeat may live on while its
+        PDOs stopped -- the same alarm and reactions as a lost master, EMCY 0x8250."""
+        self._rpdo_lost.add(n)
+        self._lost(f"no RPDO{n} for {ms} ms (0x{RPDO_COMMUNICATION + n - 1:04X}:5)",
+                   Source(SourceKind.CANOPEN, f"RPDO{n} deadline"), pdo.EMCY_RPDO_TIMEOUT, n)
+
+    def rpdo_back(self, n: int) -> None:
+        if n not in self._rpdo_lost:
+            return
+        self._rpdo_lost.discard(n)
+        log.warning("CANopen: RPDO%d comes again (%s)", n,
+                    _BACK[self.config.canopen.on_master_lost])
         if not self.stopped:
-            self.node.emcy.send(EMCY_HEARTBEAT, self._error_register(),
-                                  struct.pack("<B4x", node_id))
+            self.node.emcy.reset(self._error_register())
+
+    def rpdo_length(self, n: int, emcy: int) -> None:
+        """RPDO n's length error began (its EMCY) or ended (an error reset), on the loop."""
+        if emcy:
+            self._rpdo_length.add(n)
+        elif n in self._rpdo_length:
+            self._rpdo_length.discard(n)
+        else:
+            return
+        if self.stopped:
+            return
+        if emcy:
+            self.node.emcy.send(emcy, self._error_register(), struct.pack("<B4x", n))
+        else:
+            self.node.emcy.reset(self._error_register())
+
+    def _lost(self, what: str, source: Source, emcy: int, detail: int) -> None:
+        """A communication error (loop): alarm AL150, its EMCY, 0x1029's NMT reaction,
+        then canopen.on_master_lost's for the processes."""
+        reaction = self.config.canopen.on_master_lost
+        done = {MasterLost.NONE: "no reaction (canopen.on_master_lost = \"none\")",
+                MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
+        self.backend.apply(FieldbusAlarm(AlarmCode.MASTER_LOST, f"CANopen: {what}; {done}",
+                                         source))
+        if not self.stopped:
+            self.node.emcy.send(emcy, self._error_register(), struct.pack("<B4x", detail))
         self._communication_error()
         if reaction is MasterLost.HOLD:
             self.backend.apply(Command(CommandKind.FEED_HOLD, None, source))

@@ -224,6 +224,12 @@ class Host(Protocol):
 
     def apply(self, changes: Sequence[tuple[str, int, str, int]], source: Source) -> None: ...
 
+    def rpdo_timeout(self, n: int, ms: int) -> None: ...
+
+    def rpdo_back(self, n: int) -> None: ...
+
+    def rpdo_length(self, n: int, emcy: int) -> None: ...
+
 
 @dataclass(frozen=True)
 class Layout:
@@ -302,6 +308,28 @@ class Tpdo:
         self.sync_count, self.started = 0, False
 
 
+# EMCY codes of an RPDO (CiA 301 table 21): not processed due to length error, length
+# exceeded, RPDO timeout (its deadline monitoring).
+EMCY_RPDO_SHORT, EMCY_RPDO_LONG, EMCY_RPDO_TIMEOUT = 0x8210, 0x8220, 0x8250
+
+
+class Deadline:
+    """An RPDO's deadline monitoring (0x14xx:5, CiA 301 7.5.2.35): armed by the first
+    frame after it is configured, moved on by each frame (not re-armed), and once run out,
+    reported once; the next frame says the RPDO is back."""
+
+    def __init__(self, ms: int) -> None:
+        self.ms = ms
+        self.last = 0.0
+        self.lost = False
+        self.timer: Timer | None = None
+
+    def stop(self) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
+
+
 class Rpdo:
     """One RPDO's configuration, swapped whole on the receive thread."""
 
@@ -319,6 +347,8 @@ class Pdos:
         self._rpdo_callbacks = {n: self._rpdo_callback(n) for n in range(1, PDO_COUNT + 1)}
         self._sync_cob: int | None = None
         self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], Source]] = {}
+        self._deadlines: dict[int, Deadline] = {}  # RPDOs with an event timer
+        self._length_error: dict[int, int] = {}  # RPDO n -> its length EMCY (0: none)
         self._short = RateLimitedLog(log)  # RPDOs shorter than their mapping
         # RPDO writes handed to the loop (counted on the receive thread) and done (on the
         # loop): the node's SDO reads of the image go through the loop while they differ.
@@ -350,6 +380,7 @@ class Pdos:
         sync = param(device, RPDO_COMMUNICATION + n - 1, 2) <= 240
         self.rpdos[n] = Rpdo(n, cob, sync, Layout.of(device, RPDO_MAPPING + n - 1))
         self._sync_pending.pop(n, None)
+        self._configure_deadline(n, param(device, RPDO_COMMUNICATION + n - 1, 5))
         old = self._subscribed.get(n)
         if old == cob:
             return
@@ -359,6 +390,20 @@ class Pdos:
         if not cob & NOT_VALID:
             self.host.subscribe(cob & 0x7FF, callback)
         self._subscribed[n] = cob
+
+    def _configure_deadline(self, n: int, ms: int) -> None:
+        """Deadline monitoring as 0x14xx:5 says now; one that had run out and is no
+        longer wanted as it was is over (its EMCY is reset)."""
+        old = self._deadlines.get(n)
+        if old is not None and old.ms == ms:
+            return
+        if old is not None:
+            old.stop()
+            del self._deadlines[n]
+            if old.lost:
+                self.host.call_soon(lambda: self.host.rpdo_back(n))
+        if ms:
+            self._deadlines[n] = Deadline(ms)
 
     def configure_sync(self) -> None:
         cob = param(self.host.node, SYNC_COB_ID, 0) & 0x7FF
@@ -404,6 +449,8 @@ class Pdos:
     def left_operational(self) -> None:
         for t in self.tpdos.values():
             t.idle()
+        for deadline in self._deadlines.values():
+            deadline.stop()  # no RPDO is expected outside OPERATIONAL
 
     def _begin(self, t: Tpdo) -> None:
         """A TPDO comes to life: an event-driven one says where things stand (unless all it
@@ -541,9 +588,16 @@ class Pdos:
         if not self.host.operational:
             return  # PDOs only in OPERATIONAL
         r = self.rpdos[n]
-        if len(data) < r.layout.frame.size:
+        self._received(n)
+        size = r.layout.frame.size
+        # CiA 301 7.2.2.x: a shorter frame is not processed (EMCY 0x8210); of a longer one
+        # the first bytes are used (EMCY 0x8220).  One EMCY when the error begins, an error
+        # reset when a frame of the right length comes.
+        self._length(n, EMCY_RPDO_SHORT if len(data) < size else
+                     EMCY_RPDO_LONG if len(data) > size else 0)
+        if len(data) < size:
             self._short.note(f"RPDO{n} 0x{can_id:03X} with {len(data)} bytes ignored "
-                             f"({r.layout.frame.size} mapped)")
+                             f"({size} mapped)")
             return
         values = r.layout.frame.unpack_from(bytes(data))
         changes = [(area, i, view, v) for (area, i, view), v in zip(r.targets, values,
@@ -556,6 +610,37 @@ class Pdos:
             return
         self.handed += 1
         self.host.call_soon(lambda: self._apply([(changes, who)]))
+
+    def _length(self, n: int, emcy: int) -> None:
+        if self._length_error.get(n, 0) != emcy:
+            self._length_error[n] = emcy
+            self.host.call_soon(lambda: self.host.rpdo_length(n, emcy))
+
+    def _received(self, n: int) -> None:
+        """An RPDO frame came (receive thread): its deadline moves on."""
+        deadline = self._deadlines.get(n)
+        if deadline is None:
+            return
+        deadline.last = self.host.clock.monotonic()
+        if deadline.lost:
+            deadline.lost = False
+            self.host.call_soon(lambda: self.host.rpdo_back(n))
+        if deadline.timer is None:
+            deadline.timer = self.host.clock.call_later(
+                deadline.ms / 1000, lambda: self._deadline_due(n, deadline))
+
+    def _deadline_due(self, n: int, deadline: Deadline) -> None:
+        """The deadline as armed (loop): if a frame came since, it moves on."""
+        deadline.timer = None
+        if self._deadlines.get(n) is not deadline or not self.host.operational:
+            return
+        left = deadline.last + deadline.ms / 1000 - self.host.clock.monotonic()
+        if left > 1e-9:
+            deadline.timer = self.host.clock.call_later(
+                left, lambda: self._deadline_due(n, deadline))
+            return
+        deadline.lost = True
+        self.host.rpdo_timeout(n, deadline.ms)
 
     def _apply(self, batches: list[tuple[list[tuple[str, int, str, int]], Source]]) -> None:
         for changes, who in batches:

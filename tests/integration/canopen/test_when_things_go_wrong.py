@@ -374,3 +374,60 @@ async def test_0x1029_takes_only_the_reactions_the_node_has(gw: Gateway, master:
     assert await master.upload(0x1029, 1) == u8(0)  # CiA 301: pre-operational
     assert await sdo_error(master.download(0x1029, 1, u8(value))) == 0x06090030
     assert await master.upload(0x1029, 1) == u8(0)
+
+
+# -- 9. RPDO deadline monitoring and length errors -----------------------------------------------
+
+async def test_an_rpdo_that_stops_coming_is_a_communication_error(
+        clocked: Gateway, master: Master, clock: ManualClock) -> None:
+    await master.download(0x1400, 5, u16(100))  # RPDO1: at least every 100 ms
+    await master.download(0x1029, 1, u8(1))  # the NMT state stays: RPDOs still served
+    master.nmt(0x01)
+    clock.advance(1.0)  # monitoring starts with the first frame, not before
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    for value in (1, 2):
+        master.network.send_message(0x210, bytes((value,)) + bytes(7))
+        await master.barrier()
+        clock.advance(0.06)  # in time: the deadline moves on
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    clock.advance(0.04)  # 100 ms since the last frame
+    code, register, rpdo = struct.unpack_from("<HBB", await master.next(EMCY))
+    assert (code, register, rpdo) == (0x8250, 0x11, 1)
+    (alarm,) = [e for e in clocked.trace if e["event"] == "alarm"]
+    assert (alarm["proc"], alarm["code"]) == (0, "AL150")  # the reaction of a lost master
+    assert all(p.held for p in clocked.engine.processes.values() if not p.external)
+    clock.advance(1.0)  # reported once
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    master.network.send_message(0x210, bytes((3,)) + bytes(7))  # it comes again
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x0000, 0x00)
+    assert await master.upload(0x2000, 1) == u8(3)
+
+
+async def test_rpdo_length_errors_send_emcy_0x8210_and_0x8220(gw: Gateway,
+                                                             master: Master) -> None:
+    await master.download(0x1402, 1, u32(0x80000410))  # RPDO3: one byte, SA byte 2
+    await master.download(0x1602, 1, u32(0x20000308))
+    await master.download(0x1602, 0, u8(1))
+    await master.download(0x1402, 1, u32(0x410))
+    master.nmt(0x01)
+    master.network.send_message(0x210, bytes(4))  # RPDO1 maps 8 bytes: too short
+    code, register, rpdo = struct.unpack_from("<HBB", await master.next(EMCY))
+    assert (code, register, rpdo) == (0x8210, 0x11, 1)
+    master.network.send_message(0x210, bytes(4))  # the same error: no second EMCY
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    master.network.send_message(0x410, bytes((9, 9)))  # RPDO3: too long, its first byte used
+    code, register, rpdo = struct.unpack_from("<HBB", await master.next(EMCY))
+    assert (code, register, rpdo) == (0x8220, 0x11, 3)
+    assert await master.upload(0x2000, 3) == u8(9)
+    master.network.send_message(0x410, bytes((8,)))
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x0000, 0x11)  # RPDO1's error remains
+    master.network.send_message(0x210, bytes(8))
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x0000, 0x00)
+    assert await master.upload(0x1001, 0) == u8(0)
