@@ -38,6 +38,8 @@ class ScriptEntry:
     set: str | None = None  # write: "SA10=1"
     sender: int | None = None  # snd: from
     target: int | None = None  # snd: to
+    command: str | None = None  # command: cycle_start, feed_hold, reset, step, ...
+    process: int | None = None  # command: of one process (None: the cell)
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,10 +59,10 @@ def load_script(path: str | Path | None) -> Script:
         return ConfigError(f"{file}: {key}: {message}")
 
     for name in raw:
-        if name not in ("write", "snd"):
-            raise fail(name, "unknown key (expected [[write]] or [[snd]])")
+        if name not in ("write", "snd", "command"):
+            raise fail(name, "unknown key (expected [[write]], [[snd]] or [[command]])")
     entries: list[ScriptEntry] = []
-    for section in ("write", "snd"):
+    for section in ("write", "snd", "command"):
         tables = raw.get(section, [])
         if not isinstance(tables, list):
             raise fail(section, f"expected an array of tables ([[{section}]])")
@@ -73,7 +75,8 @@ def load_script(path: str | Path | None) -> Script:
 def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
     if not isinstance(table, dict):
         raise fail(key, "expected a table")
-    known = {"at", "when", "after"} | ({"set"} if section == "write" else {"from", "to"})
+    known = {"at", "when", "after"} | {"write": {"set"}, "snd": {"from", "to"},
+                                       "command": {"command", "process"}}[section]
     for name in table:
         if name not in known:
             raise fail(f"{key}.{name}", "unknown key")
@@ -95,6 +98,16 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         if not isinstance(value, str) or "=" not in value:
             raise fail(f"{key}.set", f"expected an assignment such as \"SA10=1\", got {value!r}")
         return ScriptEntry(key, _f(at), when, float(after), set=value)
+    if section == "command":
+        name = table.get("command")
+        if not isinstance(name, str) or not name:
+            raise fail(f"{key}.command", f"expected a command such as \"step\" or "
+                       f"\"cycle_start\", got {name!r}")
+        process = table.get("process")
+        if process is not None and (isinstance(process, bool) or not isinstance(process, int)
+                                    or process < 1):
+            raise fail(f"{key}.process", f"expected a process number, got {process!r}")
+        return ScriptEntry(key, _f(at), when, float(after), command=name, process=process)
     ends = []
     for name in ("from", "to"):
         value = table.get(name)

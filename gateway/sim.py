@@ -28,7 +28,7 @@ from ncgate.gateway.wiring import (
     parse_assignment,
     parse_condition,
 )
-from ncgate.inputs import Snd, Source, SourceKind, Start, Var, Write
+from ncgate.inputs import Command, CommandKind, Snd, Source, SourceKind, Start, Var, Write
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Engine, Process, ProcessState, run_virtual
@@ -105,6 +105,14 @@ class ScriptPlayer:
                                  "(declare it with [[nc.process]] external = true)")
             if not 1 <= (entry.target or 0) <= config.nc.processes:
                 raise self._fail(entry, "to", f"process {entry.target} is not configured")
+        if entry.command is not None:
+            kinds = {k.label: k for k in CommandKind}
+            if entry.command not in kinds:
+                raise self._fail(entry, "command", f"unknown command {entry.command!r} "
+                                 f"({', '.join(kinds)})")
+            if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
+                raise self._fail(entry, "process", f"process {entry.process} is not "
+                                 "configured")
         if entry.when is not None:
             self._parse_when(entry)
 
@@ -172,6 +180,9 @@ class ScriptPlayer:
         try:
             if entry.set is not None:
                 self.door.apply(self._write(entry))
+            elif entry.command is not None:
+                kind = next(k for k in CommandKind if k.label == entry.command)
+                self.door.apply(Command(kind, entry.process, source))
             else:
                 assert entry.sender is not None and entry.target is not None
                 self.door.apply(Snd(entry.sender, entry.target, source))
@@ -180,7 +191,8 @@ class ScriptPlayer:
 
 
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
-            until: float | None = None, *, signals: bool = False) -> SimResult:
+            until: float | None = None, *, signals: bool = False,
+            single_block: bool = False) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
@@ -198,6 +210,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     door = Door(runtime, lambda: runtime.plc)
     player = ScriptPlayer(runtime, script, door)
     engine = runtime.engine
+    if single_block:  # every process stops after each block: the script's steps go on
+        door.apply(Command(CommandKind.SINGLE_BLOCK_ON, None, SIM))
     if len(mains) == 1:
         # Spec 5.1 (ISG): one sectioned file starts every section in its channel at t = 0.
         starts = [(mains[0], channel) for channel in runtime.store.channels(mains[0]) or (1,)]

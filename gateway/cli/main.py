@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
                      "default: none, or the built-in one with the built-in config")
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
     sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
+    sim.add_argument("--single-block", action="store_true", help="every process stops after "
+                     "each block (STEP) until the script's next [[command]] step or "
+                     "cycle_start")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
     sim.add_argument("--replay", metavar="R.jsonl", help="re-run a session recorded with "
                      "'ncgate run --record' (its config, programs and inputs) and say whether "
@@ -246,7 +249,8 @@ def _sim(args: argparse.Namespace) -> int:
     script = load_script(args.script if args.script or args.config else default_script_path())
     mains = args.main or [config.nc.main]
     try:
-        result = run_sim(config, mains, script, args.until, signals=True)
+        result = run_sim(config, mains, script, args.until, signals=True,
+                         single_block=args.single_block)
     except ProgramError as exc:
         print(str(exc), file=sys.stderr)
         storage = storage_of(config)

@@ -410,6 +410,9 @@ class Engine:
                 reason = f"{wait.code} {wait.reason()}" + (f"; {note}" if note else "")
                 reason += self._alarmed_partners(wait)
                 out.append(Blocked(p.number, *wait.where, reason))
+            elif p.dec_block is DecoderHold.STEP:
+                out.append(Blocked(p.number, *p.where, "stopped after a block (single block): "
+                                   "a cycle start or a step runs the next"))
             else:
                 out.append(Blocked(p.number, *p.where, "blocked"))
         return tuple(out)

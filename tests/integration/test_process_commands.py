@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
 from ncgate.gateway import Gateway, load_config
@@ -144,3 +145,53 @@ async def test_single_block_and_step_over_modbus(tmp_path: Path) -> None:
         finally:
             client.close()
         assert gw.engine.processes[1].E[1] == 3.0
+
+
+def test_sim_single_block_goes_on_with_the_scripts_steps(tmp_path: Path) -> None:
+    """`ncgate sim --single-block`: each block waits for the script's next command; the
+    run is deterministic (the writes land at the commands' times), and a stop with no
+    command left is a stall that names the stopped block."""
+    import json
+    import subprocess
+    import sys
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "A.nc").write_text("N1SYVAR1=1\nN2SYVAR1=2\nN3SYVAR1=3\nN4M30\n")
+    (tmp_path / "script.toml").write_text(
+        '[[command]]\nat = 1.0\ncommand = "step"\n'
+        '[[command]]\nat = 2.5\ncommand = "cycle_start"\nprocess = 1\n'
+        '[[command]]\nat = 4.0\ncommand = "single_block_off"\n')
+
+    def sim(*extra: str) -> tuple[int, list[dict[str, object]], str]:
+        trace = tmp_path / "trace.jsonl"
+        done = subprocess.run(
+            [sys.executable, "-m", "ncgate", "sim", "--config", str(tmp_path / "ncgate.toml"),
+             "--trace", str(trace), "--single-block", *extra], capture_output=True, text=True,
+            timeout=60)
+        events = [json.loads(line) for line in trace.read_text().splitlines()]
+        return done.returncode, events, done.stdout
+
+    code, events, _ = sim("--script", str(tmp_path / "script.toml"))
+    writes = [(e["t"], e["value"]) for e in events if e["event"] == "write"]
+    assert code == 0, events
+    assert writes == [(0.0, 1), (1.0, 2), (2.5, 3)]
+    assert [e["t"] for e in events if e["event"] == "end"] == [4.0]
+    code, events, out = sim()  # no script: it stops after N1 for good
+    assert code == 1 and "A.nc:2" in out and "single block" in out
+
+
+def test_a_script_command_that_does_not_exist_names_its_entry(tmp_path: Path) -> None:
+    from ncgate.config import ConfigError
+    from ncgate.config.script import load_script
+    from ncgate.gateway.sim import run_sim
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "A.nc").write_text("N1M30\n")
+    (tmp_path / "s.toml").write_text('[[command]]\nat = 1\ncommand = "jump"\n')
+    config = load_config(tmp_path / "ncgate.toml")
+    with pytest.raises(ConfigError, match=r"s\.toml: command\[0\]\.command: unknown command "
+                       r"'jump' \(cycle_start, feed_hold, reset, restart_plc, step"):
+        run_sim(config, "A", load_script(tmp_path / "s.toml"))
+    (tmp_path / "s.toml").write_text('[[command]]\nat = 1\ncommand = "step"\nprocess = 0\n')
+    with pytest.raises(ConfigError, match=r"command\[0\]\.process: expected a process number"):
+        load_script(tmp_path / "s.toml")
