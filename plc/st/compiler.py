@@ -71,8 +71,15 @@ STD_FBS: dict[str, dict[str, tuple[str, str]]] = {
     "SR": {"S1": ("in", "BOOL"), "R": ("in", "BOOL"), "Q1": ("out", "BOOL")},
     "RS": {"S": ("in", "BOOL"), "R1": ("in", "BOOL"), "Q1": ("out", "BOOL")},
 }
+MATH_FUNCTIONS = ("EXP", "LN", "LOG", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN")
 STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
-                 "SQRT", "EXPT", "TRUNC")
+                 "SQRT", "EXPT", "TRUNC", *MATH_FUNCTIONS)
+# IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
+UNSUPPORTED_TYPES = ("LINT", "ULINT", "LWORD", "STRING", "WSTRING", "CHAR", "WCHAR", "LTIME",
+                     "DATE", "TIME_OF_DAY", "TOD", "DATE_AND_TIME", "DT", "LDATE", "LTOD",
+                     "LDT")
+UNSUPPORTED_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE",
+                         "REPLACE", "FIND", "MOVE", "ATAN2", "AND_THEN", "OR_ELSE")
 # NC.P[k] members: (index in the snapshot tuple, type).
 NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
@@ -216,6 +223,22 @@ def _trunc(value: float) -> int:
     return v
 
 
+def _math(name: str, function: Callable[[float], float]) -> Callable[[float], float]:
+    """EXP, LN, ... of IEC 61131-3 (Table 23): outside the function's domain, or beyond the
+    range of a double, the logic faults and says which."""
+    def call(x: float) -> float:
+        try:
+            return function(x)
+        except (ValueError, OverflowError):
+            raise ValueError(f"{name}({float(x):g}) has no value in LREAL") from None
+    return call
+
+
+_MATH = {"EXP": math.exp, "LN": math.log, "LOG": math.log10, "SIN": math.sin,
+         "COS": math.cos, "TAN": math.tan, "ASIN": math.asin, "ACOS": math.acos,
+         "ATAN": math.atan}
+
+
 def _mux(k: int, values: tuple[Any, ...]) -> Any:
     if 0 <= k < len(values):
         return values[k]
@@ -229,7 +252,7 @@ def _guard() -> None:
 HELPERS: dict[str, Any] = {
     "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
     "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard, "_f32": _f32,
-    "_f64": _f64,
+    "_f64": _f64, **{f"_{name}": _math(name, f) for name, f in _MATH.items()},
     "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
@@ -401,10 +424,11 @@ class Compiler:
                                  f"the {ref.name} instance in a FUNCTION_BLOCK or PROGRAM",
                                  ref.span)
             return FbOf(key, key in STD_FBS)
-        hint = (" (64-bit and string types are outside ncgate's subset)"
-                if key in ("LINT", "ULINT", "LWORD", "STRING", "WSTRING", "LTIME") else
-                did_you_mean(key, [*ELEMENTARY, *STD_FBS, *(
-                    k for k, p in self.pous.items() if p.pou.kind == "FUNCTION_BLOCK")]))
+        if key in UNSUPPORTED_TYPES:
+            raise self.error(StCode.UNSUPPORTED, f"{ref.name}: 64-bit, string and date types "
+                             "are outside ncgate's subset (docs/plc.md)", ref.span)
+        hint = did_you_mean(key, [*ELEMENTARY, *STD_FBS, *(
+            k for k, p in self.pous.items() if p.pou.kind == "FUNCTION_BLOCK")])
         raise self.error(StCode.UNKNOWN_TYPE, f"unknown type {ref.name}{hint}", ref.span)
 
     def _declare(self, info: PouInfo) -> None:
@@ -711,6 +735,11 @@ class Compiler:
                 raise self.error(StCode.EXIT_OUTSIDE_LOOP, "EXIT outside a loop", span)
             for line in self.flow(EXIT_CODE, scope):
                 out.emit(line, span)
+        elif isinstance(s, n.Continue):
+            if not scope.loops:
+                raise self.error(StCode.EXIT_OUTSIDE_LOOP, "CONTINUE outside a loop", span)
+            for line in self.flow(CONTINUE_CODE, scope):
+                out.emit(line, span)
         elif isinstance(s, n.Return):
             for line in self.flow(RETURN_CODE, scope):
                 out.emit(line, span)
@@ -831,6 +860,14 @@ class Compiler:
         if target.name.upper() == "NC" and len(target.selectors) == 1 and isinstance(
                 target.selectors[0], n.Field) and target.selectors[0].name.upper() == "SEND":
             self.nc_send(s, scope)
+            return
+        key = target.name.upper()
+        if not target.selectors and (scope.info is None or key not in scope.info.vars) and (
+                key in STD_FUNCTIONS or key in UNSUPPORTED_FUNCTIONS or _conversion(key) or (
+                    key in self.pous and self.pous[key].pou.kind == "FUNCTION")):
+            # A FUNCTION called as a statement (IEC 61131-3, 7.3.3.2): its result is dropped.
+            e = self.expr(n.Call(target.name, s.args, s.span), scope)
+            out.emit(e.code, s.span)
             return
         place = scope.place(target, write=False)
         fb = place.type
@@ -1144,6 +1181,9 @@ class Compiler:
         if key in STD_FUNCTIONS:
             return self.std_call(x, key, scope)
         info = self.pous.get(key)
+        if info is None and key in UNSUPPORTED_FUNCTIONS:
+            raise self.error(StCode.UNSUPPORTED, f"{x.name}: a standard function outside "
+                             "ncgate's subset (docs/plc.md)", x.span)
         if info is None or info.pou.kind != "FUNCTION":
             what = ("a function block: declare an instance and call it as a statement"
                     if key in STD_FBS or info is not None else "not a function")
@@ -1197,6 +1237,13 @@ class Compiler:
         return t
 
     def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
+        if key in MATH_FUNCTIONS:
+            (a,) = self._args(x, scope, 1)
+            if not is_num(a.type):
+                raise self.error(StCode.TYPE_MISMATCH, f"{key} takes a number, not "
+                                 f"{_tname(a.type)}", x.span)
+            mt: Type = "LREAL" if a.type == "LREAL" else "REAL"
+            return E(real_code(f"_{key}({self.real_operand(a, mt, x.span)})", mt), mt)
         if key in ("ABS", "SQRT", "TRUNC"):
             (a,) = self._args(x, scope, 1)
             if not is_num(a.type):

@@ -40,7 +40,7 @@ class StCode(enum.Enum):
     READ_ONLY = ("ST023", "a write to an NC input, a CONSTANT, an output or a loop variable")
     BAD_ARGUMENTS = ("ST024", "arguments missing, unknown, repeated or of the wrong form")
     NOT_CALLABLE = ("ST025", "a call statement on a variable that is no function block")
-    EXIT_OUTSIDE_LOOP = ("ST026", "EXIT outside FOR, WHILE or REPEAT")
+    EXIT_OUTSIDE_LOOP = ("ST026", "EXIT or CONTINUE outside FOR, WHILE or REPEAT")
     DIVISION_BY_ZERO = ("ST027", "a division or MOD by the constant 0")
     NOT_CONSTANT = ("ST028", "an initial value or CASE label that is not a constant")
     # -- structure -------------------------------------------------------------------------------

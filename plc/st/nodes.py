@@ -192,11 +192,16 @@ class Exit:
 
 
 @dataclass(frozen=True, slots=True)
+class Continue:
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
 class Return:
     span: Span
 
 
-Stmt = Assign | CallStmt | If | Case | For | While | Repeat | Exit | Return
+Stmt = Assign | CallStmt | If | Case | For | While | Repeat | Exit | Continue | Return
 
 
 @dataclass(frozen=True, slots=True)

@@ -27,6 +27,85 @@ _UNIT_LIMIT = {"h": 24, "m": 60, "s": 60, "ms": 1000}  # below the first unit (6
 _DECIMAL = re.compile(r"[0-9](_?[0-9])*")
 _BASED = {2: re.compile(r"_?[01](_?[01])*"), 8: re.compile(r"_?[0-7](_?[0-7])*"),
           16: re.compile(r"_?[0-9A-Fa-f](_?[0-9A-Fa-f])*")}
+# Words that start a construct outside the subset: a syntax error at one is ST031.
+UNSUPPORTED_WORDS = {
+    "TYPE": "TYPE … END_TYPE (data types)", "STRUCT": "STRUCT", "END_TYPE": "TYPE … END_TYPE",
+    "END_STRUCT": "STRUCT", "VAR_GLOBAL": "VAR_GLOBAL", "VAR_IN_OUT": "VAR_IN_OUT",
+    "VAR_EXTERNAL": "VAR_EXTERNAL", "VAR_ACCESS": "VAR_ACCESS", "VAR_CONFIG": "VAR_CONFIG",
+    "NON_RETAIN": "NON_RETAIN", "CONFIGURATION": "CONFIGURATION", "RESOURCE": "RESOURCE",
+    "AT": "located variables (AT %I…)", "METHOD": "METHOD", "PROPERTY": "PROPERTY",
+    "INTERFACE": "INTERFACE", "ACTION": "ACTION", "REF_TO": "references (REF_TO)",
+    "POINTER": "pointers", "JMP": "JMP and labels",
+}
+_UNSUPPORTED_CHARS = {"{": "pragmas ({…})", "%": "located variables (%IX0.0)",
+                      "'": "STRING literals", '"': "WSTRING literals"}
+_COMMENT_OPEN = re.compile(r"\(\*|/\*|//")
+_COMMENT_PAIR = {"(*": re.compile(r"\(\*|\*\)"), "/*": re.compile(r"/\*|\*/")}
+_NOT_NEWLINE = re.compile(r"[^\n]")
+
+
+class UnclosedComment(ValueError):
+    def __init__(self, at: int) -> None:
+        super().__init__("a comment that is never closed")
+        self.at = at
+
+
+def blank_comments(text: str) -> str:
+    """The text with every comment turned into spaces (newlines kept, so every position is
+    unchanged).  ``(* *)`` and ``/* */`` nest in themselves, as IEC 61131-3 (6.1.5) allows:
+    ``(* a (* b *) c *)`` is one comment.  UnclosedComment at the opening of one that the
+    file never closes."""
+    if "(*" not in text and "/*" not in text and "//" not in text:
+        return text
+    pieces = []
+    pos = 0
+    while (found := _COMMENT_OPEN.search(text, pos)) is not None:
+        start, opener = found.start(), found.group()
+        if opener == "//":
+            end = text.find("\n", start)
+            end = len(text) if end < 0 else end
+        else:
+            depth, end = 1, found.end()
+            pair = _COMMENT_PAIR[opener]
+            while depth:
+                mark = pair.search(text, end)
+                if mark is None:
+                    raise UnclosedComment(start)
+                depth += 1 if mark.group() == opener else -1
+                end = mark.end()
+        pieces += [text[pos:start], _NOT_NEWLINE.sub(" ", text[start:end])]
+        pos = end
+    pieces.append(text[pos:])
+    return "".join(pieces)
+
+
+def _position(text: str, at: int) -> tuple[int, int]:
+    line = text.count("\n", 0, at) + 1
+    return line, at - (text.rfind("\n", 0, at) + 1) + 1
+
+
+def _unsupported(text: str, at: int) -> tuple[str, int] | None:
+    """What is outside the subset at ``at`` (or in the word before it: ``VAR_IN_OUT x``
+    lexes as VAR, then a name), if that is why the syntax failed there, and where."""
+    char = text[at:at + 1]
+    if char in _UNSUPPORTED_CHARS:
+        return _UNSUPPORTED_CHARS[char], at
+    word = re.match(r"[A-Za-z_][A-Za-z0-9_]*", text[at:])
+    if word is not None and word.group().upper() in UNSUPPORTED_WORDS:
+        return UNSUPPORTED_WORDS[word.group().upper()], at
+    before = text[:at].rstrip()
+    previous = re.search(r"[A-Za-z_][A-Za-z0-9_]*$", before)
+    if previous is not None and previous.group().upper() in UNSUPPORTED_WORDS:
+        return UNSUPPORTED_WORDS[previous.group().upper()], previous.start()
+    if char.isdigit() and before.endswith("."):
+        return "bit access (w.3)", at
+    if re.search(r"ARRAY\s*\[[^\]]*$", before, re.IGNORECASE) and char == ",":
+        return "multi-dimensional arrays", at
+    if re.search(r"\bOF\s*$", before, re.IGNORECASE) and text[at:at + 5].upper() == "ARRAY":
+        return "arrays of arrays", at
+    return None
+
+
 # What people call the grammar's punctuation, for "expected ..." in a syntax error.
 _SHOWN = {"SEMICOLON": "';'", "COLON": "':'", "LPAR": "'('", "RPAR": "')'", "COMMA": "','",
           "LSQB": "'['", "RSQB": "']'", "DOT": "'.'", "NAME": "a name", "INT": "a number"}
@@ -283,6 +362,9 @@ class _Build(Transformer_NonRecursive[Token, Any]):
     def exit_stmt(self, meta: Any, children: list[Token]) -> n.Exit:
         return n.Exit(_span(self.file, children[0]))
 
+    def continue_stmt(self, meta: Any, children: list[Token]) -> n.Continue:
+        return n.Continue(_span(self.file, children[0]))
+
     def return_stmt(self, meta: Any, children: list[Token]) -> n.Return:
         return n.Return(_span(self.file, children[0]))
 
@@ -373,9 +455,25 @@ def parse_source(text: str, file: str) -> n.SourceFile:
         source = lines[line - 1] if 0 < line <= len(lines) else ""
         return LogicError([StDiagnostic(code, message, n.Span(file, line, column), source)])
 
+    def not_supported(at: int) -> LogicError | None:
+        found = _unsupported(text, at)
+        if found is None:
+            return None
+        what, where = found
+        line, column = _position(text, where)
+        return fail(StCode.UNSUPPORTED, f"{what}: not supported by ncgate's Structured Text "
+                    "(docs/plc.md lists what is)", line, column)
+
     try:
-        tree = _parser().parse(text)
+        tree = _parser().parse(blank_comments(text))
+    except UnclosedComment as exc:
+        line, column = _position(text, exc.at)
+        raise fail(StCode.UNEXPECTED_END, "the file ends inside this comment (it is never "
+                   "closed)", line, column) from None
     except UnexpectedCharacters as exc:
+        unsupported = not_supported(exc.pos_in_stream or 0)
+        if unsupported is not None:
+            raise unsupported from None
         pos = exc.pos_in_stream or 0
         char = text[pos] if pos < len(text) else ""
         raise fail(StCode.UNEXPECTED_CHARACTER, f"unexpected character {char!r}",
@@ -386,6 +484,14 @@ def parse_source(text: str, file: str) -> n.SourceFile:
                    line, len(lines[-1]) + 1 if lines else 1) from None
     except UnexpectedToken as exc:
         token = exc.token
+        unsupported = not_supported(token.start_pos) if token.start_pos is not None else None
+        if unsupported is not None:
+            raise unsupported from None
+        if token.type == "NAME" and "NAME" not in exc.expected and "INT" in exc.expected:
+            what = ("a named constant or enumeration value as a CASE label"
+                    if "BASED_INT" in exc.expected else "a named constant as an array bound")
+            raise fail(StCode.UNSUPPORTED, f"{what}: not supported by ncgate's Structured "
+                       "Text (write the number)", token.line or 1, token.column or 1) from None
         if token.type == "$END":
             line = len(lines) or 1
             raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected "

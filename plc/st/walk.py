@@ -30,6 +30,10 @@ class _Return(Exception):
     pass
 
 
+class _Continue(Exception):
+    pass
+
+
 class Walker:
     """Runs the PROGRAMs of checked logic by walking their trees."""
 
@@ -127,6 +131,8 @@ class Walker:
                     self.block(s.body, prog)
                 except _Exit:
                     break
+                except _Continue:
+                    pass
                 self.state[prog][s.var.upper()] = _stored(i + step, t)
         elif isinstance(s, n.While):
             while self.value(s.cond, prog):
@@ -135,6 +141,8 @@ class Walker:
                     self.block(s.body, prog)
                 except _Exit:
                     break
+                except _Continue:
+                    pass
         elif isinstance(s, n.Repeat):
             while True:
                 self._tick()
@@ -142,10 +150,14 @@ class Walker:
                     self.block(s.body, prog)
                 except _Exit:
                     break
+                except _Continue:
+                    pass
                 if self.value(s.cond, prog):
                     break
         elif isinstance(s, n.Exit):
             raise _Exit
+        elif isinstance(s, n.Continue):
+            raise _Continue
         else:
             raise _Return
 

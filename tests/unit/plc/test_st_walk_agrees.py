@@ -75,8 +75,8 @@ class Gen:
                     f"{self.stmt(depth + 1)} END_CASE")
         if kind == "for":
             return (f"FOR n{depth} := {r.randrange(-2, 3)} TO {r.randrange(0, 6)} BY "
-                    f"{r.choice([1, 2])} DO {self.stmt(depth + 1)} IF {self.bool_expr()} THEN "
-                    "EXIT; END_IF END_FOR")
+                    f"{r.choice([1, 2])} DO IF {self.bool_expr()} THEN CONTINUE; END_IF "
+                    f"{self.stmt(depth + 1)} IF {self.bool_expr()} THEN EXIT; END_IF END_FOR")
         return (f"w{depth} := 0; WHILE w{depth} < {r.randrange(4)} DO w{depth} := w{depth} + 1; "
                 f"{self.stmt(depth + 1)} END_WHILE")
 
