@@ -42,6 +42,7 @@ from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
 from ncgate.inputs import Command, CommandKind, Source, SourceKind, Start, Var, Write
+from ncgate.interpreter.storage import PROGRAM_SUFFIXES, program_name
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
@@ -234,7 +235,9 @@ class WebConsole:
         return web.Response(text=body, content_type="application/json")
 
     async def _programs(self, request: web.Request) -> web.StreamResponse:
-        names = sorted({path.stem for path in program_files(self.gw.config)})
+        # Files a program name can name (spec 1.1): not the config, the PLC logic, a README.
+        names = sorted({program_name(path) for path in program_files(self.gw.config)
+                        if path.suffix.lower() in PROGRAM_SUFFIXES})
         return web.json_response({"programs": names, "main": self.gw.config.nc.main})
 
     async def _timeline(self, request: web.Request) -> web.StreamResponse:

@@ -37,7 +37,14 @@ function connect() {
   source.addEventListener("status", (e) => {
     const s = JSON.parse(e.data);
     if (s.session !== undefined) {
-      if (session !== null && s.session !== session) resetSession();
+      if (session !== null && s.session !== session) {
+        // Another run (a restart, another config): start afresh, and read its events from
+        // its first (the stream resumed at the old run's last id would skip them).
+        resetSession();
+        source.close();
+        connect();
+        return;
+      }
       session = s.session;
     }
     if (status === null) status = {};
@@ -63,13 +70,34 @@ function setConn(up) {
   const c = $("#conn");
   c.textContent = up ? "live" : "reconnecting…";
   c.className = up ? "up" : "down";
+  $("#offline").hidden = up;
+  document.body.classList.toggle("offline", !up);
+  controls();
 }
-function resetSession() {  // the gateway restarted: its events start again at 1
+// Buttons act only while the gateway answers (and the console is not read-only): a page
+// whose server stopped must not look as if a click would do something.
+function controls() {
+  const off = !live || !status || !status.web || status.web.read_only;
+  for (const b of document.querySelectorAll("nav button, nav select, #lanes button")) {
+    b.disabled = off;
+  }
+}
+function resetSession() {  // another run: its lanes, programs, events start afresh
   events = [];
   lastSeq = -1;
   status = null;
-  $("#log tbody").replaceChildren();
+  session = null;
+  pending = {};
+  kinds.clear();
+  drawnSa = "";
+  drawnSaBy = [];
+  for (const box of ["#lanes", "#log tbody", "#sa", "#k", "#syvar", "#plc", "#fieldbus",
+                     "#start-process", "#start-program"]) {
+    $(box).replaceChildren();
+  }
+  for (const box of ["#filter-proc", "#filter-kind"]) $(box).replaceChildren($(box).options[0]);
   timelineDirty = true;
+  loadPrograms();
 }
 function addEvent(ev) {
   if (ev.seq <= lastSeq) return false;
@@ -86,6 +114,7 @@ function addEvent(ev) {
 
 // ---- acting -------------------------------------------------------------------------------
 async function post(path, body) {
+  if (!live) { say("the gateway is not answering"); return false; }
   const headers = { "Content-Type": "application/json" };
   if (token) headers.Authorization = "Bearer " + token;
   const r = await fetch(path, { method: "POST", headers, body: JSON.stringify(body) });
@@ -119,11 +148,9 @@ function render() {
   pending = {};
   renderClock();
   $("#source").textContent = status.config;
-  for (const b of document.querySelectorAll("nav button, nav select")) {
-    b.disabled = status.web.read_only;
-  }
   if (status.web.token && !token) $("#token").hidden = false;
   if (parts.processes) renderLanes();
+  controls();
   if (parts.image) renderImage();
   if (parts.plc) renderPlc();
   if (parts.fieldbus) renderFieldbus();
@@ -160,8 +187,12 @@ function renderLanes() {
     }
     if (p.wait) {
       const w = p.wait;
-      let text = w.code + " " + w.reason;
-      detail.append(el("div", "wait", text));
+      const wait = el("div", "wait", w.code + " " + w.reason + " ");
+      const since = el("span", "since");  // the tick keeps it going
+      since.dataset.since = w.since;
+      wait.append(since);
+      detail.append(wait);
+      waitFor(since);
     }
     if (p.alarm) {
       const a = el("div", "alarm", p.alarm.code + ": " + p.alarm.message + " ");
@@ -395,8 +426,16 @@ function machineNow() {
   const since = live ? (performance.now() - statusAt) / 1000 : 0;
   return status.t + since * (status.time_scale || 1);
 }
+function waitFor(span) {
+  const s = Math.max(0, machineNow() - Number(span.dataset.since));
+  span.textContent = "for " + (s < 60 ? s.toFixed(0) + " s" :
+    Math.floor(s / 60) + " min " + (s % 60).toFixed(0).padStart(2, "0") + " s");
+}
 function tick() {
-  if (status && status.t !== undefined) renderClock();
+  if (status && status.t !== undefined) {
+    renderClock();
+    for (const span of document.querySelectorAll("#lanes .wait .since")) waitFor(span);
+  }
   if ($("#pause").checked) return;
   if (timelineDirty || performance.now() - timelineAt >= 1000) renderTimeline();
 }
@@ -417,4 +456,5 @@ async function loadPrograms() {
   } catch (e) { /* the stream's reconnect will show that the server is away */ }
 }
 loadPrograms();
+controls();
 connect();

@@ -165,11 +165,17 @@ def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
         # The server goes away: the page says so, and comes back by itself with the new run.
         run.stop()
         until(browser, "the lost connection", lambda d: text(d, "#conn") == "reconnecting…")
+        # It says so in a banner and offers no button that would do nothing.
+        until(browser, "the banner and no controls",
+              lambda d: d.find_element(By.ID, "offline").is_displayed()
+              and not d.find_element(By.ID, "btn-start").is_enabled())
         run = start_run(web_port, "ncgate-browser-2")
         until(browser, "the new run, live",
               lambda d: text(d, "#conn") == "live"
               and text(d, "#lane-2 .state") == "IDLE"
-              and not d.find_elements(By.CSS_SELECTOR, "#log tbody tr"))
+              and not d.find_elements(By.CSS_SELECTOR, "#log tbody tr")
+              and not d.find_element(By.ID, "offline").is_displayed()
+              and d.find_element(By.ID, "btn-start").is_enabled())
         browser.find_element(By.ID, "btn-start").click()
         until(browser, "P2 waiting again, and the new run's events",
               lambda d: text(d, "#lane-2 .state") == "WAIT_COND"
@@ -287,5 +293,48 @@ def test_the_clock_and_the_timeline_move_on_when_nothing_happens(browser: Any,
         until(browser, "the timeline's axis moving",
               lambda d: text(d, "#timeline text:last-child") != axis)
         assert not log_rows(browser)
+        # A wait says how long it has lasted, and that goes on too.
+        browser.find_element(By.ID, "btn-start").click()
+        waited = until(browser, "P2 waiting at N40, for some time",
+                       lambda d: "SA10=1" in text(d, "#lane-2 .wait")
+                       and text(d, "#lane-2 .wait .since"))
+        assert waited.startswith("for ")
+        until(browser, "the wait's duration moving",
+              lambda d: text(d, "#lane-2 .wait .since") not in ("", waited))
+    finally:
+        run.stop()
+
+
+def test_another_run_on_the_same_port_starts_the_page_afresh(browser: Any,
+                                                            web_port: int) -> None:
+    """A restart with another config left the old lanes, programs and filters (twice), and
+    the page resumed the new run at the old run's last event, missing its first ones."""
+    run = start_run(web_port, "ncgate-browser-7")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "five lanes", lambda d: len(d.find_elements(By.CSS_SELECTOR,
+                                                                   ".lane")) == 5)
+        for value in range(1, 4):
+            post_write(web_port, "SYVAR5", value)
+        until(browser, "three writes", lambda d: len(log_rows(d)) == 3)
+        run.stop()
+        until(browser, "the lost connection", lambda d: text(d, "#conn") == "reconnecting…")
+        run = RunProcess("--port", "0", "--web", f"127.0.0.1:{web_port}", "--set",
+                         "nc.processes=3", "--set", "canopen.channel=ncgate-browser-8")
+        run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
+        for value in range(1, 6):  # the new run's events 1..5, as the page reconnects
+            post_write(web_port, "SYVAR6", value)
+        until(browser, "the new run's five writes, from its first",
+              lambda d: [row.find_element(By.TAG_NAME, "td").text for row in log_rows(d)]
+              == ["5", "4", "3", "2", "1"])
+        assert [lane.get_attribute("id") for lane in browser.find_elements(
+            By.CSS_SELECTOR, ".lane")] == ["lane-1", "lane-2", "lane-3"]
+        options = [o.text for o in browser.find_elements(By.CSS_SELECTOR,
+                                                         "#filter-proc option")]
+        assert options == ["every process", "P1", "P2", "P3"]
+        assert [o.text for o in browser.find_elements(By.CSS_SELECTOR,
+                                                      "#filter-kind option")] == [
+            "every kind", "write"]
+        assert "SYVAR6" in text(browser, "#log tbody tr:first-child")
     finally:
         run.stop()

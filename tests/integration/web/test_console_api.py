@@ -537,3 +537,19 @@ async def test_the_stream_sends_events_in_batches_not_one_message_per_write(
             seen += sum(1 for e in batch["events"] if e["seq"] >= first)
     # One message a write put a page minutes behind; a batch per 50 ms is a handful here.
     assert messages <= writes // 10, messages
+
+
+# -- always true (issue 30 item 3) -------------------------------------------------------------
+
+async def test_programs_lists_only_programs_not_the_other_files_beside_them(
+        tmp_path: Path) -> None:
+    example = EXAMPLES / "plclogic"  # PROG91..93 beside ncgate.toml, plc.st and README.md
+    assert {"ncgate.toml", "plc.st", "README.md"} <= {p.name for p in example.iterdir()}
+    config = ncgate_test_config(example / "ncgate.toml", **{
+        "web.port": 0, "plc.retain_file": str(tmp_path / "r.sqlite")})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/programs") as r:
+            assert await r.json() == {"programs": ["PROG91", "PROG92", "PROG93"],
+                                      "main": "PROG91"}
