@@ -49,6 +49,9 @@ CONSUMER_ENTRIES = 4  # 0x1016: nodes whose heartbeat the node watches
 
 SYNC_COB_ID, STORE, RESTORE, CONSUMER_HEARTBEAT = 0x1005, 0x1010, 0x1011, 0x1016
 ERROR_BEHAVIOUR = 0x1029
+# SYNC consumer: communication cycle period (us), synchronous window length (us), SYNC
+# counter overflow value (CiA 301 7.5.2.6/7/21).
+CYCLE_PERIOD, SYNC_WINDOW, SYNC_OVERFLOW = 0x1006, 0x1007, 0x1019
 # 0x1029:1, what a communication error (the master's heartbeat lost) does to the NMT state
 # (CiA 301 7.5.2.32): 0 pre-operational (from OPERATIONAL only), 1 no change, 2 stopped.
 TO_PRE_OPERATIONAL, NO_STATE_CHANGE, TO_STOPPED = 0, 1, 2
@@ -300,6 +303,10 @@ def build_dictionary(config: Config) -> ObjectDictionary:
 
     # SYNC consumer (the node produces no SYNC: bit 30 stays clear).
     od.add_object(_var("COB-ID SYNC message", SYNC_COB_ID, 0, UNSIGNED32, "rw", 0x80))
+    od.add_object(_var("Communication cycle period", CYCLE_PERIOD, 0, UNSIGNED32, "rw", 0))
+    od.add_object(_var("Synchronous window length", SYNC_WINDOW, 0, UNSIGNED32, "rw", 0))
+    od.add_object(_var("Synchronous counter overflow value", SYNC_OVERFLOW, 0, UNSIGNED8,
+                       "rw", 0))
     # Store / restore the communication parameters (CiA 301 7.5.2.13/14): sub 1 all, sub 2
     # communication; reading 1 says "saves on command".
     for index, name in ((STORE, "Store parameters"), (RESTORE, "Restore default parameters")):

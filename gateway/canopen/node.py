@@ -58,6 +58,7 @@ from ncgate.gateway.canopen.dictionary import (
     COMMAND,
     CONSUMER_ENTRIES,
     CONSUMER_HEARTBEAT,
+    CYCLE_PERIOD,
     ERROR_BEHAVIOUR,
     LAST_SND,
     NO_STATE_CHANGE,
@@ -67,6 +68,7 @@ from ncgate.gateway.canopen.dictionary import (
     STATUS_BASE,
     STORE,
     SYNC_COB_ID,
+    SYNC_OVERFLOW,
     TO_PRE_OPERATIONAL,
     TO_STOPPED,
     TPDO_COMMUNICATION,
@@ -129,6 +131,7 @@ class CanopenNode:
         self._master_lost: set[int] = set()
         self._rpdo_lost: set[int] = set()  # RPDOs whose deadline ran out (0x14xx:5)
         self._rpdo_length: set[int] = set()  # RPDOs in a length error (EMCY 0x8210/0x8220)
+        self._sync_errors: set[int] = set()  # SYNC EMCYs in force (0x8100, 0x8240)
         self._hub: RemoteServer | None = None
         # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
@@ -449,7 +452,8 @@ class CanopenNode:
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
         lost = (REGISTER_GENERIC | REGISTER_COMMUNICATION
-                if self._master_lost or self._rpdo_lost or self._rpdo_length else 0)
+                if self._master_lost or self._rpdo_lost or self._rpdo_length
+                or self._sync_errors else 0)
         return int(alarms) | lost
 
     def _read(self, index: int, subindex: int) -> int:
@@ -483,6 +487,8 @@ class CanopenNode:
                 pdo.check_write(self.node, index, subindex, number)
             elif index == SYNC_COB_ID:
                 pdo.check_sync_cob_id(number)
+            elif index == SYNC_OVERFLOW:
+                pdo.check_sync_overflow(number, pdo.param(self.node, CYCLE_PERIOD, 0))
             elif index == CONSUMER_HEARTBEAT:
                 entries = [pdo.param(self.node, CONSUMER_HEARTBEAT, s)
                            for s in range(1, CONSUMER_ENTRIES + 1)]
@@ -518,6 +524,8 @@ class CanopenNode:
                 self.call_soon(lambda: self.pdos.configure_tpdo(n))
         elif index == SYNC_COB_ID:
             self.pdos.configure_sync()
+        elif index == CYCLE_PERIOD:
+            self.pdos.configure_sync_period()
         elif index == CONSUMER_HEARTBEAT:
             self._configure_heartbeats()
 
@@ -607,6 +615,25 @@ class CanopenNode:
             return
         if emcy:
             self.node.emcy.send(emcy, self._error_register(), struct.pack("<B4x", n))
+        else:
+            self.node.emcy.reset(self._error_register())
+
+    def sync_error(self, emcy: int, on: bool) -> None:
+        """A SYNC error began (its EMCY: 0x8100 timeout, 0x8240 length) or ended (an error
+        reset), on the loop.  No process reaction: the master's heartbeat says whether it
+        lives; the SYNC's timing is the PDOs' concern."""
+        if on == (emcy in self._sync_errors):
+            return
+        if on:
+            self._sync_errors.add(emcy)
+            log.warning("CANopen: SYNC %s", "timeout (0x1006)" if emcy == pdo.EMCY_SYNC_TIMEOUT
+                        else "length disagrees with 0x1019")
+        else:
+            self._sync_errors.discard(emcy)
+        if self.stopped:
+            return
+        if on:
+            self.node.emcy.send(emcy, self._error_register())
         else:
             self.node.emcy.reset(self._error_register())
 

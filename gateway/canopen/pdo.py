@@ -47,6 +47,7 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.gateway.canopen.clock import Clock, Timer
 from ncgate.gateway.canopen.codes import (
+    ABORT_APPLICATION_DEVICE_STATE,
     ABORT_INVALID_VALUE,
     ABORT_PDO_CANNOT_MAP,
     ABORT_PDO_LENGTH_EXCEEDED,
@@ -54,6 +55,7 @@ from ncgate.gateway.canopen.codes import (
 )
 from ncgate.gateway.canopen.dictionary import (
     COMMAND,
+    CYCLE_PERIOD,
     LAST_SND,
     MAX_MAPPED,
     PDO_COUNT,
@@ -61,6 +63,8 @@ from ncgate.gateway.canopen.dictionary import (
     RPDO_MAPPING,
     STATUS_BASE,
     SYNC_COB_ID,
+    SYNC_OVERFLOW,
+    SYNC_WINDOW,
     TPDO_COMMUNICATION,
     TPDO_MAPPING,
     image_target,
@@ -178,6 +182,15 @@ def _check_cob_id(current: int, cob: int) -> None:
         raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
+def check_sync_overflow(value: int, period_us: int) -> None:
+    """0x1019: 0 (SYNC without counter) or 2..240; written only while 0x1006 is 0
+    (CiA 301 7.5.2.21: 0x08000022 otherwise)."""
+    if value == 1 or value > 240:
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
+    if period_us:
+        raise SdoAbortedError(ABORT_APPLICATION_DEVICE_STATE)
+
+
 def check_sync_cob_id(cob: int) -> None:
     """0x1005: the node consumes SYNC and produces none (bit 30), 11-bit ids only (bits
     11..29 clear), and no identifier CiA 301 table 3 restricts (7.3.5): a SYNC on 0x610
@@ -229,6 +242,8 @@ class Host(Protocol):
     def rpdo_back(self, n: int) -> None: ...
 
     def rpdo_length(self, n: int, emcy: int) -> None: ...
+
+    def sync_error(self, emcy: int, on: bool) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -311,6 +326,10 @@ class Tpdo:
 # EMCY codes of an RPDO (CiA 301 table 21): not processed due to length error, length
 # exceeded, RPDO timeout (its deadline monitoring).
 EMCY_RPDO_SHORT, EMCY_RPDO_LONG, EMCY_RPDO_TIMEOUT = 0x8210, 0x8220, 0x8250
+# SYNC errors: no SYNC within 1.5 communication cycle periods (as CANopenNode), a SYNC
+# whose length disagrees with 0x1019 (a counter byte, or none).
+EMCY_SYNC_TIMEOUT, EMCY_SYNC_LENGTH = 0x8100, 0x8240
+SYNC_TIMEOUT_PERIODS = 1.5
 
 
 class Deadline:
@@ -348,6 +367,11 @@ class Pdos:
         self._sync_cob: int | None = None
         self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], Source]] = {}
         self._deadlines: dict[int, Deadline] = {}  # RPDOs with an event timer
+        self._sync_watch: Deadline | None = None  # 0x1006: the SYNC's own deadline
+        self._sync_timeout_s = 0.0
+        self._sync_length_error = False
+        self._last_sync_at: float | None = None  # the node's clock at the last SYNC
+        self.sync_late_rpdos = 0  # synchronous RPDOs dropped: outside the window (0x1007)
         self._length_error: dict[int, int] = {}  # RPDO n -> its length EMCY (0: none)
         self._short = RateLimitedLog(log)  # RPDOs shorter than their mapping
         # RPDO writes handed to the loop (counted on the receive thread) and done (on the
@@ -368,6 +392,7 @@ class Pdos:
         for n in self.tpdos:
             self.configure_rpdo(n)
         self.configure_sync()
+        self.configure_sync_period()
         self.host.call_soon(self._configure_tpdos)
 
     def _configure_tpdos(self) -> None:
@@ -404,6 +429,41 @@ class Pdos:
                 self.host.call_soon(lambda: self.host.rpdo_back(n))
         if ms:
             self._deadlines[n] = Deadline(ms)
+
+    def configure_sync_period(self) -> None:
+        """0x1006 as it is now (receive thread): SYNC timeout monitoring from the next
+        SYNC on, or none; a timeout reported before is over."""
+        period_us = param(self.host.node, CYCLE_PERIOD, 0)
+        old = self._sync_watch
+        if old is not None:
+            old.stop()
+            if old.lost:
+                self.host.call_soon(lambda: self.host.sync_error(EMCY_SYNC_TIMEOUT, False))
+        self._sync_timeout_s = period_us * SYNC_TIMEOUT_PERIODS / 1e6
+        self._sync_watch = Deadline(0) if period_us else None
+
+    def _sync_seen(self) -> None:
+        watch = self._sync_watch
+        if watch is None:
+            return
+        watch.last = self.host.clock.monotonic()
+        if watch.lost:
+            watch.lost = False
+            self.host.call_soon(lambda: self.host.sync_error(EMCY_SYNC_TIMEOUT, False))
+        if watch.timer is None:
+            watch.timer = self.host.clock.call_later(self._sync_timeout_s,
+                                                     lambda: self._sync_due(watch))
+
+    def _sync_due(self, watch: Deadline) -> None:
+        watch.timer = None
+        if self._sync_watch is not watch or not self.host.operational:
+            return
+        left = watch.last + self._sync_timeout_s - self.host.clock.monotonic()
+        if left > 1e-9:
+            watch.timer = self.host.clock.call_later(left, lambda: self._sync_due(watch))
+            return
+        watch.lost = True
+        self.host.sync_error(EMCY_SYNC_TIMEOUT, True)
 
     def configure_sync(self) -> None:
         cob = param(self.host.node, SYNC_COB_ID, 0) & 0x7FF
@@ -451,6 +511,9 @@ class Pdos:
             t.idle()
         for deadline in self._deadlines.values():
             deadline.stop()  # no RPDO is expected outside OPERATIONAL
+        if self._sync_watch is not None:
+            self._sync_watch.stop()  # nor a SYNC handled
+        self._last_sync_at = None
 
     def _begin(self, t: Tpdo) -> None:
         """A TPDO comes to life: an event-driven one says where things stand (unless all it
@@ -606,6 +669,11 @@ class Pdos:
             return
         who = Source(SourceKind.CANOPEN, f"RPDO{n} 0x{can_id:03X}")
         if r.sync:
+            window_us = param(self.host.node, SYNC_WINDOW, 0)
+            if window_us and self._last_sync_at is not None and \
+                    self.host.clock.monotonic() - self._last_sync_at > window_us / 1e6:
+                self.sync_late_rpdos += 1  # outside the synchronous window: discarded
+                return
             self._sync_pending[n] = (changes, who)  # applied at the next SYNC; the last wins
             return
         self.handed += 1
@@ -658,6 +726,13 @@ class Pdos:
         dropped and counted (``sync_dropped``), never sent late in a burst."""
         if not self.host.operational:
             return
+        self._last_sync_at = self.host.clock.monotonic()
+        self._sync_seen()
+        overflow = param(self.host.node, SYNC_OVERFLOW, 0)
+        wrong = len(data) != (1 if overflow else 0)  # a counter byte iff 0x1019 > 0
+        if wrong != self._sync_length_error:
+            self._sync_length_error = wrong
+            self.host.call_soon(lambda: self.host.sync_error(EMCY_SYNC_LENGTH, wrong))
         now = time.time()  # python-can stamps frames with the wall clock
         period = self._sync_period
         if self._last_sync_stamp and timestamp > self._last_sync_stamp:
@@ -665,6 +740,9 @@ class Pdos:
         self._last_sync_stamp = timestamp
         counter = data[0] if data else None
         stale = bool(timestamp) and now - timestamp > max(period, SYNC_WINDOW_MIN_S)
+        window_us = param(self.host.node, SYNC_WINDOW, 0)
+        if window_us and timestamp and now - timestamp > window_us / 1e6:
+            stale = True  # handled after the synchronous window closed (0x1007)
         for t in list(self.tpdos.values()):
             if t.valid and t.type <= 240:
                 self._sync_tpdo(t, counter, send=not stale)

@@ -431,3 +431,61 @@ async def test_rpdo_length_errors_send_emcy_0x8210_and_0x8220(gw: Gateway,
     code, register = struct.unpack_from("<HB", await master.next(EMCY))
     assert (code, register) == (0x0000, 0x00)
     assert await master.upload(0x1001, 0) == u8(0)
+
+
+# -- 10. the SYNC objects: 0x1006 cycle period, 0x1007 window, 0x1019 counter overflow ----------
+
+async def test_no_sync_for_one_and_a_half_cycle_periods_is_emcy_0x8100(
+        clocked: Gateway, master: Master, clock: ManualClock) -> None:
+    await master.download(0x1006, 0, u32(10_000))  # 10 ms
+    master.nmt(0x01)
+    for _ in range(2):
+        master.sync()
+        await master.barrier()
+        clock.advance(0.014)  # within 15 ms: the deadline moves on
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    clock.advance(0.001)
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x8100, 0x11)
+    assert await master.upload(0x1001, 0) == u8(0x11)
+    master.sync()  # it comes again
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x0000, 0x00)
+
+
+async def test_0x1019_says_whether_a_sync_carries_a_counter(gw: Gateway,
+                                                            master: Master) -> None:
+    for value in (1, 241):
+        assert await sdo_error(master.download(0x1019, 0, u8(value))) == 0x06090030
+    await master.download(0x1019, 0, u8(5))
+    master.nmt(0x01)
+    master.sync(counter=1)  # as 0x1019 says: no EMCY
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    master.sync()  # no counter byte
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x8240, 0x11)
+    master.sync(counter=2)
+    code, register = struct.unpack_from("<HB", await master.next(EMCY))
+    assert (code, register) == (0x0000, 0x00)
+    await master.download(0x1006, 0, u32(10_000))
+    assert await sdo_error(master.download(0x1019, 0, u8(0))) == 0x08000022  # period set
+
+
+async def test_a_synchronous_rpdo_after_the_window_waits_for_no_sync(
+        clocked: Gateway, master: Master, clock: ManualClock) -> None:
+    await master.download(0x1400, 2, u8(1))  # RPDO1: at every SYNC
+    await master.download(0x1007, 0, u32(5_000))  # a 5 ms window after each SYNC
+    master.nmt(0x01)
+    master.sync()
+    await master.barrier()
+    clock.advance(0.006)  # the window has closed
+    master.network.send_message(0x210, bytes((4,)) + bytes(7))
+    master.sync()
+    await master.barrier()
+    assert await master.upload(0x2000, 1) == u8(0)  # discarded
+    master.network.send_message(0x210, bytes((5,)) + bytes(7))  # within the window
+    master.sync()
+    await master.barrier()
+    assert await master.upload(0x2000, 1) == u8(5)
