@@ -150,6 +150,7 @@ function render() {
   $("#source").textContent = status.config;
   if (status.web.token && !token) $("#token").hidden = false;
   if (parts.processes) renderLanes();
+  if (parts.processes || parts.plc) renderAlarms();
   controls();
   if (parts.image) renderImage();
   if (parts.plc) renderPlc();
@@ -204,6 +205,19 @@ function renderLanes() {
     detail.append(el("small", null, p.blocks + " blocks, " + p.snd_sent + " SND sent, " +
                      p.snd_received + " received"));
   }
+}
+// Every alarm pending, in the header, where it shows whatever part of the page is in view.
+function renderAlarms() {
+  const said = [];
+  for (const p of status.processes) {
+    if (p.alarm) {
+      const w = p.alarm.where;
+      said.push("P" + p.number + " " + p.alarm.code + (w ? " at " + w.prog + ":" + w.line +
+                (w.n !== null && w.n !== undefined ? " N" + w.n : "") : ""));
+    }
+  }
+  if (status.plc && status.plc.fault) said.push("PLC FAULT: " + status.plc.fault);
+  $("#alarms").textContent = said.join("; ");
 }
 function cells(box, count, make) {
   if (box.children.length !== count) {

@@ -17,6 +17,7 @@ import sys
 import threading
 import urllib.request
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -336,5 +337,30 @@ def test_another_run_on_the_same_port_starts_the_page_afresh(browser: Any,
                                                       "#filter-kind option")] == [
             "every kind", "write"]
         assert "SYVAR6" in text(browser, "#log tbody tr:first-child")
+    finally:
+        run.stop()
+
+
+def test_an_alarm_shows_in_the_header_and_in_its_lane_with_its_block(
+        browser: Any, web_port: int, tmp_path: Path) -> None:
+    (tmp_path / "MAIN.nc").write_text("N10 (DLY,0.1)\nN20 (SND,3)\nN30 M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "MAIN"\n[nc.storage]\nMP0 = "."\n'
+                                          'default = "MP0"\n')
+    run = RunProcess("--config", str(tmp_path / "ncgate.toml"), "--port", "0", "--web",
+                     f"127.0.0.1:{web_port}", "--set", "canopen.channel=ncgate-browser-9")
+    try:
+        run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        assert text(browser, "#alarms") == ""
+        browser.find_element(By.ID, "btn-start").click()
+        # (SND,3) to a process that runs no program: AL111 at N20.
+        until(browser, "the alarm in the header and the lane",
+              lambda d: text(d, "#alarms") == "P1 AL111 at MAIN.nc:2 N20"
+              and "N20 (SND,3)" in text(d, "#lane-1 .block")
+              and "AL111" in text(d, "#lane-1 .alarm"))
+        browser.find_element(By.CSS_SELECTOR, "#lane-1 .alarm button").click()  # Reset
+        until(browser, "the alarm cleared", lambda d: text(d, "#alarms") == ""
+              and text(d, "#lane-1 .state") == "IDLE")
     finally:
         run.stop()
