@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import sqlite3
 import time
 from collections.abc import Callable, Sequence
@@ -32,7 +33,7 @@ from typing import Any, Protocol
 from ncgate.errors import NcgateError
 from ncgate.plc.image import IOImage, PlcError
 from ncgate.plc.retain import RetainStore
-from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar
+from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar, to_real
 from ncgate.plc.st.types import ArrayOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
@@ -297,6 +298,7 @@ class PlcRuntime:
             self._saved = values
 
     def _apply_retained(self, stored: dict[str, tuple[str, Any]]) -> None:
+        used = set()
         for program, var in self._retained:
             name = f"{program}.{var.key}"
             found = stored.get(name)
@@ -305,10 +307,19 @@ class PlcRuntime:
             type_name, value = found
             if type_name != str(var.type) or not _fits(value, var.type):
                 log.warning("RETAIN %s: the stored %s no longer fits %s; initial value "
-                            "used", name, type_name, var.type)
+                            "used, and the stored value dropped", name, type_name, var.type)
                 continue
-            setattr(self.programs[program], f"v_{var.key}", value)
+            setattr(self.programs[program], f"v_{var.key}", _as_stored(value, var.type))
+            used.add(name)
+        for name in sorted(set(stored) - {f"{p}.{v.key}" for p, v in self._retained}):
+            log.warning("RETAIN %s: no such RETAIN variable now; its stored value is dropped",
+                        name)
         self._saved = self.retained_values()
+        if used != set(stored):
+            # Rewrite the store now: an old row left there would come back the day the
+            # variable has its old type again -- a value from two versions earlier.
+            self._saved = None
+            self._save_retained()
 
     # -- watching ---------------------------------------------------------------------------
 
@@ -361,6 +372,14 @@ def _split(rest: str) -> list[str | int]:
     return parts
 
 
+def _as_stored(value: Any, t: Any) -> Any:
+    """A REAL as the logic holds it: IEEE single (a store written before REALs were single
+    may hold doubles)."""
+    if isinstance(t, ArrayOf):
+        return [_as_stored(v, t.element) for v in value]
+    return to_real(value) if t == "REAL" else value
+
+
 def _fits(value: Any, t: Any) -> bool:
     if isinstance(t, ArrayOf):
         return isinstance(value, list) and len(value) == t.length and all(
@@ -368,7 +387,12 @@ def _fits(value: Any, t: Any) -> bool:
     if t == "BOOL":
         return isinstance(value, bool)
     if t in ("REAL", "LREAL"):
-        return isinstance(value, float | int) and not isinstance(value, bool)
+        if not isinstance(value, float | int) or isinstance(value, bool):
+            return False
+        try:
+            return math.isfinite(to_real(value) if t == "REAL" else float(value))
+        except OverflowError:
+            return False
     if not isinstance(value, int) or isinstance(value, bool):
         return False
     lo, hi = limits("DINT" if t == "TIME" else t)

@@ -176,6 +176,9 @@ def _f32(value: float) -> float:
                             "+-3.4E38)") from None
 
 
+to_real = _f32  # the value a REAL holds (RETAIN rounds what it restores with it)
+
+
 def _f64(value: float) -> float:
     """An LREAL result: already IEEE double; an overflow to infinity is an error."""
     if math.isinf(value) or math.isnan(value):

@@ -61,3 +61,93 @@ def test_a_store_that_fails_leaves_the_plc_scanning(tmp_path: Path,
             plc.scan(t * 10)
     assert plc.status.state is PlcState.RUNNING and plc.read("keep.n") == 4
     assert caplog.text.count("RETAIN values not saved") == 1
+
+
+# ---- store drift and corruption (issue 29 item 6) ---------------------------------------------
+# The expected values are IEC 61131-3's (2.4.2.1 / 6.5.6): a RETAIN variable with no valid
+# retained value starts with its initial value, as at a cold restart.
+
+def version(n_type: str) -> str:
+    return (f"PROGRAM keep\nVAR RETAIN n : {n_type} := 7; END_VAR\nn := n + 1;\n"
+            "END_PROGRAM\n")
+
+
+def test_a_retyped_variable_drops_its_old_row_so_going_back_gets_no_stale_value(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "r.sqlite"
+    store = RetainStore(path)
+    runtime(store, version("INT")).scan(0)  # n = 8, stored as INT
+    store.close()
+    store = RetainStore(path)
+    with caplog.at_level(logging.WARNING, "ncgate.plc"):
+        v2 = runtime(store, version("DINT"))  # retyped: initial value, the INT row dropped
+    assert v2.read("keep.n") == 7 and "RETAIN KEEP.N" in caplog.text
+    assert store.load() == {"KEEP.N": ("DINT", 7)}
+    store.close()
+    back = runtime(RetainStore(path), version("INT"))  # back to INT: not the 8 of version 1
+    assert back.read("keep.n") == 7
+
+
+def test_a_variable_that_is_gone_drops_its_row_with_a_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    store = RetainStore(tmp_path / "r.sqlite")
+    store.save({"KEEP.N": ("INT", 3), "KEEP.OLD": ("INT", 9)})
+    with caplog.at_level(logging.WARNING, "ncgate.plc"):
+        plc = runtime(store, version("INT"))
+    assert plc.read("keep.n") == 3 and "RETAIN KEEP.OLD" in caplog.text
+    assert store.load() == {"KEEP.N": ("INT", 3)}
+
+
+def sound_store(path: Path) -> None:
+    store = RetainStore(path)
+    store.save({f"KEEP.X{k}": ("INT", k) for k in range(400)})  # a few pages
+    store.close()
+
+
+def garble_a_page(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[4096 + 8:4096 + 4000] = b"\xa5" * (4000 - 8)  # inside page 2
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("damage", ["not sqlite", "a garbled page", "another table"])
+def test_a_corrupt_store_is_moved_aside_and_the_plc_starts_cold(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, damage: str) -> None:
+    path = tmp_path / "r.sqlite"
+    if damage == "not sqlite":
+        path.write_bytes(b"this is no database\n" * 300)
+    elif damage == "a garbled page":
+        sound_store(path)
+        garble_a_page(path)
+    else:
+        import sqlite3
+        with sqlite3.connect(path) as db:
+            db.execute("CREATE TABLE retain (id INTEGER, blob BLOB)")
+    before = path.read_bytes()
+    with caplog.at_level(logging.WARNING, "ncgate.plc"):
+        store = RetainStore(path)
+        plc = runtime(store, version("INT"))
+    assert plc.read("keep.n") == 7  # the initial value
+    aside = [p for p in tmp_path.iterdir() if ".corrupt-" in p.name and
+             not p.name.endswith("-wal")]
+    assert len(aside) == 1 and aside[0].read_bytes() == before  # kept, as it was
+    assert "moved aside" in caplog.text
+    plc.scan(0)
+    store.close()
+    assert runtime(RetainStore(path), version("INT")).read("keep.n") == 8  # a sound store
+
+
+def test_a_locked_or_unopenable_store_is_still_an_error_not_moved_aside(tmp_path: Path) -> None:
+    import sqlite3
+    folder = tmp_path / "a-folder"
+    folder.mkdir()
+    with pytest.raises(sqlite3.Error):
+        RetainStore(folder)  # a folder is no file: a place problem for the user
+    assert folder.is_dir() and not list(tmp_path.glob("*.corrupt-*"))
+
+
+def test_a_real_stored_as_a_double_comes_back_as_the_single_it_is(tmp_path: Path) -> None:
+    store = RetainStore(tmp_path / "r.sqlite")
+    store.save({"KEEP.R": ("REAL", 0.1)})
+    plc = runtime(store)
+    assert plc.read("keep.r") == 13421773 / 2**27  # binary32 nearest to 0.1
