@@ -412,7 +412,7 @@ PROGRAM every
 VAR
   b : BOOL := TRUE; si : SINT := -5; i : INT := -300; di : DINT := 70000;
   us : USINT := 5; ui : UINT := 60000; ud : UDINT := 4000000000;
-  by : BYTE := 16#FF; w : WORD := 16#FFFF; dw : DWORD := 16#FFFFFFFF;
+  bt : BYTE := 16#FF; w : WORD := 16#FFFF; dw : DWORD := 16#FFFFFFFF;
   r : REAL := 1.5; lr : LREAL := 2.25; tm : TIME := T#1s500ms;
   zero : REAL; inf : REAL;
   ints : ARRAY[1..3] OF INT;
