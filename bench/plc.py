@@ -5,7 +5,10 @@ writes and a FOR loop over an array -- scanned by the compiled code (``PlcRuntim
 image snapshot, the program, the diff and the one write of its outputs) and by the
 tree-walking evaluator (``ncgate.plc.st.walk``: the program only) on the same inputs.
 Both must end with the same variables; the script prints the median and p90 scan time of
-each and their ratio.  Targets: compiled median <= 0.5 ms, >= 5x the tree walk.
+each and their ratio.  Targets (issue 29): compiled median <= 0.3 ms, >= 10x the tree walk.
+Issue 29's changes (operator chains cut into temporaries, deep blocks moved into helper
+functions, REAL rounded to single) leave this program's generated Python byte for byte as it
+was: the chains here are short, the nesting shallow, and it has no REAL.
 
     .venv/bin/python bench/plc.py [--scans N]
 """
@@ -119,9 +122,9 @@ def main() -> None:
     print(f"program: {statements} statements (100 TON, a FOR over 100 elements), compiled "
           f"in {compile_ms:.0f} ms; {args.scans} scans, the same results both ways")
     print(f"compiled scan:  median {c:.3f} ms, p90 {p90(compiled):.3f} ms "
-          f"(target: median <= 0.5 ms)")
+          f"(target: median <= 0.3 ms)")
     print(f"tree walk scan: median {w:.3f} ms, p90 {p90(walked):.3f} ms")
-    print(f"ratio: compiled is {w / c:.1f}x the tree walk (target: >= 5x)")
+    print(f"ratio: compiled is {w / c:.1f}x the tree walk (target: >= 10x)")
 
 
 if __name__ == "__main__":
