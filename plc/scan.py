@@ -33,7 +33,15 @@ from typing import Any, Protocol
 from ncgate.errors import NcgateError
 from ncgate.plc.image import IOImage, PlcError
 from ncgate.plc.retain import RetainStore
-from ncgate.plc.st.compiler import IterationGuard, Logic, PlcFault, ProgramVar, to_real
+from ncgate.plc.st.compiler import (
+    REAL_OVERFLOW,
+    REAL_OVERFLOW_MESSAGE,
+    IterationGuard,
+    Logic,
+    PlcFault,
+    ProgramVar,
+    to_real,
+)
 from ncgate.plc.st.types import ArrayOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
@@ -263,6 +271,8 @@ class PlcRuntime:
             message = "calls nested too deep"
         elif isinstance(exc, ZeroDivisionError) and "MOD" not in message:
             message = "division by zero"
+        elif isinstance(exc, OverflowError) and message == REAL_OVERFLOW:
+            message = REAL_OVERFLOW_MESSAGE
         fault = PlcFault(message, span, line)
         self.status.state = PlcState.FAULT
         self.status.fault = fault

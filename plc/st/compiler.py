@@ -177,6 +177,9 @@ def _f32(value: float) -> float:
 
 
 to_real = _f32  # the value a REAL holds (RETAIN rounds what it restores with it)
+# struct's words for a REAL result beyond single's range, which the scan rewords.
+REAL_OVERFLOW = "float too large to pack with f format"
+REAL_OVERFLOW_MESSAGE = "a REAL result outside REAL's range (IEEE single, +-3.4E38)"
 
 
 def _f64(value: float) -> float:
@@ -255,7 +258,8 @@ def _guard() -> None:
 HELPERS: dict[str, Any] = {
     "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
     "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard, "_f32": _f32,
-    "_f64": _f64, **{f"_{name}": _math(name, f) for name, f in _MATH.items()},
+    "_f64": _f64, "_F32P": _SINGLE.pack, "_F32U": _SINGLE.unpack,
+    **{f"_{name}": _math(name, f) for name, f in _MATH.items()},
     "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
@@ -319,8 +323,11 @@ def wrap_value(value: int, t: Type) -> int:
 
 def real_code(code: str, t: Type) -> str:
     """The code of an arithmetic result of type ``t``: rounded to single for REAL, checked
-    for overflow for LREAL, as it is for an integer type (wrapped where stored)."""
-    return f"_f32({code})" if t == "REAL" else f"_f64({code})" if t == "LREAL" else code
+    for overflow for LREAL, as it is for an integer type (wrapped where stored).  The REAL
+    rounding is _f32 inlined, two C calls and no Python frame: 88 ns a result where the
+    call took 116 (timeit, CPython 3.11); its OverflowError is worded by the scan."""
+    return (f"_F32U(_F32P({code}))[0]" if t == "REAL" else f"_f64({code})" if t == "LREAL"
+            else code)
 
 
 # ---- signatures ------------------------------------------------------------------------------
