@@ -88,6 +88,8 @@ def _unsupported(text: str, at: int) -> tuple[str, int] | None:
     """What is outside the subset at ``at`` (or in the word before it: ``VAR_IN_OUT x``
     lexes as VAR, then a name), if that is why the syntax failed there, and where."""
     char = text[at:at + 1]
+    if char == "%" and text[:at].rstrip().endswith("."):
+        return "bit access (w.%X3)", at
     if char in _UNSUPPORTED_CHARS:
         return _UNSUPPORTED_CHARS[char], at
     word = re.match(r"[A-Za-z_][A-Za-z0-9_]*", text[at:])

@@ -5,8 +5,10 @@ compare the compiled code with.
 It walks the syntax tree every scan, looking names up in dictionaries, as an interpreter
 without a compile step does.  It covers what those programs use -- PROGRAMs and the standard
 function blocks; elementary variables and arrays; assignments, IF, CASE, FOR, WHILE, REPEAT,
-EXIT, RETURN; every operator; ABS, MIN, MAX, LIMIT, SEL; the image -- and raises
-:class:`NotImplementedError` for the rest (user FUNCTIONs and FUNCTION_BLOCKs, NC access).
+EXIT, CONTINUE, RETURN; every operator on integers and BOOLs; ABS, MIN, MAX, LIMIT, SEL;
+the image -- and raises :class:`NotImplementedError` for the rest (user FUNCTIONs and
+FUNCTION_BLOCKs, NC access).  It computes REALs in double, untyped: it is no reading of
+REAL's single precision, which tests/unit/plc/test_st_iec_values.py checks instead.
 Only logic that :func:`~ncgate.plc.st.compiler.compile_logic` accepted is walked.
 """
 
