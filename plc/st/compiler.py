@@ -79,7 +79,7 @@ UNSUPPORTED_TYPES = ("LINT", "ULINT", "LWORD", "STRING", "WSTRING", "CHAR", "WCH
                      "DATE", "TIME_OF_DAY", "TOD", "DATE_AND_TIME", "DT", "LDATE", "LTOD",
                      "LDT")
 UNSUPPORTED_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE",
-                         "REPLACE", "FIND", "MOVE", "ATAN2", "AND_THEN", "OR_ELSE")
+                         "REPLACE", "FIND", "MOVE")
 # NC.P[k] members: (index in the snapshot tuple, type).
 NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),

@@ -36,6 +36,7 @@ UNSUPPORTED_WORDS = {
     "AT": "located variables (AT %I…)", "METHOD": "METHOD", "PROPERTY": "PROPERTY",
     "INTERFACE": "INTERFACE", "ACTION": "ACTION", "REF_TO": "references (REF_TO)",
     "POINTER": "pointers", "JMP": "JMP and labels",
+    "AND_THEN": "AND_THEN (CODESYS; write AND)", "OR_ELSE": "OR_ELSE (CODESYS; write OR)",
 }
 _UNSUPPORTED_CHARS = {"{": "pragmas ({…})", "%": "located variables (%IX0.0)",
                       "'": "STRING literals", '"': "WSTRING literals"}
