@@ -49,6 +49,8 @@ CONSUMER_ENTRIES = 4  # 0x1016: nodes whose heartbeat the node watches
 
 SYNC_COB_ID, STORE, RESTORE, CONSUMER_HEARTBEAT = 0x1005, 0x1010, 0x1011, 0x1016
 ERROR_BEHAVIOUR = 0x1029
+ERROR_HISTORY, EMCY_INHIBIT = 0x1003, 0x1015
+HISTORY_ENTRIES = 8  # 0x1003: the newest errors kept
 # SYNC consumer: communication cycle period (us), synchronous window length (us), SYNC
 # counter overflow value (CiA 301 7.5.2.6/7/21).
 CYCLE_PERIOD, SYNC_WINDOW, SYNC_OVERFLOW = 0x1006, 0x1007, 0x1019
@@ -286,12 +288,21 @@ def build_dictionary(config: Config) -> ObjectDictionary:
 
     od.add_object(_var("Device type", 0x1000, 0, UNSIGNED32, "ro", 0))
     od.add_object(_var("Error register", 0x1001, 0, UNSIGNED8, "ro", 0))
+    # Pre-defined error field (CiA 301 7.5.2.4): sub 0 the number of errors recorded (writing
+    # 0 clears them), subs 1.. the errors, newest first (read by the node's callback).
+    history = ODArray("Pre-defined error field", ERROR_HISTORY)
+    history.add_member(_var("Number of errors", ERROR_HISTORY, 0, UNSIGNED8, "rw", 0))
+    for sub in range(1, HISTORY_ENTRIES + 1):
+        history.add_member(_var(f"Standard error field {sub}", ERROR_HISTORY, sub, UNSIGNED32,
+                                "ro", 0))
+    od.add_object(history)
     od.add_object(_string("Manufacturer device name", 0x1008, PRODUCT_NAME))
     od.add_object(_string("Manufacturer hardware version", 0x1009, "none (software node)"))
     od.add_object(_string("Manufacturer software version", 0x100A, __version__))
     emcy = _var("COB-ID EMCY", 0x1014, 0, UNSIGNED32, "ro", 0x80 + node_id)
     _relative(emcy, 0x80)
     od.add_object(emcy)
+    od.add_object(_var("Inhibit time EMCY", EMCY_INHIBIT, 0, UNSIGNED16, "rw", 0))  # 100 us
     od.add_object(_var("Producer heartbeat time", 0x1017, 0, UNSIGNED16, "rw",
                        config.canopen.heartbeat_ms))
     od.add_object(_record("Identity object", 0x1018, [

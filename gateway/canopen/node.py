@@ -33,6 +33,7 @@ import logging
 import struct
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -45,11 +46,12 @@ from ncgate.config import Config, MasterLost
 from ncgate.config.state import state_folder
 from ncgate.errors import InputRefused
 from ncgate.gateway.canopen import pdo, store
-from ncgate.gateway.canopen.clock import Clock, LoopClock
+from ncgate.gateway.canopen.clock import Clock, LoopClock, Timer
 from ncgate.gateway.canopen.codes import (
     ABORT_APPLICATION_DEVICE_STATE,
     ABORT_GENERAL_ERROR,
     ABORT_INVALID_VALUE,
+    ABORT_NO_DATA_AVAILABLE,
     ABORT_READ_WRITEONLY,
     ABORT_STORE_APPLICATION,
     REFUSAL,
@@ -59,7 +61,10 @@ from ncgate.gateway.canopen.dictionary import (
     CONSUMER_ENTRIES,
     CONSUMER_HEARTBEAT,
     CYCLE_PERIOD,
+    EMCY_INHIBIT,
     ERROR_BEHAVIOUR,
+    ERROR_HISTORY,
+    HISTORY_ENTRIES,
     LAST_SND,
     NO_STATE_CHANGE,
     PLC_STATUS,
@@ -103,6 +108,7 @@ log = logging.getLogger("ncgate.canopen")
 EMCY_SOFTWARE = 0x6200
 EMCY_HEARTBEAT = 0x8130  # life guard or heartbeat error (CiA 301 table 21)
 REGISTER_GENERIC, REGISTER_COMMUNICATION = 0x01, 0x10
+EMCY_QUEUE = 64  # EMCYs waiting for 0x1015's inhibit time; older ones are dropped
 
 T = TypeVar("T")
 
@@ -132,6 +138,10 @@ class CanopenNode:
         self._rpdo_lost: set[int] = set()  # RPDOs whose deadline ran out (0x14xx:5)
         self._rpdo_length: set[int] = set()  # RPDOs in a length error (EMCY 0x8210/0x8220)
         self._sync_errors: set[int] = set()  # SYNC EMCYs in force (0x8100, 0x8240)
+        self._history: tuple[int, ...] = ()  # 0x1003, newest first (swapped whole)
+        self._emcy_queue: deque[bytes] = deque()  # EMCYs waiting for the inhibit time
+        self._emcy_timer: Timer | None = None
+        self._emcy_last = -1e18
         self._hub: RemoteServer | None = None
         # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
         # the CAN thread.  A tuple of immutable values, swapped in one assignment.
@@ -213,6 +223,8 @@ class CanopenNode:
             self._hub.server_close()
             self._hub = None
         self.pdos.close()
+        if self._emcy_timer is not None:
+            self._emcy_timer.cancel()
         if self.heartbeats is not None:
             self.heartbeats.close()
         self.node.nmt.stop_heartbeat()
@@ -394,7 +406,7 @@ class CanopenNode:
     def _check_stored(self, stored: store.Parameters) -> str | None:
         """Whether stored parameters fit this dictionary (the config may have changed)."""
         for index, subs in stored.items():
-            if not 0x1000 <= index < 0x2000 or index in (STORE, RESTORE):
+            if not 0x1000 <= index < 0x2000 or index in (STORE, RESTORE, ERROR_HISTORY):
                 return f"0x{index:04X} is not a communication parameter"
             for sub, data in subs.items():
                 try:
@@ -436,6 +448,13 @@ class CanopenNode:
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
         if index == 0x1001:
             return self._on_loop(self._error_register)
+        if index == ERROR_HISTORY:
+            history = self._history  # one read of what the loop swaps whole
+            if subindex == 0:
+                return len(history)
+            if subindex > len(history):
+                raise SdoAbortedError(ABORT_NO_DATA_AVAILABLE)  # no such error recorded
+            return history[subindex - 1]
         if index in (STORE, RESTORE) and subindex:
             return 1  # saves and restores on command
         if index < 0x2000 or subindex == 0:
@@ -496,6 +515,10 @@ class CanopenNode:
                 check_entries(entries)
             elif index in (STORE, RESTORE):
                 self._store_command(index, number)
+            elif index == ERROR_HISTORY:  # sub 0 only (the rest is read-only): 0 clears
+                if number != 0:
+                    raise SdoAbortedError(ABORT_INVALID_VALUE)
+                self._on_loop(self._clear_history)
             elif index == ERROR_BEHAVIOUR and subindex == 1 and number not in (
                     TO_PRE_OPERATIONAL, NO_STATE_CHANGE, TO_STOPPED):
                 raise SdoAbortedError(ABORT_INVALID_VALUE)  # reserved or manufacturer's
@@ -533,7 +556,8 @@ class CanopenNode:
         """0x1010 "save" / 0x1011 "load" (CiA 301): any other value is refused, 0x08000020."""
         if index == STORE and value == store.SAVE:
             parameters = {i: dict(subs) for i, subs in list(self.node.data_store.items())
-                          if 0x1000 <= i < 0x2000 and i not in (STORE, RESTORE)}
+                          if 0x1000 <= i < 0x2000
+                          and i not in (STORE, RESTORE, ERROR_HISTORY)}
             try:
                 store.save(self.store_path, parameters)
             except OSError as exc:
@@ -600,8 +624,7 @@ class CanopenNode:
         self._rpdo_lost.discard(n)
         log.warning("CANopen: RPDO%d comes again (%s)", n,
                     _BACK[self.config.canopen.on_master_lost])
-        if not self.stopped:
-            self.node.emcy.reset(self._error_register())
+        self._emcy_reset()
 
     def rpdo_length(self, n: int, emcy: int) -> None:
         """RPDO n's length error began (its EMCY) or ended (an error reset), on the loop."""
@@ -611,12 +634,10 @@ class CanopenNode:
             self._rpdo_length.discard(n)
         else:
             return
-        if self.stopped:
-            return
         if emcy:
-            self.node.emcy.send(emcy, self._error_register(), struct.pack("<B4x", n))
+            self._emcy_error(emcy, struct.pack("<B4x", n), n)
         else:
-            self.node.emcy.reset(self._error_register())
+            self._emcy_reset()
 
     def sync_error(self, emcy: int, on: bool) -> None:
         """A SYNC error began (its EMCY: 0x8100 timeout, 0x8240 length) or ended (an error
@@ -630,12 +651,10 @@ class CanopenNode:
                         else "length disagrees with 0x1019")
         else:
             self._sync_errors.discard(emcy)
-        if self.stopped:
-            return
         if on:
-            self.node.emcy.send(emcy, self._error_register())
+            self._emcy_error(emcy)
         else:
-            self.node.emcy.reset(self._error_register())
+            self._emcy_reset()
 
     def _lost(self, what: str, source: Source, emcy: int, detail: int) -> None:
         """A communication error (loop): alarm AL150, its EMCY, 0x1029's NMT reaction,
@@ -645,8 +664,7 @@ class CanopenNode:
                 MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
         self.backend.apply(FieldbusAlarm(AlarmCode.MASTER_LOST, f"CANopen: {what}; {done}",
                                          source))
-        if not self.stopped:
-            self.node.emcy.send(emcy, self._error_register(), struct.pack("<B4x", detail))
+        self._emcy_error(emcy, struct.pack("<B4x", detail), detail)
         self._communication_error()
         if reaction is MasterLost.HOLD:
             self.backend.apply(Command(CommandKind.FEED_HOLD, None, source))
@@ -675,12 +693,51 @@ class CanopenNode:
         self._master_lost.discard(node_id)
         log.warning("CANopen: the heartbeat of node %d is back (%s)", node_id,
                     _BACK[self.config.canopen.on_master_lost])
-        if not self.stopped:
-            # The heartbeat error is over: EMCY 0x0000 with the register as it is now (CiA
-            # 301 7.2.7.1), so a master sees a process alarm that remains (register bit 0).
-            self.node.emcy.reset(self._error_register())
+        # The heartbeat error is over: EMCY 0x0000 with the register as it is now (CiA 301
+        # 7.2.7.1), so a master sees a process alarm that remains (register bit 0).
+        self._emcy_reset()
 
-    # -- PDO triggers and EMCY (loop) -------------------------------------------------------
+    # -- EMCY, the error history and the inhibit time (loop) ----------------------------------
+
+    def _emcy_error(self, code: int, data: bytes = b"", info: int = 0) -> None:
+        """An error occurs: recorded in 0x1003 (newest first; the upper 16 bits say more:
+        the alarm code, the node or PDO number), then its EMCY with the register as it is."""
+        self._history = ((info & 0xFFFF) << 16 | code, *self._history)[:HISTORY_ENTRIES]
+        self._emit(code, data)
+
+    def _emcy_reset(self) -> None:
+        """An error is over: EMCY 0x0000 with the register as it is now."""
+        self._emit(0, b"")
+
+    def _emit(self, code: int, data: bytes) -> None:
+        if self.stopped:
+            return  # no EMCY in STOPPED (CiA 301); the history keeps the error
+        if len(self._emcy_queue) == EMCY_QUEUE:
+            self._emcy_queue.popleft()
+        self._emcy_queue.append(struct.pack("<HB5s", code, self._error_register(), data))
+        self._emcy_next()
+
+    def _emcy_next(self) -> None:
+        """Send what waits, each EMCY at least 0x1015 (100 us units) after the last."""
+        while self._emcy_queue and self._emcy_timer is None:
+            inhibit_s = pdo.param(self.node, EMCY_INHIBIT, 0) * 100e-6
+            wait = self._emcy_last + inhibit_s - self.clock.monotonic()
+            if wait > 0:
+                self._emcy_timer = self.clock.call_later(wait, self._emcy_due)
+                return
+            payload = self._emcy_queue.popleft()
+            if not self.stopped:
+                self.network.send_message(0x80 + self.node_id, payload)
+                self._emcy_last = self.clock.monotonic()
+
+    def _emcy_due(self) -> None:
+        self._emcy_timer = None
+        self._emcy_next()
+
+    def _clear_history(self) -> None:
+        self._history = ()
+
+    # -- PDO triggers (loop) -------------------------------------------------------------------
 
     def _on_state(self, process: Process | None, old: ProcessState) -> None:
         self.pdos.status_changed()
@@ -690,17 +747,14 @@ class CanopenNode:
             if event.proc == 0:
                 return  # a fieldbus alarm: its own EMCY (above)
             self._alarmed = True
-            register = self._error_register()
-            if not self.stopped:  # no EMCY in STOPPED (CiA 301)
-                self.node.emcy.send(EMCY_SOFTWARE, register,
-                                      struct.pack("<BH2x", event.proc & 0xFF,
-                                                  int(event.code) & 0xFFFF))
+            self._emcy_error(EMCY_SOFTWARE, struct.pack("<BH2x", event.proc & 0xFF,
+                                                        int(event.code) & 0xFFFF),
+                             int(event.code))
         elif isinstance(event, ev.End) and event.how == "reset" and self._alarmed:
             # A reset clears the alarms one process at a time: when none is left, say so.
             if self._error_register() == 0:
                 self._alarmed = False
-                if not self.stopped:
-                    self.node.emcy.reset(0)
+                self._emcy_reset()
         elif isinstance(event, ev.Snd | ev.Signal):  # a signal counts like an SND (spec 5.6)
             self.pdos.snd()
 

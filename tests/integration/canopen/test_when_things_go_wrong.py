@@ -489,3 +489,44 @@ async def test_a_synchronous_rpdo_after_the_window_waits_for_no_sync(
     master.sync()
     await master.barrier()
     assert await master.upload(0x2000, 1) == u8(5)
+
+
+# -- 11. the error history 0x1003 and the EMCY inhibit time 0x1015 ---------------------------------
+
+async def test_0x1003_lists_the_errors_newest_first_and_writing_0_clears_it(
+        clocked: Gateway, master: Master, clock: ManualClock) -> None:
+    assert await master.upload(0x1003, 0) == u8(0)
+    await clocked.start("BAD", process=3)
+    assert (await master.next(EMCY))[:2] == b"\x00\x62"  # 0x6200
+    await master.download(0x1016, 1, u32(MASTER_ID << 16 | 100))
+    await heartbeat(master)
+    clock.advance(0.1)
+    await master.next(EMCY)  # 0x8130
+    alarm = next(e for e in clocked.trace if e["event"] == "alarm" and e["proc"] == 3)
+    al = int(str(alarm["code"])[2:])  # AL code number, as the EMCY carries it
+    assert await master.upload(0x1003, 0) == u8(2)
+    assert await master.upload(0x1003, 1) == u32(MASTER_ID << 16 | 0x8130)  # newest
+    assert await master.upload(0x1003, 2) == u32(al << 16 | 0x6200)
+    assert await sdo_error(master.upload(0x1003, 3)) == 0x08000024  # no such error
+    assert await sdo_error(master.download(0x1003, 0, u8(1))) == 0x06090030
+    assert await sdo_error(master.download(0x1003, 1, u32(0))) == 0x06010002  # read only
+    await master.download(0x1003, 0, u8(0))  # clear
+    assert await master.upload(0x1003, 0) == u8(0)
+    assert await sdo_error(master.upload(0x1003, 1)) == 0x08000024
+
+
+async def test_0x1015_spaces_emcys_by_its_inhibit_time(clocked: Gateway, master: Master,
+                                                       clock: ManualClock) -> None:
+    await master.download(0x1015, 0, u16(1000))  # 100 ms
+    await clocked.start("BAD", process=3)
+    first = await master.next(EMCY)
+    await clocked.start("BAD", process=2)
+    await clocked.wait_state(2, "ALARM", timeout_s=5)
+    await master.barrier()
+    assert master.frames[EMCY].empty()  # within the inhibit time: it waits
+    clock.advance(0.099)
+    await master.barrier()
+    assert master.frames[EMCY].empty()
+    clock.advance(0.001)
+    second = await master.next(EMCY)
+    assert (first[0:2], first[3], second[0:2], second[3]) == (b"\x00\x62", 3, b"\x00\x62", 2)
