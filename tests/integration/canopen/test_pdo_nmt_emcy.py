@@ -14,6 +14,7 @@ import pytest
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.gateway.canopen.dictionary import build_dictionary
 from ncgate.gateway.cli.main import main
 
@@ -80,7 +81,9 @@ async def test_tpdo1_on_every_state_change_and_tpdo2_on_every_snd(gw: Gateway,
     assert sum(1 for e in gw.trace if e["event"] == "snd") == 2  # one TPDO2 per SND
 
 
-async def test_tpdo2_inhibit_time_spaces_the_snds(gw: Gateway, master: Master) -> None:
+async def test_tpdo2_inhibit_time_spaces_the_snds(clocked: Gateway, master: Master,
+                                                  clock: ManualClock) -> None:
+    gw = clocked
     await master.while_disabled(0x1801, 3, struct.pack("<H", 500))  # 50 ms
     master.nmt(0x01)
     await master.next(0x190)  # the node is OPERATIONAL: it sent its states
@@ -90,12 +93,15 @@ async def test_tpdo2_inhibit_time_spaces_the_snds(gw: Gateway, master: Master) -
     gw.write("SA10", 1)
     await gw.wait_state(1, "WAIT_PROC", timeout_s=5)
     gw.send(4, 1)
-    stamps = []
-    for _ in range(2):
-        await master.next(0x290)
-        stamps.append(asyncio.get_running_loop().time())
-    # not sent closer than the inhibit time (the second SND came right after the first)
-    assert stamps[1] - stamps[0] >= 0.045
+    await master.next(0x290)
+    await master.barrier()
+    # the second SND came right after the first: its frame waits for the inhibit time
+    assert master.frames[0x290].empty()
+    clock.advance(0.049)
+    await master.barrier()
+    assert master.frames[0x290].empty()
+    clock.advance(0.001)
+    await master.next(0x290)
 
 
 async def test_emcy_on_alarm_and_on_reset(gw: Gateway, master: Master) -> None:
