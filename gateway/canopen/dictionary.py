@@ -50,6 +50,7 @@ CONSUMER_ENTRIES = 4  # 0x1016: nodes whose heartbeat the node watches
 SYNC_COB_ID, STORE, RESTORE, CONSUMER_HEARTBEAT = 0x1005, 0x1010, 0x1011, 0x1016
 ERROR_BEHAVIOUR = 0x1029
 ERROR_HISTORY, EMCY_INHIBIT = 0x1003, 0x1015
+SDO_SERVER, SECOND_SDO_SERVER = 0x1200, 0x1201
 HISTORY_ENTRIES = 8  # 0x1003: the newest errors kept
 # SYNC consumer: communication cycle period (us), synchronous window length (us), SYNC
 # counter overflow value (CiA 301 7.5.2.6/7/21).
@@ -329,6 +330,22 @@ def build_dictionary(config: Config) -> ObjectDictionary:
     od.add_object(_array("Error behaviour", ERROR_BEHAVIOUR, 1, "", UNSIGNED8, "rw",
                          default=TO_PRE_OPERATIONAL, pdo=False,
                          names=("Communication error",)))
+    # SDO server parameters (CiA 301 7.5.2.33): the default server (its COB-IDs follow the
+    # node id), and a second one, off until a master gives it COB-IDs of its own.
+    server = ODRecord("SDO server parameter", SDO_SERVER)
+    server.add_member(_var("Highest sub-index supported", SDO_SERVER, 0, UNSIGNED8, "const",
+                           2))
+    for sub, (name, base) in enumerate((("COB-ID client to server", 0x600),
+                                        ("COB-ID server to client", 0x580)), start=1):
+        member = _var(name, SDO_SERVER, sub, UNSIGNED32, "const", base + node_id)
+        _relative(member, base)
+        server.add_member(member)
+    od.add_object(server)
+    od.add_object(_record("SDO server parameter 2", SECOND_SDO_SERVER, [
+        ("COB-ID client to server", UNSIGNED32, "rw", 0x80000000),
+        ("COB-ID server to client", UNSIGNED32, "rw", 0x80000000),
+        ("Node-ID of the SDO client", UNSIGNED8, "rw", 0),
+    ]))
     _pdos(od, config)
     # Manufacturer area.
     od.add_object(_array("SA bytes", SA_BYTES, plc.sa_bits // 8, "SA byte", UNSIGNED8, "rw"))

@@ -70,6 +70,7 @@ from ncgate.gateway.canopen.dictionary import (
     PLC_STATUS,
     RESTORE,
     RPDO_COMMUNICATION,
+    SECOND_SDO_SERVER,
     STATUS_BASE,
     STORE,
     SYNC_COB_ID,
@@ -82,7 +83,7 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
-from ncgate.gateway.canopen.sdo import Deferred, Device
+from ncgate.gateway.canopen.sdo import Deferred, Device, SdoService
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.ratelimit import RateLimitedLog
@@ -151,6 +152,8 @@ class CanopenNode:
         self._pending: set[asyncio.Handle] = set()  # callbacks handed to the loop, not yet run
         self._sdo_source = Source(SourceKind.CANOPEN, f"SDO 0x{0x600 + self.node_id:03X}")
         self._refusals = RateLimitedLog(log)
+        # The second SDO server (0x1201), while its COB-IDs are valid: (rx, tx) and it.
+        self._second_sdo: tuple[int, int, SdoService] | None = None
 
     @property
     def clock(self) -> Clock:
@@ -181,6 +184,7 @@ class CanopenNode:
         self.network.subscribe(0, self._on_nmt)  # after canopen's own NMT handler
         self.pdos.configure_all()
         self._configure_heartbeats()
+        self._configure_second_sdo()
         engine = self.backend.engine
         engine.state_listeners.append(self._on_state)
         engine.trace.subscribe(self._on_event)
@@ -229,6 +233,8 @@ class CanopenNode:
             self.heartbeats.close()
         self.node.nmt.stop_heartbeat()
         self.node.sdo.close()  # type: ignore[attr-defined]
+        if self._second_sdo is not None:
+            self._second_sdo[2].close()
         engine = self.backend.engine
         if self._on_state in engine.state_listeners:
             engine.state_listeners.remove(self._on_state)
@@ -367,6 +373,8 @@ class CanopenNode:
             # The SDO server restarts with the node: a transfer open before the reset is
             # gone, without an abort (the master that reset the node knows).
             self.node.sdo.reset()  # type: ignore[attr-defined]
+            if self._second_sdo is not None:
+                self._second_sdo[2].reset()
             self._reset_communication()
             if command == 0x81:
                 # Reset node also restores the node's own application values: the SND sender
@@ -390,6 +398,26 @@ class CanopenNode:
         self._restore_stored()
         self.pdos.configure_all()
         self._configure_heartbeats()
+        self._configure_second_sdo()
+
+    def _configure_second_sdo(self) -> None:
+        """Serve SDO on 0x1201's COB-IDs while both are valid (receive thread, or at start):
+        a tool (an HMI, a commissioning laptop) then reads and writes the node without
+        sharing 0x600/0x580 + node id with the PLC master.  Its own transfer state."""
+        rx, tx = (pdo.param(self.node, SECOND_SDO_SERVER, s) for s in (1, 2))
+        wanted = None if (rx | tx) & pdo.NOT_VALID else (rx & 0x7FF, tx & 0x7FF)
+        current = self._second_sdo
+        if current is not None and current[:2] == wanted:
+            return
+        if current is not None:
+            self.network.unsubscribe(current[0], current[2].on_request)
+            current[2].close()
+            self._second_sdo = None
+        if wanted is not None:
+            server = SdoService(wanted[0], wanted[1], self.node)
+            server.network = self.network
+            self.network.subscribe(wanted[0], server.on_request)
+            self._second_sdo = (*wanted, server)
 
     def _restore_stored(self) -> None:
         stored = store.load(self.store_path)
@@ -506,6 +534,9 @@ class CanopenNode:
                 pdo.check_write(self.node, index, subindex, number)
             elif index == SYNC_COB_ID:
                 pdo.check_sync_cob_id(number)
+            elif index == SECOND_SDO_SERVER and subindex in (1, 2):
+                _check_server_cob_id(pdo.param(self.node, index, subindex), number,
+                                     self.node_id)
             elif index == SYNC_OVERFLOW:
                 pdo.check_sync_overflow(number, pdo.param(self.node, CYCLE_PERIOD, 0))
             elif index == CONSUMER_HEARTBEAT:
@@ -549,6 +580,8 @@ class CanopenNode:
             self.pdos.configure_sync()
         elif index == CYCLE_PERIOD:
             self.pdos.configure_sync_period()
+        elif index == SECOND_SDO_SERVER:
+            self._configure_second_sdo()
         elif index == CONSUMER_HEARTBEAT:
             self._configure_heartbeats()
 
@@ -767,6 +800,21 @@ _BACK = {
     MasterLost.NONE: "nothing was done when it was lost (canopen.on_master_lost = \"none\"): "
                      "the processes ran on",
 }
+
+
+def _check_server_cob_id(current: int, cob: int, node_id: int) -> None:
+    """0x1201's COB-IDs (CiA 301 7.5.2.33): 11 bits (bits 11..30 clear), changed only while
+    invalid, not an identifier CiA 301 table 3 reserves for NMT, SYNC/EMCY/TIME, heartbeat
+    or LSS, and not the default server's own: 0x06090030 otherwise."""
+    can_id = cob & 0x7FF
+    if cob & 0x7FFFF800:
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
+    if not (current | cob) & pdo.NOT_VALID and (current ^ cob) & 0x7FF:
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
+    if not cob & pdo.NOT_VALID and (
+            can_id in (0x600 + node_id, 0x580 + node_id)
+            or (pdo.restricted(can_id) and not 0x581 <= can_id <= 0x67F)):
+        raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
 def _last_snd(engine: Engine) -> tuple[int, int, int, int]:

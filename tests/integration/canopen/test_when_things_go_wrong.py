@@ -530,3 +530,68 @@ async def test_0x1015_spaces_emcys_by_its_inhibit_time(clocked: Gateway, master:
     clock.advance(0.001)
     second = await master.next(EMCY)
     assert (first[0:2], first[3], second[0:2], second[3]) == (b"\x00\x62", 3, b"\x00\x62", 2)
+
+
+# -- 12. a second SDO server for a tool beside the PLC master ----------------------------------
+
+HMI_ID = 0x41  # the tool reaches the second server as "node 65": 0x641 / 0x5C1
+
+
+async def second_server(master: Master) -> None:
+    await master.download(0x1201, 1, u32(0x600 + HMI_ID))
+    await master.download(0x1201, 2, u32(0x580 + HMI_ID))
+    await master.download(0x1201, 3, u8(2))  # the tool's node id, for the record
+
+
+@pytest.fixture
+def hmi(ncgate_config: Config) -> Iterator[Master]:
+    """A second master (an HMI, a commissioning tool) on the same bus, speaking to the
+    second SDO server through an ordinary canopen RemoteNode."""
+    from .conftest import connect_master
+
+    tool = connect_master(ncgate_config)
+    node = canopen.RemoteNode(HMI_ID, tool.node.object_dictionary)
+    tool.network.add_node(node)
+    node.sdo.RESPONSE_TIMEOUT = 2.0
+    yield Master(tool.network, node, HMI_ID)
+    tool.network.disconnect()
+
+
+async def test_a_tool_uses_the_second_sdo_server_while_the_master_has_a_transfer_open(
+        gw: Gateway, master: Master, hmi: Master) -> None:
+    assert await master.upload(0x1201, 1) == u32(0x80000000)  # off by default
+    assert await master.upload(0x1200, 1) == u32(0x610)
+    await second_server(master)
+    answers = master.listen(SDO_ANSWER) if SDO_ANSWER not in master.frames else \
+        master.frames[SDO_ANSWER]
+    # the master opens a segmented download on the default server ...
+    assert (await master.raw_sdo(struct.pack("<BHBL", 0x21, 0x2200, 1, 2)))[0] == 0x60
+    # ... meanwhile the tool reads a string (segmented) and writes, on its own server
+    assert await hmi.upload(0x1008, 0) == b"ncgate CNC co-simulator gateway"
+    await hmi.download(0x2000, 2, u8(0b100))
+    assert gw.read("SA10") == 1
+    assert answers.empty()  # none of the tool's answers went to the master's COB-ID
+    # the master's transfer was not disturbed: its last segment completes it
+    answer = await master.raw_sdo(bytes((0x0B,)) + struct.pack("<h", -5) + bytes(5))
+    assert answer[0] == 0x20
+    assert gw.image.read("SYVAR", 0, "IN") == -5
+    # off again: the tool's server stops (reset communication restores the default)
+    master.nmt(0x82)
+    assert await master.upload(0x1201, 1) == u32(0x80000000)
+
+
+@pytest.mark.parametrize(("values", "why"), [
+    ([0x610], "the default server's request id"),
+    ([0x590 | 0x80000000, 0x590], "the default server's answer id, in sub 1"),
+    ([0x701], "a heartbeat id"),
+    ([0xE41], "bit 11"),
+    ([0x641, 0x642], "a change while valid"),
+])
+async def test_the_second_servers_cob_ids_follow_cia_301(gw: Gateway, master: Master,
+                                                         values: list[int], why: str) -> None:
+    *first, refused = values
+    for value in first:
+        await master.download(0x1201, 1, u32(value))
+    stored = await master.upload(0x1201, 1)
+    assert await sdo_error(master.download(0x1201, 1, u32(refused))) == 0x06090030, why
+    assert await master.upload(0x1201, 1) == stored
