@@ -22,7 +22,9 @@ The rooms:
 Here: NMT (boot-up, PRE-OPERATIONAL or OPERATIONAL with ``nmt_autostart``, resets that
 restore the communication parameters), the manufacturer objects wired to the image and the
 processes, the command word answered before it runs, EMCY on every alarm and an error reset
-when they are gone; 0x1001 follows.
+when they are gone (0x1001 follows; each error listed in 0x1003, each EMCY spaced by
+0x1015), the reactions to a communication error (0x1029 for the NMT state,
+``canopen.on_master_lost`` for the processes), and the second SDO server (0x1201).
 """
 
 from __future__ import annotations

@@ -11,11 +11,18 @@ Two halves, on two threads:
   handed to the loop; TPDOs are built and sent on the loop, where the image and the processes
   live.  Timers (inhibit, event timer) run on the node's clock, so tests drive them.
 
-Transmission types.  TPDO: 0 (at the next SYNC after a change), 1..240 (every n-th SYNC;
+Transmission types.  TPDO: 0 (at the next SYNC after a change of its own frame), 1..240
+(every n-th SYNC;
 the SYNC start value of sub 6 waits for that SYNC counter), 254/255 (on change, spaced by the
 inhibit time, and when the event timer runs out).  RPDO: 0..240 (applied at the next SYNC),
 254/255 (at once).  252/253 (RTR only) and the reserved 241..251 are refused with 0x06090030:
 the node answers no remote frames (canopen's network drops them).
+
+Watching the master (CiA 301 7.5.2.35, 7.5.2.6/7/21): an RPDO's event timer is a deadline
+(EMCY 0x8250 and the lost-master reactions), a frame of the wrong length is EMCY
+0x8210/0x8220; 0x1006 is the SYNC's deadline (EMCY 0x8100), 0x1007 its window, 0x1019 says
+whether a SYNC carries a counter (EMCY 0x8240).  Leaving OPERATIONAL drops synchronous RPDO
+data not yet applied.
 
 "On change" means: the image bytes or SYVARs a TPDO maps were written, a process it maps
 changed state, or an SND happened.  A TPDO that maps the last-SND record sends one frame per
@@ -333,20 +340,55 @@ SYNC_TIMEOUT_PERIODS = 1.5
 
 
 class Deadline:
-    """An RPDO's deadline monitoring (0x14xx:5, CiA 301 7.5.2.35): armed by the first
-    frame after it is configured, moved on by each frame (not re-armed), and once run out,
-    reported once; the next frame says the RPDO is back."""
+    """Something expected again within ``timeout_s`` (an RPDO with an event timer, the SYNC
+    with a cycle period; CiA 301 7.5.2.35, 7.5.2.6): armed by the first arrival, moved on by
+    each (not re-armed); once run out, ``lost()`` is called once (on the loop), and the next
+    arrival calls ``back()`` (on the loop, through ``call_soon``).  Watched only while
+    ``watching()`` holds (OPERATIONAL)."""
 
-    def __init__(self, ms: int) -> None:
-        self.ms = ms
+    def __init__(self, timeout_s: float, clock: Clock,
+                 call_soon: Callable[[Callable[[], None]], None], watching: Callable[[], bool],
+                 lost: Callable[[], None], back: Callable[[], None]) -> None:
+        self.timeout_s, self.clock, self._call_soon = timeout_s, clock, call_soon
+        self._watching, self._lost, self._back = watching, lost, back
         self.last = 0.0
         self.lost = False
         self.timer: Timer | None = None
+        self.closed = False
+
+    def seen(self) -> None:
+        """An arrival (receive thread)."""
+        self.last = self.clock.monotonic()
+        if self.lost:
+            self.lost = False
+            self._call_soon(self._back)
+        if self.timer is None:
+            self.timer = self.clock.call_later(self.timeout_s, self._due)
+
+    def _due(self) -> None:
+        """The deadline as armed: if something came since, it moves on."""
+        self.timer = None
+        if self.closed or not self._watching():
+            return
+        left = self.last + self.timeout_s - self.clock.monotonic()
+        if left > 1e-9:
+            self.timer = self.clock.call_later(left, self._due)
+            return
+        self.lost = True
+        self._lost()
 
     def stop(self) -> None:
+        """Not watched until the next arrival (leaving OPERATIONAL)."""
         if self.timer is not None:
             self.timer.cancel()
             self.timer = None
+
+    def close(self) -> None:
+        """No longer wanted (reconfigured): a loss it reported is over."""
+        self.stop()
+        self.closed = True
+        if self.lost:
+            self._call_soon(self._back)
 
 
 class Rpdo:
@@ -368,7 +410,6 @@ class Pdos:
         self._sync_pending: dict[int, tuple[list[tuple[str, int, str, int]], Source]] = {}
         self._deadlines: dict[int, Deadline] = {}  # RPDOs with an event timer
         self._sync_watch: Deadline | None = None  # 0x1006: the SYNC's own deadline
-        self._sync_timeout_s = 0.0
         self._sync_length_error = False
         self._last_sync_at: float | None = None  # the node's clock at the last SYNC
         self.sync_late_rpdos = 0  # synchronous RPDOs dropped: outside the window (0x1007)
@@ -417,53 +458,33 @@ class Pdos:
         self._subscribed[n] = cob
 
     def _configure_deadline(self, n: int, ms: int) -> None:
-        """Deadline monitoring as 0x14xx:5 says now; one that had run out and is no
-        longer wanted as it was is over (its EMCY is reset)."""
-        old = self._deadlines.get(n)
-        if old is not None and old.ms == ms:
+        """Deadline monitoring as 0x14xx:5 says now (0: none)."""
+        old = self._deadlines.pop(n, None)
+        if old is not None and round(old.timeout_s * 1000) == ms:
+            self._deadlines[n] = old
             return
         if old is not None:
-            old.stop()
-            del self._deadlines[n]
-            if old.lost:
-                self.host.call_soon(lambda: self.host.rpdo_back(n))
+            old.close()
         if ms:
-            self._deadlines[n] = Deadline(ms)
+            host = self.host
+            self._deadlines[n] = Deadline(ms / 1000, host.clock, host.call_soon,
+                                          lambda: host.operational,
+                                          lambda: host.rpdo_timeout(n, ms),
+                                          lambda: host.rpdo_back(n))
 
     def configure_sync_period(self) -> None:
-        """0x1006 as it is now (receive thread): SYNC timeout monitoring from the next
-        SYNC on, or none; a timeout reported before is over."""
+        """0x1006 as it is now: SYNC timeout monitoring (1.5 periods) from the next SYNC on,
+        or none."""
         period_us = param(self.host.node, CYCLE_PERIOD, 0)
-        old = self._sync_watch
-        if old is not None:
-            old.stop()
-            if old.lost:
-                self.host.call_soon(lambda: self.host.sync_error(EMCY_SYNC_TIMEOUT, False))
-        self._sync_timeout_s = period_us * SYNC_TIMEOUT_PERIODS / 1e6
-        self._sync_watch = Deadline(0) if period_us else None
-
-    def _sync_seen(self) -> None:
-        watch = self._sync_watch
-        if watch is None:
-            return
-        watch.last = self.host.clock.monotonic()
-        if watch.lost:
-            watch.lost = False
-            self.host.call_soon(lambda: self.host.sync_error(EMCY_SYNC_TIMEOUT, False))
-        if watch.timer is None:
-            watch.timer = self.host.clock.call_later(self._sync_timeout_s,
-                                                     lambda: self._sync_due(watch))
-
-    def _sync_due(self, watch: Deadline) -> None:
-        watch.timer = None
-        if self._sync_watch is not watch or not self.host.operational:
-            return
-        left = watch.last + self._sync_timeout_s - self.host.clock.monotonic()
-        if left > 1e-9:
-            watch.timer = self.host.clock.call_later(left, lambda: self._sync_due(watch))
-            return
-        watch.lost = True
-        self.host.sync_error(EMCY_SYNC_TIMEOUT, True)
+        if self._sync_watch is not None:
+            self._sync_watch.close()
+            self._sync_watch = None
+        if period_us:
+            host = self.host
+            self._sync_watch = Deadline(period_us * SYNC_TIMEOUT_PERIODS / 1e6, host.clock,
+                                        host.call_soon, lambda: host.operational,
+                                        lambda: host.sync_error(EMCY_SYNC_TIMEOUT, True),
+                                        lambda: host.sync_error(EMCY_SYNC_TIMEOUT, False))
 
     def configure_sync(self) -> None:
         cob = param(self.host.node, SYNC_COB_ID, 0) & 0x7FF
@@ -651,7 +672,9 @@ class Pdos:
         if not self.host.operational:
             return  # PDOs only in OPERATIONAL
         r = self.rpdos[n]
-        self._received(n)
+        deadline = self._deadlines.get(n)
+        if deadline is not None:
+            deadline.seen()
         size = r.layout.frame.size
         # CiA 301 7.2.2.x: a shorter frame is not processed (EMCY 0x8210); of a longer one
         # the first bytes are used (EMCY 0x8220).  One EMCY when the error begins, an error
@@ -684,32 +707,6 @@ class Pdos:
             self._length_error[n] = emcy
             self.host.call_soon(lambda: self.host.rpdo_length(n, emcy))
 
-    def _received(self, n: int) -> None:
-        """An RPDO frame came (receive thread): its deadline moves on."""
-        deadline = self._deadlines.get(n)
-        if deadline is None:
-            return
-        deadline.last = self.host.clock.monotonic()
-        if deadline.lost:
-            deadline.lost = False
-            self.host.call_soon(lambda: self.host.rpdo_back(n))
-        if deadline.timer is None:
-            deadline.timer = self.host.clock.call_later(
-                deadline.ms / 1000, lambda: self._deadline_due(n, deadline))
-
-    def _deadline_due(self, n: int, deadline: Deadline) -> None:
-        """The deadline as armed (loop): if a frame came since, it moves on."""
-        deadline.timer = None
-        if self._deadlines.get(n) is not deadline or not self.host.operational:
-            return
-        left = deadline.last + deadline.ms / 1000 - self.host.clock.monotonic()
-        if left > 1e-9:
-            deadline.timer = self.host.clock.call_later(
-                left, lambda: self._deadline_due(n, deadline))
-            return
-        deadline.lost = True
-        self.host.rpdo_timeout(n, deadline.ms)
-
     def _apply(self, batches: list[tuple[list[tuple[str, int, str, int]], Source]]) -> None:
         for changes, who in batches:
             try:
@@ -727,7 +724,8 @@ class Pdos:
         if not self.host.operational:
             return
         self._last_sync_at = self.host.clock.monotonic()
-        self._sync_seen()
+        if self._sync_watch is not None:
+            self._sync_watch.seen()
         overflow = param(self.host.node, SYNC_OVERFLOW, 0)
         wrong = len(data) != (1 if overflow else 0)  # a counter byte iff 0x1019 > 0
         if wrong != self._sync_length_error:
