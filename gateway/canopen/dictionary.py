@@ -4,9 +4,10 @@ CiA 301 communication area: 0x1000 device type, 0x1001 error register, 0x1003 er
 history, 0x1005..0x1007 and 0x1019 SYNC, 0x1008..0x100A names, 0x1010/0x1011 store and
 restore, 0x1014/0x1015 EMCY, 0x1016/0x1017 heartbeats, 0x1018 identity, 0x1029 error
 behaviour, 0x1200/0x1201 SDO servers, and the PDO communication (0x1400.., 0x1800..) and
-mapping (0x1600.., 0x1A00..) entries of RPDO1..4 and TPDO1..4.  Manufacturer area: the image (0x2000 SA
-bytes, 0x2100+j K bytes, 0x2200+j SYVARs), the command record (0x2400), the process status
-records (0x2500+k-1), the last SND (0x2600) and the PLC status (0x2700).  Sizes follow the image.
+mapping (0x1600.., 0x1A00..) entries of RPDO1..4 and TPDO1..4.  Manufacturer area: the
+image (0x2000 SA bytes, 0x2100+j K bytes, 0x2200+j SYVARs), the command record (0x2400), the
+process status records (0x2500+k-1), the last SND (0x2600) and the PLC status (0x2700).
+Sizes follow the image.
 
 The manufacturer objects hold no data of their own: the node reads and writes the live image
 and process status through callbacks (``ncgate.gateway.canopen.node``).
