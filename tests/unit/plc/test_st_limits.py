@@ -72,6 +72,19 @@ def test_200_nested_loops_with_exit_and_return_in_a_function() -> None:
     assert (plc["main.full"], plc["main.cut"], plc["main.n"]) == (13, 2, 200)
 
 
+def test_return_continue_and_exit_from_deep_in_a_program_act_on_the_right_level() -> None:
+    # RETURN 100 IFs deep ends the scan (after stays 0); 60 IFs inside a FOR, CONTINUE
+    # skips k = 2 (the FOR still steps) and EXIT leaves at k = 4: c = 1 + 3, n = 2.
+    deep_return = ("IF n >= 0 THEN n := n + 1;\n" * 100 + "CASE n OF 100: RETURN; END_CASE"
+                   + " END_IF\n" * 100 + "after := 1;\n")
+    deep_loop = ("FOR k := 1 TO 5 DO\n" + "IF k > 0 THEN\n" * 60
+                 + "IF k = 2 THEN CONTINUE; END_IF IF k = 4 THEN EXIT; END_IF c := c + k;"
+                 + " END_IF\n" * 60 + "m := m + 1; END_FOR\n")
+    plc = Plc(program(deep_loop + deep_return, "n, after, c, m : DINT; k : INT;")).scan()
+    assert (plc["main.n"], plc["main.after"]) == (100, 0)
+    assert (plc["main.c"], plc["main.m"], plc["main.k"]) == (4, 2, 4)
+
+
 def test_1000_elsifs_and_1000_case_arms_pick_their_branch() -> None:
     elsifs = "".join(f"ELSIF x = {k} THEN a := {k * 2};\n" for k in range(1, 1000))
     arms = "".join(f"{k}: c := {k * 3};\n" for k in range(1000))
@@ -216,6 +229,7 @@ def test_generated_programs_load_or_get_coded_diagnostics_with_positions(seed: i
             for d in exc.diagnostics:
                 assert isinstance(d.code, StCode), source
                 assert 1 <= d.span.line <= lines and d.span.column >= 1, (d.render(), source)
+                assert d.code.code in d.render()
             continue
         loaded += 1
         plc.scan(2)  # a runtime error is a FAULT, and nothing escapes the scan
