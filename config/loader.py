@@ -36,7 +36,7 @@ STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_TLS_PORT = 802  # mbaps, Modbus/TCP Security
 DEFAULT_WEB_PORT = 8080  # the console's port when web.port is not set
-MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox")
+MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox", "overrides")
 
 
 BUILT_IN = "<built-in default>"  # the name of the built-in config in messages
@@ -423,6 +423,9 @@ class ModbusMapConfig:
     sa_bytes: int = setting(1500, "holding base of the SA bytes", lo=0, hi=65535)
     command: int = setting(2000, "holding address of the command word; the SND mailbox "
                            "follows at +1, +2", lo=0, hi=65535)
+    overrides: int = setting(2010, "holding base of the overrides in percent: feed (0..200) "
+                             "and rapid (0..100) of process k at +2(k-1), +2(k-1)+1",
+                             lo=0, hi=65535)
     status: int = setting(100, "input base of the per-process status blocks (20 registers "
                           "each)", lo=0, hi=65535)
     snd_log: int | None = setting(None, "input base of the SND log (the last 16 SNDs, 98 "

@@ -31,6 +31,7 @@ from ncgate.inputs import (
     CommandKind,
     FieldbusAlarm,
     Input,
+    Override,
     Snd,
     SourceKind,
     Start,
@@ -106,6 +107,8 @@ class Door:
             self._start(item)  # type: ignore[arg-type]
         elif kind is FieldbusAlarm:
             self._alarm(item)  # type: ignore[arg-type]
+        elif kind is Override:
+            self._override(item)  # type: ignore[arg-type]
         else:
             raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
 
@@ -176,6 +179,23 @@ class Door:
             plc = self._plc()
             if plc is not None and process is None:  # a reset of the cell also restarts a
                 plc.restart()  # faulted PLC
+
+    def _override(self, item: Override) -> None:
+        for name, value, top in (("feed", item.feed, 200), ("rapid", item.rapid, 100)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                      or not 0 <= value <= top):
+                raise InputRefused(Reason.BAD_VALUE, f"{name} override {value!r}: a whole "
+                                   f"percent 0..{top}")
+        if item.feed is None and item.rapid is None:
+            raise InputRefused(Reason.BAD_VALUE, "an override names feed, rapid or both")
+        engine = self.runtime.engine
+        if item.process is not None:
+            self._process(item.process)
+            if engine.processes[item.process].external:
+                raise InputRefused(Reason.EXTERNAL_PROCESS, f"process {item.process} is "
+                                   "external: it has no motion to override")
+        self._enter(item)
+        engine.override(item.feed, item.rapid, item.process)
 
     def _restart_plc(self, item: Command) -> None:
         """The PLC logic starts again after a FAULT (a running one is left alone); the NC

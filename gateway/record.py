@@ -55,6 +55,7 @@ from ncgate.inputs import (
     CommandKind,
     FieldbusAlarm,
     Input,
+    Override,
     Snd,
     Source,
     Start,
@@ -75,7 +76,7 @@ COMPARED: dict[str, tuple[str, ...]] = {
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
-                    "remove"})
+                    "remove", "override"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
@@ -119,6 +120,8 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
         out.update({"input": "snd", "from": item.sender, "to": item.target})
     elif isinstance(item, Start):
         out.update(input="start", prog=item.program, proc=item.process)
+    elif isinstance(item, Override):
+        out.update(input="override", feed=item.feed, rapid=item.rapid, process=item.process)
     else:
         out.update(input="alarm", code=int(item.code), message=item.message)
     return out
@@ -198,8 +201,13 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         if code not in ALARMS:
             raise ValueError(f'"code": {code} is no alarm of the fieldbus side')
         return t, FieldbusAlarm(code, _field(item, "message", str, "a text"), source)
+    if kind == "override":
+        return t, Override(_field(item, "feed", int, "a percent or null", optional=True),
+                           _field(item, "rapid", int, "a percent or null", optional=True),
+                           _field(item, "process", int, "a process number, or null for the "
+                                  "cell", optional=True), source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
-                     "alarm)")
+                     "alarm, override)")
 
 
 def _check_event(item: dict[str, Any]) -> None:

@@ -62,6 +62,7 @@ class Move:
     end: tuple[float, ...]
     length_mm: float
     duration_s: float
+    rapid: bool = False  # G0: the rapid override applies, not the feed override
 
 
 def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
@@ -101,7 +102,7 @@ def plan_move(modal: Modal, axes: dict[str, float], arc: dict[str, float],
     check_duration(duration, settings, f"the move ({fmt_number(length)} mm at "
                    f"{fmt_number(rate)} mm/min)")
     modal.position = end
-    return Move(start, tuple(end), length, duration)
+    return Move(start, tuple(end), length, duration, modal.motion == 0)
 
 
 def check_duration(seconds: float, settings: RuntimeSettings, what: str) -> None:

@@ -247,7 +247,19 @@ class FieldbusAlarm:
     source: Source = API
 
 
-Input = Write | Writes | Command | Snd | Start | FieldbusAlarm
+@dataclass(frozen=True, slots=True)
+class Override:
+    """The feed override (0..200 %) and/or the rapid override (0..100 %) of one process or,
+    ``process=None``, of the cell: in force from the next interpolation step."""
+
+    feed: int | None = None
+    rapid: int | None = None
+    process: int | None = None
+    source: Source = API
+
+
+Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override
 
 __all__ = ["API", "Command", "CommandKind", "FieldbusAlarm", "Input", "InputRefused",
-           "Reason", "Snd", "Source", "SourceKind", "Start", "Var", "Write", "Writes"]
+           "Override", "Reason", "Snd", "Source", "SourceKind", "Start", "Var", "Write",
+           "Writes"]

@@ -23,7 +23,7 @@ from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
 from ncgate.gateway.wiring import Backend
-from ncgate.inputs import Command, Snd, Source, Var, Writes
+from ncgate.inputs import Command, Override, Snd, Source, Var, Writes
 from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 from ncgate.interpreter.engine.sync import SND_LOG
 
@@ -55,6 +55,7 @@ class Kind(enum.Enum):
     PROCESS_STATUS = "process status"
     SND_LOG = "SND log"
     PLC_STATUS = "PLC status"
+    OVERRIDES = "overrides"
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,7 +97,7 @@ PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait 
 _LAYOUT_KEYS = {Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars", Kind.SA_BYTES: "sa_bytes",
                 Kind.COMMAND: "command", Kind.MAILBOX: "command",
                 Kind.PROCESS_STATUS: "status", Kind.SND_LOG: "snd_log",
-                Kind.PLC_STATUS: "plc_status", Kind.INFO: "info"}
+                Kind.PLC_STATUS: "plc_status", Kind.INFO: "info", Kind.OVERRIDES: "overrides"}
 _WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
             ProcessState.WAIT_EXE}
 
@@ -115,6 +116,7 @@ class ModbusMap:
         self.K_BASE, self.SYVAR_BASE, self.SA_BYTE_BASE = (
             layout.k_bytes, layout.syvars, layout.sa_bytes)
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
+        self.OVERRIDES = layout.overrides
         self.STATUS_BASE = layout.status
         self.SND_LOG_BASE, self.PLC_BASE = layout.input_bases(processes)
         sa_bytes = plc.sa_bits // 8
@@ -138,9 +140,15 @@ class ModbusMap:
                    access("sa_bytes", "rw"), "uint8",
                    "SA byte n (bits 8n..8n+7, the same bits as the coils)"),
             Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, access("command", "w"),
-                   "uint16", "command: 1 cycle start, 2 feed hold, 3 reset (reads 0)"),
+                   "uint16", "command: 1 cycle start, 2 feed hold, 3 reset, 4 restart the "
+                   "PLC, 5 step, 6/7 single block on/off; high byte: the process, 0 the cell "
+                   "(reads 0)"),
             Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
+            Region(Table.HOLDING, self.OVERRIDES, 2 * processes, Kind.OVERRIDES,
+                   access("overrides", "rw"), "uint16",
+                   f"process k at {self.OVERRIDES}+2(k-1): feed override (0..200 %), rapid "
+                   "override (0..100 %); in force from the next interpolation step"),
             Region(Table.INPUT, 0, 9, Kind.INFO, "r", "uint16",
                    "0 map version, 1 process count, 2-3 event counter (u32), "
                    "4-7 last SND: sender, target, block N, event number (low 16 bits), "
@@ -265,6 +273,11 @@ class ModbusMap:
             return snd_log_registers(backend.engine)[first:first + count]
         if kind is Kind.PLC_STATUS:
             return plc_registers(backend.plc_status)[first:first + count]
+        if kind is Kind.OVERRIDES:
+            processes = backend.engine.processes
+            values = [v for k in range(1, len(processes) + 1)
+                      for v in (processes[k].feed_override, processes[k].rapid_override)]
+            return values[first:first + count]
         return self._status_registers(backend.engine, address, count)
 
     def _info(self, backend: Backend) -> list[int]:
@@ -306,7 +319,7 @@ class ModbusMap:
             if "w" not in region.access:
                 raise ModbusError(ILLEGAL_ADDRESS, f"{region.kind.value} is read-only")
             kind = region.kind
-            if kind in (Kind.COMMAND, Kind.MAILBOX):
+            if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.OVERRIDES):
                 if len(pieces) > 1:
                     raise ModbusError(ILLEGAL_ADDRESS, f"the {kind.value} must be written on "
                                       "its own")
@@ -323,6 +336,25 @@ class ModbusMap:
             changes += [(Var.at(area, first + i, "BY"), v) for i, v in enumerate(chunk)]
         return changes
 
+    def _overrides(self, backend: Backend, offset: int, values: Sequence[int],
+                   source: Source) -> None:
+        """Feed and rapid of each process the write covers, checked whole first (nothing of
+        a bad write is applied), then one Override input per process."""
+        per_process: dict[int, dict[str, int]] = {}
+        processes = backend.engine.processes
+        for i, value in enumerate(values):
+            k, which = divmod(offset + i, 2)
+            if processes[k + 1].external:
+                raise ModbusError(ILLEGAL_VALUE, f"process {k + 1} is external: it has no "
+                                  "motion to override")
+            name, top = ("feed", 200) if which == 0 else ("rapid", 100)
+            if value > top:
+                raise ModbusError(ILLEGAL_VALUE, f"{name} override of process {k + 1}: "
+                                  f"0..{top} %")
+            per_process.setdefault(k + 1, {})[name] = value
+        for k, given in per_process.items():
+            backend.apply(Override(given.get("feed"), given.get("rapid"), k, source))
+
     def write_registers(self, backend: Backend, address: int, values: Sequence[int],
                         source: Source) -> None:
         count = len(values)
@@ -332,7 +364,9 @@ class ModbusMap:
             return
         region, offset = planned
         kind = region.kind
-        if kind is Kind.COMMAND:
+        if kind is Kind.OVERRIDES:
+            self._overrides(backend, offset, values, source)
+        elif kind is Kind.COMMAND:
             (word,) = values
             command = command_word(word)
             if command is None:

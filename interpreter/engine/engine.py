@@ -260,14 +260,12 @@ class Engine:
                 if p.int_timer is not None:
                     p.int_timer.cancel()
                     p.int_timer = None
-                    assert p.int_item is not None
-                    elapsed = self.now - p.int_started
-                    p.int_remaining = max(0.0, p.int_item.duration - elapsed)
+                    p.int_remaining = self._nominal_left(p)
             else:
                 p.held = False
-                if p.int_remaining is not None and p.int_item is not None:
+                if p.int_remaining is not None and p.int_move is not None:
                     remaining, p.int_remaining = p.int_remaining, None
-                    self._arm_item(p, p.int_item, remaining)
+                    self._arm_item(p, p.int_move, remaining)
                 else:
                     self._interp_run(p)
             self._update_state(p)
@@ -588,14 +586,15 @@ class Engine:
                     listener(p, old)
 
     def _position(self, p: Process) -> tuple[float, ...]:
-        item = p.int_item
+        item = p.int_move
         if item is not None and item.move is not None:
             move = item.move
             if p.int_remaining is not None:
                 done = 1.0 - (p.int_remaining / item.duration if item.duration else 0.0)
             elif item.duration > 0:
                 now = self.now if self.clock is None else max(self.now, self.clock())
-                done = min(1.0, max(0.0, (now - p.int_started) / item.duration))
+                nominal = p.int_done + (now - p.int_started) * p.int_rate
+                done = min(1.0, max(0.0, nominal / item.duration))
             else:
                 done = 1.0
             return tuple(a + (b - a) * done for a, b in zip(move.start, move.end, strict=True))
@@ -791,12 +790,66 @@ class Engine:
             return True
         return p.dec_wait is not None and p.dec_wait.kind is WaitKind.FLUSH
 
-    def _arm_item(self, p: Process, item: QueueItem, duration: float) -> None:
-        p.int_started = self.now - (item.duration - duration)
-        p.int_timer = self._schedule(duration, lambda: self._timed_done(p, item))
+    def _arm_item(self, p: Process, item: QueueItem, remaining: float) -> None:
+        """Time ``item`` from now, ``remaining`` of its nominal seconds left, at the process's
+        override (a move's: feed or rapid; a dwell or tool change runs at 100 %).  At 0 % the
+        motion stands where it is, the process not held."""
+        p.int_move = item
+        p.int_done = item.duration - remaining
+        p.int_started = self.now
+        rate = p.int_rate = self._rate(p, item)
+        if rate <= 0.0:
+            p.int_remaining = remaining
+            return
+        p.int_timer = self._schedule(remaining / rate, functools.partial(self._timed_done, p,
+                                                                         item))
+
+    @staticmethod
+    def _rate(p: Process, item: QueueItem) -> float:
+        move = item.move
+        if move is None:
+            return 1.0
+        return (p.rapid_override if move.rapid else p.feed_override) / 100.0
+
+    def _nominal_left(self, p: Process) -> float:
+        """The nominal seconds of the timed item still to run."""
+        item = p.int_move
+        assert item is not None
+        done = p.int_done + (self.now - p.int_started) * p.int_rate
+        return max(0.0, item.duration - done)
+
+    def override(self, feed: int | None = None, rapid: int | None = None,
+                 process: int | None = None) -> None:
+        """Set the feed (0..200 %) and/or rapid (0..100 %) override of one process or the
+        cell, from the next interpolation step: a move under way goes on at the new rate
+        from where it is; 0 % stands without a feed hold."""
+        targets = self.processes.values() if process is None else (self.processes[process],)
+        for p in targets:
+            if p.external:
+                continue
+            if feed is not None:
+                p.feed_override = feed
+            if rapid is not None:
+                p.rapid_override = rapid
+            self._record(ev.Override, self.now, p.number, None, p.feed_override,
+                         p.rapid_override)
+            item = p.int_move
+            if item is None or p.held:
+                continue  # a hold keeps its nominal time left: the resume takes the new rate
+            if p.int_timer is not None:
+                p.int_timer.cancel()
+                p.int_timer = None
+                left = self._nominal_left(p)
+            elif p.int_remaining is not None:  # it stood at 0 %
+                left, p.int_remaining = p.int_remaining, None
+            else:
+                continue
+            self._arm_item(p, item, left)
+        self.last_change = self.now
 
     def _timed_done(self, p: Process, item: QueueItem) -> None:
         p.int_timer = None
+        p.int_move = None
         if item.move is not None:
             p.actual = list(item.move.end)
         p.stats.moving_s += item.duration
@@ -841,9 +894,7 @@ class Engine:
                     move = action.move
                     if move.duration_s > 0:
                         sub = QueueItem(ItemKind.SYNC, move.duration_s, item.where, move)
-                        p.int_started = self.now
-                        p.int_timer = self._schedule(move.duration_s,
-                                                     functools.partial(self._timed_done, p, sub))
+                        self._arm_item(p, sub, move.duration_s)
                         return False
                     p.actual = list(move.end)
                 elif not self.perform(p, Stage.INTERPOLATOR, action, item.where):

@@ -235,8 +235,23 @@ class Remove(NamedTuple):
         return "remove"
 
 
+class Override(NamedTuple):
+    """The process's overrides changed (percent): in force from the next interpolation step."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    feed: int
+    rapid: int
+
+    @property
+    def kind(self) -> str:
+        return "override"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
-         | Display | Signal | Remove)
+         | Display | Signal | Remove | Override)
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).
 COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})

@@ -69,6 +69,9 @@ class Process:
         self.alarm: tuple[int, str, Where | None] | None = None
         self.held = False
         self.single_block = False  # stop after each block (a mode: kept over programs)
+        # The overrides in percent (the operator's switches: kept over programs and resets).
+        self.feed_override = 100
+        self.rapid_override = 100
         self.actual: list[float] = list(self.modal.position)  # the interpolator's position
         self.queued = False  # in the engine's run queue
         self.clear()
@@ -89,6 +92,12 @@ class Process:
         self.int_timer: Timer | None = None
         self.int_started = 0.0
         self.int_remaining: float | None = None  # a timed item paused by a feed hold
+        # The item whose time runs (a move, dwell or tool change; a move of a # block), the
+        # nominal seconds of it done when its timer was armed, and the rate since (its
+        # override: 1.0 at 100 %).
+        self.int_move: QueueItem | None = None
+        self.int_done = 0.0
+        self.int_rate = 1.0
         self.int_wait: WaitRecord | None = None
         # The interpolator would run but waits for the decoder to fill its buffer (ISG).
         self.starved = False

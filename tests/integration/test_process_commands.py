@@ -195,3 +195,43 @@ def test_a_script_command_that_does_not_exist_names_its_entry(tmp_path: Path) ->
     (tmp_path / "s.toml").write_text('[[command]]\nat = 1\ncommand = "step"\nprocess = 0\n')
     with pytest.raises(ConfigError, match=r"command\[0\]\.process: expected a process number"):
         load_script(tmp_path / "s.toml")
+
+
+async def test_overrides_over_modbus_scale_the_move_under_way(tmp_path: Path) -> None:
+    """Holding 2010+2(k-1): feed and rapid override of process k.  50 % makes P2's move run
+    at half speed from where it is; 0 % stands with P2 RUNNING (not HOLD); a value past the
+    range, or a write over the external process's registers, is refused whole (03)."""
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1M30\n")
+    (tmp_path / "B.nc").write_text("N1G1X1000F600\nN2M30\n")  # 100 s
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.port": 0,
+                                                           "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        p2 = gw.engine.processes[2]
+        try:
+            gw.command(CommandKind.CYCLE_START, process=2)
+            await gw.wait_state(2, "RUNNING", timeout_s=10)
+            assert not (await client.write_registers(2012, [50, 80], device_id=1)).isError()
+            regs = (await client.read_holding_registers(2010, count=6,
+                                                        device_id=1)).registers
+            assert regs == [100, 100, 50, 80, 100, 100]
+            assert p2.int_rate == 0.5 and p2.int_timer is not None
+            assert not (await client.write_register(2012, 0, device_id=1)).isError()
+            x = (await client.read_input_registers(132, count=2, device_id=1)).registers
+            await client.read_holding_registers(2010, count=2, device_id=1)  # a round trip
+            assert (await client.read_input_registers(132, count=2,
+                                                      device_id=1)).registers == x  # stands
+            assert gw.status(2).state is ProcessState.RUNNING  # not held
+            assert p2.int_timer is None and p2.int_remaining is not None
+            bad = await client.write_registers(2012, [100, 101], device_id=1)  # rapid > 100
+            assert bad.isError() and bad.exception_code == 3
+            bad = await client.write_registers(2014, [120, 90, 100, 100], device_id=1)  # P4
+            assert bad.isError() and bad.exception_code == 3
+            assert gw.engine.processes[3].feed_override == 100  # nothing of it stored
+        finally:
+            client.close()
+        overrides = [(e["proc"], e["feed"], e["rapid"]) for e in gw.trace
+                     if e["event"] == "override"]
+    assert overrides == [(2, 50, 80), (2, 0, 80)]

@@ -495,3 +495,51 @@ def test_a_step_runs_exactly_one_block_of_a_running_program() -> None:
     engine.cycle_start()  # not in single block: it runs to its end
     sim.run()
     assert engine.status(1).state is ProcessState.IDLE and engine.processes[1].E[1] == 3.0
+
+
+def test_the_feed_override_scales_feed_moves_only() -> None:
+    """50 %: a G1 of 1 s takes 2 s; a G0 (rapid override 100 %) and a dwell keep theirs."""
+    programs = {"A": "N1G1X10F600\nN2G0X0\nN3(DLY,1)\nN4M30\n"}
+    sim = make_sim(programs, rapid_mm_min=600.0)
+    sim.engine.override(feed=50)
+    sim.engine.start("A")
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(2.0 + 1.0 + 1.0)
+    events = sim.events("override")  # one per process of the cell
+    assert [(e["proc"], e["feed"], e["rapid"], e["t"]) for e in events] == [
+        (k, 50, 100, 0.0) for k in range(1, 6)]
+
+
+def test_an_override_changed_mid_move_acts_from_where_the_move_is() -> None:
+    """At 0.5 s a 1 s move is half done; at 200 % its other half takes 0.25 s.  At 0 % it
+    stands (RUNNING, not HOLD), and goes on when raised."""
+    sim = make_sim({"A": "N1G1X10F600\nN2M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.call_at(0.5, lambda: engine.override(feed=200))
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(0.75)
+
+    sim = make_sim({"A": "N1G1X10F600\nN2M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.call_at(0.25, lambda: engine.override(feed=0))
+    seen: list[tuple[ProcessState, float]] = []
+    engine.call_at(5.0, lambda: seen.append((engine.status(1).state,
+                                             engine.status(1).position[0])))
+    engine.call_at(6.0, lambda: engine.override(feed=100))
+    sim.run()
+    assert seen == [(ProcessState.RUNNING, pytest.approx(2.5))]
+    assert sim.first("end", proc=1)["t"] == pytest.approx(6.75)
+
+
+def test_a_feed_hold_during_a_hash_blocks_move_keeps_its_time() -> None:
+    """A move inside a # block held at 0.5 s and resumed at 2.5 s ends at 3.0 s; it ended
+    at once on resume before (the hold measured the # block, not its move)."""
+    sim = make_sim({"A": "N1#G1X10F600\nN2M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.call_at(0.5, lambda: engine.hold(True))
+    engine.call_at(2.5, lambda: engine.hold(False))
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(3.0)
