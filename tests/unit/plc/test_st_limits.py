@@ -169,7 +169,11 @@ class Fuzz:
             kind = r.choice(["num", "num", "bool", "real"] + (
                 ["if", "case", "for", "while", "repeat"] if depth < 1 else []) + [
                 "call", "jump"])
-            if kind == "num":
+            if r.random() < 0.005:  # now and then, the sizes generated I/O code reaches
+                out.append(r.choice([
+                    f"b := {' OR '.join(['c'] * r.randrange(200, 260))};",
+                    "IF b THEN a := 1;\n" * (k := r.randrange(100, 120)) + " END_IF" * k]))
+            elif kind == "num":
                 out.append(f"{r.choice(['a', 'i', 'v[i]', 'SYVAR[0]'])} := {self.num()};")
             elif kind == "bool":
                 out.append(f"{r.choice(['b', 'c', 'SA[2]', 'NC.START'])} := {self.cond()};")
