@@ -68,9 +68,16 @@ def command_kind(value: object) -> CommandKind:
     if kind is None:
         raise InputRefused(Reason.BAD_VALUE, f"command {value!r}: 1 cycle start, 2 feed "
                            "hold, 3 reset, 4 restart the PLC, 5 step, 6/7 single block "
-                           "on/off")
+                           "on/off, 8/9 optional stop on/off, 10/11 block skip on/off")
     return kind
 ImageChange = tuple[str, int, str, int]
+# The operator's switches of the cell, as commands.
+_SWITCHES: dict[CommandKind, dict[str, bool]] = {
+    CommandKind.OPTIONAL_STOP_ON: {"optional_stop": True},
+    CommandKind.OPTIONAL_STOP_OFF: {"optional_stop": False},
+    CommandKind.BLOCK_SKIP_ON: {"block_skip": True},
+    CommandKind.BLOCK_SKIP_OFF: {"block_skip": False},
+}
 
 
 class Door:
@@ -157,6 +164,13 @@ class Door:
         engine = self.runtime.engine
         if kind is CommandKind.RESTART_PLC:
             self._restart_plc(item)
+            return
+        if kind in _SWITCHES:
+            if process is not None:
+                raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's switch "
+                                   "(process null)")
+            self._enter(item)
+            engine.switch(**_SWITCHES[kind])
             return
         if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
             self._interlocks(kind)

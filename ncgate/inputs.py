@@ -203,6 +203,10 @@ class CommandKind(enum.IntEnum):
     STEP = 5  # exactly one more block, then stop (STEP)
     SINGLE_BLOCK_ON = 6  # stop after each block until a cycle start
     SINGLE_BLOCK_OFF = 7
+    OPTIONAL_STOP_ON = 8  # M01 stops (the operator's switch; the cell's)
+    OPTIONAL_STOP_OFF = 9
+    BLOCK_SKIP_ON = 10  # blocks marked "/" are skipped (the cell's)
+    BLOCK_SKIP_OFF = 11
 
     @property
     def label(self) -> str:

@@ -99,6 +99,10 @@ class Engine:
         # By (file, process): the latest version of each, with its compiled blocks.
         self._loaded: dict[tuple[str, int], LoadedProgram] = {}
         self.last_change = 0.0  # the time of the last state change or image write
+        # The operator's switches: M01 stops only while optional stop is on; a block marked
+        # "/" is skipped while block skip is on (nc.optional_skip is its initial position).
+        self.optional_stop = False
+        self.block_skip = settings.optional_skip
         # The EXE/REL/WAI/SND rules and their state (sync.py): a part, not a base class.  The
         # SND/WAI hot path calls it directly (the front end binds wait_process and send once).
         self.sync = sync = Sync(self)
@@ -219,6 +223,22 @@ class Engine:
                 self._make_runnable(p)
                 released = True
         return released
+
+    def program_stop(self, p: Process, optional: bool = False) -> None:
+        """M00 (``optional``: M01, only while the optional-stop switch is on): the process
+        stops after this block, its motion done (STEP), until a cycle start."""
+        if not optional or self.optional_stop:
+            p.step_once = True
+
+    def switch(self, optional_stop: bool | None = None, block_skip: bool | None = None) -> None:
+        """The operator's switches.  Block skip acts on the blocks decoded from now on (the
+        compiled blocks are compiled again)."""
+        if optional_stop is not None:
+            self.optional_stop = optional_stop
+        if block_skip is not None and block_skip != self.block_skip:
+            self.block_skip = block_skip
+            for loaded in self._loaded.values():
+                loaded.blocks[:] = [None] * len(loaded.blocks)
 
     def single_block(self, on: bool, process: int | None = None) -> None:
         """Single-block mode of one process or the cell: after each block the process stops

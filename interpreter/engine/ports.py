@@ -105,6 +105,13 @@ class BlockHost(Protocol):
     def end_decoding(self, p: Process, how: str, where: Where) -> None:
         """The program ends (REL, M30, ...) once the motion queued before has run."""
 
+    def program_stop(self, p: Process, optional: bool = ...) -> None:
+        """M00 (M01 with ``optional``): stop after this block until a cycle start."""
+
+    @property
+    def block_skip(self) -> bool:
+        """The block-skip switch: a block marked "/" is skipped while it is on."""
+
     # -- for a dialect's own actions (registered with Engine.register_action) --
 
     @property

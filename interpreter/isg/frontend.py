@@ -147,6 +147,9 @@ class _BlockCompiler:
                 if w.letter == "M" and isinstance(w.value, Num) and w.value.value in (30, 2):
                     body.append(self._end("M30" if w.value.value == 30 else "M02"))
                     break
+                if w.letter == "M" and isinstance(w.value, Num) and w.value.value in (0, 1):
+                    body.append(self._stop(optional=w.value.value == 1))
+                    break
         if self.sync_read:  # spec 5.5: an implicit #FLUSH WAIT before the read
             flush_wait = self.host.flush_wait
             where = self.where
@@ -156,6 +159,15 @@ class _BlockCompiler:
             ops.append(sync_read)
         ops.extend(body)
         return ops
+
+    def _stop(self, optional: bool) -> Op:
+        """M00 / M01, as NC-110's: stop after this block until a cycle start."""
+        program_stop = self.host.program_stop
+
+        def stop(p: Process) -> Step:
+            program_stop(p, optional)
+            return NEXT
+        return stop
 
     # ---- expressions ---------------------------------------------------------------------
 

@@ -119,7 +119,7 @@ class NC110:
             raise RuntimeAlarm(AlarmCode.PROGRAM_INVALID,
                                f"{d.span}: {d.code.code}: {d.message}") from None
         where: Where = (loaded.file, index + 1, block.number)
-        if block.deleted and host.settings.optional_skip:
+        if block.deleted and host.block_skip:
             return CompiledBlock((), where, False)  # "/": skipped, not counted
         ops = _BlockCompiler(host, program, index, where).compile(block)
         return CompiledBlock(tuple(ops), where, bool(block.items) or block.number is not None)
@@ -375,7 +375,19 @@ class _BlockCompiler:
             if word.letter == "M" and isinstance(word.value, float) and word.value in (30, 2):
                 how = "M30" if word.value == 30 else "M02"
                 return [self._end_op(how)]
+            if word.letter == "M" and isinstance(word.value, float) and word.value in (0, 1):
+                return [self._stop_op(optional=word.value == 1)]
         return []
+
+    def _stop_op(self, optional: bool) -> Op:
+        """M00 / M01: the program stops after this block (its motion done) until a cycle
+        start; M01 only while the optional-stop switch is on."""
+        program_stop = self.host.program_stop
+
+        def stop(p: Process) -> Step:
+            program_stop(p, optional)
+            return NEXT
+        return stop
 
     def _end_op(self, how: str) -> Op:
         end_decoding = self.host.end_decoding

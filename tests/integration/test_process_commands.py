@@ -235,3 +235,30 @@ async def test_overrides_over_modbus_scale_the_move_under_way(tmp_path: Path) ->
         overrides = [(e["proc"], e["feed"], e["rapid"]) for e in gw.trace
                      if e["event"] == "override"]
     assert overrides == [(2, 50, 80), (2, 0, 80)]
+
+
+async def test_optional_stop_and_block_skip_switches_over_modbus(tmp_path: Path) -> None:
+    """Command words 8 (optional stop on) and 10 (block skip on): M01 stops, a "/" block is
+    skipped; 0x0108 (a switch of one process) is refused -- they are the cell's."""
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1SYVAR1=1\nN2M01\n/N3SYVAR1=3\nN4SYVAR2=4\nN5M30\n")
+    (tmp_path / "B.nc").write_text("N1M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.port": 0,
+                                                           "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            async def word(value: int) -> int:
+                answer = await client.write_register(COMMAND, value, device_id=1)
+                return answer.exception_code if answer.isError() else 0
+
+            assert await word(0x0108) == 3
+            assert await word(8) == 0 and await word(10) == 0
+            assert await word(1) == 0
+            await gw.wait_state(1, "STEP", timeout_s=10)  # at M01
+            assert await word(1) == 0
+            await gw.wait_idle(timeout_s=10)
+        finally:
+            client.close()
+        assert (gw.read("SYVAR1"), gw.read("SYVAR2")) == (1, 4)  # N3 was skipped

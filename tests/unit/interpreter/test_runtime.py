@@ -543,3 +543,39 @@ def test_a_feed_hold_during_a_hash_blocks_move_keeps_its_time() -> None:
     engine.call_at(2.5, lambda: engine.hold(False))
     sim.run()
     assert sim.first("end", proc=1)["t"] == pytest.approx(3.0)
+
+
+def test_m00_stops_after_its_block_and_m01_only_with_optional_stop() -> None:
+    """M00: the process stops once the block (and its move) is done, until a cycle start;
+    M01 the same while the optional-stop switch is on, else it goes on."""
+    text = "N1G1X10F600M00\nN2SYVAR1=1\nN3M01\nN4SYVAR1=2\nN5M30\n"
+    sim = make_sim({"A": text})
+    engine = sim.engine
+    engine.start("A")
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP and engine.now == 1.0
+    engine.cycle_start()
+    sim.run()  # M01 with the switch off: through to the end
+    assert engine.status(1).state is ProcessState.IDLE
+    assert [e["value"] for e in sim.events("write")] == [1, 2]
+
+    sim = make_sim({"A": text})
+    engine = sim.engine
+    engine.switch(optional_stop=True)
+    engine.start("A")
+    sim.run()
+    engine.cycle_start()
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP  # at M01
+    assert [e["value"] for e in sim.events("write")] == [1]
+
+
+def test_the_block_skip_switch_acts_on_blocks_decoded_after_it() -> None:
+    sim = make_sim({"A": "N1SYVAR1=1\n/N2SYVAR1=2\nN3(WAI,SA1=1)\n/N4SYVAR1=4\nN5M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    sim.run()  # the switch is off: N2 runs
+    engine.switch(block_skip=True)  # before N4 is decoded
+    sim.image.write([("SA", 1, "bit", 1)], "plc")
+    sim.run()
+    assert [e["value"] for e in sim.events("write") if e["var"] == "SYVAR1"] == [1, 2]
