@@ -40,6 +40,8 @@ class ScriptEntry:
     target: int | None = None  # snd: to
     command: str | None = None  # command: cycle_start, feed_hold, reset, step, ...
     process: int | None = None  # command: of one process (None: the cell)
+    point: str | None = None  # break: the breakpoint ("PROG92:8", "P2 wait", "sync")
+    on: bool = True  # break: set (or clear)
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,10 +61,11 @@ def load_script(path: str | Path | None) -> Script:
         return ConfigError(f"{file}: {key}: {message}")
 
     for name in raw:
-        if name not in ("write", "snd", "command"):
-            raise fail(name, "unknown key (expected [[write]], [[snd]] or [[command]])")
+        if name not in ("write", "snd", "command", "break"):
+            raise fail(name, "unknown key (expected [[write]], [[snd]], [[command]] or "
+                       "[[break]])")
     entries: list[ScriptEntry] = []
-    for section in ("write", "snd", "command"):
+    for section in ("write", "snd", "command", "break"):
         tables = raw.get(section, [])
         if not isinstance(tables, list):
             raise fail(section, f"expected an array of tables ([[{section}]])")
@@ -76,7 +79,8 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
     if not isinstance(table, dict):
         raise fail(key, "expected a table")
     known = {"at", "when", "after"} | {"write": {"set"}, "snd": {"from", "to"},
-                                       "command": {"command", "process"}}[section]
+                                       "command": {"command", "process"},
+                                       "break": {"point", "on"}}[section]
     for name in table:
         if name not in known:
             raise fail(f"{key}.{name}", "unknown key")
@@ -98,6 +102,14 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         if not isinstance(value, str) or "=" not in value:
             raise fail(f"{key}.set", f"expected an assignment such as \"SA10=1\", got {value!r}")
         return ScriptEntry(key, _f(at), when, float(after), set=value)
+    if section == "break":
+        point, on = table.get("point"), table.get("on", True)
+        if not isinstance(point, str) or not point.strip():
+            raise fail(f"{key}.point", f"expected a breakpoint such as \"PROG92:8\", \"N40\", "
+                       f"\"P2 wait\" or \"sync\", got {point!r}")
+        if not isinstance(on, bool):
+            raise fail(f"{key}.on", f"expected true (set) or false (clear), got {on!r}")
+        return ScriptEntry(key, _f(at), when, float(after), point=point, on=on)
     if section == "command":
         name = table.get("command")
         if not isinstance(name, str) or not name:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, TypeVar
 
 from ncgate.errors import InputRefused, Reason
 from ncgate.inputs import (
+    Break,
     Command,
     CommandKind,
     FieldbusAlarm,
@@ -41,6 +42,7 @@ from ncgate.inputs import (
 )
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
+from ncgate.interpreter.engine.breaks import parse_breakpoint
 from ncgate.plc.image import ImageAddressError, ImageValueError
 
 if TYPE_CHECKING:
@@ -116,6 +118,8 @@ class Door:
             self._alarm(item)  # type: ignore[arg-type]
         elif kind is Override:
             self._override(item)  # type: ignore[arg-type]
+        elif kind is Break:
+            self._break(item)  # type: ignore[arg-type]
         else:
             raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
 
@@ -165,6 +169,13 @@ class Door:
         if kind is CommandKind.RESTART_PLC:
             self._restart_plc(item)
             return
+        if kind is CommandKind.RUN_TO_SYNC:
+            if process is not None:
+                raise InputRefused(Reason.BAD_VALUE, "run to sync stops the whole cell "
+                                   "(process null)")
+            self._enter(item)
+            engine.set_break(parse_breakpoint("sync"))
+            return
         if kind in _SWITCHES:
             if process is not None:
                 raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's switch "
@@ -193,6 +204,19 @@ class Door:
             plc = self._plc()
             if plc is not None and process is None:  # a reset of the cell also restarts a
                 plc.restart()  # faulted PLC
+
+    def _break(self, item: Break) -> None:
+        if not isinstance(item.on, bool):
+            raise InputRefused(Reason.BAD_VALUE, f"a breakpoint is set or cleared: on "
+                               f"{item.on!r}")
+        try:
+            bp = parse_breakpoint(item.at)
+        except ValueError as exc:
+            raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
+        if bp.process is not None:
+            self._process(bp.process)
+        self._enter(item)
+        self.runtime.engine.set_break(bp, item.on)
 
     def _override(self, item: Override) -> None:
         for name, value, top in (("feed", item.feed, 200), ("rapid", item.rapid, 100)):

@@ -51,6 +51,7 @@ from ncgate.gateway.plc import start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime
 from ncgate.inputs import (
+    Break,
     Command,
     CommandKind,
     FieldbusAlarm,
@@ -76,7 +77,7 @@ COMPARED: dict[str, tuple[str, ...]] = {
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
-                    "remove", "override"})
+                    "remove", "override", "break"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
@@ -122,6 +123,8 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
         out.update(input="start", prog=item.program, proc=item.process)
     elif isinstance(item, Override):
         out.update(input="override", feed=item.feed, rapid=item.rapid, process=item.process)
+    elif isinstance(item, Break):
+        out.update({"input": "break", "at": item.at, "on": item.on})
     else:
         out.update(input="alarm", code=int(item.code), message=item.message)
     return out
@@ -201,13 +204,16 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         if code not in ALARMS:
             raise ValueError(f'"code": {code} is no alarm of the fieldbus side')
         return t, FieldbusAlarm(code, _field(item, "message", str, "a text"), source)
+    if kind == "break":
+        return t, Break(_field(item, "at", str, "a breakpoint such as \"PROG92:8\""),
+                        _field(item, "on", bool, "true (set) or false (clear)"), source)
     if kind == "override":
         return t, Override(_field(item, "feed", int, "a percent or null", optional=True),
                            _field(item, "rapid", int, "a percent or null", optional=True),
                            _field(item, "process", int, "a process number, or null for the "
                                   "cell", optional=True), source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
-                     "alarm, override)")
+                     "alarm, override, break)")
 
 
 def _check_event(item: dict[str, Any]) -> None:

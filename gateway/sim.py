@@ -28,11 +28,22 @@ from ncgate.gateway.wiring import (
     parse_assignment,
     parse_condition,
 )
-from ncgate.inputs import Command, CommandKind, Snd, Source, SourceKind, Start, Var, Write
+from ncgate.inputs import (
+    Break,
+    Command,
+    CommandKind,
+    Snd,
+    Source,
+    SourceKind,
+    Start,
+    Var,
+    Write,
+)
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Engine, Process, ProcessState, run_virtual
 from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.breaks import parse_breakpoint
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
 from ncgate.plc.image import PlcError
@@ -105,6 +116,11 @@ class ScriptPlayer:
                                  "(declare it with [[nc.process]] external = true)")
             if not 1 <= (entry.target or 0) <= config.nc.processes:
                 raise self._fail(entry, "to", f"process {entry.target} is not configured")
+        if entry.point is not None:
+            try:
+                parse_breakpoint(entry.point)
+            except ValueError as exc:
+                raise self._fail(entry, "point", str(exc)) from None
         if entry.command is not None:
             kinds = {k.label: k for k in CommandKind}
             if entry.command not in kinds:
@@ -183,6 +199,8 @@ class ScriptPlayer:
             elif entry.command is not None:
                 kind = next(k for k in CommandKind if k.label == entry.command)
                 self.door.apply(Command(kind, entry.process, source))
+            elif entry.point is not None:
+                self.door.apply(Break(entry.point, entry.on, source))
             else:
                 assert entry.sender is not None and entry.target is not None
                 self.door.apply(Snd(entry.sender, entry.target, source))
@@ -192,7 +210,8 @@ class ScriptPlayer:
 
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
             until: float | None = None, *, signals: bool = False,
-            single_block: bool = False) -> SimResult:
+            single_block: bool = False, breaks: Sequence[str] = (),
+            keep_going: bool = False) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
@@ -212,6 +231,19 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     engine = runtime.engine
     if single_block:  # every process stops after each block: the script's steps go on
         door.apply(Command(CommandKind.SINGLE_BLOCK_ON, None, SIM))
+    for point in breaks:  # --break: refused ones are usage errors
+        try:
+            door.apply(Break(point, True, SIM))
+        except InputRefused as exc:
+            raise UsageError(f"--break {point}: {exc}") from None
+    if keep_going:  # --continue: each hit is traced, then the cell goes on at once
+
+        def go_on(event: Event) -> None:
+            if isinstance(event, ev.Break):
+                engine.call_at(engine.now, lambda: door.apply(
+                    Command(CommandKind.CYCLE_START, None, SIM)))
+
+        runtime.trace.subscribe(go_on)
     if len(mains) == 1:
         # Spec 5.1 (ISG): one sectioned file starts every section in its channel at t = 0.
         starts = [(mains[0], channel) for channel in runtime.store.channels(mains[0]) or (1,)]

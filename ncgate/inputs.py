@@ -207,6 +207,7 @@ class CommandKind(enum.IntEnum):
     OPTIONAL_STOP_OFF = 9
     BLOCK_SKIP_ON = 10  # blocks marked "/" are skipped (the cell's)
     BLOCK_SKIP_OFF = 11
+    RUN_TO_SYNC = 12  # stop the cell at the next EXE/WAI/SND/REL/#SIGNAL/#WAIT of anyone
 
     @property
     def label(self) -> str:
@@ -262,8 +263,18 @@ class Override:
     source: Source = API
 
 
-Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override
+@dataclass(frozen=True, slots=True)
+class Break:
+    """Set (``on``) or clear a breakpoint, as an engineer writes it: ``PROG92:8``, ``N40``,
+    ``P2 wait``, ``P2 wait EXE``, ``sync`` (run to sync)."""
 
-__all__ = ["API", "Command", "CommandKind", "FieldbusAlarm", "Input", "InputRefused",
+    at: str
+    on: bool = True
+    source: Source = API
+
+
+Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break
+
+__all__ = ["API", "Break", "Command", "CommandKind", "FieldbusAlarm", "Input", "InputRefused",
            "Override", "Reason", "Snd", "Source", "SourceKind", "Start", "Var", "Write",
            "Writes"]

@@ -32,6 +32,7 @@ FREE = {"modbus.port": 0, "canopen.enabled": False}
 # What only the door may call: the engine's and the image's ways of being changed from
 # outside.  (The engine's own modules and the PLC scan's output stage are inside the cell.)
 MUTATORS = {"cycle_start", "external_snd", "fieldbus_alarm", "apply_writes", "override", "switch",
+            "set_break",
             "single_block"}
 
 

@@ -79,6 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--single-block", action="store_true", help="every process stops after "
                      "each block (STEP) until the script's next [[command]] step or "
                      "cycle_start")
+    sim.add_argument("--break", dest="breaks", action="append", default=[], metavar="AT",
+                     help="a breakpoint: PROG92:8 (file stem and line), N40 (any process), "
+                     "'P2 N40', 'P2 wait', 'P2 wait EXE', sync (run to sync); a hit stops the "
+                     "cell until the script's next cycle_start, or at once with --continue")
+    sim.add_argument("--continue", dest="keep_going", action="store_true",
+                     help="--break: each hit is traced, then the run goes on")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
     sim.add_argument("--replay", metavar="R.jsonl", help="re-run a session recorded with "
                      "'ncgate run --record' (its config, programs and inputs) and say whether "
@@ -250,7 +256,8 @@ def _sim(args: argparse.Namespace) -> int:
     mains = args.main or [config.nc.main]
     try:
         result = run_sim(config, mains, script, args.until, signals=True,
-                         single_block=args.single_block)
+                         single_block=args.single_block, breaks=args.breaks,
+                         keep_going=args.keep_going)
     except ProgramError as exc:
         print(str(exc), file=sys.stderr)
         storage = storage_of(config)

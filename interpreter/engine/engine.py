@@ -42,6 +42,7 @@ from ncgate.interpreter.engine.actions import (
     WaitProcess,
     WriteSyvar,
 )
+from ncgate.interpreter.engine.breaks import Breakpoint
 from ncgate.interpreter.engine.events import Blocked, FlushOn, WaitOn
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Process, QueueItem
@@ -103,6 +104,11 @@ class Engine:
         # "/" is skipped while block skip is on (nc.optional_skip is its initial position).
         self.optional_stop = False
         self.block_skip = settings.optional_skip
+        # Breakpoints (breaks.py): the decoder looks at block ones only when there are any.
+        self.breakpoints: list[Breakpoint] = []
+        self._block_breaks = False
+        self._wait_breaks = False
+        self._sync_listener: Callable[[], None] | None = None
         # The EXE/REL/WAI/SND rules and their state (sync.py): a part, not a base class.  The
         # SND/WAI hot path calls it directly (the front end binds wait_process and send once).
         self.sync = sync = Sync(self)
@@ -182,10 +188,12 @@ class Engine:
         the command, as its input's source says).  Of the cell (``process`` None): resume
         every held process, or start ``main`` in process 1.  Of one process: resume it if
         held, or start its own main (``[[nc.process]] main``; process 1: ``main``)."""
-        if self._any_held(process):
+        held = self._any_held(process)
+        for p in (self.processes.values() if process is None else (self.processes[process],)):
+            p.step_once = False  # a breakpoint's pending stops: the cell goes on
+        if held:  # a hold and a stop after a block (a breakpoint's) go on together
             self.hold(False, process)
-            return
-        if self._release_steps(process):
+        if self._release_steps(process) or held:
             return
         number = 1 if process is None else process
         main = self.cycle_start_program(process)
@@ -223,6 +231,60 @@ class Engine:
                 self._make_runnable(p)
                 released = True
         return released
+
+    # ---- breakpoints (breaks.py) ------------------------------------------------------------
+
+    def set_break(self, breakpoint: Breakpoint, on: bool = True) -> None:
+        """Set (or, ``on`` False, clear) a breakpoint."""
+        if on and breakpoint not in self.breakpoints:
+            self.breakpoints.append(breakpoint)
+        elif not on and breakpoint in self.breakpoints:
+            self.breakpoints.remove(breakpoint)
+        self._breaks_changed()
+
+    def _breaks_changed(self) -> None:
+        self._block_breaks = any(b.at_block for b in self.breakpoints)
+        self._wait_breaks = any(b.wait for b in self.breakpoints)
+        sync = any(b.sync for b in self.breakpoints)
+        if sync and self._sync_listener is None:
+            self._sync_listener = self.trace.subscribe(self._sync_event)
+        elif not sync and self._sync_listener is not None:
+            self._sync_listener()
+            self._sync_listener = None
+
+    def _break_at_block(self, p: Process, pc: int, where: Where) -> bool:
+        """A block breakpoint on the block at ``pc``: the process stops before it (STEP)
+        and the cell holds."""
+        file, line, n = where
+        for bp in self.breakpoints:
+            if bp.at_block and bp.matches_block(p.number, file, line, n):
+                p.break_passed = pc
+                p.dec_block = DecoderHold.STEP
+                self._update_state(p)
+                self._hit(bp, p.number, where)
+                return True
+        return False
+
+    def _sync_event(self, event: ev.Event) -> None:
+        """Run to sync: the first EXE/WAI/SND/REL/#SIGNAL/#WAIT of any process stops the
+        cell -- every process after the block it is in, motion held."""
+        kind = type(event)
+        if not (kind in (ev.Snd, ev.Exe, ev.Wait, ev.Signal)
+                or (kind is ev.End and event.how == "REL")):  # type: ignore[union-attr]
+            return
+        bp = next(b for b in self.breakpoints if b.sync)
+        self.breakpoints.remove(bp)  # one-shot
+        self._breaks_changed()
+        self._hit(bp, event.proc, event.where)
+
+    def _hit(self, bp: Breakpoint, proc: int, where: Where | None) -> None:
+        """The cell stops: motion holds, and every decoder stops after the block it is in
+        (a held process's decoder would otherwise go on, and its plain codes act)."""
+        self._record(ev.Break, self.now, proc, where, bp.text)
+        for p in self.processes.values():
+            if p.loaded is not None and p.alarm is None and p.dec_block is not DecoderHold.STEP:
+                p.step_once = True
+        self.hold(True)
 
     def program_stop(self, p: Process, optional: bool = False) -> None:
         """M00 (``optional``: M01, only while the optional-stop switch is on): the process
@@ -428,6 +490,9 @@ class Engine:
                 reason = f"{wait.code} {wait.reason()}" + (f"; {note}" if note else "")
                 reason += self._alarmed_partners(wait)
                 out.append(Blocked(p.number, *wait.where, reason))
+            elif p.held:
+                out.append(Blocked(p.number, *p.where, "held (a feed hold or a breakpoint's "
+                                   "stop): a cycle start goes on"))
             elif p.dec_block is DecoderHold.STEP:
                 out.append(Blocked(p.number, *p.where, "stopped after a block (single block): "
                                    "a cycle start or a step runs the next"))
@@ -646,6 +711,11 @@ class Engine:
                         self.end_decoding(p, "eof", (loaded.file, lines, None))
                         return
                     block = blocks[pc] or self._compile(loaded, pc)
+                    if self._block_breaks:
+                        if p.break_passed == pc:  # stopped here before: go on this time
+                            p.break_passed = -1
+                        elif self._break_at_block(p, pc, block.where):
+                            return
                     if block.counted:
                         stats.blocks += 1
                     p.block = block
@@ -962,6 +1032,11 @@ class Engine:
             wait.timeout = self._schedule(self._wait_timeout_s,
                                           lambda: self._wait_timed_out(p, wait))
         self._update_state(p)
+        if self._wait_breaks:
+            for bp in self.breakpoints:
+                if bp.matches_wait(p.number, wait.kind):
+                    self._hit(bp, p.number, wait.where)
+                    break
 
     def _finish_wait(self, p: Process, wait: WaitRecord, by: int | str) -> None:
         """The wait is over: resume the stage that waited."""

@@ -250,8 +250,22 @@ class Override(NamedTuple):
         return "override"
 
 
+class Break(NamedTuple):
+    """A breakpoint was hit: the cell stops (feed-hold semantics; a cycle start goes on)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    breakpoint: str
+
+    @property
+    def kind(self) -> str:
+        return "break"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
-         | Display | Signal | Remove | Override)
+         | Display | Signal | Remove | Override | Break)
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).
 COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})

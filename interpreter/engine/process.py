@@ -104,6 +104,7 @@ class Process:
         self.sync_i = 0
         self.dec_timer: Timer | None = None  # nc.block_time_ms: the block's processing time
         self.step_once = False  # a step: stop after the next block, single block or not
+        self.break_passed = -1  # the line index a block breakpoint stopped before (passed once)
         # Runaway detection: blocks decoded since the engine last stood still (its epoch).
         self.spin = 0
         self.spin_epoch = -1

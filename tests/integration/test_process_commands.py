@@ -262,3 +262,70 @@ async def test_optional_stop_and_block_skip_switches_over_modbus(tmp_path: Path)
         finally:
             client.close()
         assert (gw.read("SYVAR1"), gw.read("SYVAR2")) == (1, 4)  # N3 was skipped
+
+
+def test_sim_breakpoints_from_the_command_line_and_the_script(tmp_path: Path) -> None:
+    """`sim --break PROG:LINE` stops the cell before that block; the script's cycle_start
+    goes on, `--continue` goes on at once; a bad breakpoint is a usage error (exit 2)."""
+    import json
+    import subprocess
+    import sys
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "A.nc").write_text("N1SYVAR1=1\nN2G1X10F600\nN3SYVAR1=3\nN4M30\n")
+    (tmp_path / "script.toml").write_text('[[command]]\nat = 5.0\ncommand = "cycle_start"\n')
+
+    def sim(*extra: str) -> tuple[int, list[dict[str, object]], str]:
+        trace = tmp_path / "trace.jsonl"
+        trace.unlink(missing_ok=True)
+        done = subprocess.run(
+            [sys.executable, "-m", "ncgate", "sim", "--config", str(tmp_path / "ncgate.toml"),
+             "--trace", str(trace), *extra], capture_output=True, text=True, timeout=60)
+        events = ([json.loads(line) for line in trace.read_text().splitlines()]
+                  if trace.exists() else [])
+        return done.returncode, events, done.stdout + done.stderr
+
+    code, events, _ = sim("--break", "A:3", "--script", str(tmp_path / "script.toml"))
+    hits = [(e["t"], e["line"], e["breakpoint"]) for e in events if e["event"] == "break"]
+    assert code == 0 and hits == [(0.0, 3, "A:3")]
+    # N2's move (1 s) was held from t = 0 until the script's cycle start at 5 s.
+    assert [e["t"] for e in events if e["event"] == "end"] == [6.0]
+    code, events, _ = sim("--break", "N3", "--continue")
+    assert code == 0 and [e["breakpoint"] for e in events if e["event"] == "break"] == ["N3"]
+    assert [e["t"] for e in events if e["event"] == "end"] == [1.0]
+    code, _, out = sim("--break", "A:3")  # nobody goes on: a stall naming the stop
+    assert code == 1 and "held" in out
+    code, _, out = sim("--break", "P9 N3")
+    assert code == 2 and "--break P9 N3" in out
+
+
+async def test_breakpoints_and_run_to_sync_through_the_api_and_modbus(
+        tmp_path: Path) -> None:
+    from ncgate.errors import InputRefused, Reason
+    from ncgate.gateway.record import replay
+    from ncgate.inputs import Break
+
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1(EXE,2,B)\nN2(WAI,2)\nN3M30\n")
+    (tmp_path / "B.nc").write_text("N1G1X5F600\nN2(SND,1)\nN3M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.port": 0,
+                                                           "canopen.enabled": False})
+    record = tmp_path / "session.jsonl"
+    async with Gateway(cfg, cold=True, record=record) as gw:
+        with pytest.raises(InputRefused) as caught:
+            gw.apply(Break("somewhere"))
+        assert caught.value.reason is Reason.BAD_VALUE
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            assert not (await client.write_register(COMMAND, 12, device_id=1)).isError()
+        finally:
+            client.close()
+        gw.command(CommandKind.CYCLE_START)  # A's EXE is the next sync event: the cell stops
+        await gw.wait_state(1, "HOLD", timeout_s=10)
+        hits = [e for e in gw.trace if e["event"] == "break"]
+        assert [(e["proc"], e["breakpoint"]) for e in hits] == [(1, "sync")]
+        gw.command(CommandKind.CYCLE_START)  # goes on: run to sync was one-shot
+        await gw.wait_idle(timeout_s=10)
+    result = replay(record)
+    assert result.divergence is None, result.divergence

@@ -579,3 +579,64 @@ def test_the_block_skip_switch_acts_on_blocks_decoded_after_it() -> None:
     sim.image.write([("SA", 1, "bit", 1)], "plc")
     sim.run()
     assert [e["value"] for e in sim.events("write") if e["var"] == "SYVAR1"] == [1, 2]
+
+
+def test_a_block_breakpoint_stops_before_its_block_and_a_cycle_start_goes_on() -> None:
+    from ncgate.interpreter.engine.breaks import parse_breakpoint
+
+    programs = {"A": "N1(EXE,2,B)\nN2SYVAR1=1\nN3G1X10F600\nN4SYVAR1=2\nN5M30\n",
+                "B": "N10G1X100F600\nN20M30\n"}
+    sim = make_sim(programs)
+    engine = sim.engine
+    engine.set_break(parse_breakpoint("a.nc:4"))  # the file's stem, any case
+    engine.start("A")
+    sim.run()
+    (hit,) = sim.events("break")
+    # The decoder reached N4 at t = 0 (plain codes act at decode time, lookahead 16).
+    assert (hit["proc"], hit["line"], hit["n"], hit["breakpoint"], hit["t"]) == (
+        1, 4, 4, "A:4", 0.0)
+    # P1 stopped before N4 (its SYVAR1 is still 1); P2's move is held, not ended.
+    assert sim.image.read("SYVAR", 1, "IN") == 1
+    assert engine.status(2).state is ProcessState.HOLD
+    engine.cycle_start()
+    sim.run()
+    assert sim.image.read("SYVAR", 1, "IN") == 2 and engine.all_idle
+    assert sim.first("end", proc=2)["t"] == pytest.approx(10.0)  # it moved again after
+
+
+def test_a_wait_breakpoint_and_run_to_sync_stop_the_cell() -> None:
+    from ncgate.interpreter.engine.breaks import parse_breakpoint
+
+    programs = {"A": "N1G1X10F600\nN2(WAI,2)\nN3M30\n", "B": "N1G1X20F600\nN2(SND,1)\nN3M30\n"}
+    sim = make_sim(programs)
+    engine = sim.engine
+    engine.set_break(parse_breakpoint("P1 wait WAI"))
+    engine.start("A")
+    engine.start("B", 2)
+    sim.run()
+    (hit,) = sim.events("break")
+    assert (hit["proc"], hit["n"], hit["t"], hit["breakpoint"]) == (1, 2, 0.0, "P1 wait WAI")
+    assert engine.status(2).state is ProcessState.HOLD  # P2's move held
+    engine.set_break(parse_breakpoint("P1 wait WAI"), on=False)
+    engine.set_break(parse_breakpoint("sync"))  # the next sync event of anyone
+    engine.cycle_start()
+    sim.run()
+    hits = sim.events("break")
+    assert [(h["proc"], h["n"], h["breakpoint"]) for h in hits[1:]] == [(2, 2, "sync")]
+    assert engine.breakpoints == []  # run to sync is one-shot
+    engine.cycle_start()
+    sim.run()
+    assert engine.all_idle and sim.events("alarm") == []
+
+
+def test_breakpoints_are_parsed_as_engineers_write_them() -> None:
+    from ncgate.interpreter.engine.breaks import parse_breakpoint
+
+    assert parse_breakpoint("PROG92:8").text == "PROG92:8"
+    assert parse_breakpoint("prog92.nc:8").program == "PROG92"
+    assert parse_breakpoint("n40").n == 40 and parse_breakpoint("N40").process is None
+    assert parse_breakpoint("P2  wait").process == 2
+    assert parse_breakpoint("P2 wait exe").text == "P2 wait EXE"
+    for bad in ("", "P0 N4", "P2 sync", "wait forever", "PROG92:0", "X40"):
+        with pytest.raises(ValueError):
+            parse_breakpoint(bad)
