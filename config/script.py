@@ -42,6 +42,8 @@ class ScriptEntry:
     process: int | None = None  # command: of one process (None: the cell)
     point: str | None = None  # break: the breakpoint ("PROG92:8", "P2 wait", "sync")
     on: bool = True  # break: set (or clear)
+    feed: int | None = None  # override: the feed override in percent
+    rapid: int | None = None  # override: the rapid override in percent
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,11 +63,11 @@ def load_script(path: str | Path | None) -> Script:
         return ConfigError(f"{file}: {key}: {message}")
 
     for name in raw:
-        if name not in ("write", "snd", "command", "break"):
-            raise fail(name, "unknown key (expected [[write]], [[snd]], [[command]] or "
-                       "[[break]])")
+        if name not in ("write", "snd", "command", "break", "override"):
+            raise fail(name, "unknown key (expected [[write]], [[snd]], [[command]], [[break]] "
+                       "or [[override]])")
     entries: list[ScriptEntry] = []
-    for section in ("write", "snd", "command", "break"):
+    for section in ("write", "snd", "command", "break", "override"):
         tables = raw.get(section, [])
         if not isinstance(tables, list):
             raise fail(section, f"expected an array of tables ([[{section}]])")
@@ -80,7 +82,8 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         raise fail(key, "expected a table")
     known = {"at", "when", "after"} | {"write": {"set"}, "snd": {"from", "to"},
                                        "command": {"command", "process"},
-                                       "break": {"point", "on"}}[section]
+                                       "break": {"point", "on"},
+                                       "override": {"feed", "rapid", "process"}}[section]
     for name in table:
         if name not in known:
             raise fail(f"{key}.{name}", "unknown key")
@@ -102,6 +105,17 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         if not isinstance(value, str) or "=" not in value:
             raise fail(f"{key}.set", f"expected an assignment such as \"SA10=1\", got {value!r}")
         return ScriptEntry(key, _f(at), when, float(after), set=value)
+    if section == "override":
+        values = {}
+        for name in ("feed", "rapid", "process"):
+            value = table.get(name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+                raise fail(f"{key}.{name}", f"expected a whole number, got {value!r}")
+            values[name] = value
+        if values["feed"] is None and values["rapid"] is None:
+            raise fail(key, "give feed, rapid or both (percent)")
+        return ScriptEntry(key, _f(at), when, float(after), feed=values["feed"],
+                           rapid=values["rapid"], process=values["process"])
     if section == "break":
         point, on = table.get("point"), table.get("on", True)
         if not isinstance(point, str) or not point.strip():

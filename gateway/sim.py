@@ -32,6 +32,7 @@ from ncgate.inputs import (
     Break,
     Command,
     CommandKind,
+    Override,
     Snd,
     Source,
     SourceKind,
@@ -126,9 +127,8 @@ class ScriptPlayer:
             if entry.command not in kinds:
                 raise self._fail(entry, "command", f"unknown command {entry.command!r} "
                                  f"({', '.join(kinds)})")
-            if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
-                raise self._fail(entry, "process", f"process {entry.process} is not "
-                                 "configured")
+        if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
+            raise self._fail(entry, "process", f"process {entry.process} is not configured")
         if entry.when is not None:
             self._parse_when(entry)
 
@@ -201,6 +201,8 @@ class ScriptPlayer:
                 self.door.apply(Command(kind, entry.process, source))
             elif entry.point is not None:
                 self.door.apply(Break(entry.point, entry.on, source))
+            elif entry.feed is not None or entry.rapid is not None:
+                self.door.apply(Override(entry.feed, entry.rapid, entry.process, source))
             else:
                 assert entry.sender is not None and entry.target is not None
                 self.door.apply(Snd(entry.sender, entry.target, source))

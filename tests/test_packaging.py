@@ -120,7 +120,8 @@ def test_examples_are_listed_and_run(capsys: pytest.CaptureFixture[str]) -> None
     assert main(["examples"]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert [line.split()[:2] for line in listed] == [
-        ["conditional", "COND1"], ["errors", "-"], ["hazard", "HAZ1"],
+        ["commissioning", "PROG91"], ["conditional", "COND1"], ["errors", "-"],
+        ["hazard", "HAZ1"],
         ["isg_dec_interp", "DECINT"],
         ["isg_decoders", "DECODERS"], ["isg_flush", "FLUSH"], ["isg_no_flush", "NOFLUSH"],
         ["isg_params", "PARAMS"], ["isg_paths", "PATHS"], ["isg_ve", "VE"],

@@ -329,3 +329,29 @@ async def test_breakpoints_and_run_to_sync_through_the_api_and_modbus(
         await gw.wait_idle(timeout_s=10)
     result = replay(record)
     assert result.divergence is None, result.divergence
+
+
+def test_the_commissioning_walkthrough_runs_as_its_readme_says() -> None:
+    """examples/commissioning: the break at P2's N16 at 10.399 s, P2's feed at 50 % a second
+    later, the cycle start at 42 s refused while the door (SA100) is open, the end at
+    101.930 s (90.798 s without the walkthrough), exit 0 -- each figure as its README says."""
+    from ncgate.config.script import load_script
+    from ncgate.gateway.examples import find_example
+    from ncgate.gateway.sim import run_sim
+
+    example = find_example("commissioning")
+    assert example.script is not None
+    result = run_sim(load_config(example.config), "PROG91", load_script(example.script))
+    events = result.events
+    (hit,) = [e for e in events if e["event"] == "break"]
+    assert (hit["proc"], hit["prog"], hit["n"], round(hit["t"], 3)) == (2, "PROG92.nc", 16,
+                                                                        10.399)
+    (override,) = [e for e in events if e["event"] == "override"]
+    assert (override["proc"], override["feed"], round(override["t"], 3)) == (2, 50, 11.399)
+    refused = [e for e in events if e["event"] == "hazard" and "SA100 is set" in e["message"]]
+    assert [e["t"] for e in refused] == [42.0]
+    assert result.outcome == "idle" and result.exit_status == 0
+    assert round(result.runtime.engine.now, 3) == 101.930
+    readme = (example.folder / "README.md").read_text()
+    for figure in ("10.399", "101.930", "90.798", "SA100"):
+        assert figure in readme
