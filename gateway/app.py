@@ -404,9 +404,11 @@ class Gateway:
         self._settle()
 
     async def start(self, name: str | None = None, process: int = 1,
-                    source: Source = API) -> None:
-        """The operator's SPG: start NAME (default: the config's main) in a process."""
-        await self.apply_async(Start(name, process, source))
+                    source: Source = API, at: str | None = None,
+                    with_calc: bool = False) -> None:
+        """The operator's SPG: start NAME (default: the config's main) in a process; ``at``
+        a label or an N number: a block search (``with_calc``: E parameters too)."""
+        await self.apply_async(Start(name, process, source, at, with_calc))
 
     def write(self, var: str, value: int, source: Source = API) -> None:
         """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``)."""

@@ -310,13 +310,22 @@ class Door:
         runtime = self.runtime
         name = self._start_check(item)
         try:  # load (parse and check) before the clock is read: it starts when it is ready
-            runtime.store.load(name, None, item.process)
+            program = runtime.store.load(name, None, item.process)
         except ProgramNotFoundError as exc:
             raise InputRefused(Reason.PROGRAM_NOT_FOUND, str(exc)) from exc
         except ProgramError as exc:
             raise InputRefused(Reason.PROGRAM_INVALID, str(exc)) from exc
+        if item.at is not None:  # a block search: refused before anything acts
+            if not isinstance(item.at, str) or not isinstance(item.with_calc, bool):
+                raise InputRefused(Reason.BAD_VALUE, f"a block search starts at a label or an "
+                                   f"N number, got {item.at!r}")
+            try:
+                runtime.engine.block_search(program, item.process, item.at, item.with_calc)
+            except ValueError as exc:
+                raise InputRefused(Reason.BAD_VALUE, f"block search: {exc}") from None
         self._enter(dataclasses.replace(item, program=name))  # recorded by its name
-        runtime.engine.start(name, item.process, by=str(item.source))
+        runtime.engine.start(name, item.process, by=str(item.source), at=item.at,
+                             with_calc=item.with_calc)
 
     def _alarm(self, item: FieldbusAlarm) -> None:
         if not isinstance(item.message, str):

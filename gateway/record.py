@@ -121,6 +121,8 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
         out.update({"input": "snd", "from": item.sender, "to": item.target})
     elif isinstance(item, Start):
         out.update(input="start", prog=item.program, proc=item.process)
+        if item.at is not None:
+            out.update(at=item.at, with_calc=item.with_calc)
     elif isinstance(item, Override):
         out.update(input="override", feed=item.feed, rapid=item.rapid, process=item.process)
     elif isinstance(item, Break):
@@ -198,7 +200,9 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
                       _field(item, "to", int, "a process number"), source)
     if kind == "start":
         return t, Start(_field(item, "prog", str, "a program name"),
-                        _field(item, "proc", int, "a process number"), source)
+                        _field(item, "proc", int, "a process number"), source,
+                        _field(item, "at", str, "a label or an N number", optional=True),
+                        bool(_field(item, "with_calc", bool, "true or false", optional=True)))
     if kind == "alarm":
         code = _field(item, "code", int, "an alarm number")
         if code not in ALARMS:

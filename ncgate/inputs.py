@@ -235,11 +235,15 @@ class Snd:
 
 @dataclass(frozen=True, slots=True)
 class Start:
-    """The operator's program start: ``program`` (None: the config's main) in ``process``."""
+    """The operator's program start: ``program`` (None: the config's main) in ``process``;
+    ``at`` a label or an N number: a block search (the program starts there, with the modal
+    state the blocks before it set; ``with_calc``: their E parameters too)."""
 
     program: str | None = None
     process: int = 1
     source: Source = API
+    at: str | None = None
+    with_calc: bool = False
 
 
 @dataclass(frozen=True, slots=True)

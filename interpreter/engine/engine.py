@@ -63,6 +63,7 @@ from ncgate.interpreter.engine.states import (
 from ncgate.interpreter.engine.sync import Sync, first_line
 from ncgate.interpreter.engine.timers import Timer, TimerHeap
 from ncgate.interpreter.engine.trace import Trace
+from ncgate.interpreter.motion import Modal
 from ncgate.interpreter.settings import RuntimeSettings
 
 NEXT, WAIT_NEXT, WAIT_RETRY, JUMP = Step.NEXT, Step.WAIT_NEXT, Step.WAIT_RETRY, Step.JUMP
@@ -172,16 +173,32 @@ class Engine:
     # ==== public API ========================================================================
 
     def start(self, name: str, process: int = 1, by: str = "operator",
-              device: str | None = None) -> None:
-        """The operator's SPG: load NAME into an idle process and start it."""
+              device: str | None = None, at: str | None = None,
+              with_calc: bool = False) -> None:
+        """The operator's SPG: load NAME into an idle process and start it -- at a label or
+        an N number (``at``: a block search, :meth:`block_search`)."""
         p = self._process(process)
         if p.external:
             raise ValueError(f"process {process} is external: it runs no part program")
         if p.loaded is not None or p.alarm is not None:
             raise ValueError(f"process {process} is busy ({p.state.name})")
         program = self.loader.load(name, device, process)
+        found = self.block_search(program, process, at, with_calc) if at else None
         self._start_program(p, program, by)
+        if found is not None:
+            p.pc, p.modal, e = found
+            p.actual = list(p.modal.position)
+            if with_calc:
+                p.E = e
         self._kick()
+
+    def block_search(self, program: ProgramText, process: int, at: str,
+                     with_calc: bool = False) -> tuple[int, Modal, list[float]]:
+        """Where a start of ``program`` at ``at`` begins and with what modal state (the
+        front end's block search); ValueError saying why it cannot start there."""
+        p = self._process(process)
+        return self.front_end.block_search(program, at, p.modal, p.E, self.settings,
+                                           self.image.read, with_calc)
 
     def cycle_start(self, by: str = "api", process: int | None = None) -> None:
         """Command 1: resume after a feed hold, or start the main program (``by``: who gave

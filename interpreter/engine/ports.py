@@ -27,6 +27,7 @@ if TYPE_CHECKING:
         QueueItem,
     )
     from ncgate.interpreter.engine.states import Stage, WaitRecord, Where
+    from ncgate.interpreter.motion import Modal
     from ncgate.interpreter.settings import RuntimeSettings
 
     ActionHandler = Callable[[Process, Stage, Any, Where], bool]
@@ -160,3 +161,10 @@ class FrontEnd(Protocol):
 
     def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
         """The (process, program name) of each EXE that names its process by a constant."""
+
+    def block_search(self, program: ProgramText, at: str, modal: Modal, e_params: list[float],
+                     settings: RuntimeSettings, read: Callable[[str, int, str], int],
+                     with_calc: bool) -> tuple[int, Modal, list[float]]:
+        """A start at ``at`` (a label, an N number): the line index, the modal state and the
+        E parameters the blocks before it make; ValueError saying why it cannot start
+        there."""

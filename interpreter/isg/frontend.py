@@ -51,7 +51,8 @@ from ncgate.interpreter.isg.nodes import (
 )
 from ncgate.interpreter.isg.parser import IsgProgram, blank_comments
 from ncgate.interpreter.isg.signals import AwaitSignal, RemoveSignals, SendSignal, SignalBoard
-from ncgate.interpreter.motion import plan_move
+from ncgate.interpreter.motion import Modal, plan_move
+from ncgate.interpreter.settings import RuntimeSettings
 
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
@@ -117,6 +118,12 @@ class IsgFrontEnd:
 
     def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
         return frozenset()
+
+    def block_search(self, program: ProgramText, at: str, modal: Modal, e_params: list[float],
+                     settings: RuntimeSettings, read: Callable[[str, int, str], int],
+                     with_calc: bool) -> tuple[int, Modal, list[float]]:
+        raise ValueError("block search: the ISG dialect does not have it yet (start the "
+                         "section from its beginning)")
 
 
 class _BlockCompiler:

@@ -33,7 +33,7 @@ from ncgate.interpreter.engine.actions import (
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
 from ncgate.interpreter.engine.states import Stage, Where
-from ncgate.interpreter.motion import Move, check_duration, plan_move
+from ncgate.interpreter.motion import Modal, Move, check_duration, plan_move
 from ncgate.interpreter.nc110.evaluate import (
     compile_expr,
     reads_image,
@@ -64,7 +64,8 @@ from ncgate.interpreter.nc110.nodes import (
     Word,
 )
 from ncgate.interpreter.nc110.parser import Program
-from ncgate.interpreter.settings import AXES
+from ncgate.interpreter.nc110.search import search
+from ncgate.interpreter.settings import AXES, RuntimeSettings
 
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
@@ -131,6 +132,12 @@ class NC110:
     def exe_calls(self, program: ProgramText) -> frozenset[tuple[int, str]]:
         assert isinstance(program, Program)
         return exe_calls(program)
+
+    def block_search(self, program: ProgramText, at: str, modal: Modal, e_params: list[float],
+                     settings: RuntimeSettings, read: Callable[[str, int, str], int],
+                     with_calc: bool) -> tuple[int, Modal, list[float]]:
+        assert isinstance(program, Program)
+        return search(program, at, modal, e_params, settings, read, with_calc)
 
     def attach(self, host: BlockHost, reset_listeners: list[Callable[[], None]]) -> None:
         """NC-110 registers no actions of its own and keeps no state beside the engine's."""

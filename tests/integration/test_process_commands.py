@@ -355,3 +355,26 @@ def test_the_commissioning_walkthrough_runs_as_its_readme_says() -> None:
     readme = (example.folder / "README.md").read_text()
     for figure in ("10.399", "101.930", "90.798", "SA100"):
         assert figure in readme
+
+
+async def test_a_block_search_through_the_api_is_refused_or_recorded(tmp_path: Path) -> None:
+    from ncgate.errors import InputRefused, Reason
+    from ncgate.gateway.record import replay
+
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1G1F600\nN2(WAI,SA1=1)\nN3X10\nN4M30\n")
+    (tmp_path / "B.nc").write_text("N1M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.enabled": False,
+                                                           "canopen.enabled": False})
+    record = tmp_path / "session.jsonl"
+    async with Gateway(cfg, cold=True, record=record) as gw:
+        with pytest.raises(InputRefused, match=r"block search: .*A.nc:2: \(WAI,SA1=1\)") as c:
+            await gw.start("A", at="N3")
+        assert c.value.reason is Reason.BAD_VALUE
+        await gw.start("A", at="N2")  # N1 only is skipped: its G1 F600 are in force
+        await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+        gw.write("SA1", 1)
+        await gw.wait_idle(timeout_s=10)
+    lines = [line for line in record.read_text().splitlines() if '"input": "start"' in line]
+    assert len(lines) == 1 and '"at": "N2"' in lines[0]
+    assert replay(record).divergence is None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -640,3 +641,34 @@ def test_breakpoints_are_parsed_as_engineers_write_them() -> None:
     for bad in ("", "P0 N4", "P2 sync", "wait forever", "PROG92:0", "X40"):
         with pytest.raises(ValueError):
             parse_breakpoint(bad)
+
+
+def test_a_block_search_starts_at_a_label_or_n_with_the_modal_state_before_it() -> None:
+    """Start at N40: G1, F600, G91 and X10 of the blocks before it are in force, nothing of
+    them acted (no SYVAR write ran, no time passed); with calculation E1 is 5."""
+    text = "N10G1F600\nN20E1=5\nN30G91X10\nN40XE1\nN50SYVAR1=E1\nN60M30\n"
+    sim = make_sim({"A": text})
+    engine = sim.engine
+    engine.start("A", at="N40", with_calc=True)
+    sim.run()
+    # N40 moves X by E1 = 5 mm (incremental) from X10 at F600: 0.5 s.
+    assert sim.first("end", proc=1)["t"] == pytest.approx(0.5)
+    assert engine.processes[1].actual[0] == pytest.approx(15.0)
+    assert [e["value"] for e in sim.events("write")] == [5]
+    assert sim.first("start", proc=1)["t"] == 0.0
+
+    sim = make_sim({"A": text})
+    sim.engine.start("A", at="N40")  # without calculation: E1 stays 0, no move
+    sim.run()
+    assert sim.engine.processes[1].actual[0] == pytest.approx(10.0)
+
+
+def test_a_block_search_is_refused_where_the_skipped_blocks_sync() -> None:
+    programs = {"A": '"L"N1G1X1F600\nN2(SND,2)\nN3X2\nN4(BNC,L)\nN5M30\n', "B": "N1M30\n"}
+    sim = make_sim(programs)
+    for at, reason in (("N3", "(SND,2) is a synchronisation code"),
+                       ("N5", "(SND,2) is a synchronisation code"),
+                       ("N9", "no block N9"), ("NOWHERE", "no label")):
+        with pytest.raises(ValueError, match=re.escape(reason)):
+            sim.engine.start("A", at=at)
+    assert sim.engine.status(1).state is ProcessState.IDLE and sim.events("start") == []
