@@ -138,7 +138,10 @@ class Gateway:
         self._runtime, self._driver = runtime, driver
         stack.callback(self._stop_clock)
         stack.callback(self._stop_loading)
-        self.door = Door(runtime, lambda: runtime.plc, sync=self._sync_clock)
+        # The clock is brought to now before each input acts: what was due before it happens
+        # first, at its own time (jumping the clock past due timers would start what follows
+        # them late, and a write storm would slow the machine down).
+        self.door = Door(runtime, lambda: runtime.plc, sync=driver.catch_up)
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
             runtime.trace.subscribe(listener)
@@ -289,13 +292,6 @@ class Gateway:
 
     # -- acting as the operator and as a PLC -----------------------------------------------
 
-    def _sync_clock(self) -> None:
-        """Bring the engine to now before an input acts: what was due before it happens
-        first, at its own time (jumping the clock past due timers would start what follows
-        them late, and a write storm would slow the machine down)."""
-        assert self._driver is not None
-        self._driver.catch_up()
-
     def _settle(self) -> None:
         """Run what an outside input made runnable, at the input's time."""
         assert self._driver is not None
@@ -309,8 +305,14 @@ class Gateway:
         A start (or a cycle start) of a program not read yet is read and checked off the
         loop first (the fieldbus is served meanwhile); then the input acts, and a refusal
         of it then is logged.  :meth:`apply_async` waits for that and raises it."""
-        if self._driver is None:
+        driver = self._driver
+        if driver is None:
             raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+        kind = type(item)
+        if kind is Writes or kind is Write:  # the fieldbus's every request: straight through
+            self.door.apply(item)
+            driver.settle()
+            return
         self.door.precheck(item)  # what can be refused without the program: at once
         load = self._load_needed(item)
         if load is not None:

@@ -178,7 +178,10 @@ class Writes:
 
     def __post_init__(self) -> None:
         try:
-            if type(self.changes) is tuple and all(type(var) is Var for var, _ in self.changes):
+            changes = self.changes
+            if type(changes) is tuple and (
+                    (len(changes) == 1 and type(changes[0][0]) is Var)
+                    or all(type(var) is Var for var, _ in changes)):
                 return  # the fieldbus's way (Var.at): nothing to convert
             changes = tuple((Var.of(var), value) for var, value in self.changes)
         except (TypeError, ValueError):

@@ -13,8 +13,7 @@ only: the interpreter reaches it through its own protocol, the gateway wires the
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 from ncgate.errors import NcgateError
 
@@ -33,15 +32,18 @@ class ImageValueError(PlcError, ValueError):
     """A value the variable's type cannot hold (never wrapped silently)."""
 
 
-@dataclass(frozen=True, slots=True)
-class Change:
-    """One stored value: what a listener of the image is told."""
+class Change(NamedTuple):
+    """One stored value: what a listener of the image is told.  (A NamedTuple: one is made
+    for every value of every fieldbus write.)"""
 
     area: str
-    index: int
+    index: int  # type: ignore[assignment]  # (shadows tuple.index, as the field name it is)
     view: str
     value: int
     old: int
+
+
+_new = tuple.__new__  # a Change without NamedTuple's generated __new__ (the write hot path)
 
 
 Listener = Callable[[Sequence[Change], str], None]
@@ -146,7 +148,7 @@ class IOImage:
             keys = self._store(area, index, view, value, old)
             for key in self._keys(area, index, view):
                 self._writers[key] = stamp
-            change = Change(area, index, view, value, old)
+            change = _new(Change, (area, index, view, value, old))
             written.append(change)
             if keys:
                 touched.update(keys)
