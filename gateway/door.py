@@ -31,6 +31,7 @@ from ncgate.inputs import (
     Command,
     CommandKind,
     FieldbusAlarm,
+    Force,
     Input,
     Override,
     Snd,
@@ -120,6 +121,8 @@ class Door:
             self._override(item)  # type: ignore[arg-type]
         elif kind is Break:
             self._break(item)  # type: ignore[arg-type]
+        elif kind is Force:
+            self._force(item)  # type: ignore[arg-type]
         else:
             raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
 
@@ -201,6 +204,25 @@ class Door:
             plc = self._plc()
             if plc is not None and process is None:  # a reset of the cell also restarts a
                 plc.restart()  # faulted PLC
+
+    def _force(self, item: Force) -> None:
+        image, engine = self.runtime.image, self.runtime.engine
+        var, value = item.var, item.value
+        if var is None:
+            if value is not None:
+                raise InputRefused(Reason.BAD_VALUE, "a force names its variable")
+            self._enter(item)
+            image.unforce()
+            engine.note_force(None, None, str(item.source))
+            return
+        if value is not None:
+            self.image_changes(((var, value),))  # the address and the value, or refused
+        self._enter(item)
+        if value is None:
+            image.unforce(var.area, var.index, var.view)
+        else:
+            image.force(var.area, var.index, var.view, value, str(item.source))
+        engine.note_force(str(var), value, str(item.source))
 
     def _break(self, item: Break) -> None:
         if not isinstance(item.on, bool):

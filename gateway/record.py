@@ -55,6 +55,7 @@ from ncgate.inputs import (
     Command,
     CommandKind,
     FieldbusAlarm,
+    Force,
     Input,
     Override,
     Snd,
@@ -77,7 +78,7 @@ COMPARED: dict[str, tuple[str, ...]] = {
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
-                    "remove", "override", "break"})
+                    "remove", "override", "break", "force", "forced"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
@@ -127,6 +128,9 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
         out.update(input="override", feed=item.feed, rapid=item.rapid, process=item.process)
     elif isinstance(item, Break):
         out.update({"input": "break", "at": item.at, "on": item.on})
+    elif isinstance(item, Force):
+        out.update(input="force", var=list(item.var.address) if item.var else None,
+                   value=item.value)
     else:
         out.update(input="alarm", code=int(item.code), message=item.message)
     return out
@@ -208,6 +212,17 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
         if code not in ALARMS:
             raise ValueError(f'"code": {code} is no alarm of the fieldbus side')
         return t, FieldbusAlarm(code, _field(item, "message", str, "a text"), source)
+    if kind == "force":
+        raw = _field(item, "var", list, "[area, index, view] or null", optional=True)
+        var = None
+        if raw is not None:
+            if not (len(raw) == 3 and raw[0] in ("SA", "SK", "SYVAR") and raw[2] in (
+                    "bit", "BY", "IN") and isinstance(raw[1], int)
+                    and not isinstance(raw[1], bool)):
+                raise ValueError(f'"var": {json.dumps(raw)} names no image variable')
+            var = Var(raw[0], raw[1], raw[2])
+        return t, Force(var, _field(item, "value", int, "a value or null", optional=True),
+                        source)
     if kind == "break":
         return t, Break(_field(item, "at", str, "a breakpoint such as \"PROG92:8\""),
                         _field(item, "on", bool, "true (set) or false (clear)"), source)
@@ -217,7 +232,7 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
                            _field(item, "process", int, "a process number, or null for the "
                                   "cell", optional=True), source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
-                     "alarm, override, break)")
+                     "alarm, override, break, force)")
 
 
 def _check_event(item: dict[str, Any]) -> None:

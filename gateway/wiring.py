@@ -66,6 +66,12 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
                               change.value, writer)
 
     image.subscribe(on_write)  # type: ignore[arg-type]
+
+    def on_overridden(changes: list[tuple[str, int, str, int]], writer: str) -> None:
+        for area, index, view, value in changes:
+            engine.note_forced(variable_name(area, index, view), value, writer)
+
+    image.on_overridden = on_overridden
     interlocks = tuple((what, _image_var(text)) for what, text in (
         ("feed hold", config.nc.feed_hold_input),
         ("cycle start inhibit", config.nc.cycle_start_inhibit_input)) if text)

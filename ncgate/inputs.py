@@ -280,8 +280,38 @@ class Break:
     source: Source = API
 
 
-Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break
+@dataclass(frozen=True, slots=True)
+class Force:
+    """Force ``var`` to ``value`` (kept whatever writes it) or, ``value`` None, release it;
+    ``var`` None (and ``value`` None): release every forced variable."""
 
-__all__ = ["API", "Break", "Command", "CommandKind", "FieldbusAlarm", "Input", "InputRefused",
-           "Override", "Reason", "Snd", "Source", "SourceKind", "Start", "Var", "Write",
-           "Writes"]
+    var: Var | None
+    value: int | None = None
+    source: Source = API
+
+    def __post_init__(self) -> None:
+        if self.var is not None and type(self.var) is not Var:
+            object.__setattr__(self, "var", Var.of(self.var))
+
+
+Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break | Force
+
+__all__ = [
+    "API",
+    "Break",
+    "Command",
+    "CommandKind",
+    "FieldbusAlarm",
+    "Force",
+    "Input",
+    "InputRefused",
+    "Override",
+    "Reason",
+    "Snd",
+    "Source",
+    "SourceKind",
+    "Start",
+    "Var",
+    "Write",
+    "Writes",
+]

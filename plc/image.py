@@ -82,6 +82,13 @@ class IOImage:
         self._waits: dict[_Key, set[Wait]] = {}
         self._writers: dict[_Key, tuple[int, str]] = {}  # key -> (write number, writer)
         self._listeners: list[Listener] = []
+        # Forcing: the forced variables, as given, and what they make of each write -- per
+        # SA/SK byte the bits forced and their values, the SYVARs forced.  ``on_overridden``
+        # hears every write a force changed or dropped: (area, index, view, value tried).
+        self.forced: dict[tuple[str, int, str], int] = {}
+        self._force_bytes: dict[tuple[str, int], tuple[int, int]] = {}
+        self._force_syvars: dict[int, int] = {}
+        self.on_overridden: Callable[[list[tuple[str, int, str, int]], str], None] | None = None
         self.generation = 0  # +1 on every write that changed something
         self._write_number = 0
 
@@ -138,6 +145,8 @@ class IOImage:
         if not checked:
             for area, index, view, value in items:
                 self.check(area, index, view, value)
+        if self.forced:
+            items = self._apply_forces(items, writer)
         done: list[Change] = []
         written: list[Change] = []
         touched: set[_Key] = set()
@@ -162,6 +171,84 @@ class IOImage:
         if touched:
             self._wake(touched)
         return done
+
+    # -- forcing --------------------------------------------------------------------------
+
+    def force(self, area: str, index: int, view: str, value: int, writer: str) -> None:
+        """Force a variable to ``value``: stored now, and kept whatever writes it after
+        (PLC logic, the fieldbus, programs) until :meth:`unforce`."""
+        self.check(area, index, view, value)
+        self.forced[(area, index, view)] = value
+        self._force_index()
+        self.write([(area, index, view, value)], writer, checked=True)
+
+    def unforce(self, area: str | None = None, index: int = 0, view: str = "") -> None:
+        """Release one forced variable (``area`` None: every one); its value stays."""
+        if area is None:
+            self.forced.clear()
+        else:
+            self.forced.pop((area, index, view), None)
+        self._force_index()
+
+    def _force_index(self) -> None:
+        self._force_bytes.clear()
+        self._force_syvars.clear()
+        for (area, index, view), value in self.forced.items():
+            if area == "SYVAR":
+                self._force_syvars[index] = value
+                continue
+            if view == "bit":
+                pieces = [(index >> 3, 1 << (index & 7), (value & 1) << (index & 7))]
+            elif view == "BY":
+                pieces = [(index, 0xFF, value)]
+            else:
+                word = value & 0xFFFF
+                pieces = [(index, 0xFF, word & 0xFF), (index + 1, 0xFF, word >> 8)]
+            for byte, mask, bits in pieces:
+                old_mask, old_bits = self._force_bytes.get((area, byte), (0, 0))
+                self._force_bytes[(area, byte)] = (old_mask | mask,
+                                                   (old_bits & ~mask) | bits)
+
+    def _apply_forces(self, items: list[tuple[str, int, str, int]],
+                      writer: str) -> list[tuple[str, int, str, int]]:
+        """The writes as the forces let them through: forced bits (and SYVARs) are written
+        with their forced values whatever the write said; every write changed so is told to
+        ``on_overridden``."""
+        out = []
+        overridden = []
+        forced_bytes = self._force_bytes
+        for change in items:
+            area, index, view, value = change
+            if area == "SYVAR":
+                forced = self._force_syvars.get(index)
+                if forced is not None and value != forced:
+                    overridden.append(change)
+                    change = (area, index, view, forced)
+                out.append(change)
+                continue
+            if view == "bit":
+                mask, bits = forced_bytes.get((area, index >> 3), (0, 0))
+                bit = 1 << (index & 7)
+                if mask & bit and (value << (index & 7)) != (bits & bit):
+                    overridden.append(change)
+                    change = (area, index, view, 1 if bits & bit else 0)
+                out.append(change)
+                continue
+            if view == "BY":
+                mask, bits = forced_bytes.get((area, index), (0, 0))
+                kept = (value & ~mask) | bits
+            else:
+                word = value & 0xFFFF
+                lo_mask, lo_bits = forced_bytes.get((area, index), (0, 0))
+                hi_mask, hi_bits = forced_bytes.get((area, index + 1), (0, 0))
+                kept = (((word >> 8) & ~hi_mask | hi_bits) << 8) | ((word & ~lo_mask) | lo_bits)
+                kept = kept - 0x10000 if kept & 0x8000 else kept
+            if kept != value:
+                overridden.append(change)
+            out.append((area, index, view, kept))
+        if overridden and self.on_overridden is not None:
+            self.on_overridden(overridden, writer)
+        return out
 
     def _store(self, area: str, index: int, view: str, value: int, old: int) -> list[_Key]:
         """Store one value; the keys whose storage changed."""

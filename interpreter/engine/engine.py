@@ -612,6 +612,15 @@ class Engine:
         else:
             self._record(ev.Write, self.now, 0, None, name, value, who)
 
+    def note_force(self, var: str | None, value: int | None, who: str) -> None:
+        """A force set (or released: ``value`` None) from outside: in the trace."""
+        self.last_change = self.now
+        self._record(ev.Force, self.now, 0, None, var, value, who)
+
+    def note_forced(self, var: str, value: int, who: str) -> None:
+        """A write a force overrode (``value``: what ``who`` tried to store)."""
+        self._record(ev.Forced, self.now, 0, None, var, value, who)
+
     def note_hazard(self, proc: int, message: str) -> None:
         """Record a hazard found outside the engine (a script's SND that could not go)."""
         self._record(ev.Hazard, self.now, proc, None, message)

@@ -264,8 +264,40 @@ class Break(NamedTuple):
         return "break"
 
 
+class Force(NamedTuple):
+    """A variable forced (``value``) or released (``value`` None; ``var`` None: every one)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    var: str | None
+    value: int | None
+    who: str
+
+    @property
+    def kind(self) -> str:
+        return "force"
+
+
+class Forced(NamedTuple):
+    """A write a force overrode: ``value`` is what ``who`` tried to store."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    var: str
+    value: int
+    who: str
+
+    @property
+    def kind(self) -> str:
+        return "forced"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
-         | Display | Signal | Remove | Override | Break)
+         | Display | Signal | Remove | Override | Break | Force | Forced)
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).
 COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})
