@@ -118,6 +118,37 @@ def _image_input(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) 
     return text.upper()
 
 
+_SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _symbols(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("symbols", {})
+    if not isinstance(raw, dict):
+        raise r.fail(key, "expected a table of NAME = \"SA10\"")
+    out: dict[str, str] = {}
+    seen: dict[str, str] = {}
+    for name, entry in raw.items():
+        item = f"{key}.{name}"
+        if isinstance(entry, dict):
+            unknown = set(entry) - {"var", "comment"}
+            if unknown:
+                raise r.fail(f"{item}.{sorted(unknown)[0]}", "unknown key (var, comment)")
+            entry = entry.get("var")
+        if not isinstance(entry, str) or _VE_MAP.match(entry) is None:
+            raise r.fail(item, f"expected an image variable (SA10, SA2.BY, SK3, SK4.IN, "
+                         f"SYVAR5), got {entry!r}")
+        if not _SYMBOL.match(name) or _VE_MAP.match(name) or re.fullmatch(
+                r"(SA|SK|K|SYVAR|E)\d.*", name, re.IGNORECASE):
+            raise r.fail(item, "a name is letters, digits and _, and not an image variable's "
+                         "own (SA10, K3, SYVAR5, E1)")
+        if name.upper() in seen:
+            raise r.fail(item, f"{name!r} is {seen[name.upper()]!r} already (names are not "
+                         "case-sensitive)")
+        seen[name.upper()] = name
+        out[name] = entry.upper()
+    return out
+
+
 def _process_main(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
     return r.str_(t["main"], key) if "main" in t else ""
 
@@ -569,6 +600,10 @@ class Config:
     canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
     trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
     web: WebConfig = setting(doc="[web]", factory=WebConfig)
+    symbols: Mapping[str, str] = setting(
+        doc="[symbols]: I/O names, NAME = \"SA10\" (or { var = \"SA10\", comment = \"...\" }): "
+        "usable wherever a variable is named (API, sim script) and shown beside it",
+        parse=_symbols, factory=dict)
     source: Path | None = None  # the file it came from (None: built-in default); not a key
 
 
@@ -771,6 +806,7 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
     in_image = [(f"nc.ve.{name}.map", ve.map) for name, ve in nc.ve.items()]
     in_image += [(f"nc.{key}", getattr(nc, key))
                  for key in ("feed_hold_input", "cycle_start_inhibit_input") if getattr(nc, key)]
+    in_image += [(f"symbols.{name}", text) for name, text in config.symbols.items()]
     for key, text in in_image:
         found = _VE_MAP.match(text)
         assert found is not None

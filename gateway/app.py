@@ -49,7 +49,6 @@ from ncgate.inputs import (
     Source,
     SourceKind,
     Start,
-    Var,
     Write,
     Writes,
 )
@@ -413,11 +412,12 @@ class Gateway:
         await self.apply_async(Start(name, process, source, at, with_calc))
 
     def write(self, var: str, value: int, source: Source = API) -> None:
-        """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``)."""
-        self.apply(Write(Var.parse(var), value, source))
+        """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``, or an I/O name
+        of ``[symbols]``)."""
+        self.apply(Write(self.runtime.var(var), value, source))
 
     def read(self, var: str) -> int:
-        v = Var.parse(var)
+        v = self.runtime.var(var)
         try:
             return self.runtime.image.read(v.area, v.index, v.view)
         except ImageAddressError as exc:

@@ -145,7 +145,7 @@ class ScriptPlayer:
                 raise self._fail(entry, "when", f"process {number} is not configured")
             return StateTrigger(number, ProcessState[state_name])
         try:
-            var, op, value = parse_condition(text)
+            var, op, value = parse_condition(self.runtime.resolve(text))
             self.runtime.image.read(*var)
         except (ValueError, PlcError) as exc:
             raise self._fail(entry, "when", str(exc)) from None
@@ -185,7 +185,7 @@ class ScriptPlayer:
 
     def _write(self, entry: ScriptEntry) -> Write:
         """The entry's ``set`` as an input, checked against the image (not applied)."""
-        (area, index, view), value = parse_assignment(entry.set or "")
+        (area, index, view), value = parse_assignment(self.runtime.resolve(entry.set or ""))
         item = Write(Var(area, index, view), value, Source(SourceKind.SCRIPT, entry.key))
         self.door.image_changes(((item.var, item.value),))
         return item

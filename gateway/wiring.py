@@ -30,8 +30,9 @@ def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
     nc = config.nc
     names = {f.name for f in dataclasses.fields(RuntimeSettings)} & set(dir(nc))
     dialect = dialect_of(nc.dialect)
+    symbols = tuple((_image_var(text).address, name) for name, text in config.symbols.items())
     return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed,
-                           buffered=dialect.buffered)
+                           buffered=dialect.buffered, names=symbols)
 
 
 def front_end_of(config: Config) -> DialectFrontEnd:
@@ -49,6 +50,24 @@ class Runtime:
     # The PLC's interlock inputs, levels ("feed hold", nc.feed_hold_input; "cycle start
     # inhibit"): while one is set, a cycle start is refused (the door asks).
     interlocks: tuple[tuple[str, Var], ...] = ()
+    # The I/O names of [symbols]: NAME (upper case) -> its variable.
+    symbols: dict[str, Var] = dataclasses.field(default_factory=dict)
+
+    def var(self, text: str) -> Var:
+        """A variable named as a user names it: an I/O name (``door_closed``) or an image
+        variable (``SA10``); InputRefused (UNKNOWN_VARIABLE) otherwise."""
+        found = self.symbols.get(text.strip().upper()) if isinstance(text, str) else None
+        return found if found is not None else Var.parse(text)
+
+    def resolve(self, text: str) -> str:
+        """An assignment or condition with an I/O name on its left put back as the image
+        variable it names (``door_closed=1`` -> ``SA10=1``), for the image's parser."""
+        for i, ch in enumerate(text):
+            if ch in "=#<>":
+                name = text[:i].strip()
+                found = self.symbols.get(name.upper())
+                return f"{found}{text[i:]}" if found is not None else text
+        return text
 
 
 def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> Runtime:
@@ -75,7 +94,8 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     interlocks = tuple((what, _image_var(text)) for what, text in (
         ("feed hold", config.nc.feed_hold_input),
         ("cycle start inhibit", config.nc.cycle_start_inhibit_input)) if text)
-    return Runtime(config, image, store, engine, trace, interlocks=interlocks)
+    symbols = {name.upper(): _image_var(text) for name, text in config.symbols.items()}
+    return Runtime(config, image, store, engine, trace, interlocks=interlocks, symbols=symbols)
 
 
 def _image_var(text: str) -> Var:

@@ -108,6 +108,7 @@ class WaitRecord:
     text: str | Callable[[], str] | None = None
     targets: tuple[int, ...] | None = None
     note: Callable[[], str | None] | None = None
+    name: str | None = None  # a condition's variable's I/O name ([symbols]), shown beside it
 
     def describe(self, proc: int) -> str:
         return f"P{proc} {describe_where(self.where)} {self.code}"
@@ -118,7 +119,8 @@ class WaitRecord:
         if self.kind is WaitKind.COND:
             value, writer = self.probe() if self.probe is not None else (self.value, self.writer)
             by = f", last written by {writer}" if writer else ""
-            return f"waits for {self.cond} (now {fmt_number(value)}{by})"
+            cond = f"{self.name} ({self.cond})" if self.name else self.cond
+            return f"waits for {cond} (now {fmt_number(value)}{by})"
         return {WaitKind.PROC: f"waits for an SND from P{self.target}",
                 WaitKind.SND: f"waits for P{self.target} to take its SND",
                 WaitKind.EXE: f"waits for P{self.target} to be free",

@@ -107,6 +107,7 @@ class Sync:
         self._alarm = host.alarm
         self._start_program = host.start_program
         self._kick = host.kick
+        self._names = dict(host.settings.names)
         # Whether something outside the programs may still start a program in a process (an
         # orphan wait is one nothing can end).  Open cell (run, the Gateway API): the
         # operator may start any process (console Start, Gateway.start), so yes.  Closed
@@ -268,6 +269,8 @@ class Sync:
         area, index, view = cond.area, cond.index, cond.view
         wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self._host.now, stage,
                           cond=cond.text)
+        if self._names:
+            wait.name = self._names.get((area, index, view))
 
         def satisfied() -> None:
             wait.handle = None

@@ -1,0 +1,65 @@
+"""I/O names (issue 28, item 3): [symbols] names image variables; the API and the sim script
+take a name wherever they take a variable, and a wait's why-record shows it beside."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ncgate.config import ConfigError, load_config
+from ncgate.config.script import load_script
+from ncgate.gateway import Gateway
+from ncgate.gateway.sim import run_sim
+
+CELL = """[nc]
+main = "A"
+[nc.storage]
+MP0 = "."
+[canopen]
+enabled = false
+[symbols]
+door_closed = "SA10"
+spindle_speed = { var = "SYVAR3", comment = "rpm / 10" }
+"""
+
+
+def _cell(tmp_path: Path) -> Path:
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1(WAI,SA10=1)\nN2SYVAR4=SYVAR3\nN3M30\n")
+    return tmp_path / "ncgate.toml"
+
+
+async def test_the_api_writes_and_reads_by_name_and_the_why_record_shows_it(
+        tmp_path: Path) -> None:
+    async with Gateway(load_config(_cell(tmp_path), overrides={"modbus.port": 0})) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+        assert "waits for door_closed (SA10=1) (now 0" in gw.describe_blocked()
+        gw.write("spindle_speed", 120)
+        gw.write("DOOR_CLOSED", 1)  # names are not case-sensitive
+        await gw.wait_idle(timeout_s=10)
+        assert gw.read("SYVAR4") == 120 and gw.read("door_closed") == 1
+
+
+def test_the_sim_script_takes_names(tmp_path: Path) -> None:
+    (tmp_path / "s.toml").write_text('[[write]]\nwhen = "P1 WAIT_COND"\nafter = 1.0\n'
+                                     'set = "door_closed=1"\n[[write]]\nat = 0.5\n'
+                                     'set = "spindle_speed=7"\n')
+    result = run_sim(load_config(_cell(tmp_path)), "A", load_script(tmp_path / "s.toml"))
+    assert result.exit_status == 0
+    writes = [(e["var"], e["value"], e["t"]) for e in result.events if e["event"] == "write"]
+    assert writes == [("SYVAR3", 7, 0.5), ("SA10", 1, 1.0), ("SYVAR4", 7, 1.0)]
+
+
+@pytest.mark.parametrize(("table", "message"), [
+    ('door = "SA99999"', "symbols.door: SA99999 is outside the image"),
+    ('door = "X10"', "symbols.door: expected an image variable"),
+    ('SA12 = "SA10"', "symbols.SA12: a name is letters"),
+    ('door = "SA10"\nDOOR = "SA11"', "symbols.DOOR: 'DOOR' is 'door' already"),
+])
+def test_a_bad_name_is_a_config_error_naming_the_key(tmp_path: Path, table: str,
+                                                     message: str) -> None:
+    (tmp_path / "ncgate.toml").write_text(f"[symbols]\n{table}\n")
+    with pytest.raises(ConfigError, match=message):
+        load_config(tmp_path / "ncgate.toml")
