@@ -107,6 +107,9 @@ class WebConsole:
         self.address: tuple[str, int] | None = None
         self.streams = 0
         self._feed: EventFeed | None = None
+        # (position, the feed's seq) -> (the position after, the event messages): streams at
+        # one position share one rendering of a batch (50 pages cost one, not fifty).
+        self._batches: dict[tuple[int, int], tuple[int, str]] = {}
         self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
@@ -227,11 +230,26 @@ class WebConsole:
         image = request.query.get("image", "1") != "0"
         return web.json_response(status(self.gw, image=image))
 
+    def _batch(self, feed: EventFeed, position: int) -> tuple[int, str]:
+        """The event messages after ``position`` and the position after them, made once for
+        every stream that stands there."""
+        key = (position, feed.seq)
+        found = self._batches.get(key)
+        if found is None:
+            texts, missed = feed.since(position)
+            after = position + missed + len(texts)
+            found = (after, "".join(event_messages(texts, missed, after)) if texts else "")
+            if len(self._batches) >= 256:
+                self._batches.clear()
+            self._batches[key] = found
+        return found
+
     async def _events(self, request: web.Request) -> web.StreamResponse:
         assert self._feed is not None
         since = _int_query(request, "since", 0)
         texts, missed = self._feed.since(since)
-        body = f'{{"seq":{self._feed.seq},"missed":{missed},"events":[{",".join(texts)}]}}'
+        last = since + missed + len(texts) if texts else self._feed.seq  # (paged: ask again)
+        body = f'{{"seq":{last},"missed":{missed},"events":[{",".join(texts)}]}}'
         return web.Response(text=body, content_type="application/json")
 
     async def _programs(self, request: web.Request) -> web.StreamResponse:
@@ -298,15 +316,17 @@ class WebConsole:
                         messages += status_messages(changed)
                         sent.update(changed)
                         status_at = now
-                texts, missed = feed.since(position)
-                if texts:
-                    position += missed + len(texts)
-                    messages += event_messages(texts, missed, position)
+                position, text = self._batch(feed, position)
+                if text:
+                    messages.append(text)
                 if not messages and now - written_at >= PING_S:
                     messages.append(": ping\n\n")
                 if messages:
                     await self._send(response, "".join(messages))
                     written_at = now
+                if position < feed.seq:  # more than one read's worth: the rest at once
+                    await asyncio.sleep(0)
+                    continue
                 await feed.wait(STATUS_EVERY_S)
         except (ConnectionResetError, TimeoutError):
             pass  # the client went away (or read nothing for WRITE_TIMEOUT_S): its stream ends

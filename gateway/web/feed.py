@@ -1,8 +1,12 @@
 """The live stream's source: trace events for every console client, kept once.
 
 A trace listener only appends the typed event (it is on the path of every SND and WAI); at
-most once per BATCH_S (at once when the last batch is older) the new events are rendered to
-JSON, kept in one shared ring, and every waiting stream is woken.  So a stream sends at most
+most once per BATCH_S (at once when the last batch is older) the new events go into one
+shared ring, and every waiting stream is woken.  An event is rendered to JSON when a stream
+first asks for it (then kept rendered), at most SINCE_MAX at a time: with no page open
+nothing is rendered, and a busy cell's 50 ms of events never make one long callback that
+holds up the fieldbus (rendering a batch in the flush took 4 ms every 50 ms at the storm
+bench's rate).  So a stream sends at most
 one batch of events per BATCH_S whatever the rate: a PLC that writes 2,000 times a second
 gives a page 20 messages, not 2,000 (one message per write put the page minutes behind).
 A stream keeps only its position (a sequence number): memory does
@@ -23,13 +27,15 @@ from ncgate.interpreter.engine.events import Event, as_dict
 
 RING = 5000  # events kept for streams that connect or fall behind
 BATCH_S = 0.05  # events reach the streams at most this often (bench/console_browser.py)
+SINCE_MAX = 500  # events rendered for one read of the ring (about 0.5 ms); the rest next time
 
 
 class EventFeed:
     def __init__(self, loop: asyncio.AbstractEventLoop, keep: int = RING) -> None:
         self._loop = loop
         self._pending: list[Event] = []
-        self._ring: deque[tuple[int, str]] = deque(maxlen=keep)  # (seq, JSON)
+        # [seq, the event -- or its JSON once a stream asked for it]
+        self._ring: deque[list[int | Event | str]] = deque(maxlen=keep)
         self._flush: asyncio.Handle | None = None
         self._tick: asyncio.Future[None] | None = None
         self._flushed_at = -1e9  # loop time of the last flush
@@ -48,9 +54,11 @@ class EventFeed:
         self._flush = None
         self._flushed_at = self._loop.time()
         pending, self._pending = self._pending, []
+        ring = self._ring
         for event in pending:
-            self._ring.append((event.seq, json.dumps(as_dict(event), separators=(",", ":"))))
-            self.seq = event.seq
+            ring.append([event.seq, event])
+        if pending:
+            self.seq = pending[-1].seq
         self.wake()
 
     def wake(self) -> None:
@@ -68,17 +76,25 @@ class EventFeed:
                 await asyncio.shield(self._tick)
 
     def since(self, seq: int) -> tuple[list[str], int]:
-        """The events after ``seq`` as JSON texts, and how many were missed (out of the ring)."""
+        """The events after ``seq`` as JSON texts (at most SINCE_MAX: ask again for the
+        rest), and how many were missed (out of the ring)."""
         ring = self._ring
-        if not ring or ring[-1][0] <= seq:
+        if not ring or ring[-1][0] <= seq:  # type: ignore[operator]
             return [], 0
-        first = ring[0][0]
-        if seq < first - 1:
-            return [text for _, text in ring], first - 1 - seq
+        first: int = ring[0][0]  # type: ignore[assignment]
+        last: int = ring[-1][0]  # type: ignore[assignment]
+        missed = first - 1 - seq if seq < first - 1 else 0
         # The ring's sequence numbers are consecutive: the events after seq are its last
         # (last - seq) entries, read from the right end (cheap on a deque).
-        count = ring[-1][0] - seq
-        return [ring[-k][1] for k in range(count, 0, -1)], 0
+        count = min(last - max(seq, first - 1), len(ring))
+        out = []
+        for k in range(count, max(count - SINCE_MAX, 0), -1):
+            entry = ring[-k]
+            item = entry[1]
+            if not isinstance(item, str):
+                item = entry[1] = json.dumps(as_dict(item), separators=(",", ":"))  # type: ignore[arg-type]
+            out.append(item)
+        return out, missed
 
     def close(self) -> None:
         self.closed = True
