@@ -51,6 +51,7 @@ log = logging.getLogger("ncgate.web")
 
 STATUS_EVERY_S = 0.25  # a stream's status at most this often (and when anything changed)
 MESSAGE_BYTES = 64 * 1024  # a stream's message (one data line) at most this long
+STREAMS_PER_TURN = 8  # streams that send in one loop turn; the others in the next ones
 PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients keep it
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
@@ -110,6 +111,10 @@ class WebConsole:
         # (position, the feed's seq) -> (the position after, the event messages): streams at
         # one position share one rendering of a batch (50 pages cost one, not fifty).
         self._batches: dict[tuple[int, int], tuple[int, str]] = {}
+        # Streams take turns: at most STREAMS_PER_TURN of them send in one loop turn, so that
+        # fifty pages woken by one batch do not hold the fieldbus up for one long turn.
+        self._turn_count = 0
+        self._next_turn: asyncio.Future[None] | None = None
         self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
@@ -230,6 +235,21 @@ class WebConsole:
         image = request.query.get("image", "1") != "0"
         return web.json_response(status(self.gw, image=image))
 
+    async def _take_turn(self, loop: asyncio.AbstractEventLoop) -> None:
+        while self._turn_count >= STREAMS_PER_TURN:
+            if self._next_turn is None:
+                self._next_turn = loop.create_future()
+            await self._next_turn
+        if self._turn_count == 0:  # the first of this turn: the count starts again after it
+            loop.call_soon(self._new_turn)
+        self._turn_count += 1
+
+    def _new_turn(self) -> None:
+        self._turn_count = 0
+        turn, self._next_turn = self._next_turn, None
+        if turn is not None and not turn.done():
+            turn.set_result(None)
+
     def _batch(self, feed: EventFeed, position: int) -> tuple[int, str]:
         """The event messages after ``position`` and the position after them, made once for
         every stream that stands there."""
@@ -307,6 +327,7 @@ class WebConsole:
             loop = asyncio.get_running_loop()
             await self._send(response, "retry: 1000\n\n")
             while not feed.closed and not _gone(request):
+                await self._take_turn(loop)
                 messages: list[str] = []
                 now = loop.time()
                 if now - status_at >= STATUS_EVERY_S:  # first: it names the session
