@@ -64,7 +64,10 @@ class QuietNc:
     def last_snd(self) -> tuple[int, int, int]:
         return (0, 0, 0)
 
-    def command(self, word: int, where: str) -> None:
+    def command(self, word: int, where: str, process: int | None = None) -> None:
+        pass
+
+    def override(self, feed: int, where: str, process: int | None = None) -> None:
         pass
 
     def send(self, sender: int, target: int, where: str) -> None:

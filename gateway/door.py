@@ -279,6 +279,10 @@ class Door:
 
     def _interlocks(self, kind: CommandKind) -> None:
         """A cycle start while a PLC interlock input is set is refused, saying which."""
+        plc = self._plc()
+        if plc is not None and plc.hold_level:
+            raise InputRefused(Reason.INTERLOCK, f"{kind.label}: the PLC's NC.HOLD_LEVEL is "
+                               "set")
         image = self.runtime.image
         for key, var in self.runtime.interlocks:
             if image.read(var.area, var.index, var.view):

@@ -24,7 +24,15 @@ from ncgate.config import Config, ConfigError
 from ncgate.config.state import state_folder
 from ncgate.gateway.door import Door
 from ncgate.gateway.wiring import Runtime
-from ncgate.inputs import Command, CommandKind, FieldbusAlarm, Snd, Source, SourceKind
+from ncgate.inputs import (
+    Command,
+    CommandKind,
+    FieldbusAlarm,
+    Override,
+    Snd,
+    Source,
+    SourceKind,
+)
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.states import WAITING_STATES
@@ -99,8 +107,11 @@ class EngineNc:
         last = self.engine.last_snd
         return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
 
-    def command(self, word: int, where: str) -> None:
-        self.door.apply(Command(CommandKind(word), None, Source(SourceKind.PLC, where)))
+    def command(self, word: int, where: str, process: int | None = None) -> None:
+        self.door.apply(Command(CommandKind(word), process, Source(SourceKind.PLC, where)))
+
+    def override(self, feed: int, where: str, process: int | None = None) -> None:
+        self.door.apply(Override(feed, None, process, Source(SourceKind.PLC, where)))
 
     def send(self, sender: int, target: int, where: str) -> None:
         self.door.apply(Snd(sender, target, Source(SourceKind.PLC, where)))

@@ -64,8 +64,13 @@ class NcPort(Protocol):
 
     def last_snd(self) -> tuple[int, int, int]: ...  # sender, target, sequence
 
-    # 1 cycle start, 2 feed hold, 3 reset; ``where``: FILE:LINE of the logic that gave it
-    def command(self, word: int, where: str) -> None: ...
+    # The command word (1 cycle start, 2 feed hold, 3 reset, 8/9 optional stop, 10/11 block
+    # skip), of the cell or of ``process``; ``where``: FILE:LINE of the logic that gave it.
+    # InputRefused when it cannot go (said as a hazard).
+    def command(self, word: int, where: str, process: int | None = None) -> None: ...
+
+    # The feed override in percent, of the cell or of ``process``.
+    def override(self, feed: int, where: str, process: int | None = None) -> None: ...
 
     # InputRefused when it cannot go (said as a hazard)
     def send(self, sender: int, target: int, where: str) -> None: ...
@@ -130,8 +135,17 @@ class PlcRuntime:
             (sender, target, where))
         self._outputs: list[bool] = ns["_NCO"]
         self._outputs_at: list[str] = ns["_NCW"]
+        self._process_outputs: list[list[bool]] = ns["_NCP"]
+        self._process_outputs_at: list[list[str]] = ns["_NCPW"]
+        self._overrides: list[int] = ns["_NCV"]
+        self._overrides_at: list[str] = ns["_NCVW"]
+        self._process_overrides: list[int] = ns["_NCPV"]
+        self._process_overrides_at: list[str] = ns["_NCPVW"]
         ns["_guard"] = self._guard
-        self._last_outputs = [False, False, False]
+        self._last_outputs = [False] * len(self._outputs)
+        self._last_process_outputs = [[False] * 3 for _ in self._process_outputs]
+        self._last_overrides = [100]
+        self._last_process_overrides = [100] * len(self._process_overrides)
         self._retained = [(p, v) for p, table in logic.programs.items()
                           for v in table.values() if v.retain]
         self._saved: dict[str, tuple[str, Any]] | None = None
@@ -148,8 +162,15 @@ class PlcRuntime:
         """(Re)create the program instances: initial values, then the RETAIN ones."""
         self.programs = {key: self.logic.new_program(key) for key in self.logic.programs}
         self._runs = [self.programs[key] for key in self.order]
-        self._outputs[:] = [False, False, False]
-        self._last_outputs = [False, False, False]
+        self._outputs[:] = [False] * len(self._outputs)
+        self._last_outputs = [False] * len(self._outputs)
+        for outputs in self._process_outputs:
+            outputs[:] = [False, False, False]
+        self._last_process_outputs = [[False] * 3 for _ in self._process_outputs]
+        self._overrides[:] = [100]
+        self._last_overrides = [100]
+        self._process_overrides[:] = [100] * len(self._process_overrides)
+        self._last_process_overrides = [100] * len(self._process_overrides)
         self._sends.clear()
         if self.retain is not None:
             self._apply_retained(self.retain.load())
@@ -233,19 +254,55 @@ class PlcRuntime:
                     if old != new]
         return out
 
+    @property
+    def hold_level(self) -> bool:
+        """NC.HOLD_LEVEL as the last scan left it: while TRUE the NC refuses a cycle start."""
+        return bool(self._last_outputs[5]) and self.status.state is PlcState.RUNNING
+
     def _act(self) -> None:
         outputs, last = self._outputs, self._last_outputs
         if outputs != last:
             for i, word in enumerate((1, 2, 3)):
                 if outputs[i] and not last[i]:  # NC.START/HOLD/RESET act on a rising edge
-                    self.nc.command(word, self._outputs_at[i])
+                    self._command(word, self._outputs_at[i])
+            for i, on, off in ((3, 8, 9), (4, 10, 11)):  # OPT_STOP, BLOCK_SKIP: levels
+                if bool(outputs[i]) != bool(last[i]):
+                    self._command(on if outputs[i] else off, self._outputs_at[i])
+            if outputs[5] and not last[5]:  # HOLD_LEVEL: holds as it rises
+                self._command(2, self._outputs_at[5])
             self._last_outputs = [bool(o) for o in outputs]
+        for k, (now, before) in enumerate(zip(self._process_outputs,
+                                              self._last_process_outputs, strict=True)):
+            if now != before:
+                for i, word in enumerate((1, 2, 3)):
+                    if now[i] and not before[i]:
+                        self._command(word, self._process_outputs_at[k][i], k + 1)
+                self._last_process_outputs[k] = [bool(o) for o in now]
+        if self._overrides[0] != self._last_overrides[0]:
+            self._last_overrides[0] = value = self._overrides[0]
+            self._override(value, self._overrides_at[0], None)
+        for k, value in enumerate(self._process_overrides):
+            if value != self._last_process_overrides[k]:
+                self._last_process_overrides[k] = value
+                self._override(value, self._process_overrides_at[k], k + 1)
         for sender, target, where in self._sends:
             try:
                 self.nc.send(sender, target, where)
             except NcgateError as exc:
                 self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
         self._sends.clear()
+
+    def _command(self, word: int, where: str, process: int | None = None) -> None:
+        try:
+            self.nc.command(word, where, process)
+        except NcgateError as exc:  # refused (an interlock, ...): said, the scan goes on
+            self.nc.hazard(f"PLC command {word} at {where}: {exc}")
+
+    def _override(self, feed: int, where: str, process: int | None) -> None:
+        try:
+            self.nc.override(feed, where, process)
+        except NcgateError as exc:
+            self.nc.hazard(f"PLC FEED_OVERRIDE at {where}: {exc}")
 
     def _guard(self) -> None:
         """Called by the compiled logic when its loop iterations ran out: the iteration

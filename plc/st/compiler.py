@@ -85,7 +85,13 @@ NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
               "IDLE": (6, "BOOL"), "HELD": (7, "BOOL")}
 NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
-NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2}
+# NC outputs (BOOL, in _NCO): START/HOLD/RESET act on a rising edge; OPT_STOP, BLOCK_SKIP
+# and HOLD_LEVEL are levels (the operator's switches, and a feed-hold interlock).
+NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2, "OPT_STOP": 3, "BLOCK_SKIP": 4,
+              "HOLD_LEVEL": 5}
+# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge.
+NC_PROCESS_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2}
+NC_VALUE_OUTPUTS = {"FEED_OVERRIDE"}  # INT percent: NC.FEED_OVERRIDE, NC.P[k].FEED_OVERRIDE
 
 # Limits of the Python the logic compiles to (CPython 3.11): 100 levels of indentation, 20
 # nested loops in one function, 200 nested parentheses, an `elif` chain of a few thousand
@@ -1483,6 +1489,9 @@ class Scope:
             # The output's value, and where the logic set it: the command it gives is
             # attributed "plc FILE:LINE".
             return Place(code, "BOOL", lambda v: f"{code} = {v}; _NCW[{slot}] = {at!r}")
+        if name == "FEED_OVERRIDE" and len(sels) == 1:
+            at = nc_where(var.span)
+            return Place("_NCV[0]", "INT", lambda v: f"_NCV[0] = {v}; _NCVW[0] = {at!r}")
         place: Place | None = None
         if name == "EVENTS" and len(sels) == 1:
             place = Place("_NCE", "UDINT", None, "NC.EVENTS is an input")
@@ -1502,18 +1511,32 @@ class Scope:
             if i.const is not None and not 1 <= i.const <= count:
                 raise c.error(StCode.INDEX_RANGE, f"process {i.const} is not configured "
                               f"(1..{count})", sels[1].span)
-            member = NC_PROCESS.get(sels[2].name.upper())
+            k = str(i.const - 1) if i.const is not None else f"_ix({i.code}, 1, {count})"
+            out_name = sels[2].name.upper()
+            if out_name in NC_PROCESS_OUTPUTS:
+                slot = NC_PROCESS_OUTPUTS[out_name]
+                code, at = f"_NCP[{k}][{slot}]", nc_where(var.span)
+                return Place(code, "BOOL",
+                             lambda v: f"{code} = {v}; _NCPW[{k}][{slot}] = {at!r}")
+            if out_name in NC_VALUE_OUTPUTS:
+                code, at = f"_NCPV[{k}]", nc_where(var.span)
+                return Place(code, "INT", lambda v: f"{code} = {v}; _NCPVW[{k}] = {at!r}")
+            member = NC_PROCESS.get(out_name)
             if member is None:
                 raise c.error(StCode.UNKNOWN_MEMBER, f"NC.P[k] has no {sels[2].name}"
-                              + did_you_mean(sels[2].name, NC_PROCESS), sels[2].span)
-            k = str(i.const - 1) if i.const is not None else f"_ix({i.code}, 1, {count})"
+                              + did_you_mean(sels[2].name, [*NC_PROCESS, *NC_PROCESS_OUTPUTS,
+                                                            *NC_VALUE_OUTPUTS]),
+                              sels[2].span)
             place = Place(f"_NCS[{k}][{member[0]}]", member[1], None,
                           f"NC.P[k].{sels[2].name.upper()} is an input")
         if place is None:
             raise c.error(StCode.UNKNOWN_MEMBER, f"{_show(var)}: NC has P[k].STATE/N/LINE/"
-                          "WAITING/ALARM/ALARM_CODE/IDLE/HELD, EVENTS, LAST_SND.SENDER/"
-                          "TARGET/SEQ, START, HOLD, RESET and SEND(sender, target)"
-                          + did_you_mean(name, ["P", "EVENTS", "LAST_SND", *NC_OUTPUTS]),
+                          "WAITING/ALARM/ALARM_CODE/IDLE/HELD/START/HOLD/RESET/"
+                          "FEED_OVERRIDE, EVENTS, LAST_SND.SENDER/TARGET/SEQ, START, HOLD, "
+                          "RESET, OPT_STOP, BLOCK_SKIP, HOLD_LEVEL, FEED_OVERRIDE and "
+                          "SEND(sender, target)"
+                          + did_you_mean(name, ["P", "EVENTS", "LAST_SND", *NC_OUTPUTS,
+                                                *NC_VALUE_OUTPUTS]),
                           first.span)
         if write:
             raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: "
@@ -1616,8 +1639,13 @@ class Logic:
         self._spans = spans
         self._filename = f"<ncgate-st {id(self):x}>"
         self.namespace: dict[str, Any] = dict(HELPERS)
+        k = compiler.ctx.processes
         self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
-                              _NCO=[False, False, False], _NCW=["", "", ""],
+                              _NCO=[False] * len(NC_OUTPUTS), _NCW=[""] * len(NC_OUTPUTS),
+                              _NCV=[100], _NCVW=[""],
+                              _NCP=[[False] * 3 for _ in range(k)],
+                              _NCPW=[[""] * 3 for _ in range(k)],
+                              _NCPV=[100] * k, _NCPVW=[""] * k,
                               _NC_SEND=lambda s, t, w: None)
         code = compile(source, self._filename, "exec")
         exec(code, self.namespace)

@@ -117,3 +117,44 @@ async def test_a_restart_of_the_plc_without_plc_logic_is_refused(tmp_path: Path)
         with pytest.raises(InputRefused, match="no PLC logic") as caught:
             gw.command(CommandKind.RESTART_PLC)
         assert caught.value.reason is Reason.NOT_CONFIGURED
+
+
+LEVELS = """PROGRAM main
+VAR n : INT; END_VAR
+n := n + 1;
+NC.P[2].START := SA[30];
+NC.HOLD_LEVEL := SA[31];
+NC.FEED_OVERRIDE := SYVAR[9];
+END_PROGRAM
+"""
+
+
+async def test_the_plc_logic_starts_a_process_holds_as_a_level_and_sets_the_override(
+        tmp_path: Path) -> None:
+    """Issue 27's ST names through a running gateway: NC.P[2].START starts process 2's own
+    main; NC.HOLD_LEVEL holds the cell and refuses a Modbus cycle start while TRUE;
+    NC.FEED_OVERRIDE sets every process's feed override."""
+    (tmp_path / "logic.st").write_text(LEVELS)
+    (tmp_path / "B.nc").write_text("N1G1X1000F600\nN2M30\n")
+    path = _cell(tmp_path, '[plc]\nlogic = "logic.st"\n[[nc.process]]\nnumber = 2\n'
+                           'main = "B"\n')
+    async with Gateway(ncgate_test_config(path)) as gw:
+        watch = PlcWatch(gw)
+        gw.write("SYVAR9", 100)
+        gw.write("SA30", 1)  # the logic's NC.P[2].START rises
+        await gw.wait_state(2, "RUNNING", timeout_s=10)
+        gw.write("SYVAR9", 40)
+        n = watch.read("main.n")
+        await watch.until("main.n", test=lambda v: v >= n + 2)  # two scans later
+        assert gw.engine.processes[2].feed_override == 40
+        gw.write("SA31", 1)  # NC.HOLD_LEVEL
+        await gw.wait_state(2, "HOLD", timeout_s=10)
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            refused = await client.write_register(COMMAND, 1, device_id=1)
+        finally:
+            client.close()
+        assert refused.isError() and refused.exception_code == 6
+        starts = [(e["proc"], e["by"]) for e in gw.trace if e["event"] == "start"]
+    assert starts == [(2, "plc logic.st:4")]

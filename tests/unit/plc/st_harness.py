@@ -20,7 +20,8 @@ class RecordingNc:
     processes: list[NcSnapshot] = field(default_factory=lambda: [IDLE] * 5)
     event_count: int = 0
     last: tuple[int, int, int] = (0, 0, 0)
-    commands: list[int] = field(default_factory=list)
+    commands: list[int | tuple[int, int]] = field(default_factory=list)
+    overrides: list[tuple[int, int | None]] = field(default_factory=list)
     where: list[str] = field(default_factory=list)  # FILE:LINE of each command
     sends: list[tuple[int, int]] = field(default_factory=list)
     faults: list[str] = field(default_factory=list)
@@ -36,9 +37,12 @@ class RecordingNc:
     def last_snd(self) -> tuple[int, int, int]:
         return self.last
 
-    def command(self, word: int, where: str = "") -> None:
-        self.commands.append(word)
+    def command(self, word: int, where: str = "", process: int | None = None) -> None:
+        self.commands.append(word if process is None else (word, process))
         self.where.append(where)
+
+    def override(self, feed: int, where: str = "", process: int | None = None) -> None:
+        self.overrides.append((feed, process))
 
     def send(self, sender: int, target: int, where: str = "") -> None:
         if self.refuse_sends:

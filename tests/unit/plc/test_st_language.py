@@ -292,3 +292,49 @@ def test_nc_inputs_and_outputs() -> None:
     plc.nc.refuse_sends = True
     plc.scan()
     assert plc.nc.hazards == ["PLC NC.SEND(4, 2): process 2 runs no program"]
+
+
+def test_nc_commissioning_outputs() -> None:
+    """Issue 27's ST names: NC.P[k].START/HOLD/RESET act on a rising edge for process k;
+    NC.OPT_STOP and NC.BLOCK_SKIP are switches (8/9, 10/11 as they change); NC.HOLD_LEVEL
+    holds as it rises; NC.FEED_OVERRIDE and NC.P[k].FEED_OVERRIDE act as they change."""
+    source = program("""
+        NC.P[2].START := SA[0];
+        NC.P[3].RESET := SA[1];
+        NC.OPT_STOP := SA[2];
+        NC.BLOCK_SKIP := SA[3];
+        NC.HOLD_LEVEL := SA[4];
+        NC.FEED_OVERRIDE := SYVAR[1];
+        NC.P[2].FEED_OVERRIDE := SYVAR[2];
+    """, "")
+    plc = Plc(source)
+    plc.image.write([("SYVAR", 1, "IN", 100), ("SYVAR", 2, "IN", 100)], "test")
+    plc.scan()
+    assert plc.nc.commands == [] and plc.nc.overrides == []  # 100 %: nothing changed
+    plc.image.write([("SA", 0, "bit", 1), ("SA", 2, "bit", 1), ("SYVAR", 1, "IN", 50)],
+                    "test")
+    plc.scan(3)  # edges once, levels once, the override once
+    assert plc.nc.commands == [8, (1, 2)]  # the cell's outputs, then each process's
+    assert plc.nc.overrides == [(50, None)]
+    plc.image.write([("SA", 1, "bit", 1), ("SA", 2, "bit", 0), ("SA", 3, "bit", 1),
+                     ("SA", 4, "bit", 1), ("SYVAR", 2, "IN", 0)], "test")
+    plc.scan()
+    assert plc.nc.commands == [8, (1, 2), 9, 10, 2, (3, 3)]
+    assert plc.nc.overrides == [(50, None), (0, 2)]
+    assert plc.runtime.hold_level
+
+
+def test_a_refused_nc_command_is_a_hazard_and_the_scan_goes_on() -> None:
+    from ncgate.errors import InputRefused, Reason
+
+    plc = Plc(program("NC.START := SA[0]; n := n + 1;", "n : INT;"))
+
+    def refuse(word: int, where: str = "", process: int | None = None) -> None:
+        raise InputRefused(Reason.INTERLOCK, "cycle_start: feed hold input SA100 is set")
+
+    plc.nc.command = refuse  # type: ignore[method-assign]
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    plc.scan(2)
+    assert plc["main.n"] == 2  # it scanned on
+    assert len(plc.nc.hazards) == 1 and plc.nc.hazards[0].startswith("PLC command 1 at test.st:")
+    assert plc.nc.hazards[0].endswith(": cycle_start: feed hold input SA100 is set")
