@@ -217,6 +217,17 @@ class CommandKind(enum.IntEnum):
         return self.name.lower()
 
 
+def command_word(word: int) -> tuple[CommandKind, int | None] | None:
+    """A fieldbus command word (Modbus holding 2000, CANopen 0x2400:1): the command in the low
+    byte, the process in the high byte (0: the cell, as 1/2/3 always meant; ``0x0201``:
+    cycle start of process 2).  None: not a command."""
+    try:
+        kind = CommandKind(word & 0xFF)
+    except ValueError:
+        return None
+    return kind, (word >> 8) or None
+
+
 @dataclass(frozen=True, slots=True)
 class Command:
     """Cycle start, feed hold, reset or a restart of the PLC logic; ``process=None``: the

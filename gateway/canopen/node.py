@@ -100,6 +100,7 @@ from ncgate.inputs import (
     Var,
     Write,
     Writes,
+    command_word,
 )
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, Process, ProcessState
@@ -561,7 +562,7 @@ class CanopenNode:
         if index == COMMAND and subindex == 1:
             # Accepted at once; the work (a cycle start may parse a long program) runs on,
             # and its outcome shows in the status objects, the EMCY and the trace.
-            if value not in (1, 2, 3):
+            if command_word(value) is None:  # the Modbus command word's encoding
                 raise SdoAbortedError(ABORT_INVALID_VALUE)
             self.call_soon(lambda: self._run_command(value))
             return
@@ -610,8 +611,10 @@ class CanopenNode:
             raise SdoAbortedError(ABORT_STORE_APPLICATION)
 
     def _run_command(self, word: int) -> None:
+        command = command_word(word)
+        assert command is not None
         try:
-            self.backend.apply(Command(CommandKind(word), None, self._sdo_source))
+            self.backend.apply(Command(command[0], command[1], self._sdo_source))
         except InputRefused as exc:  # answered already: say it in the log
             self._refusals.note(f"command {word} written through 0x2400:1 refused: {exc}")
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import enum
 from typing import Final
 
+from ncgate import inputs
 from ncgate.errors import Reason
 from ncgate.inputs import CommandKind
 
@@ -45,15 +46,7 @@ TARGET_NO_RESPONSE: Final = ExceptionCode.GATEWAY_TARGET_NO_RESPONSE
 COMMAND_WORDS: Final = {kind.value: kind for kind in CommandKind}
 
 
-def command_word(word: int) -> tuple[CommandKind, int | None] | None:
-    """The command register's word: the command in the low byte (1 cycle start, 2 feed
-    hold, 3 reset, 4 restart the PLC logic, 5 step, 6 single block on, 7 off), the process in
-    the high byte (0: the cell, as 1/2/3 always meant; ``0x0201``: cycle start of process
-    2).  None: not a command."""
-    kind = COMMAND_WORDS.get(word & 0xFF)
-    if kind is None:
-        return None
-    return kind, (word >> 8) or None
+command_word = inputs.command_word  # one decoding for every fieldbus (ncgate.inputs)
 
 # Why the door refused an input -> the exception code the client gets.  Total: a test checks
 # that every Reason has a row.

@@ -78,7 +78,7 @@ async def test_status_objects_per_process(gw: Gateway, master: Master) -> None:
     ("download32 0x2200:1=5", 0x06070010),  # INTEGER16 sent as 4 bytes
     ("download16 0x2100:1=300", 0x06090030),  # a K byte > 255 in a wider type
     ("download8 0x2400:3=9", 0x06090030),  # an unknown SND target
-    ("download16 0x2400:1=7", 0x06090030),  # an unknown command
+    ("download16 0x2400:1=13", 0x06090030),  # an unknown command (1..12 are commands)
     ("download8 0x2400:2=2", 0x06090030),  # an SND sender that is not external
 ])
 async def test_abort_codes(gw: Gateway, master: Master, action: str, code: int) -> None:
@@ -172,3 +172,22 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                 assert caught.value.code == 0x06010001
             checked += 1
     assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4 + 6
+
+
+async def test_the_control_word_takes_the_commissioning_commands(gw: Gateway,
+                                                                  master: Master) -> None:
+    """0x2400:1 takes the Modbus command word's encoding (issue 27): 0x0203 resets process 2
+    alone, 6/7 switch single block; a low byte that is no command is 0x06090030."""
+    await master.download(0x2400, 1, u16(6))  # single block on, the cell
+    await master.download(0x2400, 1, u16(1))  # cycle start: P1 stops after its first block
+    await gw.wait_state(1, "STEP", timeout_s=5)
+    await master.download(0x2400, 1, u16(7))  # single block off: it goes on
+    await gw.wait_state(2, "WAIT_COND", timeout_s=5)
+    await master.download(0x2400, 1, u16(0x0203))  # reset of process 2 alone
+    await gw.wait_state(2, "IDLE", timeout_s=5)
+    assert gw.status(1).state.name != "IDLE"  # P1 untouched
+    with pytest.raises(SdoAbortedError) as caught:
+        await master.download(0x2400, 1, u16(0x00FF))
+    assert caught.value.code == 0x06090030
+    ends = [(e["proc"], e["how"]) for e in gw.trace if e["event"] == "end"]
+    assert ends == [(2, "reset")]
