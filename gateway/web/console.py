@@ -41,7 +41,7 @@ from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
-from ncgate.inputs import Command, CommandKind, Source, SourceKind, Start, Var, Write
+from ncgate.inputs import Break, Command, CommandKind, Override, Source, SourceKind, Start, Write
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES, program_name
 
 if TYPE_CHECKING:
@@ -65,7 +65,14 @@ SECURITY_HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "no-referrer",
 }
-COMMANDS = {"start": 1, "hold": 2, "reset": 3}
+COMMANDS = {"start": 1, "hold": 2, "reset": 3}  # the page's words (start: a cycle start)
+# Every command by its name (issue 27): the command word's kinds, the switches (with "on"),
+# and "break" (with "at").
+KINDS = {**{k.label: k for k in CommandKind}, "start": CommandKind.CYCLE_START,
+         "hold": CommandKind.FEED_HOLD}
+SWITCHES = {"single_block": (CommandKind.SINGLE_BLOCK_ON, CommandKind.SINGLE_BLOCK_OFF),
+            "optional_stop": (CommandKind.OPTIONAL_STOP_ON, CommandKind.OPTIONAL_STOP_OFF),
+            "block_skip": (CommandKind.BLOCK_SKIP_ON, CommandKind.BLOCK_SKIP_OFF)}
 # Why the door refused an input -> the HTTP status the API answers (the JSON body says the
 # reason in words).  Total: a test checks that every Reason has a row.
 HTTP_STATUS: dict[Reason, int] = {
@@ -382,8 +389,19 @@ class WebConsole:
             raise ApiError(400, 'expected {"var": "SA10", "value": 1}: "var" is missing')
         if isinstance(value, bool) or not isinstance(value, int):
             raise ApiError(400, f'"value": expected a whole number, got {value!r}')
+        name = var.strip().upper()
+        if name == "FEED_OVERRIDE" or (name.endswith(".FEED_OVERRIDE") and name[0] == "P"):
+            process = None if name == "FEED_OVERRIDE" else name[1:].split(".")[0]
+            if process is not None and not process.isdigit():
+                raise ApiError(422, f"{var}: FEED_OVERRIDE, or P<k>.FEED_OVERRIDE")
+            try:
+                self.gw.apply(Override(value, None, int(process) if process else None,
+                                       _source(request)))
+            except InputRefused as exc:
+                raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
+            return web.json_response({"var": name, "value": value})
         try:
-            item = Write(Var.parse(var), value, _source(request))
+            item = Write(self.gw.runtime.var(var), value, _source(request))
             self.gw.apply(item)
         except InputRefused as exc:
             raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
@@ -393,15 +411,31 @@ class WebConsole:
     async def _command(self, request: web.Request) -> web.StreamResponse:
         body = await self._body(request)
         command = body.get("command")
-        if command not in COMMANDS:
-            raise ApiError(400, f"\"command\": expected one of {', '.join(COMMANDS)}, got "
+        names = [*KINDS, *SWITCHES, "break"]
+        if command not in names:
+            raise ApiError(400, f"\"command\": expected one of {', '.join(names)}, got "
                            f"{command!r}")
         program, process = body.get("program"), body.get("process", 1)
         source = _source(request)
-        if program is None:
-            if "process" in body:
-                raise ApiError(400, '"process" goes with "program"')
-            item: Command | Start = Command(CommandKind(COMMANDS[command]), None, source)
+        item: Command | Start | Break
+        if command == "break":
+            at, on = body.get("at"), body.get("on", True)
+            if not isinstance(at, str) or not isinstance(on, bool):
+                raise ApiError(400, 'expected {"command": "break", "at": "PROG92:8", "on": '
+                               'true}')
+            item = Break(at, on, source)
+        elif program is None:
+            one = body.get("process")
+            if one is not None and (isinstance(one, bool) or not isinstance(one, int)):
+                raise ApiError(400, f'"process": a process number or null, got {one!r}')
+            if command in SWITCHES:
+                on = body.get("on")
+                if not isinstance(on, bool):
+                    raise ApiError(400, f'"on": true or false, for {command}')
+                kind = SWITCHES[command][0 if on else 1]
+            else:
+                kind = KINDS[command]
+            item = Command(kind, one, source)
         elif command != "start":
             raise ApiError(400, '"program" goes with the "start" command')
         else:

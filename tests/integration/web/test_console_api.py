@@ -170,7 +170,8 @@ async def test_start_a_program_in_a_process(gw: Gateway, http: aiohttp.ClientSes
     assert code == 404 and "NOPE" in body["error"]
     for bad in ({"command": "start", "program": "PROG93", "process": 9},
                 {"command": "hold", "program": "PROG93"},
-                {"command": "fly"}, {"command": "start", "process": 2}):
+                {"command": "fly"}, {"command": "start", "process": "two"},
+                {"command": "single_block", "process": 2}, {"command": "break"}):
         code, body = await post(http, "/api/command", bad)
         assert code == 400, bad
         assert body["error"]
@@ -553,3 +554,24 @@ async def test_programs_lists_only_programs_not_the_other_files_beside_them(
                 http.get("/api/programs") as r:
             assert await r.json() == {"programs": ["PROG91", "PROG92", "PROG93"],
                                       "main": "PROG91"}
+
+
+async def test_the_commissioning_commands_through_the_api(gw: Gateway,
+                                                          http: aiohttp.ClientSession) -> None:
+    """Issue 27's API: single block with "on", step and cycle start of one process, a
+    breakpoint, the PLC restart (refused here: no PLC logic), the feed override as a write."""
+    ok = {"command": "single_block", "on": True, "process": 1}
+    assert (await post(http, "/api/command", ok))[0] == 200
+    assert (await post(http, "/api/command", {"command": "cycle_start", "process": 1}))[0] == 200
+    await gw.wait_state(1, "STEP", timeout_s=10)
+    assert (await post(http, "/api/command", {"command": "step", "process": 1}))[0] == 200
+    code, _ = await post(http, "/api/command", {"command": "break", "at": "P2 wait"})
+    assert code == 200 and [b.text for b in gw.engine.breakpoints] == ["P2 wait"]
+    code, body = await post(http, "/api/command", {"command": "restart_plc"})
+    assert code == 409 and "no PLC logic" in body["error"]
+    assert (await post(http, "/api/write", {"var": "P2.FEED_OVERRIDE", "value": 40}))[0] == 200
+    assert (await post(http, "/api/write", {"var": "FEED_OVERRIDE", "value": 250}))[0] == 422
+    assert gw.engine.processes[2].feed_override == 40
+    assert gw.engine.processes[1].feed_override == 100
+    overrides = [(e["proc"], e["feed"]) for e in gw.trace if e["event"] == "override"]
+    assert overrides == [(2, 40)]
