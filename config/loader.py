@@ -384,6 +384,8 @@ class NcConfig:
     cell: str = setting("ncgate cell", "the cell's name, as fieldbus masters see it (Modbus "
                         "device identification: UserApplicationName)")
     autostart: bool = setting(False, "run: start main at once (else on cycle start)")
+    feed_override: int = setting(100, "the feed override at start, percent (0..200): every "
+                                 "process's, until a door changes it", lo=0, hi=200)
     feed_hold_input: str = setting(
         "", "a PLC interlock as a level (e.g. \"SA100\", door open): while it is set, motion "
         "holds and a cycle start is refused (empty: none)", parse=_image_input)

@@ -52,6 +52,7 @@ class RuntimeSettings:
     # The program a cycle start of one process starts, for processes 2 up ([[nc.process]]
     # main); process 1's is ``main``.
     mains: tuple[tuple[int, str], ...] = ()
+    feed_override: int = 100  # percent, every process's at start
     # The I/O names of [symbols], by variable: what a why-record shows beside the variable
     # ("waits for door_closed (SA10=1)").
     names: tuple[tuple[tuple[str, int, str], str], ...] = ()

@@ -88,6 +88,8 @@ class Engine:
             k: Process(k, k in settings.external, settings.e_params)
             for k in range(1, settings.processes + 1)
         }
+        for p in self.processes.values():
+            p.feed_override = settings.feed_override
         self._timers = TimerHeap()
         self._runnable: deque[Process] = deque()
         self._running = False

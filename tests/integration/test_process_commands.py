@@ -378,3 +378,20 @@ async def test_a_block_search_through_the_api_is_refused_or_recorded(tmp_path: P
     lines = [line for line in record.read_text().splitlines() if '"input": "start"' in line]
     assert len(lines) == 1 and '"at": "N2"' in lines[0]
     assert replay(record).divergence is None
+
+
+def test_sim_set_nc_feed_override(tmp_path: Path) -> None:
+    import json
+    import subprocess
+    import sys
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "A.nc").write_text("N1G1X10F600\nN2M30\n")
+    trace = tmp_path / "t.jsonl"
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sim", "--config",
+                           str(tmp_path / "ncgate.toml"), "--set", "nc.feed_override=50",
+                           "--trace", str(trace)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    ends = [json.loads(line)["t"] for line in trace.read_text().splitlines()
+            if '"event": "end"' in line or '"event":"end"' in line]
+    assert ends == [2.0]

@@ -672,3 +672,8 @@ def test_a_block_search_is_refused_where_the_skipped_blocks_sync() -> None:
         with pytest.raises(ValueError, match=re.escape(reason)):
             sim.engine.start("A", at=at)
     assert sim.engine.status(1).state is ProcessState.IDLE and sim.events("start") == []
+
+
+def test_nc_feed_override_is_every_processs_override_at_start() -> None:
+    sim = simulate({"A": "N1G1X10F600\nN2M30\n"}, feed_override=50)
+    assert sim.first("end", proc=1)["t"] == pytest.approx(2.0)
