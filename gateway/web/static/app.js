@@ -175,7 +175,20 @@ function renderLanes() {
     if (!lane) {
       lane = el("div", "lane");
       lane.id = "lane-" + p.number;
-      lane.append(el("span", "num", "P" + p.number), el("span", "state"), el("div", "detail"));
+      lane.append(el("span", "num", "P" + p.number), el("span", "state"));
+      if (!p.external) {  // this process's own commands (issue 27): the command of one process
+        const controls = el("span", "controls");
+        for (const [command, label] of [["cycle_start", "Start"], ["feed_hold", "Hold"],
+                                        ["step", "Step"], ["reset", "Reset"]]) {
+          const b = el("button", "lane-" + command, label);
+          b.title = label + " process " + p.number;
+          b.addEventListener("click", () => post("/api/command", { command,
+                                                                   process: p.number }));
+          controls.append(b);
+        }
+        lane.append(controls);
+      }
+      lane.append(el("div", "detail"));
       box.append(lane);
     }
     const state = lane.querySelector(".state");

@@ -364,3 +364,26 @@ def test_an_alarm_shows_in_the_header_and_in_its_lane_with_its_block(
               and text(d, "#lane-1 .state") == "IDLE")
     finally:
         run.stop()
+
+
+def test_a_lane_starts_holds_and_resets_its_own_process(browser: Any, web_port: int) -> None:
+    """Issue 27: each lane's buttons command its process alone. P1's Start starts nc.main in
+    P1; P2's Hold holds P2 only; P1's Reset ends P1's program while P2 stays held."""
+    run = start_run(web_port, "ncgate-browser-lanes")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        until(browser, "P1's lane buttons",
+              lambda d: d.find_elements(By.CSS_SELECTOR, "#lane-1 .lane-cycle_start"))
+        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-cycle_start").click()
+        until(browser, "PROG91 in P1 and PROG92 in P2",
+              lambda d: text(d, "#lane-1 .state") not in ("", "IDLE")
+              and text(d, "#lane-2 .state") not in ("", "IDLE"))
+        browser.find_element(By.CSS_SELECTOR, "#lane-2 .lane-feed_hold").click()
+        until(browser, "P2 held", lambda d: "HOLD" in text(d, "#lane-2 .state"))
+        assert "HOLD" not in text(browser, "#lane-1 .state")
+        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-reset").click()
+        until(browser, "P1 reset", lambda d: text(d, "#lane-1 .state") == "IDLE")
+        assert "HOLD" in text(browser, "#lane-2 .state")
+    finally:
+        run.stop()
