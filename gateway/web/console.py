@@ -41,7 +41,18 @@ from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
-from ncgate.inputs import Break, Command, CommandKind, Override, Source, SourceKind, Start, Write
+from ncgate.inputs import (
+    Break,
+    Command,
+    CommandKind,
+    Force,
+    Override,
+    Source,
+    SourceKind,
+    Start,
+    Write,
+    var_name,
+)
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES, program_name
 
 if TYPE_CHECKING:
@@ -148,6 +159,9 @@ class WebConsole:
         app.router.add_get("/api/programs", self._programs)
         app.router.add_post("/api/write", self._write)
         app.router.add_post("/api/command", self._command)
+        app.router.add_get("/api/force", self._forced)
+        app.router.add_post("/api/force", self._force)
+        app.router.add_delete("/api/force", self._unforce_all)
         runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
                                handle_signals=False)
         await runner.setup()
@@ -381,6 +395,34 @@ class WebConsole:
         if not isinstance(body, dict):
             raise ApiError(400, "expected a JSON object")
         return body
+
+    async def _forced(self, request: web.Request) -> web.StreamResponse:
+        """The force list: each forced variable and its value."""
+        forced = self.gw.image.forced
+        return web.json_response({"forced": [
+            {"var": var_name(area, index, view), "value": value}
+            for (area, index, view), value in sorted(forced.items())]})
+
+    async def _force(self, request: web.Request) -> web.StreamResponse:
+        """``{"var": "SA10", "value": 1}`` forces; ``"value": null`` releases it."""
+        body = await self._body(request)
+        var, value = body.get("var"), body.get("value")
+        if not isinstance(var, str) or not var.strip():
+            raise ApiError(400, 'expected {"var": "SA10", "value": 1 or null}')
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ApiError(400, f'"value": a whole number or null, got {value!r}')
+        try:
+            item = Force(self.gw.runtime.var(var), value, _source(request))
+            self.gw.apply(item)
+        except InputRefused as exc:
+            raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
+        log.info("web %s: force %s = %s", request.remote, item.var, value)
+        return web.json_response({"var": str(item.var), "value": value})
+
+    async def _unforce_all(self, request: web.Request) -> web.StreamResponse:
+        self.gw.apply(Force(None, None, _source(request)))
+        log.info("web %s: every force released", request.remote)
+        return web.json_response({"forced": []})
 
     async def _write(self, request: web.Request) -> web.StreamResponse:
         body = await self._body(request)

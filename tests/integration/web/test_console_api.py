@@ -575,3 +575,25 @@ async def test_the_commissioning_commands_through_the_api(gw: Gateway,
     assert gw.engine.processes[1].feed_override == 100
     overrides = [(e["proc"], e["feed"]) for e in gw.trace if e["event"] == "override"]
     assert overrides == [(2, 40)]
+
+
+async def test_the_force_list_through_the_api(gw: Gateway, http: aiohttp.ClientSession) -> None:
+    """Issue 28's interface: POST /api/force forces (and, value null, releases), DELETE
+    releases every one, GET lists them; a forced bit keeps its value against a write."""
+    assert (await post(http, "/api/force", {"var": "SA10", "value": 1}))[0] == 200
+    assert (await post(http, "/api/force", {"var": "SYVAR3", "value": -5}))[0] == 200
+    async with http.get("/api/force") as r:
+        assert (await r.json())["forced"] == [{"var": "SA10", "value": 1},
+                                              {"var": "SYVAR3", "value": -5}]
+    gw.write("SA10", 0)  # overridden
+    assert gw.read("SA10") == 1
+    assert (await post(http, "/api/force", {"var": "SA10", "value": None}))[0] == 200
+    gw.write("SA10", 0)
+    assert gw.read("SA10") == 0
+    code, body = await post(http, "/api/force", {"var": "SA10", "value": 2})
+    assert code == 422 and "SA10" in body["error"]
+    async with http.delete("/api/force") as r:
+        assert r.status == 200
+    assert gw.image.forced == {}
+    forces = [(e["var"], e["value"]) for e in gw.trace if e["event"] == "force"]
+    assert forces == [("SA10", 1), ("SYVAR3", -5), ("SA10", None), (None, None)]
