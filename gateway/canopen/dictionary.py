@@ -66,6 +66,9 @@ TPDO_COMMUNICATION, TPDO_MAPPING = 0x1800, 0x1A00
 
 SA_BYTES, K_BASE, SYVAR_BASE = 0x2000, 0x2100, 0x2200
 COMMAND, STATUS_BASE, LAST_SND, PLC_STATUS = 0x2400, 0x2500, 0x2600, 0x2700
+# The overrides in percent, sub k for process k (issue 27): feed 0..200, rapid 0..100.
+FEED_OVERRIDE, RAPID_OVERRIDE = 0x2410, 0x2411
+OVERRIDE_TOP = {FEED_OVERRIDE: 200, RAPID_OVERRIDE: 100}
 
 _RANGE = {UNSIGNED8: (0, 0xFF), UNSIGNED16: (0, 0xFFFF), UNSIGNED32: (0, 0xFFFFFFFF),
           INTEGER16: (-0x8000, 0x7FFF)}
@@ -363,6 +366,10 @@ def build_dictionary(config: Config) -> ObjectDictionary:
         ("SND sender", UNSIGNED8, "wo", None),
         ("SND target", UNSIGNED8, "wo", None),
     ]))
+    for index, what in ((FEED_OVERRIDE, "Feed override"), (RAPID_OVERRIDE, "Rapid override")):
+        od.add_object(_array(f"{what} (percent)", index, processes, what, UNSIGNED8, "rw",
+                             default=100, pdo=False,
+                             names=tuple(f"{what} P{k + 1}" for k in range(processes))))
     for k in range(processes):
         od.add_object(_record(f"Process {k + 1} status", STATUS_BASE + k, [
             ("State", UNSIGNED8, "ro", None),

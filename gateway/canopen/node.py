@@ -66,10 +66,13 @@ from ncgate.gateway.canopen.dictionary import (
     EMCY_INHIBIT,
     ERROR_BEHAVIOUR,
     ERROR_HISTORY,
+    FEED_OVERRIDE,
     HISTORY_ENTRIES,
     LAST_SND,
     NO_STATE_CHANGE,
+    OVERRIDE_TOP,
     PLC_STATUS,
+    RAPID_OVERRIDE,
     RESTORE,
     RPDO_COMMUNICATION,
     SECOND_SDO_SERVER,
@@ -94,6 +97,7 @@ from ncgate.inputs import (
     Command,
     CommandKind,
     FieldbusAlarm,
+    Override,
     Snd,
     Source,
     SourceKind,
@@ -518,6 +522,9 @@ class CanopenNode:
                     s.snd_received & 0xFFFFFFFF][subindex - 1]
         if index == LAST_SND:
             return list(_last_snd(engine))[subindex - 1]
+        if index in OVERRIDE_TOP:
+            p = engine.processes[subindex]
+            return p.feed_override if index == FEED_OVERRIDE else p.rapid_override
         if index == PLC_STATUS:
             regs = plc_registers(self.backend.plc_status)
             if subindex == 1:
@@ -559,6 +566,10 @@ class CanopenNode:
             return
         value = od.decode_raw(data)
         assert isinstance(value, int)
+        if index in OVERRIDE_TOP:
+            if value > OVERRIDE_TOP[index]:
+                raise SdoAbortedError(ABORT_INVALID_VALUE)
+            raise Deferred(lambda: self._write(index, subindex, value))
         if index == COMMAND and subindex == 1:
             # Accepted at once; the work (a cycle start may parse a long program) runs on,
             # and its outcome shows in the status objects, the EMCY and the trace.
@@ -625,6 +636,10 @@ class CanopenNode:
                                          self._sdo_source))
             elif index == COMMAND:
                 self._command(subindex, value)
+            elif index in OVERRIDE_TOP:
+                feed = value if index == FEED_OVERRIDE else None
+                rapid = value if index == RAPID_OVERRIDE else None
+                self.backend.apply(Override(feed, rapid, subindex, self._sdo_source))
         except InputRefused as exc:
             raise SdoAbortedError(REFUSAL[exc.reason]) from None
 

@@ -79,6 +79,8 @@ async def test_status_objects_per_process(gw: Gateway, master: Master) -> None:
     ("download16 0x2100:1=300", 0x06090030),  # a K byte > 255 in a wider type
     ("download8 0x2400:3=9", 0x06090030),  # an unknown SND target
     ("download16 0x2400:1=13", 0x06090030),  # an unknown command (1..12 are commands)
+    ("download8 0x2410:1=201", 0x06090030),  # a feed override past 200 %
+    ("download8 0x2411:1=101", 0x06090030),  # a rapid override past 100 %
     ("download8 0x2400:2=2", 0x06090030),  # an SND sender that is not external
 ])
 async def test_abort_codes(gw: Gateway, master: Master, action: str, code: int) -> None:
@@ -143,6 +145,19 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                 assert await master.upload(index, 0) == u8(len(obj.subindices) - 1)
                 continue
             size = len(var) // 8
+            if index in (0x2410, 0x2411):  # the overrides (issue 27): of process ``sub``
+                external = gw.engine.processes[sub].external
+                if external:  # no motion to override: refused
+                    with pytest.raises(SdoAbortedError) as caught:
+                        await master.download(index, sub, u8(50))
+                    assert caught.value.code == 0x06090030
+                else:
+                    await master.download(index, sub, u8(50))
+                    p = gw.engine.processes[sub]
+                    assert (p.feed_override if index == 0x2410 else p.rapid_override) == 50
+                    assert await master.upload(index, sub) == u8(50)
+                checked += 1
+                continue
             if var.access_type == "rw":  # image objects: write a distinct value, read it back
                 value = (index * 7 + sub) % 100 + 1
                 if index >= 0x2200:
@@ -171,7 +186,7 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                     await master.upload(index, sub)
                 assert caught.value.code == 0x06010001
             checked += 1
-    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4 + 6
+    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4 + 6 + 2 * 4  # + the overrides
 
 
 async def test_the_control_word_takes_the_commissioning_commands(gw: Gateway,
