@@ -36,6 +36,10 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "dialect": gw.config.nc.dialect.value,
         "held": any(p.held for p in engine.processes.values()),
         "lag_s": round(gw.lag_s, 6),  # behind the clock (machine s): 0 while on time
+        # The commissioning controls in force (issue 27).
+        "controls": {"breakpoints": [b.text for b in engine.breakpoints],
+                     "optional_stop": engine.optional_stop, "block_skip": engine.block_skip,
+                     "forced": len(gw.image.forced)},
         "processes": [process(gw, number) for number in engine.processes],
         "plc": plc(gw),
         "fieldbus": fieldbus(gw),
@@ -71,6 +75,8 @@ def process(gw: Gateway, number: int) -> dict[str, Any]:
     return {"number": number, "state": s.state.name, "external": s.external,
             "program": s.program, "line": s.line, "n": s.n, "block": block,
             "held": s.held, "blocks": s.blocks, "snd_sent": s.snd_sent,
+            "single_block": p.single_block, "feed_override": p.feed_override,
+            "rapid_override": p.rapid_override,
             "snd_received": s.snd_received, "wait": wait, "alarm": alarm}
 
 

@@ -135,6 +135,34 @@ $("#start-form").addEventListener("submit", (e) => {
   post("/api/command", { command: "start", program: $("#start-program").value,
                          process: Number($("#start-process").value) });
 });
+// The commissioning controls (issue 27): the cell's single block, run to sync, breakpoints,
+// the feed override.
+$("#single-block").addEventListener("change", () =>
+  post("/api/command", { command: "single_block", on: $("#single-block").checked }));
+$("#btn-sync").addEventListener("click", () => post("/api/command", { command: "run_to_sync" }));
+$("#break-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  post("/api/command", { command: "break", at: $("#break-at").value });
+});
+$("#feed-override").addEventListener("change", () =>
+  write("FEED_OVERRIDE", Number($("#feed-override").value)));
+function renderControls() {
+  const c = status.controls;
+  if (!c) return;
+  const box = $("#breakpoints");
+  box.replaceChildren();
+  for (const at of c.breakpoints) {  // each with its own clear button
+    const b = el("button", "breakpoint", at + " \u00d7");
+    b.title = "clear the breakpoint " + at;
+    b.addEventListener("click", () => post("/api/command", { command: "break", at, on: false }));
+    box.append(b);
+  }
+  const p1 = status.processes && status.processes[0];
+  if (p1 && document.activeElement !== $("#feed-override")) {
+    $("#feed-override").value = p1.feed_override;
+  }
+  if (p1) $("#single-block").checked = status.processes.every((p) => p.external || p.single_block);
+}
 $("#token").addEventListener("change", () => {
   token = $("#token").value;
   sessionStorage.setItem("ncgate-token", token);
@@ -150,6 +178,7 @@ function render() {
   $("#source").textContent = status.config;
   if (status.web.token && !token) $("#token").hidden = false;
   if (parts.processes) renderLanes();
+  if (parts.processes || parts.controls) renderControls();
   if (parts.processes || parts.plc) renderAlarms();
   controls();
   if (parts.image) renderImage();

@@ -387,3 +387,36 @@ def test_a_lane_starts_holds_and_resets_its_own_process(browser: Any, web_port: 
         assert "HOLD" in text(browser, "#lane-2 .state")
     finally:
         run.stop()
+
+
+def test_the_commissioning_controls_of_the_page(browser: Any, web_port: int) -> None:
+    """Issue 27 from the page: a breakpoint set with the form is listed (and cleared by its
+    button), single block is switched for the cell, the feed override is written."""
+    run = start_run(web_port, "ncgate-browser-controls")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "break-at").send_keys("PROG92:8")
+        browser.find_element(By.CSS_SELECTOR, "#break-form button").click()
+        until(browser, "the breakpoint listed",
+              lambda d: "PROG92:8" in text(d, "#breakpoints"))
+        browser.find_element(By.ID, "single-block").click()
+        feed = browser.find_element(By.ID, "feed-override")
+        feed.clear()
+        feed.send_keys("50\n")
+        browser.find_element(By.ID, "break-at").click()  # away from the field: a change
+        status_url = f"http://127.0.0.1:{web_port}/api/status"
+
+        def status() -> dict[str, Any]:
+            with urllib.request.urlopen(status_url, timeout=5) as r:
+                return json.loads(r.read())
+
+        until(browser, "single block and 50 % in the status",
+              lambda d: all(p["single_block"] for p in status()["processes"]
+                            if not p["external"])
+              and status()["processes"][0]["feed_override"] == 50)
+        browser.find_element(By.CSS_SELECTOR, "#breakpoints .breakpoint").click()
+        until(browser, "the breakpoint cleared",
+              lambda d: status()["controls"]["breakpoints"] == [])
+    finally:
+        run.stop()
