@@ -213,7 +213,8 @@ class ScriptPlayer:
 def run_sim(config: Config, main: str | Sequence[str], script: Script,
             until: float | None = None, *, signals: bool = False,
             single_block: bool = False, breaks: Sequence[str] = (),
-            keep_going: bool = False) -> SimResult:
+            keep_going: bool = False, at: str | None = None,
+            with_calc: bool = False) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
@@ -251,9 +252,9 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         starts = [(mains[0], channel) for channel in runtime.store.channels(mains[0]) or (1,)]
     else:
         starts = [(name, number) for number, name in enumerate(mains, start=1)]
-    for name, number in starts:
-        try:
-            door.apply(Start(name, number, SIM))
+    for i, (name, number) in enumerate(starts):
+        try:  # --at: a block search of the first program
+            door.apply(Start(name, number, SIM, at if i == 0 else None, with_calc))
         except InputRefused as exc:  # the program's own error, with its diagnostics
             if isinstance(exc.__cause__, ProgramError | ProgramNotFoundError):
                 raise exc.__cause__ from None

@@ -85,6 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
                      "cell until the script's next cycle_start, or at once with --continue")
     sim.add_argument("--continue", dest="keep_going", action="store_true",
                      help="--break: each hit is traced, then the run goes on")
+    sim.add_argument("--at", metavar="LABEL|N", help="block search: start the main program "
+                     "at a label or an N number, with the modal state of the blocks before")
+    sim.add_argument("--with-calc", action="store_true",
+                     help="--at: the E parameters of the blocks before are calculated too")
     sim.add_argument("--gantt", metavar="G.svg", help="draw the timeline picture")
     sim.add_argument("--replay", metavar="R.jsonl", help="re-run a session recorded with "
                      "'ncgate run --record' (its config, programs and inputs) and say whether "
@@ -257,7 +261,7 @@ def _sim(args: argparse.Namespace) -> int:
     try:
         result = run_sim(config, mains, script, args.until, signals=True,
                          single_block=args.single_block, breaks=args.breaks,
-                         keep_going=args.keep_going)
+                         keep_going=args.keep_going, at=args.at, with_calc=args.with_calc)
     except ProgramError as exc:
         print(str(exc), file=sys.stderr)
         storage = storage_of(config)

@@ -490,7 +490,11 @@ class WebConsole:
             if any(c in program for c in "/\\") or program.startswith("."):
                 raise ApiError(400, f'"program": a program\'s name on the storage devices, '
                                f"not a path: {program!r}")
-            item = Start(program, process, source)
+            at, with_calc = body.get("at"), body.get("with_calc", False)
+            if (at is not None and not isinstance(at, str)) or not isinstance(with_calc, bool):
+                raise ApiError(400, '"at": a label or an N number (a block search), '
+                               '"with_calc": true or false')
+            item = Start(program, process, source, at, with_calc)
         try:
             await self.gw.apply_async(item)  # a program is read off the loop
         except InputRefused as exc:

@@ -401,3 +401,27 @@ def test_sim_set_nc_feed_override(tmp_path: Path) -> None:
     ends = [json.loads(line)["t"] for line in trace.read_text().splitlines()
             if '"event": "end"' in line or '"event":"end"' in line]
     assert ends == [2.0]
+
+
+def test_sim_at_starts_the_main_program_by_block_search(tmp_path: Path) -> None:
+    import json
+    import subprocess
+    import sys
+
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\nlookahead = 0\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "A.nc").write_text("N10G1F600\nN20E1=5\nN30G91X10\nN40XE1\nN50SYVAR1=E1\n"
+                                   "N60M30\n")
+    trace = tmp_path / "t.jsonl"
+
+    def sim(*extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "ncgate", "sim", "--config",
+                               str(tmp_path / "ncgate.toml"), "--trace", str(trace), *extra],
+                              capture_output=True, text=True, timeout=60)
+
+    assert sim("--at", "N40", "--with-calc").returncode == 0
+    writes = [json.loads(line) for line in trace.read_text().splitlines()
+              if '"write"' in line]
+    assert [(e["var"], e["value"], e["t"]) for e in writes] == [("SYVAR1", 5, 0.5)]
+    refused = sim("--at", "N99")
+    assert refused.returncode == 2 and "no block N99" in refused.stderr
