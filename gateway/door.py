@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Final, TypeVar
 
 from ncgate.errors import InputRefused, Reason
 from ncgate.inputs import (
@@ -35,6 +35,7 @@ from ncgate.inputs import (
     Input,
     Override,
     Snd,
+    Source,
     SourceKind,
     Start,
     Var,
@@ -73,6 +74,30 @@ def command_kind(value: object) -> CommandKind:
                            "hold, 3 reset, 4 restart the PLC, 5 step, 6/7 single block "
                            "on/off, 8/9 optional stop on/off, 10/11 block skip on/off")
     return kind
+# Command words past the CommandKinds: they carry an N number written beside them (Modbus
+# holding command+3, CANopen 0x2400:4), and become other inputs (issue 27).
+SEARCH_WORDS: Final = {13: "block search", 14: "breakpoint", 15: "clear breakpoints"}
+
+
+def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[Input] | None:
+    """The inputs of command words 13..15 (None: another word): 13 starts the process's main
+    (the high byte's; 0: process 1's nc.main) by block search at N``n``, 14 sets a
+    breakpoint at N``n`` (of that process, or any), 15 clears every breakpoint."""
+    low, process = word & 0xFF, word >> 8
+    if low not in SEARCH_WORDS:
+        return None
+    if low == 13:
+        k = process or 1
+        main = runtime.config.nc.main if k == 1 else dict(runtime.config.nc.mains).get(k)
+        if not main:
+            raise InputRefused(Reason.NOT_CONFIGURED, f"process {k} has no main program "
+                               "([[nc.process]] main)")
+        return [Start(main, k, source, f"N{n}")]
+    if low == 14:
+        return [Break(f"P{process} N{n}" if process else f"N{n}", True, source)]
+    return [Break(b.text, False, source) for b in runtime.engine.breakpoints]
+
+
 ImageChange = tuple[str, int, str, int]
 # The operator's switches of the cell, as commands.
 _SWITCHES: dict[CommandKind, dict[str, bool]] = {

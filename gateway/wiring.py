@@ -113,6 +113,9 @@ class Backend(Protocol):
     @property
     def engine(self) -> Engine: ...
 
+    @property
+    def runtime(self) -> Runtime: ...
+
     def apply(self, item: Input) -> None: ...
 
     @property

@@ -365,6 +365,7 @@ def build_dictionary(config: Config) -> ObjectDictionary:
         ("Control word", UNSIGNED16, "wo", None),
         ("SND sender", UNSIGNED8, "wo", None),
         ("SND target", UNSIGNED8, "wo", None),
+        ("Search N", UNSIGNED16, "rw", 0),
     ]))
     for index, what in ((FEED_OVERRIDE, "Feed override"), (RAPID_OVERRIDE, "Rapid override")):
         od.add_object(_array(f"{what} (percent)", index, processes, what, UNSIGNED8, "rw",

@@ -89,6 +89,7 @@ from ncgate.gateway.canopen.dictionary import (
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
 from ncgate.gateway.canopen.sdo import Deferred, Device, SdoService
+from ncgate.gateway.door import SEARCH_WORDS, search_inputs
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.ratelimit import RateLimitedLog
@@ -492,7 +493,7 @@ class CanopenNode:
             return history[subindex - 1]
         if index in (STORE, RESTORE) and subindex:
             return 1  # saves and restores on command
-        if index < 0x2000 or subindex == 0:
+        if index < 0x2000 or subindex == 0 or (index == COMMAND and subindex == 4):
             return None  # the dictionary's own value (stored or default)
         if index < COMMAND and self.pdos.done == self.pdos.handed:
             return self._image_value(index, subindex)  # the snapshot, from this thread
@@ -573,13 +574,14 @@ class CanopenNode:
         if index == COMMAND and subindex == 1:
             # Accepted at once; the work (a cycle start may parse a long program) runs on,
             # and its outcome shows in the status objects, the EMCY and the trace.
-            if command_word(value) is None:  # the Modbus command word's encoding
-                raise SdoAbortedError(ABORT_INVALID_VALUE)
+            if command_word(value) is None and (value & 0xFF) not in SEARCH_WORDS:
+                raise SdoAbortedError(ABORT_INVALID_VALUE)  # the Modbus command word's
             self.call_soon(lambda: self._run_command(value))
             return
-        if index == COMMAND and subindex == 2:
-            self._command(2, value)  # the mailbox's sender: checked here, then stored
-            return
+        if index == COMMAND and subindex in (2, 4):
+            if subindex == 2:
+                self._command(2, value)  # the mailbox's sender: checked here, then stored
+            return  # (sub 4: the N number of command words 13/14, stored as it is)
         raise Deferred(lambda: self._write(index, subindex, value))  # answered from the loop
 
     def _on_stored(self, index: int, subindex: int) -> None:
@@ -623,8 +625,14 @@ class CanopenNode:
 
     def _run_command(self, word: int) -> None:
         command = command_word(word)
-        assert command is not None
         try:
+            if command is None:  # 13..15: with the N number of 0x2400:4
+                n = self.node.data_store.get(COMMAND, {}).get(4)
+                number = int.from_bytes(n, "little") if n else 0
+                for item in search_inputs(word, number, self.backend.runtime,
+                                          self._sdo_source) or ():
+                    self.backend.apply(item)
+                return
             self.backend.apply(Command(command[0], command[1], self._sdo_source))
         except InputRefused as exc:  # answered already: say it in the log
             self._refusals.note(f"command {word} written through 0x2400:1 refused: {exc}")

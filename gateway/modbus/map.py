@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ncgate.config import Config, ConfigError
+from ncgate.gateway.door import search_inputs
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
@@ -56,6 +57,7 @@ class Kind(enum.Enum):
     SND_LOG = "SND log"
     PLC_STATUS = "PLC status"
     OVERRIDES = "overrides"
+    SEARCH = "search"
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,7 +99,8 @@ PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait 
 _LAYOUT_KEYS = {Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars", Kind.SA_BYTES: "sa_bytes",
                 Kind.COMMAND: "command", Kind.MAILBOX: "command",
                 Kind.PROCESS_STATUS: "status", Kind.SND_LOG: "snd_log",
-                Kind.PLC_STATUS: "plc_status", Kind.INFO: "info", Kind.OVERRIDES: "overrides"}
+                Kind.PLC_STATUS: "plc_status", Kind.INFO: "info", Kind.OVERRIDES: "overrides",
+                Kind.SEARCH: "command"}
 _WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
             ProcessState.WAIT_EXE}
 
@@ -117,6 +120,8 @@ class ModbusMap:
             layout.k_bytes, layout.syvars, layout.sa_bytes)
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
         self.OVERRIDES = layout.overrides
+        self.SEARCH = layout.command + 3
+        self.search_n = 0  # the N number command words 13/14 use
         self.STATUS_BASE = layout.status
         self.SND_LOG_BASE, self.PLC_BASE = layout.input_bases(processes)
         sa_bytes = plc.sa_bits // 8
@@ -146,6 +151,9 @@ class ModbusMap:
                    "(reads 0)"),
             Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
+            Region(Table.HOLDING, self.SEARCH, 1, Kind.SEARCH, access("command", "rw"),
+                   "uint16", "the N number of command words 13 (block search), 14 "
+                   "(breakpoint)"),
             Region(Table.HOLDING, self.OVERRIDES, 2 * processes, Kind.OVERRIDES,
                    access("overrides", "rw"), "uint16",
                    f"process k at {self.OVERRIDES}+2(k-1): feed override (0..200 %), rapid "
@@ -268,6 +276,8 @@ class ModbusMap:
             return [v & 0xFFFF for v in image.syvar[first:first + count]]
         if kind in (Kind.COMMAND, Kind.MAILBOX):
             return [0] * count
+        if kind is Kind.SEARCH:
+            return [self.search_n]
         if kind is Kind.INFO:
             return self._info(backend)[first:first + count]
         if kind is Kind.SND_LOG:
@@ -320,7 +330,7 @@ class ModbusMap:
             if "w" not in region.access:
                 raise ModbusError(ILLEGAL_ADDRESS, f"{region.kind.value} is read-only")
             kind = region.kind
-            if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.OVERRIDES):
+            if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.OVERRIDES, Kind.SEARCH):
                 if len(pieces) > 1:
                     raise ModbusError(ILLEGAL_ADDRESS, f"the {kind.value} must be written on "
                                       "its own")
@@ -367,8 +377,15 @@ class ModbusMap:
         kind = region.kind
         if kind is Kind.OVERRIDES:
             self._overrides(backend, offset, values, source)
+        elif kind is Kind.SEARCH:
+            (self.search_n,) = values
         elif kind is Kind.COMMAND:
             (word,) = values
+            searched = search_inputs(word, self.search_n, backend.runtime, source)
+            if searched is not None:
+                for item in searched:
+                    backend.apply(item)
+                return
             command = command_word(word)
             if command is None:
                 raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset, "

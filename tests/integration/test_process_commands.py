@@ -425,3 +425,41 @@ def test_sim_at_starts_the_main_program_by_block_search(tmp_path: Path) -> None:
     assert [(e["var"], e["value"], e["t"]) for e in writes] == [("SYVAR1", 5, 0.5)]
     refused = sim("--at", "N99")
     assert refused.returncode == 2 and "no block N99" in refused.stderr
+
+
+async def test_block_search_and_breakpoints_by_n_from_the_fieldbus(tmp_path: Path) -> None:
+    """Holding 2003 holds an N number; command word 13 starts the process's main by block
+    search there, 14 sets a breakpoint at it, 15 clears every breakpoint (issue 27)."""
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N10G1X1F600\nN20X2\nN30SYVAR1=3\nN40M30\n")
+    (tmp_path / "B.nc").write_text("N1G1X10F600\nN2SYVAR2=2\nN3M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.port": 0,
+                                                           "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            async def word(value: int) -> None:
+                assert not (await client.write_register(COMMAND, value, device_id=1)).isError()
+
+            assert not (await client.write_register(2003, 2, device_id=1)).isError()
+            assert (await client.read_holding_registers(2003, count=1,
+                                                        device_id=1)).registers == [2]
+            await word(0x020E)  # breakpoint at N2 of process 2
+            assert [b.text for b in gw.engine.breakpoints] == ["P2 N2"]
+            await word(0x0201)  # P2 starts B: the breakpoint stops the cell before N2
+            await gw.wait_state(2, "HOLD", timeout_s=10)
+            await word(15)  # clear every breakpoint
+            assert gw.engine.breakpoints == []
+            await word(1)  # go on
+            assert not (await client.write_register(2003, 30, device_id=1)).isError()
+            gw.runtime.store.preload("A", 1)  # read already: the start acts with the write
+            await word(13)  # P1's main by block search at N30: N10 and N20 skipped
+            await gw.wait_state(1, "IDLE", timeout_s=10)
+            assert gw.engine.processes[1].actual[0] == 2.0  # where N20 would have left it
+            await gw.wait_idle(timeout_s=10)
+        finally:
+            client.close()
+        writes = [(e["var"], e["value"]) for e in gw.trace if e["event"] == "write"
+                  and e["var"].startswith("SYVAR")]
+    assert writes == [("SYVAR2", 2), ("SYVAR1", 3)]

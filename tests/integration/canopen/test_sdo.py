@@ -78,7 +78,7 @@ async def test_status_objects_per_process(gw: Gateway, master: Master) -> None:
     ("download32 0x2200:1=5", 0x06070010),  # INTEGER16 sent as 4 bytes
     ("download16 0x2100:1=300", 0x06090030),  # a K byte > 255 in a wider type
     ("download8 0x2400:3=9", 0x06090030),  # an unknown SND target
-    ("download16 0x2400:1=13", 0x06090030),  # an unknown command (1..12 are commands)
+    ("download16 0x2400:1=16", 0x06090030),  # an unknown command (1..15 are commands)
     ("download8 0x2410:1=201", 0x06090030),  # a feed override past 200 %
     ("download8 0x2411:1=101", 0x06090030),  # a rapid override past 100 %
     ("download8 0x2400:2=2", 0x06090030),  # an SND sender that is not external
@@ -145,6 +145,11 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                 assert await master.upload(index, 0) == u8(len(obj.subindices) - 1)
                 continue
             size = len(var) // 8
+            if (index, sub) == (0x2400, 4):  # the N number of command words 13/14
+                await master.download(index, sub, u16(40))
+                assert await master.upload(index, sub) == u16(40)
+                checked += 1
+                continue
             if index in (0x2410, 0x2411):  # the overrides (issue 27): of process ``sub``
                 external = gw.engine.processes[sub].external
                 if external:  # no motion to override: refused
@@ -186,7 +191,7 @@ async def test_every_manufacturer_object(gw: Gateway, master: Master) -> None:
                     await master.upload(index, sub)
                 assert caught.value.code == 0x06010001
             checked += 1
-    assert checked == 128 + 512 + 256 + 3 + 4 * 8 + 4 + 6 + 2 * 4  # + the overrides
+    assert checked == 128 + 512 + 256 + 4 + 4 * 8 + 4 + 6 + 2 * 4  # + the overrides
 
 
 async def test_the_control_word_takes_the_commissioning_commands(gw: Gateway,
@@ -206,3 +211,17 @@ async def test_the_control_word_takes_the_commissioning_commands(gw: Gateway,
     assert caught.value.code == 0x06090030
     ends = [(e["proc"], e["how"]) for e in gw.trace if e["event"] == "end"]
     assert ends == [(2, "reset")]
+
+
+async def test_the_search_n_and_words_13_to_15(gw: Gateway, master: Master) -> None:
+    """0x2400:4 holds the N number of control words 14 (a breakpoint) and 15 (clear them),
+    as Modbus holding 2003 does (issue 27)."""
+    await master.download(0x2400, 4, u16(40))
+    await master.download(0x2400, 1, u16(0x020E))  # breakpoint at N40 of process 2
+    # The command acts on the loop after the answer; a status read is served on the loop
+    # after it (in order): once it is answered, the command has acted.
+    await master.upload(0x2500, 1)
+    assert [b.text for b in gw.engine.breakpoints] == ["P2 N40"]
+    await master.download(0x2400, 1, u16(15))
+    await master.upload(0x2500, 1)
+    assert gw.engine.breakpoints == []

@@ -54,7 +54,7 @@ def test_a_region_set_in_the_config_stays_where_it_was_put() -> None:
 @pytest.mark.parametrize(("text", "message"), [
     ("[plc]\nk_bytes = 1024", "modbus.map.k_bytes: k_bytes (0..1023) overlaps syvars"),
     ("[modbus.map]\ncommand = 1254", "modbus.map.syvars: syvars (1000..1255) overlaps "
-     "command (1254..1256)"),
+     "command (1254..1257)"),
     ("[modbus.map]\nstatus = 5", "modbus.map.status: status (5..104) overlaps info"),
     ("[modbus.map]\nsnd_log = 150", "modbus.map.status: status (100..199) overlaps snd_log "
      "(150..247)"),
