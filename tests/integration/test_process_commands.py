@@ -4,6 +4,7 @@ cell's 1/2/3, which keep their meaning."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -463,3 +464,37 @@ async def test_block_search_and_breakpoints_by_n_from_the_fieldbus(tmp_path: Pat
         writes = [(e["var"], e["value"]) for e in gw.trace if e["event"] == "write"
                   and e["var"].startswith("SYVAR")]
     assert writes == [("SYVAR2", 2), ("SYVAR1", 3)]
+
+
+async def test_a_session_using_every_control_replays_as_recorded(tmp_path: Path) -> None:
+    """Single block, a step, an override, the switches, a breakpoint and its clearing, a
+    command of one process: the record keeps each, and the replay matches."""
+    from ncgate.gateway.record import replay
+    from ncgate.inputs import Break, Command, Override
+
+    (tmp_path / "ncgate.toml").write_text(CELL)
+    (tmp_path / "A.nc").write_text("N1G1X10F600\nN2M01\nN3X20\nN4M30\n")
+    (tmp_path / "B.nc").write_text("N1G1X5F600\nN2M30\n")
+    cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.enabled": False,
+                                                           "canopen.enabled": False})
+    record = tmp_path / "session.jsonl"
+    async with Gateway(cfg, cold=True, record=record) as gw:
+        gw.apply(Command(CommandKind.OPTIONAL_STOP_ON))
+        gw.apply(Override(feed=200, process=1))
+        gw.apply(Break("P2 N2"))
+        gw.apply(Command(CommandKind.SINGLE_BLOCK_ON, 1))
+        gw.command(CommandKind.CYCLE_START)
+        await gw.wait_state(1, "STEP", timeout_s=10)  # after N1 (single block)
+        gw.apply(Command(CommandKind.SINGLE_BLOCK_OFF, 1))
+        await gw.wait_state(1, "STEP", timeout_s=10)  # at M01 (optional stop on)
+        gw.apply(Command(CommandKind.STEP, 1))
+        await gw.wait_state(1, "STEP", timeout_s=10)  # one block: N3
+        gw.apply(Break("P2 N2", on=False))
+        gw.command(CommandKind.CYCLE_START, process=2)  # B starts: no breakpoint any more
+        gw.command(CommandKind.CYCLE_START, process=1)
+        await gw.wait_idle(timeout_s=10)
+    kinds = {json.loads(line).get("input") for line in record.read_text().splitlines()}
+    assert {"command", "override", "break"} <= kinds
+    result = replay(record)
+    # Two starts and two ends compared, at their times: the stops and the 200 % move shaped them.
+    assert result.divergence is None and result.compared == 4, result.divergence
