@@ -15,6 +15,7 @@ import csv
 import enum
 import io
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -87,7 +88,8 @@ class Region:
 
 
 REGION_NAMES = {Kind.SA_BITS: "sa_bits", Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars",
-                Kind.SA_BYTES: "sa_bytes", Kind.COMMAND: "command", Kind.MAILBOX: "mailbox"}
+                Kind.SA_BYTES: "sa_bytes", Kind.COMMAND: "command", Kind.MAILBOX: "mailbox",
+                Kind.OVERRIDES: "overrides", Kind.SEARCH: "command"}
 PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")
 PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait target",
                      "alarm code", "SNDs sent (hi)", "SNDs sent (lo)", "SNDs received (hi)",
@@ -408,12 +410,39 @@ class ModbusMap:
     # -- for people: `ncgate map` -------------------------------------------------------------
 
     def rows(self) -> list[dict[str, object]]:
-        return [{
+        """The regions, then a row for each I/O name of ``[symbols]`` at its address."""
+        rows: list[dict[str, object]] = [{
             "table": r.table.value, "start": r.start, "end": r.end - 1, "count": r.count,
             "hmi_start": r.hmi(r.start), "hmi_end": r.hmi(r.end - 1), "type": r.type,
             "access": {"rw": "read/write", "r": "read", "w": "write"}[r.access],
             "content": r.content,
         } for r in self.regions]
+        for name, text in self.config.symbols.items():
+            place = self._symbol_place(text)
+            if place is None:
+                continue
+            region, address, count = place
+            rows.append({
+                "table": region.table.value, "start": address, "end": address + count - 1,
+                "count": count, "hmi_start": region.hmi(address),
+                "hmi_end": region.hmi(address + count - 1), "type": region.type,
+                "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
+                "content": f"{name} ({text}): an I/O name of [symbols]"})
+        return rows
+
+    def _symbol_place(self, text: str) -> tuple[Region, int, int] | None:
+        """Where an image variable (as [symbols] names it) is on the map."""
+        m = re.fullmatch(r"(SYVAR|SA|SK|K)(\d+)(?:\.(BY|IN))?", text.upper())
+        if m is None:
+            return None
+        area, index, view = m.group(1), int(m.group(2)), m.group(3)
+        kind, address, count = {
+            "SYVAR": (Kind.SYVARS, self.SYVAR_BASE + index, 1),
+            "SA": ((Kind.SA_BYTES, self.SA_BYTE_BASE + index, 1) if view else
+                   (Kind.SA_BITS, index, 1)),
+        }.get(area, (Kind.K_BYTES, self.K_BASE + index, 2 if view == "IN" else 1))
+        region = next((r for r in self.regions if r.kind is kind), None)
+        return None if region is None else (region, address, count)
 
     def render(self, fmt: str) -> str:
         rows = self.rows()

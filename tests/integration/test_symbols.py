@@ -63,3 +63,29 @@ def test_a_bad_name_is_a_config_error_naming_the_key(tmp_path: Path, table: str,
     (tmp_path / "ncgate.toml").write_text(f"[symbols]\n{table}\n")
     with pytest.raises(ConfigError, match=message):
         load_config(tmp_path / "ncgate.toml")
+
+
+def test_ncgate_map_lists_the_names_at_their_addresses(tmp_path: Path) -> None:
+    """`ncgate map --format csv` has a row per I/O name: SA10 is coil 10, SYVAR3 is holding
+    1003 (the default map)."""
+    import csv
+    import io
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "ncgate", "map", "--config",
+                           str(_cell(tmp_path)), "--format", "csv"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    rows = {row["content"].split(" ")[0]: row for row in csv.DictReader(io.StringIO(done.stdout))}
+    assert rows["door_closed"]["table"].startswith("coil")
+    assert rows["door_closed"]["start"] == "10"
+    assert rows["spindle_speed"]["table"].startswith("holding")
+    assert rows["spindle_speed"]["start"] == "1003"
+
+
+def test_a_role_may_write_the_overrides_region_by_its_name() -> None:
+    from ncgate.gateway.modbus.map import ModbusMap, Table
+
+    region = ModbusMap(load_config(None)).region(Table.HOLDING, 2010, 2)
+    assert region.name == "overrides"  # (it was "": no role could write it)
