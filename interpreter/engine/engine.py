@@ -577,6 +577,10 @@ class Engine:
         """An SND in the name of external process ``sender`` (fieldbus mailbox, script)."""
         self.sync.external_snd(sender, target)
 
+    def acts_early(self, p: Process, code: str, where: Where) -> None:
+        """A plain code acting while motion above it is still queued: a hazard (sync.py)."""
+        self.sync.acts_early(p, code, where)
+
     def write_syvar(self, p: Process, index: int, value: int, where: Where,
                     stage: Stage = Stage.DECODER) -> None:
         self.sync.write_syvar(p, index, value, where, stage)

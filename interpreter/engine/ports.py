@@ -103,6 +103,10 @@ class BlockHost(Protocol):
     def write_syvar(self, p: Process, index: int, value: int, where: Where,
                     stage: Stage = ...) -> None: ...
 
+    def acts_early(self, p: Process, code: str, where: Where) -> None:
+        """A plain code that acts while motion above it is still queued (``p.queue``): the
+        hazard event that says so."""
+
     def end_decoding(self, p: Process, how: str, where: Where) -> None:
         """The program ends (REL, M30, ...) once the motion queued before has run."""
 

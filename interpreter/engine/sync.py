@@ -154,7 +154,7 @@ class Sync:
 
     def wait_process(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
         if p.queue and stage is Stage.DECODER:
-            self._acts_early(p, code, where)
+            self.acts_early(p, code, where)
         if n == p.number:
             raise RuntimeAlarm(AlarmCode.WAIT_FOR_SELF, "a process cannot wait for itself")
         sender = self._process_arg(n)
@@ -186,7 +186,7 @@ class Sync:
 
     def send(self, p: Process, stage: Stage, n: int, code: str, where: Where) -> bool:
         if p.queue and stage is Stage.DECODER:
-            self._acts_early(p, code, where)
+            self.acts_early(p, code, where)
         target = self._process_arg(n)
         if target.external:
             self._deliver_snd(p, target, None, where=where)
@@ -265,7 +265,7 @@ class Sync:
     def wait_condition(self, p: Process, stage: Stage, cond: WaitCondition,
                         where: Where) -> bool:
         if p.queue and stage is Stage.DECODER:
-            self._acts_early(p, f"(WAI,{cond.text})", where)
+            self.acts_early(p, f"(WAI,{cond.text})", where)
         area, index, view = cond.area, cond.index, cond.view
         wait = WaitRecord(WaitKind.COND, 0, f"(WAI,{cond.text})", where, self._host.now, stage,
                           cond=cond.text)
@@ -293,7 +293,7 @@ class Sync:
     def write_syvar(self, p: Process, index: int, value: int, where: Where,
                     stage: Stage = Stage.DECODER) -> None:
         if p.queue and stage is Stage.DECODER:
-            self._acts_early(p, f"SYVAR{index}={value}", where)
+            self.acts_early(p, f"SYVAR{index}={value}", where)
         self.write_image(p, "SYVAR", index, "IN", value, where)
 
     def write_image(self, p: Process, area: str, index: int, view: str, value: int,
@@ -308,7 +308,7 @@ class Sync:
         finally:
             self.writer_proc = None
 
-    def _acts_early(self, p: Process, code: str, where: Where) -> None:
+    def acts_early(self, p: Process, code: str, where: Where) -> None:
         """A plain (not #) SND, WAI or SYVAR write acts when the decoder reaches it (spec 2.4),
         here while motion programmed above it is still queued: on the machine it happens
         before that motion ends.  Legal (manual 1.4), but rarely what was meant: say so."""

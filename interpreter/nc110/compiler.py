@@ -189,18 +189,8 @@ class _BlockCompiler:
         with nc.sync_reads the decoder waits for the motion first (the flush above)."""
         read: set[int] = set()
         for item in items:
-            exprs: list[Expr] = []
-            if isinstance(item, Assign):
-                exprs = [item.expr]
-            elif isinstance(item, Branch):
-                exprs = [item.left, item.right]
-            elif isinstance(item, Repeat):
-                exprs = [item.count]
-            elif isinstance(item, Dwell):
-                exprs = [item.seconds]
-            elif isinstance(item, Display):
-                exprs = list(item.args)
-            elif isinstance(item, WaitCond):
+            exprs = _decode_exprs(item)
+            if isinstance(item, WaitCond):
                 exprs = [item.value] if synced else [item.var, item.value]
             for expr in exprs:
                 read.update(syvars_read(expr))
@@ -230,21 +220,7 @@ class _BlockCompiler:
 
     @staticmethod
     def _reads_image(items: tuple[Item, ...]) -> bool:
-        for item in items:
-            exprs: list[Expr] = []
-            if isinstance(item, Assign):
-                exprs = [item.expr]
-            elif isinstance(item, Branch):
-                exprs = [item.left, item.right]
-            elif isinstance(item, Repeat):
-                exprs = [item.count]
-            elif isinstance(item, Dwell):
-                exprs = [item.seconds]
-            elif isinstance(item, Display):
-                exprs = list(item.args)
-            if any(reads_image(e) for e in exprs):
-                return True
-        return False
+        return any(reads_image(e) for item in items for e in _decode_exprs(item))
 
     # ---- evaluation helpers (decode time) ---------------------------------------------
 
@@ -496,20 +472,14 @@ class _BlockCompiler:
     def _early_exe(self, item: Exe, act: Op) -> Op:
         """A plain (not #) EXE acts when the decoder reaches it (spec 2.4), as a plain SND,
         WAI or SYVAR write does: with motion above it still queued, the program starts
-        before that motion ends.  The engine records those as hazards; this is the same
-        hazard, in the same words, for an EXE."""
-        record = self.host.record
+        before that motion ends -- the engine's hazard for those (``acts_early``)."""
+        acts_early = self.host.acts_early
         where = self.where
         code = format_item(item)
 
         def exe(p: Process) -> Step:
             if p.queue:
-                _, line, n = p.queue[0].where
-                above = f"N{n}" if n is not None else f"line {line}"
-                record(ev.Hazard, p.number, where,
-                       f"{code} acted at decode time while motion programmed above it "
-                       f"({above}) was still queued; mark the block # to act in motion order, "
-                       "or set nc.lookahead = 0")
+                acts_early(p, code, where)
             return act(p)
         return exe
 
@@ -561,6 +531,21 @@ class _BlockCompiler:
             p.repeats.append([index, n, erp[0]])
             return NEXT
         return repeat
+
+
+def _decode_exprs(item: Item) -> list[Expr]:
+    """The expressions a block's item has the decoder evaluate (a WAI's condition apart)."""
+    if isinstance(item, Assign):
+        return [item.expr]
+    if isinstance(item, Branch):
+        return [item.left, item.right]
+    if isinstance(item, Repeat):
+        return [item.count]
+    if isinstance(item, Dwell):
+        return [item.seconds]
+    if isinstance(item, Display):
+        return list(item.args)
+    return []
 
 
 def _matching_erp(program: Program, index: int) -> int:
