@@ -88,7 +88,7 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
         return None
     if low == 13:
         k = process or 1
-        main = runtime.config.nc.main if k == 1 else dict(runtime.config.nc.mains).get(k)
+        main = runtime.engine.main_of(k)
         if not main:
             raise InputRefused(Reason.NOT_CONFIGURED, f"process {k} has no main program "
                                "([[nc.process]] main)")
@@ -99,6 +99,10 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
 
 
 ImageChange = tuple[str, int, str, int]
+# Commands only the cell takes (a process in them is refused).
+_CELL_ONLY: Final = frozenset({CommandKind.RESTART_PLC, CommandKind.RUN_TO_SYNC,
+                               CommandKind.OPTIONAL_STOP_ON, CommandKind.OPTIONAL_STOP_OFF,
+                               CommandKind.BLOCK_SKIP_ON, CommandKind.BLOCK_SKIP_OFF})
 # The operator's switches of the cell, as commands.
 _SWITCHES: dict[CommandKind, dict[str, bool]] = {
     CommandKind.OPTIONAL_STOP_ON: {"optional_stop": True},
@@ -191,30 +195,23 @@ class Door:
         kind = command_kind(item.kind)
         process = item.process
         engine = self.runtime.engine
+        if kind in _CELL_ONLY and process is not None:
+            raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's (process null)")
         if kind is CommandKind.RESTART_PLC:
             self._restart_plc(item)
             return
         if kind is CommandKind.RUN_TO_SYNC:
-            if process is not None:
-                raise InputRefused(Reason.BAD_VALUE, "run to sync stops the whole cell "
-                                   "(process null)")
             self._enter(item)
             engine.set_break(parse_breakpoint("sync"))
             return
         if kind in _SWITCHES:
-            if process is not None:
-                raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's switch "
-                                   "(process null)")
             self._enter(item)
             engine.switch(**_SWITCHES[kind])
             return
         if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
             self._interlocks(kind)
         if process is not None:
-            self._process(process)
-            if engine.processes[process].external:
-                raise InputRefused(Reason.EXTERNAL_PROCESS, f"{kind.label} of process "
-                                   f"{process}: it is external, it runs no part program")
+            self._own_process(process, kind.label)
         self._enter(item)
         if kind is CommandKind.CYCLE_START:
             engine.cycle_start(by=str(item.source), process=process)
@@ -270,21 +267,14 @@ class Door:
                                    f"percent 0..{top}")
         if item.feed is None and item.rapid is None:
             raise InputRefused(Reason.BAD_VALUE, "an override names feed, rapid or both")
-        engine = self.runtime.engine
         if item.process is not None:
-            self._process(item.process)
-            if engine.processes[item.process].external:
-                raise InputRefused(Reason.EXTERNAL_PROCESS, f"process {item.process} is "
-                                   "external: it has no motion to override")
+            self._own_process(item.process, "an override")
         self._enter(item)
-        engine.override(item.feed, item.rapid, item.process)
+        self.runtime.engine.override(item.feed, item.rapid, item.process)
 
     def _restart_plc(self, item: Command) -> None:
         """The PLC logic starts again after a FAULT (a running one is left alone); the NC
         processes and their waits are untouched."""
-        if item.process is not None:
-            raise InputRefused(Reason.BAD_VALUE, "a restart of the PLC is the cell's "
-                               "(process null)")
         plc = self._plc()
         if plc is None:
             raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
@@ -313,6 +303,13 @@ class Door:
             if image.read(var.area, var.index, var.view):
                 raise InputRefused(Reason.INTERLOCK, f"{kind.label}: {key} input {var} is "
                                    "set")
+
+    def _own_process(self, number: int, doing: str) -> None:
+        """A command of one process: a configured one that runs part programs."""
+        self._process(number)
+        if self.runtime.engine.processes[number].external:
+            raise InputRefused(Reason.EXTERNAL_PROCESS, f"{doing} of process {number}: it is "
+                               "external, it runs no part program")
 
     def _snd(self, item: Snd) -> None:
         engine = self.runtime.engine

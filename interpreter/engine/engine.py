@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import functools
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from ncgate.interpreter.codes import AlarmCode
@@ -208,7 +208,7 @@ class Engine:
         every held process, or start ``main`` in process 1.  Of one process: resume it if
         held, or start its own main (``[[nc.process]] main``; process 1: ``main``)."""
         held = self._any_held(process)
-        for p in (self.processes.values() if process is None else (self.processes[process],)):
+        for p in self._targets(process):
             p.step_once = False  # a breakpoint's pending stops: the cell goes on
         if held:  # a hold and a stop after a block (a breakpoint's) go on together
             self.hold(False, process)
@@ -228,20 +228,29 @@ class Engine:
     def cycle_start_program(self, process: int | None = None) -> str | None:
         """The program a cycle start (of the cell, or of ``process``) would start now; None
         when it resumes a feed hold or a single block, or starts nothing."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         if any(p.held or p.dec_block is DecoderHold.STEP for p in targets):
             return None
         number = 1 if process is None else process
         p = self.processes.get(number)
-        main = self.settings.main if number == 1 else dict(self.settings.mains).get(number)
+        main = self.main_of(number)
         if main and p is not None and p.loaded is None and p.alarm is None and not p.external:
             return main
         return None
 
+    def main_of(self, process: int) -> str | None:
+        """The program a cycle start of ``process`` starts: ``main`` for process 1, its own
+        ``[[nc.process]] main`` for the others (None: none)."""
+        return self.settings.main if process == 1 else dict(self.settings.mains).get(process)
+
+    def _targets(self, process: int | None) -> Iterable[Process]:
+        """The processes a command of the cell (None) or of one process acts on."""
+        return self.processes.values() if process is None else (self.processes[process],)
+
     def _release_steps(self, process: int | None) -> bool:
         """Processes stopped after a block (single block) run their next block: True when
         there was one."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         released = False
         for p in targets:
             if p.dec_block is DecoderHold.STEP:
@@ -324,7 +333,7 @@ class Engine:
     def single_block(self, on: bool, process: int | None = None) -> None:
         """Single-block mode of one process or the cell: after each block the process stops
         (STEP) until a cycle start; off, a process stopped so goes on."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         for p in targets:
             if not p.external:
                 p.single_block = on
@@ -334,7 +343,7 @@ class Engine:
     def step(self, process: int | None = None) -> None:
         """Exactly one more block: a process stopped after a block runs its next one and stops
         again; a running one stops after the block it is in."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         for p in targets:
             if p.loaded is None or p.alarm is not None or p.external:
                 continue
@@ -345,14 +354,12 @@ class Engine:
                 self._make_runnable(p)
 
     def _any_held(self, process: int | None) -> bool:
-        if process is None:
-            return any(p.held for p in self.processes.values())
-        return self.processes[process].held
+        return any(p.held for p in self._targets(process))
 
     def hold(self, on: bool = True, process: int | None = None) -> None:
         """Feed hold (of the cell, or of one process): motion stops where it is;
         ``hold(False)`` resumes it."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         for p in targets:
             if p.external or p.held == on:
                 continue
@@ -383,7 +390,7 @@ class Engine:
         queue, waits and E parameters), and what the others had with it as when its program
         ends (tokens to it dropped, a rendezvous SND to it an alarm, an EXE waiting for it
         starts); a dialect's stored signals stay (a reset of the cell clears them)."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         for p in targets:
             was_busy = p.loaded is not None or p.alarm is not None
             self._cancel_pending(p)
@@ -945,7 +952,7 @@ class Engine:
         """Set the feed (0..200 %) and/or rapid (0..100 %) override of one process or the
         cell, from the next interpolation step: a move under way goes on at the new rate
         from where it is; 0 % stands without a feed hold."""
-        targets = self.processes.values() if process is None else (self.processes[process],)
+        targets = self._targets(process)
         for p in targets:
             if p.external:
                 continue
