@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Final, TypeVar
 
 from ncgate.errors import InputRefused, Reason
 from ncgate.inputs import (
+    FEED_OVERRIDE_MAX,
+    RAPID_OVERRIDE_MAX,
     Break,
     Command,
     CommandKind,
@@ -260,7 +262,8 @@ class Door:
         self.runtime.engine.set_break(bp, item.on)
 
     def _override(self, item: Override) -> None:
-        for name, value, top in (("feed", item.feed, 200), ("rapid", item.rapid, 100)):
+        for name, value, top in (("feed", item.feed, FEED_OVERRIDE_MAX),
+                                 ("rapid", item.rapid, RAPID_OVERRIDE_MAX)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                       or not 0 <= value <= top):
                 raise InputRefused(Reason.BAD_VALUE, f"{name} override {value!r}: a whole "

@@ -270,6 +270,10 @@ class FieldbusAlarm:
     source: Source = API
 
 
+FEED_OVERRIDE_MAX: Final = 200  # percent: the feed override's range is 0..this
+RAPID_OVERRIDE_MAX: Final = 100  # percent: the rapid override's
+
+
 @dataclass(frozen=True, slots=True)
 class Override:
     """The feed override (0..200 %) and/or the rapid override (0..100 %) of one process or,

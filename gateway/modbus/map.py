@@ -25,7 +25,16 @@ from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
 from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
 from ncgate.gateway.wiring import Backend
-from ncgate.inputs import Command, Override, Snd, Source, Var, Writes
+from ncgate.inputs import (
+    FEED_OVERRIDE_MAX,
+    RAPID_OVERRIDE_MAX,
+    Command,
+    Override,
+    Snd,
+    Source,
+    Var,
+    Writes,
+)
 from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 from ncgate.interpreter.engine.sync import SND_LOG
 
@@ -360,7 +369,8 @@ class ModbusMap:
             if processes[k + 1].external:
                 raise ModbusError(ILLEGAL_VALUE, f"process {k + 1} is external: it has no "
                                   "motion to override")
-            name, top = ("feed", 200) if which == 0 else ("rapid", 100)
+            name, top = (("feed", FEED_OVERRIDE_MAX) if which == 0 else
+                         ("rapid", RAPID_OVERRIDE_MAX))
             if value > top:
                 raise ModbusError(ILLEGAL_VALUE, f"{name} override of process {k + 1}: "
                                   f"0..{top} %")
