@@ -16,6 +16,7 @@ from pathlib import Path
 import canopen
 import pytest
 import pytest_asyncio
+from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
@@ -167,6 +168,17 @@ def u16(v: int) -> bytes:
 
 def i16(v: int) -> bytes:
     return v.to_bytes(2, "little", signed=True)
+
+
+def u32(v: int) -> bytes:
+    return v.to_bytes(4, "little")
+
+
+async def sdo_error(call: object) -> int:
+    """The abort code of an SDO call that must be refused."""
+    with pytest.raises(SdoAbortedError) as caught:
+        await call  # type: ignore[misc]
+    return caught.value.code
 
 
 def abort_code(answer: bytes) -> int:

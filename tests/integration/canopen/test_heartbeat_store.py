@@ -15,7 +15,6 @@ from pathlib import Path
 
 import canopen
 import pytest
-from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config, load_config
 from ncgate.config.state import state_folder
@@ -26,20 +25,10 @@ from ncgate.gateway.canopen.dictionary import write_eds
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.interpreter.engine import ProcessState
 
-from .conftest import Master, connect_master, u8
+from .conftest import Master, connect_master, sdo_error, u8, u32
 
 MASTER_ID = 1
 EMCY = 0x90
-
-
-def u32(v: int) -> bytes:
-    return struct.pack("<L", v)
-
-
-async def sdo_error(call: object) -> int:
-    with pytest.raises(SdoAbortedError) as caught:
-        await call  # type: ignore[misc]
-    return caught.value.code
 
 
 async def heartbeat(master: Master, state: int = 0x05) -> None:

@@ -9,20 +9,13 @@ import threading
 from pathlib import Path
 
 import pytest
-from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.clock import ManualClock
 
-from .conftest import Master, abort_code, i16, u8
+from .conftest import Master, abort_code, i16, sdo_error, u8
 
 SDO_ANSWER = 0x590
-
-
-async def sdo_error(call: object) -> int:
-    with pytest.raises(SdoAbortedError) as caught:
-        await call  # type: ignore[misc]
-    return caught.value.code
 
 
 async def rpdo1_lands(master: Master, cob: int, value: int) -> bool:

@@ -10,26 +10,15 @@ from pathlib import Path
 
 import canopen
 import pytest
-from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.clock import ManualClock, Timer
 from ncgate.gateway.canopen.dictionary import write_eds
 
-from .conftest import Master, u8
+from .conftest import Master, sdo_error, u8, u32
 
 TPDO1, TPDO3, TPDO4 = 0x190, 0x390, 0x490
-
-
-async def sdo_error(call: object) -> int:
-    with pytest.raises(SdoAbortedError) as caught:
-        await call  # type: ignore[misc]
-    return caught.value.code
-
-
-def u32(v: int) -> bytes:
-    return struct.pack("<L", v)
 
 
 async def set_type(master: Master, comm: int, ttype: int) -> None:

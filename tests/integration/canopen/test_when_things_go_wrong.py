@@ -17,30 +17,19 @@ from pathlib import Path
 
 import canopen
 import pytest
-from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.gateway.canopen.dictionary import write_eds
 
-from .conftest import Master, abort_code, u8, u16
+from .conftest import Master, abort_code, sdo_error, u8, u16, u32
 
 BOOT = 0x710
 SDO_ANSWER = 0x590
 EMCY = 0x90
 TPDO3 = 0x390
 MASTER_ID = 1
-
-
-def u32(v: int) -> bytes:
-    return struct.pack("<L", v)
-
-
-async def sdo_error(call: object) -> int:
-    with pytest.raises(SdoAbortedError) as caught:
-        await call  # type: ignore[misc]
-    return caught.value.code
 
 
 def drain(q: queue.Queue[bytes]) -> list[bytes]:
