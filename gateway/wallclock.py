@@ -55,7 +55,7 @@ class WallClockDriver:
     def catch_up(self) -> None:
         """Fire what is due up to now (a slice of it: the rest on the next turns), so that an
         input from outside acts after everything that was due before it."""
-        now = (self.loop.time() - self.t0) * self.scale
+        now = (self.loop.time() - self.t0) * self.scale  # now(), inlined: every input
         engine = self.engine
         due = engine.next_timer()
         if (due is None or due > now) and not engine.has_unfinished:

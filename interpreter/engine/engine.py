@@ -343,15 +343,11 @@ class Engine:
     def step(self, process: int | None = None) -> None:
         """Exactly one more block: a process stopped after a block runs its next one and stops
         again; a running one stops after the block it is in."""
-        targets = self._targets(process)
-        for p in targets:
+        for p in self._targets(process):
             if p.loaded is None or p.alarm is not None or p.external:
                 continue
             p.step_once = True
-            if p.dec_block is DecoderHold.STEP:
-                p.dec_block = None
-                self._update_state(p)
-                self._make_runnable(p)
+            self._release_steps(p.number)
 
     def _any_held(self, process: int | None) -> bool:
         return any(p.held for p in self._targets(process))
