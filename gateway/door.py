@@ -46,7 +46,7 @@ from ncgate.inputs import (
 )
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
-from ncgate.interpreter.engine.breaks import parse_breakpoint
+from ncgate.interpreter.engine.breaks import MAX_BREAKPOINTS, parse_breakpoint
 from ncgate.plc.image import ImageAddressError, ImageValueError
 
 if TYPE_CHECKING:
@@ -88,6 +88,9 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
     low, process = word & 0xFF, word >> 8
     if low not in SEARCH_WORDS:
         return None
+    if process and process not in runtime.engine.processes:
+        raise InputRefused(Reason.UNKNOWN_PROCESS, f"no process {process} (1.."
+                           f"{len(runtime.engine.processes)})")
     if low == 13:
         k = process or 1
         main = runtime.engine.main_of(k)
@@ -258,6 +261,10 @@ class Door:
             raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
         if bp.process is not None:
             self._process(bp.process)
+        breakpoints = self.runtime.engine.breakpoints
+        if item.on and bp not in breakpoints and len(breakpoints) >= MAX_BREAKPOINTS:
+            raise InputRefused(Reason.BAD_VALUE, f"{MAX_BREAKPOINTS} breakpoints are set: "
+                               "clear one first")
         self._enter(item)
         self.runtime.engine.set_break(bp, item.on)
 

@@ -182,3 +182,20 @@ async def test_odd_commands_starts_and_alarms_are_refused(tmp_path: Path) -> Non
             with pytest.raises(InputRefused):
                 gw.command(word)  # type: ignore[arg-type]
         assert not gw.trace  # nothing of any of them happened
+
+
+async def test_breakpoints_are_bounded_and_spelled_in_ascii(tmp_path: Path) -> None:
+    from ncgate.inputs import Break
+    from ncgate.interpreter.engine.breaks import MAX_BREAKPOINTS
+
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE)) as gw:
+        for n in range(MAX_BREAKPOINTS):
+            gw.apply(Break(f"N{n}"))
+        with pytest.raises(InputRefused, match="breakpoints are set") as caught:
+            gw.apply(Break(f"N{MAX_BREAKPOINTS}"))
+        assert caught.value.reason is Reason.BAD_VALUE
+        gw.apply(Break("N0"))  # one already set: no new one
+        for text in ("P\uff11 N5", "N\u0663", "PROG92:" + "9" * 20):
+            with pytest.raises(InputRefused):
+                gw.apply(Break(text, on=False))

@@ -28,6 +28,7 @@ import hmac
 import io
 import json
 import logging
+import re
 from collections.abc import Awaitable, Callable
 from importlib import resources
 from typing import TYPE_CHECKING, Any
@@ -432,10 +433,11 @@ class WebConsole:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ApiError(400, f'"value": expected a whole number, got {value!r}')
         name = var.strip().upper()
-        if name == "FEED_OVERRIDE" or (name.endswith(".FEED_OVERRIDE") and name[0] == "P"):
-            process = None if name == "FEED_OVERRIDE" else name[1:].split(".")[0]
-            if process is not None and not process.isdigit():
+        if name.endswith("FEED_OVERRIDE"):
+            found = re.fullmatch(r"(?:P([0-9]{1,3})\.)?FEED_OVERRIDE", name)
+            if found is None:
                 raise ApiError(422, f"{var}: FEED_OVERRIDE, or P<k>.FEED_OVERRIDE")
+            process = found.group(1)
             try:
                 self.gw.apply(Override(value, None, int(process) if process else None,
                                        _source(request)))
@@ -460,6 +462,8 @@ class WebConsole:
         program, process = body.get("program"), body.get("process", 1)
         source = _source(request)
         item: Command | Start | Break
+        if program is None and ("at" in body or "with_calc" in body) and command != "break":
+            raise ApiError(400, '"at" and "with_calc" go with "program" (a block search)')
         if command == "break":
             at, on = body.get("at"), body.get("on", True)
             if not isinstance(at, str) or not isinstance(on, bool):

@@ -24,9 +24,11 @@ from typing import Final
 
 from ncgate.interpreter.engine.states import WaitKind
 
-_PROCESS: Final = re.compile(r"P(\d+)\s+(.*)$", re.IGNORECASE)
-_LINE: Final = re.compile(r"([^\s:]+):(\d+)$")
-_N: Final = re.compile(r"N(\d+)$", re.IGNORECASE)
+# ASCII digits only, and a bounded count (a process, a line, an N number).
+_PROCESS: Final = re.compile(r"P([0-9]{1,3})\s+(.*)$", re.IGNORECASE)
+_LINE: Final = re.compile(r"([^\s:]+):([0-9]{1,9})$")
+_N: Final = re.compile(r"N([0-9]{1,9})$", re.IGNORECASE)
+MAX_BREAKPOINTS: Final = 256  # set at once: a commissioning session needs a handful
 # A wait's kind as written after "wait": the WaitKind, or the dialect's signal wait.
 WAIT_KINDS: Final = {"WAI": WaitKind.PROC, "PROC": WaitKind.PROC, "COND": WaitKind.COND,
                      "SND": WaitKind.SND, "EXE": WaitKind.EXE, "FLUSH": WaitKind.FLUSH,

@@ -450,6 +450,9 @@ async def test_block_search_and_breakpoints_by_n_from_the_fieldbus(tmp_path: Pat
             assert [b.text for b in gw.engine.breakpoints] == ["P2 N2"]
             await word(0x0201)  # P2 starts B: the breakpoint stops the cell before N2
             await gw.wait_state(2, "HOLD", timeout_s=10)
+            bad = await client.write_register(COMMAND, 0x060F, device_id=1)  # no process 6
+            assert bad.isError() and bad.exception_code == 3
+            assert gw.engine.breakpoints != []
             await word(15)  # clear every breakpoint
             assert gw.engine.breakpoints == []
             await word(1)  # go on

@@ -597,3 +597,16 @@ async def test_the_force_list_through_the_api(gw: Gateway, http: aiohttp.ClientS
     assert gw.image.forced == {}
     forces = [(e["var"], e["value"]) for e in gw.trace if e["event"] == "force"]
     assert forces == [("SA10", 1), ("SYVAR3", -5), ("SA10", None), (None, None)]
+
+
+async def test_odd_override_names_and_a_search_without_a_program_are_refused(
+        gw: Gateway, http: aiohttp.ClientSession) -> None:
+    """A hostile review's finds: a Unicode or 5,000-digit process number was a 500; extra text
+    was accepted; "at" without "program" started the cell from the top."""
+    for var in ("P\u00b2.FEED_OVERRIDE", "P" + "9" * 5000 + ".FEED_OVERRIDE",
+                "P2.X.FEED_OVERRIDE", "P\u0663.FEED_OVERRIDE"):
+        code, body = await post(http, "/api/write", {"var": var, "value": 50})
+        assert code == 422, (var, code, body)
+    assert all(p.feed_override == 100 for p in gw.engine.processes.values())
+    code, _ = await post(http, "/api/command", {"command": "start", "at": "N0"})
+    assert code == 400 and all(s.state.name == "IDLE" for s in map(gw.status, range(1, 6)))
