@@ -36,7 +36,8 @@ STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_TLS_PORT = 802  # mbaps, Modbus/TCP Security
 DEFAULT_WEB_PORT = 8080  # the console's port when web.port is not set
-MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox", "overrides")
+MAP_REGIONS = ("sa_bits", "k_bytes", "syvars", "sa_bytes", "command", "mailbox", "overrides",
+               "force")
 
 
 BUILT_IN = "<built-in default>"  # the name of the built-in config in messages
@@ -459,6 +460,10 @@ class ModbusMapConfig:
     overrides: int = setting(2010, "holding base of the overrides in percent: feed (0..200) "
                              "and rapid (0..100) of process k at +2(k-1), +2(k-1)+1",
                              lo=0, hi=65535)
+    force: int = setting(2100, "holding base of the force table: a force request at +0..+3 "
+                         "(action, kind, index, value in one FC16), the number of forced "
+                         "variables at +4, the first 32 forces at +5.. (3 registers each)",
+                         lo=0, hi=65535)
     status: int = setting(100, "input base of the per-process status blocks (20 registers "
                           "each)", lo=0, hi=65535)
     snd_log: int | None = setting(None, "input base of the SND log (the last 16 SNDs, 98 "

@@ -29,6 +29,7 @@ from ncgate.inputs import (
     FEED_OVERRIDE_MAX,
     RAPID_OVERRIDE_MAX,
     Command,
+    Force,
     Override,
     Snd,
     Source,
@@ -68,6 +69,8 @@ class Kind(enum.Enum):
     PLC_STATUS = "PLC status"
     OVERRIDES = "overrides"
     SEARCH = "search"
+    FORCE_REQUEST = "force request"
+    FORCE_LIST = "force list"
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,7 +101,8 @@ class Region:
 
 REGION_NAMES = {Kind.SA_BITS: "sa_bits", Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars",
                 Kind.SA_BYTES: "sa_bytes", Kind.COMMAND: "command", Kind.MAILBOX: "mailbox",
-                Kind.OVERRIDES: "overrides", Kind.SEARCH: "command"}
+                Kind.OVERRIDES: "overrides", Kind.SEARCH: "command",
+                Kind.FORCE_REQUEST: "force", Kind.FORCE_LIST: "force"}
 PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")
 PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait target",
                      "alarm code", "SNDs sent (hi)", "SNDs sent (lo)", "SNDs received (hi)",
@@ -111,7 +115,14 @@ _LAYOUT_KEYS = {Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars", Kind.SA_BYTES: "
                 Kind.COMMAND: "command", Kind.MAILBOX: "command",
                 Kind.PROCESS_STATUS: "status", Kind.SND_LOG: "snd_log",
                 Kind.PLC_STATUS: "plc_status", Kind.INFO: "info", Kind.OVERRIDES: "overrides",
-                Kind.SEARCH: "command"}
+                Kind.SEARCH: "command", Kind.FORCE_REQUEST: "force", Kind.FORCE_LIST: "force"}
+# The force table (docs/decisions.md): a request's action, and the kinds of variable a
+# request or a listed force names, by their register value.
+FORCE_ACTIONS = {1: "force", 2: "release", 3: "release every one"}
+FORCE_KINDS = {1: ("SA", "bit"), 2: ("SA", "BY"), 3: ("SA", "IN"), 4: ("SK", "BY"),
+               5: ("SK", "IN"), 6: ("SYVAR", "IN")}
+_FORCE_KIND_OF = {place: kind for kind, place in FORCE_KINDS.items()}
+FORCE_LISTED = 32  # the forces the table shows (the count at +4 says how many there are)
 _WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
             ProcessState.WAIT_EXE}
 
@@ -132,6 +143,7 @@ class ModbusMap:
         self.COMMAND, self.MAILBOX = layout.command, layout.command + 1
         self.OVERRIDES = layout.overrides
         self.SEARCH = layout.command + 3
+        self.FORCE = layout.force
         self.search_n = 0  # the N number command words 13/14 use
         self.STATUS_BASE = layout.status
         self.SND_LOG_BASE, self.PLC_BASE = layout.input_bases(processes)
@@ -169,6 +181,14 @@ class ModbusMap:
                    access("overrides", "rw"), "uint16",
                    f"process k at {self.OVERRIDES}+2(k-1): feed override (0..200 %), rapid "
                    "override (0..100 %); in force from the next interpolation step"),
+            Region(Table.HOLDING, self.FORCE, 4, Kind.FORCE_REQUEST, access("force", "w"),
+                   "uint16", "force request, one FC16 of 4: action (1 force, 2 release, 3 "
+                   "release every one), kind (1 SA bit, 2 SA byte, 3 SA word, 4 K byte, 5 K "
+                   "word, 6 SYVAR), index, value (words as int16) (reads 0)"),
+            Region(Table.HOLDING, self.FORCE + 4, 1 + 3 * FORCE_LISTED, Kind.FORCE_LIST, "r",
+                   "uint16", f"the force list: how many variables are forced, then the first "
+                   f"{FORCE_LISTED} in address order (SA, SK, SYVAR), 3 registers each: kind, "
+                   "index, value; unused entries read 0"),
             Region(Table.INPUT, 0, 9, Kind.INFO, "r", "uint16",
                    "0 map version, 1 process count, 2-3 event counter (u32), "
                    "4-7 last SND: sender, target, block N, event number (low 16 bits), "
@@ -285,8 +305,10 @@ class ModbusMap:
             return list(image.sa[first:first + count])
         if kind is Kind.SYVARS:
             return [v & 0xFFFF for v in image.syvar[first:first + count]]
-        if kind in (Kind.COMMAND, Kind.MAILBOX):
+        if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.FORCE_REQUEST):
             return [0] * count
+        if kind is Kind.FORCE_LIST:
+            return force_list_registers(image.forced)[first:first + count]
         if kind is Kind.SEARCH:
             return [self.search_n]
         if kind is Kind.INFO:
@@ -341,7 +363,8 @@ class ModbusMap:
             if "w" not in region.access:
                 raise ModbusError(ILLEGAL_ADDRESS, f"{region.kind.value} is read-only")
             kind = region.kind
-            if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.OVERRIDES, Kind.SEARCH):
+            if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.OVERRIDES, Kind.SEARCH,
+                        Kind.FORCE_REQUEST):
                 if len(pieces) > 1:
                     raise ModbusError(ILLEGAL_ADDRESS, f"the {kind.value} must be written on "
                                       "its own")
@@ -391,6 +414,8 @@ class ModbusMap:
             self._overrides(backend, offset, values, source)
         elif kind is Kind.SEARCH:
             (self.search_n,) = values
+        elif kind is Kind.FORCE_REQUEST:
+            backend.apply(self._force_request(offset, values, source))
         elif kind is Kind.COMMAND:
             (word,) = values
             searched = search_inputs(word, self.search_n, backend.runtime, source)
@@ -411,6 +436,25 @@ class ModbusMap:
                                   f"FC16 at {self.MAILBOX}..{self.MAILBOX + 1}")
             sender, target = values
             backend.apply(Snd(sender, target, source))  # refusals: codes.REFUSAL
+
+    def _force_request(self, offset: int, values: Sequence[int], source: Source) -> Force:
+        """The Force input a force request asks for (the door checks the variable)."""
+        if len(values) != 4 or offset != 0:
+            raise ModbusError(ILLEGAL_ADDRESS, "a force request is action, kind, index, value "
+                              f"in one FC16 at {self.FORCE}..{self.FORCE + 3}")
+        action, kind, index, value = values
+        if action not in FORCE_ACTIONS:
+            raise ModbusError(ILLEGAL_VALUE, "force request action: 1 force, 2 release, "
+                              "3 release every one")
+        if action == 3:
+            return Force(None, None, source)
+        if kind not in FORCE_KINDS:
+            raise ModbusError(ILLEGAL_VALUE, "force request kind: 1 SA bit, 2 SA byte, 3 SA "
+                              "word, 4 K byte, 5 K word, 6 SYVAR")
+        area, view = FORCE_KINDS[kind]
+        if view == "IN" and value & 0x8000:
+            value -= 0x10000  # a word is int16, as the SYVAR registers hold it
+        return Force(Var.at(area, index, view), value if action == 1 else None, source)
 
     def check_register_values(self, address: int, values: Sequence[int]) -> None:
         """Validate a write without doing it (FC23 checks its write before anything happens;
@@ -486,6 +530,15 @@ def _flag(engine: Engine, k: int, bit: int) -> bool:
     return (p.loaded is not None, state in (ProcessState.RUNNING, ProcessState.DWELL),
             state in _WAITING, state is ProcessState.ALARM,
             p.motion_active, p.held)[bit]
+
+
+def force_list_registers(forced: dict[tuple[str, int, str], int]) -> list[int]:
+    """The force list's registers: the count, then the first forces in name order."""
+    regs = [min(len(forced), 0xFFFF)]
+    for (area, index, view), value in sorted(forced.items())[:FORCE_LISTED]:
+        regs += [_FORCE_KIND_OF[(area, view)], index, value & 0xFFFF]
+    regs += [0] * (1 + 3 * FORCE_LISTED - len(regs))
+    return regs
 
 
 def snd_log_registers(engine: Engine) -> list[int]:

@@ -65,3 +65,87 @@ async def test_a_forced_bit_holds_against_plc_logic_and_a_modbus_writer(tmp_path
     lines = [line for line in record.read_text().splitlines() if '"input": "force"' in line]
     assert len(lines) == 2
     assert replay(record).divergence is None
+
+
+# The force table (docs/decisions.md): holding 2100..2103 a request (action, kind, index,
+# value), 2104 the count, 2105.. the list, 3 registers a force (kind, index, value).
+FORCE, FORCE_SA_BIT, FORCE_SYVAR = 2100, 1, 6
+
+
+async def test_a_modbus_client_forces_through_the_force_table(tmp_path: Path) -> None:
+    (tmp_path / "logic.st").write_text(LOGIC)
+    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
+        '[canopen]\nenabled = false\n')
+    record = tmp_path / "session.jsonl"
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
+        watch = PlcWatch(gw)
+        await watch.until("main.n", 3)
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            async def table() -> list[int]:
+                answer = await client.read_holding_registers(FORCE, count=11, device_id=1)
+                assert not answer.isError()
+                return list(answer.registers)
+
+            # Force SA20 off and SYVAR5 to -2 (int16 in a register: 0xFFFE).
+            for request in ([1, FORCE_SA_BIT, 20, 0], [1, FORCE_SYVAR, 5, 0xFFFE]):
+                answer = await client.write_registers(FORCE, request, device_id=1)
+                assert not answer.isError()
+            n = watch.read("main.n")
+            await watch.until("main.n", n + 5)  # the logic writes both every scan
+            assert gw.read("SA20") == 0 and gw.read("SYVAR5") == -2
+            assert not (await client.write_coil(20, True, device_id=1)).isError()
+            assert gw.read("SA20") == 0  # a Modbus writer is overridden too
+            # The list: the request reads 0; 2 forced; SA bit 20 = 0, SYVAR 5 = 0xFFFE.
+            assert await table() == [0, 0, 0, 0, 2, FORCE_SA_BIT, 20, 0, FORCE_SYVAR, 5,
+                                     0xFFFE]
+            assert sorted(gw.image.forced) == [("SA", 20, "bit"), ("SYVAR", 5, "IN")]
+
+            # Bad requests are refused with their code, and nothing of them is forced.
+            for request, code in (([9, FORCE_SA_BIT, 21, 1], 3),   # no such action
+                                  ([1, 9, 21, 1], 3),              # no such kind
+                                  ([1, FORCE_SA_BIT, 21, 2], 3),   # a bit is 0 or 1
+                                  ([1, FORCE_SA_BIT, 60000, 1], 2)):  # outside the image
+                answer = await client.write_registers(FORCE, request, device_id=1)
+                assert answer.isError() and answer.exception_code == code, request
+            answer = await client.write_register(FORCE, 1, device_id=1)  # not one FC16 of 4
+            assert answer.isError() and answer.exception_code == 2
+            answer = await client.write_registers(FORCE + 4, [0], device_id=1)  # the list
+            assert answer.isError() and answer.exception_code == 2
+            assert len(gw.image.forced) == 2
+
+            # Release SA20: the logic writes it again; then release every one.
+            assert not (await client.write_registers(FORCE, [2, FORCE_SA_BIT, 20, 0],
+                                                     device_id=1)).isError()
+            n = watch.read("main.n")
+            await watch.until("main.n", n + 2)
+            assert gw.read("SA20") == 1
+            assert (await table())[4:8] == [1, FORCE_SYVAR, 5, 0xFFFE]
+            assert not (await client.write_registers(FORCE, [3, 0, 0, 0],
+                                                     device_id=1)).isError()
+            assert await table() == [0] * 11
+            n = watch.read("main.n")
+            await watch.until("main.n", n + 2)
+            assert gw.read("SYVAR5") > 0  # SYVAR[5] := n again
+        finally:
+            client.close()
+        trace = gw.trace
+    forces = [(e["var"], e["value"], e["who"].split()[0]) for e in trace
+              if e["event"] == "force"]
+    assert forces == [("SA20", 0, "modbus"), ("SYVAR5", -2, "modbus"),
+                      ("SA20", None, "modbus"), (None, None, "modbus")]
+    assert replay(record).divergence is None
+
+
+def test_the_force_table_is_named_force_for_roles_and_read_only() -> None:
+    from ncgate.config import load_config
+    from ncgate.gateway.modbus.map import ModbusMap, Table
+
+    served = ModbusMap(load_config(None))
+    assert {served.region(Table.HOLDING, a, 1).name for a in (FORCE, FORCE + 4)} == {"force"}
+    assert served.region(Table.HOLDING, FORCE, 4).access == "w"
+    locked = ModbusMap(load_config(None, overrides={"modbus.map.read_only": ["force"]}))
+    assert locked.region(Table.HOLDING, FORCE, 4).access == "r"
