@@ -30,7 +30,8 @@ log = logging.getLogger("ncgate")
 def _on(on: object) -> str:
     if isinstance(on, ev.WaitOn):
         if on.cond is not None:
-            return f"{on.cond} (now {fmt_number(on.value or 0)})"
+            cond = f"{on.name} ({on.cond})" if on.name else on.cond
+            return f"{cond} (now {fmt_number(on.value or 0)})"
         return {WaitKind.PROC: f"an SND from P{on.target}",
                 WaitKind.SND: f"P{on.target} to take its SND",
                 WaitKind.EXE: f"P{on.target} to be free"}.get(on.kind, on.kind.name)

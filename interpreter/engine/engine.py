@@ -1061,7 +1061,7 @@ class Engine:
         else:
             p.int_wait = wait
         on = wait.on if wait.on is not None else _new(
-            WaitOn, (wait.kind, wait.target, wait.cond, wait.value))
+            WaitOn, (wait.kind, wait.target, wait.cond, wait.value, wait.name))
         self._record(ev.Wait, self.now, p.number, wait.where, on)
         if self._wait_timeout_s:
             wait.timeout = self._schedule(self._wait_timeout_s,

@@ -36,6 +36,7 @@ class WaitOn(NamedTuple):
     target: int = 0
     cond: str | None = None
     value: int | float | None = None
+    name: str | None = None  # the condition's variable's I/O name ([symbols])
 
 
 class SignalOn(NamedTuple):
@@ -329,6 +330,8 @@ def _json(value: Any) -> Any:
             number = value.value
             if isinstance(number, float) and number == int(number):
                 number = int(number)
+            if value.name is not None:
+                return {"cond": value.cond, "value": number, "name": value.name}
             return {"cond": value.cond, "value": number}
         return {_ON_KEY[value.kind]: value.target}
     if isinstance(value, AlarmCode):

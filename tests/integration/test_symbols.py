@@ -42,6 +42,31 @@ async def test_the_api_writes_and_reads_by_name_and_the_why_record_shows_it(
         assert gw.read("SYVAR4") == 120 and gw.read("door_closed") == 1
 
 
+async def test_the_run_log_and_the_trace_name_the_variable_a_wait_is_on(
+        tmp_path: Path) -> None:
+    from ncgate.gateway.cli.serve import describe
+    from ncgate.interpreter.engine import events as ev
+
+    heard: list[ev.Event] = []
+    async with Gateway(load_config(_cell(tmp_path), overrides={"modbus.port": 0}),
+                       listeners=[heard.append]) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+        waits = [e for e in gw.trace if e["event"] == "wait"]
+    assert waits[0]["on"] == {"cond": "SA10=1", "value": 0, "name": "door_closed"}
+    lines = [describe(e) for e in heard if isinstance(e, ev.Wait)]
+    assert lines == ["P1 waits at A.nc:1 N1 for door_closed (SA10=1) (now 0)"]
+
+
+def test_a_stall_report_names_the_variable(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    from ncgate.gateway.cli.main import main
+
+    assert main(["sim", "--config", str(_cell(tmp_path))]) == 1
+    out = capsys.readouterr().out
+    assert "P1 A.nc:1 N1 (WAI,SA10=1) waits for door_closed (SA10=1) (now 0)" in out
+
+
 def test_the_sim_script_takes_names(tmp_path: Path) -> None:
     (tmp_path / "s.toml").write_text('[[write]]\nwhen = "P1 WAIT_COND"\nafter = 1.0\n'
                                      'set = "door_closed=1"\n[[write]]\nat = 0.5\n'
