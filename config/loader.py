@@ -14,6 +14,7 @@ Stdlib only, and the interpreter's leaf module of settings (the SND policy is de
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import difflib
 import enum
@@ -122,14 +123,56 @@ def _image_input(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) 
 _SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 
 
+def _symbols_file(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    if "symbols_file" not in t:
+        return None
+    path = (r.base / r.str_(t["symbols_file"], key)).resolve()
+    if not path.is_file():
+        raise r.fail(key, f"no such file: {path}")
+    return path
+
+
+def _io_list(r: _Reader, path: Path, key: str) -> list[tuple[str, str, Any]]:
+    """The rows of a CSV I/O list (docs/decisions.md): a header naming the columns ``name``,
+    ``var`` and optionally ``comment``, comma- or semicolon-separated, as PLC tools export
+    them; as (what names the row in an error, the name, {var})."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise r.fail(key, f"{path}: {exc}") from None
+    lines = text.splitlines()
+    header = lines[0] if lines else ""
+    delimiter = ";" if header.count(";") > header.count(",") else ","
+    rows = csv.reader(lines, delimiter=delimiter)
+    columns = [c.strip().lower() for c in next(rows, [])]
+    if "name" not in columns or "var" not in columns or not set(columns) <= {
+            "name", "var", "comment"}:
+        raise r.fail(key, f"{path}:1: expected a header of name, var and (optionally) comment, "
+                     f"got {header!r}")
+    out = []
+    for number, row in enumerate(rows, 2):
+        if not any(cell.strip() for cell in row):
+            continue
+        if len(row) != len(columns):
+            raise r.fail(key, f"{path}:{number}: expected {len(columns)} columns, got "
+                         f"{len(row)}")
+        cells = dict(zip(columns, (cell.strip() for cell in row), strict=True))
+        out.append((f"{key} ({path.name}:{number}) {cells['name']}", cells["name"],
+                    {"var": cells["var"]}))
+    return out
+
+
 def _symbols(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     raw = t.get("symbols", {})
     if not isinstance(raw, dict):
         raise r.fail(key, "expected a table of NAME = \"SA10\"")
     out: dict[str, str] = {}
     seen: dict[str, str] = {}
-    for name, entry in raw.items():
-        item = f"{key}.{name}"
+    entries: list[tuple[str, str, Any]] = []
+    if done.get("symbols_file") is not None:
+        entries += _io_list(r, done["symbols_file"], "symbols_file")
+    entries += [(f"{key}.{name}", name, entry) for name, entry in raw.items()]
+    for item, name, entry in entries:
         if isinstance(entry, dict):
             unknown = set(entry) - {"var", "comment"}
             if unknown:
@@ -145,6 +188,9 @@ def _symbols(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> A
         if name.upper() in seen:
             raise r.fail(item, f"{name!r} is {seen[name.upper()]!r} already (names are not "
                          "case-sensitive)")
+        if _outside_image(entry, done["plc"]):
+            raise r.fail(item, f"{entry} is outside the image (plc.sa_bits, plc.k_bytes, "
+                         "plc.syvars)")
         seen[name.upper()] = name
         out[name] = entry.upper()
     return out
@@ -607,6 +653,10 @@ class Config:
     canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
     trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
     web: WebConfig = setting(doc="[web]", factory=WebConfig)
+    symbols_file: Path | None = setting(
+        None, "a CSV I/O list of more I/O names: a header of name, var and (optionally) "
+        "comment, comma- or semicolon-separated (as PLC tools export them); its names join "
+        "[symbols]'s", parse=_symbols_file)
     symbols: Mapping[str, str] = setting(
         doc="[symbols]: I/O names, NAME = \"SA10\" (or { var = \"SA10\", comment = \"...\" }): "
         "usable wherever a variable is named (API, sim script) and shown beside it",
@@ -805,6 +855,19 @@ class _Reader:
         return value
 
 
+def _outside_image(text: str, plc: PlcConfig) -> bool:
+    """Whether an image variable as the config names it (SA10, SK3.IN) lies past the image."""
+    found = _VE_MAP.match(text)
+    assert found is not None
+    area, index, view = found.group(1).upper(), int(found.group(2)), found.group(3)
+    size = {"SYVAR": plc.syvars, "SA": plc.sa_bits, "SK": plc.k_bytes, "K": plc.k_bytes}[area]
+    if area == "SA" and view:
+        size = plc.sa_bits // 8
+    if view and view.upper() == "IN":
+        size -= 1  # two bytes
+    return index >= size
+
+
 # ---- checks across keys ----------------------------------------------------------------------
 
 
@@ -813,17 +876,8 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
     in_image = [(f"nc.ve.{name}.map", ve.map) for name, ve in nc.ve.items()]
     in_image += [(f"nc.{key}", getattr(nc, key))
                  for key in ("feed_hold_input", "cycle_start_inhibit_input") if getattr(nc, key)]
-    in_image += [(f"symbols.{name}", text) for name, text in config.symbols.items()]
     for key, text in in_image:
-        found = _VE_MAP.match(text)
-        assert found is not None
-        area, index, view = found.group(1).upper(), int(found.group(2)), found.group(3)
-        size = {"SYVAR": plc.syvars, "SA": plc.sa_bits, "SK": plc.k_bytes, "K": plc.k_bytes}[area]
-        if area == "SA" and view:
-            size = plc.sa_bits // 8
-        if view and view.upper() == "IN":
-            size -= 1  # two bytes
-        if index >= size:
+        if _outside_image(text, plc):
             raise r.fail(key, f"{text} is outside the image (plc.sa_bits, plc.k_bytes, "
                          "plc.syvars)")
     if nc.tool_change_s > nc.limits.block_s:

@@ -90,6 +90,41 @@ def test_a_bad_name_is_a_config_error_naming_the_key(tmp_path: Path, table: str,
         load_config(tmp_path / "ncgate.toml")
 
 
+@pytest.mark.parametrize("io_list", [
+    "name,var,comment\nspindle_on,SA11,M03 issued\nfeed_rate,SYVAR7,\n",
+    # as a PLC tool exports it: semicolons, a BOM, a blank line, a header in capitals
+    "\ufeffName;Var;Comment\nspindle_on;SA11;M03 issued\n\nfeed_rate;SYVAR7;mm/min\n",
+])
+async def test_a_csv_io_list_adds_names(tmp_path: Path, io_list: str) -> None:
+    (tmp_path / "io.csv").write_text(io_list, encoding="utf-8")
+    config = _cell(tmp_path)
+    config.write_text('symbols_file = "io.csv"\n' + CELL)
+    loaded = load_config(config, overrides={"modbus.port": 0})
+    assert loaded.symbols == {"spindle_on": "SA11", "feed_rate": "SYVAR7",
+                              "door_closed": "SA10", "spindle_speed": "SYVAR3"}
+    async with Gateway(loaded) as gw:
+        gw.write("spindle_on", 1)
+        gw.write("FEED_RATE", -5)
+        assert gw.read("SA11") == 1 and gw.read("SYVAR7") == -5
+
+
+@pytest.mark.parametrize(("io_list", "message"), [
+    ("name,address\ndoor,SA1\n", r"symbols_file: .*io.csv:1: expected a header"),
+    ("name,var\nok,SA1\ndoor,X10\n",
+     r"symbols_file \(io.csv:3\) door: expected an image variable"),
+    ("name,var\ndoor,SA1,extra\n", r"symbols_file: .*io.csv:2: expected 2 columns"),
+    ("name,var\ndoor,SA99999\n", r"symbols_file \(io.csv:2\) door: SA99999 is outside"),
+    # a name the CSV and [symbols] both give: the second place is named
+    ("name,var\nDoor_Closed,SA1\n", r"symbols.door_closed: 'door_closed' is 'Door_Closed'"),
+])
+def test_a_bad_io_list_is_a_config_error_naming_the_row(tmp_path: Path, io_list: str,
+                                                        message: str) -> None:
+    (tmp_path / "io.csv").write_text(io_list)
+    (tmp_path / "ncgate.toml").write_text('symbols_file = "io.csv"\n' + CELL)
+    with pytest.raises(ConfigError, match=message):
+        load_config(tmp_path / "ncgate.toml")
+
+
 def test_ncgate_map_lists_the_names_at_their_addresses(tmp_path: Path) -> None:
     """`ncgate map --format csv` has a row per I/O name: SA10 is coil 10, SYVAR3 is holding
     1003 (the default map)."""
