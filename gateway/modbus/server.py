@@ -204,6 +204,9 @@ class RequestHandler:
                 log.exception("modbus: read %s from %s failed", pdu.hex(), source)
                 return exception_pdu(fc, DEVICE_FAILURE)
         try:
+            if len(pdu) == 5 and writable is None and (fc == FC.WRITE_SINGLE_COIL
+                                                       or fc == FC.WRITE_SINGLE_REGISTER):
+                return self._write_single(fc, pdu, source)
             validate(pdu)  # (an FC3/FC4 of another length: 03)
             if fc == FC.ENCAPSULATED_INTERFACE:
                 return self._device_identification(pdu[2], pdu[3])
@@ -222,6 +225,23 @@ class RequestHandler:
         except Exception:  # a bug of ours must not take the connection down
             log.exception("modbus: request %s from %s failed", pdu.hex(), source)
             return exception_pdu(fc, DEVICE_FAILURE)
+
+    def _write_single(self, fc: int, pdu: bytes, source: Source) -> bytes:
+        """FC5 and FC6 of plain Modbus/TCP, the writers' hot path: validate's rules for them
+        (the length, checked by the caller) without pymodbus's decoding, which formats every
+        request for a debug log it does not write.  The answer is the request echoed
+        (Modbus application protocol 6.5, 6.6).  It took bench/modbus.py's write -> resume
+        p50 inside the gateway from 24 to 19 us (issue 23)."""
+        address, value = _ADDRESS_COUNT.unpack_from(pdu, 1)
+        m = self.map
+        if fc == FC.WRITE_SINGLE_COIL:
+            m.region(Table.COILS, address, 1)  # the address first (libmodbus)
+            if value != 0xFF00 and value != 0:
+                raise ModbusError(ILLEGAL_VALUE, "FC5 value must be 0x0000 or 0xFF00")
+            m.write_bits(self.backend, address, (value == 0xFF00,), source)
+        else:
+            m.write_registers(self.backend, address, (value,), source)
+        return bytes(pdu)
 
     def _device_identification(self, code: int, object_id: int) -> bytes:
         """FC43/14 (Modbus application protocol 6.21): the basic objects (0..2) and the
