@@ -476,8 +476,9 @@ class PlcConfig:
     sa_bits: int = setting(1024, "bits of the SA packet (a multiple of 8)", lo=8, hi=65536)
     k_bytes: int = setting(512, "bytes of the K packet", lo=2, hi=65536)
     syvars: int = setting(256, "SYVARs (16-bit signed)", lo=1, hi=32768)
-    logic: tuple[Path, ...] = setting((), "PLC logic in Structured Text: a .st file or a list "
-                                      "of them (none: the PLC runs no logic)", parse=_logic)
+    logic: tuple[Path, ...] = setting((), "PLC logic: a Structured Text .st or PLCopen XML "
+                                      ".xml file, or a list of them in scan order (none: the "
+                                      "PLC runs no logic)", parse=_logic)
     programs: tuple[str, ...] = setting((), "the PROGRAMs each scan runs, in this order "
                                         "(default: every PROGRAM, in file order)",
                                         parse=_programs)

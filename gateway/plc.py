@@ -40,7 +40,7 @@ from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.compiler import Context, Logic, compile_logic
-from ncgate.plc.st.parser import parse_file
+from ncgate.plc.st.plcopen import read_logic_file
 
 log = logging.getLogger("ncgate.plc")
 
@@ -59,8 +59,9 @@ def logic_context(config: Config) -> Context:
 
 
 def load_logic(files: tuple[Path, ...], config: Config) -> Logic:
-    """Parse and check every file; raises LogicError with all the diagnostics."""
-    return compile_logic([parse_file(path) for path in files], logic_context(config))
+    """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix);
+    raises LogicError with all the diagnostics."""
+    return compile_logic([read_logic_file(path) for path in files], logic_context(config))
 
 
 def program_order(logic: Logic, config: Config) -> list[str]:

@@ -30,9 +30,9 @@ from ncgate.interpreter.storage import PROGRAM_SUFFIXES
 from ncgate.plc.st.compiler import compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StDiagnostic
 from ncgate.plc.st.nodes import SourceFile
-from ncgate.plc.st.parser import parse_file
+from ncgate.plc.st.plcopen import read_logic_file
 
-LOGIC_SUFFIX = ".st"  # Structured Text: PLC logic, checked as the PLC loads it
+LOGIC_SUFFIXES = (".st", ".xml")  # PLC logic (ST, PLCopen XML), checked as the PLC loads it
 
 CONFIG_BESIDE = "ncgate.toml"
 
@@ -65,7 +65,7 @@ def expand(arguments: Sequence[str]) -> list[Path]:
             if path.is_dir():
                 out.extend(sorted(p for p in path.iterdir() if p.is_file()
                                   and p.suffix.lower() in (*PROGRAM_SUFFIXES[1:],
-                                                           LOGIC_SUFFIX)))
+                                                           *LOGIC_SUFFIXES)))
             elif path.is_file():
                 out.append(path)
             else:
@@ -96,10 +96,10 @@ def check_files(
     reports: dict[Path, FileReport] = {}
     for group in groups.values():
         cfg = config if config is not None else config_for(group[0], None)
-        logic = [p for p in group if p.suffix.lower() == LOGIC_SUFFIX]
+        logic = [p for p in group if p.suffix.lower() in LOGIC_SUFFIXES]
         if logic:
             reports.update(check_logic(logic, cfg))
-        paths = [p for p in group if p.suffix.lower() != LOGIC_SUFFIX]
+        paths = [p for p in group if p.suffix.lower() not in LOGIC_SUFFIXES]
         if not paths:
             continue
         which = dialect or cfg.nc.dialect
@@ -131,7 +131,7 @@ def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]
     parsed: list[SourceFile] = []
     for path in files:
         try:
-            parsed.append(parse_file(path))
+            parsed.append(read_logic_file(path))
         except LogicError as exc:
             found[str(path)].extend(exc.diagnostics)
     if parsed:

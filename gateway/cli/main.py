@@ -221,10 +221,10 @@ def _check(args: argparse.Namespace) -> int:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
     if errors and dialect is None:
-        from ncgate.gateway.cli.check import LOGIC_SUFFIX, config_for
+        from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
 
         _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in reports
-                                   if r.errors and r.path.suffix.lower() != LOGIC_SUFFIX])
+                                   if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     return EXIT_FAILED if errors else EXIT_OK
 
 

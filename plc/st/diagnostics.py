@@ -49,6 +49,8 @@ class StCode(enum.Enum):
     DUPLICATE_POU = ("ST032", "two POUs with one name")
     EXTERNAL_SENDER = ("ST033", "NC.SEND from a process that is not external")
     DUPLICATE_LABEL = ("ST034", "a CASE value listed twice")
+    # -- PLCopen XML -------------------------------------------------------------------------------
+    XML_PROJECT = ("ST040", "a PLCopen XML file that is not well-formed or not a TC6 project")
 
     @property
     def code(self) -> str:
