@@ -632,6 +632,19 @@ class TraceConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class WebTlsConfig:
+    """HTTPS for the console: on when ``cert`` is set."""
+
+    cert: Path | None = setting(None, "the console's certificate chain (PEM); setting it serves "
+                                "the console over HTTPS only", parse=_optional_path)
+    key: Path | None = setting(None, "its private key (PEM)", parse=_optional_path)
+
+    @property
+    def enabled(self) -> bool:
+        return self.cert is not None
+
+
+@dataclass(frozen=True, slots=True)
 class WebConfig:
     """The commissioning console (``ncgate run``): a page and an HTTP API on one port."""
 
@@ -644,6 +657,7 @@ class WebConfig:
                                 "<token>`", parse=_optional_str)
     read_only: bool = setting(False, "refuse every write and command (a view only)")
     max_streams: int = setting(32, "live streams (browser tabs) at once", lo=1, hi=1000)
+    tls: WebTlsConfig = setting(doc="[web.tls]", factory=WebTlsConfig)
 
 
 @dataclass(frozen=True, slots=True)
@@ -897,6 +911,7 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
             raise r.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at most 32768 "
                          f"K bytes, got {plc.k_bytes}")
     _check_tls(r, config.modbus.tls)
+    _check_web_tls(r, config.web.tls)
     web = config.web
     if serving and web.enabled and not is_loopback(web.host) and not web.token:
         raise r.fail("web.token", f"the console listens on {web.host}, beyond this "
@@ -920,6 +935,35 @@ def is_loopback(host: str) -> bool:
         return False  # a host name: it may resolve to anything
 
 
+def _load_pair(r: _Reader, key: str, cert: Path | None, private: Path | None,
+               *more: Path | None) -> ssl.SSLContext:
+    """A server's certificate and key (and ``more`` files) exist and load as a pair: a
+    server context holding them, or the error naming ``key``.cert / .key."""
+    names = ("cert", "key", "ca")
+    for name, path in zip(names, (cert, private, *more), strict=False):
+        if path is not None and not path.is_file():
+            raise r.fail(f"{key}.{name}", f"no such file: {path}")
+    assert cert is not None and private is not None
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    try:
+        context.load_cert_chain(cert, private)
+    except (ssl.SSLError, ValueError) as exc:
+        raise r.fail(f"{key}.key", f"the certificate {cert.name} and key {private.name} do "
+                     f"not load as a pair: {exc}") from None
+    return context
+
+
+def _check_web_tls(r: _Reader, tls: WebTlsConfig) -> None:
+    """[web.tls]: both files or neither, and they load (the Modbus TLS loader's check)."""
+    if tls.cert is None and tls.key is None:
+        return
+    if tls.cert is None:
+        raise r.fail("web.tls.cert", "missing (web.tls.key is set: HTTPS needs cert and key)")
+    if tls.key is None:
+        raise r.fail("web.tls.key", "missing (HTTPS needs cert and key)")
+    _load_pair(r, "web.tls", tls.cert, tls.key)
+
+
 def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
     """The TLS files exist and load (so that a bad one is named before anything starts)."""
     if not tls.enabled:
@@ -934,17 +978,7 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
     for name in ("key", "ca"):
         if getattr(tls, name) is None:
             raise r.fail(f"modbus.tls.{name}", "missing (TLS needs cert, key and ca)")
-    for name in ("cert", "key", "ca"):
-        path = getattr(tls, name)
-        if not path.is_file():
-            raise r.fail(f"modbus.tls.{name}", f"no such file: {path}")
-    assert tls.cert is not None and tls.key is not None
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
-    try:
-        context.load_cert_chain(tls.cert, tls.key)
-    except (ssl.SSLError, ValueError) as exc:
-        raise r.fail("modbus.tls.key", f"the certificate {tls.cert.name} and key "
-                     f"{tls.key.name} do not load as a pair: {exc}") from None
+    context = _load_pair(r, "modbus.tls", tls.cert, tls.key, tls.ca)
     try:
         context.load_verify_locations(cafile=tls.ca)
     except (ssl.SSLError, ValueError) as exc:
@@ -956,7 +990,7 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
-    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, WebConfig)})
+    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, WebTlsConfig, WebConfig)})
 
 
 def config_markdown() -> str:

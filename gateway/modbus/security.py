@@ -18,6 +18,7 @@ import ssl
 from typing import Final
 
 from ncgate.config import ModbusTlsConfig
+from ncgate.gateway.tls import server_context as tls_context
 
 ROLE_OID: Final = "1.3.6.1.4.1.50316.802.1"
 _UTF8STRING: Final = 0x0C
@@ -26,12 +27,7 @@ _UTF8STRING: Final = 0x0C
 def server_context(tls: ModbusTlsConfig) -> ssl.SSLContext:
     """The server's TLS context: TLS >= 1.2, a client certificate signed by ``tls.ca``."""
     assert tls.cert is not None and tls.key is not None and tls.ca is not None
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
-    context.minimum_version = ssl.TLSVersion.TLSv1_2
-    context.verify_mode = ssl.CERT_REQUIRED
-    context.load_cert_chain(tls.cert, tls.key)
-    context.load_verify_locations(cafile=tls.ca)
-    return context
+    return tls_context(tls.cert, tls.key, tls.ca)
 
 
 def role_of(der: bytes) -> str | None:

@@ -40,6 +40,7 @@ from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
+from ncgate.gateway.tls import server_context
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import status
 from ncgate.inputs import (
@@ -167,7 +168,13 @@ class WebConsole:
                                handle_signals=False)
         await runner.setup()
         port = self.config.port if self.config.port is not None else self.default_port
-        site = web.TCPSite(runner, self.config.host, port, reuse_address=True)
+        tls = self.config.tls
+        # [web.tls]: HTTPS only, with the loader the Modbus TLS port uses (the files were
+        # checked when the config loaded).
+        context = (server_context(tls.cert, tls.key) if tls.cert is not None
+                   and tls.key is not None else None)
+        site = web.TCPSite(runner, self.config.host, port, reuse_address=True,
+                           ssl_context=context)
         try:
             await site.start()
         except OSError as exc:
@@ -198,7 +205,8 @@ class WebConsole:
     def url(self) -> str:
         assert self.address is not None
         host, port = self.address
-        return f"http://{f'[{host}]' if ':' in host else host}:{port}/"
+        scheme = "https" if self.config.tls.enabled else "http"
+        return f"{scheme}://{f'[{host}]' if ':' in host else host}:{port}/"
 
     # -- who may do what ---------------------------------------------------------------------
 
