@@ -78,6 +78,14 @@ def describe(event: Event) -> str | None:
             for b in event.blocked)
     if isinstance(event, ev.Hazard):
         return f"P{proc} hazard{at}: {event.message}"
+    if isinstance(event, ev.Force):
+        if event.var is None:
+            return f"every force released (by {event.who})"
+        if event.value is None:
+            return f"{event.var} released (by {event.who})"
+        return f"{event.var} forced to {event.value} (by {event.who})"
+    if isinstance(event, ev.Forced):
+        return f"{event.var} = {event.value} by {event.who} overridden by force"
     return None
 
 
@@ -113,7 +121,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
                 return
             hazards_logged.add(key)
         warn = isinstance(event, ev.Alarm | ev.Deadlock | ev.Stall | ev.Hazard)
-        if isinstance(event, ev.Write):
+        if isinstance(event, ev.Write | ev.Forced):
             if debug() and budget.take():  # a PLC writes every scan: worded only if asked
                 log.debug(describe(event))
             return

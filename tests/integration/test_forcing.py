@@ -149,3 +149,22 @@ def test_the_force_table_is_named_force_for_roles_and_read_only() -> None:
     assert served.region(Table.HOLDING, FORCE, 4).access == "w"
     locked = ModbusMap(load_config(None, overrides={"modbus.map.read_only": ["force"]}))
     assert locked.region(Table.HOLDING, FORCE, 4).access == "r"
+
+
+async def test_the_run_log_says_what_was_forced_and_released(tmp_path: Path) -> None:
+    from ncgate.gateway.cli.serve import describe
+    from ncgate.interpreter.engine import events as ev
+
+    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[canopen]\nenabled = false\n')
+    heard: list[ev.Event] = []
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"),
+                       listeners=[heard.append]) as gw:
+        gw.apply(Force(Var.parse("SA20"), 1))
+        gw.write("SA20", 0)  # overridden
+        gw.apply(Force(Var.parse("SA20"), None))
+        gw.apply(Force(None, None))
+    lines = [describe(e) for e in heard if isinstance(e, ev.Force | ev.Forced)]
+    assert lines == ["SA20 forced to 1 (by api)", "SA20 = 0 by api overridden by force",
+                     "SA20 released (by api)", "every force released (by api)"]
