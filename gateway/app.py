@@ -96,6 +96,7 @@ class Gateway:
         self._record_path = record
         self._overrides = dict(overrides or {})
         self.recorder: SessionRecorder | None = None
+        self._record_detach: Callable[[], None] = lambda: None
         self._listeners = tuple(listeners)
         self._canopen_clock = canopen_clock
         self.map = ModbusMap(self.config)
@@ -157,13 +158,9 @@ class Gateway:
         runtime.engine.state_listeners.append(self._on_state)
         for listener in self._listeners:
             runtime.trace.subscribe(listener)
+        stack.callback(self.stop_record)
         if self._record_path is not None:
-            recorder = SessionRecorder(self._record_path, self.config, self._overrides, loop)
-            stack.callback(self._close_record, recorder)
-            self.recorder = recorder
-            trace.subscribe(recorder.event)
-            runtime.store.loaded.append(recorder.program)
-            self.door.recorder = recorder.input
+            self.start_record(self._record_path)
         adapters: list[Adapter] = []
         if self.config.modbus.enabled:
             self._modbus = ModbusServer(self.config.modbus, self.map, self)
@@ -207,10 +204,43 @@ class Gateway:
             runtime.retain.close()
         self._plc = None
 
-    def _close_record(self, recorder: SessionRecorder) -> None:
+    def start_record(self, path: str | Path) -> Path:
+        """Write the session from now on to ``path`` (``run --record``, or the console's
+        Record): the header, then every input and event (docs/console.md).  One record at a
+        time: GatewayError while one is written."""
+        if self.recorder is not None:
+            raise GatewayError(f"a record is being written already ({self.recorder.path})")
+        runtime = self.runtime
+        recorder = SessionRecorder(path, self.config, self._overrides,
+                                   asyncio.get_running_loop())
+        self.recorder = recorder
+        unsubscribe = runtime.trace.subscribe(recorder.event)
+        runtime.store.loaded.append(recorder.program)
+        self.door.recorder = recorder.input
+
+        def detach() -> None:
+            unsubscribe()
+            runtime.store.loaded.remove(recorder.program)
+            self.door.recorder = None
+        self._record_detach = detach
+        return recorder.path
+
+    @property
+    def record_folder(self) -> Path:
+        """Where a record started from the console goes: beside ``run --record``'s file,
+        or in the folder ``run`` was started in."""
+        return Path(self._record_path).parent if self._record_path is not None else Path.cwd()
+
+    def stop_record(self) -> Path | None:
+        """Close the record being written with its stop line (a whole record, to replay);
+        its path, or None when none was written."""
+        recorder, self.recorder = self.recorder, None
+        if recorder is None:
+            return None
+        self._record_detach()
         stop_t = self._driver.now() if self._driver is not None else 0.0
         recorder.close(max(stop_t, self.engine.now))
-        self.recorder = None
+        return recorder.path
 
     async def __aexit__(self, exc_type: type[BaseException] | None,
                         exc: BaseException | None, tb: TracebackType | None) -> None:

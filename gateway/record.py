@@ -280,6 +280,10 @@ class SessionRecorder:
             self._programs[str(path)] = digest
             self._file.append(json.dumps({"program": str(path), "sha256": digest}) + "\n")
 
+    def flush(self) -> None:
+        """Write what is pending now (a download of the record as far as it is)."""
+        self._file.flush()
+
     def close(self, t: float) -> None:
         self._file.append(json.dumps({"stop": round(t, 6)}) + "\n")
         self._file.close()

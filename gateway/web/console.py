@@ -29,8 +29,10 @@ import io
 import json
 import logging
 import re
+import time
 from collections.abc import Awaitable, Callable
 from importlib import resources
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
@@ -55,6 +57,8 @@ from ncgate.inputs import (
     Write,
     var_name,
 )
+from ncgate.interpreter.engine import ProcessState
+from ncgate.interpreter.engine.trace import to_jsonl
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES, program_name
 
 if TYPE_CHECKING:
@@ -138,6 +142,7 @@ class WebConsole:
         self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
+        self._last_record: Path | None = None  # the record GET /api/record serves
         self._assets = {name: resources.files("ncgate.gateway.web").joinpath(
             "static", name).read_bytes() for name in ASSETS}
         self._loopback = is_loopback(config.host)
@@ -164,6 +169,9 @@ class WebConsole:
         app.router.add_get("/api/force", self._forced)
         app.router.add_post("/api/force", self._force)
         app.router.add_delete("/api/force", self._unforce_all)
+        app.router.add_get("/api/trace.jsonl", self._trace)
+        app.router.add_get("/api/record", self._record)
+        app.router.add_post("/api/record", self._record_switch)
         runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
                                handle_signals=False)
         await runner.setup()
@@ -313,6 +321,57 @@ class WebConsole:
         out = io.StringIO()
         write_gantt(self.gw.trace, config.processes, out, external=config.external)
         return web.Response(text=out.getvalue(), content_type="image/svg+xml")
+
+    async def _trace(self, request: web.Request) -> web.StreamResponse:
+        """The events kept (``trace.ring``) as a trace file: one JSON line each."""
+        events = self.gw.runtime.trace.events
+        body = "".join(to_jsonl(event) + "\n" for event in events)
+        name = f"ncgate-trace-{self.gw.session}.jsonl"
+        return web.Response(text=body, content_type="application/jsonl", headers={
+            "Content-Disposition": f'attachment; filename="{name}"'})
+
+    async def _record(self, request: web.Request) -> web.StreamResponse:
+        """The session record being written (as far as it is), or the last one."""
+        recorder = self.gw.recorder
+        if recorder is not None:
+            recorder.flush()
+            self._last_record = recorder.path
+        path = self._last_record
+        if path is None or not path.is_file():
+            raise ApiError(404, "no record: start one (POST /api/record {\"on\": true}, or "
+                           "run --record FILE)")
+        return web.FileResponse(path, headers={
+            "Content-Type": "application/jsonl",
+            "Content-Disposition": f'attachment; filename="{path.name}"'})
+
+    async def _record_switch(self, request: web.Request) -> web.StreamResponse:
+        """``{"on": true}`` starts a record (beside ``run --record``'s file, or in the
+        folder ``run`` was started in); ``{"on": false}`` closes it with its stop line."""
+        body = await self._body(request)
+        on = body.get("on")
+        if not isinstance(on, bool):
+            raise ApiError(400, 'expected {"on": true} or {"on": false}')
+        gw = self.gw
+        if not on:
+            path = gw.stop_record()
+            if path is None:
+                raise ApiError(409, "no record is being written")
+            self._last_record = path
+            log.info("web %s: record %s closed", request.remote, path)
+            return web.json_response({"record": None, "last": str(path)})
+        if gw.recorder is not None:
+            raise ApiError(409, f"a record is being written already ({gw.recorder.path})")
+        # The replay starts every process from its program's start: a record begun while
+        # one runs would hold the rest of a run without its start (docs/decisions.md).
+        busy = [p.number for p in gw.engine.processes.values()
+                if not p.external and p.state is not ProcessState.IDLE]
+        if busy:
+            raise ApiError(409, f"process {busy[0]} runs a program: start a record while "
+                           "every process is idle (Reset first)")
+        path = gw.start_record(record_path(gw.record_folder))
+        self._last_record = path
+        log.info("web %s: recording to %s", request.remote, path)
+        return web.json_response({"record": str(path)})
 
     def _status_parts(self) -> dict[str, str]:
         """The status as JSON parts (each top-level key, and the image's ``sa``, ``k``,
@@ -517,6 +576,18 @@ class WebConsole:
                                       "process": process})
         log.info("web %s: %s", request.remote, command)
         return web.json_response({"command": command})
+
+
+def record_path(folder: Path) -> Path:
+    """A new record's file in ``folder``: ``ncgate-record-<UTC time>.jsonl``, never one
+    that exists."""
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    path = folder / f"ncgate-record-{stamp}.jsonl"
+    number = 2
+    while path.exists():
+        path = folder / f"ncgate-record-{stamp}-{number}.jsonl"
+        number += 1
+    return path
 
 
 def status_parts(whole: dict[str, Any]) -> dict[str, str]:

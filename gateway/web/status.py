@@ -12,8 +12,10 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from ncgate import __version__
+from ncgate.inputs import var_name
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import ProcessState
+from ncgate.interpreter.settings import AXES
 from ncgate.plc.st.compiler import ProgramVar
 from ncgate.plc.st.types import ArrayOf, FbOf, Type
 
@@ -41,6 +43,11 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
                      "optional_stop": engine.optional_stop, "block_skip": engine.block_skip,
                      "forced": len(gw.image.forced)},
         "processes": [process(gw, number) for number in engine.processes],
+        # The force list (the F marks of the image grid) and the I/O names of [symbols]
+        # by the variable they name (the grid's names).
+        "forced": {var_name(*key): value for key, value in sorted(gw.image.forced.items())},
+        "symbols": symbols(gw),
+        "record": str(gw.recorder.path) if gw.recorder is not None else None,
         "plc": plc(gw),
         "fieldbus": fieldbus(gw),
         "counters": {"events": gw.runtime.trace.seq, "sync_events": gw.runtime.trace.counter},
@@ -77,7 +84,17 @@ def process(gw: Gateway, number: int) -> dict[str, Any]:
             "held": s.held, "blocks": s.blocks, "snd_sent": s.snd_sent,
             "single_block": p.single_block, "feed_override": p.feed_override,
             "rapid_override": p.rapid_override,
+            # Where the axes are (the interpolator's position, mm) and the modal feed.
+            "position": {axis: round(value, 4) for axis, value in zip(
+                AXES[:3], s.position[:3], strict=False)},
+            "feed": p.modal.feed_mm_min, "moving": s.motion_active,
             "snd_received": s.snd_received, "wait": wait, "alarm": alarm}
+
+
+def symbols(gw: Gateway) -> dict[str, str]:
+    """The I/O names by the variable they name: ``{"SA10": "door_closed"}``."""
+    runtime = gw.runtime
+    return {str(runtime.var(name)): name for name in gw.config.symbols}
 
 
 def plc(gw: Gateway) -> dict[str, Any] | None:

@@ -16,6 +16,7 @@ import pytest
 
 from ncgate.config import ConfigError
 from ncgate.gateway import Gateway
+from ncgate.gateway.record import replay
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.plc_kit import PlcWatch
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
@@ -610,3 +611,67 @@ async def test_odd_override_names_and_a_search_without_a_program_are_refused(
     assert all(p.feed_override == 100 for p in gw.engine.processes.values())
     code, _ = await post(http, "/api/command", {"command": "start", "at": "N0"})
     assert code == 400 and all(s.state.name == "IDLE" for s in map(gw.status, range(1, 6)))
+
+
+async def test_a_record_started_and_stopped_from_the_console_replays_and_downloads(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 30: start/stop recording and download the record -- a whole record (header,
+    the inputs, the events, the stop line) that replays as a match; and the trace kept."""
+    monkeypatch.chdir(tmp_path)  # a run without --record records in the folder it started in
+    async with await console() as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with http.get("/api/record") as r:
+                assert r.status == 404  # none yet
+            assert (await post(http, "/api/record", {"on": False}))[0] == 409
+            code, body = await post(http, "/api/record", {"on": True})
+            assert code == 200
+            path = Path(body["record"])
+            assert path.parent == tmp_path and path.name.startswith("ncgate-record-")
+            assert (await post(http, "/api/record", {"on": True}))[0] == 409  # one at a time
+            async with http.get("/api/status") as r:
+                assert (await r.json())["record"] == str(path)
+            await post(http, "/api/command", {"command": "start"})
+            await gw.wait_state(2, "WAIT_COND")
+            await post(http, "/api/write", {"var": "SA10", "value": 1})
+            await gw.wait_state(2, "RUNNING")
+            # The record so far, downloaded while it is written: its header and the inputs.
+            async with http.get("/api/record") as r:
+                assert r.status == 200
+                assert "attachment" in r.headers["Content-Disposition"]
+                lines = [json.loads(line) for line in (await r.text()).splitlines()]
+            assert lines[0]["ncgate_record"] == 2
+            assert [i["input"] for i in lines if "input" in i] == ["command", "write"]
+            # Not while a program runs: the replay would miss its start.
+            code, body = await post(http, "/api/record", {"on": False})
+            assert code == 200 and body["last"] == str(path)
+            code, body = await post(http, "/api/record", {"on": True})
+            assert code == 409 and "idle" in body["error"]
+            async with http.get("/api/trace.jsonl") as r:
+                assert r.status == 200 and "attachment" in r.headers["Content-Disposition"]
+                trace = [json.loads(line) for line in (await r.text()).splitlines()]
+            assert [e["seq"] for e in trace] == [e["seq"] for e in gw.trace]
+            assert any(e["event"] == "resume" and e["proc"] == 2 for e in trace)
+    text = await asyncio.to_thread(path.read_text)
+    assert json.loads(text.splitlines()[-1]).keys() == {"stop"}
+    result = replay(path)
+    assert result.divergence is None, result.divergence
+
+
+async def test_status_says_where_each_process_is_and_its_feed(tmp_path: Path) -> None:
+    """Issue 30: a lane shows X/Y/Z and the feed: after G1 X10 Y20 Z-5 F300 the process
+    stands there, with the modal feed 300 mm/min."""
+    (tmp_path / "A.nc").write_text("N1G1X10Y20Z-5F300\nN2(WAI,SA10=1)\nN3M30\n")
+    # lookahead 0: the WAI acts after the move above it (spec 2.4), not while it is queued.
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\nlookahead = 0\n'
+                                          '[nc.storage]\nMP0 = "."\n')
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **{"web.port": 0,
+                                                             "nc.time_scale": 100.0})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND")
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/status") as r:
+            p1 = (await r.json())["processes"][0]
+    assert p1["position"] == {"X": 10, "Y": 20, "Z": -5} and p1["feed"] == 300
