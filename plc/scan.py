@@ -160,6 +160,7 @@ class PlcRuntime:
 
     def start(self) -> None:
         """(Re)create the program instances: initial values, then the RETAIN ones."""
+        self.logic.reset_globals()
         self.programs = {key: self.logic.new_program(key) for key in self.logic.programs}
         self._runs = [self.programs[key] for key in self.order]
         self._outputs[:] = [False] * len(self._outputs)
@@ -344,8 +345,7 @@ class PlcRuntime:
         out = {}
         for program, var in self._retained:
             value = getattr(self.programs[program], f"v_{var.key}")
-            out[f"{program}.{var.key}"] = (str(var.type), list(value)
-                                           if isinstance(value, list) else value)
+            out[f"{program}.{var.key}"] = (str(var.type), self.logic.dump(value, var.type))
         return out
 
     def _save_retained(self) -> None:
@@ -372,11 +372,11 @@ class PlcRuntime:
             if found is None:
                 continue
             type_name, value = found
-            if type_name != str(var.type) or not _fits(value, var.type):
+            if type_name != str(var.type) or not self.logic.fits(value, var.type):
                 log.warning("RETAIN %s: the stored %s no longer fits %s; initial value "
                             "used, and the stored value dropped", name, type_name, var.type)
                 continue
-            setattr(self.programs[program], f"v_{var.key}", _as_stored(value, var.type))
+            setattr(self.programs[program], f"v_{var.key}", self.logic.restore(value, var.type))
             used.add(name)
         for name in sorted(set(stored) - {f"{p}.{v.key}" for p, v in self._retained}):
             log.warning("RETAIN %s: no such RETAIN variable now; its stored value is dropped",
@@ -409,7 +409,7 @@ class PlcRuntime:
                 if not isinstance(t, ArrayOf) or not t.lo <= part <= t.hi:
                     raise PlcPathError(f"{path!r}: [{part}] is not an index of {t}")
                 obj, t = obj[part - t.lo], t.element
-                table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None
+                table = self.logic.members_of(t)
                 continue
             name = part.upper()
             if isinstance(t, FbOf) and t.std:
@@ -422,7 +422,7 @@ class PlcRuntime:
                 raise PlcPathError(f"{path!r}: no {part} here ({known})")
             var = table[name]
             obj, t = getattr(obj, f"v_{name}"), var.type
-            table = self.logic.fb_vars.get(t.name) if isinstance(t, FbOf) else None
+            table = self.logic.members_of(t)
         return list(obj) if isinstance(obj, list) else obj
 
 

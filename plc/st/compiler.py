@@ -25,7 +25,7 @@ import struct
 import sys
 import types as pytypes
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,13 +37,21 @@ from ncgate.plc.st.types import (
     ANY_INT,
     ANY_REAL,
     BITS,
+    DATE_NAMES,
+    DATES,
+    DURATIONS,
     ELEMENTARY,
     INTS,
     REALS,
     SIGNED,
+    STRING_DEFAULT,
     UNSIGNED,
     ArrayOf,
+    EnumOf,
     FbOf,
+    Ranged,
+    StringOf,
+    StructOf,
     Type,
     common,
     default_value,
@@ -72,14 +80,19 @@ STD_FBS: dict[str, dict[str, tuple[str, str]]] = {
     "RS": {"S": ("in", "BOOL"), "R1": ("in", "BOOL"), "Q1": ("out", "BOOL")},
 }
 MATH_FUNCTIONS = ("EXP", "LN", "LOG", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN")
+# The character string functions (6.6.2.5.11, Table 43).
+STRING_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE", "REPLACE",
+                    "FIND")
 STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
-                 "SQRT", "EXPT", "TRUNC", *MATH_FUNCTIONS)
+                 "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", *MATH_FUNCTIONS,
+                 *STRING_FUNCTIONS)
 # IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
-UNSUPPORTED_TYPES = ("LINT", "ULINT", "LWORD", "STRING", "WSTRING", "CHAR", "WCHAR", "LTIME",
-                     "DATE", "TIME_OF_DAY", "TOD", "DATE_AND_TIME", "DT", "LDATE", "LTOD",
-                     "LDT")
-UNSUPPORTED_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE",
-                         "REPLACE", "FIND", "MOVE")
+UNSUPPORTED_TYPES = ("CHAR", "WCHAR", "LDATE", "LTOD", "LDT", "LDATE_AND_TIME",
+                     "LTIME_OF_DAY")
+UNSUPPORTED_FUNCTIONS: tuple[str, ...] = ()
+# Each type's pure-integer carrier: what its value wraps as where it is stored.
+CARRIER = {"TIME": "DINT", "LTIME": "LINT", "DATE": "UDINT", "DT": "UDINT", "TOD": "UDINT"}
+TOD_MS = 86_400_000
 # NC.P[k] members: (index in the snapshot tuple, type).
 NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
@@ -261,15 +274,120 @@ def _guard() -> None:
     raise IterationGuard("the loop iteration guard ran out")
 
 
+# The string functions of IEC 61131-3 (6.6.2.5.11, Table 43), positions 1-based.  A negative
+# length, or a position before the first character, is an error of the standard's (the
+# logic faults); a length or position past the end takes what is there (docs/plc.md).
+
+def _length(name: str, value: int) -> int:
+    if value < 0:
+        raise ValueError(f"{name}: L = {value} is negative")
+    return value
+
+
+def _position_of(name: str, value: int, first: int = 1) -> int:
+    if value < first:
+        raise ValueError(f"{name}: P = {value}; positions start at {first}")
+    return value
+
+
+def _left(s: str, n: int) -> str:
+    return s[:_length("LEFT", n)]
+
+
+def _right(s: str, n: int) -> str:
+    n = _length("RIGHT", n)
+    return s[len(s) - n:] if n < len(s) else s
+
+
+def _midstr(s: str, n: int, p: int) -> str:
+    start = _position_of("MID", p) - 1
+    return s[start:start + _length("MID", n)]
+
+
+def _insert(a: str, b: str, p: int) -> str:
+    p = _position_of("INSERT", p, 0)
+    return a[:p] + b + a[p:]
+
+
+def _delete(s: str, n: int, p: int) -> str:
+    start = _position_of("DELETE", p) - 1
+    return s[:start] + s[start + _length("DELETE", n):]
+
+
+def _replace(a: str, b: str, n: int, p: int) -> str:
+    start = _position_of("REPLACE", p) - 1
+    return a[:start] + b + a[start + _length("REPLACE", n):]
+
+
+def _find(a: str, b: str) -> int:
+    return a.find(b) + 1 if b else 0
+
+
+def _ranged(value: int, lo: int, hi: int) -> int:
+    """A value stored in a subrange variable: outside its limits it is an error
+    (IEC 61131-3, 6.4.4.4)."""
+    if lo <= value <= hi:
+        return value
+    raise ValueError(f"{value} is outside the subrange {lo}..{hi}")
+
+
+def _struct(obj: Any, values: dict[str, Any]) -> Any:
+    """A structure instance with the members of its declared initial value."""
+    for name, value in values.items():
+        setattr(obj, name, value)
+    return obj
+
+
+def _time_real(ms: int, factor: float, divide: bool) -> int:
+    """TIME * or / a number (IEC 61131-3, Table 30): rounded to the nearest unit, half to
+    even, as a REAL converts to an integer (6.6.2.5.6)."""
+    if divide:
+        if factor == 0:
+            raise ZeroDivisionError("division by zero")
+        value = ms / factor
+    else:
+        value = ms * factor
+    if math.isnan(value) or math.isinf(value):
+        raise OverflowError("a TIME result beyond any range")
+    return round(value)
+
+
+def _tostr(value: Any, t: str) -> str:
+    """X_TO_STRING: the literal's text without its type prefix, as CODESYS writes it."""
+    if t == "BOOL":
+        return "TRUE" if value else "FALSE"
+    if t in ("REAL", "LREAL"):
+        return repr(float(value)).upper().replace("E+", "E")
+    return str(value)
+
+
+def _strto(text: str, t: str) -> Any:
+    """STRING_TO_X: the number in the text (leading and trailing blanks ignored)."""
+    text = text.strip()
+    try:
+        if t == "BOOL":
+            return text.upper() in ("TRUE", "1")
+        if t in ("REAL", "LREAL"):
+            return float(text.replace("_", ""))
+        return int(text.replace("_", ""), 0) if text[:2].lower() in ("0x", "0b") else \
+            int(text.replace("_", ""))
+    except ValueError:
+        raise ValueError(f"STRING_TO_{t}: {text!r} is not a number") from None
+
+
 HELPERS: dict[str, Any] = {
     "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
     "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard, "_f32": _f32,
     "_f64": _f64, "_F32P": _SINGLE.pack, "_F32U": _SINGLE.unpack,
     **{f"_{name}": _math(name, f) for name, f in _MATH.items()},
     "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
+    "_left": _left, "_right": _right, "_midstr": _midstr, "_insert": _insert,
+    "_delete": _delete, "_replace": _replace, "_find": _find, "_ranged": _ranged,
+    "_struct": _struct, "_time_real": _time_real, "_tostr": _tostr, "_strto": _strto,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
-_BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD"}
+_BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD", 64: "LWORD"}
+_TIMED = (*DURATIONS, *DATES)
 # Integers a REAL holds exactly (24-bit mantissa): their conversion needs no rounding.
 _EXACT_IN_REAL = ("SINT", "INT", "USINT", "UINT", "BYTE", "WORD")
 
@@ -303,8 +421,10 @@ class Place:
 
 
 def wrap_code(code: str, t: Type) -> str:
-    if t == "TIME":
-        t = "DINT"
+    if t == "TOD":
+        return f"(({code}) % {TOD_MS})"
+    if isinstance(t, str):
+        t = CARRIER.get(t, t)
     if t in SIGNED:
         half = 1 << (stdlib.INTEGER_TYPES[str(t)][0] - 1)
         return f"((({code}) + {half}) & {2 * half - 1}) - {half}"
@@ -314,6 +434,8 @@ def wrap_code(code: str, t: Type) -> str:
 
 
 def const_code(value: Any, t: Type) -> str:
+    if isinstance(t, StringOf):
+        return repr(str(value))
     if t == "REAL":
         return repr(_f32(value))
     if t in REALS or t == ANY_REAL:
@@ -324,7 +446,25 @@ def const_code(value: Any, t: Type) -> str:
 
 
 def wrap_value(value: int, t: Type) -> int:
-    return stdlib.wrap(value, "DINT" if t == "TIME" else str(t))
+    if t == "TOD":
+        return value % TOD_MS
+    return stdlib.wrap(value, CARRIER.get(str(t), str(t)))
+
+
+def copy_code(code: str, t: Type, depth: int = 0) -> str:
+    """A copy of an aggregate value (an assignment copies, IEC 61131-3, 7.3.3.2.2)."""
+    if isinstance(t, StructOf):
+        return f"{code}._copy()"
+    if isinstance(t, ArrayOf):
+        if isinstance(t.element, StructOf | ArrayOf):
+            e = f"_e{depth}"
+            return f"[{copy_code(e, t.element, depth + 1)} for {e} in {code}]"
+        return f"list({code})"
+    return code
+
+
+def is_aggregate(t: Type) -> bool:
+    return isinstance(t, ArrayOf | StructOf)
 
 
 def real_code(code: str, t: Type) -> str:
@@ -346,6 +486,7 @@ class VarInfo:
     qualifier: str | None
     span: n.Span
     initial: Any = None
+    image: tuple[str, int] | None = None  # an I/O name of [symbols]: its image variable
 
 
 @dataclass
@@ -354,10 +495,56 @@ class PouInfo:
     file: n.SourceFile
     vars: dict[str, VarInfo] = field(default_factory=dict)
     result: Type | None = None
+    externals: set[str] = field(default_factory=set)  # VAR_EXTERNAL: globals it names
 
     @property
     def inputs(self) -> list[tuple[str, VarInfo]]:
-        return [(k, v) for k, v in self.vars.items() if v.section == "VAR_INPUT"]
+        """A FUNCTION's parameters in order: VAR_INPUT and VAR_IN_OUT."""
+        return [(k, v) for k, v in self.vars.items()
+                if v.section in ("VAR_INPUT", "VAR_IN_OUT")]
+
+    @property
+    def in_outs(self) -> list[str]:
+        return [k for k, v in self.vars.items() if v.section == "VAR_IN_OUT"]
+
+
+@dataclass
+class StructInfo:
+    decl: n.TypeDecl
+    fields: dict[str, VarInfo]
+
+
+@dataclass
+class EnumInfo:
+    display: str
+    values: dict[str, int]  # value name (upper case) -> its integer
+    names: dict[str, str]  # value name (upper case) -> as written
+    default: int
+
+    def name_of(self, value: int) -> str:
+        return next((self.names[k] for k, v in self.values.items() if v == value), str(value))
+
+
+def _leaf(t: Type) -> Type:
+    while isinstance(t, ArrayOf):
+        t = t.element
+    return t
+
+
+def _leaf_count(t: Type) -> int:
+    count = 1
+    while isinstance(t, ArrayOf):
+        count *= t.length
+        t = t.element
+    return count
+
+
+def _reshape(flat: list[Any], t: ArrayOf) -> list[Any]:
+    """A flat list of initial values (row by row) as the nested lists of an array of arrays."""
+    if not isinstance(t.element, ArrayOf):
+        return flat
+    size = _leaf_count(t.element)
+    return [_reshape(flat[i * size:(i + 1) * size], t.element) for i in range(t.length)]
 
 
 class Problems(Exception):
@@ -383,6 +570,15 @@ class Compiler:
         self.ctx = context
         self.diagnostics: list[StDiagnostic] = []
         self.pous: dict[str, PouInfo] = {}
+        self.type_decls: dict[str, tuple[n.TypeDecl, n.SourceFile]] = {}
+        self.resolved: dict[str, Type] = {}
+        self._resolving: set[str] = set()
+        self.structs: dict[str, StructInfo] = {}
+        self.enums: dict[str, EnumInfo] = {}
+        self.enum_values: dict[str, list[str]] = {}  # value name -> the enumerations with it
+        self.type_defaults: dict[str, Any] = {}  # a TYPE's declared initial value
+        self.globals: dict[str, VarInfo] = {}
+        self._prelude_call: n.Call | None = None  # a call that may write before its statement
         self.out = _Emitter()
         self._temp = 0
         self._depth = 0  # expression nesting, not counting operator chains
@@ -403,9 +599,19 @@ class Compiler:
         self.diagnostics.append(StDiagnostic(code, message, span, self._source(span)))
         return Problems()
 
-    # -- pass 1: POUs and their declarations ---------------------------------------------------
+    # -- pass 1: data types, globals, POUs and their declarations ------------------------------
 
     def collect(self) -> None:
+        for f in self.files:
+            for decl in f.types:
+                if decl.key in self.type_decls or decl.key in ELEMENTARY or \
+                        decl.key in STD_FBS:
+                    first = self.type_decls.get(decl.key)
+                    where = f" (first at {first[0].span})" if first else ""
+                    self.error(StCode.DUPLICATE_NAME, f"the type {decl.name} is defined "
+                               f"twice{where}", decl.span)
+                    continue
+                self.type_decls[decl.key] = (decl, f)
         for f in self.files:
             for pou in f.pous:
                 if pou.key in self.pous:
@@ -417,23 +623,114 @@ class Compiler:
                     self.error(StCode.DUPLICATE_POU, f"{pou.name} is a standard "
                                "function or function block", pou.span)
                     continue
+                if pou.key in self.type_decls:
+                    self.error(StCode.DUPLICATE_POU, f"{pou.name} is also a data type "
+                               f"(at {self.type_decls[pou.key][0].span})", pou.span)
+                    continue
                 self.pous[pou.key] = PouInfo(pou, f)
+        # Enumerations first: their values may be named in any declaration; then the
+        # globals (resolving the types they use, which may use the global constants before
+        # them), then the other types.
+        enums_first = sorted(self.type_decls, key=lambda k: self.type_decls[k][0].kind != "ENUM")
+        for key in enums_first[:sum(d.kind == "ENUM" for d, _ in self.type_decls.values())]:
+            try:
+                self.user_type(key)
+            except Problems:
+                continue
+        self._declare_globals()
+        for key in self.type_decls:
+            try:
+                self.user_type(key)
+            except Problems:
+                continue
         for info in self.pous.values():
             self._declare(info)
         self._check_recursion()
 
-    def resolve_type(self, ref: n.TypeRef, in_function: bool) -> Type:
+    def _declare_globals(self) -> None:
+        """VAR_GLOBAL of every file, in file order (a global's initial value may use the
+        constants before it), and the config's I/O names ([symbols])."""
+        scope = Scope(self, None, "")
+        for f in self.files:
+            for decl in f.globals:
+                key = decl.name.upper()
+                try:
+                    if key in RESERVED:
+                        raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is reserved "
+                                         "(the image and the NC)", decl.span)
+                    if key in self.globals:
+                        raise self.error(StCode.DUPLICATE_NAME, f"the global {decl.name} is "
+                                         f"declared twice (first at {self.globals[key].span})",
+                                         decl.span)
+                    if decl.qualifier == "RETAIN":
+                        raise self.error(StCode.UNSUPPORTED, "VAR_GLOBAL RETAIN: declare the "
+                                         "RETAIN variables in a PROGRAM", decl.span)
+                    t = self.resolve_type(decl.type, False)
+                    initial = self._initial(decl, t, scope)
+                    self.globals[key] = VarInfo(decl.name, t, "VAR_GLOBAL", decl.qualifier,
+                                                decl.span, initial)
+                except Problems:
+                    continue
+
+    # -- types -------------------------------------------------------------------------------
+
+    def const_int(self, expr: n.Expr, scope: Scope, what: str) -> int:
+        """A constant integer expression (an array bound, a length, an enumeration value,
+        a subrange limit): literals, named constants, enumeration values."""
+        e = self.expr(expr, scope)
+        if e.const is None or isinstance(e.const, bool | float | str):
+            raise self.error(StCode.NOT_CONSTANT, f"{what} is a constant integer",
+                             _span_of(expr))
+        return int(e.const)
+
+    def resolve_type(self, ref: n.TypeRef, in_function: bool,
+                     scope: Scope | None = None) -> Type:
+        scope = scope or Scope(self, None, "")
         if isinstance(ref, n.ArrayType):
-            if ref.hi < ref.lo:
-                raise self.error(StCode.UNSUPPORTED, f"ARRAY[{ref.lo}..{ref.hi}] is empty",
-                                 ref.span)
-            if ref.hi - ref.lo >= 65536:
+            element = self.resolve_type(ref.element, in_function, scope)
+            dims = [(self.const_int(lo, scope, "an array bound"),
+                     self.const_int(hi, scope, "an array bound")) for lo, hi in ref.dims]
+            size = 1
+            for lo, hi in dims:
+                if hi < lo:
+                    raise self.error(StCode.UNSUPPORTED, f"ARRAY[{lo}..{hi}] is empty",
+                                     ref.span)
+                size *= hi - lo + 1
+            if size > 65536:
                 raise self.error(StCode.UNSUPPORTED, "an array of more than 65536 elements",
                                  ref.span)
-            return ArrayOf(ref.lo, ref.hi, self.resolve_type(ref.element, in_function))
+            t: Type = element
+            for lo, hi in reversed(dims):  # ARRAY[a, b] OF T is ARRAY[a] OF ARRAY[b] OF T
+                t = ArrayOf(lo, hi, t)
+            return t
         key = ref.name.upper()
+        key = DATE_NAMES.get(key, key)
+        if isinstance(ref, n.SubrangeType):
+            if key not in INTS:
+                raise self.error(StCode.TYPE_MISMATCH, f"a subrange is of an integer type, not "
+                                 f"{ref.name}", ref.span)
+            lo = self.const_int(ref.lo, scope, "a subrange limit")
+            hi = self.const_int(ref.hi, scope, "a subrange limit")
+            base_lo, base_hi = limits(key)
+            if not base_lo <= lo <= hi <= base_hi:
+                raise self.error(StCode.CONSTANT_RANGE, f"{key}({lo}..{hi}) is not a subrange "
+                                 f"of {key} ({base_lo}..{base_hi})", ref.span)
+            return Ranged(key, lo, hi)
+        if key in ("STRING", "WSTRING"):
+            length = STRING_DEFAULT
+            if ref.size is not None:
+                length = self.const_int(ref.size, scope, "a string's length")
+                if not 1 <= length <= 65535:
+                    raise self.error(StCode.CONSTANT_RANGE, f"a {key} holds 1..65535 "
+                                     f"characters, not {length}", _span_of(ref.size))
+            return StringOf(length, key == "WSTRING")
+        if ref.size is not None:
+            raise self.error(StCode.TYPE_MISMATCH, f"only STRING and WSTRING take a length, "
+                             f"not {ref.name}", ref.span)
         if key in ELEMENTARY:
             return key
+        if key in self.type_decls:
+            return self.user_type(key)
         if key in STD_FBS or (key in self.pous and self.pous[key].pou.kind == "FUNCTION_BLOCK"):
             if in_function:
                 raise self.error(StCode.UNSUPPORTED, "a FUNCTION keeps no state: declare "
@@ -441,24 +738,108 @@ class Compiler:
                                  ref.span)
             return FbOf(key, key in STD_FBS)
         if key in UNSUPPORTED_TYPES:
-            raise self.error(StCode.UNSUPPORTED, f"{ref.name}: 64-bit, string and date types "
-                             "are outside ncgate's subset (docs/plc.md)", ref.span)
-        hint = did_you_mean(key, [*ELEMENTARY, *STD_FBS, *(
+            raise self.error(StCode.UNSUPPORTED, f"{ref.name}: a type outside ncgate's "
+                             "subset (docs/plc.md)", ref.span)
+        hint = did_you_mean(key, [*ELEMENTARY, *STD_FBS, *self.type_decls, *(
             k for k, p in self.pous.items() if p.pou.kind == "FUNCTION_BLOCK")])
         raise self.error(StCode.UNKNOWN_TYPE, f"unknown type {ref.name}{hint}", ref.span)
+
+    def user_type(self, key: str) -> Type:
+        """A TYPE's type, resolved once (in any order; a type that contains itself is
+        ST030)."""
+        if key in self.resolved:
+            return self.resolved[key]
+        decl, _ = self.type_decls[key]
+        if key in self._resolving:
+            raise self.error(StCode.RECURSION, f"the type {decl.name} contains itself",
+                             decl.span)
+        self._resolving.add(key)
+        try:
+            t = self._define(decl)
+        finally:
+            self._resolving.discard(key)
+        self.resolved[key] = t
+        return t
+
+    def _define(self, decl: n.TypeDecl) -> Type:
+        key = decl.key
+        scope = Scope(self, None, "")
+        if decl.kind == "ENUM":
+            values: dict[str, int] = {}
+            display: dict[str, str] = {}
+            nxt = 0
+            for name, expr, span in decl.items:
+                vkey = name.upper()
+                if vkey in values:
+                    raise self.error(StCode.DUPLICATE_NAME, f"{name} is listed twice in "
+                                     f"{decl.name}", span)
+                if expr is not None:
+                    nxt = self.const_int(expr, scope, "an enumeration value")
+                values[vkey], display[vkey] = nxt, name
+                nxt += 1
+                self.enum_values.setdefault(vkey, []).append(key)
+            default = next(iter(values.values()))
+            if isinstance(decl.initial, str):
+                if decl.initial.upper() not in values:
+                    raise self.error(StCode.UNKNOWN_NAME, f"{decl.initial} is not a value of "
+                                     f"{decl.name}", decl.span)
+                default = values[decl.initial.upper()]
+            self.enums[key] = EnumInfo(decl.name, values, display, default)
+            return EnumOf(key)
+        if decl.kind == "STRUCT":
+            info = StructInfo(decl, {})
+            for f in decl.fields:
+                fkey = f.name.upper()
+                try:
+                    if fkey in info.fields:
+                        raise self.error(StCode.DUPLICATE_NAME, f"{f.name} is declared twice "
+                                         f"in {decl.name}", f.span)
+                    ft = self.resolve_type(f.type, False, scope)
+                    if _holds_fb(ft):
+                        raise self.error(StCode.UNSUPPORTED, "a function block instance in a "
+                                         "STRUCT: declare it in the FUNCTION_BLOCK or PROGRAM",
+                                         f.span)
+                    info.fields[fkey] = VarInfo(f.name, ft, "VAR", None, f.span,
+                                                self._initial(f, ft, scope))
+                except Problems:
+                    continue
+            self.structs[key] = info
+            return StructOf(key)
+        assert decl.base is not None
+        t = self.resolve_type(decl.base, False, scope)
+        if decl.initial is not None and not isinstance(decl.initial, str):
+            self.type_defaults[key] = self.initial_value(decl.initial, t, decl.span, scope)
+        return t
+
+    def default(self, t: Type, ref: n.TypeRef | None = None) -> Any:
+        """A variable's initial value when it declares none: its type's (a TYPE may give
+        one), else IEC's (default_value)."""
+        if isinstance(ref, n.NamedType) and ref.name.upper() in self.type_defaults:
+            return self.type_defaults[ref.name.upper()]
+        if isinstance(t, EnumOf):
+            return self.enums[t.name].default
+        if isinstance(t, StructOf | FbOf):
+            return None
+        if isinstance(t, ArrayOf):
+            if isinstance(t.element, str | StringOf):
+                return default_value(t)
+            return [self.default(t.element) for _ in range(t.length)]
+        return default_value(t)
 
     def _declare(self, info: PouInfo) -> None:
         pou = info.pou
         in_function = pou.kind == "FUNCTION"
+        scope = Scope(self, info, "")
+        scope.constants_only = True
         if pou.result is not None:
             try:
-                result = self.resolve_type(pou.result, True)
-                if not isinstance(result, str):
-                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION returns an elementary "
-                                     "type", pou.result.span)
+                result = self.resolve_type(pou.result, True, scope)
+                if isinstance(result, FbOf):
+                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION returns a value, not a "
+                                     "function block", pou.result.span)
                 info.result = result
                 info.vars[pou.key] = VarInfo(pou.name, result, "RESULT", None, pou.span,
-                                             default_value(result))
+                                             self.default(result, pou.result))
             except Problems:
                 pass
         for decl in pou.decls:
@@ -470,48 +851,95 @@ class Compiler:
                 if key in info.vars:
                     raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is declared twice "
                                      f"(first at {info.vars[key].span})", decl.span)
-                t = self.resolve_type(decl.type, in_function)
+                t = self.resolve_type(decl.type, in_function, scope)
+                if decl.section == "VAR_EXTERNAL":
+                    found = self.globals.get(key)
+                    if found is None:
+                        raise self.error(StCode.UNKNOWN_NAME, f"VAR_EXTERNAL {decl.name}: no "
+                                         "VAR_GLOBAL of that name", decl.span)
+                    if found.type != t:
+                        raise self.error(StCode.TYPE_MISMATCH, f"VAR_EXTERNAL {decl.name} is "
+                                         f"{t}, the global is {found.type}", decl.span)
+                    info.externals.add(key)
+                    continue
                 if decl.qualifier == "RETAIN" and pou.kind != "PROGRAM":
                     raise self.error(StCode.UNSUPPORTED, "RETAIN variables belong in a "
                                      "PROGRAM", decl.span)
-                if decl.qualifier == "RETAIN" and _holds_fb(t):
-                    raise self.error(StCode.UNSUPPORTED, "a function block instance cannot be "
-                                     "RETAIN; retain the values it needs", decl.span)
                 if in_function and decl.section == "VAR_OUTPUT":
                     raise self.error(StCode.UNSUPPORTED, "a FUNCTION gives one result: no "
                                      "VAR_OUTPUT", decl.span)
-                initial = self._initial(decl, t)
+                if decl.section == "VAR_IN_OUT" and (decl.initial is not None or _holds_fb(t)):
+                    raise self.error(StCode.UNSUPPORTED, "a VAR_IN_OUT is a reference to the "
+                                     "caller's variable: no initial value, no function block",
+                                     decl.span)
+                if decl.section == "VAR_IN_OUT" and pou.kind == "PROGRAM":
+                    raise self.error(StCode.UNSUPPORTED, "a PROGRAM has no caller: no "
+                                     "VAR_IN_OUT", decl.span)
+                initial = self._initial(decl, t, scope)
                 info.vars[key] = VarInfo(decl.name, t, decl.section, decl.qualifier,
                                          decl.span, initial)
             except Problems:
                 continue
 
-    def _initial(self, decl: n.VarDecl, t: Type) -> Any:
+    def _initial(self, decl: n.VarDecl, t: Type, scope: Scope) -> Any:
         if decl.initial is None:
             if decl.qualifier == "CONSTANT":
                 raise self.error(StCode.NOT_CONSTANT, f"the CONSTANT {decl.name} needs a "
                                  "value", decl.span)
-            return None if isinstance(t, FbOf) or _holds_fb(t) else default_value(t)
+            return None if isinstance(t, FbOf) or _holds_fb(t) else self.default(t, decl.type)
+        return self.initial_value(decl.initial, t, decl.span, scope)
+
+    def initial_value(self, init: n.Initial, t: Type, span: n.Span, scope: Scope) -> Any:
+        """A declared initial value (6.5.1.3): a constant, an array's list (``[1, 2(0)]``,
+        flat over every dimension, row by row), a structure's ``(x := 1, y := 2)``."""
         if isinstance(t, FbOf) or _holds_fb(t):
             raise self.error(StCode.UNSUPPORTED, "a function block instance takes no initial "
-                             "value", decl.span)
-        if isinstance(decl.initial, n.ArrayInit):
+                             "value", span)
+        if isinstance(init, n.ArrayInit):
             if not isinstance(t, ArrayOf):
-                raise self.error(StCode.TYPE_MISMATCH, f"{decl.name} is {t}, not an array",
-                                 decl.initial.span)
-            values = []
-            for count, expr in decl.initial.items:
-                values += [self._const(expr, t.element)] * count
-            if len(values) > t.length:
+                raise self.error(StCode.TYPE_MISMATCH, f"{t} is not an array", init.span)
+            nested = isinstance(t.element, ArrayOf) and all(
+                isinstance(v, n.ArrayInit) for _, v in init.items)
+            leaf: Type = t
+            count = 1
+            if not nested:
+                while isinstance(leaf, ArrayOf):
+                    count *= leaf.length
+                    leaf = leaf.element
+            else:
+                leaf, count = t.element, t.length
+            values: list[Any] = []
+            for repeat, item in init.items:
+                one = self.default(leaf) if item is None else self.initial_value(
+                    item, leaf, span, scope)
+                values += [one] * repeat
+            if len(values) > count:
                 raise self.error(StCode.INDEX_RANGE, f"{len(values)} initial values for "
-                                 f"{t.length} elements", decl.initial.span)
-            return values + [default_value(t.element)] * (t.length - len(values))
+                                 f"{count} elements", init.span)
+            values += [self.default(leaf) for _ in range(count - len(values))]
+            return values if nested else _reshape(values, t)
+        if isinstance(init, n.StructInit):
+            if not isinstance(t, StructOf):
+                raise self.error(StCode.TYPE_MISMATCH, f"{t} is not a structure", init.span)
+            fields = self.structs[t.name].fields
+            out: dict[str, Any] = {}
+            for name, fspan, sub in init.items:
+                fkey = name.upper()
+                member = fields.get(fkey)
+                if member is None:
+                    raise self.error(StCode.UNKNOWN_MEMBER, f"{t.name} has no {name}"
+                                     + did_you_mean(fkey, fields), fspan)
+                out[fkey] = self.initial_value(sub, member.type, fspan, scope)
+            return out
+        if isinstance(t, StructOf):
+            raise self.error(StCode.TYPE_MISMATCH, f"a {t.name}'s initial value is "
+                             "(member := value, …)", _span_of(init))
         if isinstance(t, ArrayOf):
-            return [self._const(decl.initial, t.element)] * t.length
-        return self._const(decl.initial, t)
+            return _reshape([self._const(init, _leaf(t), scope)] * _leaf_count(t), t)
+        return self._const(init, t, scope)
 
-    def _const(self, expr: n.Expr, t: Type) -> Any:
-        e = self.expr(expr, Scope(self, None, ""))
+    def _const(self, expr: n.Expr, t: Type, scope: Scope | None = None) -> Any:
+        e = self.expr(expr, scope or Scope(self, None, ""))
         if e.const is None:
             raise self.error(StCode.NOT_CONSTANT, "an initial value is a constant",
                              _span_of(expr))
@@ -522,6 +950,12 @@ class Compiler:
             return float(e.const)
         if t == "BOOL":
             return bool(e.const)
+        if isinstance(t, StringOf):
+            return str(e.const)[:t.length]
+        if isinstance(t, EnumOf):
+            return int(e.const)
+        if isinstance(t, Ranged):
+            return int(e.const)
         return wrap_value(e.const, t) if isinstance(t, str) and t != "BOOL" else e.const
 
     def _check_recursion(self) -> None:
@@ -557,6 +991,20 @@ class Compiler:
     def compile(self) -> tuple[str, list[n.Span | None]]:
         self.collect()
         out = self.out
+        for key, declared in self.structs.items():
+            self._struct_class(key, declared)
+        out.emit("class _Globals:", None)
+        out.indent += 1
+        names = [f"v_{k}" for k, g in self.globals.items() if g.image is None]
+        out.emit(f"__slots__ = {tuple(names)!r}", None)
+        out.emit("def __init__(self):", None)
+        out.indent += 1
+        for k, g in self.globals.items():
+            if g.image is None:
+                out.emit(f"self.v_{k} = {self.init_code(g.type, g.initial)}", g.span)
+        out.emit("pass", None)
+        out.indent -= 2
+        out.emit("_G = _Globals()", None)
         for key, info in self.pous.items():
             if info.pou.kind == "FUNCTION":
                 self._function(key, info)
@@ -566,6 +1014,26 @@ class Compiler:
             out.lines += helper.lines
             out.spans += helper.spans
         return "\n".join(out.lines) + "\n", out.spans
+
+    def _struct_class(self, key: str, struct: StructInfo) -> None:
+        """A structure type as a class: its members, and _copy (an assignment copies)."""
+        out = self.out
+        out.emit(f"class S_{key}:", struct.decl.span)
+        out.indent += 1
+        out.emit(f"__slots__ = {tuple(f'v_{k}' for k in struct.fields)!r}", None)
+        out.emit("def __init__(self):", None)
+        out.indent += 1
+        for k, v in struct.fields.items():
+            out.emit(f"self.v_{k} = {self.init_code(v.type, v.initial)}", v.span)
+        out.emit("pass", None)
+        out.indent -= 1
+        out.emit("def _copy(self):", None)
+        out.indent += 1
+        out.emit(f"o = S_{key}.__new__(S_{key})", None)
+        for k, v in struct.fields.items():
+            out.emit(f"o.v_{k} = {copy_code(f'self.v_{k}', v.type)}", None)
+        out.emit("return o", None)
+        out.indent -= 2
 
     def _class(self, key: str, info: PouInfo) -> None:
         out = self.out
@@ -577,7 +1045,7 @@ class Compiler:
         out.emit("def __init__(self):", None)
         out.indent += 1
         for k, v in info.vars.items():
-            out.emit(f"self.v_{k} = {_init_code(v.type, v.initial)}", v.span)
+            out.emit(f"self.v_{k} = {self.init_code(v.type, v.initial)}", v.span)
         out.emit("pass", None)
         out.indent -= 1
         out.emit("def __call__(self, _now=0):", info.pou.span)
@@ -587,20 +1055,34 @@ class Compiler:
 
     def _function(self, key: str, info: PouInfo) -> None:
         out = self.out
-        params = ", ".join(f"v_{k}={_init_code(v.type, v.initial)}" for k, v in info.inputs)
+        # An aggregate's default is made at each call (a Python default is made once).
+        params = ", ".join(f"v_{k}=None" if is_aggregate(v.type) or v.section == "VAR_IN_OUT"
+                           else f"v_{k}={self.init_code(v.type, v.initial)}"
+                           for k, v in info.inputs)
         out.emit(f"def F_{key}({params}):", info.pou.span)
         out.indent += 1
         helpers_at = len(out.lines)
+        for k, v in info.inputs:
+            if is_aggregate(v.type) and v.section == "VAR_INPUT":
+                out.emit(f"if v_{k} is None: v_{k} = {self.init_code(v.type, v.initial)}",
+                         v.span)
         for k, v in info.vars.items():
-            if v.section != "VAR_INPUT":
-                out.emit(f"v_{k} = {_init_code(v.type, v.initial)}", v.span)
+            if v.section not in ("VAR_INPUT", "VAR_IN_OUT"):
+                out.emit(f"v_{k} = {self.init_code(v.type, v.initial)}", v.span)
         self._local_helpers = []
         self._body(info, Scope(self, info, ""))
-        out.emit(f"return v_{key}", None)
+        out.emit(self.function_return(info), None)
         out.indent -= 1
         for helper in reversed(self._local_helpers):  # defined first, called later
             out.lines[helpers_at:helpers_at] = helper.lines
             out.spans[helpers_at:helpers_at] = helper.spans
+
+    def function_return(self, info: PouInfo) -> str:
+        """A FUNCTION's return: its result, and the values of its VAR_IN_OUTs, which the
+        caller stores back into the variables it gave (copy in, copy out)."""
+        if not info.in_outs:
+            return f"return v_{info.pou.key}"
+        return "return (" + ", ".join(f"v_{k}" for k in [info.pou.key, *info.in_outs]) + ",)"
 
     def _body(self, info: PouInfo, scope: Scope) -> None:
         out = self.out
@@ -609,13 +1091,33 @@ class Compiler:
         out.emit("global _LEFT", None)
         for k, v in info.vars.items():
             if v.section == "VAR_TEMP":
-                out.emit(f"{scope.prefix}v_{k} = {_init_code(v.type, v.initial)}", v.span)
+                out.emit(f"{scope.prefix}v_{k} = {self.init_code(v.type, v.initial)}", v.span)
         start = len(out.lines)
         self.stmts(info.pou.body, scope)
         if len(out.lines) == start:
             out.emit("pass", None)
         if not scope.loops_used:
             del out.lines[guard_at], out.spans[guard_at]
+
+    def init_code(self, t: Type, initial: Any) -> str:
+        """The code of a variable's initial value (a new object for an aggregate)."""
+        if isinstance(t, FbOf):
+            return f"_STD_{t.name}()" if t.std else f"FB_{t.name}()"
+        if isinstance(t, StructOf):
+            if not initial:
+                return f"S_{t.name}()"
+            fields = self.structs[t.name].fields
+            members = ", ".join(f"'v_{k}': {self.init_code(fields[k].type, v)}"
+                                for k, v in initial.items())
+            return f"_struct(S_{t.name}(), {{{members}}})"
+        if isinstance(t, ArrayOf):
+            if isinstance(t.element, FbOf | StructOf | ArrayOf) and (
+                    initial is None or _holds_fb(t)):
+                return f"[{self.init_code(t.element, None)} for _ in range({t.length})]"
+            if isinstance(t.element, StructOf | ArrayOf):
+                return "[" + ", ".join(self.init_code(t.element, v) for v in initial) + "]"
+            return repr(list(initial))
+        return repr(initial)
 
     def temp(self) -> str:
         self._temp += 1
@@ -707,9 +1209,9 @@ class Compiler:
         if code != RETURN_CODE and scope.loops and scope.loops[-1][0] == scope.frame:
             return ["break"] if code == EXIT_CODE else [*scope.loops[-1][1], "continue"]
         if code == RETURN_CODE and scope.frame == 0:
-            pou = scope.info.pou if scope.info is not None else None
-            return [f"return v_{pou.key}" if pou is not None and pou.kind == "FUNCTION"
-                    else "return"]
+            info = scope.info
+            return [self.function_return(info) if info is not None and
+                    info.pou.kind == "FUNCTION" else "return"]
         scope.codes.add(code)
         return [f"return {code}"]
 
@@ -718,7 +1220,12 @@ class Compiler:
         span = s.span
         if isinstance(s, n.Assign):
             place = scope.place(s.target, write=True)
-            value = self.coerce(self.expr(s.expr, scope), place.type, _span_of(s.expr))
+            if isinstance(s.expr, n.Call):
+                self._prelude_call = s.expr
+            try:
+                value = self.coerce(self.expr(s.expr, scope), place.type, _span_of(s.expr))
+            finally:
+                self._prelude_call = None
             assert place.store is not None
             out.emit(place.store(value), span)
         elif isinstance(s, n.CallStmt):
@@ -793,9 +1300,9 @@ class Compiler:
     def case(self, s: n.Case, scope: Scope) -> None:
         out = self.out
         sel = self.expr(s.selector, scope)
-        if not is_int(sel.type):
-            raise self.error(StCode.TYPE_MISMATCH, f"CASE selects on an integer, not "
-                             f"{sel.type}", _span_of(s.selector))
+        if not is_int(sel.type) and not isinstance(sel.type, EnumOf):
+            raise self.error(StCode.TYPE_MISMATCH, f"CASE selects on an integer or an "
+                             f"enumeration, not {sel.type}", _span_of(s.selector))
         t = self.temp()
         out.emit(f"{t} = {sel.code}", s.span)
         scope.live.append(t)  # a helper function holding later arms takes it as a parameter
@@ -811,8 +1318,12 @@ class Compiler:
         for labels, body in arms[:CHAIN_BRANCHES]:
             tests = []
             for label in labels:
-                lo = self._label(label.lo, selector)
-                hi = self._label(label.hi, selector) if label.hi is not None else None
+                try:
+                    lo = self._label(label.lo, selector, scope)
+                    hi = self._label(label.hi, selector, scope) if label.hi is not None \
+                        else None
+                except Problems:
+                    continue
                 values = {lo} if hi is None else set(range(lo, hi + 1)) if hi - lo < 4096 \
                     else set()
                 if values & seen:
@@ -832,13 +1343,29 @@ class Compiler:
             out.emit("if True:" if first else "else:", s.span)
             self.block(s.otherwise, scope, s.span)
 
-    def _label(self, lit: n.Literal, selector: Type) -> int:
-        t = lit.type or ANY_INT
-        if t not in INTS and t != ANY_INT:
-            raise self.error(StCode.TYPE_MISMATCH, f"a CASE label is an integer, not {t}",
-                             lit.span)
-        self.coerce(E(repr(lit.value), t, lit.value), selector, lit.span)
-        return int(lit.value)
+    def _label(self, label: n.Literal | n.Var | n.EnumLit, selector: Type, scope: Scope
+               ) -> int:
+        """A CASE label: an integer literal, a named constant or an enumeration value
+        (7.3.3.3.3: constants of the selector's type)."""
+        saved = scope.constants_only
+        scope.constants_only = True
+        try:
+            e = self.expr(label, scope)
+        finally:
+            scope.constants_only = saved
+        if e.const is None or isinstance(e.const, bool | float | str):
+            raise self.error(StCode.NOT_CONSTANT, "a CASE label is a constant integer or "
+                             "enumeration value", label.span)
+        if isinstance(selector, EnumOf) or isinstance(e.type, EnumOf):
+            if e.type != selector:
+                raise self.error(StCode.TYPE_MISMATCH, f"a CASE label of {_tname(e.type)} "
+                                 f"where the selector is {selector}", label.span)
+            return int(e.const)
+        if e.type not in INTS and e.type != ANY_INT:
+            raise self.error(StCode.TYPE_MISMATCH, f"a CASE label is an integer, not "
+                             f"{_tname(e.type)}", label.span)
+        self.coerce(E(repr(e.const), e.type, e.const), selector, label.span)
+        return int(e.const)
 
     def for_loop(self, s: n.For, scope: Scope) -> None:
         out = self.out
@@ -878,11 +1405,16 @@ class Compiler:
             self.nc_send(s, scope)
             return
         key = target.name.upper()
-        if not target.selectors and (scope.info is None or key not in scope.info.vars) and (
+        if not target.selectors and scope.lookup(key) is None and (
                 key in STD_FUNCTIONS or key in UNSUPPORTED_FUNCTIONS or _conversion(key) or (
                     key in self.pous and self.pous[key].pou.kind == "FUNCTION")):
             # A FUNCTION called as a statement (IEC 61131-3, 7.3.3.2): its result is dropped.
-            e = self.expr(n.Call(target.name, s.args, s.span), scope)
+            call = n.Call(target.name, s.args, s.span)
+            self._prelude_call = call
+            try:
+                e = self.expr(call, scope)
+            finally:
+                self._prelude_call = None
             out.emit(e.code, s.span)
             return
         place = scope.place(target, write=False)
@@ -899,6 +1431,17 @@ class Compiler:
             if arg.name is None:
                 raise self.error(StCode.BAD_ARGUMENTS, f"name the inputs of {fb.name} "
                                  "(IN := …)", arg.span)
+            if members.get(arg.name.upper(), ("",))[0] == "inout":
+                # VAR_IN_OUT (6.5.2.2): the caller's variable itself -- copied in before
+                # the call and back after it.
+                assert arg.expr is not None
+                ref = self.reference(arg.expr, members[arg.name.upper()][1], fb.name,
+                                     arg.name, scope)
+                given.add(arg.name.upper())
+                out.emit(f"{f}.v_{arg.name.upper()} = {ref.read}", s.span)
+                assert ref.store is not None
+                outputs.append(ref.store(f"{f}.v_{arg.name.upper()}"))
+                continue
             key = arg.name.upper()
             member = members.get(key)
             if member is None:
@@ -924,10 +1467,32 @@ class Compiler:
                 assert dest.store is not None
                 outputs.append(dest.store(self.coerce(E(f"{f}.{attr}", mtype), dest.type,
                                                       arg.output.span)))
+        missing = [k for k, (d, _) in members.items() if d == "inout" and k not in given]
+        if missing:
+            raise self.error(StCode.BAD_ARGUMENTS, f"{fb.name}'s VAR_IN_OUT {missing[0]} is "
+                             "given at every call (name := variable)", s.span)
         out.emit(f"{f}(_NOW)", s.span)
         for line in outputs:
             out.emit(line, s.span)
 
+    def reference(self, expr: n.Expr, t: Type, pou: str, name: str, scope: Scope) -> Place:
+        """The variable given to a VAR_IN_OUT: a writable place of exactly its type."""
+        if not isinstance(expr, n.Var):
+            raise self.error(StCode.BAD_ARGUMENTS, f"{pou}'s {name} is VAR_IN_OUT: give it "
+                             "a variable, not an expression", _span_of(expr))
+        place = scope.place(expr, write=True)
+        same = place.type == t or (isinstance(place.type, StringOf) and isinstance(
+            t, StringOf) and place.type.wide == t.wide)
+        if not same:
+            raise self.error(StCode.TYPE_MISMATCH, f"{pou}'s VAR_IN_OUT {name} is {t}, not "
+                             f"{place.type}", expr.span)
+        if isinstance(t, StringOf) and isinstance(place.type, StringOf) and \
+                place.type.length < t.length:
+            store = place.store
+            assert store is not None
+            length = place.type.length
+            return Place(place.read, place.type, lambda v: store(f"{v}[:{length}]"))
+        return place
     def nc_send(self, s: n.CallStmt, scope: Scope) -> None:
         if len(s.args) != 2 or any(a.name is not None for a in s.args):
             raise self.error(StCode.BAD_ARGUMENTS, "NC.SEND(sender, target) takes two "
@@ -953,18 +1518,46 @@ class Compiler:
         info = self.pous[fb.name]
         out: dict[str, tuple[str, Type]] = {}
         for k, v in info.vars.items():
-            direction = {"VAR_INPUT": "in", "VAR_OUTPUT": "out"}.get(v.section, "internal")
+            direction = {"VAR_INPUT": "in", "VAR_OUTPUT": "out", "VAR_IN_OUT": "inout"}.get(
+                v.section, "internal")
             out[k] = (direction, v.type)
         return out
 
     # -- expressions ---------------------------------------------------------------------------
 
     def coerce(self, e: E, t: Type, span: n.Span) -> str:
-        """The code storing ``e`` in a place of type ``t`` (wrapped), or a diagnostic."""
+        """The code storing ``e`` in a place of type ``t`` (wrapped, truncated, copied,
+        checked against a subrange), or a diagnostic."""
+        if isinstance(t, StringOf) and isinstance(e.type, StringOf) and t.wide == e.type.wide:
+            # IEC 61131-3, 6.4.2: a longer value is truncated to the variable's length.
+            if e.const is not None:
+                return repr(str(e.const)[:t.length])
+            return e.code if e.type.length <= t.length else f"{e.code}[:{t.length}]"
+        if isinstance(t, StringOf | EnumOf | StructOf) or isinstance(
+                e.type, StringOf | EnumOf | StructOf):
+            if e.type == t:
+                return copy_code(e.code, t)
+            hint = ""
+            if isinstance(t, StringOf) and isinstance(e.type, StringOf):
+                hint = (f" (convert it: {'WSTRING' if e.type.wide else 'STRING'}_TO_"
+                        f"{'WSTRING' if t.wide else 'STRING'})")
+            raise self.error(StCode.TYPE_MISMATCH, f"{_tname(e.type)} where {t} is expected"
+                             + hint, span)
+        code = self._coerce(e, t, span)
+        if isinstance(t, Ranged):
+            if e.const is not None:
+                if not t.lo <= e.const <= t.hi:
+                    raise self.error(StCode.CONSTANT_RANGE, f"{e.const} is outside the "
+                                     f"subrange {t.lo}..{t.hi}", span)
+                return code
+            return f"_ranged({code}, {t.lo}, {t.hi})"
+        return code
+
+    def _coerce(self, e: E, t: Type, span: n.Span) -> str:
         if e.type == t:
             if isinstance(t, ArrayOf):
-                return f"list({e.code})"
-            if isinstance(t, str) and (is_int(t) or t == "TIME") and not e.exact:
+                return copy_code(e.code, t)
+            if isinstance(t, str) and (is_int(t) or t in CARRIER) and not e.exact:
                 return wrap_code(e.code, t)
             return e.code
         if e.type in (ANY_INT, ANY_REAL) and e.const is not None and isinstance(t, str):
@@ -987,7 +1580,7 @@ class Compiler:
         if isinstance(e.type, str) and isinstance(t, str) and e.type in ELEMENTARY \
                 and t in ELEMENTARY:
             hint = f" (convert it: {e.type}_TO_{t})"
-        elif e.type == ANY_INT and t == "TIME":
+        elif e.type == ANY_INT and t in DURATIONS:
             hint = " (write a duration: T#100ms)"
         raise self.error(StCode.TYPE_MISMATCH, f"{_tname(e.type)} where {t} is expected"
                          + hint, span)
@@ -1011,10 +1604,56 @@ class Compiler:
             return f"_f32({e.code})"
         return e.code
 
+    def named_value(self, x: n.Var, scope: Scope) -> E | None:
+        """A name that is a value, not a place: a scalar CONSTANT (folded where it is
+        used), or an enumeration's value -- ``RUN``, or CODESYS's ``E_State.RUN``."""
+        key = x.name.upper()
+        if key in RESERVED:
+            return None
+        found = scope.lookup(key)
+        if found is not None:
+            v = found[0]
+            if v.qualifier == "CONSTANT" and not x.selectors and isinstance(
+                    v.initial, bool | int | float | str) and v.image is None:
+                return E(const_code(v.initial, v.type), v.type, v.initial)
+            return None
+        if key in self.enums and len(x.selectors) == 1 and isinstance(x.selectors[0],
+                                                                       n.Field):
+            return self.enum_lit(n.EnumLit(x.name, x.selectors[0].name, x.span))
+        if not x.selectors and key in self.enum_values:
+            owners = self.enum_values[key]
+            if len(owners) > 1:
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name} is a value of " + " and "
+                                 .join(self.enums[o].display for o in owners if o in self.enums)
+                                 + f": name its type ({self.enums[owners[0]].display}#{x.name})",
+                                 x.span)
+            return self.enum_lit(n.EnumLit(owners[0], x.name, x.span))
+        return None
+
+    def enum_lit(self, x: n.EnumLit) -> E:
+        key = x.type_name.upper()
+        if key in self.type_decls and key not in self.enums:
+            with suppress(Problems):
+                self.user_type(key)
+        info = self.enums.get(key)
+        if info is None:
+            raise self.error(StCode.UNKNOWN_TYPE, f"{x.type_name} is not an enumeration type"
+                             + did_you_mean(key, self.enums), x.span)
+        value = info.values.get(x.name.upper())
+        if value is None:
+            raise self.error(StCode.UNKNOWN_NAME, f"{info.display} has no value {x.name}"
+                             + did_you_mean(x.name, info.names.values()), x.span)
+        return E(repr(value), EnumOf(key), value)
+
     def expr(self, x: n.Expr, scope: Scope) -> E:
         if isinstance(x, n.Literal):
             return self.literal(x)
+        if isinstance(x, n.EnumLit):
+            return self.enum_lit(x)
         if isinstance(x, n.Var):
+            known = self.named_value(x, scope)
+            if known is not None:
+                return known
             place = scope.place(x, write=False)
             if isinstance(place.type, FbOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"{_show(x)} is a {place.type} "
@@ -1062,17 +1701,19 @@ class Compiler:
 
     def literal(self, x: n.Literal) -> E:
         t = x.type
+        if isinstance(x.value, str):
+            return E(repr(x.value), StringOf(max(len(x.value), 1), t == "WSTRING"), x.value)
         if t is None:
             kind: Type = ANY_REAL if isinstance(x.value, float) else ANY_INT
-            if kind == ANY_INT and abs(int(x.value)) >= 1 << 32:
+            if kind == ANY_INT and abs(int(x.value)) >= 1 << 64:
                 raise self.error(StCode.CONSTANT_RANGE, f"{x.value} is too large (at most "
-                                 "32 bits)", x.span)
+                                 "64 bits)", x.span)
             if kind == ANY_REAL and math.isinf(x.value):
                 raise self.error(StCode.CONSTANT_RANGE, "a real literal beyond LREAL's range",
                                  x.span)
             return E(repr(x.value), kind, x.value)
-        if t in INTS or t == "TIME":
-            lo, hi = limits("DINT" if t == "TIME" else t)
+        if t in INTS or t == "TIME" or t == "LTIME" or t in DATES:
+            lo, hi = limits(CARRIER.get(t, t))
             if not lo <= x.value <= hi:
                 shown = f"{x.value} ms" if t == "TIME" else x.value
                 limit = (f"{lo}..{hi}" if t != "TIME" else
@@ -1095,7 +1736,7 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"NOT takes a BOOL or a bit string, not "
                              f"{_tname(e.type)}" + (" (type it: WORD#5)" if e.type == ANY_INT
                                                     else ""), x.span)
-        if not is_num(e.type) and e.type != "TIME":
+        if not is_num(e.type) and e.type not in DURATIONS:
             raise self.error(StCode.TYPE_MISMATCH, f"{x.op} takes a number, not "
                              f"{_tname(e.type)}", x.span)
         if x.op == "+":
@@ -1105,7 +1746,7 @@ class Compiler:
                 return E(repr(-e.const), e.type, -e.const, e.exact)
             return E(const_code(-e.const, e.type), e.type, -e.const, not is_int(e.type) or
                      limits(str(e.type))[0] <= -e.const <= limits(str(e.type))[1])
-        return E(f"(-{e.code})", e.type, None, not is_int(e.type) and e.type != "TIME")
+        return E(f"(-{e.code})", e.type, None, not is_int(e.type) and e.type not in DURATIONS)
 
     def binary(self, x: n.Binary, a: E, b: E) -> E:
         op = x.op
@@ -1124,8 +1765,11 @@ class Compiler:
                 return E(repr(value), t, value)
             return E(f"({a.code} {py} {b.code})", t)
         if op in ("=", "<>", "<", ">", "<=", ">="):
-            ok = (is_num(a.type) and is_num(b.type)) or ((a.type == b.type and isinstance(
-                a.type, str)) and (a.type != "BOOL" or op in ("=", "<>")))
+            same = (a.type == b.type and isinstance(a.type, str | EnumOf)) or (
+                isinstance(a.type, StringOf) and isinstance(b.type, StringOf)
+                and a.type.wide == b.type.wide)
+            ok = (is_num(a.type) and is_num(b.type)) or (same and (
+                a.type != "BOOL" or op in ("=", "<>")))
             if not ok:
                 raise self.error(StCode.TYPE_MISMATCH, f"{op} between {_tname(a.type)} and "
                                  f"{_tname(b.type)}", x.span)
@@ -1143,7 +1787,7 @@ class Compiler:
             return E(real_code(f"_pow({self.real_operand(a, t, x.span)}, "
                                f"{self.real_operand(b, t, x.span)})", t), t)
         # + - * / MOD
-        if "TIME" in (a.type, b.type):
+        if a.type in _TIMED or b.type in _TIMED:
             return self._time_arith(x, a, b)
         t = common(a.type, b.type)
         if t is None or not is_num(t):
@@ -1162,6 +1806,19 @@ class Compiler:
             # A folded integer is computed exactly and wraps where it is stored, as the
             # same expression of variables does: i := 32767 + 1 stores -32768.
             return E(repr(value), t, value, real)
+        if a.const is not None and b.const is not None and isinstance(t, str) and (
+                t in INTS or t in REALS) and not isinstance(a.const, bool | str) and \
+                not isinstance(b.const, bool | str):
+            # Typed constants (named constants: N * 2) fold too -- a declaration needs the
+            # value; the result is the type's, computed as at run time.
+            value = _fold(op, a.const, b.const, real)
+            try:
+                value = _f32(value) if t == "REAL" else _f64(float(value)) if real else value
+            except OverflowError:
+                raise self.error(StCode.CONSTANT_RANGE, f"{op} of {a.const} and {b.const} "
+                                 f"is beyond {t}'s range", x.span) from None
+            return E(const_code(value, t), t, value, real or (
+                limits(t)[0] <= value <= limits(t)[1]))
         ac, bc = (self.real_operand(a, t, x.span), self.real_operand(b, t, x.span)) if real \
             else (a.code, b.code)
         if op == "/":
@@ -1175,19 +1832,30 @@ class Compiler:
         return E(real_code(code, t), t, None, real)
 
     def _time_arith(self, x: n.Binary, a: E, b: E) -> E:
+        """Durations, times of day and dates (IEC 61131-3, 6.6.2.5.7, Table 30)."""
         op = x.op
-        if op in ("+", "-") and a.type == "TIME" and b.type == "TIME":
-            return E(f"({a.code} {op} {b.code})", "TIME", None, False)
-        if op in ("*", "/") and a.type == "TIME" and is_int(b.type):
-            if op == "/" and b.const == 0:
+        ta, tb = a.type, b.type
+        if op in ("+", "-") and ta == tb and ta in DURATIONS:
+            return E(f"({a.code} {op} {b.code})", ta, None, False)
+        if (ta in DURATIONS and op in ("*", "/") and is_num(tb)) or (
+                tb in DURATIONS and op == "*" and is_num(ta)):
+            d, k = (a, b) if ta in DURATIONS else (b, a)
+            if op == "/" and k.const == 0:
                 raise self.error(StCode.DIVISION_BY_ZERO, "/ by zero", _span_of(x.right))
-            code = f"({a.code} * {b.code})" if op == "*" else f"_idiv({a.code}, {b.code})"
-            return E(code, "TIME", None, False)
-        if op == "*" and b.type == "TIME" and is_int(a.type):
-            return E(f"({a.code} * {b.code})", "TIME", None, False)
-        raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(a.type)} and "
-                         f"{_tname(b.type)} (TIME adds to TIME, and multiplies or divides by "
-                         "an integer)", x.span)
+            if is_real(k.type):  # TIME * REAL: rounded to the unit
+                return E(f"_time_real({d.code}, {k.code}, {op == '/'})", d.type, None, False)
+            code = f"({d.code} * {k.code})" if op == "*" else f"_idiv({d.code}, {k.code})"
+            return E(code, d.type, None, False)
+        if ta == "TOD" and tb == "TIME" and op in ("+", "-"):
+            return E(f"({a.code} {op} {b.code})", "TOD", None, False)
+        if ta == "DT" and tb == "TIME" and op in ("+", "-"):
+            return E(f"({a.code} {op} _idiv({b.code}, 1000))", "DT", None, False)
+        if op == "-" and ta == tb and ta in DATES:
+            scale = "" if ta == "TOD" else " * 1000"
+            return E(f"(({a.code} - {b.code}){scale})", "TIME", None, False)
+        raise self.error(StCode.TYPE_MISMATCH, f"{op} of {_tname(ta)} and {_tname(tb)} (a "
+                         "duration adds to a duration, a TOD or a DT, and multiplies or "
+                         "divides by a number; two dates subtract to a TIME)", x.span)
 
     def call(self, x: n.Call, scope: Scope) -> E:
         key = x.name.upper()
@@ -1208,6 +1876,7 @@ class Compiler:
             raise self.error(StCode.UNKNOWN_CALL, f"{x.name} is {what}{hint}", x.span)
         inputs = info.inputs
         values: dict[str, str] = {}
+        stores: dict[str, Callable[[str], str]] = {}
         for i, arg in enumerate(x.args):
             if arg.output is not None:
                 raise self.error(StCode.BAD_ARGUMENTS, "a FUNCTION has no outputs to bind",
@@ -1228,10 +1897,30 @@ class Compiler:
                 raise self.error(StCode.BAD_ARGUMENTS, f"{v.display} is given twice",
                                  arg.span)
             assert arg.expr is not None
+            if v.section == "VAR_IN_OUT":
+                ref = self.reference(arg.expr, v.type, x.name, v.display, scope)
+                assert ref.store is not None
+                values[k], stores[k] = ref.read, ref.store
+                continue
             values[k] = self.coerce(self.expr(arg.expr, scope), v.type, _span_of(arg.expr))
         args = ", ".join(f"v_{k}={code}" for k, code in values.items())
         assert info.result is not None
-        return E(f"F_{key}({args})", info.result)
+        if not info.in_outs:
+            return E(f"F_{key}({args})", info.result)
+        missing = [k for k in info.in_outs if k not in values]
+        if missing:
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s VAR_IN_OUT "
+                             f"{info.vars[missing[0]].display} is given at every call",
+                             x.span)
+        if self._prelude_call is not x:
+            raise self.error(StCode.UNSUPPORTED, f"{x.name} has a VAR_IN_OUT: call it as a "
+                             "statement or alone on the right of := (not inside an "
+                             "expression)", x.span)
+        t = self.temp()
+        self.out.emit(f"{t} = F_{key}({args})", x.span)
+        for i, k in enumerate(info.in_outs):
+            self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
+        return E(f"{t}[0]", info.result)
 
     def _args(self, x: n.Call, scope: Scope, count: int | None, least: int = 1) -> list[E]:
         if any(a.name is not None or a.output is not None for a in x.args):
@@ -1253,6 +1942,17 @@ class Compiler:
         return t
 
     def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
+        if key in STRING_FUNCTIONS:
+            return self.string_call(x, key, scope)
+        if key == "MOVE":
+            (a,) = self._args(x, scope, 1)
+            return E(copy_code(a.code, a.type), a.type, a.const, a.exact)
+        if key == "CONCAT_DATE_TOD":
+            d, tod = self._args(x, scope, 2)
+            if d.type != "DATE" or tod.type != "TOD":
+                raise self.error(StCode.TYPE_MISMATCH, "CONCAT_DATE_TOD takes a DATE and a TOD",
+                                 x.span)
+            return E(f"({d.code} + {tod.code} // 1000)", "DT", None, False)
         if key in MATH_FUNCTIONS:
             (a,) = self._args(x, scope, 1)
             if not is_num(a.type):
@@ -1282,14 +1982,14 @@ class Compiler:
         if key in ("MIN", "MAX"):
             values = self._args(x, scope, None, 2)
             t = self._same(x, values)
-            if not is_num(t) and t != "TIME":
+            if not is_num(t) and t not in _TIMED and not isinstance(t, StringOf | EnumOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"{key} of {t}", x.span)
             codes = ", ".join(self._as(v, t, x) for v in values)
             return E(f"{key.lower()}({codes})", t, None, _exact(values))
         if key == "LIMIT":
             values = self._args(x, scope, 3)
             t = self._same(x, values)
-            if not is_num(t) and t != "TIME":
+            if not is_num(t) and t not in _TIMED and not isinstance(t, StringOf | EnumOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"LIMIT of {t}", x.span)
             mn, v, mx = (self._as(e, t, x) for e in values)
             return E(f"min(max({v}, {mn}), {mx})", t, None, _exact(values))
@@ -1321,6 +2021,62 @@ class Compiler:
         size = stdlib.INTEGER_TYPES[str(a.type)][0]
         return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
 
+    def string_call(self, x: n.Call, key: str, scope: Scope) -> E:
+        """LEN, LEFT, RIGHT, MID, CONCAT, INSERT, DELETE, REPLACE, FIND (IEC 61131-3,
+        Table 43), called with their inputs in order or by their names (IN, L, P, IN1…)."""
+        formal = {"LEN": ("IN",), "LEFT": ("IN", "L"), "RIGHT": ("IN", "L"),
+                  "MID": ("IN", "L", "P"), "INSERT": ("IN1", "IN2", "P"),
+                  "DELETE": ("IN", "L", "P"), "REPLACE": ("IN1", "IN2", "L", "P"),
+                  "FIND": ("IN1", "IN2")}
+        if key == "CONCAT":
+            names = tuple(f"IN{i + 1}" for i in range(len(x.args)))
+            if len(x.args) < 2:
+                raise self.error(StCode.BAD_ARGUMENTS, "CONCAT takes at least 2 inputs",
+                                 x.span)
+        else:
+            names = formal[key]
+        args = list(x.args)
+        if any(a.name is not None for a in args):
+            given = {a.name.upper(): a for a in args if a.name is not None}
+            if len(given) != len(args) or set(given) != set(names):
+                raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes "
+                                 + ", ".join(names) + ", all in order or all by name",
+                                 x.span)
+            args = [given[name] for name in names]
+        if len(args) != len(names) or any(a.output is not None for a in args):
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes {len(names)} input(s) ("
+                             + ", ".join(names) + f"), got {len(args)}", x.span)
+        values = []
+        for name, arg in zip(names, args, strict=True):
+            assert arg.expr is not None
+            e = self.expr(arg.expr, scope)
+            if name.startswith("IN") and not isinstance(e.type, StringOf):
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name}'s {name} is a STRING or "
+                                 f"WSTRING, not {_tname(e.type)}", arg.span)
+            if name in ("L", "P") and not is_int(e.type):
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name}'s {name} is an integer, "
+                                 f"not {_tname(e.type)}", arg.span)
+            values.append(e)
+        texts = [v.type for v in values if isinstance(v.type, StringOf)]
+        if any(t.wide != texts[0].wide for t in texts):
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} of a STRING and a WSTRING "
+                             "(convert one: STRING_TO_WSTRING)", x.span)
+        c = [v.code for v in values]
+        first = texts[0]
+        if key == "LEN":
+            return E(f"len({c[0]})", "INT")
+        if key == "FIND":
+            return E(f"_find({c[0]}, {c[1]})", "INT")
+        joined = StringOf(min(sum(t.length for t in texts), 65535), first.wide)
+        if key == "CONCAT":
+            if all(v.const is not None for v in values):
+                text = "".join(str(v.const) for v in values)
+                return E(repr(text), joined, text)
+            return E("(" + " + ".join(c) + ")", joined)
+        call = {"LEFT": "_left", "RIGHT": "_right", "MID": "_midstr", "INSERT": "_insert",
+                "DELETE": "_delete", "REPLACE": "_replace"}[key]
+        return E(f"{call}({', '.join(c)})", joined if key in ("INSERT", "REPLACE") else first)
+
     def _as(self, e: E, t: Type, x: n.Call) -> str:
         """An argument of a standard function: checked against the common type, but not
         wrapped -- the functions compute on exact values, like the operators; the result
@@ -1331,24 +2087,55 @@ class Compiler:
 
     def convert(self, x: n.Call, src: str, dst: str, scope: Scope) -> E:
         (a,) = self._args(x, scope, 1)
+        texts = ("STRING", "WSTRING")
+        if src in texts:
+            if not (isinstance(a.type, StringOf) and a.type.wide == (src == "WSTRING")):
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
+                                 f"{_tname(a.type)}", x.span)
+            if dst in texts:  # a character beyond one byte becomes '?'
+                return E(f"{a.code}.encode('latin-1', 'replace').decode('latin-1')"
+                         if dst == "STRING" else a.code, StringOf(a.type.length, dst != "STRING"))
+            if dst == "BOOL" or dst in INTS or dst in REALS:
+                value = f"_strto({a.code}, {dst!r})"
+                return E(real_code(value, dst) if dst in REALS else value, dst, None,
+                         dst in REALS or dst == "BOOL")
+            raise self.error(StCode.UNSUPPORTED, f"{x.name}: a text converts to BOOL, an "
+                             "integer or a real (docs/plc.md)", x.span)
+        if dst in texts:
+            if not (a.type == src or widens(a.type, src)) or not (
+                    src == "BOOL" or src in INTS or src in REALS):
+                raise self.error(StCode.UNSUPPORTED if a.type == src else
+                                 StCode.TYPE_MISMATCH, f"{x.name}: BOOL, integers and reals "
+                                 f"convert to text, not {_tname(a.type)}", x.span)
+            return E(f"_tostr({a.code}, {src!r})", StringOf(STRING_DEFAULT, dst == "WSTRING"))
         if not (a.type == src or widens(a.type, src)):
             raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
                              f"{_tname(a.type)}", x.span)
         code = a.code
         if a.const is not None and a.type in (ANY_INT, ANY_REAL) and src in REALS:
             code = self._real_const(a.const, src, x.span)
+        special = {("TIME", "LTIME"): f"({code} * 1000000)",
+                   ("LTIME", "TIME"): f"_idiv({code}, 1000000)",
+                   ("DT", "DATE"): f"({code} - {code} % 86400)",
+                   ("DT", "TOD"): f"({code} % 86400 * 1000)",
+                   ("DATE", "DT"): code}
+        if (src, dst) in special:
+            return E(special[src, dst], dst, None, False)
+        if (src in _TIMED and dst in _TIMED) or (src in DATES and dst in REALS) or (
+                dst in DATES and (src in REALS or src == "BOOL")):
+            raise self.error(StCode.UNSUPPORTED, f"{x.name}: not a conversion of IEC "
+                             "61131-3's (docs/plc.md lists them)", x.span)
         if dst in REALS:
             exact = dst == "LREAL" or src in _EXACT_IN_REAL or src == "REAL" or src == "BOOL"
             return E(f"float({code})" if exact else f"_f32({code})", dst)
         if dst == "BOOL":
             return E(f"({code} != 0)", "BOOL")
         if src in REALS or a.type == ANY_REAL:
-            lo, hi = limits("DINT" if dst == "TIME" else dst)
+            lo, hi = limits(CARRIER.get(dst, dst))
             return E(f"_r2i({code}, {lo}, {hi}, {dst!r})", dst)
         if src == "BOOL":
             return E(f"int({code})", dst)
         return E(code, dst, None, False)
-
 
 class Scope:
     """The names a POU body sees, and how to reach them."""
@@ -1369,6 +2156,18 @@ class Scope:
         self.codes: set[int] = set()
         self.nesting = 0
         self.live: list[str] = []  # temporaries a helper function must be given
+        self.constants_only = False  # a declaration: only constants may be named
+
+    def lookup(self, key: str) -> tuple[VarInfo, str] | None:
+        """A name's variable and the code of it: the POU's own, else a global."""
+        info = self.info
+        v = info.vars.get(key) if info is not None else None
+        if v is not None:
+            return v, f"{self.prefix}v_{key}"
+        g = self.c.globals.get(key)
+        if g is not None:
+            return g, f"_G.v_{key}"
+        return None
 
     def place(self, var: n.Var, write: bool) -> Place:
         c = self.c
@@ -1378,15 +2177,21 @@ class Scope:
         if key == "NC":
             return self._nc(var, write)
         info = self.info
-        v = info.vars.get(key) if info is not None else None
-        if v is None:
+        found = self.lookup(key)
+        if found is None or (self.constants_only and found[0].qualifier != "CONSTANT"):
             names = [x.display for x in info.vars.values()] if info is not None else []
+            names += [g.display for g in c.globals.values()]
             hint = did_you_mean(key, [*names, *IMAGE_NAMES, "NC"])
-            if info is None:
-                raise c.error(StCode.NOT_CONSTANT, f"{var.name}: an initial value is a "
-                              "constant", var.span)
+            if found is not None:
+                raise c.error(StCode.NOT_CONSTANT, f"{var.name}: a declaration or CASE label "
+                              "takes constants (literals, VAR CONSTANT, enumeration values)",
+                              var.span)
             raise c.error(StCode.UNKNOWN_NAME, f"unknown variable {var.name}{hint}", var.span)
-        code = f"{self.prefix}v_{key}"
+        v, code = found
+        if v.image is not None:
+            return self._image(n.Var(v.image[0], (n.Index(n.Literal(
+                v.image[1], None, var.span), var.span), *var.selectors), var.span),
+                v.image[0], write)
         t: Type = v.type
         why = ""
         if v.qualifier == "CONSTANT":
@@ -1414,18 +2219,40 @@ class Scope:
                 else:
                     code = f"{code}[_ix({i.code}, {t.lo}, {t.length})]"
                 t = t.element
+            elif isinstance(sel, n.Bit):
+                if sel is not var.selectors[-1] or not isinstance(t, str) or t not in INTS:
+                    raise c.error(StCode.TYPE_MISMATCH, f"{_show(var)}: bit access is the last "
+                                  f"selector, of an integer or bit string, not {t}", sel.span)
+                width = stdlib.INTEGER_TYPES[t][0]
+                if sel.bit >= width:
+                    raise c.error(StCode.INDEX_RANGE, f"bit {sel.bit} of a {width}-bit {t} "
+                                  f"(0..{width - 1})", sel.span)
+                if write and why:
+                    raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: {why}",
+                                  var.span)
+                return Place(f"(({code} >> {sel.bit}) & 1 == 1)", "BOOL",
+                             _bit_store(code, sel.bit, t) if not why else None, why)
+            elif isinstance(t, StructOf):
+                fields = c.structs[t.name].fields
+                mkey = sel.name.upper()
+                member = fields.get(mkey)
+                if member is None:
+                    raise c.error(StCode.UNKNOWN_MEMBER, f"{t.name} has no {sel.name}"
+                                  + did_you_mean(mkey, fields), sel.span)
+                code = f"{code}.v_{mkey}"
+                t = member.type
             else:
                 if not isinstance(t, FbOf):
                     raise c.error(StCode.UNKNOWN_MEMBER, f"{_show(var)}: {t} has no members",
                                   sel.span)
                 members = c.members(t)
                 mkey = sel.name.upper()
-                member = members.get(mkey)
-                if member is None:
+                member_fb = members.get(mkey)
+                if member_fb is None:
                     raise c.error(StCode.UNKNOWN_MEMBER, f"{t.name} has no {sel.name}"
                                   + did_you_mean(mkey, members), sel.span)
-                direction, mtype = member
-                if direction == "internal":
+                direction, mtype = member_fb
+                if direction in ("internal", "inout"):
                     raise c.error(StCode.UNKNOWN_MEMBER, f"{sel.name} is internal to "
                                   f"{t.name} (only VAR_INPUT and VAR_OUTPUT are seen outside)",
                                   sel.span)
@@ -1561,11 +2388,20 @@ def _exact(values: Sequence[E]) -> bool:
     return all(v.exact for v in values)
 
 
+def _bit_store(word: str, bit: int, t: str) -> Callable[[str], str]:
+    """The statement setting one bit of an integer place (wrapped: bit 15 of an INT)."""
+    mask = 1 << bit
+    return lambda v: f"{word} = " + wrap_code(
+        f"({word} | {mask}) if {v} else ({word} & {~mask})", t)
+
+
 def _conversion(key: str) -> tuple[str, str] | None:
     if "_TO_" not in key:
         return None
     src, _, dst = key.partition("_TO_")
-    if src in ELEMENTARY and dst in ELEMENTARY and src != dst:
+    src, dst = DATE_NAMES.get(src, src), DATE_NAMES.get(dst, dst)
+    known = (*ELEMENTARY, "STRING", "WSTRING")
+    if src in known and dst in known and src != dst:
         return src, dst
     return None
 
@@ -1576,16 +2412,6 @@ def _holds_fb(t: Type) -> bool:
     return isinstance(t, FbOf)
 
 
-def _init_code(t: Type, initial: Any) -> str:
-    if isinstance(t, FbOf):
-        return f"_STD_{t.name}()" if t.std else f"FB_{t.name}()"
-    if isinstance(t, ArrayOf):
-        if _holds_fb(t):
-            return f"[{_init_code(t.element, None)} for _ in range({t.length})]"
-        return repr(list(initial))
-    return repr(initial)
-
-
 def _span_of(x: Any) -> n.Span:
     span: n.Span = x.span
     return span
@@ -1594,7 +2420,8 @@ def _span_of(x: Any) -> n.Span:
 def _show(var: n.Var) -> str:
     text = var.name
     for sel in var.selectors:
-        text += f".{sel.name}" if isinstance(sel, n.Field) else "[…]"
+        text += f".{sel.name}" if isinstance(sel, n.Field) else f".{sel.bit}" if isinstance(
+            sel, n.Bit) else "[…]"
     return text
 
 
@@ -1660,6 +2487,87 @@ class Logic:
                 self.display[key] = info.pou.name
             elif info.pou.kind == "FUNCTION_BLOCK":
                 self.fb_vars[key] = table
+        self.struct_fields: dict[str, dict[str, ProgramVar]] = {
+            key: {k: ProgramVar(k, v.display, v.type, False) for k, v in struct.fields.items()}
+            for key, struct in compiler.structs.items()}
+        self.globals: dict[str, ProgramVar] = {
+            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN")
+            for k, v in compiler.globals.items() if v.image is None}
+        self.enums = dict(compiler.enums)
+
+    def reset_globals(self) -> None:
+        """The VAR_GLOBALs at their initial values (a cold start of the logic)."""
+        self.namespace["_G"] = self.namespace["_Globals"]()
+
+    # -- RETAIN of aggregates: a value as JSON, and back ---------------------------------------
+
+    def dump(self, value: Any, t: Type) -> Any:
+        """A variable's value as JSON: a structure or an FB instance as an object of its
+        members (an FB's internal state too: a retained CTU keeps CV and its edge memory)."""
+        if isinstance(t, ArrayOf):
+            return [self.dump(v, t.element) for v in value]
+        if isinstance(t, StructOf):
+            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
+                    for k, f in self.struct_fields[t.name].items()}
+        if isinstance(t, FbOf):
+            if t.std:
+                return _dump_std(value)
+            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
+                    for k, f in self.fb_vars[t.name].items()}
+        return value
+
+    def members_of(self, t: Any) -> dict[str, ProgramVar] | None:
+        """The members of a user FB's instance or a structure (for a path: main.fb.x)."""
+        if isinstance(t, FbOf) and not t.std:
+            return self.fb_vars.get(t.name)
+        if isinstance(t, StructOf):
+            return self.struct_fields.get(t.name)
+        return None
+
+    def fresh(self, t: Type) -> Any:
+        """A new instance of an aggregate type (its initial value), None for a scalar."""
+        if isinstance(t, ArrayOf):
+            return [self.fresh(t.element) for _ in range(t.length)]
+        if isinstance(t, FbOf):
+            return self.namespace[f"_STD_{t.name}" if t.std else f"FB_{t.name}"]()
+        if isinstance(t, StructOf):
+            return self.namespace[f"S_{t.name}"]()
+        return None
+
+    def restore(self, stored: Any, t: Type) -> Any:
+        """A RETAIN value from the store as the logic holds it; ValueError when it no
+        longer fits its variable's type (retyped, resized, other members)."""
+        return self.load(stored, t, self.fresh(t))
+
+    def fits(self, stored: Any, t: Type) -> bool:
+        try:
+            self.restore(stored, t)
+        except (ValueError, TypeError, AttributeError, OverflowError):
+            return False
+        return True
+
+    def load(self, stored: Any, t: Type, fresh: Any) -> Any:
+        """A stored value into ``fresh`` (a new instance of ``t``), or ValueError when the
+        value no longer fits the type (the caller then keeps the initial value)."""
+        if isinstance(t, ArrayOf):
+            if not isinstance(stored, list) or len(stored) != t.length:
+                raise ValueError("not an array of that length")
+            return [self.load(s, t.element, f) for s, f in zip(stored, fresh, strict=True)]
+        if isinstance(t, StructOf | FbOf):
+            if isinstance(t, FbOf) and t.std:
+                _load_std(fresh, stored)
+                return fresh
+            table = self.struct_fields[t.name] if isinstance(t, StructOf) else \
+                self.fb_vars[t.name]
+            if not isinstance(stored, dict) or set(stored) != set(table):
+                raise ValueError("other members")
+            for k, f in table.items():
+                setattr(fresh, f"v_{k}", self.load(stored[k], f.type,
+                                                   getattr(fresh, f"v_{k}")))
+            return fresh
+        if not _fits_scalar(stored, t):
+            raise ValueError(f"not a {t}")
+        return to_real(stored) if t == "REAL" else stored
 
     def new_program(self, key: str) -> Any:
         return self.namespace[f"P_{key}"]()
@@ -1681,6 +2589,47 @@ class Logic:
                         return span, f.line(span.line)
                 return span, ""
         return None, ""
+
+
+def _dump_std(fb: Any) -> dict[str, Any]:
+    import dataclasses
+
+    return {f.name: (_dump_std(v) if dataclasses.is_dataclass(v := getattr(fb, f.name))
+                     else v) for f in dataclasses.fields(fb)}
+
+
+def _load_std(fb: Any, stored: Any) -> None:
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(fb)}
+    if not isinstance(stored, dict) or set(stored) != set(fields):
+        raise ValueError("other members")
+    for name in fields:
+        current = getattr(fb, name)
+        if dataclasses.is_dataclass(current):
+            _load_std(current, stored[name])
+        elif type(stored[name]) is not type(current) and not (
+                current is None or stored[name] is None):
+            raise ValueError(f"{name} is not a {type(current).__name__}")
+        else:
+            setattr(fb, name, stored[name])
+
+
+def _fits_scalar(value: Any, t: Type) -> bool:
+    if t == "BOOL":
+        return isinstance(value, bool)
+    if isinstance(t, StringOf):
+        return isinstance(value, str) and len(value) <= t.length
+    if t in REALS:
+        return isinstance(value, float | int) and not isinstance(value, bool) and \
+            math.isfinite(value)
+    if isinstance(t, EnumOf):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(t, str) and t in stdlib.INTEGER_TYPES:
+        lo, hi = limits(t) if t != "TOD" else (0, TOD_MS - 1)
+        ok = isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+        return ok and (not isinstance(t, Ranged) or t.lo <= value <= t.hi)
+    return False
 
 
 @contextmanager

@@ -23,19 +23,33 @@ class Span:
 
 @dataclass(frozen=True, slots=True)
 class NamedType:
+    """A type by its name; ``size``: STRING[20] / STRING(20)'s length."""
+
     name: str
+    span: Span
+    size: Expr | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SubrangeType:
+    """``INT(0..100)``: the base type and its (constant) limits."""
+
+    name: str
+    lo: Expr
+    hi: Expr
     span: Span
 
 
 @dataclass(frozen=True, slots=True)
 class ArrayType:
-    lo: int
-    hi: int
-    element: NamedType
+    """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions."""
+
+    dims: tuple[tuple[Expr, Expr], ...]
+    element: TypeRef
     span: Span
 
 
-TypeRef = NamedType | ArrayType
+TypeRef = NamedType | SubrangeType | ArrayType
 
 
 # ---- expressions -------------------------------------------------------------------------------
@@ -44,8 +58,17 @@ TypeRef = NamedType | ArrayType
 class Literal:
     """A constant.  ``type`` is None for an untyped number (``5``, ``16#FF``, ``1.5``)."""
 
-    value: bool | int | float
+    value: bool | int | float | str
     type: str | None
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class EnumLit:
+    """``E_State#RUN``: an enumeration value named with its type."""
+
+    type_name: str
+    name: str
     span: Span
 
 
@@ -62,11 +85,19 @@ class Index:
 
 
 @dataclass(frozen=True, slots=True)
+class Bit:
+    """``w.3``: one bit of an integer (6.5.1.2, Table 12)."""
+
+    bit: int
+    span: Span
+
+
+@dataclass(frozen=True, slots=True)
 class Var:
     """A name with member and index selectors: ``x``, ``t1.Q``, ``arr[i]``, ``NC.P[2].STATE``."""
 
     name: str
-    selectors: tuple[Field | Index, ...]
+    selectors: tuple[Field | Index | Bit, ...]
     span: Span
 
 
@@ -102,25 +133,55 @@ class Call:
     span: Span
 
 
-Expr = Literal | Var | Binary | Unary | Call
+Expr = Literal | EnumLit | Var | Binary | Unary | Call
 
 
 # ---- declarations --------------------------------------------------------------------------------
 
 @dataclass(frozen=True, slots=True)
 class ArrayInit:
-    items: tuple[tuple[int, Expr], ...]  # (repeat count, value)
+    items: tuple[tuple[int, Initial | None], ...]  # (repeat count, value; None: default)
     span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class StructInit:
+    """``(x := 1, y := [1, 2])``: a structure's initial value, member by member."""
+
+    items: tuple[tuple[str, Span, Initial], ...]
+    span: Span
+
+
+Initial = Expr | ArrayInit | StructInit
 
 
 @dataclass(frozen=True, slots=True)
 class VarDecl:
     name: str
     type: TypeRef
-    initial: Expr | ArrayInit | None
-    section: str  # VAR, VAR_INPUT, VAR_OUTPUT, VAR_TEMP
+    initial: Initial | None
+    section: str  # VAR, VAR_INPUT, VAR_OUTPUT, VAR_IN_OUT, VAR_TEMP, VAR_EXTERNAL, VAR_GLOBAL
     qualifier: str | None  # RETAIN, CONSTANT
     span: Span
+
+
+@dataclass(frozen=True, slots=True)
+class TypeDecl:
+    """One data type of a TYPE … END_TYPE (6.4.4): ``kind`` STRUCT (``fields``), ENUM
+    (``items``: name, value or None, span; ``initial``: the default's name) or ALIAS
+    (``base``, ``initial``: a subrange, an array or another name, with a default)."""
+
+    name: str
+    kind: str
+    fields: tuple[VarDecl, ...]
+    items: tuple[tuple[str, Expr | None, Span], ...]
+    base: TypeRef | None
+    initial: Initial | str | None
+    span: Span
+
+    @property
+    def key(self) -> str:
+        return self.name.upper()
 
 
 # ---- statements ----------------------------------------------------------------------------------
@@ -148,8 +209,10 @@ class If:
 
 @dataclass(frozen=True, slots=True)
 class CaseLabel:
-    lo: Literal
-    hi: Literal | None  # a range lo..hi
+    """A value, a named constant or an enumeration value, or a range lo..hi of them."""
+
+    lo: Literal | Var | EnumLit
+    hi: Literal | Var | EnumLit | None
     span: Span
 
 
@@ -225,6 +288,8 @@ class SourceFile:
     path: str
     text: str
     pous: tuple[Pou, ...]
+    types: tuple[TypeDecl, ...] = ()
+    globals: tuple[VarDecl, ...] = ()
 
     def line(self, number: int) -> str:
         lines = self.text.splitlines()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import re
+from decimal import Decimal
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -19,52 +20,70 @@ from lark.visitors import Transformer_NonRecursive
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
 
-_TIME_PART = re.compile(r"([0-9][0-9_]*(?:\.[0-9]+)?)(d|h|ms|m|s)_?", re.IGNORECASE)
-_MS = {"d": 86_400_000, "h": 3_600_000, "m": 60_000, "s": 1000, "ms": 1}
-_UNITS = ("d", "h", "m", "s", "ms")  # a duration's units, in the order IEC writes them
-_UNIT_LIMIT = {"h": 24, "m": 60, "s": 60, "ms": 1000}  # below the first unit (6.3.3)
+_TIME_PART = re.compile(r"([0-9][0-9_]*(?:\.[0-9]+)?)(d|h|ms|m|s|us|ns)_?", re.IGNORECASE)
+_NS = {"d": 86_400 * 10**9, "h": 3_600 * 10**9, "m": 60 * 10**9, "s": 10**9, "ms": 10**6,
+       "us": 1000, "ns": 1}
+_UNITS = ("d", "h", "m", "s", "ms", "us", "ns")  # a duration's units, in IEC's order
+_UNIT_LIMIT = {"h": 24, "m": 60, "s": 60, "ms": 1000, "us": 1000, "ns": 1000}  # (6.3.3)
+_ESCAPES = {"$": "$", "'": "'", '"': '"', "L": "\n", "N": "\n", "P": "\f", "R": "\r",
+            "T": "\t"}
+_DATE = re.compile(r"([0-9]+)-([0-9]+)-([0-9]+)")
+_TOD = re.compile(r"([0-9]+):([0-9]+)(?::([0-9]+)(\.[0-9]+)?)?")
 # IEC 61131-3, 6.3.2: a single '_' between digits (and after the base's '#').
 _DECIMAL = re.compile(r"[0-9](_?[0-9])*")
 _BASED = {2: re.compile(r"_?[01](_?[01])*"), 8: re.compile(r"_?[0-7](_?[0-7])*"),
           16: re.compile(r"_?[0-9A-Fa-f](_?[0-9A-Fa-f])*")}
 # Words that start a construct outside the subset: a syntax error at one is ST031.
 UNSUPPORTED_WORDS = {
-    "TYPE": "TYPE … END_TYPE (data types)", "STRUCT": "STRUCT", "END_TYPE": "TYPE … END_TYPE",
-    "END_STRUCT": "STRUCT", "VAR_GLOBAL": "VAR_GLOBAL", "VAR_IN_OUT": "VAR_IN_OUT",
-    "VAR_EXTERNAL": "VAR_EXTERNAL", "VAR_ACCESS": "VAR_ACCESS", "VAR_CONFIG": "VAR_CONFIG",
-    "NON_RETAIN": "NON_RETAIN", "CONFIGURATION": "CONFIGURATION", "RESOURCE": "RESOURCE",
+    "VAR_ACCESS": "VAR_ACCESS", "VAR_CONFIG": "VAR_CONFIG",
+    "CONFIGURATION": "CONFIGURATION", "RESOURCE": "RESOURCE",
     "AT": "located variables (AT %I…)", "METHOD": "METHOD", "PROPERTY": "PROPERTY",
     "INTERFACE": "INTERFACE", "ACTION": "ACTION", "REF_TO": "references (REF_TO)",
-    "POINTER": "pointers", "JMP": "JMP and labels",
+    "POINTER": "pointers", "JMP": "JMP and labels", "UNION": "UNION",
     "AND_THEN": "AND_THEN (CODESYS; write AND)", "OR_ELSE": "OR_ELSE (CODESYS; write OR)",
 }
-_UNSUPPORTED_CHARS = {"{": "pragmas ({…})", "%": "located variables (%IX0.0)",
-                      "'": "STRING literals", '"': "WSTRING literals"}
-_COMMENT_OPEN = re.compile(r"\(\*|/\*|//")
+_UNSUPPORTED_CHARS = {"%": "located variables (%IX0.0)"}
+_COMMENT_OPEN = re.compile(r"\(\*|/\*|//|\{|'|\"")
 _COMMENT_PAIR = {"(*": re.compile(r"\(\*|\*\)"), "/*": re.compile(r"/\*|\*/")}
+_STRING_END = {"'": re.compile(r"\$.|'|\n", re.DOTALL), '"': re.compile(r'\$.|"|\n', re.DOTALL)}
 _NOT_NEWLINE = re.compile(r"[^\n]")
 
 
 class UnclosedComment(ValueError):
-    def __init__(self, at: int) -> None:
-        super().__init__("a comment that is never closed")
+    def __init__(self, at: int, what: str = "comment") -> None:
+        super().__init__(f"a {what} that is never closed")
         self.at = at
+        self.what = what
 
 
 def blank_comments(text: str) -> str:
-    """The text with every comment turned into spaces (newlines kept, so every position is
-    unchanged).  ``(* *)`` and ``/* */`` nest in themselves, as IEC 61131-3 (6.1.5) allows:
-    ``(* a (* b *) c *)`` is one comment.  UnclosedComment at the opening of one that the
-    file never closes."""
-    if "(*" not in text and "/*" not in text and "//" not in text:
+    """The text with every comment and pragma turned into spaces (newlines kept, so every
+    position is unchanged).  ``(* *)`` and ``/* */`` nest in themselves, as IEC 61131-3
+    (6.1.5) allows: ``(* a (* b *) c *)`` is one comment.  A pragma ``{attribute …}``
+    (6.2) is accepted and ignored.  String literals are skipped: ``'(*'`` is text.
+    UnclosedComment at the opening of one that the file never closes."""
+    if not any(mark in text for mark in ("(*", "/*", "//", "{")):
         return text
     pieces = []
     pos = 0
-    while (found := _COMMENT_OPEN.search(text, pos)) is not None:
+    search = 0
+    while (found := _COMMENT_OPEN.search(text, search)) is not None:
         start, opener = found.start(), found.group()
+        if opener in ("'", '"'):  # a string literal: step over it
+            end = found.end()
+            while (mark := _STRING_END[opener].search(text, end)) is not None and \
+                    mark.group().startswith("$"):
+                end = mark.end()
+            search = mark.end() if mark is not None else len(text)
+            continue
         if opener == "//":
             end = text.find("\n", start)
             end = len(text) if end < 0 else end
+        elif opener == "{":
+            end = text.find("}", start)
+            if end < 0:
+                raise UnclosedComment(start, "pragma")
+            end += 1
         else:
             depth, end = 1, found.end()
             pair = _COMMENT_PAIR[opener]
@@ -75,7 +94,7 @@ def blank_comments(text: str) -> str:
                 depth += 1 if mark.group() == opener else -1
                 end = mark.end()
         pieces += [text[pos:start], _NOT_NEWLINE.sub(" ", text[start:end])]
-        pos = end
+        pos = search = end
     pieces.append(text[pos:])
     return "".join(pieces)
 
@@ -100,12 +119,6 @@ def _unsupported(text: str, at: int) -> tuple[str, int] | None:
     previous = re.search(r"[A-Za-z_][A-Za-z0-9_]*$", before)
     if previous is not None and previous.group().upper() in UNSUPPORTED_WORDS:
         return UNSUPPORTED_WORDS[previous.group().upper()], previous.start()
-    if char.isdigit() and before.endswith("."):
-        return "bit access (w.3)", at
-    if re.search(r"ARRAY\s*\[[^\]]*$", before, re.IGNORECASE) and char == ",":
-        return "multi-dimensional arrays", at
-    if re.search(r"\bOF\s*$", before, re.IGNORECASE) and text[at:at + 5].upper() == "ARRAY":
-        return "arrays of arrays", at
     return None
 
 
@@ -140,15 +153,87 @@ def parse_number(text: str) -> int:
     return int(text.replace("_", ""))
 
 
-def parse_time(text: str) -> int:
-    """``T#1s500ms`` -> 1500 (milliseconds, rounded).  IEC 61131-3, 6.3.3: the units in the
-    order d h m s ms, each once; only the last may have a fraction; only the first may
-    overflow (``T#25h`` but not ``T#1h75m``).  ValueError otherwise."""
+def parse_string(text: str) -> str:
+    """``'it$'s$N'`` -> "it's\\n" (IEC 61131-3, 6.3.3: $$ $' $" $L $N $P $R $T, $hh in a
+    STRING, $hhhh in a WSTRING).  A STRING holds one byte a character: ValueError for one
+    beyond Latin-1."""
+    wide = text[0] == '"'
+    body = text[1:-1]
+    out = []
+    i = 0
+    while i < len(body):
+        char = body[i]
+        if char != "$":
+            out.append(char)
+            i += 1
+            continue
+        nxt = body[i + 1]
+        if nxt.upper() in _ESCAPES:
+            out.append(_ESCAPES[nxt.upper()])
+            i += 2
+        else:
+            width = 4 if wide else 2
+            out.append(chr(int(body[i + 1:i + 1 + width], 16)))
+            i += 1 + width
+    value = "".join(out)
+    if not wide and any(ord(c) > 255 for c in value):
+        raise ValueError("a STRING holds one byte a character (Latin-1): write a WSTRING "
+                         "\"…\" for this text")
+    return value
+
+
+def parse_date(text: str) -> tuple[str, int]:
+    """``D#2024-01-31`` -> ("DATE", seconds since 1970-01-01), ``TOD#12:30:15.5`` -> ("TOD",
+    ms since midnight), ``DT#2024-01-31-12:30:15`` -> ("DT", seconds since 1970) -- the
+    representation of CODESYS and TwinCAT (docs/plc.md).  ValueError for a day that is not."""
+    import calendar
+    import datetime
+
+    kind, body = text.split("#", 1)
+    kind = {"D": "DATE", "TIME_OF_DAY": "TOD", "DATE_AND_TIME": "DT"}.get(kind.upper(),
+                                                                        kind.upper())
+    seconds = 0
+    if kind in ("DATE", "DT"):
+        found = _DATE.match(body)
+        assert found is not None
+        y, mo, d = (int(g) for g in found.groups())
+        try:
+            day = datetime.date(y, mo, d)
+        except ValueError as exc:
+            raise ValueError(f"{text}: {exc}") from None
+        seconds = calendar.timegm(day.timetuple())
+        if kind == "DATE":
+            if not 0 <= seconds < 1 << 32:
+                raise ValueError(f"{text} is outside DATE's range (1970-01-01..2106-02-07)")
+            return kind, seconds
+        body = body[found.end() + 1:]
+    found = _TOD.fullmatch(body)
+    if found is None:
+        raise ValueError(f"{text} is not a time of day")
+    h, m, sec = int(found.group(1)), int(found.group(2)), int(found.group(3) or 0)
+    fraction = found.group(4) or ""
+    if h > 23 or m > 59 or sec > 59:
+        raise ValueError(f"{text}: hours 0..23, minutes and seconds 0..59")
+    if kind == "TOD":
+        return kind, (h * 3600 + m * 60 + sec) * 1000 + round(float("0" + fraction) * 1000)
+    if fraction.strip(".0"):
+        raise ValueError(f"{text}: DT holds whole seconds")
+    seconds += h * 3600 + m * 60 + sec
+    if not 0 <= seconds < 1 << 32:
+        raise ValueError(f"{text} is outside DT's range (1970..2106)")
+    return kind, seconds
+
+
+def parse_time(text: str, long: bool = False) -> int:
+    """``T#1s500ms`` -> 1500 (milliseconds, rounded; ``long``: an LTIME, in nanoseconds).
+    IEC 61131-3, 6.3.3: the units in the order d h m s ms us ns, each once; only the last
+    may have a fraction; only the first may overflow (``T#25h`` but not ``T#1h75m``).
+    ValueError otherwise."""
     body = text.split("#", 1)[1]
     sign = -1 if body.startswith("-") else 1
     body = body.lstrip("+-")
     parts = _TIME_PART.findall(body)
-    total = 0.0
+    total = Decimal(0)
     last = -1
     for i, (value, unit) in enumerate(parts):
         unit = unit.lower()
@@ -159,12 +244,12 @@ def parse_time(text: str) -> int:
             raise ValueError(f"{text}: one '_' at most between digits")
         if "." in value and i != len(parts) - 1:
             raise ValueError(f"{text}: only the last unit may have a fraction")
-        number = float(value.replace("_", ""))
+        number = Decimal(value.replace("_", ""))
         if i > 0 and unit in _UNIT_LIMIT and number >= _UNIT_LIMIT[unit]:
             raise ValueError(f"{text}: {value}{unit} overflows into the unit before it")
         last = order
-        total += number * _MS[unit]
-    return sign * round(total)
+        total += number * _NS[unit]
+    return sign * round(total if long else total / 10**6)
 
 
 def parse_typed(text: str) -> tuple[str, bool | int | float]:
@@ -213,8 +298,42 @@ class _Build(Transformer_NonRecursive[Token, Any]):
 
     # -- POUs --------------------------------------------------------------------------------
 
-    def start(self, meta: Any, children: list[n.Pou]) -> tuple[n.Pou, ...]:
-        return tuple(children)
+    def start(self, meta: Any, children: list[Any]
+              ) -> tuple[tuple[n.Pou, ...], tuple[n.TypeDecl, ...], tuple[n.VarDecl, ...]]:
+        pous = tuple(c for c in children if isinstance(c, n.Pou))
+        types = tuple(t for c in children if isinstance(c, tuple) and c and c[0] == "TYPE"
+                      for t in c[1])
+        globals_ = tuple(d for c in children if isinstance(c, list) for d in c)
+        return pous, types, globals_
+
+    # -- data types and globals ----------------------------------------------------------------
+
+    def type_decl(self, meta: Any, children: list[Any]) -> tuple[str, list[n.TypeDecl]]:
+        return ("TYPE", [c for c in children if isinstance(c, n.TypeDecl)])
+
+    def type_def(self, meta: Any, children: list[Any]) -> n.TypeDecl:
+        name, (kind, fields, items, base, initial) = children
+        return n.TypeDecl(str(name), kind, fields, items, base, initial,
+                          _span(self.file, name))
+
+    def struct_spec(self, meta: Any, children: list[Any]) -> tuple[Any, ...]:
+        fields = tuple(d for c in children if isinstance(c, list) for d in c)
+        return ("STRUCT", fields, (), None, None)
+
+    def enum_spec(self, meta: Any, children: list[Any]) -> tuple[Any, ...]:
+        items = tuple(c for c in children if isinstance(c, tuple))
+        default = next((str(c) for c in children if isinstance(c, Token)), None)
+        return ("ENUM", (), items, None, default)
+
+    def enum_item(self, meta: Any, children: list[Any]) -> tuple[str, n.Expr | None, n.Span]:
+        return (str(children[0]), children[1] if len(children) > 1 else None,
+                _span(self.file, children[0]))
+
+    def alias_spec(self, meta: Any, children: list[Any]) -> tuple[Any, ...]:
+        return ("ALIAS", (), (), children[0], children[1] if len(children) > 1 else None)
+
+    def global_block(self, meta: Any, children: list[Any]) -> list[n.VarDecl]:
+        return self.var_block(meta, children)
 
     def _pou(self, kind: str, meta: Any, children: list[Any]) -> n.Pou:
         name = children[1]
@@ -240,8 +359,10 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         section = str(children[0]).upper()
         qualifier = None
         items = children[1:-1]
-        if items and isinstance(items[0], Token):
-            qualifier = str(items[0]).upper()
+        while items and isinstance(items[0], Token):
+            word = str(items[0]).upper()
+            if word != "NON_RETAIN":  # the default: nothing is kept over a restart
+                qualifier = word
             items = items[1:]
         return [n.VarDecl(d.name, d.type, d.initial, section, qualifier, d.span)
                 for decl in items for d in decl]
@@ -257,10 +378,19 @@ class _Build(Transformer_NonRecursive[Token, Any]):
     def named_type(self, meta: Any, children: list[Token]) -> n.NamedType:
         return n.NamedType(str(children[0]), _span(self.file, children[0]))
 
+    def sized_type(self, meta: Any, children: list[Any]) -> n.NamedType:
+        return n.NamedType(str(children[0]), _span(self.file, children[0]), children[1])
+
+    def subrange_type(self, meta: Any, children: list[Any]) -> n.SubrangeType:
+        return n.SubrangeType(str(children[0]), children[1], children[2],
+                              _span(self.file, children[0]))
+
     def array_type(self, meta: Any, children: list[Any]) -> n.ArrayType:
-        _, lo, hi, _, elem = children
-        return n.ArrayType(lo, hi, n.NamedType(str(elem), _span(self.file, elem)),
-                           self._s(meta, children))
+        dims = tuple(c for c in children if isinstance(c, tuple))
+        return n.ArrayType(dims, children[-1], _span(self.file, children[0]))
+
+    def dim(self, meta: Any, children: list[Any]) -> tuple[n.Expr, n.Expr]:
+        return (children[0], children[1])
 
     def _number(self, token: Token) -> int:
         try:
@@ -268,18 +398,22 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         except ValueError as exc:
             raise BadLiteral(token, str(exc)) from None
 
-    def bound(self, meta: Any, children: list[Token]) -> int:
-        value = self._number(children[-1])
-        return -value if len(children) == 2 else value
-
-    def array_init(self, meta: Any, children: list[tuple[int, n.Expr]]) -> n.ArrayInit:
+    def array_init(self, meta: Any, children: list[tuple[int, n.Initial | None]]
+                   ) -> n.ArrayInit:
         return n.ArrayInit(tuple(children), self._s(meta, []))
 
-    def init_one(self, meta: Any, children: list[n.Expr]) -> tuple[int, n.Expr]:
+    def init_one(self, meta: Any, children: list[n.Initial]) -> tuple[int, n.Initial]:
         return (1, children[0])
 
-    def init_repeat(self, meta: Any, children: list[Any]) -> tuple[int, n.Expr]:
-        return (self._number(children[0]), children[1])
+    def init_repeat(self, meta: Any, children: list[Any]) -> tuple[int, n.Initial | None]:
+        return (self._number(children[0]), children[1] if len(children) > 1 else None)
+
+    def struct_init(self, meta: Any, children: list[tuple[str, n.Span, n.Initial]]
+                    ) -> n.StructInit:
+        return n.StructInit(tuple(children), children[0][1])
+
+    def field_init(self, meta: Any, children: list[Any]) -> tuple[str, n.Span, n.Initial]:
+        return (str(children[0]), _span(self.file, children[0]), children[1])
 
     # -- statements --------------------------------------------------------------------------
 
@@ -337,10 +471,15 @@ class _Build(Transformer_NonRecursive[Token, Any]):
     def label_range(self, meta: Any, children: list[n.Literal]) -> n.CaseLabel:
         return n.CaseLabel(children[0], children[1], children[0].span)
 
-    def case_value(self, meta: Any, children: list[Token]) -> n.Literal:
+    def case_value(self, meta: Any, children: list[Token]) -> n.Literal | n.Var | n.EnumLit:
         token = children[-1]
         negative = len(children) == 2
         span = _span(self.file, children[0])
+        if token.type == "CASE_NAME":
+            first, _, member = str(token).partition(".")
+            return n.Var(first, (n.Field(member, span),) if member else (), span)
+        if token.type == "ENUM_LIT":
+            return self.enum_lit(meta, [token])
         if token.type == "TYPED_LIT":
             type_name, value = self._typed(token)
         else:
@@ -386,13 +525,19 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.Call(str(children[0]), tuple(children[1:]), _span(self.file, children[0]))
 
     def variable(self, meta: Any, children: list[Any]) -> n.Var:
-        return n.Var(str(children[0]), tuple(children[1:]), _span(self.file, children[0]))
+        selectors = []
+        for c in children[1:]:  # a[i, j] is a[i][j]
+            selectors += c if isinstance(c, list) else [c]
+        return n.Var(str(children[0]), tuple(selectors), _span(self.file, children[0]))
 
     def field(self, meta: Any, children: list[Token]) -> n.Field:
         return n.Field(str(children[0]), _span(self.file, children[0]))
 
-    def index(self, meta: Any, children: list[Any]) -> n.Index:
-        return n.Index(children[0], children[0].span)
+    def bit(self, meta: Any, children: list[Token]) -> n.Bit:
+        return n.Bit(self._number(children[0]), _span(self.file, children[0]))
+
+    def index(self, meta: Any, children: list[Any]) -> list[n.Index]:
+        return [n.Index(c, c.span) for c in children]
 
     def int_lit(self, meta: Any, children: list[Token]) -> n.Literal:
         return n.Literal(self._number(children[0]), None, _span(self.file, children[0]))
@@ -417,11 +562,33 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.Literal(value, type_name, _span(self.file, children[0]))
 
     def time_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        text = str(children[0])
+        long = text.upper().startswith("L")
         try:
-            value = parse_time(str(children[0]))
+            value = parse_time(text, long)
         except ValueError as exc:
             raise BadLiteral(children[0], str(exc)) from None
-        return n.Literal(value, "TIME", _span(self.file, children[0]))
+        return n.Literal(value, "LTIME" if long else "TIME", _span(self.file, children[0]))
+
+    def date_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        try:
+            type_name, value = parse_date(str(children[0]))
+        except ValueError as exc:
+            raise BadLiteral(children[0], str(exc)) from None
+        return n.Literal(value, type_name, _span(self.file, children[0]))
+
+    def string_lit(self, meta: Any, children: list[Token]) -> n.Literal:
+        token = children[0]
+        wide = token.type == "WSTRING_LIT"
+        try:
+            value = parse_string(str(token))
+        except ValueError as exc:
+            raise BadLiteral(token, str(exc)) from None
+        return n.Literal(value, "WSTRING" if wide else "STRING", _span(self.file, token))
+
+    def enum_lit(self, meta: Any, children: list[Token]) -> n.EnumLit:
+        type_name, _, name = str(children[0]).partition("#")
+        return n.EnumLit(type_name, name, _span(self.file, children[0]))
 
     def bool_lit(self, meta: Any, children: list[Token]) -> n.Literal:
         return n.Literal(str(children[0]).upper() == "TRUE", "BOOL",
@@ -471,8 +638,8 @@ def parse_source(text: str, file: str) -> n.SourceFile:
         tree = _parser().parse(blank_comments(text))
     except UnclosedComment as exc:
         line, column = _position(text, exc.at)
-        raise fail(StCode.UNEXPECTED_END, "the file ends inside this comment (it is never "
-                   "closed)", line, column) from None
+        raise fail(StCode.UNEXPECTED_END, f"the file ends inside this {exc.what} (it is "
+                   "never closed)", line, column) from None
     except UnexpectedCharacters as exc:
         unsupported = not_supported(exc.pos_in_stream or 0)
         if unsupported is not None:
@@ -490,11 +657,6 @@ def parse_source(text: str, file: str) -> n.SourceFile:
         unsupported = not_supported(token.start_pos) if token.start_pos is not None else None
         if unsupported is not None:
             raise unsupported from None
-        if token.type == "NAME" and "NAME" not in exc.expected and "INT" in exc.expected:
-            what = ("a named constant or enumeration value as a CASE label"
-                    if "BASED_INT" in exc.expected else "a named constant as an array bound")
-            raise fail(StCode.UNSUPPORTED, f"{what}: not supported by ncgate's Structured "
-                       "Text (write the number)", token.line or 1, token.column or 1) from None
         if token.type == "$END":
             line = len(lines) or 1
             raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected "
@@ -506,14 +668,14 @@ def parse_source(text: str, file: str) -> n.SourceFile:
     except UnexpectedInput as exc:  # pragma: no cover - the three above are all lark raises
         raise fail(StCode.UNEXPECTED_TOKEN, str(exc), exc.line, exc.column) from None
     try:
-        pous = _Build(file).transform(tree)
+        pous, types, globals_ = _Build(file).transform(tree)
     except Exception as exc:  # lark wraps a transformer's error in VisitError
         cause = getattr(exc, "orig_exc", exc)
         if isinstance(cause, BadLiteral):
             raise fail(StCode.BAD_LITERAL, str(cause), cause.token.line or 1,
                        cause.token.column or 1) from None
         raise
-    return n.SourceFile(file, text, pous)
+    return n.SourceFile(file, text, pous, types, globals_)
 
 
 def parse_file(path: str | Path) -> n.SourceFile:

@@ -25,6 +25,9 @@ INTEGER_TYPES: dict[str, tuple[int, bool]] = {
     "USINT": (8, False), "UINT": (16, False), "UDINT": (32, False), "ULINT": (64, False),
     "BYTE": (8, False), "WORD": (16, False), "DWORD": (32, False), "LWORD": (64, False),
     "TIME": (32, True),  # milliseconds
+    "LTIME": (64, True),  # nanoseconds
+    "DATE": (32, False), "DT": (32, False),  # seconds since 1970-01-01
+    "TOD": (32, False),  # milliseconds since midnight (wraps at 24 h: see wrap_code)
 }
 
 

@@ -14,14 +14,63 @@ from dataclasses import dataclass
 
 from ncgate.plc.st.stdlib import INTEGER_TYPES, limits
 
-SIGNED = ("SINT", "INT", "DINT")
-UNSIGNED = ("USINT", "UINT", "UDINT")
-BITS = ("BYTE", "WORD", "DWORD")
+SIGNED = ("SINT", "INT", "DINT", "LINT")
+UNSIGNED = ("USINT", "UINT", "UDINT", "ULINT")
+BITS = ("BYTE", "WORD", "DWORD", "LWORD")
 REALS = ("REAL", "LREAL")
 INTS = (*SIGNED, *UNSIGNED, *BITS)
-ELEMENTARY = ("BOOL", *INTS, *REALS, "TIME")
+DURATIONS = ("TIME", "LTIME")  # TIME: 32-bit ms; LTIME: 64-bit ns
+DATES = ("DATE", "TOD", "DT")  # DATE, DT: 32-bit s since 1970; TOD: ms since midnight
+ELEMENTARY = ("BOOL", *INTS, *REALS, *DURATIONS, *DATES)
+# The long names of the date types (6.4.2, Table 10) and what ncgate calls them.
+DATE_NAMES = {"TIME_OF_DAY": "TOD", "DATE_AND_TIME": "DT"}
 ANY_INT, ANY_REAL = "ANY_INT", "ANY_REAL"
+STRING_DEFAULT = 80  # a STRING's length when none is declared (CODESYS, TwinCAT, Beremiz)
 __all__ = ["limits"]  # re-exported: the type's range, as stdlib defines it for wrap()
+
+
+class Ranged(str):
+    """A subrange type (``INT(0..100)``, 6.4.4.4): the name of its base type -- so every
+    rule of the base applies -- with its limits, checked where a value is stored."""
+
+    lo: int
+    hi: int
+
+    def __new__(cls, base: str, lo: int, hi: int) -> Ranged:
+        self = super().__new__(cls, base)
+        self.lo, self.hi = lo, hi
+        return self
+
+
+@dataclass(frozen=True, slots=True)
+class StringOf:
+    """STRING[length] (one byte a character) or WSTRING[length] (UTF-16 units)."""
+
+    length: int
+    wide: bool = False
+
+    def __str__(self) -> str:
+        return f"{'WSTRING' if self.wide else 'STRING'}[{self.length}]"
+
+
+@dataclass(frozen=True, slots=True)
+class StructOf:
+    """A structure type (TYPE … STRUCT); its members are the compiler's ``structs[name]``."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+@dataclass(frozen=True, slots=True)
+class EnumOf:
+    """An enumeration type; its values are integers (the compiler's ``enums[name]``)."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return self.name
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,7 +98,7 @@ class FbOf:
         return self.name
 
 
-Type = str | ArrayOf | FbOf
+Type = str | ArrayOf | FbOf | StringOf | StructOf | EnumOf
 
 
 def bits(t: str) -> int:
@@ -72,6 +121,8 @@ def widens(src: Type, dst: Type) -> bool:
     """May a value of ``src`` be stored in ``dst`` without a conversion function?"""
     if src == dst:
         return True
+    if isinstance(src, StringOf) and isinstance(dst, StringOf):
+        return src.wide == dst.wide  # a longer value is truncated where it is stored
     if not isinstance(src, str) or not isinstance(dst, str):
         return False
     if src == ANY_INT:
@@ -96,6 +147,8 @@ def common(a: Type, b: Type) -> Type | None:
     """The type both operands of an arithmetic operator convert to, or None."""
     if a == b:
         return a
+    if isinstance(a, StringOf) and isinstance(b, StringOf):
+        return StringOf(max(a.length, b.length), a.wide) if a.wide == b.wide else None
     if (a == ANY_REAL and is_int(b)) or (b == ANY_REAL and is_int(a)):
         return "REAL" if ANY_INT not in (a, b) else ANY_REAL
     if widens(a, b):
@@ -106,11 +159,16 @@ def common(a: Type, b: Type) -> Type | None:
 
 
 def default_value(t: Type) -> object:
-    """The initial value of a variable declared without one (IEC: 0, FALSE, 0.0, T#0s)."""
+    """The initial value of a variable declared without one (IEC 6.4.2, Table 10: 0, FALSE,
+    0.0, T#0s, D#1970-01-01, '', a subrange's lower limit)."""
     if t == "BOOL":
         return False
     if t in REALS:
         return 0.0
     if isinstance(t, ArrayOf):
         return [default_value(t.element) for _ in range(t.length)]
+    if isinstance(t, StringOf):
+        return ""
+    if isinstance(t, Ranged):
+        return t.lo if t.lo > 0 or t.hi < 0 else 0
     return 0

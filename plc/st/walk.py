@@ -111,6 +111,9 @@ class Walker:
             selector = self.value(s.selector, prog)
             for labels, body in s.arms:
                 for label in labels:
+                    if not isinstance(label.lo, n.Literal) or not isinstance(
+                            label.hi, n.Literal | None):
+                        raise NotImplementedError("the walker takes literal CASE labels")
                     lo = label.lo.value
                     hi = label.hi.value if label.hi is not None else lo
                     if lo <= selector <= hi:
@@ -184,7 +187,7 @@ class Walker:
                     raise IndexError(f"index {i} outside {t.lo}..{t.hi}")
                 obj, t = obj[i - t.lo], t.element
             else:
-                assert isinstance(t, FbOf)
+                assert isinstance(t, FbOf) and isinstance(sel, n.Field)
                 name = sel.name.upper()
                 obj, t = getattr(obj, name), _std_member(t.name, name)
         return obj, t
@@ -215,7 +218,7 @@ class Walker:
                 raise IndexError(f"index {i} outside {t.lo}..{t.hi}")
             holder[i - t.lo] = _stored(value, t.element)
         else:
-            assert isinstance(t, FbOf)
+            assert isinstance(t, FbOf) and isinstance(last, n.Field)
             name = last.name.upper()
             setattr(holder, name, _stored(value, _std_member(t.name, name)))
 
@@ -277,6 +280,8 @@ class Walker:
                 return _pow(a, b)
             # + - * / MOD: as the compiler folds constants (a float / 0 raises too)
             return _fold(op, a, b, isinstance(a, float) or isinstance(b, float))
+        if isinstance(x, n.EnumLit):
+            raise NotImplementedError("the walker reads no enumerations")
         key = x.name.upper()
         args = [self.value(a.expr, prog) for a in x.args if a.expr is not None]
         if key == "ABS":

@@ -151,3 +151,55 @@ def test_a_real_stored_as_a_double_comes_back_as_the_single_it_is(tmp_path: Path
     store.save({"KEEP.R": ("REAL", 0.1)})
     plc = runtime(store)
     assert plc.read("keep.r") == 13421773 / 2**27  # binary32 nearest to 0.1
+
+
+FB_SOURCE = """TYPE Stats : STRUCT count : DINT; last : STRING[8]; END_STRUCT END_TYPE
+FUNCTION_BLOCK Tally
+VAR_INPUT pulse : BOOL; END_VAR
+VAR edge : R_TRIG; n : INT; END_VAR
+edge(CLK := pulse);
+IF edge.Q THEN n := n + 1; END_IF
+END_FUNCTION_BLOCK
+PROGRAM keep
+VAR RETAIN parts : CTU; tally : Tally; stats : Stats; END_VAR
+VAR pulse : BOOL; END_VAR
+pulse := NOT pulse;
+parts(CU := pulse, PV := 100);
+tally(pulse := pulse);
+stats.count := stats.count + 1; stats.last := 'scan';
+END_PROGRAM
+"""
+
+
+def test_a_retained_counter_fb_and_structure_keep_their_state_over_a_restart(
+        tmp_path: Path) -> None:
+    # IEC 61131-3, 6.5.6: a RETAIN instance keeps its state over a warm restart -- a CTU's
+    # CV, a user FB's variables (and its R_TRIG's memory), a structure's members.
+    store = RetainStore(tmp_path / "r.sqlite")
+    first = runtime(store, FB_SOURCE)
+    for t in range(5):  # pulse TRUE, FALSE, TRUE, FALSE, TRUE: three rising edges
+        first.scan(t * 10)
+    assert first.read("keep.parts.CV") == 3
+    store.close()
+    again = runtime(RetainStore(tmp_path / "r.sqlite"), FB_SOURCE)
+    assert again.read("keep.parts.CV") == 3 and again.read("keep.tally.n") == 3
+    assert (again.read("keep.stats.count"), again.read("keep.stats.last")) == (5, "scan")
+    # pulse (not retained) starts FALSE: TRUE now is no edge, the R_TRIGs remember TRUE;
+    # FALSE, then TRUE again is the fourth edge, counted on from 3.
+    for t in (100, 110, 120):
+        again.scan(t)
+    assert again.read("keep.parts.CV") == 4 and again.read("keep.tally.n") == 4
+
+
+def test_a_retained_fb_whose_type_changed_starts_from_its_initial_state(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    store = RetainStore(tmp_path / "r.sqlite")
+    first = runtime(store, FB_SOURCE)
+    first.scan(0)
+    store.close()
+    changed = FB_SOURCE.replace("VAR edge : R_TRIG; n : INT; END_VAR",
+                                "VAR edge : R_TRIG; n : INT; extra : BOOL; END_VAR")
+    with caplog.at_level(logging.WARNING):
+        again = runtime(RetainStore(tmp_path / "r.sqlite"), changed)
+    assert again.read("keep.tally.n") == 0 and again.read("keep.parts.CV") == 1
+    assert "KEEP.TALLY" in caplog.text.upper()

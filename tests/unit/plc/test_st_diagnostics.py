@@ -24,7 +24,7 @@ CASES = [
     # names
     ("ST010", "PROGRAM p VAR counter : INT; END_VAR\n¦countr := 1; END_PROGRAM"),
     ("ST011", "PROGRAM p VAR x : ¦INTEGER; END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR x : ¦LINT; END_VAR\nEND_PROGRAM"),
+    ("ST031", "PROGRAM p VAR x : ¦CHAR; END_VAR\nEND_PROGRAM"),
     ("ST012", "PROGRAM p VAR x : INT; END_VAR\nx := ¦FOO(1); END_PROGRAM"),
     ("ST012", "PROGRAM p VAR x : BOOL; END_VAR\nx := ¦TON(IN := TRUE); END_PROGRAM"),
     ("ST013", "PROGRAM p VAR a : INT; ¦a : BOOL; END_VAR\nEND_PROGRAM"),
@@ -67,25 +67,50 @@ CASES = [
     ("ST030", "¦FUNCTION_BLOCK fb VAR me : fb; END_VAR END_FUNCTION_BLOCK"),
     ("ST031", "FUNCTION_BLOCK fb VAR RETAIN ¦n : INT; END_VAR END_FUNCTION_BLOCK"),
     ("ST031", "FUNCTION f : INT VAR t : ¦TON; END_VAR f := 1; END_FUNCTION"),
-    ("ST031", "PROGRAM p VAR RETAIN ¦t : TON; END_VAR END_PROGRAM"),
     # outside the subset (issue 29): ST031 where the construct starts
-    ("ST031", "¦TYPE E : (A, B); END_TYPE\nPROGRAM p END_PROGRAM"),
-    ("ST031", "¦{attribute 'qualified_only'}\nPROGRAM p END_PROGRAM"),
-    ("ST031", "PROGRAM p VAR s : INT; END_VAR\ns := ¦'text'; END_PROGRAM"),
-    ("ST031", "PROGRAM p VAR s : ¦STRING; END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR w : WORD; b : BOOL; END_VAR\nb := w.¦3; END_PROGRAM"),
-    ("ST031", "PROGRAM p VAR a : ARRAY[1..2¦, 1..3] OF INT; END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR a : ARRAY[1..2] OF ¦ARRAY[1..3] OF INT; END_VAR\nEND_PROGRAM"),
-    ("ST031", "FUNCTION_BLOCK f ¦VAR_IN_OUT x : INT; END_VAR END_FUNCTION_BLOCK"),
-    ("ST031", "¦VAR_GLOBAL g : INT; END_VAR\nPROGRAM p END_PROGRAM"),
     ("ST031", "PROGRAM p VAR x ¦AT %IX0.0 : BOOL; END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR x : INT; END_VAR\nx := ¦LEN(x); END_PROGRAM"),
     ("ST031", "PROGRAM p VAR q : ¦POINTER TO INT; END_VAR\nEND_PROGRAM"),
     ("ST031", "PROGRAM p VAR q : ¦REF_TO INT; END_VAR\nEND_PROGRAM"),
     ("ST031", "PROGRAM p VAR w : WORD; b : BOOL; END_VAR\nb := w.¦%X3; END_PROGRAM"),
-    ("ST031", "PROGRAM p VAR CONSTANT n : INT := 3; END_VAR VAR a : ARRAY[1..¦n] OF INT; "
-              "END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR x : INT; END_VAR\nCASE x OF ¦RED: x := 1; END_CASE END_PROGRAM"),
+    ("ST031", "VAR_GLOBAL RETAIN ¦g : INT; END_VAR\nPROGRAM p END_PROGRAM"),
+    ("ST031", "PROGRAM p VAR_IN_OUT ¦x : INT; END_VAR END_PROGRAM"),
+    ("ST031", "FUNCTION f : INT VAR_IN_OUT a : INT; END_VAR f := a; END_FUNCTION\n"
+              "PROGRAM p VAR x : INT; END_VAR\nx := 1 + ¦f(x); END_PROGRAM"),
+    ("ST031", "PROGRAM p VAR s : STRING; END_VAR\ns := ¦TIME_TO_STRING(T#1s); END_PROGRAM"),
+    # data types, constants, strings, bits, VAR_IN_OUT (issue 29)
+    ("ST013", "TYPE E : (A, B); END_TYPE TYPE ¦E : INT; END_TYPE PROGRAM p END_PROGRAM"),
+    ("ST013", "TYPE E : (A, B, ¦A); END_TYPE PROGRAM p END_PROGRAM"),
+    ("ST030", "TYPE ¦S : STRUCT s : S; END_STRUCT END_TYPE PROGRAM p END_PROGRAM"),
+    ("ST014", "TYPE S : STRUCT a : INT; END_STRUCT END_TYPE\nPROGRAM p VAR s : S; END_VAR\n"
+              "s.¦b := 1; END_PROGRAM"),
+    ("ST014", "TYPE S : STRUCT a : INT; END_STRUCT END_TYPE\n"
+              "PROGRAM p VAR s : S := (a := 1, ¦c := 2); END_VAR END_PROGRAM"),
+    ("ST020", "TYPE E : (A, B); F : (B, C); END_TYPE\nPROGRAM p VAR e : E; END_VAR\n"
+              "e := ¦B; END_PROGRAM"),
+    ("ST020", "TYPE E : (A, B); F : (C, D); END_TYPE\nPROGRAM p VAR e : E; END_VAR\n"
+              "CASE e OF A: e := B; ¦F#C: e := A; END_CASE END_PROGRAM"),
+    ("ST020", "TYPE E : (A, B); END_TYPE\nPROGRAM p VAR e : E; i : INT; END_VAR\n"
+              "e := ¦i; END_PROGRAM"),
+    ("ST010", "TYPE E : (A, B); END_TYPE\nPROGRAM p VAR e : E; END_VAR\n"
+              "e := ¦E#C; END_PROGRAM"),
+    ("ST021", "TYPE Pct : INT(0..100); END_TYPE\nPROGRAM p VAR x : Pct; END_VAR\n"
+              "x := ¦101; END_PROGRAM"),
+    ("ST028", "PROGRAM p VAR n : INT := 3; a : ARRAY[1..¦n] OF INT; END_VAR\nEND_PROGRAM"),
+    ("ST010", "PROGRAM p VAR x : INT; END_VAR\nCASE x OF ¦RED: x := 1; END_CASE END_PROGRAM"),
+    ("ST022", "PROGRAM p VAR w : WORD; b : BOOL; END_VAR\nb := w.¦16; END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR r : REAL; b : BOOL; END_VAR\nb := r.¦1; END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR s : STRING; w : WSTRING; END_VAR\ns := ¦w; END_PROGRAM"),
+    ("ST024", "PROGRAM p VAR s : STRING; END_VAR\ns := ¦LEFT(s); END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR s : STRING; END_VAR\ns := LEFT(s, ¦'3'); END_PROGRAM"),
+    ("ST005", "PROGRAM p VAR s : STRING; END_VAR\ns := ¦'caf\u0100'; END_PROGRAM"),
+    ("ST005", "PROGRAM p VAR d : DATE; END_VAR\nd := ¦D#2023-02-29; END_PROGRAM"),
+    ("ST024", "FUNCTION_BLOCK fb VAR_IN_OUT x : INT; END_VAR x := x + 1; END_FUNCTION_BLOCK\n"
+              "PROGRAM p VAR f : fb; END_VAR\nf(x := ¦3); END_PROGRAM"),
+    ("ST024", "FUNCTION_BLOCK fb VAR_IN_OUT x : INT; END_VAR x := x + 1; END_FUNCTION_BLOCK\n"
+              "PROGRAM p VAR f : fb; END_VAR\n¦f(); END_PROGRAM"),
+    ("ST020", "FUNCTION_BLOCK fb VAR_IN_OUT x : INT; END_VAR x := x + 1; END_FUNCTION_BLOCK\n"
+              "PROGRAM p VAR f : fb; d : DINT; END_VAR\nf(x := ¦d); END_PROGRAM"),
+    ("ST010", "PROGRAM p VAR_EXTERNAL ¦g : INT; END_VAR END_PROGRAM"),
     ("ST026", "PROGRAM p\n¦CONTINUE; END_PROGRAM"),
     ("ST003", "PROGRAM p ¦(* never (* closed *)\nEND_PROGRAM"),
     ("ST032", "PROGRAM p END_PROGRAM\n¦PROGRAM P END_PROGRAM"),
