@@ -55,7 +55,8 @@ PLC_REGISTERS = ("state (0 stopped, 1 running, 2 fault)", "scans (hi)", "scans (
 
 def logic_context(config: Config) -> Context:
     plc, nc = config.plc, config.nc
-    return Context(plc.sa_bits, plc.k_bytes, plc.syvars, nc.processes, nc.external)
+    return Context(plc.sa_bits, plc.k_bytes, plc.syvars, nc.processes, nc.external,
+                   tuple(config.symbols.items()))
 
 
 def load_logic(files: tuple[Path, ...], config: Config) -> Logic:

@@ -21,6 +21,7 @@ outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan
 from __future__ import annotations
 
 import math
+import re
 import struct
 import sys
 import types as pytypes
@@ -143,13 +144,22 @@ class IterationGuard(RuntimeError):
 
 @dataclass(frozen=True, slots=True)
 class Context:
-    """What the logic is checked against: the image's sizes and the NC's processes."""
+    """What the logic is checked against: the image's sizes and the NC's processes; the
+    config's I/O names ([symbols]: name -> "SA10", "SA2.BY", "SK3", "SK4.IN", "SYVAR5"),
+    globals of the logic bound to their image variable; ``strict``: IEC 61131-3 as written
+    (False: CODESYS's leniencies load, each with a warning)."""
 
     sa_bits: int = 1024
     k_bytes: int = 512
     syvars: int = 256
     processes: int = 5
     external: frozenset[int] = frozenset()
+    symbols: tuple[tuple[str, str], ...] = ()
+    strict: bool = True
+
+
+# An I/O name's image variable as the config writes it; its area in ST and its type.
+_SYMBOL_VAR = re.compile(r"(SYVAR|SA|SK|K)(\d+)(?:\.(BY|IN))?$", re.IGNORECASE)
 
 
 # ---- helpers the generated code calls -------------------------------------------------------
@@ -638,6 +648,14 @@ class Compiler:
             except Problems:
                 continue
         self._declare_globals()
+        for key, v in self.globals.items():
+            if v.image is None:
+                continue
+            clash: n.Pou | n.TypeDecl | None = self.pous[key].pou if key in self.pous else (
+                self.type_decls[key][0] if key in self.type_decls else None)
+            if clash is not None:
+                self.error(StCode.DUPLICATE_NAME, f"{clash.name} is {_symbol_clash(v)}",
+                           clash.span)
         for key in self.type_decls:
             try:
                 self.user_type(key)
@@ -651,6 +669,22 @@ class Compiler:
         """VAR_GLOBAL of every file, in file order (a global's initial value may use the
         constants before it), and the config's I/O names ([symbols])."""
         scope = Scope(self, None, "")
+        for name, var in self.ctx.symbols:
+            found = _SYMBOL_VAR.match(var)
+            if found is None:  # the config's loader checks the form: not reached from it
+                continue
+            area, index, view = found.group(1).upper(), int(found.group(2)), (
+                found.group(3) or "").upper()
+            image = {("SA", ""): ("SA", "BOOL"), ("SA", "BY"): ("SAB", "BYTE"),
+                     ("SK", ""): ("SK", "BYTE"), ("K", ""): ("SK", "BYTE"),
+                     ("SK", "BY"): ("SK", "BYTE"), ("K", "BY"): ("SK", "BYTE"),
+                     ("SK", "IN"): ("SKIN", "INT"), ("K", "IN"): ("SKIN", "INT"),
+                     ("SYVAR", ""): ("SYVAR", "INT")}.get((area, view))
+            if image is None:
+                continue
+            self.globals[name.upper()] = VarInfo(name, image[1], "SYMBOL", None,
+                                                 n.Span("[symbols]", 1, 1), None,
+                                                 (image[0], index))
         for f in self.files:
             for decl in f.globals:
                 key = decl.name.upper()
@@ -659,8 +693,10 @@ class Compiler:
                         raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is reserved "
                                          "(the image and the NC)", decl.span)
                     if key in self.globals:
+                        first = self.globals[key]
                         raise self.error(StCode.DUPLICATE_NAME, f"the global {decl.name} is "
-                                         f"declared twice (first at {self.globals[key].span})",
+                                         + (f"declared twice (first at {first.span})"
+                                            if first.image is None else _symbol_clash(first)),
                                          decl.span)
                     if decl.qualifier == "RETAIN":
                         raise self.error(StCode.UNSUPPORTED, "VAR_GLOBAL RETAIN: declare the "
@@ -851,6 +887,10 @@ class Compiler:
                 if key in info.vars:
                     raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is declared twice "
                                      f"(first at {info.vars[key].span})", decl.span)
+                symbol = self.globals.get(key)
+                if symbol is not None and symbol.image is not None:
+                    raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is "
+                                     + _symbol_clash(symbol), decl.span)
                 t = self.resolve_type(decl.type, in_function, scope)
                 if decl.section == "VAR_EXTERNAL":
                     found = self.globals.get(key)
@@ -2189,9 +2229,7 @@ class Scope:
             raise c.error(StCode.UNKNOWN_NAME, f"unknown variable {var.name}{hint}", var.span)
         v, code = found
         if v.image is not None:
-            return self._image(n.Var(v.image[0], (n.Index(n.Literal(
-                v.image[1], None, var.span), var.span), *var.selectors), var.span),
-                v.image[0], write)
+            return self._symbol(var, v)
         t: Type = v.type
         why = ""
         if v.qualifier == "CONSTANT":
@@ -2267,6 +2305,34 @@ class Scope:
                           f"{_show(var)}", var.span)
         final = code
         return Place(final, t, (lambda value: f"{final} = {value}") if not why else None, why)
+
+    def _symbol(self, var: n.Var, v: VarInfo) -> Place:
+        """An I/O name of [symbols]: its image variable, read and written as SA[i], SAB[i],
+        SK[i] or SYVAR[i] are (SKn.IN: the two bytes n, n+1 as an INT, low byte first)."""
+        c = self.c
+        assert v.image is not None
+        area, index = v.image
+        if area == "SKIN":
+            place = Place(f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)",
+                          "INT", lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535)"
+                          ".to_bytes(2, 'little')")
+        else:
+            place = self._image(n.Var(area, (n.Index(n.Literal(index, None, var.span),
+                                                     var.span),), var.span), area, False)
+        if not var.selectors:
+            return place
+        sel = var.selectors[0]
+        if len(var.selectors) > 1 or not isinstance(sel, n.Bit) or place.type == "BOOL":
+            raise c.error(StCode.TYPE_MISMATCH, f"{v.display} is the {place.type} "
+                          f"{area}{index}: no members or indices (bit access: .0)", sel.span)
+        width = 8 if place.type == "BYTE" else 16
+        if sel.bit >= width:
+            raise c.error(StCode.INDEX_RANGE, f"bit {sel.bit} of a {width}-bit "
+                          f"{place.type} (0..{width - 1})", sel.span)
+        mask, read, store = 1 << sel.bit, place.read, place.store
+        assert store is not None
+        return Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
+            wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type)))
 
     def _image(self, var: n.Var, key: str, write: bool) -> Place:
         c = self.c
@@ -2386,6 +2452,12 @@ def _fold(op: str, a: Any, b: Any, real: bool) -> Any:
 
 def _exact(values: Sequence[E]) -> bool:
     return all(v.exact for v in values)
+
+
+def _symbol_clash(symbol: VarInfo) -> str:
+    assert symbol.image is not None
+    return (f"also the I/O name {symbol.display} of the config's [symbols] (rename one: the "
+            "logic reads the I/O name as its image variable)")
 
 
 def _bit_store(word: str, bit: int, t: str) -> Callable[[str], str]:
