@@ -36,6 +36,7 @@ from ncgate.inputs import (
     Force,
     Input,
     Override,
+    PlcVar,
     Snd,
     Source,
     SourceKind,
@@ -240,8 +241,16 @@ class Door:
                 raise InputRefused(Reason.BAD_VALUE, "a force names its variable")
             self._enter(item)
             image.unforce()
+            plc = self._plc()
+            if plc is not None:
+                plc.unforce()
             engine.note_force(None, None, str(item.source))
             return
+        if isinstance(var, PlcVar):
+            self._force_plc(item, var)
+            return
+        if value is not None and not isinstance(value, int):
+            raise InputRefused(Reason.BAD_VALUE, f"{var} holds whole numbers, not {value!r}")
         if value is not None:
             self.image_changes(((var, value),))  # the address and the value, or refused
         self._enter(item)
@@ -250,6 +259,29 @@ class Door:
         else:
             image.force(var.area, var.index, var.view, value, str(item.source))
         engine.note_force(str(var), value, str(item.source))
+
+    def _force_plc(self, item: Force, var: PlcVar) -> None:
+        """Force a variable of the PLC logic: kept at the start and the end of every scan
+        (docs/decisions.md)."""
+        plc = self._plc()
+        if plc is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, f"{var}: no PLC logic runs ([plc] logic)")
+        path = str(var)
+        try:
+            if item.value is None:
+                plc.forceable(path)
+            else:
+                stored = plc.check_force(path, item.value)
+        except KeyError as exc:  # PlcPathError
+            raise InputRefused(Reason.UNKNOWN_VARIABLE, str(exc)) from None
+        except ValueError as exc:
+            raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
+        self._enter(item)
+        if item.value is None:
+            plc.unforce(path)
+        else:
+            plc.force(path, stored)
+        self.runtime.engine.note_force(path, item.value, str(item.source))
 
     def _break(self, item: Break) -> None:
         if not isinstance(item.on, bool):

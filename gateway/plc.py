@@ -208,6 +208,7 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
                                plc.loop_limit, store,
                                watchdog_ms=0 if closed else plc.watchdog_ms)
     runtime.plc = logic_runtime
+    logic_runtime.on_overridden = lambda path, value: engine.note_forced(path, value, "plc")
     driver = ScanDriver(engine, logic_runtime, plc.scan_ms, wall=wall, closed=closed,
                         scale=config.nc.time_scale,
                         stall_s=config.nc.stall_s)

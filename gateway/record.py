@@ -58,6 +58,7 @@ from ncgate.inputs import (
     Force,
     Input,
     Override,
+    PlcVar,
     Snd,
     Source,
     Start,
@@ -129,8 +130,10 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
     elif isinstance(item, Break):
         out.update({"input": "break", "at": item.at, "on": item.on})
     elif isinstance(item, Force):
-        out.update(input="force", var=list(item.var.address) if item.var else None,
-                   value=item.value)
+        var = item.var
+        out.update(input="force", value=item.value,
+                   var=None if var is None else str(var) if isinstance(var, PlcVar)
+                   else list(var.address))
     else:
         out.update(input="alarm", code=int(item.code), message=item.message)
     return out
@@ -213,16 +216,22 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
             raise ValueError(f'"code": {code} is no alarm of the fieldbus side')
         return t, FieldbusAlarm(code, _field(item, "message", str, "a text"), source)
     if kind == "force":
-        raw = _field(item, "var", list, "[area, index, view] or null", optional=True)
-        var = None
-        if raw is not None:
+        raw = _field(item, "var", (list, str), "[area, index, view], a PLC variable or null",
+                     optional=True)
+        var: Var | PlcVar | None = None
+        if isinstance(raw, str):
+            try:
+                var = PlcVar(raw)
+            except InputRefused:
+                raise ValueError(f'"var": {json.dumps(raw)} names no PLC variable') from None
+        elif raw is not None:
             if not (len(raw) == 3 and raw[0] in ("SA", "SK", "SYVAR") and raw[2] in (
                     "bit", "BY", "IN") and isinstance(raw[1], int)
                     and not isinstance(raw[1], bool)):
                 raise ValueError(f'"var": {json.dumps(raw)} names no image variable')
             var = Var(raw[0], raw[1], raw[2])
-        return t, Force(var, _field(item, "value", int, "a value or null", optional=True),
-                        source)
+        return t, Force(var, _field(item, "value", (int, float, bool), "a value or null",
+                                    optional=True), source)
     if kind == "break":
         return t, Break(_field(item, "at", str, "a breakpoint such as \"PROG92:8\""),
                         _field(item, "on", bool, "true (set) or false (clear)"), source)

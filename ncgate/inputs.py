@@ -296,17 +296,43 @@ class Break:
 
 
 @dataclass(frozen=True, slots=True)
+class PlcVar:
+    """A variable of the PLC logic, by its path: ``main.n``, ``main.t[2]``, ``main.s.x``."""
+
+    path: str
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, str) or _PLC_PATH.fullmatch(self.path.strip()) is None:
+            raise InputRefused(Reason.UNKNOWN_VARIABLE, f"{self.path!r} is neither an image "
+                               "variable (SA10, SK3, SYVAR5) nor a PLC variable (main.n)")
+
+    def __str__(self) -> str:
+        return self.path.strip()
+
+
+_PLC_PATH = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*(\[-?\d+\])*|\[-?\d+\])+")
+
+
+@dataclass(frozen=True, slots=True)
 class Force:
     """Force ``var`` to ``value`` (kept whatever writes it) or, ``value`` None, release it;
-    ``var`` None (and ``value`` None): release every forced variable."""
+    ``var`` None (and ``value`` None): release every forced variable.  ``var`` is an image
+    variable or a PLC variable (a string is the one it spells: ``"SA10"``, ``"main.n"``)."""
 
-    var: Var | None
-    value: int | None = None
+    var: Var | PlcVar | None
+    value: int | float | None = None
     source: Source = API
 
     def __post_init__(self) -> None:
-        if self.var is not None and type(self.var) is not Var:
-            object.__setattr__(self, "var", Var.of(self.var))
+        var: object = self.var
+        if var is not None and type(var) is not Var and type(var) is not PlcVar:
+            try:
+                var = Var.of(var)  # type: ignore[arg-type]  # (a str; else refused)
+            except InputRefused:
+                if not isinstance(var, str) or "." not in var:
+                    raise
+                var = PlcVar(var)
+            object.__setattr__(self, "var", var)
 
 
 Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break | Force
@@ -321,6 +347,7 @@ __all__ = [
     "Input",
     "InputRefused",
     "Override",
+    "PlcVar",
     "Reason",
     "Snd",
     "Source",

@@ -154,6 +154,10 @@ class PlcRuntime:
         self._runs: list[Any] = []
         # Called after every scan and on a fault (a watch waits on these, never polls).
         self.scan_listeners: list[Callable[[], None]] = []
+        # Forcing (issue 28): the forced variables by path, as given and as stored; told of
+        # each value of the logic's that a force overrode (path, the value the logic left).
+        self.forced: dict[str, tuple[str, Any]] = {}
+        self.on_overridden: Callable[[str, Any], None] | None = None
         self.start()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -214,12 +218,16 @@ class PlcRuntime:
         self._deadline_ns = (started + self.watchdog_ms * 1_000_000 if self.watchdog_ms
                              else 0)
         self._sends.clear()
+        if self.forced:
+            self._apply_forces(False)
         try:
             for program in self._runs:
                 program()
         except Exception as exc:  # any error of the logic is a FAULT, never a
             self._fault(exc)       # crash of the loop that serves the fieldbus
             return
+        if self.forced:
+            self._apply_forces(True)
         changes = self._changes(image.sa, image.k, image.syvar)
         if changes:
             image.write(changes, "plc")
@@ -424,6 +432,112 @@ class PlcRuntime:
             obj, t = getattr(obj, f"v_{name}"), var.type
             table = self.logic.members_of(t)
         return list(obj) if isinstance(obj, list) else obj
+
+    # -- forcing (issue 28, item 2; docs/decisions.md) -----------------------------------------
+
+    def forceable(self, path: str) -> Any:
+        """The type of the variable at ``path``; PlcPathError (a KeyError) for no such
+        variable, ValueError for one a force cannot set."""
+        _, _, t = self._place(path)
+        if not isinstance(t, str) or t not in _FORCEABLE:
+            raise ValueError(f"{path}: a force sets a variable of an elementary type (BOOL, "
+                             f"an integer, REAL, LREAL, TIME), not {t}")
+        return t
+
+    def check_force(self, path: str, value: Any) -> Any:
+        """The value ``path`` would be forced to, as the logic stores it; PlcPathError (a
+        KeyError) for no such variable, ValueError for a value it cannot hold."""
+        t = self.forceable(path)
+        if t == "BOOL" and value in (0, 1) and not isinstance(value, float):
+            value = bool(value)
+        if isinstance(value, bool) and t != "BOOL":
+            raise ValueError(f"{path} is {t}: not {value!r}")
+        stored = _as_stored(value, t)
+        if not _fits(stored, t) or (hasattr(t, "lo") and not t.lo <= stored <= t.hi):
+            raise ValueError(f"{path} is {t}: it cannot hold {value!r}")
+        return stored
+
+    def force(self, path: str, stored: Any) -> None:
+        """Keep ``path`` at ``stored`` (from :meth:`check_force`): set now, then at the start
+        and at the end of every scan (the logic may change it inside a scan)."""
+        self.forced[self._key(path)] = (path, stored)
+        self._set(path, stored)
+
+    def unforce(self, path: str | None = None) -> None:
+        """Release one forced variable (None: every one); its value stays."""
+        if path is None:
+            self.forced.clear()
+        else:
+            self.forced.pop(self._key(path), None)
+
+    def _key(self, path: str) -> str:
+        return "".join(path.split()).upper()
+
+    def _apply_forces(self, after: bool) -> None:
+        for path, stored in list(self.forced.values()):
+            try:
+                parent, key, _ = self._place(path)
+            except PlcPathError:
+                continue  # gone with an online change: kept, set again if it comes back
+            current = parent[key] if isinstance(key, int) else getattr(parent, key)
+            if current != stored or type(current) is not type(stored):
+                if after and self.on_overridden is not None:
+                    self.on_overridden(path, current)
+                self._assign(parent, key, stored)
+
+    def _set(self, path: str, stored: Any) -> None:
+        parent, key, _ = self._place(path)
+        self._assign(parent, key, stored)
+
+    @staticmethod
+    def _assign(parent: Any, key: str | int, value: Any) -> None:
+        if isinstance(key, int):
+            parent[key] = value
+        else:
+            setattr(parent, key, value)
+
+    def _place(self, path: str) -> tuple[Any, str | int, Any]:
+        """Where ``path`` lives: its container, the attribute or index in it, its type."""
+        program, _, rest = path.strip().partition(".")
+        key = program.upper()
+        if key not in self.programs:
+            raise PlcPathError(f"no program {program!r}")
+        try:
+            parts = _split(rest)
+        except ValueError:
+            raise PlcPathError(f"{path!r}: not a variable's path") from None
+        if not parts:
+            raise PlcPathError(f"{path!r}: name a variable of {program}")
+        obj: Any = self.programs[key]
+        table: dict[str, ProgramVar] | None = self.logic.programs[key]
+        t: Any = None
+        for i, part in enumerate(parts):
+            last = i == len(parts) - 1
+            if isinstance(part, int):
+                if not isinstance(t, ArrayOf) or not t.lo <= part <= t.hi:
+                    raise PlcPathError(f"{path!r}: [{part}] is not an index of {t}")
+                if last:
+                    return obj, part - t.lo, t.element
+                obj, t = obj[part - t.lo], t.element
+                table = self.logic.members_of(t)
+                continue
+            name = part.upper()
+            if isinstance(t, FbOf) and t.std:
+                # A standard FB's members are its outputs and state: the logic's to set.
+                raise PlcPathError(f"{path!r}: {t.name}.{part} is not forced (force the "
+                                   "variable it feeds)")
+            if table is None or name not in table:
+                raise PlcPathError(f"{path!r}: no {part} here")
+            var = table[name]
+            if last:
+                return obj, f"v_{name}", var.type
+            obj, t = getattr(obj, f"v_{name}"), var.type
+            table = self.logic.members_of(t)
+        raise PlcPathError(f"{path!r}: not a variable's path")  # not reached
+
+
+_FORCEABLE = frozenset(("BOOL", "SINT", "INT", "DINT", "LINT", "USINT", "UINT", "UDINT",
+                        "ULINT", "BYTE", "WORD", "DWORD", "LWORD", "REAL", "LREAL", "TIME"))
 
 
 def _split(rest: str) -> list[str | int]:

@@ -27,6 +27,20 @@ class PlcWatch:
         """A variable now: ``"cell.answer.ET"``, ``"main.values[3]"``."""
         return self.gateway.plc.read(path)
 
+    async def next_scan(self, timeout_s: float = 10.0) -> None:
+        """Until the PLC has finished one more scan."""
+        runtime = self.gateway.plc
+        scanned = asyncio.Event()
+        runtime.scan_listeners.append(scanned.set)
+        try:
+            async with asyncio.timeout(timeout_s):
+                await scanned.wait()
+        except TimeoutError:
+            raise WaitIdleTimeout(f"no scan in {timeout_s:g} s (PLC "
+                                  f"{runtime.status.state.name})") from None
+        finally:
+            runtime.scan_listeners.remove(scanned.set)
+
     async def until(self, path: str, expected: Any = None, *,
                     test: Callable[[Any], bool] | None = None, timeout_s: float = 10.0) -> Any:
         """Until ``path`` equals ``expected`` (or ``test(value)`` holds); returns the value."""

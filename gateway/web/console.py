@@ -28,6 +28,7 @@ import hmac
 import io
 import json
 import logging
+import math
 import re
 import time
 from collections.abc import Awaitable, Callable
@@ -51,9 +52,11 @@ from ncgate.inputs import (
     CommandKind,
     Force,
     Override,
+    PlcVar,
     Source,
     SourceKind,
     Start,
+    Var,
     Write,
     var_name,
 )
@@ -467,9 +470,12 @@ class WebConsole:
     async def _forced(self, request: web.Request) -> web.StreamResponse:
         """The force list: each forced variable and its value."""
         forced = self.gw.image.forced
+        plc = self.gw.runtime.plc
         return web.json_response({"forced": [
             {"var": var_name(area, index, view), "value": value}
-            for (area, index, view), value in sorted(forced.items())]})
+            for (area, index, view), value in sorted(forced.items())] + [
+            {"var": path, "value": value}
+            for path, value in (plc.forced.values() if plc is not None else ())]})
 
     async def _force(self, request: web.Request) -> web.StreamResponse:
         """``{"var": "SA10", "value": 1}`` forces; ``"value": null`` releases it."""
@@ -477,10 +483,15 @@ class WebConsole:
         var, value = body.get("var"), body.get("value")
         if not isinstance(var, str) or not var.strip():
             raise ApiError(400, 'expected {"var": "SA10", "value": 1 or null}')
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
-            raise ApiError(400, f'"value": a whole number or null, got {value!r}')
+        if value is not None and (not isinstance(value, int | float) or (
+                isinstance(value, float) and not math.isfinite(value))):
+            raise ApiError(400, f'"value": a number, true, false or null, got {value!r}')
         try:
-            item = Force(self.gw.runtime.var(var), value, _source(request))
+            try:
+                target: Var | PlcVar = self.gw.runtime.var(var)
+            except InputRefused:
+                target = PlcVar(var)  # a PLC variable (main.n), or refused as neither
+            item = Force(target, value, _source(request))
             self.gw.apply(item)
         except InputRefused as exc:
             raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None

@@ -621,12 +621,12 @@ class Engine:
         else:
             self._record(ev.Write, self.now, 0, None, name, value, who)
 
-    def note_force(self, var: str | None, value: int | None, who: str) -> None:
+    def note_force(self, var: str | None, value: int | float | None, who: str) -> None:
         """A force set (or released: ``value`` None) from outside: in the trace."""
         self.last_change = self.now
         self._record(ev.Force, self.now, 0, None, var, value, who)
 
-    def note_forced(self, var: str, value: int, who: str) -> None:
+    def note_forced(self, var: str, value: int | float, who: str) -> None:
         """A write a force overrode (``value``: what ``who`` tried to store)."""
         self._record(ev.Forced, self.now, 0, None, var, value, who)
 

@@ -14,7 +14,7 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.record import replay
 from ncgate.gateway.testing.plc_kit import PlcWatch
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
-from ncgate.inputs import Force, Var
+from ncgate.inputs import Command, CommandKind, Force, Var
 
 LOGIC = """PROGRAM main
 VAR n : INT; END_VAR
@@ -168,3 +168,103 @@ async def test_the_run_log_says_what_was_forced_and_released(tmp_path: Path) -> 
     lines = [describe(e) for e in heard if isinstance(e, ev.Force | ev.Forced)]
     assert lines == ["SA20 forced to 1 (by api)", "SA20 = 0 by api overridden by force",
                      "SA20 released (by api)", "every force released (by api)"]
+
+
+PLC_LOGIC = """PROGRAM main
+VAR n : INT; on : BOOL; speed : REAL; t : TON; zero : INT; END_VAR
+IF SA[30] THEN n := n / zero; END_IF;   (* a FAULT on demand *)
+n := n + 1;
+SYVAR[5] := n;           (* what the logic made of n inside the scan *)
+on := NOT on;
+SA[20] := on;
+speed := 1.5;
+END_PROGRAM
+"""
+
+
+async def test_a_forced_plc_variable_is_kept_at_the_start_and_end_of_every_scan(
+        tmp_path: Path) -> None:
+    """As CODESYS forces (docs/decisions.md): the forced value is set before the logic runs
+    and again after it, so the logic sees it each scan and what it leaves is overridden."""
+    (tmp_path / "logic.st").write_text(PLC_LOGIC)
+    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
+        '[canopen]\nenabled = false\n')
+    record = tmp_path / "session.jsonl"
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
+        watch = PlcWatch(gw)
+        await watch.until("main.n", 3)
+        gw.apply(Force("main.n", 100))
+        gw.apply(Force("main.on", True))
+        gw.apply(Force("MAIN.SPEED", -2))
+        for _ in range(5):  # five scans more: each starts and ends with the forced values
+            await watch.next_scan()
+            assert watch.read("main.n") == 100 and watch.read("main.on") is True
+            assert watch.read("main.speed") == -2.0
+            assert gw.read("SYVAR5") == 101  # the logic ran on 100 and stored 101
+            assert gw.read("SA20") == 0      # NOT TRUE, inside the scan
+        # A restart makes the programs anew (n := 0): the first scan starts from the force.
+        gw.write("SA30", 1)
+        await watch.until("main.n", test=lambda _: gw.plc.status.state.name == "FAULT")
+        gw.write("SA30", 0)
+        gw.apply(Command(CommandKind.RESTART_PLC))
+        await watch.next_scan()
+        assert gw.read("SYVAR5") == 101 and watch.read("main.n") == 100
+        # Refused, with nothing forced: no such variable, a value it cannot hold, an FB's
+        # member, a value of another type.
+        for var, value, reason in (("main.nope", 1, Reason.UNKNOWN_VARIABLE),
+                                   ("other.n", 1, Reason.UNKNOWN_VARIABLE),
+                                   ("main.n", 40000, Reason.BAD_VALUE),
+                                   ("main.on", 2, Reason.BAD_VALUE),
+                                   ("main.t.Q", 1, Reason.UNKNOWN_VARIABLE),
+                                   ("main.t", 1, Reason.BAD_VALUE),
+                                   ("main.n", 1.5, Reason.BAD_VALUE)):
+            with pytest.raises(InputRefused) as caught:
+                gw.apply(Force(var, value))
+            assert caught.value.reason is reason, (var, value)
+        assert sorted(gw.runtime.plc.forced) == ["MAIN.N", "MAIN.ON", "MAIN.SPEED"]
+        gw.apply(Force("main.n", None))  # released: counting goes on from 100
+        await watch.until("main.n", 103)
+        gw.apply(Force(None, None))
+        await watch.next_scan()
+        assert not gw.runtime.plc.forced
+        trace = gw.trace
+    forces = [(e["var"], e["value"]) for e in trace if e["event"] == "force"]
+    assert forces == [("main.n", 100), ("main.on", True), ("MAIN.SPEED", -2),
+                      ("main.n", None), (None, None)]
+    overridden = {(e["var"], e["value"]) for e in trace
+                  if e["event"] == "forced" and e["who"] == "plc"}
+    assert ("main.n", 101) in overridden and ("main.on", False) in overridden
+    assert ("MAIN.SPEED", 1.5) in overridden
+    assert replay(record).divergence is None
+
+
+async def test_the_api_forces_a_plc_variable_and_lists_it(tmp_path: Path) -> None:
+    import aiohttp
+
+    (tmp_path / "logic.st").write_text(PLC_LOGIC)
+    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
+        '[canopen]\nenabled = false\n[web]\nport = 0\n')
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), console=True) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            for body, status in (({"var": "main.on", "value": True}, 200),
+                                 ({"var": "main.speed", "value": 2.5}, 200),
+                                 ({"var": "SA10", "value": 1}, 200),
+                                 ({"var": "main.nope", "value": 1}, 422),
+                                 ({"var": "main.speed", "value": "fast"}, 400),
+                                 ({"var": "main.n", "value": 1e9}, 422)):
+                async with http.post("/api/force", json=body) as r:
+                    assert r.status == status, (body, r.status, await r.text())
+            async with http.get("/api/force") as r:
+                assert (await r.json())["forced"] == [
+                    {"var": "SA10", "value": 1}, {"var": "main.on", "value": True},
+                    {"var": "main.speed", "value": 2.5}]
+            await PlcWatch(gw).next_scan()
+            assert PlcWatch(gw).read("main.on") is True
+            async with http.delete("/api/force") as r:
+                assert r.status == 200
+        assert not gw.runtime.plc.forced and not gw.image.forced
