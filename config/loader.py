@@ -493,6 +493,9 @@ class PlcConfig:
         None, "where VAR RETAIN values are kept (default: ncgate-plc-retain.sqlite next to "
         "the config; for the built-in config or one inside an installed package, in "
         "~/.local/state/ncgate/: docs/decisions.md)", parse=_optional_path)
+    strict: bool = setting(True, "Structured Text as IEC 61131-3 writes it; false: CODESYS-"
+                           "compatible -- implicit narrowing and CODESYS's extensions load, "
+                           "each with an SW warning giving the IEC spelling (docs/plc.md)")
 
 
 @dataclass(frozen=True, slots=True)

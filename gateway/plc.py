@@ -56,13 +56,16 @@ PLC_REGISTERS = ("state (0 stopped, 1 running, 2 fault)", "scans (hi)", "scans (
 def logic_context(config: Config) -> Context:
     plc, nc = config.plc, config.nc
     return Context(plc.sa_bits, plc.k_bytes, plc.syvars, nc.processes, nc.external,
-                   tuple(config.symbols.items()))
+                   tuple(config.symbols.items()), plc.strict)
 
 
 def load_logic(files: tuple[Path, ...], config: Config) -> Logic:
     """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix);
     raises LogicError with all the diagnostics."""
-    return compile_logic([read_logic_file(path) for path in files], logic_context(config))
+    logic = compile_logic([read_logic_file(path) for path in files], logic_context(config))
+    for warning in logic.warnings:  # plc.strict = false: what IEC would refuse
+        log.warning("%s", warning.render())
+    return logic
 
 
 def program_order(logic: Logic, config: Config) -> list[str]:

@@ -136,7 +136,9 @@ def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]
             found[str(path)].extend(exc.diagnostics)
     if parsed:
         try:
-            compile_logic(parsed, logic_context(config))
+            logic = compile_logic(parsed, logic_context(config))
+            for d in logic.warnings:
+                found.setdefault(d.span.file, []).append(d)
         except LogicError as exc:
             for d in exc.diagnostics:
                 found.setdefault(d.span.file, []).append(d)

@@ -579,6 +579,7 @@ class Compiler:
         self.files = list(files)
         self.ctx = context
         self.diagnostics: list[StDiagnostic] = []
+        self.warnings: list[StDiagnostic] = []
         self.pous: dict[str, PouInfo] = {}
         self.type_decls: dict[str, tuple[n.TypeDecl, n.SourceFile]] = {}
         self.resolved: dict[str, Type] = {}
@@ -608,6 +609,14 @@ class Compiler:
     def error(self, code: StCode, message: str, span: n.Span) -> Problems:
         self.diagnostics.append(StDiagnostic(code, message, span, self._source(span)))
         return Problems()
+
+    def lenient(self, code: StCode, warning: StCode, message: str, span: n.Span) -> None:
+        """A construct strict IEC refuses (``code``) and CODESYS accepts: with plc.strict
+        = false, a warning (``warning``) and the construct loads; else the error."""
+        if self.ctx.strict:
+            raise self.error(code, message + " (plc.strict = false accepts it, as CODESYS "
+                             "does)", span)
+        self.warnings.append(StDiagnostic(warning, message, span, self._source(span)))
 
     # -- pass 1: data types, globals, POUs and their declarations ------------------------------
 
@@ -1577,6 +1586,12 @@ class Compiler:
                 e.type, StringOf | EnumOf | StructOf):
             if e.type == t:
                 return copy_code(e.code, t)
+            if (isinstance(t, EnumOf) and is_int(e.type)) or (
+                    isinstance(e.type, EnumOf) and isinstance(t, str) and t in INTS):
+                self.lenient(StCode.TYPE_MISMATCH, StCode.ENUM_AS_INTEGER,
+                             f"{_tname(e.type)} where {t} is expected (IEC: an enumeration "
+                             "is no integer; name its value)", span)
+                return e.code if isinstance(t, EnumOf) else wrap_code(e.code, t)
             hint = ""
             if isinstance(t, StringOf) and isinstance(e.type, StringOf):
                 hint = (f" (convert it: {'WSTRING' if e.type.wide else 'STRING'}_TO_"
@@ -1616,6 +1631,12 @@ class Compiler:
                 return (f"float({e.code})" if t == "LREAL" or e.type in _EXACT_IN_REAL
                         else f"_f32({e.code})")
             return wrap_code(e.code, t) if not e.exact else e.code
+        if isinstance(e.type, str) and isinstance(t, str) and (
+                (is_int(e.type) and t in INTS) or (e.type == "LREAL" and t == "REAL")):
+            self.lenient(StCode.TYPE_MISMATCH, StCode.IMPLICIT_NARROWING,
+                         f"{_tname(e.type)} where {t} is expected: an implicit narrowing "
+                         f"(IEC: {'DINT' if e.type == ANY_INT else e.type}_TO_{t})", span)
+            return real_code(e.code, t) if t == "REAL" else wrap_code(e.code, t)
         hint = ""
         if isinstance(e.type, str) and isinstance(t, str) and e.type in ELEMENTARY \
                 and t in ELEMENTARY:
@@ -1659,7 +1680,11 @@ class Compiler:
             return None
         if key in self.enums and len(x.selectors) == 1 and isinstance(x.selectors[0],
                                                                        n.Field):
-            return self.enum_lit(n.EnumLit(x.name, x.selectors[0].name, x.span))
+            member = x.selectors[0].name
+            self.lenient(StCode.TYPE_MISMATCH, StCode.VENDOR_EXTENSION,
+                         f"{x.name}.{member}: CODESYS's spelling of an enumeration value "
+                         f"(IEC: {x.name}#{member})", x.span)
+            return self.enum_lit(n.EnumLit(x.name, member, x.span))
         if not x.selectors and key in self.enum_values:
             owners = self.enum_values[key]
             if len(owners) > 1:
@@ -1790,6 +1815,12 @@ class Compiler:
 
     def binary(self, x: n.Binary, a: E, b: E) -> E:
         op = x.op
+        if op in ("AND_THEN", "OR_ELSE"):
+            plain = op.split("_")[0]
+            self.lenient(StCode.UNSUPPORTED, StCode.VENDOR_EXTENSION, f"{op}: CODESYS's "
+                         f"short-circuit {plain} (IEC: {plain}, which ncgate evaluates "
+                         "left to right and stops as soon as the result is known)", x.span)
+            op = plain
         if op in ("AND", "OR", "XOR"):
             if a.type == "BOOL" and b.type == "BOOL":
                 py = {"AND": "and", "OR": "or", "XOR": "!="}[op]
@@ -2535,6 +2566,9 @@ class Logic:
         self.files = tuple(files)
         self.python_source = source
         self.reads_nc = compiler.reads_nc
+        # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
+        self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
+            d.span.file, d.span.line, d.span.column)))
         self._spans = spans
         self._filename = f"<ncgate-st {id(self):x}>"
         self.namespace: dict[str, Any] = dict(HELPERS)

@@ -49,6 +49,11 @@ class StCode(enum.Enum):
     DUPLICATE_POU = ("ST032", "two POUs with one name")
     EXTERNAL_SENDER = ("ST033", "NC.SEND from a process that is not external")
     DUPLICATE_LABEL = ("ST034", "a CASE value listed twice")
+    # -- warnings (plc.strict = false: CODESYS's leniencies load, the IEC spelling said) ----
+    IMPLICIT_NARROWING = ("SW001", "an implicit narrowing conversion (IEC: DINT_TO_INT …)")
+    VENDOR_EXTENSION = ("SW002", "a vendor extension (E.RUN, AND_THEN, OR_ELSE): IEC's "
+                        "spelling given")
+    ENUM_AS_INTEGER = ("SW003", "an enumeration value used as an integer, or the reverse")
     # -- PLCopen XML -------------------------------------------------------------------------------
     XML_PROJECT = ("ST040", "a PLCopen XML file that is not well-formed or not a TC6 project")
 
@@ -60,6 +65,10 @@ class StCode(enum.Enum):
     def summary(self) -> str:
         return self.value[1]
 
+    @property
+    def is_error(self) -> bool:
+        return not self.value[0].startswith("SW")
+
 
 @dataclass(frozen=True, slots=True)
 class StDiagnostic:
@@ -70,11 +79,12 @@ class StDiagnostic:
 
     @property
     def is_error(self) -> bool:
-        return True
+        return self.code.is_error
 
     def render(self) -> str:
         s = self.span
-        return render_diagnostic(s.file, s.line, s.column, "error", self.code.code,
+        return render_diagnostic(s.file, s.line, s.column,
+                                 "error" if self.is_error else "warning", self.code.code,
                                  self.message, self.source_line)
 
     def __str__(self) -> str:
@@ -107,6 +117,8 @@ def did_you_mean(word: str, candidates: Iterable[str]) -> str:
 
 def codes_markdown() -> str:
     lines = ["", "## Structured Text (PLC logic)", "",
-             "Generated from `plc/st/diagnostics.py`.", "", "| code | what |", "|---|---|"]
+             "Generated from `plc/st/diagnostics.py`. SW codes are warnings, given only with "
+             "`plc.strict = false` (where strict IEC refuses the construct).", "",
+             "| code | what |", "|---|---|"]
     lines += [f"| {c.code} | {c.summary} |" for c in StCode]
     return "\n".join(lines) + "\n"

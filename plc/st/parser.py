@@ -40,7 +40,6 @@ UNSUPPORTED_WORDS = {
     "AT": "located variables (AT %I…)", "METHOD": "METHOD", "PROPERTY": "PROPERTY",
     "INTERFACE": "INTERFACE", "ACTION": "ACTION", "REF_TO": "references (REF_TO)",
     "POINTER": "pointers", "JMP": "JMP and labels", "UNION": "UNION",
-    "AND_THEN": "AND_THEN (CODESYS; write AND)", "OR_ELSE": "OR_ELSE (CODESYS; write OR)",
 }
 _UNSUPPORTED_CHARS = {"%": "located variables (%IX0.0)"}
 _COMMENT_OPEN = re.compile(r"\(\*|/\*|//|\{|'|\"")

@@ -24,7 +24,7 @@ def test_codes_are_unique_and_well_formed() -> None:
 def test_st_codes_are_unique_and_well_formed() -> None:
     codes = [c.code for c in StCode]
     assert len(codes) == len(set(codes))
-    assert all(c.startswith("ST") and c[2:].isdigit() and len(c) == 5 for c in codes)
+    assert all(c[:2] in ("ST", "SW") and c[2:].isdigit() and len(c) == 5 for c in codes)
 
 
 def test_docs_table_is_the_code_table() -> None:
