@@ -3,25 +3,28 @@ against (``bench/plc.py``) and an independent second reading of the language tha
 compare the compiled code with.
 
 It walks the syntax tree every scan, looking names up in dictionaries, as an interpreter
-without a compile step does.  It covers what those programs use -- PROGRAMs and the standard
-function blocks; elementary variables and arrays; assignments, IF, CASE, FOR, WHILE, REPEAT,
-EXIT, CONTINUE, RETURN; every operator on integers and BOOLs; ABS, MIN, MAX, LIMIT, SEL;
-the image -- and raises :class:`NotImplementedError` for the rest (user FUNCTIONs and
-FUNCTION_BLOCKs, NC access).  It computes REALs in double, untyped: it is no reading of
-REAL's single precision, which tests/unit/plc/test_st_iec_values.py checks instead.
+without a compile step does.  It covers what those programs use -- PROGRAMs, the standard
+function blocks and user FUNCTION_BLOCKs (inputs and outputs); elementary variables, arrays,
+structures (dictionaries), enumerations and STRINGs; assignments, IF, CASE, FOR, WHILE,
+REPEAT, EXIT, CONTINUE, RETURN; every operator on integers and BOOLs; ABS, MIN, MAX, LIMIT,
+SEL, LEN, LEFT, RIGHT, MID, CONCAT, FIND; the image -- and raises
+:class:`NotImplementedError` for the rest (user FUNCTIONs, VAR_IN_OUT, globals, NC
+access).  It computes REALs in double, untyped: it is no reading of REAL's single precision,
+which tests/unit/plc/test_st_iec_values.py checks instead.
 Only logic that :func:`~ncgate.plc.st.compiler.compile_logic` accepted is walked.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 from typing import Any
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
 from ncgate.plc.st.compiler import IMAGE_NAMES as IMAGE
 from ncgate.plc.st.compiler import Compiler, Context, IterationGuard, _fold, _pow
-from ncgate.plc.st.types import ArrayOf, FbOf, Type, default_value
+from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, StringOf, StructOf, Type, default_value
 
 
 class _Exit(Exception):
@@ -36,6 +39,14 @@ class _Continue(Exception):
     pass
 
 
+class _Frame:
+    """The variables of a PROGRAM or of a user FB instance, and their types."""
+
+    def __init__(self, state: dict[str, Any], types: dict[str, Type]) -> None:
+        self.state = state
+        self.types = types
+
+
 class Walker:
     """Runs the PROGRAMs of checked logic by walking their trees."""
 
@@ -43,6 +54,7 @@ class Walker:
                  k: bytearray, syvar: list[int], loop_limit: int = 100_000) -> None:
         compiler = Compiler(files, context)
         compiler.collect()
+        self.compiler = compiler
         self.pous = compiler.pous
         self.sa, self.k, self.syvar = sa, k, syvar
         self.loop_limit = loop_limit
@@ -50,20 +62,31 @@ class Walker:
         self.left = 0
         self.state: dict[str, dict[str, Any]] = {}
         self.types: dict[str, dict[str, Type]] = {}
+        self.frames: dict[str, _Frame] = {}
         for key, info in self.pous.items():
             if info.pou.kind != "PROGRAM":
                 continue
             self.types[key] = {k2: v.type for k2, v in info.vars.items()}
             self.state[key] = {k2: self._new(v.type, v.initial) for k2, v in info.vars.items()}
+            self.frames[key] = _Frame(self.state[key], self.types[key])
 
     def _new(self, t: Type, initial: Any) -> Any:
         if isinstance(t, FbOf):
-            if not t.std:
-                raise NotImplementedError("the walker runs the standard function blocks only")
-            return stdlib.FUNCTION_BLOCKS[t.name]()
+            if t.std:
+                return stdlib.FUNCTION_BLOCKS[t.name]()
+            info = self.pous[t.name]
+            if any(v.section == "VAR_IN_OUT" for v in info.vars.values()):
+                raise NotImplementedError("the walker passes no VAR_IN_OUT")
+            return _Frame({k: self._new(v.type, v.initial) for k, v in info.vars.items()},
+                          {k: v.type for k, v in info.vars.items()})
+        if isinstance(t, StructOf):
+            fields = self.compiler.structs[t.name].fields
+            given = initial or {}
+            return {k: self._new(f.type, given.get(k, f.initial)) for k, f in fields.items()}
         if isinstance(t, ArrayOf):
-            if isinstance(t.element, FbOf):
-                return [self._new(t.element, None) for _ in range(t.length)]
+            if isinstance(t.element, FbOf | StructOf | ArrayOf):
+                return [self._new(t.element, None if initial is None else initial[i])
+                        for i in range(t.length)]
             return list(initial) if initial is not None else default_value(t)
         return initial if initial is not None else default_value(t)
 
@@ -73,15 +96,15 @@ class Walker:
         for key, info in self.pous.items():
             if info.pou.kind == "PROGRAM":
                 with contextlib.suppress(_Return):  # RETURN ends the program's scan
-                    self.block(info.pou.body, key)
+                    self.block(info.pou.body, self.frames[key])
 
     # -- statements --------------------------------------------------------------------------
 
-    def block(self, body: tuple[n.Stmt, ...], prog: str) -> None:
+    def block(self, body: tuple[n.Stmt, ...], prog: _Frame) -> None:
         for stmt in body:
             self.stmt(stmt, prog)
 
-    def stmt(self, s: n.Stmt, prog: str) -> None:
+    def stmt(self, s: n.Stmt, prog: _Frame) -> None:
         if isinstance(s, n.Assign):
             self.store(s.target, self.value(s.expr, prog), prog)
         elif isinstance(s, n.CallStmt):
@@ -90,16 +113,23 @@ class Walker:
             outputs = []
             for arg in s.args:
                 assert arg.name is not None
+                name = arg.name.upper()
                 if arg.output is None:
                     assert arg.expr is not None
                     value = self.value(arg.expr, prog)
-                    member_type = _std_member(t.name, arg.name.upper())
-                    setattr(fb, arg.name.upper(), _stored(value, member_type))
+                    if t.std:
+                        setattr(fb, name, _stored(value, _std_member(t.name, name)))
+                    else:
+                        fb.state[name] = _stored(value, fb.types[name])
                 else:
-                    outputs.append((arg.output, arg.name.upper()))
-            fb(self.now_ms)
+                    outputs.append((arg.output, name))
+            if t.std:
+                fb(self.now_ms)
+            else:
+                with contextlib.suppress(_Return):
+                    self.block(self.pous[t.name].pou.body, fb)
             for target, name in outputs:
-                self.store(target, getattr(fb, name), prog)
+                self.store(target, getattr(fb, name) if t.std else fb.state[name], prog)
         elif isinstance(s, n.If):
             for cond, body in s.branches:
                 if self.value(cond, prog):
@@ -111,11 +141,8 @@ class Walker:
             selector = self.value(s.selector, prog)
             for labels, body in s.arms:
                 for label in labels:
-                    if not isinstance(label.lo, n.Literal) or not isinstance(
-                            label.hi, n.Literal | None):
-                        raise NotImplementedError("the walker takes literal CASE labels")
-                    lo = label.lo.value
-                    hi = label.hi.value if label.hi is not None else lo
+                    lo = self.value(label.lo, prog)
+                    hi = self.value(label.hi, prog) if label.hi is not None else lo
                     if lo <= selector <= hi:
                         self.block(body, prog)
                         return
@@ -123,12 +150,12 @@ class Walker:
                 self.block(s.otherwise, prog)
         elif isinstance(s, n.For):
             var = n.Var(s.var, (), s.var_span)
-            t = self.types[prog][s.var.upper()]
+            t = prog.types[s.var.upper()]
             self.store(var, self.value(s.start, prog), prog)
             end = self.value(s.end, prog)
             step = self.value(s.step, prog) if s.step is not None else 1
             while True:
-                i = self.state[prog][s.var.upper()]
+                i = prog.state[s.var.upper()]
                 if not (i <= end if step >= 0 else i >= end):
                     break
                 self._tick()
@@ -138,7 +165,7 @@ class Walker:
                     break
                 except _Continue:
                     pass
-                self.state[prog][s.var.upper()] = _stored(i + step, t)
+                prog.state[s.var.upper()] = _stored(i + step, t)
         elif isinstance(s, n.While):
             while self.value(s.cond, prog):
                 self._tick()
@@ -173,12 +200,12 @@ class Walker:
 
     # -- places --------------------------------------------------------------------------------
 
-    def locate(self, var: n.Var, prog: str) -> tuple[Any, Type]:
+    def locate(self, var: n.Var, prog: _Frame) -> tuple[Any, Type]:
         key = var.name.upper()
         if key in (*IMAGE, "NC"):
             raise NotImplementedError("the image is read through value()")
-        obj: Any = self.state[prog][key]
-        t: Type = self.types[prog][key]
+        obj: Any = prog.state[key]
+        t: Type = prog.types[key]
         for sel in var.selectors:
             if isinstance(sel, n.Index):
                 assert isinstance(t, ArrayOf)
@@ -186,13 +213,19 @@ class Walker:
                 if not t.lo <= i <= t.hi:
                     raise IndexError(f"index {i} outside {t.lo}..{t.hi}")
                 obj, t = obj[i - t.lo], t.element
+            elif isinstance(sel, n.Field) and isinstance(t, StructOf):
+                name = sel.name.upper()
+                obj, t = obj[name], self.compiler.structs[t.name].fields[name].type
+            elif isinstance(sel, n.Field) and isinstance(t, FbOf) and not t.std:
+                name = sel.name.upper()
+                obj, t = obj.state[name], obj.types[name]
             else:
                 assert isinstance(t, FbOf) and isinstance(sel, n.Field)
                 name = sel.name.upper()
                 obj, t = getattr(obj, name), _std_member(t.name, name)
         return obj, t
 
-    def store(self, var: n.Var, value: Any, prog: str) -> None:
+    def store(self, var: n.Var, value: Any, prog: _Frame) -> None:
         key = var.name.upper()
         if key in IMAGE:
             array, index = self._image_at(var, prog)
@@ -207,7 +240,7 @@ class Walker:
         if key == "NC":
             raise NotImplementedError("the walker does not drive the NC")
         if not var.selectors:
-            self.state[prog][key] = _stored(value, self.types[prog][key])
+            prog.state[key] = _stored(value, prog.types[key])
             return
         *path, last = var.selectors
         holder, t = self.locate(n.Var(var.name, tuple(path), var.span), prog)
@@ -217,12 +250,18 @@ class Walker:
             if not t.lo <= i <= t.hi:
                 raise IndexError(f"index {i} outside {t.lo}..{t.hi}")
             holder[i - t.lo] = _stored(value, t.element)
+        elif isinstance(t, StructOf) and isinstance(last, n.Field):
+            name = last.name.upper()
+            holder[name] = _stored(value, self.compiler.structs[t.name].fields[name].type)
+        elif isinstance(t, FbOf) and not t.std and isinstance(last, n.Field):
+            name = last.name.upper()
+            holder.state[name] = _stored(value, holder.types[name])
         else:
             assert isinstance(t, FbOf) and isinstance(last, n.Field)
             name = last.name.upper()
             setattr(holder, name, _stored(value, _std_member(t.name, name)))
 
-    def _image_at(self, var: n.Var, prog: str) -> tuple[Any, int]:
+    def _image_at(self, var: n.Var, prog: _Frame) -> tuple[Any, int]:
         """The array behind ``SA/SAB/SK/SYVAR[i]`` and ``i``, checked against its size (for
         SA in bits)."""
         key = var.name.upper()
@@ -235,7 +274,7 @@ class Walker:
 
     # -- expressions -----------------------------------------------------------------------------
 
-    def value(self, x: n.Expr, prog: str) -> Any:
+    def value(self, x: n.Expr, prog: _Frame) -> Any:
         if isinstance(x, n.Literal):
             return x.value
         if isinstance(x, n.Var):
@@ -246,6 +285,11 @@ class Walker:
                     else array[index]
             if key == "NC":
                 raise NotImplementedError("the walker does not read the NC")
+            if key not in prog.state:
+                owners = self.compiler.enum_values.get(key)
+                if owners and not x.selectors:  # an enumeration's value, by its name
+                    return self.compiler.enums[owners[0]].values[key]
+                raise NotImplementedError("the walker reads no globals")
             obj, _ = self.locate(x, prog)
             return obj
         if isinstance(x, n.Unary):
@@ -281,7 +325,7 @@ class Walker:
             # + - * / MOD: as the compiler folds constants (a float / 0 raises too)
             return _fold(op, a, b, isinstance(a, float) or isinstance(b, float))
         if isinstance(x, n.EnumLit):
-            raise NotImplementedError("the walker reads no enumerations")
+            return self.compiler.enums[x.type_name.upper()].values[x.name.upper()]
         key = x.name.upper()
         args = [self.value(a.expr, prog) for a in x.args if a.expr is not None]
         if key == "ABS":
@@ -294,6 +338,18 @@ class Walker:
             return min(max(args[1], args[0]), args[2])
         if key == "SEL":
             return args[2] if args[0] else args[1]
+        if key == "LEN":
+            return len(args[0])
+        if key == "CONCAT":
+            return "".join(args)
+        if key == "LEFT":
+            return args[0][:args[1]]
+        if key == "RIGHT":
+            return args[0][len(args[0]) - args[1]:] if args[1] < len(args[0]) else args[0]
+        if key == "MID":
+            return args[0][args[2] - 1:args[2] - 1 + args[1]]
+        if key == "FIND":
+            return args[0].find(args[1]) + 1 if args[1] else 0
         raise NotImplementedError(f"the walker does not call {x.name}")
 
 
@@ -307,6 +363,10 @@ def _stored(value: Any, t: Type) -> Any:
     """A value stored in a place of type ``t``: wrapped, or made a REAL."""
     if t in ("REAL", "LREAL"):
         return float(value)
-    if t == "BOOL" or not isinstance(t, str):
+    if isinstance(t, StringOf):
+        return value[:t.length]
+    if isinstance(t, StructOf):
+        return copy.deepcopy(value)
+    if t == "BOOL" or isinstance(t, EnumOf) or not isinstance(t, str):
         return value
     return stdlib.wrap(int(value), "DINT" if t == "TIME" else t)
