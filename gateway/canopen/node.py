@@ -118,6 +118,9 @@ EMCY_SOFTWARE = 0x6200
 EMCY_HEARTBEAT = 0x8130  # life guard or heartbeat error (CiA 301 table 21)
 REGISTER_GENERIC, REGISTER_COMMUNICATION = 0x01, 0x10
 EMCY_QUEUE = 64  # EMCYs waiting for 0x1015's inhibit time; older ones are dropped
+# How often the hub's thread looks whether it is to stop (socketserver's poll interval, 0.5 s
+# by default): a close waited up to that long for it, and the gateway's SIGTERM with it.
+HUB_POLL_S = 0.02
 
 T = TypeVar("T")
 
@@ -213,8 +216,8 @@ class CanopenNode:
                                channel=cfg.channel, bitrate=cfg.bitrate)
         except OSError as exc:  # name the key to change, as for the other ports
             raise listen_error(exc, "canopen.hub_port", cfg.hub_host, cfg.hub_port) from None
-        thread = threading.Thread(target=hub.serve_forever, name="ncgate can-remote hub",
-                                  daemon=True)
+        thread = threading.Thread(target=hub.serve_forever, args=(HUB_POLL_S,),
+                                  name="ncgate can-remote hub", daemon=True)
         thread.start()
         self._hub = hub
         host, port = hub.server_address[:2]
@@ -231,7 +234,9 @@ class CanopenNode:
         self._pending.clear()
         self._refusals.flush()
         if self._hub is not None:
-            self._hub.shutdown()
+            # In a thread: the loop goes on serving (and the NC on running) while the hub's
+            # thread sees the request, within HUB_POLL_S.
+            await asyncio.to_thread(self._hub.shutdown)
             self._hub.server_close()
             self._hub = None
         self.pdos.close()
