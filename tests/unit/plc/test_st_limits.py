@@ -239,3 +239,79 @@ def test_generated_programs_load_or_get_coded_diagnostics_with_positions(seed: i
         plc.scan(2)  # a runtime error is a FAULT, and nothing escapes the scan
         assert plc.runtime.status.state in (PlcState.RUNNING, PlcState.FAULT)
     assert loaded > 60 and refused > 60, (loaded, refused)  # both kinds are exercised
+
+
+# The data types, strings and declarations of issue 29 go through the same mill.
+TYPED_HEAD = """{attribute 'qualified_only'}
+TYPE
+  E : (IDLE, RUN := 5, DONE);
+  P : STRUCT x : INT := 1; s : STRING[8]; END_STRUCT;
+  R : INT(0..100);
+END_TYPE
+VAR_GLOBAL CONSTANT N : INT := 4; END_VAR
+VAR_GLOBAL g : P; END_VAR
+FUNCTION_BLOCK Fb
+VAR_INPUT k : INT; END_VAR VAR_IN_OUT io : INT; END_VAR VAR_OUTPUT q : BOOL; END_VAR
+io := io + k; q := io > N;
+END_FUNCTION_BLOCK
+"""
+TYPED_DECLS = (DECLS + " e : E; p : P; pts : ARRAY[1..N, 0..1] OF P; s : STRING; "
+               "w : WORD; sub : R; d : DT; lt : LTIME; f : Fb;")
+TYPED_SOUP = [*SOUP, "E#RUN", "E.RUN", "RUN", "p.x", "p.s", "pts[1, 0].x", "w.3", "w.%X3",
+              "'a$N'", '"w"', "STRING[", "LEN(", "MID(", "CONCAT(", "N", "g.x", "sub",
+              "D#2024-02-30", "DT#2024-01-01-1:2:3", "TOD#25:00", "LT#1ms5us", "VAR_IN_OUT",
+              "VAR_GLOBAL", "END_STRUCT", "END_TYPE", "(x := 1)", "[1, 2(3)]", "{", "}",
+              "f(k := 1, io := a);", "AND_THEN", "OR_ELSE"]
+
+
+class TypedFuzz(Fuzz):
+    def stmts(self, depth: int = 0) -> str:
+        r = self.rng
+        extra = [
+            f"p.x := {self.num()};", "p.s := CONCAT(p.s, 'ab');", "s := MID(s, a, i);",
+            "a := LEN(s) + FIND(s, 'b');", "e := E#RUN;", "IF e = DONE THEN e := IDLE; END_IF",
+            "CASE e OF IDLE: e := RUN; RUN, DONE: e := E#IDLE; END_CASE",
+            f"pts[{r.choice(['1', 'N', 'i'])}, 1].x := {self.num()};", f"w.3 := {self.cond()};",
+            f"b := w.{r.choice(['0', '15', '16'])};", "sub := sub + 30;", "d := d + T#1h;",
+            "lt := lt * 2;", "f(k := a, io := i, q => b);", "g := p; g.x := g.x + 1;",
+            "s := LEFT(s, a); s := INSERT(s, 'x', i);",
+        ]
+        return "\n".join([super().stmts(depth), *r.sample(extra, r.randrange(1, 4))])
+
+    def source(self) -> str:
+        r = self.rng
+        text = (f"{TYPED_HEAD}PROGRAM main\nVAR\n{TYPED_DECLS}\nEND_VAR\n{self.stmts()}\n"
+                "END_PROGRAM\n")
+        if r.random() < 0.6:
+            words = text.split(" ")
+            for _ in range(r.randrange(1, 4)):
+                k = r.randrange(len(words))
+                action = r.random()
+                if action < 0.3:
+                    del words[k]
+                elif action < 0.7:
+                    words.insert(k, r.choice(TYPED_SOUP))
+                else:
+                    words[k] = r.choice(TYPED_SOUP)
+            text = " ".join(words)
+        return text
+
+
+@pytest.mark.parametrize("seed", range(2))  # 2 x 300 more, with the types of issue 29
+def test_generated_typed_programs_load_or_get_coded_diagnostics(seed: int) -> None:
+    loaded = refused = 0
+    for k in range(300):
+        source = TypedFuzz(50_000 + seed * 1000 + k).source()
+        lines = source.count("\n") + 1
+        try:
+            plc = Plc(source, loop_limit=500)
+        except LogicError as exc:
+            refused += 1
+            for d in exc.diagnostics:
+                assert isinstance(d.code, StCode), source
+                assert 1 <= d.span.line <= lines and d.span.column >= 1, (d.render(), source)
+            continue
+        loaded += 1
+        plc.scan(2)
+        assert plc.runtime.status.state in (PlcState.RUNNING, PlcState.FAULT)
+    assert loaded > 30 and refused > 30, (loaded, refused)
