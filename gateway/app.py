@@ -35,7 +35,7 @@ from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeo
 from ncgate.gateway.lifecycle import Adapter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
-from ncgate.gateway.plc import ScanDriver, start_plc
+from ncgate.gateway.plc import OnlineChange, ReloadOutcome, ScanDriver, start_plc
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
@@ -109,6 +109,7 @@ class Gateway:
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
         self._stack: contextlib.AsyncExitStack | None = None
         self._loading: set[asyncio.Task[None]] = set()  # starts waiting for their program
+        self._reload_lock = asyncio.Lock()  # one online change of the PLC logic at a time
         self._load_waits: set[asyncio.Future[None]] = set()  # programs being read
         self._refusals = RateLimitedLog(logging.getLogger("ncgate"))
         self.door: Door  # set on entry: the one way in (:meth:`apply`)
@@ -355,6 +356,9 @@ class Gateway:
             self.door.apply(item)
             driver.settle()
             return
+        if kind is Command and item.kind is CommandKind.RELOAD_PLC:  # type: ignore[union-attr]
+            self._reload_soon(item)  # type: ignore[arg-type]
+            return
         self.door.precheck(item)  # what can be refused without the program: at once
         load = self._load_needed(item)
         if load is not None:
@@ -375,6 +379,9 @@ class Gateway:
     async def apply_async(self, item: Input) -> None:
         """:meth:`apply`, after reading a program it starts off the loop: a refusal is
         raised here (the console's and :meth:`start`'s way)."""
+        if type(item) is Command and item.kind is CommandKind.RELOAD_PLC:
+            await self._reload(item)
+            return
         self.door.precheck(item)
         load = self._load_needed(item)
         if load is not None:
@@ -446,6 +453,60 @@ class Gateway:
         except InputRefused as exc:
             self._refusals.note(f"{item.source}: {type(item).__name__.lower()} refused: {exc}")
         self._settle()
+
+    # -- online change of the PLC logic --------------------------------------------------------
+
+    async def reload_plc(self, source: Source = API) -> ReloadOutcome:
+        """Online change (``reload_plc``): ``[plc] logic`` is read and compiled off the loop,
+        then swapped in between two scans, keeping every variable whose path and type are
+        unchanged.  A load error leaves the old logic running: the outcome says why (``ok``
+        False).  InputRefused (NOT_CONFIGURED) without PLC logic."""
+        outcome = await self._reload(Command(CommandKind.RELOAD_PLC, None, source))
+        assert outcome is not None
+        return outcome
+
+    def _reload_soon(self, item: Command) -> None:
+        """A reload from a fieldbus: refused at once, or done in a task (the fieldbus is
+        answered now; the outcome is in the log and the trace)."""
+        if self.door.reload_plc is None or item.process is not None:
+            self.door.apply(item)  # refused: no PLC logic, or of one process
+        task = asyncio.get_running_loop().create_task(self._reload_logged(item))
+        self._loading.add(task)
+        task.add_done_callback(self._loaded)
+
+    async def _reload_logged(self, item: Command) -> None:
+        try:
+            await self._reload(item)
+        except InputRefused as exc:
+            self._refusals.note(f"{item.source}: reload_plc refused: {exc}")
+
+    async def _reload(self, item: Command) -> ReloadOutcome | None:
+        """Compile in a thread of its own (a big program must not stall the scan: the
+        figures are in docs/decisions.md), then swap it in through the door, one reload at
+        a time."""
+        online = self.door.reload_plc
+        if not isinstance(online, OnlineChange) or item.process is not None:
+            self.door.apply(item)  # refused: no PLC logic, or of one process
+            return None
+        async with self._reload_lock:
+            done = asyncio.get_running_loop().create_future()
+            self._load_waits.add(done)
+            done.add_done_callback(self._load_waits.discard)
+
+            def finish() -> None:
+                if not done.done():
+                    done.set_result(None)
+
+            def work() -> None:
+                online.prepare()
+                with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
+                    done.get_loop().call_soon_threadsafe(finish)
+
+            threading.Thread(target=work, name="ncgate reload_plc", daemon=True).start()
+            await done
+            self.door.apply(item)
+            self._settle()
+        return online.last
 
     async def start(self, name: str | None = None, process: int = 1,
                     source: Source = API, at: str | None = None,

@@ -75,7 +75,8 @@ def command_kind(value: object) -> CommandKind:
     if kind is None:
         raise InputRefused(Reason.BAD_VALUE, f"command {value!r}: 1 cycle start, 2 feed "
                            "hold, 3 reset, 4 restart the PLC, 5 step, 6/7 single block "
-                           "on/off, 8/9 optional stop on/off, 10/11 block skip on/off")
+                           "on/off, 8/9 optional stop on/off, 10/11 block skip on/off, 12 "
+                           "run to sync, 16 reload the PLC logic")
     return kind
 # Command words past the CommandKinds: they carry an N number written beside them (Modbus
 # holding command+3, CANopen 0x2400:4), and become other inputs (issue 27).
@@ -107,6 +108,7 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
 ImageChange = tuple[str, int, str, int]
 # Commands only the cell takes (a process in them is refused).
 _CELL_ONLY: Final = frozenset({CommandKind.RESTART_PLC, CommandKind.RUN_TO_SYNC,
+                               CommandKind.RELOAD_PLC,
                                CommandKind.OPTIONAL_STOP_ON, CommandKind.OPTIONAL_STOP_OFF,
                                CommandKind.BLOCK_SKIP_ON, CommandKind.BLOCK_SKIP_OFF})
 # The operator's switches of the cell, as commands.
@@ -129,6 +131,8 @@ class Door:
         self._plc = plc
         self._sync = sync
         self.recorder: Recorder | None = None  # run --record: told before the effect
+        # The online change of the PLC logic (gateway.plc.OnlineChange), given the source.
+        self.reload_plc: Callable[[str], object] | None = None
         self._hold_input = next((var for what, var in runtime.interlocks
                                  if what == "feed hold"), None)
         self._hold_level = 0
@@ -205,6 +209,9 @@ class Door:
             raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's (process null)")
         if kind is CommandKind.RESTART_PLC:
             self._restart_plc(item)
+            return
+        if kind is CommandKind.RELOAD_PLC:
+            self._reload_plc(item)
             return
         if kind is CommandKind.RUN_TO_SYNC:
             self._enter(item)
@@ -322,6 +329,16 @@ class Door:
             raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
         self._enter(item)
         plc.restart()
+
+    def _reload_plc(self, item: Command) -> None:
+        """Online change: ``[plc] logic`` read again and swapped in now, between two scans
+        (``reload_plc``, set by ``start_plc``).  A load error is no refusal: the command
+        was taken, the old logic runs on, and the diagnostics are in the log and the
+        trace's ``plc_reload``."""
+        if self._plc() is None or self.reload_plc is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to reload ([plc] logic)")
+        self._enter(item)
+        self.reload_plc(str(item.source))
 
     def _feed_hold_input(self, changes: object, writer: str) -> None:
         """The feed-hold input (nc.feed_hold_input) rose, by any write of its bit, byte or

@@ -79,6 +79,7 @@ COMPARED: dict[str, tuple[str, ...]] = {
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
+                    "plc_reload",
                     "remove", "override", "break", "force", "forced"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 

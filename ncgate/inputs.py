@@ -211,6 +211,8 @@ class CommandKind(enum.IntEnum):
     BLOCK_SKIP_ON = 10  # blocks marked "/" are skipped (the cell's)
     BLOCK_SKIP_OFF = 11
     RUN_TO_SYNC = 12  # stop the cell at the next EXE/WAI/SND/REL/#SIGNAL/#WAIT of anyone
+    # (13..15: block search and breakpoints, with an N number: gateway.door.SEARCH_WORDS)
+    RELOAD_PLC = 16  # online change: [plc] logic read again, swapped in between two scans
 
     @property
     def label(self) -> str:

@@ -42,7 +42,7 @@ from ncgate.plc.st.compiler import (
     ProgramVar,
     to_real,
 )
-from ncgate.plc.st.types import ArrayOf, FbOf, limits
+from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
 
@@ -125,23 +125,11 @@ class PlcRuntime:
         self._granted = 0  # loop iterations handed out to this scan so far
         self.retain = retain
         self.status = PlcStatus()
-        ns = logic.namespace
-        self._ns = ns
-        self._sa = ns["_SA"] = bytearray(image.sa)
-        self._k = ns["_SK"] = bytearray(image.k)
-        self._sy = ns["_SY"] = list(image.syvar)
+        self._sa = bytearray(image.sa)
+        self._k = bytearray(image.k)
+        self._sy = list(image.syvar)
         self._sends: list[tuple[int, int, str]] = []
-        ns["_NC_SEND"] = lambda sender, target, where: self._sends.append(
-            (sender, target, where))
-        self._outputs: list[bool] = ns["_NCO"]
-        self._outputs_at: list[str] = ns["_NCW"]
-        self._process_outputs: list[list[bool]] = ns["_NCP"]
-        self._process_outputs_at: list[list[str]] = ns["_NCPW"]
-        self._overrides: list[int] = ns["_NCV"]
-        self._overrides_at: list[str] = ns["_NCVW"]
-        self._process_overrides: list[int] = ns["_NCPV"]
-        self._process_overrides_at: list[str] = ns["_NCPVW"]
-        ns["_guard"] = self._guard
+        self._bind(logic.namespace)
         self._last_outputs = [False] * len(self._outputs)
         self._last_process_outputs = [[False] * 3 for _ in self._process_outputs]
         self._last_overrides = [100]
@@ -190,6 +178,68 @@ class PlcRuntime:
 
     def stop(self) -> None:
         self.status.state = PlcState.STOPPED
+
+    def _bind(self, ns: dict[str, Any]) -> None:
+        """The generated module's globals: the scan's copy of the image, the NC's outputs
+        (lists the logic writes in place), NC.SEND and the loop guard."""
+        self._ns = ns
+        ns["_SA"], ns["_SK"], ns["_SY"] = self._sa, self._k, self._sy
+        ns["_NC_SEND"] = lambda sender, target, where: self._sends.append(
+            (sender, target, where))
+        self._outputs: list[bool] = ns["_NCO"]
+        self._outputs_at: list[str] = ns["_NCW"]
+        self._process_outputs: list[list[bool]] = ns["_NCP"]
+        self._process_outputs_at: list[list[str]] = ns["_NCPW"]
+        self._overrides: list[int] = ns["_NCV"]
+        self._overrides_at: list[str] = ns["_NCVW"]
+        self._process_overrides: list[int] = ns["_NCPV"]
+        self._process_overrides_at: list[str] = ns["_NCPVW"]
+        ns["_guard"] = self._guard
+
+    def _output_lists(self) -> tuple[list[Any], ...]:
+        return (self._outputs, self._outputs_at, self._process_outputs,
+                self._process_outputs_at, self._overrides, self._overrides_at,
+                self._process_overrides, self._process_overrides_at)
+
+    def reload(self, logic: Logic, order: Sequence[str]) -> Reloaded:
+        """Online change: run ``logic`` from the next scan on (call it between two scans).
+
+        Every variable whose path and type are the same in both keeps its value, and every
+        function block instance kept keeps its state (a TON's time goes on running); a new or
+        retyped variable starts from its initial value, RETAIN too (the store holds only the
+        running logic's values), and one that is gone is dropped.  VAR_GLOBALs likewise.
+        The NC outputs keep their last levels, so an NC.START held TRUE across the change is
+        no new edge.  A PLC in FAULT runs again."""
+        old_logic, old_programs = self.logic, self.programs
+        carry = _Carry(old_logic, logic)
+        programs = {key: logic.new_program(key) for key in logic.programs}
+        # VAR_GLOBALs live in the module (_G), by their own names.
+        carry.instance(old_logic.namespace["_G"], logic.namespace["_G"], old_logic.globals,
+                       logic.globals, "")
+        for key, new in programs.items():
+            name = logic.display[key]
+            if key in old_programs:
+                carry.instance(old_programs[key], new, old_logic.programs[key],
+                               logic.programs[key], name)
+            else:
+                carry.initial.append(name)
+        carry.dropped += [old_logic.display[k] for k in old_programs if k not in programs]
+        outputs = self._output_lists()
+        self._bind(logic.namespace)
+        for old, new in zip(outputs, self._output_lists(), strict=True):
+            for i, value in enumerate(old[:len(new)]):
+                new[i] = value[:] if isinstance(value, list) else value
+        self.logic = logic
+        self.order = [name.upper() for name in order]
+        self.programs = programs
+        self._runs = [programs[key] for key in self.order]
+        self._retained = [(p, v) for p, table in logic.programs.items()
+                          for v in table.values() if v.retain]
+        self._saved = None  # the store is rewritten at the next scan: what is gone goes
+        if self.status.state is PlcState.FAULT:
+            self.status.state = PlcState.RUNNING
+            self.status.fault = None
+        return Reloaded(carry.kept, tuple(carry.initial), tuple(carry.dropped))
 
     # -- the scan ----------------------------------------------------------------------------------
 
@@ -538,6 +588,88 @@ class PlcRuntime:
 
 _FORCEABLE = frozenset(("BOOL", "SINT", "INT", "DINT", "LINT", "USINT", "UINT", "UDINT",
                         "ULINT", "BYTE", "WORD", "DWORD", "LWORD", "REAL", "LREAL", "TIME"))
+
+
+@dataclass(frozen=True, slots=True)
+class Reloaded:
+    """What an online change kept: how many variables kept their value (each member of a
+    function block instance counted), the paths that start from their initial value (new or
+    retyped) and those that are gone."""
+
+    kept: int
+    initial: tuple[str, ...]
+    dropped: tuple[str, ...]
+
+
+class _Carry:
+    """Moves the state of the old logic's instances into the new logic's, variable by
+    variable, where path and type are unchanged."""
+
+    def __init__(self, old: Logic, new: Logic) -> None:
+        self.old, self.new = old, new
+        self.kept = 0
+        self.initial: list[str] = []
+        self.dropped: list[str] = []
+
+    def instance(self, old_obj: Any, new_obj: Any, old_table: dict[str, ProgramVar],
+                 new_table: dict[str, ProgramVar], path: str) -> None:
+        for key, var in new_table.items():
+            here = f"{path}.{var.display}" if path else var.display
+            before = old_table.get(key)
+            if before is None or not self.same(before.type, var.type):
+                self.initial.append(here)
+                continue
+            attr = f"v_{key}"
+            setattr(new_obj, attr, self.value(getattr(old_obj, attr), getattr(new_obj, attr),
+                                              var.type, here))
+            self.kept += 1
+        self.dropped += [f"{path}.{v.display}" if path else v.display
+                         for k, v in old_table.items() if k not in new_table]
+
+    def value(self, old: Any, new: Any, t: Any, path: str) -> Any:
+        if isinstance(t, ArrayOf):
+            return [self.value(o, n, t.element, f"{path}[{getattr(t, 'lo', 0) + i}]")
+                    for i, (o, n) in enumerate(zip(old, new, strict=True))]
+        members = self.new.members_of(t)  # a user FB instance or a structure
+        if members is not None:
+            self.instance(old, new, self.old.members_of(t) or {}, members, path)
+            return new
+        return _copied(old, new)
+
+    def same(self, a: Any, b: Any) -> bool:
+        """The same declared type in both logics: a user FB or a structure by its name (its
+        members are then compared one by one), an enumeration by its values, a subrange
+        by its limits too."""
+        if type(a) is not type(b) or a != b:
+            return False
+        if isinstance(a, str):  # a subrange is its base's name with limits
+            return (getattr(a, "lo", None), getattr(a, "hi", None)) == (
+                getattr(b, "lo", None), getattr(b, "hi", None))
+        if isinstance(a, ArrayOf):
+            return self.same(a.element, b.element)
+        if isinstance(a, EnumOf):
+            return bool(self.old.enums.get(a.name) == self.new.enums.get(b.name))
+        return True
+
+
+def _copied(old: Any, new: Any) -> Any:
+    """A value of an unchanged type, carried into the new logic: numbers as they are, lists
+    and instances (a standard FB, a structure) member by member into the new one."""
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        return [_copied(o, n) for o, n in zip(old, new, strict=True)]
+    if type(old) is type(new):  # a number, or a standard FB (the stdlib's class): moved
+        return old
+    slots = getattr(type(new), "__slots__", None)
+    if slots and type(old).__name__ == type(new).__name__:
+        for name in (slots,) if isinstance(slots, str) else slots:
+            if hasattr(old, name):
+                setattr(new, name, _copied(getattr(old, name), getattr(new, name, None)))
+        return new
+    if hasattr(new, "__dict__") and type(old).__name__ == type(new).__name__:
+        for name, value in vars(old).items():
+            setattr(new, name, _copied(value, getattr(new, name, None)))
+        return new
+    return old
 
 
 def _split(rest: str) -> list[str | int]:

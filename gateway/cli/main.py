@@ -128,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
     loud.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
     run.add_argument("--cold", action="store_true", help="start the PLC logic without its "
                      "stored VAR RETAIN values (they are cleared)")
+    run.add_argument("--watch", action="store_true", help="reload the PLC logic when one of "
+                     "its files changes (online change: between two scans, values kept)")
     run.add_argument("--allow-missing", action="store_true", help="start even when the main "
                      "program is missing or has errors, or a storage folder does not exist "
                      "(a cell whose programs arrive later); default: refuse, with the "
@@ -411,10 +413,12 @@ def _run(args: argparse.Namespace) -> int:
                              "'ncgate[fast]')") from None
         logging.getLogger("ncgate").info("event loop: uvloop %s",
                                          importlib.metadata.version("uvloop"))
-        uvloop.run(serve(config, cold=args.cold, record=record, overrides=overrides))
+        uvloop.run(serve(config, cold=args.cold, record=record, overrides=overrides,
+                         watch=args.watch))
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
-        asyncio.run(serve(config, cold=args.cold, record=record, overrides=overrides))
+        asyncio.run(serve(config, cold=args.cold, record=record, overrides=overrides,
+                          watch=args.watch))
     return EXIT_OK
 
 

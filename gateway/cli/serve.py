@@ -17,8 +17,11 @@ from typing import Any
 
 from ncgate.config import Config
 from ncgate.config.loader import DEFAULT_WEB_PORT
+from ncgate.errors import InputRefused
 from ncgate.gateway.app import Gateway
+from ncgate.gateway.plc import LogicWatcher
 from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.inputs import Command, CommandKind, Source, SourceKind
 from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
@@ -89,6 +92,27 @@ def describe(event: Event) -> str | None:
     return None
 
 
+def _watch(gw: Gateway, config: Config, loop: asyncio.AbstractEventLoop) -> LogicWatcher | None:
+    """``run --watch``: a change of a ``[plc] logic`` file reloads the logic (the command
+    reload_plc, attributed ``api run --watch``)."""
+    if not config.plc.logic:
+        log.warning("--watch: there is no PLC logic to watch ([plc] logic)")
+        return None
+    source = Source(SourceKind.API, "run --watch")
+
+    def reload() -> None:
+        try:
+            gw.apply(Command(CommandKind.RELOAD_PLC, None, source))
+        except InputRefused as exc:  # (the PLC is always there when logic is configured)
+            log.error("--watch: reload_plc refused: %s", exc)
+
+    watcher = LogicWatcher(config.plc.logic, reload, loop)
+    watcher.start()
+    log.info("watching %s: a change reloads the PLC logic",
+             ", ".join(p.name for p in config.plc.logic))
+    return watcher
+
+
 HAZARDS_LOGGED = 1000  # distinct blocks whose hazard the log shows (the trace has them all)
 # Sync events worded per second: a loop that SNDs a thousand times a second must not flood the
 # log (or block the loop on a full stdout pipe); the trace and the console have every event.
@@ -96,7 +120,9 @@ LOG_LINES_PER_S = 100
 
 
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
-                record: str | None = None, overrides: dict[str, Any] | None = None) -> None:
+                record: str | None = None, overrides: dict[str, Any] | None = None,
+                watch: bool = False) -> None:
+    """``watch``: reload the PLC logic when one of its files changes (``run --watch``)."""
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
     installed = []
@@ -154,7 +180,12 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
                          " (writes need the token)" if config.web.token else "")
             if gw.recorder is not None:
                 log.info("recording the session to %s", gw.recorder.path)
-            await stop.wait()
+            watcher = _watch(gw, config, loop) if watch else None
+            try:
+                await stop.wait()
+            finally:
+                if watcher is not None:
+                    watcher.close()
             log.info("stopping")
     finally:
         for sig in installed:

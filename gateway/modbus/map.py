@@ -170,8 +170,8 @@ class ModbusMap:
             Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, access("command", "w"),
                    "uint16", "command: 1 cycle start, 2 feed hold, 3 reset, 4 restart the "
                    "PLC, 5 step, 6/7 single block on/off, 8/9 optional stop on/off, 10/11 "
-                   "block skip on/off, 12 run to sync; high byte: the process, 0 the cell "
-                   "(reads 0)"),
+                   "block skip on/off, 12 run to sync, 16 reload the PLC logic; high byte: "
+                   "the process, 0 the cell (reads 0)"),
             Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
             Region(Table.HOLDING, self.SEARCH, 1, Kind.SEARCH, access("command", "rw"),
@@ -428,7 +428,8 @@ class ModbusMap:
                 raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset, "
                                   "4 restart the PLC, 5 step, 6/7 single block on/off, 8/9 "
                                   "optional stop on/off, 10/11 block skip on/off, 12 run to "
-                                  "sync (high byte: the process, 0 for the cell)")
+                                  "sync, 13..15 block search and breakpoints, 16 reload the "
+                                  "PLC logic (high byte: the process, 0 for the cell)")
             backend.apply(Command(command[0], command[1], source))  # refusals: REFUSAL
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:

@@ -577,6 +577,8 @@ class WebConsole:
                 raise ApiError(400, '"at": a label or an N number (a block search), '
                                '"with_calc": true or false')
             item = Start(program, process, source, at, with_calc)
+        if isinstance(item, Command) and item.kind is CommandKind.RELOAD_PLC:
+            return await self._reload_plc(item, request)
         try:
             await self.gw.apply_async(item)  # a program is read off the loop
         except InputRefused as exc:
@@ -587,6 +589,21 @@ class WebConsole:
                                       "process": process})
         log.info("web %s: %s", request.remote, command)
         return web.json_response({"command": command})
+
+
+    async def _reload_plc(self, item: Command, request: web.Request) -> web.StreamResponse:
+        """Online change: 200 with what was kept, or 422 with the diagnostics when the logic
+        did not load (the old logic runs on)."""
+        if item.process is not None:
+            raise ApiError(400, "reload_plc is the cell's (process null)")
+        try:
+            outcome = await self.gw.reload_plc(item.source)
+        except InputRefused as exc:
+            raise ApiError(HTTP_STATUS[exc.reason], str(exc)) from None
+        log.info("web %s: reload_plc (%s)", request.remote, "loaded" if outcome.ok else
+                 "not loaded")
+        return web.json_response({"command": "reload_plc", **outcome.as_dict()},
+                                 status=200 if outcome.ok else 422)
 
 
 def record_path(folder: Path) -> Path:

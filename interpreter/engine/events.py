@@ -297,7 +297,30 @@ class Forced(NamedTuple):
         return "forced"
 
 
+class PlcReload(NamedTuple):
+    """An online change of the PLC logic (``reload_plc``, ``run --watch``): ``ok`` False
+    when the files did not load (``diagnostics``; the old logic runs on); else how many
+    variables kept their value and the paths that start anew (``initial``) or are gone."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    ok: bool
+    by: str
+    files: list[str]
+    kept: int
+    initial: list[str]
+    dropped: list[str]
+    diagnostics: list[str]
+
+    @property
+    def kind(self) -> str:
+        return "plc_reload"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
+         | PlcReload
          | Display | Signal | Remove | Override | Break | Force | Forced)
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).

@@ -932,8 +932,7 @@ class Compiler:
 
     def _initial(self, decl: n.VarDecl, t: Type, scope: Scope) -> Any:
         if decl.initial is None:
-            if decl.qualifier == "CONSTANT" and decl.section not in ("VAR_INPUT",
-                                                                     "VAR_IN_OUT"):
+            if decl.qualifier == "CONSTANT":
                 raise self.error(StCode.NOT_CONSTANT, f"the CONSTANT {decl.name} needs a "
                                  "value", decl.span)
             return None if isinstance(t, FbOf) or _holds_fb(t) else self.default(t, decl.type)
@@ -1676,8 +1675,7 @@ class Compiler:
         if found is not None:
             v = found[0]
             if v.qualifier == "CONSTANT" and not x.selectors and isinstance(
-                    v.initial, bool | int | float | str) and v.image is None and \
-                    v.section not in ("VAR_INPUT", "VAR_IN_OUT"):
+                    v.initial, bool | int | float | str) and v.image is None:
                 return E(const_code(v.initial, v.type), v.type, v.initial)
             return None
         if key in self.enums and len(x.selectors) == 1 and isinstance(x.selectors[0],
