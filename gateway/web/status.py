@@ -141,6 +141,9 @@ def plain(value: Any, t: Type, fb_vars: dict[str, dict[str, ProgramVar]]) -> Any
     if dataclasses.is_dataclass(value):  # a standard block: its IEC members, not its state
         return {f.name: plain(getattr(value, f.name), "", fb_vars)
                 for f in dataclasses.fields(value) if not f.name.startswith("_")}
+    slots = getattr(type(value), "__slots__", ())
+    if hasattr(value, "_copy") and slots:  # a structure (the compiler's S_ class): its members
+        return {name[2:]: plain(getattr(value, name), "", fb_vars) for name in slots}
     return str(value)  # nothing the compiler makes today; said rather than a 500
 
 

@@ -262,3 +262,29 @@ def test_pragmas_are_accepted_and_ignored() -> None:
               "  {attribute 'hide'}\n  x : INT;\nEND_VAR\nx := 1 {info 'here'} + 1;\n"
               "END_PROGRAM\n")
     assert Plc(source).scan()["main.x"] == 2
+
+
+def test_a_constant_var_in_out_is_read_as_the_callers_value_not_folded() -> None:
+    # VAR_IN_OUT CONSTANT (6.5.2.2): a reference the callee may not write; its value is the
+    # caller's at each call, never a folded 0.
+    source = """
+    FUNCTION Twice : INT
+    VAR_IN_OUT CONSTANT v : INT; END_VAR
+    Twice := v * 2;
+    END_FUNCTION
+    PROGRAM main
+    VAR x : INT := 21; y : INT; END_VAR
+    y := Twice(x);
+    END_PROGRAM
+    """
+    assert Plc(source).scan()["main.y"] == 42
+
+
+
+def test_the_console_shows_a_structure_as_its_members() -> None:
+    from ncgate.gateway.web.status import plain
+
+    plc = run("l.b.x := 5;", "l : Line;")
+    value = plc["main.l"]
+    assert plain(value, "", {}) == {"A": {"X": 1, "Y": 0.5},
+                                "B": {"X": 5, "Y": 0.5}, "TAG": [7, 8]}
