@@ -358,8 +358,8 @@ class _Writer:
             lo, hi = (r.attrs.get("lower", ""), r.attrs.get("upper", "")) if r else ("", "")
             out.put(f" ({lo}..{hi})", r.at if r else t.at)
         elif tag == "enum":
-            if t.child("baseType") is not None:
-                self._base(t)
+            # (its baseType is not written: an enumeration's values are integers here, and
+            # ST has no place for it -- docs/plc.md)
             values = t.child("values")
             items = []
             for v in values.all("value") if values else ():
@@ -511,7 +511,9 @@ def parse_plcopen(data: bytes, path: str) -> n.SourceFile:
     if problems:
         raise LogicError(sorted(problems, key=lambda d: (d.span.line, d.span.column)))
     assert parsed is not None
-    return n.SourceFile(path, text, _moved(parsed.pous, move))
+    # Every part of the parsed file (POUs, types, globals, what the parser adds later), its
+    # spans moved; the text is the XML's, for the lines diagnostics and faults show.
+    return dataclasses.replace(_moved(parsed, move), path=path, text=text)
 
 
 def _decoded(data: bytes) -> str:

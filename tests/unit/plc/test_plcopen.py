@@ -204,3 +204,34 @@ def test_a_large_expression_in_xml_nests_without_a_python_limit() -> None:
         "scale := raw * per_ten / 10;", f"scale := raw * per_ten / 10 + 0 * ({terms});")
     source = parse_plcopen(xml.encode(), "big.xml")
     assert [p.name for p in source.pous] == ["debounce", "scale", "main"]
+
+
+def test_data_types_and_global_lists_of_an_export_run_through_the_scan() -> None:
+    """dataTypes (an enumeration with values and one without, a subrange with its initial
+    value, an alias, a structure with an array and a STRING), a CODESYS global variable list
+    (addData) and a configuration's and a resource's globalVars: IEC 61131-3's initial
+    values (a variable of a derived type takes the type's), CASE on the enumeration."""
+    plc = Scan(HERE / "codesys_station.xml")
+    plc.set("SA", 0, 1)
+    plc.scan()
+    syvar = plc.image.syvar
+    assert plc.image.sa[1] >> 1 & 1 == 1  # SA9: g_eMode is E_Mode#AUTO
+    assert syvar[1] == 2  # REAL_TO_INT(4.0 * 0.5): the structValues over the type's 2.5
+    assert syvar[2] == 100 and syvar[3] == len("Z axis") and syvar[4] == 50
+    plc.scan(6)  # CLAMP, DRILL, then iPos 100 .. 500 in five scans of DRILL
+    assert syvar[0] == 500 and plc.image.sa[1] & 1 == 0
+    plc.scan()  # DONE
+    assert plc.image.sa[1] & 1 == 1
+    assert plc.logic.namespace["_G"].v_G_ICYCLES == 8
+
+
+def test_a_member_of_a_structure_type_is_checked_at_its_element(tmp_path: Path) -> None:
+    text = (HERE / "codesys_station.xml").read_text(encoding="utf-8")
+    path = tmp_path / "station.xml"
+    path.write_text(text.replace('<derived name="T_Depth" />', '<derived name="T_Deep" />'),
+                    encoding="utf-8")
+    with pytest.raises(LogicError) as caught:
+        compile_logic([read_logic_file(path)])
+    d = caught.value.diagnostics[0]
+    assert d.code is StCode.UNKNOWN_TYPE
+    assert (d.span.line, d.span.column) == where(path, '<derived name="T_Deep" />')
