@@ -14,8 +14,11 @@ Semantics where IEC 61131-3 leaves a choice (docs/plc.md):
   the per-scan iteration guard raise :class:`PlcFault` at the statement's file:line:col.
 
 Generated names: ``self.v_X`` (a variable X of a program or FB), ``v_X`` (of a function),
+``_G.v_X`` (a VAR_GLOBAL), ``S_T`` (the class of a structure type T, members ``v_M``),
 ``_SA``/``_SK``/``_SY`` (the scan's copy of the image), ``_NC*`` (the NC's status and
 outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan).
+Enumeration values are their integers; STRINGs Python str; a VAR_IN_OUT is copied in before
+a call and back after it.
 """
 
 from __future__ import annotations
@@ -932,7 +935,8 @@ class Compiler:
 
     def _initial(self, decl: n.VarDecl, t: Type, scope: Scope) -> Any:
         if decl.initial is None:
-            if decl.qualifier == "CONSTANT":
+            if decl.qualifier == "CONSTANT" and decl.section not in ("VAR_INPUT",
+                                                                     "VAR_IN_OUT"):
                 raise self.error(StCode.NOT_CONSTANT, f"the CONSTANT {decl.name} needs a "
                                  "value", decl.span)
             return None if isinstance(t, FbOf) or _holds_fb(t) else self.default(t, decl.type)
@@ -1675,7 +1679,8 @@ class Compiler:
         if found is not None:
             v = found[0]
             if v.qualifier == "CONSTANT" and not x.selectors and isinstance(
-                    v.initial, bool | int | float | str) and v.image is None:
+                    v.initial, bool | int | float | str) and v.image is None and \
+                    v.section not in ("VAR_INPUT", "VAR_IN_OUT"):
                 return E(const_code(v.initial, v.type), v.type, v.initial)
             return None
         if key in self.enums and len(x.selectors) == 1 and isinstance(x.selectors[0],
@@ -1821,6 +1826,14 @@ class Compiler:
                          f"short-circuit {plain} (IEC: {plain}, which ncgate evaluates "
                          "left to right and stops as soon as the result is known)", x.span)
             op = plain
+        if isinstance(a.type, EnumOf) != isinstance(b.type, EnumOf) and (
+                is_int(a.type) or is_int(b.type)):
+            # CODESYS computes with an enumeration as the integer it is.
+            self.lenient(StCode.TYPE_MISMATCH, StCode.ENUM_AS_INTEGER, f"{op} of "
+                         f"{_tname(a.type)} and {_tname(b.type)} (IEC: an enumeration is no "
+                         "integer; compare it with its values)", x.span)
+            a, b = (E(e.code, "INT", e.const) if isinstance(e.type, EnumOf) else e
+                    for e in (a, b))
         if op in ("AND", "OR", "XOR"):
             if a.type == "BOOL" and b.type == "BOOL":
                 py = {"AND": "and", "OR": "or", "XOR": "!="}[op]

@@ -25,6 +25,8 @@ CASES = [
      "ST020", "SW001"),
     ("TYPE E : (A, B, C); END_TYPE\nPROGRAM main VAR e : E; i : INT; END_VAR\n"
      "e := C;\ni := e;\nEND_PROGRAM", 4, 6, "ST020", "SW003"),
+    ("TYPE E : (A, B, C); END_TYPE\nPROGRAM main VAR st : E; b : BOOL; END_VAR\n"
+     "b := st = 2;\nEND_PROGRAM", 3, 9, "ST020", "SW003"),
     ("TYPE E : (A, B, C); END_TYPE\nPROGRAM main VAR st : E; END_VAR\n"
      "st := E.B;\nEND_PROGRAM", 3, 7, "ST020", "SW002"),
     ("PROGRAM main VAR a, b, c : BOOL; END_VAR\nc := a AND_THEN b;\nEND_PROGRAM", 2, 8,
