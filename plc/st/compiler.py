@@ -1276,7 +1276,8 @@ class Compiler:
             if isinstance(s.expr, n.Call):
                 self._prelude_call = s.expr
             try:
-                value = self.coerce(self.expr(s.expr, scope), place.type, _span_of(s.expr))
+                value = self.coerce(self.typed_expr(s.expr, scope, place.type), place.type,
+                                    _span_of(s.expr))
             finally:
                 self._prelude_call = None
             assert place.store is not None
@@ -1403,7 +1404,7 @@ class Compiler:
         saved = scope.constants_only
         scope.constants_only = True
         try:
-            e = self.expr(label, scope)
+            e = self.typed_expr(label, scope, selector)
         finally:
             scope.constants_only = saved
         if e.const is None or isinstance(e.const, bool | float | str):
@@ -1510,7 +1511,8 @@ class Compiler:
                     raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is an output of "
                                      f"{fb.name}: bind it with =>", arg.span)
                 assert arg.expr is not None
-                value = self.coerce(self.expr(arg.expr, scope), mtype, _span_of(arg.expr))
+                value = self.coerce(self.typed_expr(arg.expr, scope, mtype), mtype,
+                                    _span_of(arg.expr))
                 out.emit(f"{f}.{attr} = {value}", s.span)
             else:
                 if direction != "out":
@@ -1700,6 +1702,16 @@ class Compiler:
             return self.enum_lit(n.EnumLit(owners[0], x.name, x.span))
         return None
 
+    def typed_expr(self, x: n.Expr, scope: Scope, expected: Type) -> E:
+        """An expression where a value of ``expected`` is due: a bare name that is a value
+        of several enumerations is that of ``expected`` (IEC 61131-3, 6.4.4.2: the type of
+        an enumeration value is given by its context)."""
+        if isinstance(x, n.Var) and not x.selectors and isinstance(expected, EnumOf):
+            key = x.name.upper()
+            if scope.lookup(key) is None and expected.name in self.enum_values.get(key, ()):
+                return self.enum_lit(n.EnumLit(expected.name, x.name, x.span))
+        return self.expr(x, scope)
+
     def enum_lit(self, x: n.EnumLit) -> E:
         key = x.type_name.upper()
         if key in self.type_decls and key not in self.enums:
@@ -1758,7 +1770,9 @@ class Compiler:
         done: list[str] = []
         ops = 0
         for op in reversed(spine):
-            acc = self.binary(op, acc, self.expr(op.right, scope))
+            right = self.typed_expr(op.right, scope, acc.type) if op.op in (
+                "=", "<>", "<", ">", "<=", ">=") else self.expr(op.right, scope)
+            acc = self.binary(op, acc, right)
             ops += 1
             if ops >= CHAIN_OPS and acc.const is None:
                 t = self.temp()
@@ -1986,7 +2000,8 @@ class Compiler:
                 assert ref.store is not None
                 values[k], stores[k] = ref.read, ref.store
                 continue
-            values[k] = self.coerce(self.expr(arg.expr, scope), v.type, _span_of(arg.expr))
+            values[k] = self.coerce(self.typed_expr(arg.expr, scope, v.type), v.type,
+                                    _span_of(arg.expr))
         args = ", ".join(f"v_{k}={code}" for k, code in values.items())
         assert info.result is not None
         if not info.in_outs:

@@ -86,7 +86,7 @@ CASES = [
     ("ST014", "TYPE S : STRUCT a : INT; END_STRUCT END_TYPE\n"
               "PROGRAM p VAR s : S := (a := 1, ¦c := 2); END_VAR END_PROGRAM"),
     ("ST020", "TYPE E : (A, B); F : (B, C); END_TYPE\nPROGRAM p VAR e : E; END_VAR\n"
-              "e := ¦B; END_PROGRAM"),
+              "IF ¦B = e THEN e := A; END_IF END_PROGRAM"),
     ("ST020", "TYPE E : (A, B); F : (C, D); END_TYPE\nPROGRAM p VAR e : E; END_VAR\n"
               "CASE e OF A: e := B; ¦F#C: e := A; END_CASE END_PROGRAM"),
     ("ST020", "TYPE E : (A, B); END_TYPE\nPROGRAM p VAR e : E; i : INT; END_VAR\n"

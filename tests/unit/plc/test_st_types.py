@@ -288,3 +288,22 @@ def test_the_console_shows_a_structure_as_its_members() -> None:
     value = plc["main.l"]
     assert plain(value, "", {}) == {"A": {"X": 1, "Y": 0.5},
                                 "B": {"X": 5, "Y": 0.5}, "TAG": [7, 8]}
+
+
+def test_a_value_two_enumerations_have_takes_its_type_from_the_context() -> None:
+    # 6.4.4.2: where the context gives the type (the variable assigned, the CASE selector,
+    # the other side of a comparison, an input), a shared value needs no prefix.
+    source = """
+    TYPE E_Color : (RED, GREEN); E_Light : (OFF, RED, AMBER); END_TYPE
+    FUNCTION IsRed : BOOL VAR_INPUT c : E_Light; END_VAR IsRed := c = RED; END_FUNCTION
+    PROGRAM main
+    VAR c : E_Color; l : E_Light; hit, same, is_red : BOOL; END_VAR
+    c := RED; l := RED;
+    CASE l OF OFF: hit := FALSE; RED: hit := TRUE; END_CASE
+    same := c = RED;
+    is_red := IsRed(RED);
+    END_PROGRAM
+    """
+    plc = Plc(source).scan()
+    assert (plc["main.c"], plc["main.l"]) == (0, 1)
+    assert (plc["main.hit"], plc["main.same"], plc["main.is_red"]) == (True, True, True)
