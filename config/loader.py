@@ -30,7 +30,16 @@ from pathlib import Path
 from typing import Any
 
 from ncgate.errors import NcgateError
-from ncgate.interpreter.settings import AXES, BLOCK_S, TRAVEL_MM, Dialect, SndPolicy
+from ncgate.interpreter.settings import (
+    AUX_NC_CODES,
+    AXES,
+    BLOCK_S,
+    TRAVEL_MM,
+    AuxSettings,
+    Dialect,
+    Handshake,
+    SndPolicy,
+)
 
 MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
@@ -341,6 +350,61 @@ def _external(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
     return out
 
 
+_AUX_CODE = re.compile(r"([MSTH])(\d*)$", re.IGNORECASE)
+_AUX_VALUE = re.compile(r"(SYVAR)(\d+)$|(S?K)(\d+)\.IN$", re.IGNORECASE)
+_SA_BIT = re.compile(r"SA(\d+)$", re.IGNORECASE)
+
+
+def _aux(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    """[nc.aux]: None when the table is absent (no auxiliary function is output)."""
+    return r.section(AuxConfig, t["aux"], key) if "aux" in t else None
+
+
+def _aux_codes(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("codes", {})
+    if not isinstance(raw, dict):
+        raise r.fail(key, 'expected a table of CODE = "none" | "before_motion" | '
+                     '"after_motion" (M8 = "after_motion", T = "before_motion")')
+    out: dict[str, Handshake] = {}
+    names = " or ".join(f'"{h.value}"' for h in Handshake)
+    for name, value in raw.items():
+        item = f"{key}.{name}"
+        found = _AUX_CODE.match(name)
+        if found is None:
+            raise r.fail(item, "expected a code (M8, S1000, T5, H2) or a letter for all its "
+                         "codes (M, S, T, H)")
+        letter, digits = found.group(1).upper(), found.group(2)
+        code = f"{letter}{int(digits)}" if digits else letter
+        if letter == "M" and digits and int(digits) in AUX_NC_CODES:
+            raise r.fail(item, f"{name} keeps the NC's meaning (a stop or the program's end): "
+                         "it is not output to the PLC")
+        if code in out:
+            raise r.fail(item, f"{code} is given twice")
+        try:
+            out[code] = Handshake(value)
+        except ValueError:
+            raise r.fail(item, f"expected {names}, got {value!r}") from None
+    return out
+
+
+def _aux_value(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
+    name = key.rpartition(".")[2]
+    text = r.str_(t.get(name, "SYVAR192"), key)
+    found = _AUX_VALUE.match(text)
+    if found is None:
+        raise r.fail(key, f"expected SYVAR<n> or SK<n>.IN (a 16-bit word), got {text!r}")
+    return f"SYVAR{int(found.group(2))}" if found.group(1) else f"SK{int(found.group(4))}.IN"
+
+
+def _aux_bit(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
+    name = key.rpartition(".")[2]
+    text = r.str_(t.get(name, "SA896" if name == "strobe" else "SA960"), key)
+    found = _SA_BIT.match(text)
+    if found is None:
+        raise r.fail(key, f"expected an SA bit (SA<n>), got {text!r}")
+    return f"SA{int(found.group(1))}"
+
+
 # ---- the schema ----------------------------------------------------------------------------
 
 
@@ -369,6 +433,39 @@ class IsgConfig:
                               "sender (AL170)", lo=1, hi=1_000_000)
     signal_params: int = setting(10, "ISG: parameters a signal carries (P[0] ..)", lo=1,
                                  hi=1000)
+
+
+@dataclass(frozen=True, slots=True)
+class AuxConfig:
+    """[nc.aux]: the auxiliary functions (M, S, T, H) and their handshake with the PLC
+    (docs/interfacing-a-plc.md).  Process k's letter i (M 0, S 1, T 2, H 3) is at each
+    base + 4(k-1) + i (an SK word: + 2 bytes each)."""
+
+    handshake: Handshake = setting(
+        Handshake.NONE, 'every code\'s handshake: "none" (the value is output, nothing '
+        'waits), "before_motion" (value and strobe; the block\'s motion waits for the '
+        'acknowledge) or "after_motion" (output when the block\'s motion ends; the next '
+        'block waits)')
+    codes: Mapping[str, Handshake] = setting(
+        doc='the handshake of a code or of every code of a letter, over `handshake`: '
+        '{ M8 = "after_motion", T = "before_motion" } (a code wins over its letter)',
+        parse=_aux_codes, factory=dict)
+    timeout_s: float = setting(0.0, "an acknowledge that has not come (and gone) this long "
+                               "after the strobe is an alarm, AL145 (0: no timeout)", lo=0)
+    value: str = setting("SYVAR192", "where P1's M value goes: SYVAR<n> or SK<n>.IN (P1's S, "
+                         "T, H at +1, +2, +3, P2's M at +4, ...)", parse=_aux_value)
+    strobe: str = setting("SA896", "the SA bit of P1's M strobe (the NC sets it; P1's S, T, "
+                          "H at +1, +2, +3, P2's M at +4, ...)", parse=_aux_bit)
+    ack: str = setting("SA960", "the SA bit of P1's M acknowledge (the PLC sets it; laid "
+                       "out as the strobes)", parse=_aux_bit)
+
+    def settings(self) -> AuxSettings:
+        found = _AUX_VALUE.match(self.value)
+        assert found is not None
+        value = (("SYVAR", int(found.group(2)), "IN") if found.group(1)
+                 else ("SK", int(found.group(4)), "IN"))
+        return AuxSettings(self.handshake, tuple(self.codes.items()), self.timeout_s, value,
+                           int(self.strobe[2:]), int(self.ack[2:]))
 
 
 @dataclass(frozen=True, slots=True)
@@ -451,6 +548,14 @@ class NcConfig:
     ve: Mapping[str, VeConfig] = setting(
         doc="[nc.ve]: ISG V.E. variables, NAME = { map = \"SYVAR5\", sync = true }",
         parse=_external, factory=dict)
+    aux: AuxConfig | None = setting(
+        None, "[nc.aux]: the auxiliary functions' interface; without this table no M, S, T "
+        "or H word is output to the PLC", parse=_aux)
+
+    @property
+    def aux_interface(self) -> AuxSettings | None:
+        """[nc.aux] as the engine takes it (None: no auxiliary function is output)."""
+        return self.aux.settings() if self.aux is not None else None
 
     @property
     def external(self) -> frozenset[int]:
@@ -744,6 +849,9 @@ def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
         if cls is NcConfig and f.name == "ve":
             out.extend(keys(VeConfig, f"{dotted}.NAME"))
             continue
+        if cls is NcConfig and f.name == "aux":
+            out.extend(keys(AuxConfig, dotted))
+            continue
         if cls is StorageConfig and f.name == "devices":
             dotted = f"{prefix}.MP0 .. MP3"
         default = f.default if f.default is not dataclasses.MISSING else (
@@ -898,6 +1006,8 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
         if _outside_image(text, plc):
             raise r.fail(key, f"{text} is outside the image (plc.sa_bits, plc.k_bytes, "
                          "plc.syvars)")
+    if nc.aux is not None:
+        _check_aux(r, nc.aux, nc.processes, plc)
     if nc.tool_change_s > nc.limits.block_s:
         raise r.fail("nc.tool_change_s", f"{nc.tool_change_s:g} s is longer than a block may "
                      f"take (nc.limits.block_s = {nc.limits.block_s:g})")
@@ -926,6 +1036,28 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
         raise r.fail("web.token", "has spaces or line breaks around it; remove them")
     # The Modbus map's regions are checked against each other where Modbus is served
     # (ModbusMap), so that `check` and `sim` take a config whose map would not fit.
+
+
+def _check_aux(r: _Reader, aux: AuxConfig, processes: int, plc: PlcConfig) -> None:
+    """Every process's places are inside the image, and no strobe is an acknowledge."""
+    settings = aux.settings()
+    last = settings.place(processes, "H")
+    area, index, _ = last[0]
+    size = plc.syvars if area == "SYVAR" else plc.k_bytes - 1
+    if index >= size:
+        raise r.fail("nc.aux.value", f"{aux.value}: P{processes}'s H value would be "
+                     f"{area}{index}{'.IN' if area == 'SK' else ''}, outside the image "
+                     f"({4 * processes} words from it; plc.syvars, plc.k_bytes)")
+    for name, bit in (("strobe", last[1]), ("ack", last[2])):
+        if bit >= plc.sa_bits:
+            raise r.fail(f"nc.aux.{name}", f"{getattr(aux, name)}: P{processes}'s H bit would "
+                         f"be SA{bit}, outside the image ({4 * processes} bits from it; "
+                         "plc.sa_bits)")
+    strobes = range(settings.strobe, settings.strobe + 4 * processes)
+    acks = range(settings.ack, settings.ack + 4 * processes)
+    if set(strobes) & set(acks):
+        raise r.fail("nc.aux.ack", f"{aux.ack}..SA{acks[-1]} overlaps the strobes "
+                     f"{aux.strobe}..SA{strobes[-1]}")
 
 
 def is_loopback(host: str) -> bool:
@@ -1002,7 +1134,7 @@ def config_markdown() -> str:
              "Generated from `config/loader.py` (the dataclasses are the schema; "
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
-             "`[nc.limits]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
+             "`[nc.limits]`, `[nc.aux]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
              "`[modbus.roles]`, `[canopen]`, `[trace]`, `[web]`); an unknown key or a bad "
              "value is an error naming the file and the dotted key. Paths are relative "
              "to the config file.", "",

@@ -139,6 +139,7 @@ class AlarmCode(enum.IntEnum):
     STALL = 142
     WAIT_TIMEOUT = 143
     RUNAWAY = 144
+    AUX_TIMEOUT = 145  # no acknowledge of an auxiliary function within nc.aux.timeout_s
     MASTER_LOST = 150  # a fieldbus master's heartbeat stopped (CANopen 0x1016)
     PLC_FAULT = 160  # the PLC logic stopped on a runtime error (ST: file:line:col)
     SIGNAL_STORE_FULL = 170  # ISG: one signal more than nc.isg.max_events stored

@@ -34,6 +34,45 @@ class Dialect(enum.Enum):
     ISG = "isg"  # TwinCAT CNC / ISG: channels, #SIGNAL / #WAIT / #FLUSH, stored signals
 
 
+class Handshake(enum.Enum):
+    """How an auxiliary function (M, S, T, H) meets the PLC ([nc.aux]; FANUC's MF/FIN,
+    SINUMERIK's auxiliary functions with their acknowledgement)."""
+
+    NONE = "none"  # the value is output; nothing waits for the PLC
+    BEFORE_MOTION = "before_motion"  # value + strobe; the block's motion waits for the ack
+    AFTER_MOTION = "after_motion"  # output when the motion ends; the next block waits
+
+
+AUX_LETTERS: Final = "MSTH"  # the auxiliary words, in the order of their places
+# M codes that keep the NC's own meaning and are not output: stop, optional stop, ends.
+AUX_NC_CODES: Final = frozenset({0, 1, 2, 30})
+
+
+@dataclass(frozen=True, slots=True)
+class AuxSettings:
+    """The auxiliary-function interface ([nc.aux]): where each process's values, strobes and
+    acknowledges are in the image, and which handshake each code has.  Process k's letter
+    i (``AUX_LETTERS``) is at the base + 4(k-1) + i (an SK word: + 2 bytes each)."""
+
+    handshake: Handshake = Handshake.NONE
+    codes: tuple[tuple[str, Handshake], ...] = ()  # "M8" (a code) or "T" (a letter's codes)
+    timeout_s: float = 0.0  # 0: no timeout; else an alarm (AL145)
+    value: tuple[str, int, str] = ("SYVAR", 192, "IN")  # P1's M value (SYVAR or SK .IN)
+    strobe: int = 896  # the SA bit of P1's M strobe
+    ack: int = 960  # the SA bit of P1's M acknowledge
+
+    def handshake_of(self, letter: str, value: int) -> Handshake:
+        found = dict(self.codes)
+        return found.get(f"{letter}{value}", found.get(letter, self.handshake))
+
+    def place(self, process: int, letter: str) -> tuple[tuple[str, int, str], int, int]:
+        """Process ``process``'s ``letter``: its value's variable, strobe bit, ack bit."""
+        offset = 4 * (process - 1) + AUX_LETTERS.index(letter)
+        area, index, view = self.value
+        step = 2 if area == "SK" else 1
+        return (area, index + step * offset, view), self.strobe + offset, self.ack + offset
+
+
 @dataclass(frozen=True, slots=True)
 class RuntimeSettings:
     """The engine's settings; the names are those of ``[nc]`` in the config."""
@@ -72,3 +111,6 @@ class RuntimeSettings:
     # The interpolator takes a block only from a full buffer (lookahead blocks), or once the
     # decoder has reached the end, a flush or a synchronous read: ISG's buffer effect.
     buffered: bool = False
+    # The auxiliary-function interface ([nc.aux]); None: M, S, T and H words are not output
+    # (no [nc.aux] table: today's behaviour).
+    aux_interface: AuxSettings | None = None

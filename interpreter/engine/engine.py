@@ -42,6 +42,7 @@ from ncgate.interpreter.engine.actions import (
     WaitProcess,
     WriteSyvar,
 )
+from ncgate.interpreter.engine.aux import AuxInterface, AuxOutput
 from ncgate.interpreter.engine.breaks import Breakpoint
 from ncgate.interpreter.engine.events import Blocked, FlushOn, WaitOn
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
@@ -127,6 +128,11 @@ class Engine:
             Execute: sync.execute,
             ShowText: self._show_text,
         }
+        # The auxiliary functions' handshake with the PLC ([nc.aux]; aux.py), when configured.
+        aux = settings.aux_interface
+        self.aux = AuxInterface(self, aux, settings.processes) if aux is not None else None
+        if self.aux is not None:
+            self._actions[AuxOutput] = self.aux.output
         # Hooks for drivers and the gateway.
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
@@ -592,6 +598,12 @@ class Engine:
                     where: Where) -> None:
         self.sync.write_image(p, area, index, view, value, where)
 
+    def write_many(self, p: Process, changes: list[tuple[str, int, str, int]],
+                   where: Where) -> None:
+        """Several image variables in one atomic write, in the name of ``p``'s block (an
+        auxiliary function's value and strobe)."""
+        self.sync.write_changes(p, changes, where)
+
     def count_signal(self, sender: Process, target: int, ident: int, where: Where) -> None:
         self.sync.count_signal(sender, target, ident, where)
 
@@ -895,7 +907,7 @@ class Engine:
             p.starved = False
             item = p.queue[0]
             p.int_item = item
-            if item.kind == ItemKind.SYNC:
+            if item.kind >= ItemKind.SYNC:  # a # block's actions, or auxiliary functions
                 if not self._run_sync_item(p, item):
                     return
                 self._item_done(p)
@@ -1033,7 +1045,7 @@ class Engine:
 
     def _continue_sync(self, p: Process) -> None:
         item = p.queue[0] if p.queue else None
-        if item is None or item.kind != ItemKind.SYNC or p.alarm is not None:
+        if item is None or item.kind < ItemKind.SYNC or p.alarm is not None:
             return
         if self._run_sync_item(p, item):
             self._item_done(p)

@@ -53,6 +53,16 @@ class FlushOn(NamedTuple):
     interpolator."""
 
 
+class AuxOn(NamedTuple):
+    """What an auxiliary function's handshake waits on ([nc.aux]): the PLC's acknowledge
+    (``ack``, an SA bit) of ``code`` ("M8"), output with ``handshake``."""
+
+    code: str
+    handshake: str
+    ack: str
+    shown: str = ""  # as people write it ("M08"): the run log's (not in the trace)
+
+
 class Start(NamedTuple):
     seq: int
     t: float
@@ -319,9 +329,44 @@ class PlcReload(NamedTuple):
         return "plc_reload"
 
 
+class Aux(NamedTuple):
+    """An auxiliary function output to the PLC ([nc.aux]): ``code`` ("M8", "T5"), its
+    handshake ("none", "before_motion", "after_motion"), and where its value and strobe
+    are."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    code: str
+    handshake: str
+    value: str  # its value's variable ("SYVAR192")
+    strobe: str | None  # its strobe bit ("SA896"); None: a handshake of "none"
+
+    @property
+    def kind(self) -> str:
+        return "aux"
+
+
+class AuxAck(NamedTuple):
+    """The PLC acknowledged an auxiliary function (``by``: who set the acknowledge); the NC
+    drops its strobe next, then waits for the acknowledge to drop."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    code: str
+    by: str | None
+
+    @property
+    def kind(self) -> str:
+        return "aux_ack"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
          | PlcReload
-         | Display | Signal | Remove | Override | Break | Force | Forced)
+         | Display | Signal | Remove | Override | Break | Force | Forced | Aux | AuxAck)
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).
 COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})
@@ -348,6 +393,8 @@ def _json(value: Any) -> Any:
         return {"signal": value.signal, "from": _json(value.from_), "level": value.level}
     if isinstance(value, FlushOn):
         return {"flush": True}
+    if isinstance(value, AuxOn):
+        return {"aux": value.code, "handshake": value.handshake, "ack": value.ack}
     if isinstance(value, WaitOn):
         if value.kind is WaitKind.COND:
             number = value.value

@@ -52,6 +52,7 @@ class WaitKind(enum.IntEnum):
     SND = 3
     EXE = 4
     FLUSH = 5  # the decoder waits for its interpolator (#FLUSH, a synchronous V.E. read)
+    AUX = 6  # an auxiliary function (M, S, T, H) waits for the PLC's acknowledge ([nc.aux])
 
 
 class Stage(enum.Enum):
@@ -76,7 +77,8 @@ STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                         WaitKind.COND: ProcessState.WAIT_COND,
                         WaitKind.SND: ProcessState.WAIT_SND,
                         WaitKind.EXE: ProcessState.WAIT_EXE,
-                        WaitKind.FLUSH: ProcessState.WAIT_COND}
+                        WaitKind.FLUSH: ProcessState.WAIT_COND,
+                        WaitKind.AUX: ProcessState.WAIT_COND}
 RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD,
                                    ProcessState.STEP})
 WAITING_STATES: Final = frozenset(STATE_OF_WAIT.values())
@@ -125,6 +127,7 @@ class WaitRecord:
                 WaitKind.SND: f"waits for P{self.target} to take its SND",
                 WaitKind.EXE: f"waits for P{self.target} to be free",
                 WaitKind.FLUSH: "waits for its interpolator to run every block before it",
+                WaitKind.AUX: "waits for the PLC to acknowledge it",
                 }.get(self.kind, "waits")
 
 
@@ -198,7 +201,7 @@ STATE_RULES: Final = (
               "run, until a cycle start or a step",
               "p.dec_block is STEP_HOLD and p.int_item is None and not p.queue", "STEP"),
     StateRule(_WAITS, "the interpolator waits (the wait the machine feels, spec 2.4): the "
-              "state of its wait kind (FLUSH shows as WAIT_COND)",
+              "state of its wait kind (FLUSH and AUX show as WAIT_COND)",
               "p.int_wait is not None", "STATE_OF_WAIT[p.int_wait.kind]"),
     StateRule(_WAITS, "the decoder waits: the state of its wait kind",
               "p.dec_wait is not None", "STATE_OF_WAIT[p.dec_wait.kind]"),
@@ -250,8 +253,9 @@ TRANSITIONS: Final = (
     Transition((_S.RUNNING,), "`(WAI,n)`: n waits in `(SND,k)`, or a token n→k is latched "
                "(delivered; n resumes)", (_S.RUNNING,)),
     Transition((_S.RUNNING,), "`(WAI,var op value)` that does not hold now; ISG `#FLUSH` or "
-               "a synchronous `V.E.` read with blocks still buffered (wait kind FLUSH)",
-               (_S.WAIT_COND,)),
+               "a synchronous `V.E.` read with blocks still buffered (wait kind FLUSH); an "
+               "auxiliary function with a handshake (`[nc.aux]`) output, the PLC's "
+               "acknowledge to come (wait kind AUX)", (_S.WAIT_COND,)),
     Transition((_S.RUNNING,), "`(SND,n)`, rendezvous, n not in `(WAI,k)`", (_S.WAIT_SND,)),
     Transition((_S.RUNNING,), "`(SND,n)`: n external, n in `(WAI,k)`, or `nc.snd = "
                "\"latched\"` (a latch records a `hazard`)", (_S.RUNNING,)),
@@ -261,7 +265,9 @@ TRANSITIONS: Final = (
     Transition((_S.WAIT_PROC,), "n executes `(SND,k)`; an external SND from n arrives; (ISG) "
                "every signal the wait needs has arrived", (_S.RUNNING,)),
     Transition((_S.WAIT_COND,), "a write makes the condition true (inside that write); "
-               "(FLUSH) the interpolator has drained the buffer", (_S.RUNNING,)),
+               "(FLUSH) the interpolator has drained the buffer; (AUX) the PLC set the "
+               "acknowledge, the NC dropped the strobe, the PLC dropped the acknowledge",
+               (_S.RUNNING,)),
     Transition((_S.WAIT_SND,), "n executes `(WAI,k)`", (_S.RUNNING,)),
     Transition((_S.WAIT_EXE,), "n becomes free and k is first in line (P starts in n)",
                (_S.RUNNING,)),
@@ -281,7 +287,7 @@ TRANSITIONS: Final = (
                "with n = k or external, or P not loadable (AL112, AL113, AL120, AL121); a "
                "wait that closes a cycle of waiting processes (AL140, every member); an "
                "orphan wait (AL141); `nc.wait_timeout_s` (AL143); `nc.runaway_blocks` "
-               "(AL144)", (_S.ALARM,)),
+               "(AL144); no acknowledge within `nc.aux.timeout_s` (AL145)", (_S.ALARM,)),
     Transition((*_BUSY, _S.ALARM), "reset (command 3): queues, waits and tokens discarded",
                (_S.IDLE,)),
 )

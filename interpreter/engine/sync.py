@@ -44,13 +44,14 @@ from ncgate.interpreter.diagnostics import (
 )
 from ncgate.interpreter.engine import deadlock
 from ncgate.interpreter.engine import events as ev
-from ncgate.interpreter.engine.actions import Execute, WaitCondition
+from ncgate.interpreter.engine.actions import Execute, ItemKind, WaitCondition
+from ncgate.interpreter.engine.aux import AuxOutput
 from ncgate.interpreter.engine.events import Blocked
 from ncgate.interpreter.engine.ports import FrontEnd, ImagePort, ProgramLoader, ProgramText
 from ncgate.interpreter.engine.process import Process
 from ncgate.interpreter.engine.states import Stage, WaitKind, WaitRecord, Where, describe_where
 from ncgate.interpreter.engine.trace import Trace
-from ncgate.interpreter.settings import RuntimeSettings, SndPolicy
+from ncgate.interpreter.settings import Handshake, RuntimeSettings, SndPolicy
 
 SND_LOG = 16  # entries of the SND log the fieldbus shows
 
@@ -300,18 +301,37 @@ class Sync:
                     where: Where) -> None:
         """A program's write of an image variable, in the name of its block (the trace's
         ``write`` event names the process and the block)."""
+        self.write_changes(p, [(area, index, view, value)], where)
+
+    def write_changes(self, p: Process, changes: list[tuple[str, int, str, int]],
+                      where: Where) -> None:
+        """Several variables in one atomic write, in the name of ``p``'s block."""
         self.writer_proc = p
         self.writer_where = where
         try:
             n = f" N{where[2]}" if where[2] is not None else f" line {where[1]}"
-            self.image.write([(area, index, view, value)], f"P{p.number}{n}")
+            self.image.write(changes, f"P{p.number}{n}")
         finally:
             self.writer_proc = None
 
     def acts_early(self, p: Process, code: str, where: Where) -> None:
         """A plain (not #) SND, WAI or SYVAR write acts when the decoder reaches it (spec 2.4),
         here while motion programmed above it is still queued: on the machine it happens
-        before that motion ends.  Legal (manual 1.4), but rarely what was meant: say so."""
+        before that motion ends.  Legal (manual 1.4), but rarely what was meant: say so.
+        An auxiliary function with a handshake still queued is a sync point it crosses: the
+        hazard names it."""
+        for item in p.queue:
+            if item.kind is ItemKind.AUX:
+                for aux in item.actions or ():
+                    if isinstance(aux, AuxOutput) and aux.handshake is not Handshake.NONE:
+                        _, line, n = item.where
+                        above = f"N{n}" if n is not None else f"line {line}"
+                        self._record(ev.Hazard, self._host.now, p.number, where,
+                                     f"{code} acted at decode time before the PLC acknowledged "
+                                     f"{aux.shown} above it ({above}): a handshake is a sync "
+                                     "point; mark the block # to act in motion order, or set "
+                                     "nc.lookahead = 0")
+                        return
         _, line, n = p.queue[0].where
         above = f"N{n}" if n is not None else f"line {line}"
         self._record(ev.Hazard, self._host.now, p.number, where,

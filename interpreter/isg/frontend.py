@@ -26,6 +26,7 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import RuntimeAlarm, fmt_number
 from ncgate.interpreter.dialect import ExternalBinding
 from ncgate.interpreter.engine.actions import ItemKind, Step
+from ncgate.interpreter.engine.aux import aux_items
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
 from ncgate.interpreter.engine.states import Stage, Where
@@ -52,7 +53,7 @@ from ncgate.interpreter.isg.nodes import (
 from ncgate.interpreter.isg.parser import IsgProgram, blank_comments
 from ncgate.interpreter.isg.signals import AwaitSignal, RemoveSignals, SendSignal, SignalBoard
 from ncgate.interpreter.motion import Modal, plan_move
-from ncgate.interpreter.settings import RuntimeSettings
+from ncgate.interpreter.settings import AUX_LETTERS, RuntimeSettings
 
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
@@ -457,8 +458,11 @@ class _BlockCompiler:
             modal = p.modal
             axes: dict[str, float] = {}
             arc: dict[str, float] = {}
+            aux: list[tuple[str, float]] = []  # M, S, T: for [nc.aux]
             for letter, fn in values:
                 v = fn(p)
+                if letter in AUX_LETTERS:
+                    aux.append((letter, v))
                 if letter == "G":
                     modal.g_word(int(v), planes=False)  # the subset has no G17..G19
                 elif letter == "F":
@@ -468,9 +472,12 @@ class _BlockCompiler:
                 elif letter in _ARC:
                     arc[letter] = v
             move = plan_move(modal, axes, arc, settings)
-            if move is None:
+            before, after = aux_items(settings.aux_interface, aux, where)
+            items = [*before, QueueItem(ItemKind.MOVE, move.duration_s, where, move),
+                     *after] if move is not None else [*before, *after]
+            if not items:
                 return NEXT
-            return queue_motion(p, [QueueItem(ItemKind.MOVE, move.duration_s, where, move)])
+            return queue_motion(p, items)
         return motion
 
     def _end(self, how: str) -> Op:

@@ -30,6 +30,7 @@ from ncgate.interpreter.engine.actions import (
     WaitProcess,
     WriteSyvar,
 )
+from ncgate.interpreter.engine.aux import aux_items
 from ncgate.interpreter.engine.ports import BlockHost, ProgramText
 from ncgate.interpreter.engine.process import CompiledBlock, LoadedProgram, Op, Process, QueueItem
 from ncgate.interpreter.engine.states import Stage, Where
@@ -65,7 +66,7 @@ from ncgate.interpreter.nc110.nodes import (
 )
 from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.nc110.search import search
-from ncgate.interpreter.settings import AXES, RuntimeSettings
+from ncgate.interpreter.settings import AUX_LETTERS, AXES, RuntimeSettings
 
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
@@ -316,10 +317,13 @@ class _BlockCompiler:
         arc: dict[str, float] = {}
         items: list[QueueItem] = []
         tool_change = False
+        aux: list[tuple[str, float]] = []  # the auxiliary words, for [nc.aux]
         for word in words:
             value = word.value
             v = p.E[value.index] if not isinstance(value, float) else value
             letter = word.letter
+            if letter in AUX_LETTERS:
+                aux.append((letter, v))
             if letter == "G":
                 modal.g_word(int(v))
             elif letter == "F":
@@ -331,6 +335,8 @@ class _BlockCompiler:
             elif letter in _MOTION_WORDS:
                 (arc if letter in "IJKR" else axes)[letter] = v
         where = self.where
+        before, after = aux_items(settings.aux_interface, aux, where)
+        items.extend(before)
         if tool_change:
             items.append(QueueItem(ItemKind.TOOL, settings.tool_change_s, where))
         move = plan_move(modal, axes, arc, settings)
@@ -342,6 +348,7 @@ class _BlockCompiler:
                 raise RuntimeAlarm(AlarmCode.BAD_ARGUMENT, f"(DLY,{seconds:g}): negative time")
             check_duration(seconds, settings, f"(DLY,{fmt_number(seconds)})")
             items.append(QueueItem(ItemKind.DWELL, seconds, where))
+        items.extend(after)
         return items
 
     def _motion_op(self, words: list[Word], dwells: list[Dwell]) -> Op:
@@ -401,7 +408,9 @@ class _BlockCompiler:
                 WriteSyvar(i, _int16(fn(p.E, read), f"SYVAR{i}")) for i, fn in syvars]
             actions.extend(make(p) for make in wait_actions)
             for item in self._plan(p, words, dwells):
-                if item.move is not None:
+                if item.kind is ItemKind.AUX:  # auxiliary functions: in motion order too
+                    actions.extend(item.actions or ())  # type: ignore[arg-type]
+                elif item.move is not None:
                     actions.append(Motion(item.move))
                 else:  # tool change or dwell inside a # block: a timed move of no length
                     here = tuple(p.modal.position)
