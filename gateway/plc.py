@@ -28,6 +28,7 @@ from typing import Any
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.state import state_folder
+from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.wiring import Runtime
 from ncgate.inputs import (
@@ -38,6 +39,8 @@ from ncgate.inputs import (
     Snd,
     Source,
     SourceKind,
+    Var,
+    Write,
 )
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
@@ -94,6 +97,9 @@ def program_order(logic: Logic, config: Config) -> list[str]:
     return order
 
 
+_NO_AUX = (0, False) * 4  # NC.P[k].M, MSTROBE, S, ... without [nc.aux]
+
+
 class EngineNc:
     """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`): it reads the engine,
     and acts on it through the door, attributed ``plc FILE:LINE`` (where the logic set the
@@ -104,13 +110,15 @@ class EngineNc:
         self.door = door
 
     def snapshot(self) -> list[NcSnapshot]:
-        out = []
+        out: list[NcSnapshot] = []
+        aux = self.engine.aux
         for p in self.engine.processes.values():
             state = p.state
             n = p.where[2]
             out.append((int(state), n or 0, p.where[1], state in WAITING_STATES,
                         p.alarm is not None, p.alarm[0] if p.alarm else 0,
-                        state is ProcessState.IDLE, p.held))
+                        state is ProcessState.IDLE, p.held,
+                        *(aux.snapshot(p.number) if aux is not None else _NO_AUX)))
         return out
 
     def events(self) -> int:
@@ -128,6 +136,16 @@ class EngineNc:
 
     def send(self, sender: int, target: int, where: str) -> None:
         self.door.apply(Snd(sender, target, Source(SourceKind.PLC, where)))
+
+    def aux_ack(self, process: int, letter: str, value: bool, where: str) -> None:
+        """NC.P[k].MACK ..: a write of the acknowledge's SA bit, through the door."""
+        aux = self.engine.aux
+        if aux is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no auxiliary function is output: the "
+                               "config has no [nc.aux]")
+        ack = aux.settings.place(process, letter)[2]
+        self.door.apply(Write(Var("SA", ack, "bit"), int(value),
+                              Source(SourceKind.PLC, where)))
 
     def fault(self, message: str) -> None:
         self.door.apply(FieldbusAlarm(AlarmCode.PLC_FAULT, f"PLC fault: {message}",

@@ -24,7 +24,7 @@ COLOURS = {
 LABELS = {"RUNNING": "running", "WAIT_PROC": "WAI,n", "WAIT_COND": "WAI,cond",
           "WAIT_SND": "SND waits", "WAIT_EXE": "EXE waits", "ALARM": "alarm"}
 _ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT_EXE",
-       "signal": "WAIT_PROC", "flush": "WAIT_COND"}
+       "signal": "WAIT_PROC", "flush": "WAIT_COND", "aux": "WAIT_COND"}
 
 LEFT, RIGHT, TOP, LANE, GAP = 150, 30, 50, 34, 14
 
@@ -62,6 +62,8 @@ def state_intervals(events: Iterable[EventDict], processes: int
                 label += f"signal {target}"
             elif on_kind == "flush":
                 label += "#FLUSH"
+            elif on_kind == "aux":  # an auxiliary function waits for the PLC's acknowledge
+                label += f"{target} ack"
             else:
                 label += f"{on_kind} P{target}"
             current[proc] = (t, _ON[on_kind], label)
@@ -187,3 +189,21 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                  '   ▼ PLC write</text>')
     parts.append("</svg>")
     out.write("\n".join(parts) + "\n")
+        elif kind in ("aux", "aux_ack") and proc in lane_y:
+            # An auxiliary function: up from the lane to the PLC when output, down from the
+            # PLC when acknowledged (a strobe and its answer, [nc.aux]).
+            cx, out = x(e["t"]), kind == "aux"
+            y1, y2 = ((lane_y[proc] + 3, plc_y + LANE - 3) if out
+                      else (plc_y + LANE - 3, lane_y[proc] + 3))
+            colour = "#ef6c00" if out else "#6a1b9a"
+            code, t = str(e["code"]), float(e["t"])
+            what = (f"{code} ({e['handshake']})" if out
+                    else f"{code} acknowledged by {e['by']}")
+            dash = "" if out else ' stroke-dasharray="3,2"'
+            title = escape(f"P{proc} {what} at {t:.3f} s")
+            parts.append(f'<line x1="{cx:.1f}" y1="{y1:.1f}" x2="{cx:.1f}" y2="{y2:.1f}" '
+                         f'stroke="{colour}" stroke-width="1.5" marker-end="url(#arrow)"'
+                         f'{dash}><title>{title}</title></line>')
+            if out:
+                parts.append(f'<text x="{cx + 3:.1f}" y="{lane_y[proc] - 2:.1f}" '
+                             f'font-size="10" fill="{colour}">{escape(str(e["code"]))}</text>')

@@ -46,7 +46,9 @@ from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
 
-NcSnapshot = tuple[int, int, int, bool, bool, int, bool, bool]  # see compiler.NC_PROCESS
+# See compiler.NC_PROCESS: state, N, line, waiting, alarm, alarm code, idle, held, then the
+# auxiliary functions' value and strobe for M, S, T, H.
+NcSnapshot = tuple[int, ...]
 
 
 class PlcState(enum.IntEnum):
@@ -74,6 +76,10 @@ class NcPort(Protocol):
 
     # InputRefused when it cannot go (said as a hazard)
     def send(self, sender: int, target: int, where: str) -> None: ...
+
+    # NC.P[k].MACK (SACK, TACK, HACK): the acknowledge of process k's auxiliary functions
+    # of ``letter`` set to ``value``; InputRefused when it cannot go (said as a hazard).
+    def aux_ack(self, process: int, letter: str, value: bool, where: str) -> None: ...
 
     def fault(self, message: str) -> None: ...
 
@@ -131,7 +137,7 @@ class PlcRuntime:
         self._sends: list[tuple[int, int, str]] = []
         self._bind(logic.namespace)
         self._last_outputs = [False] * len(self._outputs)
-        self._last_process_outputs = [[False] * 3 for _ in self._process_outputs]
+        self._last_process_outputs = [[False] * len(o) for o in self._process_outputs]
         self._last_overrides = [100]
         self._last_process_overrides = [100] * len(self._process_overrides)
         self._retained = [(p, v) for p, table in logic.programs.items()
@@ -158,8 +164,8 @@ class PlcRuntime:
         self._outputs[:] = [False] * len(self._outputs)
         self._last_outputs = [False] * len(self._outputs)
         for outputs in self._process_outputs:
-            outputs[:] = [False, False, False]
-        self._last_process_outputs = [[False] * 3 for _ in self._process_outputs]
+            outputs[:] = [False] * len(outputs)
+        self._last_process_outputs = [[False] * len(o) for o in self._process_outputs]
         self._overrides[:] = [100]
         self._last_overrides = [100]
         self._process_overrides[:] = [100] * len(self._process_overrides)
@@ -336,6 +342,10 @@ class PlcRuntime:
                 for i, word in enumerate((1, 2, 3)):
                     if now[i] and not before[i]:
                         self._command(word, self._process_outputs_at[k][i], k + 1)
+                for i, letter in enumerate("MSTH", 3):  # MACK ..: levels, on a change
+                    if bool(now[i]) != bool(before[i]):
+                        self._aux_ack(k + 1, letter, bool(now[i]),
+                                      self._process_outputs_at[k][i])
                 self._last_process_outputs[k] = [bool(o) for o in now]
         if self._overrides[0] != self._last_overrides[0]:
             self._last_overrides[0] = value = self._overrides[0]
@@ -356,6 +366,12 @@ class PlcRuntime:
             self.nc.command(word, where, process)
         except NcgateError as exc:  # refused (an interlock, ...): said, the scan goes on
             self.nc.hazard(f"PLC command {word} at {where}: {exc}")
+
+    def _aux_ack(self, process: int, letter: str, value: bool, where: str) -> None:
+        try:
+            self.nc.aux_ack(process, letter, value, where)
+        except NcgateError as exc:
+            self.nc.hazard(f"PLC NC.P[{process}].{letter}ACK at {where}: {exc}")
 
     def _override(self, feed: int, where: str, process: int | None) -> None:
         try:

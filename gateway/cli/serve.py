@@ -43,6 +43,8 @@ def _on(on: object) -> str:
         return f"signal {on.signal} from {source} ({on.level})"
     if isinstance(on, ev.FlushOn):
         return "its interpolator (#FLUSH WAIT)"
+    if isinstance(on, ev.AuxOn):
+        return f"the PLC to acknowledge {on.shown or on.code} ({on.ack})"
     return str(on)
 
 
@@ -89,6 +91,10 @@ def describe(event: Event) -> str | None:
         return f"{event.var} forced to {event.value} (by {event.who})"
     if isinstance(event, ev.Forced):
         return f"{event.var} = {event.value} by {event.who} overridden by force"
+    if isinstance(event, ev.Aux):
+        return f"P{proc} outputs {event.code} ({event.handshake}){at}"
+    if isinstance(event, ev.AuxAck):
+        return f"P{proc} {event.code} acknowledged by {event.by}{at}"
     return None
 
 

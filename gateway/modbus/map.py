@@ -483,6 +483,34 @@ class ModbusMap:
                 "hmi_end": region.hmi(address + count - 1), "type": region.type,
                 "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
                 "content": f"{name} ({text}): an I/O name of [symbols]"})
+        rows += self._aux_rows()
+        return rows
+
+    def _aux_rows(self) -> list[dict[str, object]]:
+        """A row for each process's auxiliary-function values, strobes and acknowledges
+        ([nc.aux]; M, S, T, H in that order)."""
+        aux = self.config.nc.aux_interface
+        rows: list[dict[str, object]] = []
+        if aux is None:
+            return rows
+        for k in range(1, self.config.nc.processes + 1):
+            (area, index, _), strobe, ack = aux.place(k, "M")
+            first = f"SYVAR{index}" if area == "SYVAR" else f"SK{index}.IN"
+            for text, count, what in (
+                    (first, 4, "the values of M, S, T, H output (written by the NC)"),
+                    (f"SA{strobe}", 4, "the strobes of M, S, T, H (set by the NC)"),
+                    (f"SA{ack}", 4, "the acknowledges of M, S, T, H (set by the PLC)")):
+                place = self._symbol_place(text)
+                if place is None:
+                    continue
+                region, address, width = place
+                end = address + count * width - 1
+                rows.append({
+                    "table": region.table.value, "start": address, "end": end,
+                    "count": count * width, "hmi_start": region.hmi(address),
+                    "hmi_end": region.hmi(end), "type": region.type,
+                    "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
+                    "content": f"P{k} auxiliary functions ([nc.aux]): {what}"})
         return rows
 
     def _symbol_place(self, text: str) -> tuple[Region, int, int] | None:

@@ -8,6 +8,8 @@ plays the PLC with the real protocol:
     await plc.wait_state(2, "WAIT_COND")     # process 2 waits at N40 ...
     await plc.set("SA10", 1)                 # ... for the PLC to set SA10
     snd = await plc.next_snd()               # the next SND the gateway reports
+    await plc.expect_aux("M08")              # P1 outputs M08 with its strobe ([nc.aux])
+    await plc.ack_aux()                      # acknowledge, strobe drops, drop the ack
 
 A Modbus client learns of changes only by reading: the ``wait_*`` helpers poll the status
 registers every ``poll_s`` until the state is there or ``timeout_s`` runs out.
@@ -16,6 +18,7 @@ registers every ``poll_s`` until the state is there or ``timeout_s`` runs out.
 from __future__ import annotations
 
 import asyncio
+import re
 from dataclasses import dataclass
 
 from pymodbus.client import AsyncModbusTcpClient
@@ -49,6 +52,23 @@ class PlcSeen:
     fault_line: int
     late_us: int = 0  # how late the last scan started
     max_late_us: int = 0  # the largest lateness since the PLC started
+
+
+@dataclass(frozen=True, slots=True)
+class AuxSeen:
+    """An auxiliary function the NC outputs with its strobe up ([nc.aux])."""
+
+    process: int
+    letter: str  # M, S, T, H
+    value: int
+
+    @property
+    def code(self) -> str:
+        """As the trace names it: ``M8``, ``T5``."""
+        return f"{self.letter}{self.value}"
+
+
+_AUX_CODE = re.compile(r"([MSTH])(-?\d+)$", re.IGNORECASE)
 
 
 class VirtualPLC:
@@ -170,6 +190,68 @@ class VirtualPLC:
     async def send(self, sender: int, target: int) -> None:
         """An SND in the name of external process ``sender`` (the mailbox)."""
         await self._write(self.map.MAILBOX, [sender, target])
+
+    # -- auxiliary functions ([nc.aux]) ---------------------------------------------------------
+
+    def _aux_place(self, process: int, letter: str) -> tuple[str, int, int]:
+        aux = self.config.nc.aux_interface
+        if aux is None:
+            raise VirtualPLCError("the config has no [nc.aux]: no auxiliary function is output")
+        (area, index, _), strobe, ack = aux.place(process, letter.upper())
+        return (f"SYVAR{index}" if area == "SYVAR" else f"SK{index}.IN"), strobe, ack
+
+    async def aux_strobes(self) -> list[AuxSeen]:
+        """Every auxiliary function whose strobe is up now, process by process (M, S, T, H)."""
+        out = []
+        for k in range(1, self.config.nc.processes + 1):
+            _, first, _ = self._aux_place(k, "M")
+            r = await self.client.read_coils(first, count=4, device_id=self.unit)
+            self._check(r)
+            for letter, up in zip("MSTH", r.bits[:4], strict=True):
+                if up:
+                    value, _, _ = self._aux_place(k, letter)
+                    out.append(AuxSeen(k, letter, await self.get(value)))
+        return out
+
+    async def expect_aux(self, code: str, process: int = 1, timeout_s: float = 10.0) -> AuxSeen:
+        """Until process k outputs ``code`` (``"M08"``, ``"T5"``) with its strobe up; raises
+        VirtualPLCError when another code of that letter is strobed instead, or none comes."""
+        found = _AUX_CODE.match(code.strip())
+        if found is None:
+            raise VirtualPLCError(f"{code!r} is not an auxiliary function (M08, S1000, T5, H2)")
+        letter, wanted = found.group(1).upper(), int(found.group(2))
+        value, strobe, _ = self._aux_place(process, letter)
+        try:
+            async with asyncio.timeout(timeout_s):
+                # A Modbus client learns only by reading: poll.
+                while not await self.get(f"SA{strobe}"):  # noqa: ASYNC110
+                    await asyncio.sleep(self.poll_s)
+        except TimeoutError:
+            raise VirtualPLCError(f"P{process} output no {letter} function in {timeout_s:g} s "
+                                  f"(strobe SA{strobe} stayed 0; expected {code})") from None
+        seen = AuxSeen(process, letter, await self.get(value))
+        if seen.value != wanted:
+            raise VirtualPLCError(f"P{process} output {seen.code}, not {code}")
+        return seen
+
+    async def ack_aux(self, process: int | AuxSeen = 1, letter: str = "M",
+                      timeout_s: float = 10.0) -> None:
+        """Acknowledge process k's ``letter`` function (or an :class:`AuxSeen`): set the
+        acknowledge, wait until the NC drops the strobe, drop the acknowledge."""
+        if isinstance(process, AuxSeen):
+            letter = process.letter
+            process = process.process
+        _, strobe, ack = self._aux_place(process, letter[:1])
+        await self.set(f"SA{ack}", 1)
+        try:
+            async with asyncio.timeout(timeout_s):
+                # A Modbus client learns only by reading: poll.
+                while await self.get(f"SA{strobe}"):  # noqa: ASYNC110
+                    await asyncio.sleep(self.poll_s)
+        except TimeoutError:
+            raise VirtualPLCError(f"P{process}'s strobe SA{strobe} did not drop in "
+                                  f"{timeout_s:g} s after the acknowledge SA{ack}") from None
+        await self.set(f"SA{ack}", 0)
 
     async def event_counter(self) -> int:
         hi, lo = await self._input(2, 2)

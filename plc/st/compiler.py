@@ -100,14 +100,20 @@ TOD_MS = 86_400_000
 # NC.P[k] members: (index in the snapshot tuple, type).
 NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
-              "IDLE": (6, "BOOL"), "HELD": (7, "BOOL")}
+              "IDLE": (6, "BOOL"), "HELD": (7, "BOOL"),
+              # The auxiliary functions ([nc.aux]): the value last output, its strobe.
+              "M": (8, "DINT"), "MSTROBE": (9, "BOOL"), "S": (10, "DINT"),
+              "SSTROBE": (11, "BOOL"), "T": (12, "DINT"), "TSTROBE": (13, "BOOL"),
+              "H": (14, "DINT"), "HSTROBE": (15, "BOOL")}
 NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
 # NC outputs (BOOL, in _NCO): START/HOLD/RESET act on a rising edge; OPT_STOP, BLOCK_SKIP
 # and HOLD_LEVEL are levels (the operator's switches, and a feed-hold interlock).
 NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2, "OPT_STOP": 3, "BLOCK_SKIP": 4,
               "HOLD_LEVEL": 5}
-# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge.
-NC_PROCESS_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2}
+# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge; the
+# acknowledges of its auxiliary functions ([nc.aux]), levels.
+NC_PROCESS_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2, "MACK": 3, "SACK": 4, "TACK": 5,
+                      "HACK": 6}
 NC_VALUE_OUTPUTS = {"FEED_OVERRIDE"}  # INT percent: NC.FEED_OVERRIDE, NC.P[k].FEED_OVERRIDE
 
 # Limits of the Python the logic compiles to (CPython 3.11): 100 levels of indentation, 20
@@ -1468,7 +1474,7 @@ class Compiler:
             try:
                 e = self.expr(call, scope)
             finally:
-                self._prelude_call = None
+                self._prelude_call = self._statement_call = None
             out.emit(e.code, s.span)
             return
         place = scope.place(target, write=False)
@@ -2003,7 +2009,10 @@ class Compiler:
             values[k] = self.coerce(self.typed_expr(arg.expr, scope, v.type), v.type,
                                     _span_of(arg.expr))
         args = ", ".join(f"v_{k}={code}" for k, code in values.items())
-        assert info.result is not None
+        if info.result is None and self._statement_call is not x:
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} has no result (a FUNCTION "
+                             "without a type): call it as a statement", x.span)
+        result = info.result if info.result is not None else VOID
         if not info.in_outs:
             return E(f"F_{key}({args})", info.result)
         missing = [k for k in info.in_outs if k not in values]
