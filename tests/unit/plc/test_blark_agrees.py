@@ -1,15 +1,17 @@
 """An independent parser agrees on what is valid Structured Text (issue 29, item 7).
 
 blark (a lark-based IEC 61131-3 parser, Beckhoff TwinCAT's dialect, on PyPI) reads every ST
-file of the repository that is marked valid -- ``tests/programs/st/valid/``, the examples'
-``.st`` files and the vendored utility library -- and every one marked invalid
+file of the repository that is marked valid -- ``tests/programs/st/valid/`` and the examples'
+``.st`` files -- and every one marked invalid
 (``tests/programs/st/invalid/``, syntax errors).  ncgate must load each valid file and
 refuse each invalid one, and blark must say the same.  Where the two disagree for a reason
 (a gap of blark's, or a construct ncgate refuses), the file is listed in ``DISAGREE`` with
 that reason, and the test checks that they still disagree: a listed file that blark comes
 to accept fails the test until it is taken off the list.  Nothing is skipped in silence.
 
-blark checks syntax only (it has no type checker): the invalid corpus is syntax errors.
+blark checks syntax only (it has no type checker): the invalid corpus is syntax errors.  The
+vendored utility library (``library/``) is no plain ST file -- it is written as logi.CAD
+units -- and ``test_utility_library.py`` reads it.
 """
 
 from __future__ import annotations
@@ -25,9 +27,7 @@ from ncgate.plc.st.plcopen import read_logic_file
 from ...conftest import EXAMPLES, ROOT
 
 CORPUS = ROOT / "tests" / "programs" / "st"
-LIBRARY = ROOT / "tests" / "unit" / "plc" / "library"
-VALID = sorted([*(CORPUS / "valid").glob("*.st"), *EXAMPLES.rglob("*.st"),
-                *LIBRARY.glob("*.st")])
+VALID = sorted([*(CORPUS / "valid").glob("*.st"), *EXAMPLES.rglob("*.st")])
 INVALID = sorted((CORPUS / "invalid").glob("*.st"))
 CONTEXT = Context(1024, 512, 256, 5, frozenset())
 # Files on which ncgate and blark 0.8.3 disagree, and why (relative to the repository).

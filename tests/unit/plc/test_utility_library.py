@@ -1,0 +1,231 @@
+"""An open-source ST utility library loads and its functions return their documented results
+(issue 29, "Done when").
+
+The library is Wenger Automation & Engineering's *structured-text-utilities* (MIT, vendored
+with its licence in ``library/structured_text_utilities/``, docs/decisions.md): about 3,100
+lines of functions on arrays, numbers, strings and times, written "to compile on every device
+that complies to IEC 61131-3".  It is written as logi.CAD 3 units (``UNIT``, ``INTERFACE``
+with forward declarations and ``USES``, ``IMPLEMENTATION``): that wrapper is no IEC 61131-3,
+so :func:`unwrap` blanks those lines (the line numbers stay the file's) and nothing else.
+
+What does not load is listed in ``NOT_LOADED`` with its code and reason, and the test checks
+that exactly those functions fail, with those codes: a function ncgate comes to load fails
+the test until it is taken off the list.  The rest is called through the scan, and each result
+is the one the library's comments document, or the calendar's (ISO 8601) where they name a
+date.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from ncgate.plc.image import IOImage
+from ncgate.plc.scan import PlcRuntime
+from ncgate.plc.st import nodes as n
+from ncgate.plc.st.compiler import Context, compile_logic
+from ncgate.plc.st.diagnostics import LogicError
+from ncgate.plc.st.parser import parse_source
+
+from .st_harness import RecordingNc
+
+LIBRARY = Path(__file__).parent / "library" / "structured_text_utilities"
+UNITS = ("UTILITIES_STRING", "UTILITIES_TIME", "UTILITIES_MATH", "UTILITIES_ARRAY",
+         "UTILITIES_BYTE")
+CONTEXT = Context(64, 16, 8, 5, frozenset())
+# logi.CAD's unit wrapper: a UNIT, INTERFACE/IMPLEMENTATION, USES, forward declarations.
+WRAPPER = re.compile(r"^\s*(UNIT\s+\w+\s*;|INTERFACE|END_INTERFACE|IMPLEMENTATION|"
+                     r"END_IMPLEMENTATION|USES\s[^;]*;|FUNCTION\s+\w+\s*;)\s*(//.*)?$")
+FUNCTION = re.compile(r"^\s*FUNCTION\s+(\w+)\s*:")
+END_FUNCTION = re.compile(r"^\s*END_FUNCTION\b")
+
+VLA = ("a parameter ARRAY[..] OF T: a variable-length array (logi.CAD's spelling of IEC "
+       "61131-3's ARRAY[*], 6.5.3), which ncgate's ST does not have")
+STRING_INDEX = ("s[i]: one character of a STRING by its index, which ncgate's ST does not "
+                "have")
+OWN_CONVERSION = ("defines its own USINT_TO_STRING, STRING_TO_INT, ...: IEC 61131-3 makes "
+                  "these standard conversions, so the name is taken (ncgate's are used)")
+VENDOR = ("calls ANYTYPE_TO_LITTLEBYTEARRAY / LITTLEBYTEARRAY_TO_ANYTYPE, logi.CAD's own "
+          "functions, not IEC 61131-3's")
+NEEDS = "calls a function above that does not load"
+NOT_LOADED: dict[str, tuple[str, str]] = {
+    **{name: ("ST002", VLA) for name in (
+        "BYTES_TO_STRING", "STRING_TO_BYTES", "ENCODE_STRING", "DECODE_STRING",
+        *(f"CALCULATE_STATISTICS_OF_{t}_ARRAY" for t in (
+            "LREAL", "REAL", "DINT", "UDINT", "INT", "UINT", "SINT", "USINT")),
+        *(f"SORT_{t}_ARRAY" for t in (
+            "LREAL", "REAL", "DINT", "UDINT", "INT", "UINT", "SINT", "USINT", "STRING")),
+        *(f"REVERSE_{t}_ARRAY" for t in (
+            "LREAL", "REAL", "DINT", "UDINT", "INT", "UINT", "SINT", "USINT", "BYTE", "WORD",
+            "DWORD", "STRING")),
+        *(f"GET_FIRST_INDEX_OF_{t}_IN_ARRAY" for t in (
+            "LREAL", "REAL", "DINT", "UDINT", "INT", "UINT", "SINT", "USINT", "BYTE", "WORD",
+            "DWORD", "STRING")))},
+    **{name: ("ST020", STRING_INDEX) for name in ("ROUND_LREAL", "ROUND_REAL",
+                                                  "COMPARE_STRINGS")},
+    **{name: ("ST032", OWN_CONVERSION) for name in (
+        "USINT_TO_STRING", "SINT_TO_STRING", "UINT_TO_STRING", "INT_TO_STRING",
+        "STRING_TO_USINT", "STRING_TO_SINT", "STRING_TO_UINT", "STRING_TO_INT")},
+    **{name: ("ST012", VENDOR) for name in (
+        "DATE_TO_UDINT_INTERNAL", "UDINT_TO_DATE_INTERNAL", "TIME_OF_DAY_TO_UDINT_INTERNAL",
+        "UDINT_TO_TIME_OF_DAY_INTERNAL")},
+    **{name: ("ST012", NEEDS) for name in (
+        "CREATE_TIME_OF_DAY", "CREATE_DATE", "CREATE_DATE_AND_TIME", "DISSECT_TIME_OF_DAY",
+        "DISSECT_DATE", "DISSECT_DATE_AND_TIME", "GET_DAY_OF_WEEK", "GET_DAY_OF_YEAR",
+        "GET_WEEK_OF_YEAR", "FORMAT_TIME_OF_DAY", "FORMAT_DATE", "FORMAT_DATE_AND_TIME")},
+}
+
+
+def unwrap(text: str) -> list[str]:
+    return ["" if WRAPPER.match(line) else line for line in text.split("\n")]
+
+
+def functions(lines: list[str]) -> dict[str, tuple[int, int]]:
+    """Each FUNCTION's first and last line (0-based)."""
+    out: dict[str, tuple[int, int]] = {}
+    name, first = None, 0
+    for i, line in enumerate(lines):
+        found = FUNCTION.match(line)
+        if found:
+            name, first = found.group(1), i
+        elif name is not None and END_FUNCTION.match(line):
+            out[name] = (first, i)
+            name = None
+    return out
+
+
+class Library:
+    """The units, unwrapped; what does not load, found as ncgate loads it."""
+
+    def __init__(self) -> None:
+        self.lines = {unit: unwrap((LIBRARY / f"{unit}.st").read_text(encoding="utf-8"))
+                      for unit in UNITS}
+        self.where = {unit: functions(lines) for unit, lines in self.lines.items()}
+        self.failed: dict[str, str] = {}  # function -> the code of its first diagnostic
+        # Syntax, one function at a time (blank lines keep its line numbers).
+        for unit, found in self.where.items():
+            for name, (first, last) in found.items():
+                text = "\n" * first + "\n".join(self.lines[unit][first:last + 1])
+                try:
+                    parse_source(text, unit)
+                except LogicError as exc:
+                    self.failed[name] = exc.diagnostics[0].code.code
+        # Then the checks of the whole, until what is left loads.
+        while True:
+            try:
+                self.logic = compile_logic(self.files(), CONTEXT)
+                return
+            except LogicError as exc:
+                for d in exc.diagnostics:
+                    name = self.function_at(d.span.file, d.span.line)
+                    assert name is not None, d.render()
+                    self.failed.setdefault(name, d.code.code)
+
+    def function_at(self, unit: str, line: int) -> str | None:
+        return next((name for name, (first, last) in self.where[unit].items()
+                     if first < line <= last + 1), None)
+
+    def files(self, extra: str = "") -> list[n.SourceFile]:
+        out = []
+        for unit, lines in self.lines.items():
+            kept = list(lines)
+            for name in self.failed:
+                if name in self.where[unit]:
+                    first, last = self.where[unit][name]
+                    kept[first:last + 1] = [""] * (last + 1 - first)
+            out.append(parse_source("\n".join(kept), unit))
+        if extra:
+            out.append(parse_source(extra, "calls.st"))
+        return out
+
+
+LIB = Library()
+
+
+def run(body: str, decls: str) -> dict[str, Any]:
+    """One scan of a PROGRAM that calls the library; its variables."""
+    logic = compile_logic(LIB.files(f"PROGRAM calls\nVAR\n{decls}\nEND_VAR\n{body}\n"
+                                    "END_PROGRAM\n"), CONTEXT)
+    runtime = PlcRuntime(logic, IOImage(64, 16, 8), RecordingNc(), ["calls"])
+    runtime.scan(0)
+    names = [decl.split(":")[0].strip() for decl in decls.split(";") if decl.strip()]
+    return {name: runtime.read(f"calls.{name}") for name in names}
+
+
+def test_the_library_is_about_three_thousand_lines_of_ninety_seven_functions() -> None:
+    total = sum(len(lines) for lines in LIB.lines.values())
+    assert 3000 <= total <= 3200
+    assert sum(len(found) for found in LIB.where.values()) == 97
+
+
+def test_exactly_the_listed_functions_do_not_load_and_for_the_listed_reason() -> None:
+    assert {name: code for name, code in LIB.failed.items()} == {
+        name: code for name, (code, _) in NOT_LOADED.items()}
+    loaded = {name for found in LIB.where.values() for name in found} - set(LIB.failed)
+    assert len(loaded) == 25
+
+
+def test_string_functions_return_what_their_comments_say() -> None:
+    got = run("""
+c3 := CONCAT3('a', 'b', 'c');
+c9 := CONCAT9('1', '2', '3', '4', '5', '6', '7', '8', '9');
+starts := STRING_STARTSWITH('ncgate', 'nc');
+starts_short := STRING_STARTSWITH('nc', 'ncgate');
+ends := STRING_ENDSWITH('ncgate', 'gate');
+ends_case := STRING_ENDSWITH('ncgate', 'GATE');
+padded := PAD_STRING_LEFT('7', 3, '0');
+long_enough := PAD_STRING_LEFT('1234', 3, '0');
+right := PAD_STRING_RIGHT('ab', 4, '*');
+""", """c3 : STRING; c9 : STRING; starts : BOOL; starts_short : BOOL; ends : BOOL;
+ends_case : BOOL; padded : STRING; long_enough : STRING; right : STRING;""")
+    assert got == {"c3": "abc", "c9": "123456789", "starts": True, "starts_short": False,
+                   "ends": True, "ends_case": False,  # "This function is case-sensitive."
+                   "padded": "007",
+                   "long_enough": "1234",  # "already equal or greater ... unchanged"
+                   "right": "ab**"}
+
+
+def test_time_functions_return_the_documented_example() -> None:
+    """The comments' example: 1 day, 21 h, 34 min, 56.789 s is 'P1DT21H34M56.789S'."""
+    got = run("""
+t := CREATE_TIME(1, 21, 34, 56, 789);
+parts := DISSECT_TIME(T#1d21h34m56s789ms);
+iso := FORMAT_TIME(T#1d21h34m56s789ms, TIME_FORMAT#ISO8601);
+short := FORMAT_TIME(T#2m, TIME_FORMAT#ISO8601);
+tod.hour := 21; tod.minute := 34; tod.second := 56; tod.millisecond := 789;
+tod_iso := FORMAT_TIME_OF_DAY_DISSECTED(tod, TIME_OF_DAY_FORMAT#ISO8601);
+tod_hhmm := FORMAT_TIME_OF_DAY_DISSECTED(tod, TIME_OF_DAY_FORMAT#ISO8601_HHMM);
+tod_nodlm := FORMAT_TIME_OF_DAY_DISSECTED(tod, TIME_OF_DAY_FORMAT#ISO8601_HHMMSS_NODLM);
+""", """t : TIME; parts : TIME_DISSECTED; iso : STRING; short : STRING;
+tod : TIME_OF_DAY_DISSECTED; tod_iso : STRING; tod_hhmm : STRING; tod_nodlm : STRING;""")
+    assert got["t"] == ((24 + 21) * 60 + 34) * 60_000 + 56_789  # TIME in ms
+    assert run("parts := DISSECT_TIME(T#1d21h34m56s789ms);\nd := parts.day;\n"
+               "h := parts.hour;\nm := parts.minute;\nsec := parts.second;\n"
+               "ms := parts.millisecond;",
+               "parts : TIME_DISSECTED; d : USINT; h : USINT; m : USINT; sec : USINT; "
+               "ms : UINT;") | {"parts": None} == {
+        "parts": None, "d": 1, "h": 21, "m": 34, "sec": 56, "ms": 789}
+    assert got["iso"] == "P1DT21H34M56.789S" and got["short"] == "PT2M"
+    assert (got["tod_iso"], got["tod_hhmm"], got["tod_nodlm"]) == (
+        "21:34:56.789", "21:34", "213456")
+
+
+def test_dates_follow_the_calendar() -> None:
+    """2019-10-31 (the comments' example) was a Thursday (ISO day 4), the 304th day of 2019
+    and in ISO week 44; 2021-01-01 (a Friday) is in week 53 of 2020."""
+    got = run("""
+day := CREATE_DATE_INTERNAL(2019, 10, 31);
+back := DISSECT_DATE_INTERNAL(day);
+weekday := GET_DAY_OF_WEEK_INTERNAL(day);
+of_year := GET_DAY_OF_YEAR_INTERNAL(day);
+week := GET_WEEK_OF_YEAR_INTERNAL(day);
+new_year_week := GET_WEEK_OF_YEAR_INTERNAL(CREATE_DATE_INTERNAL(2021, 1, 1));
+iso := FORMAT_DATE_DISSECTED(back, DATE_FORMAT#ISO8601);
+din := FORMAT_DATE_DISSECTED(back, DATE_FORMAT#DIN5008);
+plain := FORMAT_DATE_DISSECTED(back, DATE_FORMAT#ISO8601_NODLM);
+""", """day : UDINT; back : DATE_DISSECTED; weekday : USINT; of_year : UINT; week : USINT;
+new_year_week : USINT; iso : STRING; din : STRING; plain : STRING;""")
+    assert (got["weekday"], got["of_year"], got["week"], got["new_year_week"]) == (
+        4, 304, 44, 53)
+    assert (got["iso"], got["din"], got["plain"]) == ("2019-10-31", "31.10.2019", "20191031")
