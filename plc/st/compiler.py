@@ -406,6 +406,7 @@ HELPERS: dict[str, Any] = {
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
 _BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD", 64: "LWORD"}
+VOID = "VOID"  # the type of a call of a FUNCTION without a result: a statement only
 _TIMED = (*DURATIONS, *DATES)
 # Integers a REAL holds exactly (24-bit mantissa): their conversion needs no rounding.
 _EXACT_IN_REAL = ("SINT", "INT", "USINT", "UINT", "BYTE", "WORD")
@@ -599,6 +600,7 @@ class Compiler:
         self.type_defaults: dict[str, Any] = {}  # a TYPE's declared initial value
         self.globals: dict[str, VarInfo] = {}
         self._prelude_call: n.Call | None = None  # a call that may write before its statement
+        self._statement_call: n.Call | None = None  # a call that is a whole statement
         self.out = _Emitter()
         self._temp = 0
         self._depth = 0  # expression nesting, not counting operator chains
@@ -885,7 +887,12 @@ class Compiler:
         in_function = pou.kind == "FUNCTION"
         scope = Scope(self, info, "")
         scope.constants_only = True
-        if pou.result is not None:
+        if isinstance(pou.result, n.NamedType) and pou.result.name.upper() == "VOID":
+            with suppress(Problems):  # CODESYS's and logi.CAD's FUNCTION without a result
+                self.lenient(StCode.UNKNOWN_TYPE, StCode.VENDOR_EXTENSION, f"{pou.name} : "
+                             f"VOID (IEC: FUNCTION {pou.name} without a type)",
+                             pou.result.span)
+        elif pou.result is not None:
             try:
                 result = self.resolve_type(pou.result, True, scope)
                 if isinstance(result, FbOf):
@@ -1139,9 +1146,10 @@ class Compiler:
     def function_return(self, info: PouInfo) -> str:
         """A FUNCTION's return: its result, and the values of its VAR_IN_OUTs, which the
         caller stores back into the variables it gave (copy in, copy out)."""
+        value = f"v_{info.pou.key}" if info.result is not None else "None"
         if not info.in_outs:
-            return f"return v_{info.pou.key}"
-        return "return (" + ", ".join(f"v_{k}" for k in [info.pou.key, *info.in_outs]) + ",)"
+            return f"return {value}"
+        return "return (" + ", ".join([value, *(f"v_{k}" for k in info.in_outs)]) + ",)"
 
     def _body(self, info: PouInfo, scope: Scope) -> None:
         out = self.out
@@ -1470,7 +1478,7 @@ class Compiler:
                     key in self.pous and self.pous[key].pou.kind == "FUNCTION")):
             # A FUNCTION called as a statement (IEC 61131-3, 7.3.3.2): its result is dropped.
             call = n.Call(target.name, s.args, s.span)
-            self._prelude_call = call
+            self._prelude_call = self._statement_call = call
             try:
                 e = self.expr(call, scope)
             finally:
@@ -2014,7 +2022,7 @@ class Compiler:
                              "without a type): call it as a statement", x.span)
         result = info.result if info.result is not None else VOID
         if not info.in_outs:
-            return E(f"F_{key}({args})", info.result)
+            return E(f"F_{key}({args})", result)
         missing = [k for k in info.in_outs if k not in values]
         if missing:
             raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s VAR_IN_OUT "
@@ -2028,7 +2036,7 @@ class Compiler:
         self.out.emit(f"{t} = F_{key}({args})", x.span)
         for i, k in enumerate(info.in_outs):
             self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
-        return E(f"{t}[0]", info.result)
+        return E(f"{t}[0]", result)
 
     def _args(self, x: n.Call, scope: Scope, count: int | None, least: int = 1) -> list[E]:
         if any(a.name is not None or a.output is not None for a in x.args):

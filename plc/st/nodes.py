@@ -273,7 +273,7 @@ class Pou:
 
     kind: str
     name: str
-    result: NamedType | None  # a FUNCTION's type
+    result: TypeRef | None  # a FUNCTION's type (None: a FUNCTION without a result)
     decls: tuple[VarDecl, ...]
     body: tuple[Stmt, ...]
     span: Span

@@ -338,10 +338,9 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         name = children[1]
         result = None
         rest = children[2:-1]
-        if kind == "FUNCTION":
-            result, rest = rest[0], rest[1:]
-            if not isinstance(result, n.NamedType):
-                raise BadLiteral(name, "a FUNCTION returns an elementary type, not an array")
+        if kind == "FUNCTION" and isinstance(rest[0], n.NamedType | n.SubrangeType |
+                                             n.ArrayType):
+            result, rest = rest[0], rest[1:]  # none: a FUNCTION without a result (6.6.2.2)
         decls = tuple(d for block in rest[:-1] for d in block)
         return n.Pou(kind, str(name), result, decls, rest[-1], self._s(meta, children))
 

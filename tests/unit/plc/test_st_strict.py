@@ -33,6 +33,8 @@ CASES = [
      "ST031", "SW002"),
     ("PROGRAM main VAR a, b, c : BOOL; END_VAR\nc := a OR_ELSE b;\nEND_PROGRAM", 2, 8,
      "ST031", "SW002"),
+    ("FUNCTION Noop : VOID\nVAR_INPUT x : INT; END_VAR\nEND_FUNCTION\n"
+     "PROGRAM main\nNoop(1);\nEND_PROGRAM", 1, 17, "ST011", "SW002"),
 ]
 
 

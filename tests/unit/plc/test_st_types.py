@@ -307,3 +307,41 @@ def test_a_value_two_enumerations_have_takes_its_type_from_the_context() -> None
     plc = Plc(source).scan()
     assert (plc["main.c"], plc["main.l"]) == (0, 1)
     assert (plc["main.hit"], plc["main.same"], plc["main.is_red"]) == (True, True, True)
+
+
+def test_a_function_without_a_result_and_one_returning_a_structure_or_array() -> None:
+    # 6.6.2.2: a FUNCTION may have no result (called as a statement, its VAR_IN_OUT or the
+    # globals carry what it does) or a result of a derived type.
+    source = TYPES + """
+    FUNCTION Clear
+    VAR_IN_OUT a : ARRAY[1..3] OF INT; END_VAR
+    VAR i : INT; END_VAR
+    FOR i := 1 TO 3 DO a[i] := 0; END_FOR
+    END_FUNCTION
+    FUNCTION Origin : Point
+    Origin.x := 0; Origin.y := -1.0;
+    END_FUNCTION
+    FUNCTION Ramp : ARRAY[1..3] OF INT
+    Ramp[1] := 1; Ramp[2] := 2; Ramp[3] := 3;
+    END_FUNCTION
+    PROGRAM main
+    VAR v : ARRAY[1..3] OF INT := [7, 8, 9]; p : Point; r : ARRAY[1..3] OF INT; END_VAR
+    Clear(v);
+    p := Origin();
+    r := Ramp();
+    END_PROGRAM
+    """
+    plc = Plc(source).scan()
+    assert plc["main.v"] == [0, 0, 0] and (plc["main.p.x"], plc["main.p.y"]) == (0, -1.0)
+    assert plc["main.r"] == [1, 2, 3]
+
+
+def test_a_function_without_a_result_in_an_expression_is_st020() -> None:
+    from ncgate.plc.st.diagnostics import LogicError
+
+    source = ("FUNCTION Noop\nVAR_INPUT x : INT; END_VAR\nEND_FUNCTION\nPROGRAM main\n"
+              "VAR i : INT; END_VAR\ni := Noop(1);\nEND_PROGRAM\n")
+    with pytest.raises(LogicError) as caught:
+        Plc(source)
+    d = caught.value.diagnostics[0]
+    assert (d.code.code, d.span.line, d.span.column) == ("ST020", 6, 6)
