@@ -81,6 +81,13 @@ def state_intervals(events: Iterable[EventDict], processes: int
     return out, end_t
 
 
+def _text_width(text: str, size: int) -> float:
+    """A generous width of ``text`` in a sans-serif font of ``size`` px (0.62 em a
+    character: wider than the average glyph of DejaVu Sans or Arial), so that what is laid
+    out by it never overlaps."""
+    return len(text) * size * 0.62
+
+
 def _ticks(end_t: float) -> list[float]:
     raw = end_t / 10
     magnitude = 10 ** math.floor(math.log10(raw)) if raw > 0 else 1
@@ -95,7 +102,19 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
     plot_w = width - LEFT - RIGHT
     plc_y = TOP
     lane_y = {k: TOP + (LANE + GAP) * k for k in range(1, processes + 1)}
-    height = TOP + (LANE + GAP) * (processes + 1) + 70
+    # The legend's entries, laid out in rows that fit the width (it was one row that ran
+    # past the picture's right edge and was cut).
+    entries = [(COLOURS[state], LABELS[state]) for state in COLOURS] + [
+        ("#222", "\u2192 SND"), ("#00796b", "\u2192 #SIGNAL"), ("#3f51b5", "\u25bc PLC write")]
+    legend: list[tuple[float, int, str, str]] = []  # x, row, colour, label
+    lx, row = float(LEFT), 0
+    for colour, label in entries:
+        w = 16 + _text_width(label, 12) + 24
+        if lx + w > width - 10 and lx > LEFT:
+            lx, row = float(LEFT), row + 1
+        legend.append((lx, row, colour, label))
+        lx += w
+    height = TOP + (LANE + GAP) * (processes + 1) + 56 + 18 * (row + 1)
 
     def x(t: float) -> float:
         return LEFT + plot_w * t / end_t
@@ -145,6 +164,7 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                      f'marker-end="url(#arrow)"><title>{escape(title)}</title></line>')
 
     waiting: dict[int, dict[str, object]] = {}  # proc -> what it waits on now
+    label_end = 0.0  # where the last write label drawn ends
     for e in events:
         kind, proc = e["event"], e["proc"]
         if kind == "wait":
@@ -170,40 +190,43 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                 for k in e["to"]:
                     if k in lane_y:
                         arrow(e["t"], proc, k, title.format(f"P{k}"), "#00796b")
+        elif kind in ("aux", "aux_ack") and proc in lane_y:
+            # An auxiliary function: up from the lane to the PLC when output, down from the
+            # PLC when acknowledged (a strobe and its answer, [nc.aux]).
+            cx, up = x(e["t"]), kind == "aux"
+            y1, y2 = ((lane_y[proc] + 3, plc_y + LANE - 3) if up
+                      else (plc_y + LANE - 3, lane_y[proc] + 3))
+            colour = "#ef6c00" if up else "#6a1b9a"
+            code, t = str(e["code"]), float(e["t"])
+            what = (f"{code} ({e['handshake']})" if up
+                    else f"{code} acknowledged by {e['by']}")
+            dash = "" if up else ' stroke-dasharray="3,2"'
+            title = escape(f"P{proc} {what} at {t:.3f} s")
+            parts.append(f'<line x1="{cx:.1f}" y1="{y1:.1f}" x2="{cx:.1f}" y2="{y2:.1f}" '
+                         f'stroke="{colour}" stroke-width="1.5" marker-end="url(#arrow)"'
+                         f'{dash}><title>{title}</title></line>')
+            if up:
+                parts.append(f'<text x="{cx + 3:.1f}" y="{lane_y[proc] - 2:.1f}" '
+                             f'font-size="10" fill="{colour}">{escape(str(e["code"]))}</text>')
         elif e["event"] == "write" and e["proc"] == 0:
             cx = x(e["t"])
             parts.append(f'<path d="M{cx - 5:.1f},{plc_y + 8} L{cx + 5:.1f},{plc_y + 8} '
                          f'L{cx:.1f},{plc_y + 20} z" fill="#3f51b5"><title>'
                          f'{escape(str(e["who"]))}: {escape(str(e["var"]))}={e["value"]} at '
                          f'{e["t"]:.3f} s</title></path>')
-            parts.append(f'<text x="{cx + 7:.1f}" y="{plc_y + 28}" font-size="10">'
-                         f'{escape(str(e["var"]))}={e["value"]}</text>')
-    legend_y = height - 22
-    lx = LEFT
-    for state, colour in COLOURS.items():
-        parts.append(f'<rect x="{lx}" y="{legend_y - 10}" width="12" height="12" '
-                     f'fill="{colour}"/><text x="{lx + 16}" y="{legend_y}">{LABELS[state]}'
-                     '</text>')
-        lx += 120
-    parts.append(f'<text x="{lx}" y="{legend_y}">→ SND <tspan fill="#00796b">→ #SIGNAL</tspan>'
-                 '   ▼ PLC write</text>')
+            # A label where it has room: writes close in time had their labels drawn over
+            # each other (a smear); every mark keeps its title.
+            label = f'{e["var"]}={e["value"]}'
+            lw = _text_width(label, 10)
+            if cx + 7 >= label_end and cx + 7 + lw <= LEFT + plot_w:
+                parts.append(f'<text x="{cx + 7:.1f}" y="{plc_y + 30}" font-size="10" '
+                             f'class="write-label">{escape(label)}</text>')
+                label_end = cx + 7 + lw + 4
+    legend_y = axis_y + 56
+    for lx, row, colour, label in legend:
+        y = legend_y + 18 * row
+        parts.append(f'<g class="legend"><rect x="{lx:.0f}" y="{y - 10}" width="12" '
+                     f'height="12" fill="{colour}"/><text x="{lx + 16:.0f}" y="{y}">'
+                     f'{escape(label)}</text></g>')
     parts.append("</svg>")
     out.write("\n".join(parts) + "\n")
-        elif kind in ("aux", "aux_ack") and proc in lane_y:
-            # An auxiliary function: up from the lane to the PLC when output, down from the
-            # PLC when acknowledged (a strobe and its answer, [nc.aux]).
-            cx, out = x(e["t"]), kind == "aux"
-            y1, y2 = ((lane_y[proc] + 3, plc_y + LANE - 3) if out
-                      else (plc_y + LANE - 3, lane_y[proc] + 3))
-            colour = "#ef6c00" if out else "#6a1b9a"
-            code, t = str(e["code"]), float(e["t"])
-            what = (f"{code} ({e['handshake']})" if out
-                    else f"{code} acknowledged by {e['by']}")
-            dash = "" if out else ' stroke-dasharray="3,2"'
-            title = escape(f"P{proc} {what} at {t:.3f} s")
-            parts.append(f'<line x1="{cx:.1f}" y1="{y1:.1f}" x2="{cx:.1f}" y2="{y2:.1f}" '
-                         f'stroke="{colour}" stroke-width="1.5" marker-end="url(#arrow)"'
-                         f'{dash}><title>{title}</title></line>')
-            if out:
-                parts.append(f'<text x="{cx + 3:.1f}" y="{lane_y[proc] - 2:.1f}" '
-                             f'font-size="10" fill="{colour}">{escape(str(e["code"]))}</text>')
