@@ -26,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import hmac
 import io
-import json
 import logging
 import math
 import re
@@ -45,7 +44,7 @@ from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.tls import server_context
 from ncgate.gateway.web.feed import EventFeed
-from ncgate.gateway.web.status import status
+from ncgate.gateway.web.status import LiveStatus, status
 from ncgate.inputs import (
     Break,
     Command,
@@ -146,6 +145,9 @@ class WebConsole:
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
         self._last_record: Path | None = None  # the record GET /api/record serves
+        self._live: LiveStatus | None = None  # the streams' status, built by what changed
+        self._status_texts: dict[tuple[str, ...], str] = {}  # by the parts a stream lacks
+        self._status_texts_of: dict[str, str] | None = None  # ... of this status
         self._assets = {name: resources.files("ncgate.gateway.web").joinpath(
             "static", name).read_bytes() for name in ASSETS}
         self._loopback = is_loopback(config.host)
@@ -202,6 +204,9 @@ class WebConsole:
         self._unsubscribe = self.gw.runtime.trace.subscribe(self._feed.listen)
 
     async def close(self) -> None:
+        if self._live is not None:
+            self._live.close()
+            self._live = None
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
@@ -385,9 +390,23 @@ class WebConsole:
         now = asyncio.get_running_loop().time()
         cached = self._status_cache
         if cached is None or (cached[0] != key and now - cached[1] >= STATUS_EVERY_S / 2):
-            cached = (key, now, status_parts(status(gw)))
+            if self._live is None:
+                self._live = LiveStatus(gw)
+            cached = (key, now, self._live.parts())
             self._status_cache = cached
         return cached[2]
+
+    def _status_message(self, parts: dict[str, str], changed: dict[str, str]) -> str:
+        """The status messages of these changed parts, made once for every stream that
+        lacks the same parts of the same status (streams in step all lack the same)."""
+        if parts is not self._status_texts_of:  # a new status: the old texts serve nobody
+            self._status_texts_of = parts
+            self._status_texts.clear()
+        key = tuple(changed)
+        found = self._status_texts.get(key)
+        if found is None:
+            found = self._status_texts[key] = "".join(status_messages(changed))
+        return found
 
     async def _stream(self, request: web.Request) -> web.StreamResponse:
         """Server-sent events, coalesced for each client: ``status`` (what changed since
@@ -423,10 +442,11 @@ class WebConsole:
                 messages: list[str] = []
                 now = loop.time()
                 if now - status_at >= STATUS_EVERY_S:  # first: it names the session
-                    changed = {name: text for name, text in self._status_parts().items()
+                    parts = self._status_parts()
+                    changed = {name: text for name, text in parts.items()
                                if sent.get(name) != text}
                     if changed:
-                        messages += status_messages(changed)
+                        messages.append(self._status_message(parts, changed))
                         sent.update(changed)
                         status_at = now
                 position, text = self._batch(feed, position)
@@ -616,16 +636,6 @@ def record_path(folder: Path) -> Path:
         path = folder / f"ncgate-record-{stamp}-{number}.jsonl"
         number += 1
     return path
-
-
-def status_parts(whole: dict[str, Any]) -> dict[str, str]:
-    """The status as JSON texts by part: ``"t"``, ``"processes"``, ... and ``"image.sa"``,
-    ``"image.k"``, ...: the image's writers change without its bits, and its bits often."""
-    parts = {name: json.dumps(value, separators=(",", ":"))
-             for name, value in whole.items() if name != "image"}
-    for name, value in whole.get("image", {}).items():
-        parts[f"image.{name}"] = json.dumps(value, separators=(",", ":"))
-    return parts
 
 
 def status_messages(parts: dict[str, str]) -> list[str]:

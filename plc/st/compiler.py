@@ -50,7 +50,6 @@ from ncgate.plc.st.types import (
     SIGNED,
     STRING_DEFAULT,
     UNSIGNED,
-    AnyLength,
     ArrayOf,
     EnumOf,
     FbOf,
@@ -89,8 +88,7 @@ MATH_FUNCTIONS = ("EXP", "LN", "LOG", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN
 STRING_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE", "REPLACE",
                     "FIND")
 STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
-                 "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", "LOWER_BOUND",
-                 "UPPER_BOUND", *MATH_FUNCTIONS,
+                 "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", *MATH_FUNCTIONS,
                  *STRING_FUNCTIONS)
 # IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
 UNSUPPORTED_TYPES = ("CHAR", "WCHAR", "LDATE", "LTOD", "LDT", "LDATE_AND_TIME",
@@ -440,7 +438,6 @@ class Place:
     type: Type
     store: Callable[[str], str] | None  # value code -> statement; None: read-only
     why_read_only: str = ""
-    lower: str = ""  # given to an ARRAY[*] VAR_IN_OUT: the code of its lower bound
 
 
 def wrap_code(code: str, t: Type) -> str:
@@ -529,14 +526,6 @@ class PouInfo:
     @property
     def in_outs(self) -> list[str]:
         return [k for k, v in self.vars.items() if v.section == "VAR_IN_OUT"]
-
-    @property
-    def names(self) -> list[str]:
-        """The Python names of its variables: v_X, and v_X__LO, the lower bound an
-        ARRAY[*] VAR_IN_OUT was given with."""
-        return [name for k, v in self.vars.items()
-                for name in ([f"v_{k}", f"v_{k}__LO"] if isinstance(v.type, AnyLength)
-                             else [f"v_{k}"])]
 
 
 @dataclass
@@ -751,18 +740,12 @@ class Compiler:
         return int(e.const)
 
     def resolve_type(self, ref: n.TypeRef, in_function: bool,
-                     scope: Scope | None = None, in_out: bool = False) -> Type:
+                     scope: Scope | None = None) -> Type:
         scope = scope or Scope(self, None, "")
         if isinstance(ref, n.ArrayType):
             element = self.resolve_type(ref.element, in_function, scope)
-            if any(d is None for d in ref.dims):
-                if len(ref.dims) != 1 or not in_out:
-                    raise self.error(StCode.UNSUPPORTED, "ARRAY[*] (any length) is a "
-                                     "VAR_IN_OUT's type, of one dimension", ref.span)
-                return AnyLength(element)
-            dims = [(self.const_int(d[0], scope, "an array bound"),
-                     self.const_int(d[1], scope, "an array bound")) for d in ref.dims
-                    if d is not None]
+            dims = [(self.const_int(lo, scope, "an array bound"),
+                     self.const_int(hi, scope, "an array bound")) for lo, hi in ref.dims]
             size = 1
             for lo, hi in dims:
                 if hi < lo:
@@ -933,8 +916,7 @@ class Compiler:
                 if symbol is not None and symbol.image is not None:
                     raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is "
                                      + _symbol_clash(symbol), decl.span)
-                t = self.resolve_type(decl.type, in_function, scope,
-                                      decl.section == "VAR_IN_OUT")
+                t = self.resolve_type(decl.type, in_function, scope)
                 if decl.section == "VAR_EXTERNAL":
                     found = self.globals.get(key)
                     if found is None:
@@ -1122,7 +1104,7 @@ class Compiler:
     def _class(self, key: str, info: PouInfo) -> None:
         out = self.out
         prefix = "P_" if info.pou.kind == "PROGRAM" else "FB_"
-        names = info.names
+        names = [f"v_{k}" for k in info.vars]
         out.emit(f"class {prefix}{key}:", info.pou.span)
         out.indent += 1
         out.emit(f"__slots__ = {tuple(names)!r}", None)
@@ -1130,8 +1112,6 @@ class Compiler:
         out.indent += 1
         for k, v in info.vars.items():
             out.emit(f"self.v_{k} = {self.init_code(v.type, v.initial)}", v.span)
-            if isinstance(v.type, AnyLength):
-                out.emit(f"self.v_{k}__LO = 0", v.span)
         out.emit("pass", None)
         out.indent -= 1
         out.emit("def __call__(self, _now=0):", info.pou.span)
@@ -1145,8 +1125,6 @@ class Compiler:
         params = ", ".join(f"v_{k}=None" if is_aggregate(v.type) or v.section == "VAR_IN_OUT"
                            else f"v_{k}={self.init_code(v.type, v.initial)}"
                            for k, v in info.inputs)
-        params += "".join(f", v_{k}__LO=0" for k, v in info.inputs
-                          if isinstance(v.type, AnyLength))
         out.emit(f"def F_{key}({params}):", info.pou.span)
         out.indent += 1
         helpers_at = len(out.lines)
@@ -1190,8 +1168,6 @@ class Compiler:
 
     def init_code(self, t: Type, initial: Any) -> str:
         """The code of a variable's initial value (a new object for an aggregate)."""
-        if isinstance(t, AnyLength):
-            return "None"  # the caller's array, given at each call
         if isinstance(t, FbOf):
             return f"_STD_{t.name}()" if t.std else f"FB_{t.name}()"
         if isinstance(t, StructOf):
@@ -1269,7 +1245,7 @@ class Compiler:
         helper.indent += 1
         helper.emit("global _LEFT", None)
         if local and info is not None:
-            helper.emit("nonlocal " + ", ".join(info.names), None)
+            helper.emit("nonlocal " + ", ".join(f"v_{k}" for k in info.vars), None)
         saved = (scope.frame, scope.frame_base, scope.frame_loops, scope.codes)
         scope.frame, scope.frame_base, scope.frame_loops = self._frames, helper.indent, 0
         scope.codes = set()
@@ -1531,8 +1507,6 @@ class Compiler:
                                      arg.name, scope)
                 given.add(arg.name.upper())
                 out.emit(f"{f}.v_{arg.name.upper()} = {ref.read}", s.span)
-                if ref.lower:
-                    out.emit(f"{f}.v_{arg.name.upper()}__LO = {ref.lower}", s.span)
                 assert ref.store is not None
                 outputs.append(ref.store(f"{f}.v_{arg.name.upper()}"))
                 continue
@@ -1571,18 +1545,11 @@ class Compiler:
             out.emit(line, s.span)
 
     def reference(self, expr: n.Expr, t: Type, pou: str, name: str, scope: Scope) -> Place:
-        """The variable given to a VAR_IN_OUT: a writable place of exactly its type (for
-        ARRAY[*] OF T, an array of T of any bounds: its lower bound is ``lower``)."""
+        """The variable given to a VAR_IN_OUT: a writable place of exactly its type."""
         if not isinstance(expr, n.Var):
             raise self.error(StCode.BAD_ARGUMENTS, f"{pou}'s {name} is VAR_IN_OUT: give it "
                              "a variable, not an expression", _span_of(expr))
         place = scope.place(expr, write=True)
-        if isinstance(t, AnyLength):
-            if isinstance(place.type, ArrayOf) and place.type.element == t.element:
-                return Place(place.read, place.type, place.store, lower=str(place.type.lo))
-            if isinstance(place.type, AnyLength) and place.type.element == t.element:
-                return Place(place.read, place.type, place.store,
-                             lower=f"{place.read}__LO")
         same = place.type == t or (isinstance(place.type, StringOf) and isinstance(
             t, StringOf) and place.type.wide == t.wide)
         if not same:
@@ -1662,9 +1629,6 @@ class Compiler:
         return code
 
     def _coerce(self, e: E, t: Type, span: n.Span) -> str:
-        if isinstance(t, AnyLength) or isinstance(e.type, AnyLength):
-            raise self.error(StCode.UNSUPPORTED, "an ARRAY[*] is read and written element "
-                             "by element (LOWER_BOUND .. UPPER_BOUND)", span)
         if e.type == t:
             if isinstance(t, ArrayOf):
                 return copy_code(e.code, t)
@@ -2049,8 +2013,6 @@ class Compiler:
                 ref = self.reference(arg.expr, v.type, x.name, v.display, scope)
                 assert ref.store is not None
                 values[k], stores[k] = ref.read, ref.store
-                if ref.lower:
-                    values[f"{k}__LO"] = ref.lower
                 continue
             values[k] = self.coerce(self.typed_expr(arg.expr, scope, v.type), v.type,
                                     _span_of(arg.expr))
@@ -2098,8 +2060,6 @@ class Compiler:
     def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
         if key in STRING_FUNCTIONS:
             return self.string_call(x, key, scope)
-        if key in ("LOWER_BOUND", "UPPER_BOUND"):
-            return self.bound(x, key, scope)
         if key == "MOVE":
             (a,) = self._args(x, scope, 1)
             return E(copy_code(a.code, a.type), a.type, a.const, a.exact)
@@ -2176,36 +2136,6 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"{key} shifts by an integer", x.span)
         size = stdlib.INTEGER_TYPES[str(a.type)][0]
         return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
-
-    def bound(self, x: n.Call, key: str, scope: Scope) -> E:
-        """LOWER_BOUND(arr, dim) and UPPER_BOUND(arr, dim) (IEC 61131-3, 6.5.3): of a fixed
-        array, constants; of an ARRAY[*] VAR_IN_OUT, what the caller's array has."""
-        names = {a.name.upper() for a in x.args if a.name is not None}
-        if len(x.args) != 2 or (names and names != {"ARR", "DIM"}) or any(
-                a.output is not None or a.expr is None for a in x.args):
-            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}(array, dimension)", x.span)
-        args = sorted(x.args, key=lambda a: (a.name or "").upper() == "DIM") if names \
-            else list(x.args)
-        array, dim = args[0].expr, args[1].expr
-        assert array is not None and dim is not None
-        number = self.const_int(dim, scope, "a dimension")
-        if not isinstance(array, n.Var):
-            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes an array variable",
-                             _span_of(array))
-        place = scope.place(array, write=False)
-        t: Type = place.type
-        for _ in range(number - 1):
-            t = t.element if isinstance(t, ArrayOf) else t
-        if number < 1 or not isinstance(t, ArrayOf | AnyLength) or (
-                isinstance(t, AnyLength) and number != 1):
-            raise self.error(StCode.INDEX_RANGE, f"{_show(array)} has no dimension {number}",
-                             _span_of(dim))
-        if isinstance(t, ArrayOf):
-            value = t.lo if key == "LOWER_BOUND" else t.hi
-            return E(repr(value), "DINT", value)
-        lower = f"{place.read}__LO"
-        return E(lower if key == "LOWER_BOUND" else f"({lower} + len({place.read}) - 1)",
-                 "DINT")
 
     def string_call(self, x: n.Call, key: str, scope: Scope) -> E:
         """LEN, LEFT, RIGHT, MID, CONCAT, INSERT, DELETE, REPLACE, FIND (IEC 61131-3,
@@ -2387,14 +2317,7 @@ class Scope:
     def _select(self, var: n.Var, code: str, t: Type, why: str, write: bool) -> Place:
         c = self.c
         for sel in var.selectors:
-            if isinstance(sel, n.Index) and isinstance(t, AnyLength):
-                i = c.expr(sel.expr, self)
-                if not is_int(i.type):
-                    raise c.error(StCode.TYPE_MISMATCH, f"an index is an integer, not "
-                                  f"{_tname(i.type)}", sel.span)
-                code = f"{code}[_ix({i.code}, {code}__LO, len({code}))]"
-                t = t.element
-            elif isinstance(sel, n.Index):
+            if isinstance(sel, n.Index):
                 if not isinstance(t, ArrayOf):
                     raise c.error(StCode.TYPE_MISMATCH, f"{var.name} is {t}, not an array",
                                   sel.span)

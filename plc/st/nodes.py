@@ -42,10 +42,9 @@ class SubrangeType:
 
 @dataclass(frozen=True, slots=True)
 class ArrayType:
-    """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions; None for a
-    dimension of ``ARRAY[*]`` (a VAR_IN_OUT of any length, 6.5.3)."""
+    """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions."""
 
-    dims: tuple[tuple[Expr, Expr] | None, ...]
+    dims: tuple[tuple[Expr, Expr], ...]
     element: TypeRef
     span: Span
 

@@ -675,3 +675,37 @@ async def test_status_says_where_each_process_is_and_its_feed(tmp_path: Path) ->
                 http.get("/api/status") as r:
             p1 = (await r.json())["processes"][0]
     assert p1["position"] == {"X": 10, "Y": 20, "Z": -5} and p1["feed"] == 300
+
+
+async def test_the_streams_status_built_from_changes_equals_the_whole_status() -> None:
+    """Issue 24/30: the streams' status is built again only where the image changed; after
+    each kind of write -- a bit, an SA byte, a K word, a SYVAR, and the same value by another
+    writer (no value changes, its writer does) -- it says what /api/status says."""
+    from ncgate.gateway.web.status import LiveStatus, status
+    from ncgate.inputs import Source, SourceKind, Write
+
+    async with await console() as gw:
+        live = LiveStatus(gw)
+
+        def whole() -> dict[str, str]:
+            w = status(gw)
+            out = {k: json.dumps(v, separators=(",", ":")) for k, v in w.items() if k != "image"}
+            out.update({f"image.{k}": json.dumps(v, separators=(",", ":"))
+                        for k, v in w["image"].items()})
+            return out
+
+        def image(parts: dict[str, str]) -> dict[str, str]:
+            return {k: v for k, v in parts.items() if k.startswith("image.")}
+
+        assert image(live.parts()) == image(whole())
+        other = Source(SourceKind.WEB, "10.0.0.9", "10.0.0.9")
+        for var, value, source in [("SA10", 1, None), ("SA3.BY", 0x81, None),
+                                   ("SK6.IN", 0x1234, None), ("SYVAR7", -5, None),
+                                   ("SYVAR7", -5, other)]:
+            if source is None:
+                gw.write(var, value)
+            else:
+                gw.apply(Write(gw.runtime.var(var), value, source))
+            assert image(live.parts()) == image(whole()), var
+        assert "10.0.0.9" in live.parts()["image.writers"]
+        live.close()

@@ -345,37 +345,3 @@ def test_a_function_without_a_result_in_an_expression_is_st020() -> None:
         Plc(source)
     d = caught.value.diagnostics[0]
     assert (d.code.code, d.span.line, d.span.column) == ("ST020", 6, 6)
-
-
-def test_an_any_length_array_in_out_takes_arrays_of_any_bounds() -> None:
-    # 6.5.3: ARRAY[*] in a VAR_IN_OUT; LOWER_BOUND and UPPER_BOUND give the caller's bounds.
-    source = """
-    FUNCTION SortInt
-    VAR_IN_OUT a : ARRAY[*] OF INT; END_VAR
-    VAR i, j : DINT; t : INT; END_VAR
-    FOR i := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) - 1 DO
-      FOR j := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) - 1 - (i - LOWER_BOUND(a, 1)) DO
-        IF a[j] > a[j + 1] THEN t := a[j]; a[j] := a[j + 1]; a[j + 1] := t; END_IF
-      END_FOR
-    END_FOR
-    END_FUNCTION
-    FUNCTION_BLOCK Summer
-    VAR_IN_OUT data : ARRAY[*] OF INT; END_VAR
-    VAR_OUTPUT total : DINT; lo, hi : DINT; END_VAR
-    VAR k : DINT; END_VAR
-    total := 0; lo := LOWER_BOUND(data, 1); hi := UPPER_BOUND(data, 1);
-    FOR k := lo TO hi DO total := total + data[k]; END_FOR
-    END_FUNCTION_BLOCK
-    PROGRAM main
-    VAR a : ARRAY[-2..2] OF INT := [5, -1, 4, 0, 3]; b : ARRAY[10..12] OF INT := [9, 8, 7];
-        s : Summer; total, lo, hi : DINT; fixed_hi : DINT; m : ARRAY[1..2, 3..9] OF INT;
-    END_VAR
-    SortInt(a); SortInt(b);
-    s(data := b, total => total, lo => lo, hi => hi);
-    fixed_hi := UPPER_BOUND(m, 2);
-    END_PROGRAM
-    """
-    plc = Plc(source).scan()
-    assert plc["main.a"] == [-1, 0, 3, 4, 5] and plc["main.b"] == [7, 8, 9]
-    assert (plc["main.total"], plc["main.lo"], plc["main.hi"]) == (24, 10, 12)
-    assert plc["main.fixed_hi"] == 9
