@@ -77,6 +77,8 @@ ALARMS = frozenset(int(code) for code in AlarmCode)  # what an "alarm" input may
 COMPARED: dict[str, tuple[str, ...]] = {
     "start": ("prog", "by"), "wait": ("on",), "resume": ("by",), "snd": ("to",),
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
+    # The auxiliary functions' handshake ([nc.aux]): each output and its acknowledge.
+    "aux": ("code", "handshake"), "aux_ack": ("code",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
                     "plc_reload",

@@ -205,6 +205,9 @@ class AuxInterface:
                           on=ev.AuxOn(aux.code, handshake.value, f"SA{slot.ack}", aux.shown),
                           text=functools.partial(self._reason, slot, aux))
         wait.handle = _Pending(self, slot)
+        image, ack = self.image, slot.ack
+        # The acknowledge as it is now (the console's and the status's why-record).
+        wait.probe = lambda: (image.read("SA", ack, "bit"), image.last_writer("SA", ack, "bit"))
         slot.pending = (p, wait, aux)
         slot.phase = _ACK
         timeout = self.settings.timeout_s
