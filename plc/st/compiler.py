@@ -50,6 +50,7 @@ from ncgate.plc.st.types import (
     SIGNED,
     STRING_DEFAULT,
     UNSIGNED,
+    AnyLength,
     ArrayOf,
     EnumOf,
     FbOf,
@@ -88,7 +89,8 @@ MATH_FUNCTIONS = ("EXP", "LN", "LOG", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN
 STRING_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE", "REPLACE",
                     "FIND")
 STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
-                 "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", *MATH_FUNCTIONS,
+                 "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", "LOWER_BOUND",
+                 "UPPER_BOUND", *MATH_FUNCTIONS,
                  *STRING_FUNCTIONS)
 # IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
 UNSUPPORTED_TYPES = ("CHAR", "WCHAR", "LDATE", "LTOD", "LDT", "LDATE_AND_TIME",
@@ -350,6 +352,12 @@ def _ranged(value: int, lo: int, hi: int) -> int:
     raise ValueError(f"{value} is outside the subrange {lo}..{hi}")
 
 
+def _fill(obj: Any, value: Any) -> None:
+    """A structure VAR_IN_OUT assigned whole: the caller's structure takes the members."""
+    for name in type(obj).__slots__:
+        setattr(obj, name, getattr(value, name))
+
+
 def _struct(obj: Any, values: dict[str, Any]) -> Any:
     """A structure instance with the members of its declared initial value."""
     for name, value in values.items():
@@ -402,7 +410,8 @@ HELPERS: dict[str, Any] = {
     "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
     "_left": _left, "_right": _right, "_midstr": _midstr, "_insert": _insert,
     "_delete": _delete, "_replace": _replace, "_find": _find, "_ranged": _ranged,
-    "_struct": _struct, "_time_real": _time_real, "_tostr": _tostr, "_strto": _strto,
+    "_struct": _struct, "_fill": _fill, "_time_real": _time_real, "_tostr": _tostr,
+    "_strto": _strto,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
 _BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD", 64: "LWORD"}
@@ -438,6 +447,7 @@ class Place:
     type: Type
     store: Callable[[str], str] | None  # value code -> statement; None: read-only
     why_read_only: str = ""
+    lower: str = ""  # given to an ARRAY[*] VAR_IN_OUT: the code of its lower bound
 
 
 def wrap_code(code: str, t: Type) -> str:
@@ -526,6 +536,21 @@ class PouInfo:
     @property
     def in_outs(self) -> list[str]:
         return [k for k, v in self.vars.items() if v.section == "VAR_IN_OUT"]
+
+    @property
+    def copied_in_outs(self) -> list[str]:
+        """The VAR_IN_OUTs a FUNCTION hands back for the caller to store (an array or a
+        structure is the caller's own object, written in place)."""
+        return [k for k in self.in_outs
+                if not isinstance(self.vars[k].type, ArrayOf | AnyLength | StructOf)]
+
+    @property
+    def names(self) -> list[str]:
+        """The Python names of its variables: v_X, and v_X__LO, the lower bound an
+        ARRAY[*] VAR_IN_OUT was given with."""
+        return [name for k, v in self.vars.items()
+                for name in ([f"v_{k}", f"v_{k}__LO"] if isinstance(v.type, AnyLength)
+                             else [f"v_{k}"])]
 
 
 @dataclass
@@ -649,10 +674,18 @@ class Compiler:
                     self.error(StCode.DUPLICATE_POU, f"{pou.name} is already defined at "
                                f"{other}", pou.span)
                     continue
-                if pou.key in STD_FBS or pou.key in STD_FUNCTIONS or _conversion(pou.key):
+                if pou.key in STD_FBS or ((pou.key in STD_FUNCTIONS or _conversion(pou.key))
+                                          and pou.kind != "FUNCTION"):
                     self.error(StCode.DUPLICATE_POU, f"{pou.name} is a standard "
                                "function or function block", pou.span)
                     continue
+                if pou.key in STD_FUNCTIONS or _conversion(pou.key):
+                    try:  # a library's own INT_TO_STRING: CODESYS lets it replace the standard's
+                        self.lenient(StCode.DUPLICATE_POU, StCode.VENDOR_EXTENSION,
+                                     f"{pou.name} is a standard function: this FUNCTION "
+                                     "replaces it (IEC reserves the name)", pou.span)
+                    except Problems:
+                        continue
                 if pou.key in self.type_decls:
                     self.error(StCode.DUPLICATE_POU, f"{pou.name} is also a data type "
                                f"(at {self.type_decls[pou.key][0].span})", pou.span)
@@ -740,12 +773,19 @@ class Compiler:
         return int(e.const)
 
     def resolve_type(self, ref: n.TypeRef, in_function: bool,
-                     scope: Scope | None = None) -> Type:
+                     scope: Scope | None = None, in_out: bool = False) -> Type:
         scope = scope or Scope(self, None, "")
         if isinstance(ref, n.ArrayType):
             element = self.resolve_type(ref.element, in_function, scope)
-            dims = [(self.const_int(lo, scope, "an array bound"),
-                     self.const_int(hi, scope, "an array bound")) for lo, hi in ref.dims]
+            if any(d is None for d in ref.dims):
+                if len(ref.dims) != 1 or not in_out:
+                    raise self.error(StCode.UNSUPPORTED, "ARRAY[*] (any length) is a "
+                                     "VAR_IN_OUT's or a FUNCTION input's type, of one "
+                                     "dimension", ref.span)
+                return AnyLength(element)
+            dims = [(self.const_int(d[0], scope, "an array bound"),
+                     self.const_int(d[1], scope, "an array bound")) for d in ref.dims
+                    if d is not None]
             size = 1
             for lo, hi in dims:
                 if hi < lo:
@@ -916,7 +956,9 @@ class Compiler:
                 if symbol is not None and symbol.image is not None:
                     raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is "
                                      + _symbol_clash(symbol), decl.span)
-                t = self.resolve_type(decl.type, in_function, scope)
+                t = self.resolve_type(decl.type, in_function, scope,
+                                      decl.section == "VAR_IN_OUT" or (
+                                          in_function and decl.section == "VAR_INPUT"))
                 if decl.section == "VAR_EXTERNAL":
                     found = self.globals.get(key)
                     if found is None:
@@ -1104,7 +1146,7 @@ class Compiler:
     def _class(self, key: str, info: PouInfo) -> None:
         out = self.out
         prefix = "P_" if info.pou.kind == "PROGRAM" else "FB_"
-        names = [f"v_{k}" for k in info.vars]
+        names = info.names
         out.emit(f"class {prefix}{key}:", info.pou.span)
         out.indent += 1
         out.emit(f"__slots__ = {tuple(names)!r}", None)
@@ -1112,6 +1154,8 @@ class Compiler:
         out.indent += 1
         for k, v in info.vars.items():
             out.emit(f"self.v_{k} = {self.init_code(v.type, v.initial)}", v.span)
+            if isinstance(v.type, AnyLength):
+                out.emit(f"self.v_{k}__LO = 0", v.span)
         out.emit("pass", None)
         out.indent -= 1
         out.emit("def __call__(self, _now=0):", info.pou.span)
@@ -1125,6 +1169,8 @@ class Compiler:
         params = ", ".join(f"v_{k}=None" if is_aggregate(v.type) or v.section == "VAR_IN_OUT"
                            else f"v_{k}={self.init_code(v.type, v.initial)}"
                            for k, v in info.inputs)
+        params += "".join(f", v_{k}__LO=0" for k, v in info.inputs
+                          if isinstance(v.type, AnyLength))
         out.emit(f"def F_{key}({params}):", info.pou.span)
         out.indent += 1
         helpers_at = len(out.lines)
@@ -1147,9 +1193,10 @@ class Compiler:
         """A FUNCTION's return: its result, and the values of its VAR_IN_OUTs, which the
         caller stores back into the variables it gave (copy in, copy out)."""
         value = f"v_{info.pou.key}" if info.result is not None else "None"
-        if not info.in_outs:
+        if not info.copied_in_outs:
             return f"return {value}"
-        return "return (" + ", ".join([value, *(f"v_{k}" for k in info.in_outs)]) + ",)"
+        return "return (" + ", ".join([value, *(f"v_{k}" for k in info.copied_in_outs)]) + \
+            ",)"
 
     def _body(self, info: PouInfo, scope: Scope) -> None:
         out = self.out
@@ -1168,6 +1215,8 @@ class Compiler:
 
     def init_code(self, t: Type, initial: Any) -> str:
         """The code of a variable's initial value (a new object for an aggregate)."""
+        if isinstance(t, AnyLength):
+            return "None"  # the caller's array, given at each call
         if isinstance(t, FbOf):
             return f"_STD_{t.name}()" if t.std else f"FB_{t.name}()"
         if isinstance(t, StructOf):
@@ -1245,7 +1294,7 @@ class Compiler:
         helper.indent += 1
         helper.emit("global _LEFT", None)
         if local and info is not None:
-            helper.emit("nonlocal " + ", ".join(f"v_{k}" for k in info.vars), None)
+            helper.emit("nonlocal " + ", ".join(info.names), None)
         saved = (scope.frame, scope.frame_base, scope.frame_loops, scope.codes)
         scope.frame, scope.frame_base, scope.frame_loops = self._frames, helper.indent, 0
         scope.codes = set()
@@ -1507,6 +1556,8 @@ class Compiler:
                                      arg.name, scope)
                 given.add(arg.name.upper())
                 out.emit(f"{f}.v_{arg.name.upper()} = {ref.read}", s.span)
+                if ref.lower:
+                    out.emit(f"{f}.v_{arg.name.upper()}__LO = {ref.lower}", s.span)
                 assert ref.store is not None
                 outputs.append(ref.store(f"{f}.v_{arg.name.upper()}"))
                 continue
@@ -1544,12 +1595,21 @@ class Compiler:
         for line in outputs:
             out.emit(line, s.span)
 
-    def reference(self, expr: n.Expr, t: Type, pou: str, name: str, scope: Scope) -> Place:
-        """The variable given to a VAR_IN_OUT: a writable place of exactly its type."""
+    def reference(self, expr: n.Expr, t: Type, pou: str, name: str, scope: Scope,
+                  write: bool = True) -> Place:
+        """The variable given to a VAR_IN_OUT (``write``; else an ARRAY[*] VAR_INPUT): a
+        writable place of exactly its type (for ARRAY[*] OF T, an array of T of any
+        bounds: its lower bound is ``lower``)."""
         if not isinstance(expr, n.Var):
-            raise self.error(StCode.BAD_ARGUMENTS, f"{pou}'s {name} is VAR_IN_OUT: give it "
-                             "a variable, not an expression", _span_of(expr))
-        place = scope.place(expr, write=True)
+            raise self.error(StCode.BAD_ARGUMENTS, f"{pou}'s {name} is a VAR_IN_OUT or an "
+                             "ARRAY[*]: give it a variable, not an expression", _span_of(expr))
+        place = scope.place(expr, write=write)
+        if isinstance(t, AnyLength):
+            if isinstance(place.type, ArrayOf) and place.type.element == t.element:
+                return Place(place.read, place.type, place.store, lower=str(place.type.lo))
+            if isinstance(place.type, AnyLength) and place.type.element == t.element:
+                return Place(place.read, place.type, place.store,
+                             lower=f"{place.read}__LO")
         same = place.type == t or (isinstance(place.type, StringOf) and isinstance(
             t, StringOf) and place.type.wide == t.wide)
         if not same:
@@ -1629,6 +1689,9 @@ class Compiler:
         return code
 
     def _coerce(self, e: E, t: Type, span: n.Span) -> str:
+        if isinstance(t, AnyLength) or isinstance(e.type, AnyLength):
+            raise self.error(StCode.UNSUPPORTED, "an ARRAY[*] is read and written element "
+                             "by element (LOWER_BOUND .. UPPER_BOUND)", span)
         if e.type == t:
             if isinstance(t, ArrayOf):
                 return copy_code(e.code, t)
@@ -1971,12 +2034,13 @@ class Compiler:
 
     def call(self, x: n.Call, scope: Scope) -> E:
         key = x.name.upper()
-        conv = _conversion(key)
-        if conv is not None:
-            return self.convert(x, *conv, scope)
-        if key in STD_FUNCTIONS:
-            return self.std_call(x, key, scope)
         info = self.pous.get(key)
+        if info is None or info.pou.kind != "FUNCTION":  # (a user FUNCTION may replace one)
+            conv = _conversion(key)
+            if conv is not None:
+                return self.convert(x, *conv, scope)
+            if key in STD_FUNCTIONS:
+                return self.std_call(x, key, scope)
         if info is None and key in UNSUPPORTED_FUNCTIONS:
             raise self.error(StCode.UNSUPPORTED, f"{x.name}: a standard function outside "
                              "ncgate's subset (docs/plc.md)", x.span)
@@ -2009,10 +2073,16 @@ class Compiler:
                 raise self.error(StCode.BAD_ARGUMENTS, f"{v.display} is given twice",
                                  arg.span)
             assert arg.expr is not None
-            if v.section == "VAR_IN_OUT":
-                ref = self.reference(arg.expr, v.type, x.name, v.display, scope)
-                assert ref.store is not None
-                values[k], stores[k] = ref.read, ref.store
+            if v.section == "VAR_IN_OUT" or isinstance(v.type, AnyLength):
+                ref = self.reference(arg.expr, v.type, x.name, v.display, scope,
+                                     v.section == "VAR_IN_OUT")
+                values[k] = ref.read if v.section == "VAR_IN_OUT" else copy_code(
+                    ref.read, ArrayOf(0, 0, v.type.element) if isinstance(
+                        v.type, AnyLength) else v.type)
+                if ref.store is not None:
+                    stores[k] = ref.store
+                if ref.lower:
+                    values[f"{k}__LO"] = ref.lower
                 continue
             values[k] = self.coerce(self.typed_expr(arg.expr, scope, v.type), v.type,
                                     _span_of(arg.expr))
@@ -2021,20 +2091,21 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"{x.name} has no result (a FUNCTION "
                              "without a type): call it as a statement", x.span)
         result = info.result if info.result is not None else VOID
-        if not info.in_outs:
-            return E(f"F_{key}({args})", result)
-        missing = [k for k in info.in_outs if k not in values]
+        missing = [k for k, v in inputs if k not in values and (
+            v.section == "VAR_IN_OUT" or isinstance(v.type, AnyLength))]
         if missing:
-            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s VAR_IN_OUT "
-                             f"{info.vars[missing[0]].display} is given at every call",
-                             x.span)
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s "
+                             f"{info.vars[missing[0]].display} (a VAR_IN_OUT or ARRAY[*]) "
+                             "is given at every call", x.span)
+        if not info.copied_in_outs:
+            return E(f"F_{key}({args})", result)
         if self._prelude_call is not x:
-            raise self.error(StCode.UNSUPPORTED, f"{x.name} has a VAR_IN_OUT: call it as a "
-                             "statement or alone on the right of := (not inside an "
-                             "expression)", x.span)
+            raise self.error(StCode.UNSUPPORTED, f"{x.name} has an elementary or STRING "
+                             "VAR_IN_OUT: call it as a statement or alone on the right of "
+                             ":= (not inside an expression)", x.span)
         t = self.temp()
         self.out.emit(f"{t} = F_{key}({args})", x.span)
-        for i, k in enumerate(info.in_outs):
+        for i, k in enumerate(info.copied_in_outs):
             self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
         return E(f"{t}[0]", result)
 
@@ -2060,6 +2131,8 @@ class Compiler:
     def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
         if key in STRING_FUNCTIONS:
             return self.string_call(x, key, scope)
+        if key in ("LOWER_BOUND", "UPPER_BOUND"):
+            return self.bound(x, key, scope)
         if key == "MOVE":
             (a,) = self._args(x, scope, 1)
             return E(copy_code(a.code, a.type), a.type, a.const, a.exact)
@@ -2136,6 +2209,36 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"{key} shifts by an integer", x.span)
         size = stdlib.INTEGER_TYPES[str(a.type)][0]
         return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
+
+    def bound(self, x: n.Call, key: str, scope: Scope) -> E:
+        """LOWER_BOUND(arr, dim) and UPPER_BOUND(arr, dim) (IEC 61131-3, 6.5.3): of a fixed
+        array, constants; of an ARRAY[*] VAR_IN_OUT, what the caller's array has."""
+        names = {a.name.upper() for a in x.args if a.name is not None}
+        if len(x.args) != 2 or (names and names != {"ARR", "DIM"}) or any(
+                a.output is not None or a.expr is None for a in x.args):
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}(array, dimension)", x.span)
+        args = sorted(x.args, key=lambda a: (a.name or "").upper() == "DIM") if names \
+            else list(x.args)
+        array, dim = args[0].expr, args[1].expr
+        assert array is not None and dim is not None
+        number = self.const_int(dim, scope, "a dimension")
+        if not isinstance(array, n.Var):
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes an array variable",
+                             _span_of(array))
+        place = scope.place(array, write=False)
+        t: Type = place.type
+        for _ in range(number - 1):
+            t = t.element if isinstance(t, ArrayOf) else t
+        if number < 1 or not isinstance(t, ArrayOf | AnyLength) or (
+                isinstance(t, AnyLength) and number != 1):
+            raise self.error(StCode.INDEX_RANGE, f"{_show(array)} has no dimension {number}",
+                             _span_of(dim))
+        if isinstance(t, ArrayOf):
+            value = t.lo if key == "LOWER_BOUND" else t.hi
+            return E(repr(value), "DINT", value)
+        lower = f"{place.read}__LO"
+        return E(lower if key == "LOWER_BOUND" else f"({lower} + len({place.read}) - 1)",
+                 "DINT")
 
     def string_call(self, x: n.Call, key: str, scope: Scope) -> E:
         """LEN, LEFT, RIGHT, MID, CONCAT, INSERT, DELETE, REPLACE, FIND (IEC 61131-3,
@@ -2312,12 +2415,25 @@ class Scope:
             why = f"{v.display} is CONSTANT"
         elif key in self.loop_vars and not var.selectors:
             why = f"{v.display} is the FOR loop's variable"
-        return self._select(var, code, t, why, write)
+        place = self._select(var, code, t, why, write)
+        if v.section == "VAR_IN_OUT" and not var.selectors and place.store is not None and \
+                isinstance(t, ArrayOf | StructOf):
+            # The caller's own array or structure: an assignment writes into it.
+            return Place(place.read, t, (lambda value: f"{code}[:] = {value}") if isinstance(
+                t, ArrayOf) else (lambda value: f"_fill({code}, {value})"))
+        return place
 
     def _select(self, var: n.Var, code: str, t: Type, why: str, write: bool) -> Place:
         c = self.c
         for sel in var.selectors:
-            if isinstance(sel, n.Index):
+            if isinstance(sel, n.Index) and isinstance(t, AnyLength):
+                i = c.expr(sel.expr, self)
+                if not is_int(i.type):
+                    raise c.error(StCode.TYPE_MISMATCH, f"an index is an integer, not "
+                                  f"{_tname(i.type)}", sel.span)
+                code = f"{code}[_ix({i.code}, {code}__LO, len({code}))]"
+                t = t.element
+            elif isinstance(sel, n.Index):
                 if not isinstance(t, ArrayOf):
                     raise c.error(StCode.TYPE_MISMATCH, f"{var.name} is {t}, not an array",
                                   sel.span)

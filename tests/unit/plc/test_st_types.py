@@ -345,3 +345,89 @@ def test_a_function_without_a_result_in_an_expression_is_st020() -> None:
         Plc(source)
     d = caught.value.diagnostics[0]
     assert (d.code.code, d.span.line, d.span.column) == ("ST020", 6, 6)
+
+
+def test_an_any_length_array_in_out_takes_arrays_of_any_bounds() -> None:
+    # 6.5.3: ARRAY[*] in a VAR_IN_OUT; LOWER_BOUND and UPPER_BOUND give the caller's bounds.
+    source = """
+    FUNCTION SortInt
+    VAR_IN_OUT a : ARRAY[*] OF INT; END_VAR
+    VAR i, j : DINT; t : INT; END_VAR
+    FOR i := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) - 1 DO
+      FOR j := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) - 1 - (i - LOWER_BOUND(a, 1)) DO
+        IF a[j] > a[j + 1] THEN t := a[j]; a[j] := a[j + 1]; a[j + 1] := t; END_IF
+      END_FOR
+    END_FOR
+    END_FUNCTION
+    FUNCTION_BLOCK Summer
+    VAR_IN_OUT data : ARRAY[*] OF INT; END_VAR
+    VAR_OUTPUT total : DINT; lo, hi : DINT; END_VAR
+    VAR k : DINT; END_VAR
+    total := 0; lo := LOWER_BOUND(data, 1); hi := UPPER_BOUND(data, 1);
+    FOR k := lo TO hi DO total := total + data[k]; END_FOR
+    END_FUNCTION_BLOCK
+    PROGRAM main
+    VAR a : ARRAY[-2..2] OF INT := [5, -1, 4, 0, 3]; b : ARRAY[10..12] OF INT := [9, 8, 7];
+        s : Summer; total, lo, hi : DINT; fixed_hi : DINT; m : ARRAY[1..2, 3..9] OF INT;
+    END_VAR
+    SortInt(a); SortInt(b);
+    s(data := b, total => total, lo => lo, hi => hi);
+    fixed_hi := UPPER_BOUND(m, 2);
+    END_PROGRAM
+    """
+    plc = Plc(source).scan()
+    assert plc["main.a"] == [-1, 0, 3, 4, 5] and plc["main.b"] == [7, 8, 9]
+    assert (plc["main.total"], plc["main.lo"], plc["main.hi"]) == (24, 10, 12)
+    assert plc["main.fixed_hi"] == 9
+
+
+def test_an_array_or_structure_in_out_is_the_callers_own_even_inside_an_expression() -> None:
+    # 6.5.2.2: a VAR_IN_OUT is the caller's variable: the callee's writes, a whole
+    # assignment too, are the caller's; an ARRAY[*] input is a copy (6.5.3).
+    source = TYPES + """
+    FUNCTION IndexOf : DINT
+    VAR_IN_OUT a : ARRAY[*] OF INT; END_VAR
+    VAR_INPUT x : INT; END_VAR
+    VAR k : DINT; END_VAR
+    IndexOf := -1;
+    FOR k := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) DO
+      IF a[k] = x THEN IndexOf := k; RETURN; END_IF
+    END_FOR
+    END_FUNCTION
+    FUNCTION Reset : BOOL
+    VAR_IN_OUT p : Point; END_VAR
+    VAR fresh : Point; END_VAR
+    fresh.x := 100; p := fresh; Reset := TRUE;
+    END_FUNCTION
+    FUNCTION Total : DINT
+    VAR_INPUT a : ARRAY[*] OF INT; END_VAR
+    VAR k : DINT; END_VAR
+    FOR k := LOWER_BOUND(a, 1) TO UPPER_BOUND(a, 1) DO Total := Total + a[k]; a[k] := 0;
+    END_FOR
+    END_FUNCTION
+    PROGRAM main
+    VAR v : ARRAY[5..8] OF INT := [3, 9, 4, 9]; at, sum : DINT; p : Point; ok : BOOL; END_VAR
+    at := IndexOf(v, 4) * 10 + IndexOf(v, 77);
+    ok := Reset(p) AND TRUE;
+    sum := Total(v);
+    END_PROGRAM
+    """
+    plc = Plc(source).scan()
+    assert plc["main.at"] == 7 * 10 - 1 and plc["main.sum"] == 25
+    assert plc["main.v"] == [3, 9, 4, 9]  # Total's input was a copy
+    assert (plc["main.p.x"], plc["main.ok"]) == (100, True)
+
+
+def test_a_function_named_as_a_standard_one_replaces_it_only_when_not_strict() -> None:
+    from ncgate.plc.st.diagnostics import LogicError
+
+    source = ("FUNCTION INT_TO_STRING : STRING\nVAR_INPUT i : INT; END_VAR\n"
+              "INT_TO_STRING := 'mine';\nEND_FUNCTION\n"
+              "PROGRAM main\nVAR s : STRING; END_VAR\ns := INT_TO_STRING(5);\nEND_PROGRAM\n")
+    with pytest.raises(LogicError) as caught:
+        Plc(source)
+    d = caught.value.diagnostics[0]
+    assert (d.code.code, d.span.line, d.span.column) == ("ST032", 1, 1)
+    plc = Plc(source, context=Context(strict=False)).scan()
+    assert plc["main.s"] == "mine"
+    assert [w.code.code for w in plc.logic.warnings] == ["SW002"]
