@@ -42,9 +42,10 @@ class SubrangeType:
 
 @dataclass(frozen=True, slots=True)
 class ArrayType:
-    """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions."""
+    """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions; None for a
+    dimension of ``ARRAY[*]`` (a VAR_IN_OUT of any length, 6.5.3)."""
 
-    dims: tuple[tuple[Expr, Expr], ...]
+    dims: tuple[tuple[Expr, Expr] | None, ...]
     element: TypeRef
     span: Span
 

@@ -384,10 +384,12 @@ class _Build(Transformer_NonRecursive[Token, Any]):
                               _span(self.file, children[0]))
 
     def array_type(self, meta: Any, children: list[Any]) -> n.ArrayType:
-        dims = tuple(c for c in children if isinstance(c, tuple))
+        dims = tuple(c for c in children if isinstance(c, tuple) or c is None)
         return n.ArrayType(dims, children[-1], _span(self.file, children[0]))
 
-    def dim(self, meta: Any, children: list[Any]) -> tuple[n.Expr, n.Expr]:
+    def dim(self, meta: Any, children: list[Any]) -> tuple[n.Expr, n.Expr] | None:
+        if len(children) == 1:  # '*'
+            return None
         return (children[0], children[1])
 
     def _number(self, token: Token) -> int:

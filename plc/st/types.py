@@ -88,6 +88,17 @@ class ArrayOf:
 
 
 @dataclass(frozen=True, slots=True)
+class AnyLength:
+    """``ARRAY[*] OF element`` (IEC 61131-3, 6.5.3): a VAR_IN_OUT that takes an array of
+    any bounds; LOWER_BOUND and UPPER_BOUND give them."""
+
+    element: Type
+
+    def __str__(self) -> str:
+        return f"ARRAY[*] OF {self.element}"
+
+
+@dataclass(frozen=True, slots=True)
 class FbOf:
     """An instance of a function block (``std``: one of the standard ones)."""
 
@@ -98,7 +109,7 @@ class FbOf:
         return self.name
 
 
-Type = str | ArrayOf | FbOf | StringOf | StructOf | EnumOf
+Type = str | ArrayOf | AnyLength | FbOf | StringOf | StructOf | EnumOf
 
 
 def bits(t: str) -> int:

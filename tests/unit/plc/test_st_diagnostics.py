@@ -111,6 +111,13 @@ CASES = [
     ("ST020", "FUNCTION_BLOCK fb VAR_IN_OUT x : INT; END_VAR x := x + 1; END_FUNCTION_BLOCK\n"
               "PROGRAM p VAR f : fb; d : DINT; END_VAR\nf(x := ¦d); END_PROGRAM"),
     ("ST010", "PROGRAM p VAR_EXTERNAL ¦g : INT; END_VAR END_PROGRAM"),
+    ("ST031", "PROGRAM p VAR a : ¦ARRAY[*] OF INT; END_VAR END_PROGRAM"),
+    ("ST031", "FUNCTION f VAR_IN_OUT a : ARRAY[*] OF INT; END_VAR VAR b : ARRAY[1..2] OF INT;"
+              " END_VAR\nb := ¦a; END_FUNCTION"),
+    ("ST022", "PROGRAM p VAR a : ARRAY[1..2] OF INT; x : DINT; END_VAR\n"
+              "x := UPPER_BOUND(a, ¦2); END_PROGRAM"),
+    ("ST020", "FUNCTION f VAR_IN_OUT a : ARRAY[*] OF INT; END_VAR END_FUNCTION\n"
+              "PROGRAM p VAR r : ARRAY[1..2] OF REAL; END_VAR\nf(¦r); END_PROGRAM"),
     ("ST026", "PROGRAM p\n¦CONTINUE; END_PROGRAM"),
     ("ST003", "PROGRAM p ¦(* never (* closed *)\nEND_PROGRAM"),
     ("ST032", "PROGRAM p END_PROGRAM\n¦PROGRAM P END_PROGRAM"),
