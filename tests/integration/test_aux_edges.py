@@ -199,3 +199,23 @@ async def test_a_session_acknowledged_over_modbus_replays_as_recorded(tmp_path: 
             if '"event": "write"' in line and '"var": "SA960"' in line]
     assert len(acks) == 4 and all('"who": "modbus 127.0.0.1:' in line for line in acks)
     replay(record)  # raises with the first divergence
+
+
+def test_st_cannot_write_a_strobe_and_an_acknowledge_without_aux_is_a_hazard(
+        tmp_path: Path) -> None:
+    from ncgate.plc.st.compiler import Context, compile_logic
+    from ncgate.plc.st.diagnostics import LogicError, StCode
+    from ncgate.plc.st.parser import parse_source
+
+    source = "PROGRAM p\nNC.P[1].MSTROBE := TRUE;\nEND_PROGRAM\n"
+    with pytest.raises(LogicError) as caught:
+        compile_logic([parse_source(source, "p.st")], Context(1024, 512, 256, 5, frozenset()))
+    assert [d.code for d in caught.value.diagnostics] == [StCode.READ_ONLY]
+    # Without [nc.aux] the logic's acknowledge has nothing to answer: said, the scan goes on.
+    (tmp_path / "p.st").write_text("PROGRAM p\nNC.P[1].MACK := TRUE;\nEND_PROGRAM\n")
+    config = _cell(tmp_path, "N10(DLY,0.05)\nN20M30\n", aux=None)
+    result = run_sim(load_config(config, overrides={"plc.logic": str(tmp_path / "p.st")}),
+                     "A", load_script(None))
+    assert result.outcome == "idle"
+    (hazard,) = _events(result, "hazard")
+    assert "NC.P[1].MACK at p.st:2" in hazard["message"] and "[nc.aux]" in hazard["message"]

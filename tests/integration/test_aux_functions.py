@@ -20,6 +20,7 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.sim import run_sim
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.gateway.web.status import process as process_status
 from ncgate.interpreter.engine import WaitKind
 
 EventDict = dict[str, Any]
@@ -191,6 +192,10 @@ async def test_the_built_in_cell_commissions_with_a_virtual_plc_over_modbus() ->
         await plc.wait_state(1, "WAIT_COND")
         assert (await plc.status(1))[3] == WaitKind.AUX  # wait kind 6: the acknowledge
         assert gw.status(1).wait is not None and gw.status(1).wait.code == "T1"
+        lane = process_status(gw, 1)["wait"]  # the console's lane (GET /api/status)
+        assert (lane["kind"], lane["code"], lane["cond"], lane["value"]) == (
+            "AUX", "T1", "SA962=1", 0)
+        assert "waits for the PLC to acknowledge it" in lane["reason"]
         await plc.ack_aux(seen)
         task = asyncio.create_task(plc_program(plc))
         try:
