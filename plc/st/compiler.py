@@ -751,9 +751,6 @@ class Compiler:
                                          + (f"declared twice (first at {first.span})"
                                             if first.image is None else _symbol_clash(first)),
                                          decl.span)
-                    if decl.qualifier == "RETAIN":
-                        raise self.error(StCode.UNSUPPORTED, "VAR_GLOBAL RETAIN: declare the "
-                                         "RETAIN variables in a PROGRAM", decl.span)
                     t = self.resolve_type(decl.type, False)
                     initial = self._initial(decl, t, scope)
                     self.globals[key] = VarInfo(decl.name, t, "VAR_GLOBAL", decl.qualifier,
