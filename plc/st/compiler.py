@@ -751,6 +751,9 @@ class Compiler:
                                          + (f"declared twice (first at {first.span})"
                                             if first.image is None else _symbol_clash(first)),
                                          decl.span)
+                    if decl.qualifier == "RETAIN":
+                        raise self.error(StCode.UNSUPPORTED, "VAR_GLOBAL RETAIN: declare the "
+                                         "RETAIN variables in a PROGRAM", decl.span)
                     t = self.resolve_type(decl.type, False)
                     initial = self._initial(decl, t, scope)
                     self.globals[key] = VarInfo(decl.name, t, "VAR_GLOBAL", decl.qualifier,
@@ -2036,9 +2039,6 @@ class Compiler:
             conv = _conversion(key)
             if conv is not None:
                 return self.convert(x, *conv, scope)
-            target = DATE_NAMES.get(key[3:], key[3:]) if key.startswith("TO_") else ""
-            if target in (*ELEMENTARY, "STRING", "WSTRING"):
-                return self.convert_any(x, target, scope)
             if key in STD_FUNCTIONS:
                 return self.std_call(x, key, scope)
         if info is None and key in UNSUPPORTED_FUNCTIONS:
@@ -2304,25 +2304,8 @@ class Compiler:
             return e.code
         return self.coerce(E(e.code, e.type, e.const, True), t, x.span)
 
-    def convert_any(self, x: n.Call, dst: str, scope: Scope) -> E:
-        """TO_INT(x), TO_REAL(x), ... (IEC 61131-3, 6.6.2.5.2, Table 22): the conversion
-        from the argument's own type (an untyped literal is a DINT or an LREAL)."""
+    def convert(self, x: n.Call, src: str, dst: str, scope: Scope) -> E:
         (a,) = self._args(x, scope, 1)
-        src: Type = {ANY_INT: "DINT", ANY_REAL: "LREAL"}.get(str(a.type), a.type)
-        if isinstance(src, StringOf):
-            src = "WSTRING" if src.wide else "STRING"
-        if isinstance(src, Ranged):
-            src = str(src)
-        if not isinstance(src, str) or src not in (*ELEMENTARY, "STRING", "WSTRING"):
-            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} converts an elementary value, "
-                             f"not {_tname(a.type)}", x.span)
-        if src == dst:
-            return E(a.code, a.type, a.const, a.exact)
-        return self.convert(x, src, dst, scope, a)
-
-    def convert(self, x: n.Call, src: str, dst: str, scope: Scope, given: E | None = None
-                ) -> E:
-        (a,) = self._args(x, scope, 1) if given is None else (given,)
         texts = ("STRING", "WSTRING")
         if src in texts:
             if not (isinstance(a.type, StringOf) and a.type.wide == (src == "WSTRING")):

@@ -7,6 +7,7 @@ tests are skipped with that reason -- never in CI, where a missing browser is a 
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shutil
@@ -151,6 +152,7 @@ def test_cycle_start_a_wait_a_forced_bit_and_a_server_restart(browser: Any,
         assert segments >= 2
         # Force SA10 in the image grid: P2 resumes, the log says who, the timeline grows.
         browser.find_element(By.ID, "sa-10").click()
+        answer_dialog(browser, accept=True)  # a write is asked first
         until(browser, "SA10 on, written by web",
               lambda d: "on" in d.find_element(By.ID, "sa-10").get_attribute("class")
               and "last written by web" in d.find_element(By.ID, "sa-10").get_attribute(
@@ -360,6 +362,7 @@ def test_an_alarm_shows_in_the_header_and_in_its_lane_with_its_block(
               and "N20 (SND,3)" in text(d, "#lane-1 .block")
               and "AL111" in text(d, "#lane-1 .alarm"))
         browser.find_element(By.CSS_SELECTOR, "#lane-1 .alarm button").click()  # Reset
+        answer_dialog(browser, accept=True)
         until(browser, "the alarm cleared", lambda d: text(d, "#alarms") == ""
               and text(d, "#lane-1 .state") == "IDLE")
     finally:
@@ -383,6 +386,7 @@ def test_a_lane_starts_holds_and_resets_its_own_process(browser: Any, web_port: 
         until(browser, "P2 held", lambda d: "HOLD" in text(d, "#lane-2 .state"))
         assert "HOLD" not in text(browser, "#lane-1 .state")
         browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-reset").click()
+        answer_dialog(browser, accept=True)
         until(browser, "P1 reset", lambda d: text(d, "#lane-1 .state") == "IDLE")
         assert "HOLD" in text(browser, "#lane-2 .state")
     finally:
@@ -418,5 +422,310 @@ def test_the_commissioning_controls_of_the_page(browser: Any, web_port: int) -> 
         browser.find_element(By.CSS_SELECTOR, "#breakpoints .breakpoint").click()
         until(browser, "the breakpoint cleared",
               lambda d: status()["controls"]["breakpoints"] == [])
+    finally:
+        run.stop()
+
+
+# ---- issue 30, item 4: what engineers look for ------------------------------------------------
+
+CELL_LOGIC = """PROGRAM main
+VAR
+  n : INT;
+  t : TON;
+END_VAR
+n := n + 1;
+t(IN := SA[12], PT := T#1s);
+SYVAR[7] := n;
+END_PROGRAM
+"""
+CELL_SYMBOLS = """[symbols]
+door_closed = "SA10"
+spindle_speed = { var = "SYVAR3", comment = "rpm / 10" }
+"""
+
+
+def named_cell(tmp_path: Path, web_port: int, channel: str) -> RunProcess:
+    """A cell of one program waiting for SA10, PLC logic with a counter and a TON, and two
+    I/O names."""
+    (tmp_path / "A.nc").write_text("N1G1X10Y20Z-5F300\nN2(WAI,SA10=1)\nN3M30\n")
+    (tmp_path / "logic.st").write_text(CELL_LOGIC)
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\nlookahead = 0\n[nc.storage]\nMP0 = "."\n'
+        f'[plc]\nlogic = "logic.st"\nretain_file = "{tmp_path / "r.sqlite"}"\n'
+        + CELL_SYMBOLS)
+    run = RunProcess("--config", str(tmp_path / "ncgate.toml"), "--port", "0", "--web",
+                     f"127.0.0.1:{web_port}", "--set", f"canopen.channel={channel}")
+    run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
+    return run
+
+
+def api(port: int, method: str, path: str, body: Any = None) -> Any:
+    request = urllib.request.Request(
+        f"http://127.0.0.1:{port}{path}", method=method,
+        data=None if body is None else json.dumps(body).encode(),
+        headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=WAIT_S) as answer:
+        return json.loads(answer.read())
+
+
+def answer_dialog(driver: Any, accept: bool) -> str:
+    """The confirm() the page asked: its question; accepted or dismissed."""
+    alert = WebDriverWait(driver, WAIT_S).until(lambda d: d.switch_to.alert)
+    question = str(alert.text)
+    if accept:
+        alert.accept()
+    else:
+        alert.dismiss()
+    return question
+
+
+def test_a_lane_shows_where_the_axes_are_the_feed_and_the_override(
+        browser: Any, web_port: int, tmp_path: Path) -> None:
+    run = named_cell(tmp_path, web_port, "ncgate-browser-lane-pos")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "btn-start").click()
+        until(browser, "P1 at X10 Y20 Z-5, F300, waiting",
+              lambda d: text(d, "#lane-1 .pos") == "X 10.000 Y 20.000 Z -5.000"
+              and text(d, "#lane-1 .feed") == "F 300 mm/min"
+              and "SA10=1" in text(d, "#lane-1 .wait")
+              and text(d, "#lane-1 .wait .since").startswith("for "))
+        api(web_port, "POST", "/api/write", {"var": "P1.FEED_OVERRIDE", "value": 40})
+        until(browser, "the override", lambda d: text(d, "#lane-1 .override")
+              .startswith("override 40 %"))
+    finally:
+        run.stop()
+
+
+def test_reset_and_a_write_are_asked_first(browser: Any, web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-confirm")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "btn-start").click()
+        until(browser, "P2 waiting", lambda d: text(d, "#lane-2 .state") == "WAIT_COND")
+        # A bit written only once the question is answered yes.
+        browser.find_element(By.ID, "sa-12").click()
+        assert "SA12 = 1" in answer_dialog(browser, accept=False)
+        browser.find_element(By.ID, "sa-10").click()
+        assert "SA10 = 1" in answer_dialog(browser, accept=True)
+        until(browser, "P2 resumed", lambda d: text(d, "#lane-2 .state") != "WAIT_COND")
+        writes = [e["var"] for e in api(web_port, "GET", "/api/events?since=0")["events"]
+                  if e["event"] == "write"]
+        assert writes == ["SA10"]  # not SA12: that one was declined
+        browser.find_element(By.ID, "btn-reset").click()
+        assert "Reset" in answer_dialog(browser, accept=False)
+        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-reset").click()
+        answer_dialog(browser, accept=False)
+        assert text(browser, "#lane-1 .state") != "IDLE"  # declined: still running
+        browser.find_element(By.ID, "btn-reset").click()
+        answer_dialog(browser, accept=True)
+        until(browser, "every process idle",
+              lambda d: all(text(d, f"#lane-{k} .state") == "IDLE" for k in range(1, 6)))
+    finally:
+        run.stop()
+
+
+def test_the_image_grid_has_fixed_columns_index_labels_names_and_force_marks(
+        browser: Any, web_port: int, tmp_path: Path) -> None:
+    run = named_cell(tmp_path, web_port, "ncgate-browser-grid")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "the grid", lambda d: d.find_elements(By.ID, "sa-17"))
+        # 16 bits a row, each row led by its first index: SA16 sits under SA0, SA17 under SA1.
+        left = {k: browser.find_element(By.ID, f"sa-{k}").rect["x"] for k in (0, 1, 16, 17)}
+        assert left[0] == left[16] and left[1] == left[17] and left[1] > left[0]
+        labels = [e.text for e in browser.find_elements(By.CSS_SELECTOR, "#sa .idx")][:3]
+        assert labels == ["SA0", "SA16", "SA32"]
+        assert [e.text for e in browser.find_elements(By.CSS_SELECTOR, "#k .idx")][:2] == [
+            "SK0", "SK8"]
+        # The names of [symbols]: in the cell's title and in the names table.
+        until(browser, "SA10's name", lambda d: d.find_element(By.ID, "sa-10")
+              .get_attribute("title").startswith("SA10 = 0 (door_closed"))
+        assert "spindle_speed" in browser.find_element(By.ID, "syvar-3").get_attribute("title")
+        until(browser, "the names table", lambda d: [
+            [c.text for c in row.find_elements(By.TAG_NAME, "td")][:2]
+            for row in d.find_elements(By.CSS_SELECTOR, "#names tr")] == [
+            ["door_closed", "SA10"], ["spindle_speed", "SYVAR3"]])
+        # A force by name from the form: listed, and the cell marked F.
+        browser.find_element(By.ID, "force-var").send_keys("door_closed")
+        browser.find_element(By.ID, "force-value").send_keys("1")
+        browser.find_element(By.CSS_SELECTOR, "#force-form button").click()
+        assert "door_closed = 1" in answer_dialog(browser, accept=True)
+        api(web_port, "POST", "/api/force", {"var": "SYVAR3", "value": 42})
+        until(browser, "the force list and the F marks",
+              lambda d: "SA10" in text(d, "#forced") and "SYVAR3" in text(d, "#forced")
+              and "forced" in d.find_element(By.ID, "sa-10").get_attribute("class")
+              and "forced" in d.find_element(By.ID, "syvar-3").get_attribute("class")
+              and d.find_element(By.ID, "sa-10").get_attribute("title").startswith("SA10 = 1")
+              and d.execute_script("return getComputedStyle(document.getElementById('sa-10'),"
+                                   " '::after').content") == '"F"')
+        browser.find_element(By.ID, "btn-unforce-all").click()
+        answer_dialog(browser, accept=True)
+        until(browser, "every force released",
+              lambda d: not d.find_elements(By.CSS_SELECTOR, "#forced tr")
+              and "forced" not in d.find_element(By.ID, "sa-10").get_attribute("class"))
+        assert api(web_port, "GET", "/api/force")["forced"] == []
+    finally:
+        run.stop()
+
+
+def test_fb_members_and_a_trend_of_chosen_variables(browser: Any, web_port: int,
+                                                    tmp_path: Path) -> None:
+    run = named_cell(tmp_path, web_port, "ncgate-browser-trend")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        # A TON's members, one row each.
+        until(browser, "main.t.Q and main.t.ET",
+              lambda d: {row.find_elements(By.TAG_NAME, "td")[0].text
+                         for row in d.find_elements(By.CSS_SELECTOR, "#plc-vars tr")}
+              >= {"main.n", "main.t.IN", "main.t.PT", "main.t.Q", "main.t.ET"})
+        for name in ("main.n", "spindle_speed"):
+            browser.find_element(By.ID, "trend-var").send_keys(name)
+            browser.find_element(By.CSS_SELECTOR, "#trend-form button").click()
+        api(web_port, "POST", "/api/write", {"var": "SYVAR3", "value": 250})
+        until(browser, "two lines, main.n rising, spindle_speed at 250",
+              lambda d: len(d.find_elements(By.CSS_SELECTOR, "#trend polyline")) == 2
+              and "spindle_speed = 250" in text(d, "#trend-legend")
+              and len(d.find_element(By.CSS_SELECTOR, "#trend polyline[data-name='main.n']")
+                      .get_attribute("points").split()) > 4)
+        # A time axis in machine seconds.
+        ticks = browser.execute_script(  # read at once: the chart is redrawn on each tick
+            "return [...document.querySelectorAll('#trend text.tick')].map((e) => e.textContent)")
+        assert ticks[:2] == ["0 s", "10 s"], ticks
+        # Removed with its button.
+        browser.find_element(By.CSS_SELECTOR, "#trend-legend .item button").click()
+        until(browser, "one line", lambda d: len(d.find_elements(By.CSS_SELECTOR,
+                                                                 "#trend polyline")) == 1)
+    finally:
+        run.stop()
+
+
+def test_record_from_the_page_and_the_downloads(browser: Any, web_port: int,
+                                                tmp_path: Path) -> None:
+    run = named_cell(tmp_path, web_port, "ncgate-browser-record")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "btn-record").click()
+        until(browser, "recording", lambda d: "Stop recording" in text(d, "#btn-record"))
+        post_write(web_port, "SYVAR5", 7)
+        browser.find_element(By.ID, "btn-record").click()
+        until(browser, "stopped", lambda d: text(d, "#btn-record").strip("● ") == "Record")
+        # What the links download, fetched by the page itself.
+        fetch = ("const done = arguments[arguments.length - 1];"
+                 "fetch(arguments[0]).then(async (r) => done([r.status,"
+                 " r.headers.get('Content-Disposition'), await r.text()]));")
+        code, disposition, body = browser.execute_async_script(
+            fetch, browser.find_element(By.ID, "dl-record").get_attribute("href"))
+        assert code == 200 and disposition.startswith("attachment")
+        lines = [json.loads(line) for line in body.splitlines()]
+        assert lines[0]["ncgate_record"] == 2 and list(lines[-1]) == ["stop"]
+        assert [(i["input"], i["changes"]) for i in lines if "input" in i] == [
+            ("write", [["SYVAR", 5, "IN", 7]])]
+        code, disposition, body = browser.execute_async_script(
+            fetch, browser.find_element(By.ID, "dl-trace").get_attribute("href"))
+        assert code == 200 and disposition.startswith("attachment")
+        assert any(json.loads(line).get("var") == "SYVAR5" for line in body.splitlines())
+    finally:
+        run.stop()
+
+
+def test_on_a_phone_the_page_is_one_column(browser: Any, web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-phone")
+    try:
+        browser.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+            "width": 390, "height": 844, "deviceScaleFactor": 3, "mobile": True})
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "five lanes", lambda d: len(d.find_elements(By.CSS_SELECTOR,
+                                                                   ".lane")) == 5)
+        boxes = {box: browser.find_element(By.ID, box).rect
+                 for box in ("lanes-box", "image-box", "plc-box", "force-box", "trend-box")}
+        assert len({round(r["x"]) for r in boxes.values()}) == 1, boxes  # one column
+        assert all(r["width"] <= 390 for r in boxes.values())
+        # Nothing wider than the screen; the long lists scroll in their own boxes.
+        assert browser.execute_script("return document.documentElement.scrollWidth") <= 390
+        assert browser.execute_script("return document.documentElement.scrollHeight") < 6000
+    finally:
+        run.stop()
+
+
+def test_dark_mode_follows_the_system_and_the_toggle(browser: Any, web_port: int) -> None:
+    run = start_run(web_port, "ncgate-browser-dark")
+    try:
+        def background(d: Any) -> int:
+            rgb = d.execute_script("return getComputedStyle(document.body).backgroundColor")
+            return sum(int(v) for v in rgb[rgb.index("(") + 1:-1].split(",")[:3])
+
+        browser.execute_cdp_cmd("Emulation.setEmulatedMedia", {"features": [
+            {"name": "prefers-color-scheme", "value": "dark"}]})
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        assert background(browser) < 150  # the system's dark
+        toggle = browser.find_element(By.ID, "theme")
+        assert "auto" in toggle.text
+        toggle.click()  # dark
+        toggle.click()  # light, whatever the system says
+        assert "light" in toggle.text and background(browser) > 600
+        browser.refresh()  # kept for the next visit
+        until(browser, "light again", lambda d: "light" in text(d, "#theme")
+              and background(d) > 600)
+        browser.execute_cdp_cmd("Emulation.setEmulatedMedia", {"features": [
+            {"name": "prefers-color-scheme", "value": "light"}]})
+        browser.find_element(By.ID, "theme").click()  # auto: the system's light
+        browser.find_element(By.ID, "theme").click()  # dark, whatever the system says
+        assert background(browser) < 150
+    finally:
+        run.stop()
+
+
+def test_the_server_svg_labels_do_not_overlap_and_its_legend_is_inside(
+        browser: Any, web_port: int) -> None:
+    """The timeline picture smeared its write labels over each other and cut its legend at
+    the right edge; measured here by the browser that draws it."""
+    run = start_run(web_port, "ncgate-browser-svg")
+    try:
+        for value in range(1, 41):
+            post_write(web_port, "SYVAR5", value)
+        browser.get(f"http://127.0.0.1:{web_port}/api/timeline.svg")
+        boxes = browser.execute_script("""
+            const svg = document.documentElement;
+            const box = (e) => { const b = e.getBBox(); return [b.x, b.y, b.width, b.height]; };
+            return {size: [svg.width.baseVal.value, svg.height.baseVal.value],
+                    labels: [...document.querySelectorAll('text.write-label')].map(box),
+                    legend: [...document.querySelectorAll('g.legend')].map(box),
+                    text: [...document.querySelectorAll('text')].map(box)};""")
+        width, height = boxes["size"]
+        assert boxes["labels"] and len(boxes["legend"]) == 9
+        for x, y, w, h in boxes["text"] + boxes["legend"]:
+            assert x >= 0 and x + w <= width and y >= 0 and y + h <= height, (x, y, w, h)
+        labels = sorted(boxes["labels"])
+        for (x1, _, w1, _), (x2, _, _, _) in itertools.pairwise(labels):
+            assert x1 + w1 <= x2, labels  # side by side, never on top of each other
+    finally:
+        run.stop()
+
+
+def test_a_lane_names_an_auxiliary_functions_handshake(browser: Any, web_port: int,
+                                                       tmp_path: Path) -> None:
+    """Issue 28's handshake in the lane: M08 before its block's motion waits for the PLC's
+    acknowledge (no PLC logic here: nobody answers) -- the lane says so and for how long."""
+    (tmp_path / "A.nc").write_text("N1M08G1X10F600\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[nc.aux]\ncodes = { M8 = '
+        '"before_motion" }\n')
+    run = RunProcess("--config", str(tmp_path / "ncgate.toml"), "--port", "0", "--web",
+                     f"127.0.0.1:{web_port}", "--set", "canopen.channel=ncgate-browser-aux")
+    try:
+        run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        browser.find_element(By.ID, "btn-start").click()
+        until(browser, "P1 waiting for the acknowledge of M08",
+              lambda d: text(d, "#lane-1 .wait.aux").startswith(
+                  "handshake: M08 waits for the PLC to acknowledge it")
+              and text(d, "#lane-1 .wait.aux .since").startswith("for "))
     finally:
         run.stop()
