@@ -185,6 +185,8 @@ class Gateway:
         if plc is not None:
             self._plc = plc
             stack.callback(self._stop_plc, plc)
+            if self.recorder is not None and isinstance(self.door.reload_plc, OnlineChange):
+                self.door.reload_plc.record_to(self.recorder.logic)  # (run --record)
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
 
@@ -218,11 +220,16 @@ class Gateway:
         unsubscribe = runtime.trace.subscribe(recorder.event)
         runtime.store.loaded.append(recorder.program)
         self.door.recorder = recorder.input
+        online = self.door.reload_plc
+        if isinstance(online, OnlineChange):  # the PLC runs: its logic's sources, from now
+            online.record_to(recorder.logic)
 
         def detach() -> None:
             unsubscribe()
             runtime.store.loaded.remove(recorder.program)
             self.door.recorder = None
+            if isinstance(self.door.reload_plc, OnlineChange):
+                self.door.reload_plc.record_to(None)
         self._record_detach = detach
         return recorder.path
 

@@ -22,7 +22,7 @@ import logging
 import sqlite3
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +51,7 @@ from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.compiler import Context, Logic, compile_logic
 from ncgate.plc.st.diagnostics import LogicError
-from ncgate.plc.st.plcopen import read_logic_file
+from ncgate.plc.st.plcopen import logic_from_text, read_logic_file, read_logic_text
 
 log = logging.getLogger("ncgate.plc")
 
@@ -70,10 +70,22 @@ def logic_context(config: Config) -> Context:
                    tuple(config.symbols.items()), plc.strict)
 
 
-def load_logic(files: tuple[Path, ...], config: Config) -> Logic:
-    """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix);
-    raises LogicError with all the diagnostics."""
-    logic = compile_logic([read_logic_file(path) for path in files], logic_context(config))
+Sources = dict[str, str]  # a logic file's path -> its content (plcopen.read_logic_text)
+
+
+def read_sources(files: tuple[Path, ...]) -> Sources:
+    """The content of every logic file, as the PLC loads it and a session record keeps it."""
+    return {str(path): read_logic_text(path) for path in files}
+
+
+def load_logic(files: tuple[Path, ...], config: Config,
+               sources: Sources | None = None) -> Logic:
+    """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix) --
+    from ``sources`` when given (a replay runs the logic its record carries); raises
+    LogicError with all the diagnostics."""
+    parsed = ([read_logic_file(path) for path in files] if sources is None else
+              [logic_from_text(path, text) for path, text in sources.items()])
+    logic = compile_logic(parsed, logic_context(config))
     for warning in logic.warnings:  # plc.strict = false: what IEC would refuse
         log.warning("%s", warning.render())
     return logic
@@ -168,6 +180,7 @@ class ReloadOutcome:
     kept: int = 0
     initial: tuple[str, ...] = ()
     dropped: tuple[str, ...] = ()
+    sources: Sources = field(default_factory=dict, repr=False, compare=False)  # (a record's)
 
     def as_dict(self) -> dict[str, Any]:
         return {"ok": self.ok, "files": list(self.files), "kept": self.kept,
@@ -182,15 +195,30 @@ class OnlineChange:
     :meth:`prepare` reads and compiles the files -- slow for a big program, so ``run`` calls
     it in a thread -- and the door's RELOAD_PLC calls the object on the loop, which swaps
     the logic in (:meth:`ncgate.plc.scan.PlcRuntime.reload`) or, when the files did not
-    load, leaves the old logic running and reports the diagnostics."""
+    load, leaves the old logic running and reports the diagnostics.
 
-    def __init__(self, config: Config, runtime: Runtime, plc: PlcRuntime) -> None:
+    A session record carries the logic's sources: those running when the record starts and
+    those of each reload (:meth:`record_to`), so that its replay runs the logic the session
+    ran (``recorded``: the sources of the session's reloads, in order)."""
+
+    def __init__(self, config: Config, runtime: Runtime, plc: PlcRuntime,
+                 sources: Sources) -> None:
         self.config = config
         self.runtime = runtime
         self.plc = plc
-        self._prepared: tuple[Logic, list[str]] | ReloadOutcome | None = None
+        self.sources = sources  # of the logic that runs
+        self.recorded: list[Sources] | None = None
+        self._record: Callable[[Sources, float], None] | None = None
+        self._prepared: tuple[Logic, list[str], Sources] | ReloadOutcome | None = None
         self.last: ReloadOutcome | None = None
         self._lock = threading.Lock()
+
+    def record_to(self, record: Callable[[Sources, float], None] | None) -> None:
+        """Write the running logic's sources now, and those of every reload from now on,
+        with ``record`` (``SessionRecorder.logic``; None: no more)."""
+        self._record = record
+        if record is not None:
+            record(self.sources, self.runtime.engine.now)
 
     @property
     def files(self) -> tuple[str, ...]:
@@ -216,16 +244,21 @@ class OnlineChange:
         with self._lock:
             self._prepared = prepared
 
-    def _compile(self) -> tuple[Logic, list[str]] | ReloadOutcome:
+    def _compile(self) -> tuple[Logic, list[str], Sources] | ReloadOutcome:
         config = self.config
+        sources: Sources = {}
         try:
-            logic = load_logic(config.plc.logic, config)
-            return logic, program_order(logic, config)
+            if self.recorded is not None:  # a replay: the session's next reload
+                sources = self.recorded.pop(0) if self.recorded else self.sources
+            else:
+                sources = read_sources(config.plc.logic)
+            logic = load_logic(config.plc.logic, config, sources)
+            return logic, program_order(logic, config), sources
         except LogicError as exc:
             said = tuple(d.render() for d in exc.diagnostics)
         except (ConfigError, OSError) as exc:  # plc.programs names a PROGRAM now gone; a
             said = (str(exc),)                 # file removed or unreadable
-        return ReloadOutcome(False, self.files, said)
+        return ReloadOutcome(False, self.files, said, sources=sources)
 
     def __call__(self, by: str) -> ReloadOutcome:
         """Swap in what :meth:`prepare` compiled (or compile now, on the virtual clock)."""
@@ -233,12 +266,15 @@ class OnlineChange:
             prepared, self._prepared = self._prepared, None
         if prepared is None:
             prepared = self._compile()
+        sources = prepared.sources if isinstance(prepared, ReloadOutcome) else prepared[2]
+        if self._record is not None:  # what the replay will load here (as this did)
+            self._record(sources, self.runtime.engine.now)
         if isinstance(prepared, ReloadOutcome):
             outcome = prepared
             log.error("PLC logic not reloaded (%s); the old logic runs on:\n%s", by,
                       "\n".join(outcome.diagnostics))
         else:
-            logic, order = prepared
+            logic, order, self.sources = prepared
             done = self.plc.reload(logic, order)
             outcome = ReloadOutcome(True, self.files, (), done.kept, done.initial,
                                     done.dropped)
@@ -362,16 +398,19 @@ class ScanDriver:
 
 
 def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
-              wall: Callable[[], float] | None = None, cold: bool = False
-              ) -> tuple[PlcRuntime, ScanDriver] | None:
+              wall: Callable[[], float] | None = None, cold: bool = False,
+              sources: Sources | None = None) -> tuple[PlcRuntime, ScanDriver] | None:
     """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
 
     RETAIN values are kept in ``plc.retain_file`` in ``run`` only: a simulation (``closed``)
-    starts from the initial values every time, so that it stays deterministic."""
+    starts from the initial values every time, so that it stays deterministic.
+    ``sources``: the files' content to load instead of the files (a replay's, recorded)."""
     plc = config.plc
     if not plc.logic:
         return None
-    logic = load_logic(plc.logic, config)
+    if sources is None:
+        sources = read_sources(plc.logic)
+    logic = load_logic(plc.logic, config, sources)
     order = program_order(logic, config)
     store = None
     if not closed and any(v.retain for table in logic.programs.values()
@@ -390,7 +429,7 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
                                watchdog_ms=0 if closed else plc.watchdog_ms)
     runtime.plc = logic_runtime
     logic_runtime.on_overridden = lambda path, value: engine.note_forced(path, value, "plc")
-    door.reload_plc = OnlineChange(config, runtime, logic_runtime)
+    door.reload_plc = OnlineChange(config, runtime, logic_runtime, sources)
     driver = ScanDriver(engine, logic_runtime, plc.scan_ms, wall=wall, closed=closed,
                         scale=config.nc.time_scale,
                         stall_s=config.nc.stall_s)

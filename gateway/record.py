@@ -8,6 +8,9 @@ The record is JSON Lines, in the order things happened:
   files are the ones the session used from the start (the config, the PLC logic);
 - ``{"program": path, "sha256"}`` when the session first reads a part program (and again
   when it changed): the replay warns when a program it runs is not the one recorded;
+- ``{"plc_logic": {path: text}, "t"}``: the PLC logic's files as the PLC runs them when the
+  record starts, and as each online change (``reload_plc``) read them, right after its
+  command's line: the replay loads these, not the files as they are now;
 - an *input* line for everything that came through the door from outside the cell, with its
   machine time and its source (``who``: the trace's attribution; ``peer``: the address):
   ``{"input": "write", "t", "who", "peer", "changes": [[area, index, view, value], ...]}``,
@@ -47,7 +50,7 @@ from ncgate.config import Config, ConfigError, load_config
 from ncgate.errors import InputRefused
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.plc import start_plc
+from ncgate.gateway.plc import OnlineChange, start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime
 from ncgate.inputs import (
@@ -292,6 +295,11 @@ class SessionRecorder:
             self._programs[str(path)] = digest
             self._file.append(json.dumps({"program": str(path), "sha256": digest}) + "\n")
 
+    def logic(self, sources: dict[str, str], t: float) -> None:
+        """The PLC logic's sources (path -> content): those running when the record starts
+        and those of every online change (``OnlineChange.record_to``), for the replay."""
+        self._file.append(json.dumps({"plc_logic": sources, "t": round(t, 6)}) + "\n")
+
     def flush(self) -> None:
         """Write what is pending now (a download of the record as far as it is)."""
         self._file.flush()
@@ -317,6 +325,7 @@ class Recording:
     inputs: list[RecordedInput] = field(default_factory=list)
     events: list[EventDict] = field(default_factory=list)
     programs: dict[str, str] = field(default_factory=dict)  # path -> sha256, as last read
+    logic: list[dict[str, str]] = field(default_factory=list)  # the PLC logic's sources
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -370,13 +379,21 @@ def read_record(path: str | Path) -> Recording:
             elif "seq" in item:
                 _check_event(item)
                 recording.events.append(item)
+            elif "plc_logic" in item:
+                _time(item, "t")
+                sources = _field(item, "plc_logic", dict, "the logic files' contents")
+                if not all(isinstance(k, str) and isinstance(v, str)
+                           for k, v in sources.items()):
+                    raise ValueError('"plc_logic": a path -> text object')
+                recording.logic.append(sources)
             elif "program" in item:
                 recording.programs[_field(item, "program", str, "a path")] = _field(
                     item, "sha256", str, "a sha256")
             elif "stop" in item:
                 recording.stop = _time(item, "stop")
             else:
-                raise ValueError("neither an input, an event, a program nor the stop")
+                raise ValueError("neither an input, an event, a program, the PLC logic nor "
+                                 "the stop")
         except ValueError as exc:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
@@ -465,10 +482,15 @@ def replay(path: str | Path, config: str | Path | None = None,
 
     files = header.get("files")
     files = files if isinstance(files, dict) else {}
+    if recording.logic:  # the logic is the record's: its files now do not matter
+        files = {k: v for k, v in files.items() if Path(k) not in cfg.plc.logic}
     warnings = _changed({str(k): str(v) for k, v in files.items()},
                         lambda f: _sha256(Path(f)))
     warnings += _changed(recording.programs, program_now)
-    start_plc(cfg, runtime, door, closed=True)
+    start_plc(cfg, runtime, door, closed=True,
+              sources=recording.logic[0] if recording.logic else None)
+    if recording.logic and isinstance(door.reload_plc, OnlineChange):
+        door.reload_plc.recorded = list(recording.logic[1:])  # the session's reloads
     end = recording.end
     refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order

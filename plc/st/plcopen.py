@@ -513,7 +513,8 @@ def parse_plcopen(data: bytes, path: str) -> n.SourceFile:
     assert parsed is not None
     # Every part of the parsed file (POUs, types, globals, what the parser adds later), its
     # spans moved; the text is the XML's, for the lines diagnostics and faults show.
-    return dataclasses.replace(_moved(parsed, move), path=path, text=text)
+    moved: n.SourceFile = _moved(parsed, move)
+    return dataclasses.replace(moved, path=path, text=text)
 
 
 def _decoded(data: bytes) -> str:
@@ -544,3 +545,26 @@ def read_logic_file(path: str | Path) -> n.SourceFile:
     if path.suffix.lower() == XML_SUFFIX:
         return parse_plcopen(path.read_bytes(), str(path))
     return parse_file(path)
+
+
+def read_logic_text(path: str | Path) -> str:
+    """A logic file's content as text that gives its bytes back (``logic_from_text``):
+    UTF-8, with any byte that is not kept as a surrogate (a session record carries it)."""
+    return Path(path).read_bytes().decode("utf-8", "surrogateescape")
+
+
+def logic_from_text(path: str, text: str) -> n.SourceFile:
+    """:func:`read_logic_file` of a file whose content was ``text`` (``read_logic_text``):
+    the logic a session ran, replayed from its record."""
+    data = text.encode("utf-8", "surrogateescape")
+    if Path(path).suffix.lower() == XML_SUFFIX:
+        return parse_plcopen(data, path)
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:  # as parse_file says it
+        line = data[:exc.start].count(b"\n") + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise LogicError([StDiagnostic(StCode.NOT_UTF8, f"byte 0x{data[exc.start]:02X} is "
+                                       "not UTF-8 (save the file as UTF-8)",
+                                       n.Span(path, line, column), "")]) from None
+    return parse_source(text.removeprefix("\ufeff"), path)

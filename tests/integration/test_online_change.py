@@ -173,27 +173,37 @@ async def test_canopen_command_value_16_reloads(gw: Gateway, tmp_path: Path) -> 
     await PlcWatch(gw).until("main.added", 7)
 
 
-async def test_a_recorded_reload_replays(tmp_path: Path) -> None:
+async def test_a_recorded_reload_replays_the_logic_the_session_ran(tmp_path: Path) -> None:
+    """The record carries the logic's sources (at its start, and each reload's): the replay
+    runs V1, then V2 from the reload's time, whatever the file holds when it replays."""
     record = tmp_path / "session.jsonl"
-    gw = cell(tmp_path)
-    gw = Gateway(gw.config, record=record)
+    gw = Gateway(cell(tmp_path).config, record=record)
     async with gw:
         watch = PlcWatch(gw)
         await watch.until("main.scans", 3)
         (tmp_path / "logic.st").write_text(V2)
         assert (await gw.reload_plc(Source(SourceKind.API, "test"))).ok
         await watch.until("main.added", 7)
+    (tmp_path / "logic.st").write_text(V2.replace("added : INT := 7", "added : INT := 9"))
     lines = [json.loads(line) for line in record.read_text().splitlines()]
     command = next(x for x in lines if x.get("input") == "command")
     assert (command["command"], command["who"]) == ("reload_plc", "api test")
+    logic = [x for x in lines if "plc_logic" in x]
+    assert [x["plc_logic"] for x in logic] == [{str(tmp_path / "logic.st"): V1},
+                                               {str(tmp_path / "logic.st"): V2}]
+    assert lines.index(logic[1]) == lines.index(command) + 1
     recorded = next(x for x in lines if x.get("event") == "plc_reload")
     assert recorded["ok"] and recorded["initial"] == ["main.added"]
     assert command["t"] <= recorded["t"]
     result = replay(record)
     assert result.divergence is None
+    assert not [w for w in result.warnings if "logic.st" in w]  # the record's logic ran
     replayed = [e for e in result.runtime.trace.events if e["event"] == "plc_reload"]
     assert len(replayed) == 1 and replayed[0]["ok"] and replayed[0]["by"] == "api test"
     assert abs(replayed[0]["t"] - command["t"]) < 1e-6
+    # V1 ran before the reload (V2's 'added' was new to it), then V2 as recorded (7, not
+    # the file's 9 now).
+    assert replayed[0]["initial"] == ["main.added"]
     assert result.runtime.plc is not None and result.runtime.plc.read("main.added") == 7
 
 
