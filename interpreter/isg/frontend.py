@@ -472,6 +472,11 @@ class _BlockCompiler:
                 elif letter in _ARC:
                     arc[letter] = v
             move = plan_move(modal, axes, arc, settings)
+            if not aux:
+                if move is None:
+                    return NEXT
+                return queue_motion(p, [QueueItem(ItemKind.MOVE, move.duration_s, where,
+                                                  move)])
             before, after = aux_items(settings.aux_interface, aux, where)
             items = [*before, QueueItem(ItemKind.MOVE, move.duration_s, where, move),
                      *after] if move is not None else [*before, *after]

@@ -70,6 +70,7 @@ from ncgate.interpreter.settings import AUX_LETTERS, AXES, RuntimeSettings
 
 NEXT, WAIT_NEXT, JUMP, END = Step.NEXT, Step.WAIT_NEXT, Step.JUMP, Step.END
 DECODER = Stage.DECODER
+_NO_AUX: Final[tuple[list[QueueItem], list[QueueItem]]] = ([], [])  # (never appended to)
 _MOTION_WORDS: Final = frozenset(AXES) | {"I", "J", "K", "R"}
 _EXE_ARG: Final = re.compile(r"\(\s*EXE\s*,\s*([^,)\s]*)(?:\s*,\s*([^,)\s]*))?",
                              re.IGNORECASE)
@@ -335,7 +336,7 @@ class _BlockCompiler:
             elif letter in _MOTION_WORDS:
                 (arc if letter in "IJKR" else axes)[letter] = v
         where = self.where
-        before, after = aux_items(settings.aux_interface, aux, where)
+        before, after = aux_items(settings.aux_interface, aux, where) if aux else _NO_AUX
         items.extend(before)
         if tool_change:
             items.append(QueueItem(ItemKind.TOOL, settings.tool_change_s, where))
