@@ -22,7 +22,9 @@ polling).  An acknowledge that rises with no strobe of its place up is a PLC-sid
 ``hazard`` in the trace (and the run log), ignored, never a crash.  An acknowledge still up
 when the next code is output was not dropped: the NC waits for it to rise again.
 
-Stdlib only; the engine owns one :class:`AuxInterface` when ``[nc.aux]`` is configured.
+The engine owns one :class:`AuxInterface` when ``[nc.aux]`` is configured.  Stdlib only:
+must not import ``plc``, ``gateway``, ``config`` or a front end (the front ends call
+:func:`aux_items`).
 """
 
 from __future__ import annotations

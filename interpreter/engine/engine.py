@@ -15,7 +15,9 @@ interpolator reaches it.
 The rooms: ``states`` (enums and records), ``process`` (one process), ``timers``, ``actions``
 (what compiled blocks hand over), ``sync`` (the EXE/REL/WAI/SND rules, a part the engine owns),
 ``deadlock`` (the pure search), ``events``/``trace`` (what happened), ``clock`` (the virtual
-clock), ``ports`` (what the engine needs, and what a front end may ask of it).
+clock), ``ports`` (what the engine needs, and what a front end may ask of it), ``aux`` (the
+auxiliary functions and their handshake with the PLC, a part the engine owns when
+``[nc.aux]`` is configured).
 
 Must not import ``plc``, ``gateway``, ``config`` or any front end.
 """
