@@ -545,6 +545,13 @@ class PouInfo:
                 if not isinstance(self.vars[k].type, ArrayOf | AnyLength | StructOf)]
 
     @property
+    def returned(self) -> list[str]:
+        """What a FUNCTION returns beside its result, in this order: the copied in-outs,
+        then its VAR_OUTPUTs (6.6.2.2: a FUNCTION may have outputs, bound with =>)."""
+        return [*self.copied_in_outs,
+                *(k for k, v in self.vars.items() if v.section == "VAR_OUTPUT")]
+
+    @property
     def names(self) -> list[str]:
         """The Python names of its variables: v_X, and v_X__LO, the lower bound an
         ARRAY[*] VAR_IN_OUT was given with."""
@@ -751,9 +758,6 @@ class Compiler:
                                          + (f"declared twice (first at {first.span})"
                                             if first.image is None else _symbol_clash(first)),
                                          decl.span)
-                    if decl.qualifier == "RETAIN":
-                        raise self.error(StCode.UNSUPPORTED, "VAR_GLOBAL RETAIN: declare the "
-                                         "RETAIN variables in a PROGRAM", decl.span)
                     t = self.resolve_type(decl.type, False)
                     initial = self._initial(decl, t, scope)
                     self.globals[key] = VarInfo(decl.name, t, "VAR_GLOBAL", decl.qualifier,
@@ -972,9 +976,6 @@ class Compiler:
                 if decl.qualifier == "RETAIN" and pou.kind != "PROGRAM":
                     raise self.error(StCode.UNSUPPORTED, "RETAIN variables belong in a "
                                      "PROGRAM", decl.span)
-                if in_function and decl.section == "VAR_OUTPUT":
-                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION gives one result: no "
-                                     "VAR_OUTPUT", decl.span)
                 if decl.section == "VAR_IN_OUT" and (decl.initial is not None or _holds_fb(t)):
                     raise self.error(StCode.UNSUPPORTED, "a VAR_IN_OUT is a reference to the "
                                      "caller's variable: no initial value, no function block",
@@ -1193,10 +1194,9 @@ class Compiler:
         """A FUNCTION's return: its result, and the values of its VAR_IN_OUTs, which the
         caller stores back into the variables it gave (copy in, copy out)."""
         value = f"v_{info.pou.key}" if info.result is not None else "None"
-        if not info.copied_in_outs:
+        if not info.returned:
             return f"return {value}"
-        return "return (" + ", ".join([value, *(f"v_{k}" for k in info.copied_in_outs)]) + \
-            ",)"
+        return "return (" + ", ".join([value, *(f"v_{k}" for k in info.returned)]) + ",)"
 
     def _body(self, info: PouInfo, scope: Scope) -> None:
         out = self.out
@@ -2039,6 +2039,9 @@ class Compiler:
             conv = _conversion(key)
             if conv is not None:
                 return self.convert(x, *conv, scope)
+            target = DATE_NAMES.get(key[3:], key[3:]) if key.startswith("TO_") else ""
+            if target in (*ELEMENTARY, "STRING", "WSTRING"):
+                return self.convert_any(x, target, scope)
             if key in STD_FUNCTIONS:
                 return self.std_call(x, key, scope)
         if info is None and key in UNSUPPORTED_FUNCTIONS:
@@ -2055,8 +2058,21 @@ class Compiler:
         stores: dict[str, Callable[[str], str]] = {}
         for i, arg in enumerate(x.args):
             if arg.output is not None:
-                raise self.error(StCode.BAD_ARGUMENTS, "a FUNCTION has no outputs to bind",
-                                 arg.span)
+                assert arg.name is not None
+                k = arg.name.upper()
+                out_var = info.vars.get(k)
+                if out_var is None or out_var.section != "VAR_OUTPUT":
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} has no output "
+                                     f"{arg.name}", arg.span)
+                if k in stores:
+                    raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is given twice",
+                                     arg.span)
+                dest = scope.place(arg.output, write=True)
+                assert dest.store is not None
+                stored = self.coerce(E("_VALUE_", out_var.type), dest.type, arg.output.span)
+                dest_store = dest.store
+                stores[k] = lambda v, c=stored, put=dest_store: put(c.replace("_VALUE_", v))
+                continue
             if arg.name is None:
                 if i >= len(inputs) or any(a.name is not None for a in x.args[:i]):
                     raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes {len(inputs)} "
@@ -2097,16 +2113,20 @@ class Compiler:
             raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s "
                              f"{info.vars[missing[0]].display} (a VAR_IN_OUT or ARRAY[*]) "
                              "is given at every call", x.span)
-        if not info.copied_in_outs:
+        if not info.returned:
             return E(f"F_{key}({args})", result)
+        if not any(k in stores for k in info.returned):  # outputs left unbound
+            return E(f"F_{key}({args})[0]", result)
         if self._prelude_call is not x:
-            raise self.error(StCode.UNSUPPORTED, f"{x.name} has an elementary or STRING "
-                             "VAR_IN_OUT: call it as a statement or alone on the right of "
-                             ":= (not inside an expression)", x.span)
+            raise self.error(StCode.UNSUPPORTED, f"{x.name} writes back (an elementary or "
+                             "STRING VAR_IN_OUT, an output bound with =>): call it as a "
+                             "statement or alone on the right of := (not inside an "
+                             "expression)", x.span)
         t = self.temp()
         self.out.emit(f"{t} = F_{key}({args})", x.span)
-        for i, k in enumerate(info.copied_in_outs):
-            self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
+        for i, k in enumerate(info.returned):
+            if k in stores:
+                self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
         return E(f"{t}[0]", result)
 
     def _args(self, x: n.Call, scope: Scope, count: int | None, least: int = 1) -> list[E]:
@@ -2304,8 +2324,25 @@ class Compiler:
             return e.code
         return self.coerce(E(e.code, e.type, e.const, True), t, x.span)
 
-    def convert(self, x: n.Call, src: str, dst: str, scope: Scope) -> E:
+    def convert_any(self, x: n.Call, dst: str, scope: Scope) -> E:
+        """TO_INT(x), TO_REAL(x), ... (IEC 61131-3, 6.6.2.5.2, Table 22): the conversion
+        from the argument's own type (an untyped literal is a DINT or an LREAL)."""
         (a,) = self._args(x, scope, 1)
+        src: Type = {ANY_INT: "DINT", ANY_REAL: "LREAL"}.get(str(a.type), a.type)
+        if isinstance(src, StringOf):
+            src = "WSTRING" if src.wide else "STRING"
+        if isinstance(src, Ranged):
+            src = str(src)
+        if not isinstance(src, str) or src not in (*ELEMENTARY, "STRING", "WSTRING"):
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} converts an elementary value, "
+                             f"not {_tname(a.type)}", x.span)
+        if src == dst:
+            return E(a.code, a.type, a.const, a.exact)
+        return self.convert(x, src, dst, scope, a)
+
+    def convert(self, x: n.Call, src: str, dst: str, scope: Scope, given: E | None = None
+                ) -> E:
+        (a,) = self._args(x, scope, 1) if given is None else (given,)
         texts = ("STRING", "WSTRING")
         if src in texts:
             if not (isinstance(a.type, StringOf) and a.type.wide == (src == "WSTRING")):

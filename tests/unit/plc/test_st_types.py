@@ -431,3 +431,36 @@ def test_a_function_named_as_a_standard_one_replaces_it_only_when_not_strict() -
     plc = Plc(source, context=Context(strict=False)).scan()
     assert plc["main.s"] == "mine"
     assert [w.code.code for w in plc.logic.warnings] == ["SW002"]
+
+
+def test_overloaded_to_conversions_take_the_arguments_own_type() -> None:
+    # 6.6.2.5.2, Table 22: TO_INT(x) is <type of x>_TO_INT(x).
+    plc = Plc(program("i := TO_INT(d); r := TO_REAL(i); s := TO_STRING(i); w := TO_WORD(b);"
+                      "back := TO_DINT(2.5);",
+                      "d : DINT := 70000; i : INT; r : REAL; s : STRING; w : WORD; "
+                      "b : BOOL := TRUE; back : DINT;")).scan()
+    # DINT_TO_INT wraps (70000 - 65536); LREAL_TO_DINT rounds half to even.
+    assert (plc["main.i"], plc["main.r"], plc["main.s"]) == (4464, 4464.0, "4464")
+    assert (plc["main.w"], plc["main.back"]) == (1, 2)
+
+
+def test_a_function_with_outputs_binds_them_with_an_arrow() -> None:
+    # 6.6.2.2 (3rd ed.): a FUNCTION may have VAR_OUTPUTs; the call binds them with =>;
+    # one left unbound is dropped, and then the call is an ordinary expression.
+    source = """
+    FUNCTION DivMod : BOOL
+    VAR_INPUT a, b : INT; END_VAR
+    VAR_OUTPUT q, r : INT; END_VAR
+    IF b = 0 THEN DivMod := FALSE; RETURN; END_IF
+    q := a / b; r := a MOD b; DivMod := TRUE;
+    END_FUNCTION
+    PROGRAM main
+    VAR ok, ok2, again : BOOL; q, r : INT; wide : DINT; END_VAR
+    ok := DivMod(a := 17, b := 5, q => q, r => wide);
+    DivMod(a := -7, b := 2, q => r);
+    again := DivMod(a := 1, b := 0) OR TRUE;
+    END_PROGRAM
+    """
+    plc = Plc(source).scan()
+    assert (plc["main.ok"], plc["main.q"], plc["main.wide"]) == (True, 3, 2)
+    assert plc["main.r"] == -3 and plc["main.again"] is True
