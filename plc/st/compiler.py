@@ -2070,8 +2070,7 @@ class Compiler:
                 dest = scope.place(arg.output, write=True)
                 assert dest.store is not None
                 stored = self.coerce(E("_VALUE_", out_var.type), dest.type, arg.output.span)
-                dest_store = dest.store
-                stores[k] = lambda v, c=stored, put=dest_store: put(c.replace("_VALUE_", v))
+                stores[k] = _bound_store(dest.store, stored)
                 continue
             if arg.name is None:
                 if i >= len(inputs) or any(a.name is not None for a in x.args[:i]):
@@ -2681,6 +2680,12 @@ def _fold(op: str, a: Any, b: Any, real: bool) -> Any:
 
 def _exact(values: Sequence[E]) -> bool:
     return all(v.exact for v in values)
+
+
+def _bound_store(store: Callable[[str], str], coerced: str) -> Callable[[str], str]:
+    """The statement storing a FUNCTION's output (``_VALUE_`` in ``coerced``) where the
+    call bound it."""
+    return lambda value: store(coerced.replace("_VALUE_", value))
 
 
 def _symbol_clash(symbol: VarInfo) -> str:
