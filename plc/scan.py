@@ -140,8 +140,7 @@ class PlcRuntime:
         self._last_process_outputs = [[False] * len(o) for o in self._process_outputs]
         self._last_overrides = [100]
         self._last_process_overrides = [100] * len(self._process_overrides)
-        self._retained = [(p, v) for p, table in logic.programs.items()
-                          for v in table.values() if v.retain]
+        self._retained = _retained_of(logic)
         self._saved: dict[str, tuple[str, Any]] | None = None
         self._save_failed = False
         self.programs: dict[str, Any] = {}
@@ -239,8 +238,7 @@ class PlcRuntime:
         self.order = [name.upper() for name in order]
         self.programs = programs
         self._runs = [programs[key] for key in self.order]
-        self._retained = [(p, v) for p, table in logic.programs.items()
-                          for v in table.values() if v.retain]
+        self._retained = _retained_of(logic)
         self._saved = None  # the store is rewritten at the next scan: what is gone goes
         if self.status.state is PlcState.FAULT:
             self.status.state = PlcState.RUNNING
@@ -415,10 +413,14 @@ class PlcRuntime:
 
     # -- RETAIN ------------------------------------------------------------------------------------
 
+    def _holder(self, program: str) -> Any:
+        """Where a RETAIN variable lives: its program's instance, or the VAR_GLOBALs."""
+        return self._ns["_G"] if program == GLOBALS else self.programs[program]
+
     def retained_values(self) -> dict[str, tuple[str, Any]]:
         out = {}
         for program, var in self._retained:
-            value = getattr(self.programs[program], f"v_{var.key}")
+            value = getattr(self._holder(program), f"v_{var.key}")
             out[f"{program}.{var.key}"] = (str(var.type), self.logic.dump(value, var.type))
         return out
 
@@ -450,7 +452,7 @@ class PlcRuntime:
                 log.warning("RETAIN %s: the stored %s no longer fits %s; initial value "
                             "used, and the stored value dropped", name, type_name, var.type)
                 continue
-            setattr(self.programs[program], f"v_{var.key}", self.logic.restore(value, var.type))
+            setattr(self._holder(program), f"v_{var.key}", self.logic.restore(value, var.type))
             used.add(name)
         for name in sorted(set(stored) - {f"{p}.{v.key}" for p, v in self._retained}):
             log.warning("RETAIN %s: no such RETAIN variable now; its stored value is dropped",
@@ -686,6 +688,16 @@ def _copied(old: Any, new: Any) -> Any:
             setattr(new, name, _copied(value, getattr(new, name, None)))
         return new
     return old
+
+
+GLOBALS = "VAR_GLOBAL"  # the store's name of the globals' RETAIN rows (no POU has it)
+
+
+def _retained_of(logic: Logic) -> list[tuple[str, ProgramVar]]:
+    """The RETAIN variables: (program, variable) of the programs, (GLOBALS, ...) of the
+    VAR_GLOBAL RETAINs."""
+    return [(p, v) for p, table in logic.programs.items() for v in table.values()
+            if v.retain] + [(GLOBALS, v) for v in logic.globals.values() if v.retain]
 
 
 def _split(rest: str) -> list[str | int]:

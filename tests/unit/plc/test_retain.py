@@ -203,3 +203,17 @@ def test_a_retained_fb_whose_type_changed_starts_from_its_initial_state(
         again = runtime(RetainStore(tmp_path / "r.sqlite"), changed)
     assert again.read("keep.tally.n") == 0 and again.read("keep.parts.CV") == 1
     assert "KEEP.TALLY" in caplog.text.upper()
+
+
+def test_a_var_global_retain_keeps_its_value_over_a_restart(tmp_path: Path) -> None:
+    # 6.5.6: RETAIN globals too; the others start from their initial values.
+    source = ("VAR_GLOBAL RETAIN total : DINT; END_VAR\nVAR_GLOBAL plain : DINT := 7; END_VAR\n"
+              "PROGRAM keep\ntotal := total + 1; plain := plain + 1;\nEND_PROGRAM\n")
+    store = RetainStore(tmp_path / "r.sqlite")
+    first = runtime(store, source)
+    for t in range(3):
+        first.scan(t * 10)
+    store.close()
+    again = runtime(RetainStore(tmp_path / "r.sqlite"), source)
+    g = again.logic.namespace["_G"]
+    assert (g.v_TOTAL, g.v_PLAIN) == (3, 7)
