@@ -2486,6 +2486,10 @@ class Scope:
                     code = f"{code}[_ix({i.code}, {t.lo}, {t.length})]"
                 t = t.element
             elif isinstance(sel, n.Bit):
+                if sel.codesys:
+                    c.lenient(StCode.UNSUPPORTED, StCode.VENDOR_EXTENSION, f"{var.name}"
+                              f".%X{sel.bit}: CODESYS's bit access (IEC: {var.name}."
+                              f"{sel.bit})", sel.span)
                 if sel is not var.selectors[-1] or not isinstance(t, str) or t not in INTS:
                     raise c.error(StCode.TYPE_MISMATCH, f"{_show(var)}: bit access is the last "
                                   f"selector, of an integer or bit string, not {t}", sel.span)
@@ -2550,6 +2554,9 @@ class Scope:
         if not var.selectors:
             return place
         sel = var.selectors[0]
+        if isinstance(sel, n.Bit) and sel.codesys:
+            c.lenient(StCode.UNSUPPORTED, StCode.VENDOR_EXTENSION, f"{var.name}.%X{sel.bit}: "
+                      f"CODESYS's bit access (IEC: {var.name}.{sel.bit})", sel.span)
         if len(var.selectors) > 1 or not isinstance(sel, n.Bit) or place.type == "BOOL":
             raise c.error(StCode.TYPE_MISMATCH, f"{v.display} is the {place.type} "
                           f"{area}{index}: no members or indices (bit access: .0)", sel.span)

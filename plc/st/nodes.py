@@ -87,10 +87,11 @@ class Index:
 
 @dataclass(frozen=True, slots=True)
 class Bit:
-    """``w.3``: one bit of an integer (6.5.1.2, Table 12)."""
+    """``w.3``: one bit of an integer (6.5.1.2, Table 12); ``codesys``: written w.%X3."""
 
     bit: int
     span: Span
+    codesys: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -534,7 +534,10 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         return n.Field(str(children[0]), _span(self.file, children[0]))
 
     def bit(self, meta: Any, children: list[Token]) -> n.Bit:
-        return n.Bit(self._number(children[0]), _span(self.file, children[0]))
+        token = children[0]
+        if token.type == "BIT_X":  # w.%X3
+            return n.Bit(int(str(token)[2:]), _span(self.file, token), codesys=True)
+        return n.Bit(self._number(token), _span(self.file, token))
 
     def index(self, meta: Any, children: list[Any]) -> list[n.Index]:
         return [n.Index(c, c.span) for c in children]

@@ -33,6 +33,8 @@ CASES = [
      "ST031", "SW002"),
     ("PROGRAM main VAR a, b, c : BOOL; END_VAR\nc := a OR_ELSE b;\nEND_PROGRAM", 2, 8,
      "ST031", "SW002"),
+    ("PROGRAM main VAR w : WORD; b : BOOL; END_VAR\nb := w.%X3;\nEND_PROGRAM", 2, 8,
+     "ST031", "SW002"),
     ("FUNCTION Noop : VOID\nVAR_INPUT x : INT; END_VAR\nEND_FUNCTION\n"
      "PROGRAM main\nNoop(1);\nEND_PROGRAM", 1, 17, "ST011", "SW002"),
 ]
@@ -54,9 +56,12 @@ def test_strict_refuses_and_lenient_loads_with_a_warning_at_the_same_place(
 
 def test_lenient_values_are_codesys_ones() -> None:
     plc = Plc("TYPE E : (A, B, C); END_TYPE\nPROGRAM main\nVAR d : DINT := 70000; "
-              "i : INT; e : E; n : INT; l : LREAL := 0.1; r : REAL; a, b : BOOL; END_VAR\n"
+              "i : INT; e : E; n : INT; l : LREAL := 0.1; r : REAL; a, b : BOOL; "
+              "w : WORD := 8; bit3 : BOOL; END_VAR\n"
               "i := d; e := C; n := e; r := l; b := a AND_THEN (1 / n > 0); e := 1;\n"
+              "bit3 := w.%X3; w.%X0 := TRUE;\n"
               "END_PROGRAM", context=LENIENT).scan()
     # 70000 wraps to INT: 70000 - 65536 = 4464; C is 2; REAL 0.1 is single's nearest.
     assert (plc["main.i"], plc["main.n"], plc["main.e"]) == (4464, 2, 1)
     assert plc["main.r"] == 0.10000000149011612 and plc["main.b"] is False
+    assert (plc["main.bit3"], plc["main.w"]) == (True, 9)
