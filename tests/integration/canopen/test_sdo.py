@@ -78,7 +78,7 @@ async def test_status_objects_per_process(gw: Gateway, master: Master) -> None:
     ("download32 0x2200:1=5", 0x06070010),  # INTEGER16 sent as 4 bytes
     ("download16 0x2100:1=300", 0x06090030),  # a K byte > 255 in a wider type
     ("download8 0x2400:3=9", 0x06090030),  # an unknown SND target
-    ("download16 0x2400:1=16", 0x06090030),  # an unknown command (1..15 are commands)
+    ("download16 0x2400:1=17", 0x06090030),  # an unknown command (1..16 are commands)
     ("download8 0x2410:1=201", 0x06090030),  # a feed override past 200 %
     ("download8 0x2411:1=101", 0x06090030),  # a rapid override past 100 %
     ("download8 0x2400:2=2", 0x06090030),  # an SND sender that is not external

@@ -145,7 +145,7 @@ async def test_values_out_of_range_store_nothing(ncgate_gateway: Gateway, raw: R
     assert await raw.ask(pdu(16, "HHBHHH", 10, 3, 6, 1, 2, 999)) == exc(16, 3)  # last bad
     assert await raw.ask(pdu(6, "HH", 1500, 300)) == exc(6, 3)  # SA byte
     assert await raw.ask(pdu(22, "HHH", 7, 0x0000, 0x0100)) == exc(22, 3)  # mask -> 256
-    assert await raw.ask(pdu(6, "HH", 2000, 16)) == exc(6, 3)  # no command 16
+    assert await raw.ask(pdu(6, "HH", 2000, 17)) == exc(6, 3)  # no command 17
     assert await raw.ask(pdu(6, "HH", 2000, 0x0900)) == exc(6, 3)  # nor 0 (of process 9)
     await still_serves(ncgate_gateway, raw, before)
 

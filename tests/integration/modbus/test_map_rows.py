@@ -89,7 +89,7 @@ async def test_command_and_mailbox_read_zero_and_refuse_bad_values(
         ncgate_gateway: Gateway, virtual_plc: VirtualPLC) -> None:
     assert await virtual_plc._holding(2000, 3) == [0, 0, 0]
     with pytest.raises(VirtualPLCError, match="exception_code=3"):
-        await virtual_plc.command(16)  # no command 16
+        await virtual_plc.command(17)  # no command 17 (16 reloads the PLC logic)
     with pytest.raises(VirtualPLCError, match="exception_code=3"):
         await virtual_plc.send(2, 1)  # P2 is not external
     with pytest.raises(VirtualPLCError, match="exception_code=4"):

@@ -235,3 +235,16 @@ def test_a_member_of_a_structure_type_is_checked_at_its_element(tmp_path: Path) 
     d = caught.value.diagnostics[0]
     assert d.code is StCode.UNKNOWN_TYPE
     assert (d.span.line, d.span.column) == where(path, '<derived name="T_Deep" />')
+
+
+def test_ncgate_check_reads_an_export_and_names_its_xml_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from ncgate.gateway.cli.main import main
+
+    assert main(["check", str(HERE / "codesys_press.xml")]) == 0
+    path = tmp_path / "lamps.xml"
+    path.write_bytes((HERE / "twincat_unsupported.xml").read_bytes())
+    assert main(["check", str(path)]) == 1
+    line, column = where(path, "<LD>")
+    assert f"{path}:{line}:{column}: error ST031: not supported: LD in POU MAIN" in (
+        capsys.readouterr().out)
