@@ -582,9 +582,15 @@ class _Build(Transformer_NonRecursive[Token, Any]):
 
     def string_lit(self, meta: Any, children: list[Token]) -> n.Literal:
         token = children[0]
+        text = str(token)
         wide = token.type == "WSTRING_LIT"
+        if token.type == "TYPED_STRING":  # STRING#'…' / WSTRING#"…": the type names it
+            prefix, _, text = text.partition("#")
+            wide = prefix.upper() == "WSTRING"
         try:
-            value = parse_string(str(token))
+            value = parse_string(text)
+            if not wide and any(ord(c) > 255 for c in value):
+                raise ValueError("a STRING holds one byte a character (Latin-1)")
         except ValueError as exc:
             raise BadLiteral(token, str(exc)) from None
         return n.Literal(value, "WSTRING" if wide else "STRING", _span(self.file, token))

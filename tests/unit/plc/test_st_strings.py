@@ -85,6 +85,13 @@ def test_escapes_of_string_literals() -> None:
     assert plc["main.n"] == 8
 
 
+def test_typed_string_literals_name_their_type() -> None:
+    # 6.3.3, Table 7: STRING#'OK' and WSTRING#"OK" (and WSTRING#'OK').
+    plc = Plc(program("""s := STRING#'O$4B'; w := WSTRING#"$0152K"; w2 := WSTRING#'ok';""",
+                      "s : STRING; w, w2 : WSTRING;")).scan()
+    assert (plc["main.s"], plc["main.w"], plc["main.w2"]) == ("OK", "\u0152K", "ok")
+
+
 def test_strings_compare_character_by_character() -> None:
     plc = Plc(program("lt := a < b; eq := a = 'ABC'; ne := a <> b; mx := MAX(a, b);",
                       "a : STRING := 'ABC'; b : STRING := 'ABD'; lt, eq, ne : BOOL; "
