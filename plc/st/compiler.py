@@ -2660,7 +2660,8 @@ class Scope:
         if place is None:
             raise c.error(StCode.UNKNOWN_MEMBER, f"{_show(var)}: NC has P[k].STATE/N/LINE/"
                           "WAITING/ALARM/ALARM_CODE/IDLE/HELD/START/HOLD/RESET/"
-                          "FEED_OVERRIDE, EVENTS, LAST_SND.SENDER/TARGET/SEQ, START, HOLD, "
+                          "FEED_OVERRIDE/M/MSTROBE/MACK (S, T, H likewise), EVENTS, "
+                          "LAST_SND.SENDER/TARGET/SEQ, START, HOLD, "
                           "RESET, OPT_STOP, BLOCK_SKIP, HOLD_LEVEL, FEED_OVERRIDE and "
                           "SEND(sender, target)"
                           + did_you_mean(name, ["P", "EVENTS", "LAST_SND", *NC_OUTPUTS,
@@ -2786,8 +2787,8 @@ class Logic:
         self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
                               _NCO=[False] * len(NC_OUTPUTS), _NCW=[""] * len(NC_OUTPUTS),
                               _NCV=[100], _NCVW=[""],
-                              _NCP=[[False] * 3 for _ in range(k)],
-                              _NCPW=[[""] * 3 for _ in range(k)],
+                              _NCP=[[False] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
+                              _NCPW=[[""] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
                               _NCPV=[100] * k, _NCPVW=[""] * k,
                               _NC_SEND=lambda s, t, w: None)
         code = compile(source, self._filename, "exec")
