@@ -106,6 +106,9 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
 
 
 ImageChange = tuple[str, int, str, int]
+# Forced variables, the image's and the PLC logic's together: each forced PLC variable is set
+# twice a scan, and 9,600 of them took a scan to 41 ms at scan_ms 10 (docs/decisions.md).
+MAX_FORCED: Final = 256
 # Commands only the cell takes (a process in them is refused).
 _CELL_ONLY: Final = frozenset({CommandKind.RESTART_PLC, CommandKind.RUN_TO_SYNC,
                                CommandKind.RELOAD_PLC,
@@ -260,6 +263,13 @@ class Door:
             raise InputRefused(Reason.BAD_VALUE, f"{var} holds whole numbers, not {value!r}")
         if value is not None:
             self.image_changes(((var, value),))  # the address and the value, or refused
+            if var.address not in image.forced:
+                self._room_to_force(var)
+        else:
+            try:  # a release names a variable of the image too
+                image.read(var.area, var.index, var.view)
+            except ImageAddressError as exc:
+                raise InputRefused(Reason.OUTSIDE_IMAGE, str(exc)) from None
         self._enter(item)
         if value is None:
             image.unforce(var.area, var.index, var.view)
@@ -283,12 +293,22 @@ class Door:
             raise InputRefused(Reason.UNKNOWN_VARIABLE, str(exc)) from None
         except ValueError as exc:
             raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
+        if item.value is not None and not plc.is_forced(path):
+            self._room_to_force(var)
         self._enter(item)
         if item.value is None:
             plc.unforce(path)
         else:
             plc.force(path, stored)
         self.runtime.engine.note_force(path, item.value, str(item.source))
+
+    def _room_to_force(self, var: Var | PlcVar) -> None:
+        """A new force is refused when MAX_FORCED variables are forced already."""
+        plc = self._plc()
+        forced = len(self.runtime.image.forced) + (len(plc.forced) if plc is not None else 0)
+        if forced >= MAX_FORCED:
+            raise InputRefused(Reason.BAD_VALUE, f"{var}: {forced} variables are forced "
+                               f"(at most {MAX_FORCED}): release one first")
 
     def _break(self, item: Break) -> None:
         if not isinstance(item.on, bool):

@@ -25,6 +25,7 @@ import enum
 import logging
 import math
 import sqlite3
+import struct
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -520,7 +521,12 @@ class PlcRuntime:
             value = bool(value)
         if isinstance(value, bool) and t != "BOOL":
             raise ValueError(f"{path} is {t}: not {value!r}")
-        stored = _as_stored(value, t)
+        try:  # (a REAL beyond IEEE single is an OverflowError, past a double struct.error)
+            stored = _as_stored(value, t)
+            if t == "LREAL" and isinstance(stored, int):
+                stored = float(stored)  # the LREAL the logic holds, not an int
+        except (OverflowError, struct.error):
+            raise ValueError(f"{path} is {t}: it cannot hold {value!r}") from None
         if not _fits(stored, t) or (hasattr(t, "lo") and not t.lo <= stored <= t.hi):
             raise ValueError(f"{path} is {t}: it cannot hold {value!r}")
         return stored
@@ -538,8 +544,17 @@ class PlcRuntime:
         else:
             self.forced.pop(self._key(path), None)
 
-    def _key(self, path: str) -> str:
-        return "".join(path.split()).upper()
+    def is_forced(self, path: str) -> bool:
+        """Whether the variable at ``path`` (a valid one) is forced."""
+        return self._key(path) in self.forced
+
+    @staticmethod
+    def _key(path: str) -> str:
+        """One key per variable, however its path is spelled (``main.a[01]`` is
+        ``MAIN.A[1]``): a valid path, as :meth:`_place` takes it."""
+        program, _, rest = "".join(path.split()).upper().partition(".")
+        return program + "".join(f"[{p}]" if isinstance(p, int) else f".{p}"
+                                 for p in _split(rest))
 
     def _apply_forces(self, after: bool) -> None:
         for path, stored in list(self.forced.values()):
