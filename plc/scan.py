@@ -151,6 +151,7 @@ class PlcRuntime:
         # Forcing (issue 28): the forced variables by path, as given and as stored; told of
         # each value of the logic's that a force overrode (path, the value the logic left).
         self.forced: dict[str, tuple[str, Any]] = {}
+        self._forced_types: dict[str, Any] = {}  # each force's type when it was set
         self.on_overridden: Callable[[str, Any], None] | None = None
         self.start()
 
@@ -534,15 +535,20 @@ class PlcRuntime:
     def force(self, path: str, stored: Any) -> None:
         """Keep ``path`` at ``stored`` (from :meth:`check_force`): set now, then at the start
         and at the end of every scan (the logic may change it inside a scan)."""
-        self.forced[self._key(path)] = (path, stored)
-        self._set(path, stored)
+        key = self._key(path)
+        parent, attr, t = self._place(path)
+        self.forced[key] = (path, stored)
+        self._forced_types[key] = t
+        self._assign(parent, attr, stored)
 
     def unforce(self, path: str | None = None) -> None:
         """Release one forced variable (None: every one); its value stays."""
         if path is None:
             self.forced.clear()
+            self._forced_types.clear()
         else:
             self.forced.pop(self._key(path), None)
+            self._forced_types.pop(self._key(path), None)
 
     def is_forced(self, path: str) -> bool:
         """Whether the variable at ``path`` (a valid one) is forced."""
@@ -557,20 +563,19 @@ class PlcRuntime:
                                  for p in _split(rest))
 
     def _apply_forces(self, after: bool) -> None:
-        for path, stored in list(self.forced.values()):
+        types = self._forced_types
+        for name, (path, stored) in list(self.forced.items()):
             try:
-                parent, key, _ = self._place(path)
+                parent, key, t = self._place(path)
             except PlcPathError:
                 continue  # gone with an online change: kept, set again if it comes back
+            if t != types.get(name):
+                continue  # retyped by one: the value is not its type's; likewise kept
             current = parent[key] if isinstance(key, int) else getattr(parent, key)
             if current != stored or type(current) is not type(stored):
                 if after and self.on_overridden is not None:
                     self.on_overridden(path, current)
                 self._assign(parent, key, stored)
-
-    def _set(self, path: str, stored: Any) -> None:
-        parent, key, _ = self._place(path)
-        self._assign(parent, key, stored)
 
     @staticmethod
     def _assign(parent: Any, key: str | int, value: Any) -> None:

@@ -135,3 +135,39 @@ async def test_the_force_list_is_bounded_and_a_force_past_it_is_refused(
         assert len(gw.runtime.plc.forced) + len(gw.image.forced) == MAX_FORCED
         gw.apply(Force(Var.parse("SA5"), None))
         gw.apply(Force(Var.parse("SA6"), 1))  # room again
+
+
+async def test_an_online_change_that_retypes_a_forced_variable_does_not_set_it(
+        tmp_path: Path) -> None:
+    """docs/decisions.md: an online change keeps a force.  One that retyped main.x from INT
+    to BOOL, then to SINT, had the scan store the INT force 30000 into both: a BOOL and a
+    SINT holding 30000, and the logic writing it on (SYVAR5 = 30000 from a SINT).  The force
+    stays listed and holds again when the type comes back."""
+    logic = tmp_path / "logic.st"
+    logic.write_text("PROGRAM main\nVAR n : INT; x : INT; END_VAR\nn := n + 1;\n"
+                     "SYVAR[5] := x;\nEND_PROGRAM\n")
+    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
+        '[canopen]\nenabled = false\n')
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml")) as gw:
+        watch = PlcWatch(gw)
+        await watch.until("main.n", 2)
+        gw.apply(Force("main.x", 30000))
+        await watch.next_scan()
+        assert gw.read("SYVAR5") == 30000
+        for retyped, initial in (("BOOL", False), ("SINT", 0)):
+            logic.write_text(f"PROGRAM main\nVAR n : INT; x : {retyped}; END_VAR\n"
+                             "n := n + 1;\nSYVAR[5] := 3;\nEND_PROGRAM\n")
+            assert (await gw.reload_plc()).ok
+            await watch.next_scan()
+            await watch.next_scan()
+            assert watch.read("main.x") == initial and type(watch.read("main.x")) is (
+                bool if retyped == "BOOL" else int), retyped
+        assert gw.runtime.plc.is_forced("main.x")
+        logic.write_text("PROGRAM main\nVAR n : INT; x : INT; END_VAR\nn := n + 1;\n"
+                         "SYVAR[5] := x;\nEND_PROGRAM\n")
+        assert (await gw.reload_plc()).ok
+        await watch.next_scan()
+        await watch.next_scan()
+        assert watch.read("main.x") == 30000 and gw.read("SYVAR5") == 30000
