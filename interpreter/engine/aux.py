@@ -226,8 +226,16 @@ class AuxInterface:
                     f"dropped the strobe {strobe})")
         stale = (f"; {ack} is still 1 from before: the PLC must drop it first"
                  if slot.level else "")
-        return (f"waits for the PLC to acknowledge it ({ack}=1, now {slot.level}; strobe "
-                f"{strobe}=1){stale}")
+        # The strobe as the image holds it: another writer (a fieldbus client, a force) may
+        # have dropped the NC's, and then the PLC sees no function to acknowledge.
+        if self.image.read("SA", slot.strobe, "bit"):
+            shown = f"strobe {strobe}=1"
+        else:
+            by = self.image.last_writer("SA", slot.strobe, "bit")
+            shown = (f"but the strobe {strobe} is 0, dropped by {by or 'someone'}: the PLC "
+                     "sees no function")
+        return (f"waits for the PLC to acknowledge it ({ack}=1, now {slot.level}; "
+                f"{shown}){stale}")
 
     def snapshot(self, process: int) -> tuple[int, bool, int, bool, int, bool, int, bool]:
         """The value last output and whether its strobe is up, for M, S, T and H."""

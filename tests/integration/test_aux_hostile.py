@@ -1,0 +1,45 @@
+"""Auxiliary functions ([nc.aux], issue 28 item 1) against a client that is not the PLC it
+should be: the strobe is the NC's, but any Modbus client, the sim script or a force may write
+its bit.  What the NC then says of the wait must be what the image holds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from ncgate.config import load_config
+from ncgate.config.script import load_script
+from ncgate.gateway.sim import run_sim
+
+
+def _sim(tmp_path: Path, script: str) -> Any:
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\nlookahead = 0\nstall_s = 2.0\n[nc.storage]\nMP0 = "."\n'
+        '[canopen]\nenabled = false\n[nc.aux]\nhandshake = "before_motion"\n')
+    (tmp_path / "A.nc").write_text("N10M08\nN20M30\n")
+    (tmp_path / "script.toml").write_text(script)
+    return run_sim(load_config(tmp_path / "ncgate.toml"), "A",
+                   load_script(tmp_path / "script.toml"), None)
+
+
+def test_a_stall_report_says_the_strobe_is_down_when_another_writer_dropped_it(
+        tmp_path: Path) -> None:
+    """A client drops the NC's strobe SA896 at 0.5 s: the PLC sees no function and never
+    acknowledges.  The report said 'strobe SA896=1' (a constant of the text) -- the one
+    thing a commissioning engineer would check first, and it was wrong."""
+    result = _sim(tmp_path, '[[write]]\nat = 0.5\nset = "SA896=0"\n')
+    assert result.outcome == "stall"
+    stall = next(e for e in result.events if e["event"] == "stall")
+    (blocked,) = stall["blocked"]
+    assert blocked["n"] == 10
+    reason = blocked["reason"]
+    assert "M08 waits for the PLC to acknowledge it (SA960=1, now 0" in reason
+    assert "SA896=1" not in reason and "SA896 is 0" in reason
+    assert "script write[0]" in reason  # who dropped it
+
+
+def test_a_stall_report_of_an_undisturbed_strobe_says_it_is_up(tmp_path: Path) -> None:
+    result = _sim(tmp_path, "")
+    stall = next(e for e in result.events if e["event"] == "stall")
+    (blocked,) = stall["blocked"]
+    assert "strobe SA896=1" in blocked["reason"]
