@@ -272,11 +272,17 @@ class AuxInterface:
         by = self.image.last_writer("SA", slot.ack, "bit")
         pending = slot.pending
         if pending is None or slot.phase != _ACK:
+            strobe = f"SA{slot.strobe}"
+            if self.image.read("SA", slot.strobe, "bit"):  # set by another writer, not the NC
+                setter = self.image.last_writer("SA", slot.strobe, "bit")
+                asked = (f"with no function output ({strobe} is 1, set by "
+                         f"{setter or 'someone'}, not by the NC)")
+            else:
+                asked = f"with no strobe up ({strobe} is 0)"
             self.host.record(ev.Hazard, slot.process, None,
                              f"PLC-side error: the acknowledge SA{slot.ack} of P{slot.process}'s "
-                             f"{slot.letter} functions was set by {by or 'someone'} with no "
-                             f"strobe up (SA{slot.strobe} is 0): ignored (the PLC sets it only "
-                             "in answer to a strobe)")
+                             f"{slot.letter} functions was set by {by or 'someone'} {asked}: "
+                             "ignored (the PLC sets it only in answer to a strobe)")
             return
         p, wait, aux = pending
         self.host.record(ev.AuxAck, p.number, wait.where, aux.code, by)

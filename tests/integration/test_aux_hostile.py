@@ -12,13 +12,13 @@ from ncgate.config.script import load_script
 from ncgate.gateway.sim import run_sim
 
 
-def _sim(tmp_path: Path, script: str) -> Any:
+def _sim(tmp_path: Path, script: str, main: str = "A") -> Any:
     (tmp_path / "ncgate.toml").write_text(
         '[nc]\nmain = "A"\nlookahead = 0\nstall_s = 2.0\n[nc.storage]\nMP0 = "."\n'
         '[canopen]\nenabled = false\n[nc.aux]\nhandshake = "before_motion"\n')
     (tmp_path / "A.nc").write_text("N10M08\nN20M30\n")
     (tmp_path / "script.toml").write_text(script)
-    return run_sim(load_config(tmp_path / "ncgate.toml"), "A",
+    return run_sim(load_config(tmp_path / "ncgate.toml"), main,
                    load_script(tmp_path / "script.toml"), None)
 
 
@@ -43,3 +43,17 @@ def test_a_stall_report_of_an_undisturbed_strobe_says_it_is_up(tmp_path: Path) -
     stall = next(e for e in result.events if e["event"] == "stall")
     (blocked,) = stall["blocked"]
     assert "strobe SA896=1" in blocked["reason"]
+
+
+def test_an_acknowledge_of_a_strobe_another_writer_set_is_a_hazard_that_says_so(
+        tmp_path: Path) -> None:
+    """A client sets SA896 (the NC's strobe) with no function output; the PLC acknowledges
+    it.  The hazard said 'no strobe up (SA896 is 0)' while SA896 was 1."""
+    (tmp_path / "B.nc").write_text("N10(DLY,1)\nN20M30\n")
+    result = _sim(tmp_path, '[[write]]\nat = 0.2\nset = "SA896=1"\n'
+                            '[[write]]\nat = 0.5\nset = "SA960=1"\n', main="B")
+    assert result.outcome == "idle" and result.alarms == 0
+    (hazard,) = [e for e in result.events if e["event"] == "hazard"]
+    assert hazard["t"] == 0.5 and "SA960" in hazard["message"]
+    assert "SA896 is 0" not in hazard["message"]
+    assert "SA896 is 1" in hazard["message"] and "script write[0]" in hazard["message"]
