@@ -79,15 +79,21 @@ function setConn(up) {
 }
 // Buttons act only while the gateway answers (and the console is not read-only): a page
 // whose server stopped must not look as if a click would do something.
+// Touched only when something it shows changed (every status message set them again).
+let drawnControls = "";
 function controls() {
   const off = !live || !status || !status.web || status.web.read_only;
+  const record = status && status.record;
+  const key = off + "|" + record + "|" + document.querySelectorAll(ACTING).length;
+  if (key === drawnControls) return;
+  drawnControls = key;
   for (const b of document.querySelectorAll(ACTING)) b.disabled = off;
   const rec = $("#btn-record");
-  const on = !!(status && status.record);
-  rec.textContent = on ? "■ Stop recording" : "● Record";
-  rec.classList.toggle("on", on);
-  rec.title = on ? "recording to " + status.record : rec.dataset.title;
+  rec.textContent = record ? "■ Stop recording" : "● Record";
+  rec.classList.toggle("on", !!record);
+  rec.title = record ? "recording to " + record : rec.dataset.title;
 }
+function setIfChanged(box, text) { if (box.textContent !== text) box.textContent = text; }
 function resetSession() {  // another run: its lanes, programs, events start afresh
   events = [];
   lastSeq = -1;
@@ -192,7 +198,7 @@ function render() {
   const parts = pending;
   pending = {};
   renderClock();
-  $("#source").textContent = status.config;
+  setIfChanged($("#source"), status.config);
   if (status.web.token && !token) $("#token").hidden = false;
   if (parts.processes) renderLanes();
   if (parts.processes || parts.controls) renderControls();
@@ -694,8 +700,8 @@ function renderTimeline() {
 let statusAt = 0, live = false;
 function renderClock() {
   const lag = status.lag_s ? " (engine " + status.lag_s.toFixed(3) + " s behind the clock)" : "";
-  $("#clock").textContent = "t = " + machineNow().toFixed(1) + " s" +
-    (status.held ? " (feed hold)" : "") + lag;
+  setIfChanged($("#clock"), "t = " + machineNow().toFixed(1) + " s" +
+    (status.held ? " (feed hold)" : "") + lag);
 }
 function machineNow() {
   if (!status || status.t === undefined) return 0;
