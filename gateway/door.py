@@ -265,6 +265,10 @@ class Door:
             self.image_changes(((var, value),))  # the address and the value, or refused
             if var.address not in image.forced:
                 self._room_to_force(var)
+            over = image.forced_over(var.area, var.index, var.view)
+            if over is not None:
+                raise InputRefused(Reason.BAD_VALUE, f"{var} has bits of {Var.at(*over)}, "
+                                   "which is forced: release it first")
         else:
             try:  # a release names a variable of the image too
                 image.read(var.area, var.index, var.view)

@@ -70,6 +70,16 @@ class Wait:
         self._image._unregister(self)
 
 
+def _pieces(view: str, index: int, value: int) -> list[tuple[int, int, int]]:
+    """The bytes an SA or SK variable covers: (byte, mask, the value's bits there)."""
+    if view == "bit":
+        return [(index >> 3, 1 << (index & 7), (value & 1) << (index & 7))]
+    if view == "BY":
+        return [(index, 0xFF, value)]
+    word = value & 0xFFFF
+    return [(index, 0xFF, word & 0xFF), (index + 1, 0xFF, word >> 8)]
+
+
 class IOImage:
     """SA packet (bits), K packet (bytes) and SYVARs (int16), with writers and waits."""
 
@@ -190,6 +200,20 @@ class IOImage:
             self.forced.pop((area, index, view), None)
         self._force_index()
 
+    def forced_over(self, area: str, index: int, view: str) -> tuple[str, int, str] | None:
+        """Another forced variable with bits of this one (SA1.BY over a forced SA10), or
+        None: two forces of one bit would make the force list say what the image does not."""
+        if area == "SYVAR":
+            return None  # a SYVAR has one view: forcing it again is the same variable
+        mine = {byte: mask for byte, mask, _ in _pieces(view, index, 0)}
+        for key in self.forced:
+            other_area, other_index, other_view = key
+            if other_area == area and key != (area, index, view) and any(
+                    mine.get(byte, 0) & mask
+                    for byte, mask, _ in _pieces(other_view, other_index, 0)):
+                return key
+        return None
+
     def _force_index(self) -> None:
         self._force_bytes.clear()
         self._force_syvars.clear()
@@ -197,14 +221,7 @@ class IOImage:
             if area == "SYVAR":
                 self._force_syvars[index] = value
                 continue
-            if view == "bit":
-                pieces = [(index >> 3, 1 << (index & 7), (value & 1) << (index & 7))]
-            elif view == "BY":
-                pieces = [(index, 0xFF, value)]
-            else:
-                word = value & 0xFFFF
-                pieces = [(index, 0xFF, word & 0xFF), (index + 1, 0xFF, word >> 8)]
-            for byte, mask, bits in pieces:
+            for byte, mask, bits in _pieces(view, index, value):
                 old_mask, old_bits = self._force_bytes.get((area, byte), (0, 0))
                 self._force_bytes[(area, byte)] = (old_mask | mask,
                                                    (old_bits & ~mask) | bits)

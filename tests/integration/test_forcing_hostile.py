@@ -171,3 +171,30 @@ async def test_an_online_change_that_retypes_a_forced_variable_does_not_set_it(
         await watch.next_scan()
         await watch.next_scan()
         assert watch.read("main.x") == 30000 and gw.read("SYVAR5") == 30000
+
+
+async def test_a_force_over_the_bits_of_another_forced_variable_is_refused(
+        tmp_path: Path) -> None:
+    """SA10 forced to 1, then SA1.BY (bits 8..15) to 0: both were taken, the list said
+    SA10 = 1 while SA10 read 0 -- and once SA1.BY was released, SA10 stayed 0 although listed
+    as forced to 1.  A force over another's bits is refused; a variable forced again is not."""
+    record = tmp_path / "session.jsonl"
+    async with Gateway(ncgate_test_config(_config(tmp_path, logic=False)), record=record) as gw:
+        gw.apply(Force(Var.parse("SA10"), 1))
+        gw.apply(Force(Var.parse("SK4.IN"), 300))
+        for var, value in (("SA1.BY", 0), ("SA0.IN", 0), ("SK5.BY", 1), ("SK3.IN", 7)):
+            with pytest.raises(InputRefused) as caught:
+                gw.apply(Force(var, value))
+            assert caught.value.reason is Reason.BAD_VALUE, var
+        raw = await Raw.open("127.0.0.1", gw.modbus_address[1])
+        try:  # the force table: SA byte 1 over the forced SA10, exception 03
+            assert await raw.ask(_fc16(FORCE, [1, 2, 1, 0])) == bytes((0x90, 3))
+        finally:
+            raw.close()
+        gw.apply(Force(Var.parse("SA10"), 0))  # the same variable: a new value
+        gw.apply(Force(Var.parse("SA11"), 1))  # the byte's other bits are free
+        gw.apply(Force(Var.parse("SK6.BY"), 9))
+        assert gw.read("SA10") == 0 and gw.read("SA11") == 1
+        assert sorted(str(Var.at(*k)) for k in gw.image.forced) == [
+            "SA10", "SA11", "SK4.IN", "SK6"]
+    assert record.read_text().count('"input": "force"') == 5
