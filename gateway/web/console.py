@@ -501,7 +501,8 @@ class WebConsole:
         """``{"var": "SA10", "value": 1}`` forces; ``"value": null`` releases it."""
         body = await self._body(request)
         var, value = body.get("var"), body.get("value")
-        if not isinstance(var, str) or not var.strip():
+        # A release says "value": null; a body without "value" is no request to release.
+        if not isinstance(var, str) or not var.strip() or "value" not in body:
             raise ApiError(400, 'expected {"var": "SA10", "value": 1 or null}')
         if value is not None and (not isinstance(value, int | float) or (
                 isinstance(value, float) and not math.isfinite(value))):

@@ -198,3 +198,23 @@ async def test_a_force_over_the_bits_of_another_forced_variable_is_refused(
         assert sorted(str(Var.at(*k)) for k in gw.image.forced) == [
             "SA10", "SA11", "SK4.IN", "SK6"]
     assert record.read_text().count('"input": "force"') == 5
+
+
+async def test_the_api_takes_a_release_only_when_it_says_value_null(tmp_path: Path) -> None:
+    """docs/console.md: '"value": null' releases.  A body without "value" (a client that
+    forgot it, or sent "val") released the force -- 200, recorded -- as if it had asked."""
+    import aiohttp
+
+    config = _config(tmp_path, logic=False)
+    config.write_text(config.read_text() + "[web]\nport = 0\n")
+    async with Gateway(ncgate_test_config(config), console=True) as gw:
+        gw.apply(Force(Var.parse("SA10"), 1))
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            for body in ({"var": "SA10"}, {"var": "SA10", "val": None}):
+                async with http.post("/api/force", json=body) as r:
+                    assert r.status == 400, (body, r.status, await r.text())
+            assert gw.image.forced == {("SA", 10, "bit"): 1}
+            async with http.post("/api/force", json={"var": "SA10", "value": None}) as r:
+                assert r.status == 200
+        assert not gw.image.forced
