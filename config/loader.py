@@ -158,6 +158,9 @@ def _io_list(r: _Reader, path: Path, key: str) -> list[tuple[str, str, Any]]:
             "name", "var", "comment"}:
         raise r.fail(key, f"{path}:1: expected a header of name, var and (optionally) comment, "
                      f"got {header!r}")
+    twice = sorted({c for c in columns if columns.count(c) > 1})
+    if twice:  # which of the two would a row mean?
+        raise r.fail(key, f"{path}:1: the header names {twice[0]} twice: {header!r}")
     out = []
     for number, row in enumerate(rows, 2):
         if not any(cell.strip() for cell in row):
