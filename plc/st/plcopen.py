@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
+import re
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -100,29 +102,64 @@ class _XmlProblem(Exception):
         self.at = at
 
 
+# Elements kept without what is inside them: nothing in there is read, and an export's
+# graphical bodies and layout are most of its size (a tree of them, kept, took 4 GB and
+# two minutes for a 50 MB file).
+OPAQUE = frozenset(("fileHeader", "contentHeader", "documentation", *BODY_LANGUAGES)) - {"ST"}
+
+
+def _opaque(el: _El, parent: _El | None) -> bool:
+    """Whether nothing inside ``el`` is read: layout, documentation, a body not in ST, an
+    ``addData`` item ncgate does not read, a method's (or action's ...) content."""
+    if el.tag in OPAQUE:
+        return True
+    if parent is None or parent.tag != "data":
+        return el.tag == "data" and parent is not None and parent.tag == "addData" and not (
+            el.attrs.get("name") == GLOBAL_VARS_DATA
+            or el.attrs.get("name", "").rpartition("/")[2] in UNSUPPORTED_DATA)
+    return parent.attrs.get("name") != GLOBAL_VARS_DATA  # a Method, Property, ...: its name
+
+
 def _read_xml(data: bytes) -> _El:
     parser = expat.ParserCreate(namespace_separator="}")
     parser.buffer_text = False  # one call per piece of text, so that each has its position
     root: list[_El] = []
     stack: list[_El] = []
+    skipping = 0  # > 0: inside an opaque element, this many elements deep (itself 1)
+    in_st = 0  # > 0: inside a body's ST element (the only text read)
 
     def where() -> Where:
         return parser.CurrentLineNumber, parser.CurrentColumnNumber
 
     def start(name: str, attrs: dict[str, str]) -> None:
+        nonlocal skipping, in_st
+        if skipping:
+            skipping += 1
+            return
         ns, _, tag = name.rpartition("}")
         el = _El(tag, ns, attrs, where())
-        if stack:
-            stack[-1].children.append(el)
+        parent = stack[-1] if stack else None
+        if parent is not None:
+            parent.children.append(el)
         else:
             root.append(el)
         stack.append(el)
+        if in_st or (tag == "ST" and parent is not None and parent.tag == "body"):
+            in_st += 1
+        elif _opaque(el, parent):
+            skipping = 1
 
     def end(name: str) -> None:
+        nonlocal skipping, in_st
+        if skipping > 1:
+            skipping -= 1
+            return
+        skipping = 0
+        in_st = max(in_st - 1, 0)
         stack.pop().end = where()
 
     def text(data: str) -> None:
-        if stack:
+        if in_st:
             stack[-1].text.append((data, where()))
 
     def doctype(*args: Any) -> None:
@@ -239,15 +276,15 @@ def _container(x: Any) -> bool:
 # ---- TC6 -> ST ---------------------------------------------------------------------------------
 
 class _Writer:
-    def __init__(self, path: str, lines: list[str]) -> None:
+    def __init__(self, path: str, lines: _Lines) -> None:
         self.path = path
-        self.xml_lines = lines
+        self.xml_line = lines
         self.out = _Text()
         self.problems: list[StDiagnostic] = []
 
     def problem(self, code: StCode, message: str, at: Where) -> None:
         line, column = at
-        source = self.xml_lines[line - 1] if 0 < line <= len(self.xml_lines) else ""
+        source = self.xml_line(line)
         self.problems.append(StDiagnostic(code, message, n.Span(self.path, line, column + 1),
                                           source))
 
@@ -483,8 +520,8 @@ def parse_plcopen(data: bytes, path: str) -> n.SourceFile:
     """A TC6 project's POUs, data types and global variables, as one parsed ST file whose
     spans point into the XML.  Raises :class:`LogicError` with every diagnostic found."""
     text = _decoded(data)
-    lines = text.splitlines()
-    writer = _Writer(path, lines)
+    xml_line = _Lines(text)
+    writer = _Writer(path, xml_line)
     try:
         writer.project(_read_xml(data))
     except _XmlProblem as exc:
@@ -496,9 +533,6 @@ def parse_plcopen(data: bytes, path: str) -> n.SourceFile:
     def move(span: n.Span) -> n.Span:
         line, column = source.move(span.line, span.column)
         return n.Span(path, line, column)
-
-    def xml_line(line: int) -> str:
-        return lines[line - 1] if 0 < line <= len(lines) else ""
 
     problems = list(writer.problems)
     parsed = None
@@ -515,6 +549,30 @@ def parse_plcopen(data: bytes, path: str) -> n.SourceFile:
     # spans moved; the text is the XML's, for the lines diagnostics and faults show.
     moved: n.SourceFile = _moved(parsed, move)
     return dataclasses.replace(moved, path=path, text=text)
+
+
+class _Lines:
+    """A line of the XML file's text by its number, as expat counts lines (LF, CRLF or CR
+    ends one; ``str.splitlines`` also breaks at a form feed or U+2028, which may be in an ST
+    comment).  Where each line starts is found at the first diagnostic only: a list of the
+    lines of a 50 MB file took 400 MB."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self._starts: array[int] | None = None
+
+    def __call__(self, line: int) -> str:
+        if self._starts is None:
+            self._starts = array("q", [0])
+            self._starts.extend(m.end() for m in _LINE_END.finditer(self.text))
+        starts = self._starts
+        if not 0 < line <= len(starts):
+            return ""
+        end = starts[line] if line < len(starts) else len(self.text)
+        return self.text[starts[line - 1]:end].rstrip("\r\n")
+
+
+_LINE_END = re.compile(r"\r\n?|\n")
 
 
 def _decoded(data: bytes) -> str:

@@ -248,3 +248,42 @@ def test_ncgate_check_reads_an_export_and_names_its_xml_line(
     line, column = where(path, "<LD>")
     assert f"{path}:{line}:{column}: error ST031: not supported: LD in POU MAIN" in (
         capsys.readouterr().out)
+
+
+def test_what_is_not_read_is_not_kept_a_big_export_parses_in_little_memory() -> None:
+    """An export's layout, graphical bodies and vendor addData are most of its size: they
+    are skipped, not built into a tree (a 50 MB file of them took 3.6 GB and 38 s)."""
+    import tracemalloc
+
+    xml = (HERE / "beremiz_conveyor.xml").read_bytes()
+    layout = (b'<addData><data name="http://www.3s-software.com/plcopenxml/objectid" '
+              b'handleUnknown="discard">' + b'<Position x="1" y="2"/>\n' * 200_000 +
+              b'</data></addData>\n</project>')
+    big = xml.replace(b"</project>", layout)
+    assert len(big) > 4_000_000
+    tracemalloc.start()
+    try:
+        source = parse_plcopen(big, "big.xml")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert [p.name for p in source.pous] == ["debounce", "scale", "main"]
+    # The file's text is kept (the lines a fault shows): a few times its size, not the
+    # ~100 MB of 200,000 elements with their attributes and positions.
+    assert peak < 6 * len(big), peak
+
+
+def test_the_line_under_a_diagnostic_is_the_xml_line_expat_counted(tmp_path: Path) -> None:
+    """A U+2028 (allowed in XML, in an ST comment) ends no line for expat: the line shown
+    under the diagnostic is the one the position names."""
+    text = (HERE / "beremiz_conveyor.xml").read_text(encoding="utf-8")
+    path = tmp_path / "conveyor.xml"
+    path.write_text(text.replace("q := on_delay.Q;", "(* a\u2028b *) q := on_delay.Q +;"),
+                    encoding="utf-8")
+    with pytest.raises(LogicError) as caught:
+        read_logic_file(path)
+    [d] = caught.value.diagnostics
+    lines = path.read_text(encoding="utf-8").split("\n")  # (not splitlines: U+2028)
+    line = next(i + 1 for i, x in enumerate(lines) if "q := on_delay.Q +;" in x)
+    assert d.span.line == line
+    assert "q := on_delay.Q +;" in d.source_line and d.source_line.startswith("(* a")
