@@ -96,6 +96,8 @@ STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL"
 UNSUPPORTED_TYPES = ("CHAR", "WCHAR", "LDATE", "LTOD", "LDT", "LDATE_AND_TIME",
                      "LTIME_OF_DAY")
 UNSUPPORTED_FUNCTIONS: tuple[str, ...] = ()
+# logi.CAD's functions for an ARRAY[..]'s bounds, and IEC's (plc.strict = false reads them).
+_LOGICAD_BOUNDS = {"_FIRSTINDEXOF": "LOWER_BOUND", "_LASTINDEXOF": "UPPER_BOUND"}
 # Each type's pure-integer carrier: what its value wraps as where it is stored.
 CARRIER = {"TIME": "DINT", "LTIME": "LINT", "DATE": "UDINT", "DT": "UDINT", "TOD": "UDINT"}
 TOD_MS = 86_400_000
@@ -781,6 +783,14 @@ class Compiler:
         scope = scope or Scope(self, None, "")
         if isinstance(ref, n.ArrayType):
             element = self.resolve_type(ref.element, in_function, scope)
+            if ref.dots:  # logi.CAD writes IEC's ARRAY[*] (6.5.3) as ARRAY[..]
+                said = "ARRAY[..] is logi.CAD's spelling: IEC 61131-3 (6.5.3) writes ARRAY[*]"
+                if self.ctx.strict:  # reported, then read as ARRAY[*]: no errors that follow
+                    self.error(StCode.UNSUPPORTED, f"{said} (plc.strict = false accepts "
+                               "ARRAY[..])", ref.span)
+                else:
+                    self.warnings.append(StDiagnostic(StCode.VENDOR_EXTENSION, said,
+                                                      ref.span, self._source(ref.span)))
             if any(d is None for d in ref.dims):
                 if len(ref.dims) != 1 or not in_out:
                     raise self.error(StCode.UNSUPPORTED, "ARRAY[*] (any length) is a "
@@ -2044,6 +2054,8 @@ class Compiler:
                 return self.convert_any(x, target, scope)
             if key in STD_FUNCTIONS:
                 return self.std_call(x, key, scope)
+        if info is None and key in _LOGICAD_BOUNDS:
+            return self.logicad_bound(x, _LOGICAD_BOUNDS[key], scope)
         if info is None and key in UNSUPPORTED_FUNCTIONS:
             raise self.error(StCode.UNSUPPORTED, f"{x.name}: a standard function outside "
                              "ncgate's subset (docs/plc.md)", x.span)
@@ -2228,6 +2240,22 @@ class Compiler:
             raise self.error(StCode.TYPE_MISMATCH, f"{key} shifts by an integer", x.span)
         size = stdlib.INTEGER_TYPES[str(a.type)][0]
         return E(f"_{key.lower()}({a.code}, {b.code}, {_BIT_TYPE[size]!r})", a.type)
+
+    def logicad_bound(self, x: n.Call, key: str, scope: Scope) -> E:
+        """``_firstIndexOf(a)`` / ``_lastIndexOf(a)``: logi.CAD's own functions for the bounds
+        of an ARRAY[..]; IEC 61131-3 (6.5.3) writes LOWER_BOUND(a, 1) / UPPER_BOUND(a, 1).
+        plc.strict = false reads them so, with a warning; strict, ST012 says the IEC name."""
+        said = f"{x.name} is logi.CAD's: IEC 61131-3 (6.5.3) writes {key}(array, 1)"
+        if self.ctx.strict:
+            raise self.error(StCode.UNKNOWN_CALL, f"{said} (plc.strict = false accepts "
+                             f"{x.name})", x.span)
+        self.warnings.append(StDiagnostic(StCode.VENDOR_EXTENSION, said, x.span,
+                                          self._source(x.span)))
+        if len(x.args) != 1 or x.args[0].name is not None or x.args[0].expr is None:
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}(array)", x.span)
+        one = n.Literal(1, None, x.span)
+        return self.bound(n.Call(key, (x.args[0], n.Arg(None, one, None, x.span)), x.span),
+                          key, scope)
 
     def bound(self, x: n.Call, key: str, scope: Scope) -> E:
         """LOWER_BOUND(arr, dim) and UPPER_BOUND(arr, dim) (IEC 61131-3, 6.5.3): of a fixed

@@ -43,11 +43,13 @@ class SubrangeType:
 @dataclass(frozen=True, slots=True)
 class ArrayType:
     """``ARRAY[lo..hi, lo..hi] OF element``: bounds are constant expressions; None for a
-    dimension of ``ARRAY[*]`` (a VAR_IN_OUT of any length, 6.5.3)."""
+    dimension of ``ARRAY[*]`` (a VAR_IN_OUT of any length, 6.5.3).  ``dots``: written
+    ``ARRAY[..]``, logi.CAD's spelling of ``ARRAY[*]`` (plc.strict = false only)."""
 
     dims: tuple[tuple[Expr, Expr] | None, ...]
     element: TypeRef
     span: Span
+    dots: bool = False
 
 
 TypeRef = NamedType | SubrangeType | ArrayType

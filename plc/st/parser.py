@@ -132,6 +132,10 @@ def _parser() -> Lark:
     return Lark(text, parser="lalr", propagate_positions=True, maybe_placeholders=False)
 
 
+class _Dots:
+    """A dimension written ``ARRAY[..]`` (logi.CAD's ``ARRAY[*]``), until array_type."""
+
+
 class BadLiteral(ValueError):
     def __init__(self, token: Token, message: str) -> None:
         super().__init__(message)
@@ -384,8 +388,13 @@ class _Build(Transformer_NonRecursive[Token, Any]):
                               _span(self.file, children[0]))
 
     def array_type(self, meta: Any, children: list[Any]) -> n.ArrayType:
-        dims = tuple(c for c in children if isinstance(c, tuple) or c is None)
-        return n.ArrayType(dims, children[-1], _span(self.file, children[0]))
+        dims = tuple(None if isinstance(c, _Dots) else c for c in children
+                     if isinstance(c, tuple | _Dots) or c is None)
+        return n.ArrayType(dims, children[-1], _span(self.file, children[0]),
+                           dots=any(isinstance(c, _Dots) for c in children))
+
+    def dim_dots(self, meta: Any, children: list[Any]) -> _Dots:
+        return _Dots()
 
     def dim(self, meta: Any, children: list[Any]) -> tuple[n.Expr, n.Expr] | None:
         if len(children) == 1:  # '*'

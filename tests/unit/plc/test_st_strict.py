@@ -37,6 +37,14 @@ CASES = [
      "ST031", "SW002"),
     ("FUNCTION Noop : VOID\nVAR_INPUT x : INT; END_VAR\nEND_FUNCTION\n"
      "PROGRAM main\nNoop(1);\nEND_PROGRAM", 1, 17, "ST011", "SW002"),
+    # logi.CAD: ARRAY[..] for IEC's ARRAY[*] (6.5.3), _firstIndexOf/_lastIndexOf for its
+    # LOWER_BOUND/UPPER_BOUND(a, 1)
+    ("FUNCTION F : INT\nVAR_IN_OUT a : ARRAY[..] OF INT; END_VAR\nF := a[1];\n"
+     "END_FUNCTION", 2, 16, "ST031", "SW002"),
+    ("FUNCTION F : DINT\nVAR_IN_OUT a : ARRAY[*] OF INT; END_VAR\n"
+     "F := _firstIndexOf(a);\nEND_FUNCTION", 3, 6, "ST012", "SW002"),
+    ("FUNCTION F : DINT\nVAR_IN_OUT a : ARRAY[*] OF INT; END_VAR\n"
+     "F := _lastIndexOf(a);\nEND_FUNCTION", 3, 6, "ST012", "SW002"),
 ]
 
 
@@ -65,3 +73,33 @@ def test_lenient_values_are_codesys_ones() -> None:
     assert (plc["main.i"], plc["main.n"], plc["main.e"]) == (4464, 2, 1)
     assert plc["main.r"] == 0.10000000149011612 and plc["main.b"] is False
     assert (plc["main.bit3"], plc["main.w"]) == (True, 9)
+
+
+def test_strict_says_to_write_array_star_once_and_lenient_names_the_iec_spelling() -> None:
+    source = ("FUNCTION F : INT\nVAR_IN_OUT a : ARRAY[..] OF INT; END_VAR\nF := a[1];\n"
+              "END_FUNCTION")
+    with pytest.raises(LogicError) as caught:
+        compile_logic([parse_source(source, "s.st")], Context())
+    # one diagnostic: the declaration is read as ARRAY[*] after it, so a[1] adds none
+    assert [d.code.code for d in caught.value.diagnostics] == ["ST031"]
+    assert "ARRAY[*]" in caught.value.diagnostics[0].message
+    (w,) = compile_logic([parse_source(source, "s.st")], LENIENT).warnings
+    assert "ARRAY[*]" in w.message
+
+
+def test_an_array_dots_parameter_takes_any_array_and_its_bounds_are_the_callers() -> None:
+    """IEC 61131-3, 6.5.3: an ARRAY[*] VAR_IN_OUT is the caller's array, its bounds those
+    LOWER_BOUND/UPPER_BOUND give; logi.CAD's ARRAY[..] and _firstIndexOf/_lastIndexOf are
+    the same (plc.strict = false)."""
+    plc = Plc("FUNCTION Span : DINT\nVAR_IN_OUT a : ARRAY[..] OF INT; END_VAR\n"
+              "VAR i : DINT; END_VAR\n"
+              "Span := _lastIndexOf(a) - _firstIndexOf(a) + 1;\n"
+              "FOR i := _firstIndexOf(a) TO _lastIndexOf(a) DO a[i] := a[i] * 2; END_FOR;\n"
+              "END_FUNCTION\n"
+              "PROGRAM main\nVAR x : ARRAY[-2..1] OF INT := [1, 2, 3, 4]; "
+              "y : ARRAY[5..6] OF INT := [7, 8]; nx, ny, lo, hi : DINT; END_VAR\n"
+              "nx := Span(x); ny := Span(y);\n"
+              "lo := LOWER_BOUND(x, 1); hi := UPPER_BOUND(x, 1);\n"
+              "END_PROGRAM", context=LENIENT).scan()
+    assert (plc["main.nx"], plc["main.ny"], plc["main.lo"], plc["main.hi"]) == (4, 2, -2, 1)
+    assert (plc["main.x"], plc["main.y"]) == ([2, 4, 6, 8], [14, 16])
