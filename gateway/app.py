@@ -110,6 +110,8 @@ class Gateway:
         self._stack: contextlib.AsyncExitStack | None = None
         self._loading: set[asyncio.Task[None]] = set()  # starts waiting for their program
         self._reload_lock = asyncio.Lock()  # one online change of the PLC logic at a time
+        # The reload waiting for its turn (one at most: a later ask joins it).
+        self._reload_next: asyncio.Future[ReloadOutcome | None] | None = None
         self._load_waits: set[asyncio.Future[None]] = set()  # programs being read
         self._refusals = RateLimitedLog(logging.getLogger("ncgate"))
         self.door: Door  # set on entry: the one way in (:meth:`apply`)
@@ -490,12 +492,32 @@ class Gateway:
     async def _reload(self, item: Command) -> ReloadOutcome | None:
         """Compile in a thread of its own (a big program must not stall the scan: the
         figures are in docs/decisions.md), then swap it in through the door, one reload at
-        a time."""
+        a time.  A reload asked for while another waits for its turn is that one: it has
+        not read the files yet, so it loads what this one would (reloads asked for faster
+        than they compile -- 100 a second on Modbus word 16 -- queued up without end)."""
         online = self.door.reload_plc
         if not isinstance(online, OnlineChange) or item.process is not None:
             self.door.apply(item)  # refused: no PLC logic, or of one process
             return None
+        waiting = self._reload_next
+        if waiting is not None:
+            return await asyncio.shield(waiting)
+        self._reload_next = turn = asyncio.get_running_loop().create_future()
+        try:
+            outcome = await self._reload_now(item, online)
+        except BaseException as exc:
+            if self._reload_next is turn:
+                self._reload_next = None
+            if not turn.done():
+                turn.set_exception(exc)
+                turn.exception()  # (retrieved: those that joined it, if any, get it)
+            raise
+        turn.set_result(outcome)
+        return outcome
+
+    async def _reload_now(self, item: Command, online: OnlineChange) -> ReloadOutcome | None:
         async with self._reload_lock:
+            self._reload_next = None  # the files are read from now on: a later ask waits
             done = asyncio.get_running_loop().create_future()
             self._load_waits.add(done)
             done.add_done_callback(self._load_waits.discard)

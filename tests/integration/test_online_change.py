@@ -120,6 +120,23 @@ async def test_a_load_error_leaves_the_old_logic_running_and_says_where(
     assert gw.plc.status.state is PlcState.RUNNING and gw.read("SYVAR0") == 1
 
 
+async def test_reloads_asked_for_while_one_waits_join_it_not_a_queue(
+        gw: Gateway, tmp_path: Path) -> None:
+    """Twenty asks at once: the first reloads, the second waits for it, and the other
+    eighteen join the second (it has not read the files yet), so two reloads, each traced,
+    and every ask answered with what loaded -- not twenty reloads queued one after another
+    (100 a second on Modbus word 16 piled up without end)."""
+    (tmp_path / "logic.st").write_text(V2)
+    reloads = Reloads(gw)
+    outcomes = await asyncio.gather(*(gw.reload_plc() for _ in range(20)))
+    assert all(o.ok for o in outcomes)
+    assert outcomes[0].initial == ("main.added",)  # V1 -> V2
+    assert all(o.initial == () for o in outcomes[1:])  # V2 -> V2
+    await reloads.nth(1)
+    assert len(reloads.seen) == 2
+    assert await PlcWatch(gw).until("main.added", 7) == 7
+
+
 async def test_without_logic_reload_plc_is_refused_as_not_configured() -> None:
     async with Gateway(ncgate_test_config()) as gw:
         with pytest.raises(InputRefused) as caught:
