@@ -222,8 +222,11 @@ class AuxInterface:
     def _reason(self, slot: _Slot, aux: AuxOutput) -> str:
         strobe, ack = f"SA{slot.strobe}", f"SA{slot.ack}"
         if slot.phase == _DROP:
-            return (f"waits for the PLC to drop its acknowledge ({ack}=0, now 1; the NC "
-                    f"dropped the strobe {strobe})")
+            dropped = (f"the NC dropped the strobe {strobe}, but {strobe} is still 1 (forced, "
+                       "or set again by another writer)"
+                       if self.image.read("SA", slot.strobe, "bit") else
+                       f"the NC dropped the strobe {strobe}")
+            return f"waits for the PLC to drop its acknowledge ({ack}=0, now 1; {dropped})"
         stale = (f"; {ack} is still 1 from before: the PLC must drop it first"
                  if slot.level else "")
         # The strobe as the image holds it: another writer (a fieldbus client, a force) may

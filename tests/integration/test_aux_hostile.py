@@ -57,3 +57,28 @@ def test_an_acknowledge_of_a_strobe_another_writer_set_is_a_hazard_that_says_so(
     assert hazard["t"] == 0.5 and "SA960" in hazard["message"]
     assert "SA896 is 0" not in hazard["message"]
     assert "SA896 is 1" in hazard["message"] and "script write[0]" in hazard["message"]
+
+
+async def test_a_forced_strobe_the_nc_cannot_drop_is_said_in_the_wait(tmp_path: Path) -> None:
+    """The strobe SA896 forced to 1 (a commissioning engineer's force of the NC's output):
+    the PLC acknowledges, the NC's drop of the strobe is overridden, and a PLC that drops
+    its acknowledge only when the strobe drops never does.  The wait said 'the NC dropped
+    the strobe SA896' while SA896 read 1."""
+    from ncgate.gateway import Gateway
+    from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+    from ncgate.inputs import Force, Var
+
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\nlookahead = 0\n[nc.storage]\nMP0 = "."\n'
+        '[canopen]\nenabled = false\n[nc.aux]\nhandshake = "before_motion"\n')
+    (tmp_path / "A.nc").write_text("N10M08\nN20M30\n")
+    async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml")) as gw:
+        gw.apply(Force(Var.parse("SA896"), 1))
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=10)
+        gw.write("SA960", 1)  # the PLC's acknowledge: the NC drops its strobe -- overridden
+        assert gw.read("SA896") == 1
+        blocked = gw.describe_blocked()
+        assert "waits for the PLC to drop its acknowledge" in blocked
+        assert "the NC dropped the strobe SA896)" not in blocked
+        assert "SA896 is still 1" in blocked
