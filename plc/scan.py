@@ -528,7 +528,7 @@ class PlcRuntime:
                 stored = float(stored)  # the LREAL the logic holds, not an int
         except (OverflowError, struct.error):
             raise ValueError(f"{path} is {t}: it cannot hold {value!r}") from None
-        if not _fits(stored, t) or (hasattr(t, "lo") and not t.lo <= stored <= t.hi):
+        if not _fits(stored, t):  # (forceable: an elementary type, no subrange)
             raise ValueError(f"{path} is {t}: it cannot hold {value!r}")
         return stored
 
