@@ -653,6 +653,8 @@ class _Carry:
                  new_table: dict[str, ProgramVar], path: str) -> None:
         for key, var in new_table.items():
             here = f"{path}.{var.display}" if path else var.display
+            if var.constant:  # its declaration's value, the one the code uses (inlined)
+                continue
             before = old_table.get(key)
             if before is None or not self.same(before.type, var.type):
                 self.initial.append(here)

@@ -2794,6 +2794,7 @@ class ProgramVar:
     display: str
     type: Type
     retain: bool
+    constant: bool = False  # VAR CONSTANT: an online change gives it its new value
 
 
 class Logic:
@@ -2825,7 +2826,8 @@ class Logic:
         self.display: dict[str, str] = {}
         self.fb_vars: dict[str, dict[str, ProgramVar]] = {}
         for key, info in compiler.pous.items():
-            table = {k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN")
+            table = {k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN",
+                                   v.qualifier == "CONSTANT")
                      for k, v in info.vars.items()}
             if info.pou.kind == "PROGRAM":
                 self.programs[key] = table
@@ -2836,7 +2838,8 @@ class Logic:
             key: {k: ProgramVar(k, v.display, v.type, False) for k, v in struct.fields.items()}
             for key, struct in compiler.structs.items()}
         self.globals: dict[str, ProgramVar] = {
-            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN")
+            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN",
+                          v.qualifier == "CONSTANT")
             for k, v in compiler.globals.items() if v.image is None}
         self.enums = dict(compiler.enums)
 

@@ -176,3 +176,20 @@ END_PROGRAM
     plc.scan()
     assert plc["main.x.pos"] == 8
     assert plc.runtime.logic.namespace["_G"].v_TOTAL == 4  # the global ran on
+
+
+def test_a_constant_takes_its_new_value_where_it_is_read_too() -> None:
+    """The code uses a CONSTANT's declared value (IEC 61131-3: it cannot be written), so a
+    changed constant, or a variable made CONSTANT, reads as declared after the change --
+    the console showed the old value while the code used the new one."""
+    source = ("VAR_GLOBAL CONSTANT top : INT := {v}; END_VAR\n"
+              "FUNCTION_BLOCK f\nVAR CONSTANT k : INT := {v}; END_VAR\nEND_FUNCTION_BLOCK\n"
+              "PROGRAM main\nVAR CONSTANT lim : INT := {v}; END_VAR\n"
+              "VAR {d} n : INT; g : f; END_VAR\nn := lim + top;\nEND_PROGRAM\n")
+    plc = Plc(source.format(v=100, d="later : INT := 3;")).scan()
+    plc.runtime.reload(logic(source.format(v=200, d="").replace(
+        "VAR CONSTANT lim", "VAR CONSTANT later : INT := 4; lim")), ["main"])
+    plc.scan()
+    assert plc["main.n"] == 400
+    assert (plc["main.lim"], plc["main.g.k"], plc["main.later"]) == (200, 200, 4)
+    assert plc.runtime.logic.namespace["_G"].v_TOP == 200
