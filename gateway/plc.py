@@ -71,6 +71,9 @@ def logic_context(config: Config) -> Context:
 
 
 Sources = dict[str, str]  # a logic file's path -> its content (plcopen.read_logic_text)
+# The key (no path is empty) of a reload's sources when the files could not be read: its
+# value is the error, which the session record carries and its replay reports again.
+UNREAD = ""
 
 
 def read_sources(files: tuple[Path, ...]) -> Sources:
@@ -250,14 +253,20 @@ class OnlineChange:
         try:
             if self.recorded is not None:  # a replay: the session's next reload
                 sources = self.recorded.pop(0) if self.recorded else self.sources
+                if UNREAD in sources:  # the session could not read the files
+                    return ReloadOutcome(False, self.files, (sources[UNREAD],),
+                                         sources=sources)
             else:
                 sources = read_sources(config.plc.logic)
             logic = load_logic(config.plc.logic, config, sources)
             return logic, program_order(logic, config), sources
         except LogicError as exc:
             said = tuple(d.render() for d in exc.diagnostics)
-        except (ConfigError, OSError) as exc:  # plc.programs names a PROGRAM now gone; a
-            said = (str(exc),)                 # file removed or unreadable
+        except ConfigError as exc:  # plc.programs names a PROGRAM now gone
+            said = (str(exc),)
+        except OSError as exc:  # a file removed, unreadable, a directory now: the record
+            said = (str(exc),)  # says so, for its replay to say the same
+            sources = {UNREAD: said[0]}
         return ReloadOutcome(False, self.files, said, sources=sources)
 
     def __call__(self, by: str) -> ReloadOutcome:

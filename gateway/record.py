@@ -10,7 +10,8 @@ The record is JSON Lines, in the order things happened:
   when it changed): the replay warns when a program it runs is not the one recorded;
 - ``{"plc_logic": {path: text}, "t"}``: the PLC logic's files as the PLC runs them when the
   record starts, and as each online change (``reload_plc``) read them, right after its
-  command's line: the replay loads these, not the files as they are now;
+  command's line: the replay loads these, not the files as they are now (``{"": error}``:
+  that reload could not read them, and the replay's fails with the same error);
 - an *input* line for everything that came through the door from outside the cell, with its
   machine time and its source (``who``: the trace's attribution; ``peer``: the address):
   ``{"input": "write", "t", "who", "peer", "changes": [[area, index, view, value], ...]}``,

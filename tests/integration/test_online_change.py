@@ -265,3 +265,27 @@ async def _poll(plc: VirtualPLC, var: str, value: int) -> bool:
         while await plc.get(var) != value:  # noqa: ASYNC110
             await asyncio.sleep(0.05)
     return True
+
+
+async def test_a_reload_that_could_not_read_its_file_replays_with_the_same_error(
+        tmp_path: Path) -> None:
+    """A logic file deleted, then a directory in its place (run --watch sees both): the
+    session's reloads fail with the OS's error, and so do the replay's -- it said "the files
+    hold no PROGRAM to run" for both, from an empty record of the files."""
+    record = tmp_path / "session.jsonl"
+    gw = Gateway(cell(tmp_path).config, record=record)
+    logic = tmp_path / "logic.st"
+    said = []
+    async with gw:
+        await PlcWatch(gw).until("main.scans", 3)
+        logic.unlink()
+        said.append(await gw.reload_plc(Source(SourceKind.API, "test")))
+        logic.mkdir()
+        said.append(await gw.reload_plc(Source(SourceKind.API, "test")))
+    assert [(o.ok, o.diagnostics[0].split("]")[0]) for o in said] == [
+        (False, "[Errno 2"), (False, "[Errno 21")]  # ENOENT, EISDIR
+    logic.rmdir()
+    logic.write_text(V2)
+    replayed = [e for e in replay(record).runtime.trace.events if e["event"] == "plc_reload"]
+    assert [(e["ok"], e["diagnostics"]) for e in replayed] == [
+        (False, list(o.diagnostics)) for o in said]
