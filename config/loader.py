@@ -170,15 +170,24 @@ def _io_list(r: _Reader, path: Path, key: str) -> list[tuple[str, str, Any]]:
                          f"{len(row)}")
         cells = dict(zip(columns, (cell.strip() for cell in row), strict=True))
         out.append((f"{key} ({path.name}:{number}) {cells['name']}", cells["name"],
-                    {"var": cells["var"]}))
+                    {"var": cells["var"], "comment": cells.get("comment", "")}))
     return out
+
+
+class Symbols(dict[str, str]):
+    """The I/O names (``[symbols]`` and ``symbols_file``): name -> image variable, with each
+    name's comment, if it has one, in ``comments`` (``ncgate map`` shows them)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.comments: dict[str, str] = {}
 
 
 def _symbols(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     raw = t.get("symbols", {})
     if not isinstance(raw, dict):
         raise r.fail(key, "expected a table of NAME = \"SA10\"")
-    out: dict[str, str] = {}
+    out = Symbols()
     seen: dict[str, str] = {}
     entries: list[tuple[str, str, Any]] = []
     if done.get("symbols_file") is not None:
@@ -189,6 +198,11 @@ def _symbols(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> A
             unknown = set(entry) - {"var", "comment"}
             if unknown:
                 raise r.fail(f"{item}.{sorted(unknown)[0]}", "unknown key (var, comment)")
+            comment = entry.get("comment", "")
+            if not isinstance(comment, str):
+                raise r.fail(f"{item}.comment", f"expected a text, got {comment!r}")
+            if comment.strip():
+                out.comments[name] = comment.strip()
             entry = entry.get("var")
         if not isinstance(entry, str) or _VE_MAP.match(entry) is None:
             raise r.fail(item, f"expected an image variable (SA10, SA2.BY, SK3, SK4.IN, "
@@ -783,10 +797,10 @@ class Config:
         None, "a CSV I/O list of more I/O names: a header of name, var and (optionally) "
         "comment, comma- or semicolon-separated (as PLC tools export them); its names join "
         "[symbols]'s", parse=_symbols_file)
-    symbols: Mapping[str, str] = setting(
+    symbols: Symbols = setting(
         doc="[symbols]: I/O names, NAME = \"SA10\" (or { var = \"SA10\", comment = \"...\" }): "
         "usable wherever a variable is named (API, sim script) and shown beside it",
-        parse=_symbols, factory=dict)
+        parse=_symbols, factory=Symbols)
     source: Path | None = None  # the file it came from (None: built-in default); not a key
 
 

@@ -45,11 +45,14 @@ from ncgate.inputs import (
     API,
     Command,
     CommandKind,
+    Force,
     Input,
+    PlcVar,
     Snd,
     Source,
     SourceKind,
     Start,
+    Var,
     Write,
     Writes,
 )
@@ -132,7 +135,6 @@ class Gateway:
 
     async def _open(self, stack: contextlib.AsyncExitStack,
                     loop: asyncio.AbstractEventLoop) -> None:
-        # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
         # A thread that reads a program (or serves the CAN side) keeps the GIL for up to
         # sys.getswitchinterval() each time the loop asks for it back: 5 ms by default, so
         # the loop's 1 ms ticks came 10.4 ms late at p99 while a 10 MB program was read, and
@@ -141,6 +143,7 @@ class Gateway:
         previous = sys.getswitchinterval()
         sys.setswitchinterval(min(previous, GIL_SWITCH_S))
         stack.callback(sys.setswitchinterval, previous)
+        # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
         # for) every event.
         trace = Trace(keep=self.config.trace.ring)
         t = self.config.trace
@@ -548,6 +551,15 @@ class Gateway:
         """Write one image variable (``"SA10"``, ``"SK2.IN"``, ``"SYVAR1"``, or an I/O name
         of ``[symbols]``)."""
         self.apply(Write(self.runtime.var(var), value, source))
+
+    def force(self, var: str, value: int | float | None, source: Source = API) -> None:
+        """Force a variable (``"SA10"``, an I/O name of ``[symbols]``, or a PLC variable's
+        path, ``"main.n"``) to ``value``; ``None`` releases it (docs/decisions.md)."""
+        try:
+            target: Var | PlcVar = self.runtime.var(var)
+        except InputRefused:
+            target = PlcVar(var)  # a PLC variable, or refused as neither
+        self.apply(Force(target, value, source))
 
     def read(self, var: str) -> int:
         v = self.runtime.var(var)

@@ -470,8 +470,9 @@ class ModbusMap:
             "table": r.table.value, "start": r.start, "end": r.end - 1, "count": r.count,
             "hmi_start": r.hmi(r.start), "hmi_end": r.hmi(r.end - 1), "type": r.type,
             "access": {"rw": "read/write", "r": "read", "w": "write"}[r.access],
-            "content": r.content,
+            "content": r.content, "name": "", "comment": "",
         } for r in self.regions]
+        comments = getattr(self.config.symbols, "comments", {})
         for name, text in self.config.symbols.items():
             place = self._symbol_place(text)
             if place is None:
@@ -482,8 +483,10 @@ class ModbusMap:
                 "count": count, "hmi_start": region.hmi(address),
                 "hmi_end": region.hmi(address + count - 1), "type": region.type,
                 "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
-                "content": f"{name} ({text}): an I/O name of [symbols]"})
-        rows += self._aux_rows()
+                "content": f"{name} ({text}): an I/O name of [symbols]", "name": name,
+                "comment": comments.get(name, "")})
+        for row in self._aux_rows():
+            rows.append({**row, "name": "", "comment": ""})
         return rows
 
     def _aux_rows(self) -> list[dict[str, object]]:
@@ -545,11 +548,12 @@ class ModbusMap:
             "Addresses are 0-based protocol addresses; HMI numbers are the 1-based "
             "0xxxx/1xxxx/3xxxx/4xxxx form. 32-bit values are two registers, high word first.",
             "",
-            "| table | address | HMI | type | access | content |",
-            "|---|---|---|---|---|---|",
+            "| table | address | HMI | type | access | content | name |",
+            "|---|---|---|---|---|---|---|",
         ]
         lines += [f"| {r['table']} | {r['start']}..{r['end']} | {r['hmi_start']}..{r['hmi_end']}"
-                  f" | {r['type']} | {r['access']} | {r['content']} |" for r in rows]
+                  f" | {r['type']} | {r['access']} | {r['content']} | {r['name']}"
+                  + (f" ({r['comment']})" if r['comment'] else "") + " |" for r in rows]
         return "\n".join(lines) + "\n"
 
 

@@ -126,8 +126,8 @@ def test_a_bad_io_list_is_a_config_error_naming_the_row(tmp_path: Path, io_list:
 
 
 def test_ncgate_map_lists_the_names_at_their_addresses(tmp_path: Path) -> None:
-    """`ncgate map --format csv` has a row per I/O name: SA10 is coil 10, SYVAR3 is holding
-    1003 (the default map)."""
+    """`ncgate map --format csv` has a row per I/O name, with a names column and its comment:
+    SA10 is coil 10, SYVAR3 is holding 1003 (the default map)."""
     import csv
     import io
     import subprocess
@@ -137,11 +137,34 @@ def test_ncgate_map_lists_the_names_at_their_addresses(tmp_path: Path) -> None:
                            str(_cell(tmp_path)), "--format", "csv"], capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr
-    rows = {row["content"].split(" ")[0]: row for row in csv.DictReader(io.StringIO(done.stdout))}
+    rows = {row["name"]: row for row in csv.DictReader(io.StringIO(done.stdout))
+            if row["name"]}
+    assert set(rows) == {"door_closed", "spindle_speed"}
     assert rows["door_closed"]["table"].startswith("coil")
     assert rows["door_closed"]["start"] == "10"
     assert rows["spindle_speed"]["table"].startswith("holding")
     assert rows["spindle_speed"]["start"] == "1003"
+    assert rows["spindle_speed"]["comment"] == "rpm / 10"  # as [symbols] gives it
+    assert rows["door_closed"]["comment"] == ""
+
+
+def test_an_io_list_s_comments_reach_the_map(tmp_path: Path) -> None:
+    (tmp_path / "io.csv").write_text("name;var;comment\nspindle_on;SA11;M03 issued\n")
+    config = _cell(tmp_path)
+    config.write_text('symbols_file = "io.csv"\n' + CELL)
+    from ncgate.gateway.modbus.map import ModbusMap
+
+    text = ModbusMap(load_config(config)).render("md")
+    assert "| spindle_on (M03 issued) |" in text and "| spindle_speed (rpm / 10) |" in text
+
+
+async def test_the_python_api_forces_by_name(tmp_path: Path) -> None:
+    async with Gateway(load_config(_cell(tmp_path), overrides={"modbus.port": 0})) as gw:
+        gw.force("door_closed", 1)
+        gw.write("SA10", 0)  # overridden
+        assert gw.read("door_closed") == 1 and gw.image.forced == {("SA", 10, "bit"): 1}
+        gw.force("DOOR_CLOSED", None)
+        assert gw.image.forced == {}
 
 
 def test_a_role_may_write_the_overrides_region_by_its_name() -> None:
