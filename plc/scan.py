@@ -661,8 +661,10 @@ class _Carry:
                 continue
             attr = f"v_{key}"
             setattr(new_obj, attr, self.value(getattr(old_obj, attr), getattr(new_obj, attr),
+            started = len(self.initial)
                                               var.type, here))
-            self.kept += 1
+            if len(self.initial) == started:  # (an enumeration's value may not carry)
+                self.kept += 1
         self.dropped += [f"{path}.{v.display}" if path else v.display
                          for k, v in old_table.items() if k not in new_table]
 
@@ -671,6 +673,14 @@ class _Carry:
             return [self.value(o, n, t.element, f"{path}[{getattr(t, 'lo', 0) + i}]")
                     for i, (o, n) in enumerate(zip(old, new, strict=True))]
         members = self.new.members_of(t)  # a user FB instance or a structure
+        if isinstance(t, EnumOf):  # by its value's name: a value added before it renumbers
+            name = next((k for k, v in self.old.enums[t.name].values.items() if v == old),
+                        None)
+            values = self.new.enums[t.name].values
+            if name is None or name not in values:  # its value is gone from the type
+                self.initial.append(path)
+                return new
+            return values[name]
         if members is not None:
             self.instance(old, new, self.old.members_of(t) or {}, members, path)
             return new
@@ -678,8 +688,8 @@ class _Carry:
 
     def same(self, a: Any, b: Any) -> bool:
         """The same declared type in both logics: a user FB or a structure by its name (its
-        members are then compared one by one), an enumeration by its values, a subrange
-        by its limits too."""
+        members are then compared one by one), an enumeration by its name (each value is
+        then carried by its name), a subrange by its limits too."""
         if type(a) is not type(b) or a != b:
             return False
         if isinstance(a, str):  # a subrange is its base's name with limits
@@ -688,7 +698,7 @@ class _Carry:
         if isinstance(a, ArrayOf):
             return self.same(a.element, b.element)
         if isinstance(a, EnumOf):
-            return bool(self.old.enums.get(a.name) == self.new.enums.get(b.name))
+            return a.name in self.old.enums and b.name in self.new.enums
         return True
 
 

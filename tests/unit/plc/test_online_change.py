@@ -171,7 +171,8 @@ END_PROGRAM
         "(IDLE, RUN, STOPPED)", "(IDLE, RUN, STOPPED, FAILED)")
     plc = Plc(before).scan(3)
     done = plc.runtime.reload(logic(after), ["main"])
-    assert sorted(done.initial) == ["main.x.speed", "mode"]  # retyped member; new values
+    assert sorted(done.initial) == ["main.x.speed"]  # retyped member (mode: RUN is kept)
+    assert plc.runtime.logic.namespace["_G"].v_MODE == 1  # RUN
     assert plc["main.x.pos"] == 6 and plc["main.x.speed"] == 0.5
     plc.scan()
     assert plc["main.x.pos"] == 8
@@ -193,3 +194,31 @@ def test_a_constant_takes_its_new_value_where_it_is_read_too() -> None:
     assert plc["main.n"] == 400
     assert (plc["main.lim"], plc["main.g.k"], plc["main.later"]) == (200, 200, 4)
     assert plc.runtime.logic.namespace["_G"].v_TOP == 200
+
+
+def test_a_state_machine_keeps_its_state_when_its_enumeration_changes() -> None:
+    """A state added to the enumeration -- before the current one, which renumbers it -- or
+    one removed that is not the current one: the state is carried by its name, so the
+    machine goes on where it was (it restarted from IDLE, and counted a second cycle).  A
+    variable whose state is gone starts from its initial value."""
+    source = """
+TYPE Step : (IDLE, CLAMP, DRILL, EJECT); END_TYPE
+PROGRAM main
+VAR st : Step; other : Step := Step#EJECT; cycles : CTU; n : INT;
+    trail : ARRAY[0..1] OF Step; END_VAR
+n := n + 1;
+IF n = 2 THEN st := Step#DRILL; trail[1] := Step#CLAMP; END_IF
+cycles(CU := st = Step#DRILL, PV := 10);
+SYVAR[0] := cycles.CV;
+END_PROGRAM
+"""
+    plc = Plc(source).scan(3)
+    assert (plc["main.st"], plc["main.cycles.CV"]) == (2, 1)
+    done = plc.runtime.reload(logic(source.replace(
+        "(IDLE, CLAMP, DRILL, EJECT)", "(IDLE, SAFE, CLAMP, DRILL)").replace(
+        " := Step#EJECT", "")), ["main"])
+    assert done.initial == ("main.other",)  # EJECT is gone: DRILL's initial, IDLE
+    assert plc["main.st"] == 3 and plc["main.other"] == 0  # DRILL, now 3
+    assert plc["main.trail"] == [0, 2]  # IDLE, CLAMP (now 2)
+    plc.scan(3)
+    assert plc["main.cycles.CV"] == 1 and plc.image.syvar[0] == 1  # no second cycle
