@@ -660,8 +660,8 @@ class _Carry:
                 self.initial.append(here)
                 continue
             attr = f"v_{key}"
-            setattr(new_obj, attr, self.value(getattr(old_obj, attr), getattr(new_obj, attr),
             started = len(self.initial)
+            setattr(new_obj, attr, self.value(getattr(old_obj, attr), getattr(new_obj, attr),
                                               var.type, here))
             if len(self.initial) == started:  # (an enumeration's value may not carry)
                 self.kept += 1
@@ -672,7 +672,6 @@ class _Carry:
         if isinstance(t, ArrayOf):
             return [self.value(o, n, t.element, f"{path}[{getattr(t, 'lo', 0) + i}]")
                     for i, (o, n) in enumerate(zip(old, new, strict=True))]
-        members = self.new.members_of(t)  # a user FB instance or a structure
         if isinstance(t, EnumOf):  # by its value's name: a value added before it renumbers
             name = next((k for k, v in self.old.enums[t.name].values.items() if v == old),
                         None)
@@ -681,6 +680,7 @@ class _Carry:
                 self.initial.append(path)
                 return new
             return values[name]
+        members = self.new.members_of(t)  # a user FB instance or a structure
         if members is not None:
             self.instance(old, new, self.old.members_of(t) or {}, members, path)
             return new
