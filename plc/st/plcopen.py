@@ -58,6 +58,7 @@ UNSUPPORTED_DATA = {"method": ("Method", "METHOD"), "property": ("Property", "PR
 ELEMENTARY_NAMES = {"string": "STRING", "wstring": "WSTRING"}
 
 Where = tuple[int, int]  # line (1-based), column (0-based, in characters) in the XML file
+DOCTYPE_COLUMN = -1  # a Where's column: that of "<!DOCTYPE" in its line
 
 
 # ---- the XML, with positions ---------------------------------------------------------------
@@ -163,10 +164,9 @@ def _read_xml(data: bytes) -> _El:
             stack[-1].text.append((data, where()))
 
     def doctype(*args: Any) -> None:
-        line = parser.CurrentLineNumber  # (expat is past its name: find the <!DOCTYPE)
-        raw = data.split(b"\n")[line - 1] if line else b""
+        # (expat is past its name: the column is where <!DOCTYPE is in the line's text)
         raise _XmlProblem("a DOCTYPE: a PLCopen export has none (and its entities are not "
-                          "read)", (line, max(raw.find(b"<!DOCTYPE"), 0)))
+                          "read)", (parser.CurrentLineNumber, DOCTYPE_COLUMN))
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
@@ -285,6 +285,8 @@ class _Writer:
     def problem(self, code: StCode, message: str, at: Where) -> None:
         line, column = at
         source = self.xml_line(line)
+        if column == DOCTYPE_COLUMN:  # in characters: after a BOM, an umlaut, in UTF-16
+            column = max(source.find("<!DOCTYPE"), 0)
         self.problems.append(StDiagnostic(code, message, n.Span(self.path, line, column + 1),
                                           source))
 

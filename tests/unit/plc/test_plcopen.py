@@ -287,3 +287,20 @@ def test_the_line_under_a_diagnostic_is_the_xml_line_expat_counted(tmp_path: Pat
     line = next(i + 1 for i, x in enumerate(lines) if "q := on_delay.Q +;" in x)
     assert d.span.line == line
     assert "q := on_delay.Q +;" in d.source_line and d.source_line.startswith("(* a")
+
+
+@pytest.mark.parametrize(("data", "position"), [
+    (b'\xef\xbb\xbf<?xml version="1.0"?><!DOCTYPE p [<!ENTITY a "b">]><project/>', (1, 22)),
+    ('<?xml version="1.0"?><!-- größe --><!DOCTYPE p><project/>'.encode(), (1, 36)),
+    ('<?xml version="1.0" encoding="utf-16"?>\n  <!DOCTYPE p><project/>'.encode("utf-16"),
+     (2, 3)),
+], ids=["bom", "umlaut", "utf-16"])
+def test_a_doctype_is_st040_at_its_column_in_characters(data: bytes,
+                                                        position: tuple[int, int]) -> None:
+    """The column of "<!DOCTYPE" counts characters, as every other column does: not the
+    BOM's or an umlaut's bytes, and found in a UTF-16 file's text, not in its bytes."""
+    with pytest.raises(LogicError) as caught:
+        parse_plcopen(data, "p.xml")
+    [d] = caught.value.diagnostics
+    assert (d.code, d.span.line, d.span.column) == (StCode.XML_PROJECT, *position)
+    assert d.source_line.find("<!DOCTYPE") == position[1] - 1
