@@ -684,7 +684,9 @@ class _Carry:
         if members is not None:
             self.instance(old, new, self.old.members_of(t) or {}, members, path)
             return new
-        return _copied(old, new)
+        # A number, a string, or a standard FB instance: its class is the standard
+        # library's, the same in both logics, so the instance itself moves over.
+        return old
 
     def same(self, a: Any, b: Any) -> bool:
         """The same declared type in both logics: a user FB or a structure by its name (its
@@ -700,26 +702,6 @@ class _Carry:
         if isinstance(a, EnumOf):
             return a.name in self.old.enums and b.name in self.new.enums
         return True
-
-
-def _copied(old: Any, new: Any) -> Any:
-    """A value of an unchanged type, carried into the new logic: numbers as they are, lists
-    and instances (a standard FB, a structure) member by member into the new one."""
-    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
-        return [_copied(o, n) for o, n in zip(old, new, strict=True)]
-    if type(old) is type(new):  # a number, or a standard FB (the stdlib's class): moved
-        return old
-    slots = getattr(type(new), "__slots__", None)
-    if slots and type(old).__name__ == type(new).__name__:
-        for name in (slots,) if isinstance(slots, str) else slots:
-            if hasattr(old, name):
-                setattr(new, name, _copied(getattr(old, name), getattr(new, name, None)))
-        return new
-    if hasattr(new, "__dict__") and type(old).__name__ == type(new).__name__:
-        for name, value in vars(old).items():
-            setattr(new, name, _copied(value, getattr(new, name, None)))
-        return new
-    return old
 
 
 GLOBALS = "VAR_GLOBAL"  # the store's name of the globals' RETAIN rows (no POU has it)
