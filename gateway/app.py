@@ -32,7 +32,7 @@ from ncgate.gateway.canopen.clock import Clock
 from ncgate.gateway.canopen.node import CanopenNode
 from ncgate.gateway.door import Door, command_kind
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
-from ncgate.gateway.lifecycle import Adapter
+from ncgate.gateway.lifecycle import GIL_SWITCH_S, Adapter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import OnlineChange, ReloadOutcome, ScanDriver, start_plc
@@ -65,10 +65,6 @@ from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 if TYPE_CHECKING:
     from ncgate.gateway.web.console import WebConsole
-
-# The GIL switch interval while a gateway runs (seconds): how long another thread may keep
-# the loop waiting (Gateway._open says what it was measured against).
-GIL_SWITCH_S = 0.0005
 
 
 class Gateway:
@@ -139,7 +135,8 @@ class Gateway:
         # sys.getswitchinterval() each time the loop asks for it back: 5 ms by default, so
         # the loop's 1 ms ticks came 10.4 ms late at p99 while a 10 MB program was read, and
         # 1.5-2.3 ms at 0.5 ms, the load itself no slower (alternating runs, issue 24).
-        # Restored on exit: the process is the gateway's only while it runs.
+        # `ncgate run` sets it for its whole process (cli/main.py); this gives it to every
+        # gateway of the Python API too (a test's virtual PLC), restored on exit.
         previous = sys.getswitchinterval()
         sys.setswitchinterval(min(previous, GIL_SWITCH_S))
         stack.callback(sys.setswitchinterval, previous)

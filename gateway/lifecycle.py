@@ -13,6 +13,11 @@ from __future__ import annotations
 
 from typing import Protocol
 
+# The GIL switch interval while a gateway runs (seconds): how long another thread may keep
+# the loop waiting (Gateway._open says what it was measured against; `ncgate run` sets it for
+# its whole process).
+GIL_SWITCH_S = 0.0005
+
 
 class Adapter(Protocol):
     async def start(self) -> None: ...

@@ -226,7 +226,7 @@ async def test_a_thread_keeps_the_loop_waiting_at_most_half_a_millisecond(
     Gateway._open); the interval the process had comes back when the gateway closes."""
     import sys
 
-    from ncgate.gateway.app import GIL_SWITCH_S
+    from ncgate.gateway.lifecycle import GIL_SWITCH_S
 
     before = sys.getswitchinterval()
     assert before > GIL_SWITCH_S  # Python's default, 5 ms
