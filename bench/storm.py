@@ -20,7 +20,9 @@ Per phase it prints the poller's round trip p50/p99/max, the PLC scan's max late
 overruns (of scans due), SYNC->TPDO p99/max and TPDOs missing, false master-lost alarms
 (AL150 while the master's heartbeat went on), the share of due NC round trips kept, the time
 SIGTERM took to end the gateway (sent while the abuse goes on), the CPU share the gateway
-process used (what a phase costs it, which a busy machine blurs less than the latencies), and
+process used (what a phase costs it, which a busy machine blurs less than the latencies), the
+round trip p99 of a baseline polled beside the gateway at the same rate (a bare asyncio server
+in a process of its own: what the machine under the abuse does to any Python server), and
 each figure's ratio to the quiet phase.  Targets under every abuse: poller p99 <= 5 ms and max
 <= 50 ms, PLC lateness max <= 20 ms and overruns <= 1 %, no false master-lost, SYNC->TPDO max
 <= 10 ms, NC round trips >= 95 % of due, SIGTERM <= 1 s.
@@ -128,6 +130,30 @@ async def poller(port: int, stop: asyncio.Event, rtts: list[float],
         next_at += 0.005  # 200 Hz
         await asyncio.sleep(max(0.0, next_at - time.perf_counter()))
     writer.close()
+
+
+def control_server(port: int, ready: multiprocessing.synchronize.Event) -> None:
+    """The baseline polled beside the gateway: a bare asyncio server in a process of its own
+    that answers any request with a 14-register FC4 answer -- no gateway behind it.  What the
+    machine's load does to a Python server's round trip, measured under the same abuse: the
+    part of the gateway's figure that is the machine's."""
+    async def serve() -> None:
+        answer = struct.pack(">BB14H", 4, 28, *([0] * 14))
+
+        async def client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            with contextlib.suppress(Exception):
+                while True:
+                    header = await reader.readexactly(7)
+                    await reader.readexactly(struct.unpack(">H", header[4:6])[0] - 1)
+                    writer.write(header[:4] + struct.pack(">HB", len(answer) + 1, header[6])
+                                 + answer)
+
+        server = await asyncio.start_server(client, "127.0.0.1", port)
+        ready.set()
+        async with server:
+            await server.serve_forever()
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(serve())
 
 
 class Master(threading.Thread):
@@ -352,8 +378,13 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
         gateway = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "ncgate", "run", "--config", str(config), "-q",
             stdout=asyncio.subprocess.DEVNULL, stderr=LOG, cwd=tmp)
+        control_port, control_ready = free_port(), SPAWN.Event()
+        control = SPAWN.Process(target=control_server, args=(control_port, control_ready),
+                                daemon=True)
+        control.start()
         master: Master | None = None
         try:
+            await asyncio.to_thread(control_ready.wait, 30)
             await wait_listening(port)
             master = Master(hub)
             await asyncio.to_thread(master.configure)
@@ -362,10 +393,13 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
             abuse_stop = SPAWN.Event()
             rtts: list[float] = []
             late: list[int] = []
+            control_rtts: list[float] = []
             polling = asyncio.create_task(poller(port, stop, rtts, late))
+            control_polling = asyncio.create_task(poller(control_port, stop, control_rtts, []))
             await asyncio.sleep(1.0)  # warm-up: the measured window starts after it
             rtts.clear()
             late.clear()
+            control_rtts.clear()
             master.delays.clear()
             syncs0, tpdos0 = master.syncs, master.tpdos
             scans0, overruns0, _ = await plc_status(port)
@@ -380,6 +414,7 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
             await asyncio.sleep(seconds)  # the phase's length is what is measured
             stop.set()
             await polling
+            await control_polling
             scans, overruns, _ = await plc_status(port)
             snds = await snd_count(port) - snds0
             lateness_us = max(late, default=0)  # the scans the poller saw, in the window
@@ -398,6 +433,7 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
                 if abuse.is_alive():
                     abuse.kill()
         finally:
+            control.kill()
             if master is not None:
                 master.close()
             if gateway.returncode is None:
@@ -409,6 +445,7 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
     # end (two SNDs a round trip): the trace's last events come from the shutdown, after it.
     due = elapsed * TIME_SCALE / DWELL_S
     rtts.sort()
+    control_rtts.sort()
     delays.sort()
     due_scans = max(1, scans - scans0 + overruns - overruns0)
 
@@ -424,6 +461,7 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
         "tpdo_missing": max(0, syncs - tpdos), "lost": lost,
         "nc_kept_pct": 100 * min(1.0, snds / 2 / due), "sigterm_s": sigterm_s,
         "polls": len(rtts), "cpu_pct": 100 * cpu / elapsed,
+        "control_p99": pct(control_rtts, 0.99) * 1e3,
     }
 
 
@@ -432,7 +470,8 @@ COLUMNS = [("poll_p50", "poll p50 ms", 5.0e9), ("poll_p99", "poll p99 ms", 5.0),
            ("overrun_pct", "overruns %", 1.0), ("tpdo_p99", "SYNC>TPDO p99 ms", 1e9),
            ("tpdo_max", "SYNC>TPDO max ms", 10.0), ("tpdo_missing", "TPDOs missing", 1e9),
            ("lost", "false lost", 0.0), ("nc_kept_pct", "NC kept %", -95.0),
-           ("sigterm_s", "SIGTERM s", 1.0), ("cpu_pct", "gateway CPU %", 1e9)]
+           ("sigterm_s", "SIGTERM s", 1.0), ("cpu_pct", "gateway CPU %", 1e9),
+           ("control_p99", "baseline p99 ms", 1e9)]
 
 
 def main() -> int:
