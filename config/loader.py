@@ -413,6 +413,13 @@ def _aux_value(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) ->
     return f"SYVAR{int(found.group(2))}" if found.group(1) else f"SK{int(found.group(4))}.IN"
 
 
+def _aux_bits(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> int:
+    value = t.get("value_bits", 16)
+    if value not in (16, 32) or isinstance(value, bool):
+        raise r.fail(key, f"expected 16 or 32, got {value!r}")
+    return int(value)
+
+
 def _aux_bit(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> str:
     name = key.rpartition(".")[2]
     text = r.str_(t.get(name, "SA896" if name == "strobe" else "SA960"), key)
@@ -475,6 +482,9 @@ class AuxConfig:
                           "H at +1, +2, +3, P2's M at +4, ...)", parse=_aux_bit)
     ack: str = setting("SA960", "the SA bit of P1's M acknowledge (the PLC sets it; laid "
                        "out as the strobes)", parse=_aux_bit)
+    value_bits: int = setting(16, "16: a value is one word; 32: two words, the high one first "
+                              "(a pair of SYVARs, or two SK words), each value's place twice as "
+                              "wide", parse=_aux_bits)
 
     def settings(self) -> AuxSettings:
         found = _AUX_VALUE.match(self.value)
@@ -482,7 +492,7 @@ class AuxConfig:
         value = (("SYVAR", int(found.group(2)), "IN") if found.group(1)
                  else ("SK", int(found.group(4)), "IN"))
         return AuxSettings(self.handshake, tuple(self.codes.items()), self.timeout_s, value,
-                           int(self.strobe[2:]), int(self.ack[2:]))
+                           int(self.strobe[2:]), int(self.ack[2:]), self.value_bits // 16)
 
 
 @dataclass(frozen=True, slots=True)
@@ -1060,11 +1070,13 @@ def _check_aux(r: _Reader, aux: AuxConfig, processes: int, plc: PlcConfig) -> No
     settings = aux.settings()
     last = settings.place(processes, "H")
     area, index, _ = last[0]
+    index += (settings.words - 1) * (2 if area == "SK" else 1)  # its low word
     size = plc.syvars if area == "SYVAR" else plc.k_bytes - 1
     if index >= size:
-        raise r.fail("nc.aux.value", f"{aux.value}: P{processes}'s H value would be "
+        raise r.fail("nc.aux.value", f"{aux.value}: P{processes}'s H value would end at "
                      f"{area}{index}{'.IN' if area == 'SK' else ''}, outside the image "
-                     f"({4 * processes} words from it; plc.syvars, plc.k_bytes)")
+                     f"({4 * settings.words * processes} words from it; plc.syvars, "
+                     "plc.k_bytes)")
     for name, bit in (("strobe", last[1]), ("ack", last[2])):
         if bit >= plc.sa_bits:
             raise r.fail(f"nc.aux.{name}", f"{getattr(aux, name)}: P{processes}'s H bit would "

@@ -60,6 +60,7 @@ class AuxSettings:
     value: tuple[str, int, str] = ("SYVAR", 192, "IN")  # P1's M value (SYVAR or SK .IN)
     strobe: int = 896  # the SA bit of P1's M strobe
     ack: int = 960  # the SA bit of P1's M acknowledge
+    words: int = 1  # a value's words: 1 (16-bit) or 2 (32-bit, the high word first)
 
     def handshake_of(self, letter: str, value: int) -> Handshake:
         found = dict(self.codes)
@@ -69,8 +70,20 @@ class AuxSettings:
         """Process ``process``'s ``letter``: its value's variable, strobe bit, ack bit."""
         offset = 4 * (process - 1) + AUX_LETTERS.index(letter)
         area, index, view = self.value
-        step = 2 if area == "SK" else 1
+        step = (2 if area == "SK" else 1) * self.words
         return (area, index + step * offset, view), self.strobe + offset, self.ack + offset
+
+    def value_words(self, place: tuple[str, int, str], value: int) -> list[tuple[str, int, str,
+                                                                                   int]]:
+        """The image writes that put ``value`` at a value's ``place``: one int16 word, or
+        two (the high word first, as a 32-bit value goes in two Modbus registers)."""
+        area, index, view = place
+        if self.words == 1:
+            return [(area, index, view, value)]
+        high, low = value >> 16, value & 0xFFFF
+        return [(area, index, view, high),
+                (area, index + (2 if area == "SK" else 1), view,
+                 low - 0x10000 if low & 0x8000 else low)]
 
 
 @dataclass(frozen=True, slots=True)

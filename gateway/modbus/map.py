@@ -499,8 +499,10 @@ class ModbusMap:
         for k in range(1, self.config.nc.processes + 1):
             (area, index, _), strobe, ack = aux.place(k, "M")
             first = f"SYVAR{index}" if area == "SYVAR" else f"SK{index}.IN"
+            words = aux.words
             for text, count, what in (
-                    (first, 4, "the values of M, S, T, H output (written by the NC)"),
+                    (first, 4 * words, "the values of M, S, T, H output (written by the NC)"
+                     + ("; two words each, the high one first" if words == 2 else "")),
                     (f"SA{strobe}", 4, "the strobes of M, S, T, H (set by the NC)"),
                     (f"SA{ack}", 4, "the acknowledges of M, S, T, H (set by the PLC)")):
                 place = self._symbol_place(text)

@@ -200,6 +200,18 @@ class VirtualPLC:
         (area, index, _), strobe, ack = aux.place(process, letter.upper())
         return (f"SYVAR{index}" if area == "SYVAR" else f"SK{index}.IN"), strobe, ack
 
+    async def _aux_value(self, first: str) -> int:
+        """A value as the NC output it: one word, or (``nc.aux.value_bits = 32``) two, the
+        high word first."""
+        aux = self.config.nc.aux_interface
+        high = await self.get(first)
+        if aux is None or aux.words == 1:
+            return high
+        (area, index, _), _ = parse_assignment(f"{first}=0")
+        low = await self.get(f"{area}{index + (2 if area == 'SK' else 1)}"
+                             + (".IN" if area == "SK" else ""))
+        return high << 16 | low & 0xFFFF
+
     async def aux_strobes(self) -> list[AuxSeen]:
         """Every auxiliary function whose strobe is up now, process by process (M, S, T, H)."""
         out = []
@@ -210,7 +222,7 @@ class VirtualPLC:
             for letter, up in zip("MSTH", r.bits[:4], strict=True):
                 if up:
                     value, _, _ = self._aux_place(k, letter)
-                    out.append(AuxSeen(k, letter, await self.get(value)))
+                    out.append(AuxSeen(k, letter, await self._aux_value(value)))
         return out
 
     async def expect_aux(self, code: str, process: int = 1, timeout_s: float = 10.0) -> AuxSeen:
@@ -229,7 +241,7 @@ class VirtualPLC:
         except TimeoutError:
             raise VirtualPLCError(f"P{process} output no {letter} function in {timeout_s:g} s "
                                   f"(strobe SA{strobe} stayed 0; expected {code})") from None
-        seen = AuxSeen(process, letter, await self.get(value))
+        seen = AuxSeen(process, letter, await self._aux_value(value))
         if seen.value != wanted:
             raise VirtualPLCError(f"P{process} output {seen.code}, not {code}")
         return seen

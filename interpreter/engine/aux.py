@@ -180,13 +180,13 @@ class AuxInterface:
     def output(self, p: Process, stage: Stage, aux: AuxOutput, where: Where) -> bool:
         """Output one code: True when nothing waits (``none``), else the stage waits."""
         slot = self.slots[(p.number, aux.letter)]
-        area, index, view = slot.value
-        name = _name(slot.value)
-        if not -32768 <= aux.value <= 32767:
+        name = _name(slot.value)  # (of a 32-bit value, its high word's, the first)
+        top = 0x7FFF if self.settings.words == 1 else 0x7FFF_FFFF
+        if not -top - 1 <= aux.value <= top:
             raise RuntimeAlarm(AlarmCode.VALUE_OUT_OF_RANGE,
-                               f"{aux.shown}: {name} holds -32768..32767, not {aux.value}")
+                               f"{aux.shown}: {name} holds {-top - 1}..{top}, not {aux.value}")
         handshake = aux.handshake
-        changes = [(area, index, view, aux.value)]
+        changes = self.settings.value_words(slot.value, aux.value)
         strobe = None
         if handshake is not NONE:
             strobe = f"SA{slot.strobe}"

@@ -219,3 +219,38 @@ def test_st_cannot_write_a_strobe_and_an_acknowledge_without_aux_is_a_hazard(
     assert result.outcome == "idle"
     (hazard,) = _events(result, "hazard")
     assert "NC.P[1].MACK at p.st:2" in hazard["message"] and "[nc.aux]" in hazard["message"]
+
+
+def test_32_bit_values_take_two_words_the_high_one_first(tmp_path: Path) -> None:
+    """nc.aux.value_bits = 32: S40000 (past an int16) in SYVAR193..194 as 0x0000, 0x9C40 --
+    the high word first, as a 32-bit value goes in two Modbus registers -- each letter's place
+    two words wide (P1's M 192..193, S 194..195, T 196..197)."""
+    result = _sim(_cell(tmp_path, "N10M08S40000T70000\nN20M30\n",
+                        aux='handshake = "none"\nvalue_bits = 32'))
+    writes = [(e["var"], e["value"]) for e in _events(result, "write")]
+    assert writes == [("SYVAR192", 0), ("SYVAR193", 8), ("SYVAR194", 0),
+                      ("SYVAR195", 40000 - 0x10000), ("SYVAR196", 1), ("SYVAR197", 70000 - 0x10000)]
+    assert [e["code"] for e in _events(result, "aux")] == ["M8", "S40000", "T70000"]
+
+
+def test_a_16_bit_value_past_its_range_is_an_alarm_and_32_bits_hold_it(tmp_path: Path) -> None:
+    result = _sim(_cell(tmp_path, "N10S40000\nN20M30\n", aux='handshake = "none"'))
+    assert [e["code"] for e in _events(result, "alarm")] == ["AL103"]
+
+
+async def test_the_virtual_plc_reads_a_32_bit_value(tmp_path: Path) -> None:
+    config = _cell(tmp_path, "N10S40000\nN20M30\n",
+                   aux='handshake = "before_motion"\nvalue_bits = 32', nc="lookahead = 0")
+    async with Gateway(ncgate_test_config(config, **{"modbus.port": 0})) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.command(1)
+        seen = await plc.expect_aux("S40000")
+        assert seen.value == 40000
+        await plc.ack_aux(seen)
+        await gw.wait_idle(timeout_s=30)
+
+
+@pytest.mark.parametrize("bits", ["value_bits = 24", "value_bits = true", 'value_bits = "32"'])
+def test_value_bits_is_16_or_32(tmp_path: Path, bits: str) -> None:
+    with pytest.raises(ConfigError, match=r": nc\.aux\.value_bits: expected 16 or 32"):
+        load_config(_cell(tmp_path, "N10M30\n", aux=bits))
