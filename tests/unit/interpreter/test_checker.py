@@ -117,6 +117,17 @@ def test_a_jump_into_an_rpt_body_from_outside_it_is_flagged() -> None:
     assert diagnose('(RPT,2)\n(BNC,OUT)\n(ERP)\n"OUT"\n') == []
 
 
+def test_a_jump_into_a_nested_rpt_body_names_the_innermost_body_it_enters() -> None:
+    # Outer body lines 1..7, inner 2..5: from inside the outer body only (line 6) and from
+    # outside both (line 8) a jump to line 3 enters the inner one; from inside it, none.
+    text = ('(RPT,2)\n(RPT,3)\n"IN"\nG1X1F100\n(ERP)\n(BNC,IN)\n(ERP)\n(BNC,IN)\n'
+            '(RPT,2)\n"OWN"\n(BNC,OWN)\n(ERP)\n')
+    assert diagnose(text) == [(C.JUMP_INTO_REPEAT, 6, 1), (C.JUMP_INTO_REPEAT, 8, 1)]
+    messages = [d.message for d in check_program(Program("T", "t.nc", text), CheckContext())
+                if d.code is C.JUMP_INTO_REPEAT]
+    assert all("(RPT) on line 2 " in m for m in messages), messages
+
+
 def test_exe_program_and_device_must_exist_when_storage_is_known() -> None:
     ctx = {
         "find_program": lambda name, device: name.upper() == "PROG92",
