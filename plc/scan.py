@@ -472,35 +472,8 @@ class PlcRuntime:
         """A variable's value by its path: ``"main.t1.ET"``, ``"main.counts[3]"``
         (case-insensitive).  PlcPathError (a KeyError) with the names there are when a part
         is unknown."""
-        program, _, rest = path.partition(".")
-        key = program.upper()
-        if key not in self.programs:
-            raise PlcPathError(f"no program {program!r} (programs: "
-                           f"{', '.join(self.logic.display[k] for k in self.programs)})")
-        if not rest:
-            raise PlcPathError(f"{path!r}: name a variable of {program}")
-        obj: Any = self.programs[key]
-        table: dict[str, ProgramVar] | None = self.logic.programs[key]
-        t: Any = None
-        for part in _split(rest):
-            if isinstance(part, int):
-                if not isinstance(t, ArrayOf) or not t.lo <= part <= t.hi:
-                    raise PlcPathError(f"{path!r}: [{part}] is not an index of {t}")
-                obj, t = obj[part - t.lo], t.element
-                table = self.logic.members_of(t)
-                continue
-            name = part.upper()
-            if isinstance(t, FbOf) and t.std:
-                if not hasattr(obj, name) or name.startswith("_"):
-                    raise PlcPathError(f"{path!r}: {t.name} has no {part}")
-                obj, t = getattr(obj, name), None
-                continue
-            if table is None or name not in table:
-                known = ", ".join(v.display for v in (table or {}).values())
-                raise PlcPathError(f"{path!r}: no {part} here ({known})")
-            var = table[name]
-            obj, t = getattr(obj, f"v_{name}"), var.type
-            table = self.logic.members_of(t)
+        parent, key, _ = self._place(path, members=True)
+        obj = parent[key] if isinstance(key, int) else getattr(parent, key)
         return list(obj) if isinstance(obj, list) else obj
 
     # -- forcing (issue 28, item 2; docs/decisions.md) -----------------------------------------
@@ -584,12 +557,15 @@ class PlcRuntime:
         else:
             setattr(parent, key, value)
 
-    def _place(self, path: str) -> tuple[Any, str | int, Any]:
-        """Where ``path`` lives: its container, the attribute or index in it, its type."""
-        program, _, rest = path.strip().partition(".")
+    def _place(self, path: str, members: bool = False) -> tuple[Any, str | int, Any]:
+        """Where ``path`` lives: its container, the attribute or index in it, its type (None
+        for a standard FB's member, which only ``members`` admits: a reader may look at a
+        TON's Q, a force may not set it)."""
+        program, _, rest = path.partition(".")
         key = program.upper()
         if key not in self.programs:
-            raise PlcPathError(f"no program {program!r}")
+            raise PlcPathError(f"no program {program!r} (programs: "
+                               f"{', '.join(self.logic.display[k] for k in self.programs)})")
         try:
             parts = _split(rest)
         except ValueError:
@@ -611,11 +587,19 @@ class PlcRuntime:
                 continue
             name = part.upper()
             if isinstance(t, FbOf) and t.std:
-                # A standard FB's members are its outputs and state: the logic's to set.
-                raise PlcPathError(f"{path!r}: {t.name}.{part} is not forced (force the "
-                                   "variable it feeds)")
+                if not members:
+                    # A standard FB's members are its outputs and state: the logic's to set.
+                    raise PlcPathError(f"{path!r}: {t.name}.{part} is not forced (force the "
+                                       "variable it feeds)")
+                if not hasattr(obj, name) or name.startswith("_"):
+                    raise PlcPathError(f"{path!r}: {t.name} has no {part}")
+                if last:
+                    return obj, name, None
+                obj, t = getattr(obj, name), None
+                continue
             if table is None or name not in table:
-                raise PlcPathError(f"{path!r}: no {part} here")
+                known = ", ".join(v.display for v in (table or {}).values())
+                raise PlcPathError(f"{path!r}: no {part} here ({known})")
             var = table[name]
             if last:
                 return obj, f"v_{name}", var.type
