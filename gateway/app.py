@@ -47,12 +47,10 @@ from ncgate.inputs import (
     CommandKind,
     Force,
     Input,
-    PlcVar,
     Snd,
     Source,
     SourceKind,
     Start,
-    Var,
     Write,
     Writes,
 )
@@ -552,11 +550,7 @@ class Gateway:
     def force(self, var: str, value: int | float | None, source: Source = API) -> None:
         """Force a variable (``"SA10"``, an I/O name of ``[symbols]``, or a PLC variable's
         path, ``"main.n"``) to ``value``; ``None`` releases it (docs/decisions.md)."""
-        try:
-            target: Var | PlcVar = self.runtime.var(var)
-        except InputRefused:
-            target = PlcVar(var)  # a PLC variable, or refused as neither
-        self.apply(Force(target, value, source))
+        self.apply(Force(self.runtime.force_target(var), value, source))
 
     def read(self, var: str) -> int:
         v = self.runtime.var(var)

@@ -8,9 +8,10 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ncgate.config import Config
+from ncgate.errors import InputRefused
 from ncgate.gateway.programs import ProgramStore, dialect_options
 from ncgate.gateway.programs import external_bindings as external_bindings
-from ncgate.inputs import Input, Var
+from ncgate.inputs import Input, PlcVar, Var
 from ncgate.inputs import var_name as variable_name
 from ncgate.interpreter.dialect import DialectFrontEnd
 from ncgate.interpreter.dialects import ImageVar as ImageVar
@@ -58,6 +59,14 @@ class Runtime:
         variable (``SA10``); InputRefused (UNKNOWN_VARIABLE) otherwise."""
         found = self.symbols.get(text.strip().upper()) if isinstance(text, str) else None
         return found if found is not None else Var.parse(text)
+
+    def force_target(self, text: str) -> Var | PlcVar:
+        """What a force names: an I/O name or an image variable (:meth:`var`), else a PLC
+        variable's path (``main.n``); InputRefused (UNKNOWN_VARIABLE) for neither."""
+        try:
+            return self.var(text)
+        except InputRefused:
+            return PlcVar(text)
 
     def resolve(self, text: str) -> str:
         """An assignment or condition with an I/O name on its left put back as the image

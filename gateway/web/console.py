@@ -51,11 +51,9 @@ from ncgate.inputs import (
     CommandKind,
     Force,
     Override,
-    PlcVar,
     Source,
     SourceKind,
     Start,
-    Var,
     Write,
     var_name,
 )
@@ -508,11 +506,7 @@ class WebConsole:
                 isinstance(value, float) and not math.isfinite(value))):
             raise ApiError(400, f'"value": a number, true, false or null, got {value!r}')
         try:
-            try:
-                target: Var | PlcVar = self.gw.runtime.var(var)
-            except InputRefused:
-                target = PlcVar(var)  # a PLC variable (main.n), or refused as neither
-            item = Force(target, value, _source(request))
+            item = Force(self.gw.runtime.force_target(var), value, _source(request))
             self.gw.apply(item)
         except InputRefused as exc:
             raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
