@@ -428,6 +428,15 @@ class Gateway:
         """Read and check a program in a thread of its own (a daemon: a SIGTERM does not
         wait for it); its outcome, a failure too, is kept for the start that follows."""
         store = self.runtime.store
+        await self._in_thread(f"ncgate load {name}", lambda: store.preload(name, process),
+                              # then what its EXEs will start, meanwhile
+                              then=lambda: store.read_ahead(name, process))
+
+    async def _in_thread(self, name: str, work: Callable[[], object],
+                         then: Callable[[], object] | None = None) -> None:
+        """Run ``work`` in a daemon thread of its own (a SIGTERM does not wait for it) and
+        wait until it is done; ``then`` goes on in that thread after.  The wait is one of
+        ``_load_waits``, which a close cancels."""
         done = asyncio.get_running_loop().create_future()
         self._load_waits.add(done)
         done.add_done_callback(self._load_waits.discard)
@@ -436,13 +445,14 @@ class Gateway:
             if not done.done():
                 done.set_result(None)
 
-        def work() -> None:
-            store.preload(name, process)
+        def run() -> None:
+            work()
             with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
                 done.get_loop().call_soon_threadsafe(finish)
-            store.read_ahead(name, process)  # then what its EXEs will start, meanwhile
+            if then is not None:
+                then()
 
-        threading.Thread(target=work, name=f"ncgate load {name}", daemon=True).start()
+        threading.Thread(target=run, name=name, daemon=True).start()
         await done
 
     def _read_ahead(self, program: tuple[str, int] | None) -> None:
@@ -516,21 +526,7 @@ class Gateway:
     async def _reload_now(self, item: Command, online: OnlineChange) -> ReloadOutcome | None:
         async with self._reload_lock:
             self._reload_next = None  # the files are read from now on: a later ask waits
-            done = asyncio.get_running_loop().create_future()
-            self._load_waits.add(done)
-            done.add_done_callback(self._load_waits.discard)
-
-            def finish() -> None:
-                if not done.done():
-                    done.set_result(None)
-
-            def work() -> None:
-                online.prepare()
-                with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
-                    done.get_loop().call_soon_threadsafe(finish)
-
-            threading.Thread(target=work, name="ncgate reload_plc", daemon=True).start()
-            await done
+            await self._in_thread("ncgate reload_plc", online.prepare)
             self.door.apply(item)
             self._settle()
         return online.last
