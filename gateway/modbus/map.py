@@ -472,7 +472,7 @@ class ModbusMap:
             "access": {"rw": "read/write", "r": "read", "w": "write"}[r.access],
             "content": r.content, "name": "", "comment": "",
         } for r in self.regions]
-        comments = getattr(self.config.symbols, "comments", {})
+        comments = self.config.symbols.comments
         for name, text in self.config.symbols.items():
             place = self._symbol_place(text)
             if place is None:
@@ -485,9 +485,7 @@ class ModbusMap:
                 "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
                 "content": f"{name} ({text}): an I/O name of [symbols]", "name": name,
                 "comment": comments.get(name, "")})
-        for row in self._aux_rows():
-            rows.append({**row, "name": "", "comment": ""})
-        return rows
+        return rows + self._aux_rows()
 
     def _aux_rows(self) -> list[dict[str, object]]:
         """A row for each process's auxiliary-function values, strobes and acknowledges
@@ -515,7 +513,8 @@ class ModbusMap:
                     "count": count * width, "hmi_start": region.hmi(address),
                     "hmi_end": region.hmi(end), "type": region.type,
                     "access": {"rw": "read/write", "r": "read", "w": "write"}[region.access],
-                    "content": f"P{k} auxiliary functions ([nc.aux]): {what}"})
+                    "content": f"P{k} auxiliary functions ([nc.aux]): {what}", "name": "",
+                    "comment": ""})
         return rows
 
     def _symbol_place(self, text: str) -> tuple[Region, int, int] | None:
