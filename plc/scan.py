@@ -472,8 +472,7 @@ class PlcRuntime:
         """A variable's value by its path: ``"main.t1.ET"``, ``"main.counts[3]"``
         (case-insensitive).  PlcPathError (a KeyError) with the names there are when a part
         is unknown."""
-        parent, key, _ = self._place(path, members=True)
-        obj = parent[key] if isinstance(key, int) else getattr(parent, key)
+        obj = self._get(*self._place(path, members=True)[:2])
         return list(obj) if isinstance(obj, list) else obj
 
     # -- forcing (issue 28, item 2; docs/decisions.md) -----------------------------------------
@@ -544,11 +543,15 @@ class PlcRuntime:
                 continue  # gone with an online change: kept, set again if it comes back
             if t != types.get(name):
                 continue  # retyped by one: the value is not its type's; likewise kept
-            current = parent[key] if isinstance(key, int) else getattr(parent, key)
+            current = self._get(parent, key)
             if current != stored or type(current) is not type(stored):
                 if after and self.on_overridden is not None:
                     self.on_overridden(path, current)
                 self._assign(parent, key, stored)
+
+    @staticmethod
+    def _get(parent: Any, key: str | int) -> Any:
+        return parent[key] if isinstance(key, int) else getattr(parent, key)
 
     @staticmethod
     def _assign(parent: Any, key: str | int, value: Any) -> None:
