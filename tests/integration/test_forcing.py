@@ -25,12 +25,18 @@ END_PROGRAM
 """
 
 
-async def test_a_forced_bit_holds_against_plc_logic_and_a_modbus_writer(tmp_path: Path) -> None:
-    (tmp_path / "logic.st").write_text(LOGIC)
+def cell(tmp_path: Path, logic: str | None = None, more: str = "") -> None:
+    """A cell whose main waits on SA21 (so it stays up), with ``logic`` as its PLC logic."""
     (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
+    plc = '[plc]\nlogic = "logic.st"\n' if logic is not None else ""
+    if logic is not None:
+        (tmp_path / "logic.st").write_text(logic)
     (tmp_path / "ncgate.toml").write_text(
-        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
-        '[canopen]\nenabled = false\n')
+        f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n{plc}[canopen]\nenabled = false\n{more}')
+
+
+async def test_a_forced_bit_holds_against_plc_logic_and_a_modbus_writer(tmp_path: Path) -> None:
+    cell(tmp_path, LOGIC)
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
@@ -73,11 +79,7 @@ FORCE, FORCE_SA_BIT, FORCE_SYVAR = 2100, 1, 6
 
 
 async def test_a_modbus_client_forces_through_the_force_table(tmp_path: Path) -> None:
-    (tmp_path / "logic.st").write_text(LOGIC)
-    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
-    (tmp_path / "ncgate.toml").write_text(
-        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
-        '[canopen]\nenabled = false\n')
+    cell(tmp_path, LOGIC)
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
@@ -155,9 +157,7 @@ async def test_the_run_log_says_what_was_forced_and_released(tmp_path: Path) -> 
     from ncgate.gateway.cli.serve import describe
     from ncgate.interpreter.engine import events as ev
 
-    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
-    (tmp_path / "ncgate.toml").write_text(
-        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[canopen]\nenabled = false\n')
+    cell(tmp_path)
     heard: list[ev.Event] = []
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"),
                        listeners=[heard.append]) as gw:
@@ -186,11 +186,7 @@ async def test_a_forced_plc_variable_is_kept_at_the_start_and_end_of_every_scan(
         tmp_path: Path) -> None:
     """As CODESYS forces (docs/decisions.md): the forced value is set before the logic runs
     and again after it, so the logic sees it each scan and what it leaves is overridden."""
-    (tmp_path / "logic.st").write_text(PLC_LOGIC)
-    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
-    (tmp_path / "ncgate.toml").write_text(
-        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
-        '[canopen]\nenabled = false\n')
+    cell(tmp_path, PLC_LOGIC)
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
@@ -243,11 +239,7 @@ async def test_a_forced_plc_variable_is_kept_at_the_start_and_end_of_every_scan(
 async def test_the_api_forces_a_plc_variable_and_lists_it(tmp_path: Path) -> None:
     import aiohttp
 
-    (tmp_path / "logic.st").write_text(PLC_LOGIC)
-    (tmp_path / "A.nc").write_text("N1(WAI,SA21=1)\nN2M30\n")
-    (tmp_path / "ncgate.toml").write_text(
-        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = "logic.st"\n'
-        '[canopen]\nenabled = false\n[web]\nport = 0\n')
+    cell(tmp_path, PLC_LOGIC, "[web]\nport = 0\n")
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), console=True) as gw:
         host, port = gw.web_address
         async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
