@@ -236,21 +236,23 @@ class Master(threading.Thread):
             self.bus._is_shutdown = True  # (python-can's flag: no second try at exit)
 
 
+async def input_registers(port: int, address: int, count: int) -> tuple[int, ...]:
+    """``count`` input registers from ``address``, on a connection of their own (FC4)."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    body = await ask(reader, writer, struct.pack(">BHH", 4, address, count))
+    writer.close()
+    return struct.unpack(f">{count}H", body[2:2 + 2 * count])
+
+
 async def plc_status(port: int) -> tuple[int, int, int]:
     """(scans, overruns, max lateness µs) from the PLC status registers (input 300..)."""
-    reader, writer = await asyncio.open_connection("127.0.0.1", port)
-    body = await ask(reader, writer, struct.pack(">BHH", 4, 300, 14))
-    writer.close()
-    regs = struct.unpack(">14H", body[2:30])
+    regs = await input_registers(port, 300, 14)
     return (regs[1] << 16 | regs[2], regs[7] << 16 | regs[8], regs[12] << 16 | regs[13])
 
 
 async def snd_count(port: int) -> int:
     """The SND log's newest sequence number (input 200..201): the SNDs so far."""
-    reader, writer = await asyncio.open_connection("127.0.0.1", port)
-    body = await ask(reader, writer, struct.pack(">BHH", 4, 200, 2))
-    writer.close()
-    high, low = struct.unpack(">2H", body[2:6])
+    high, low = await input_registers(port, 200, 2)
     return high << 16 | low
 
 
