@@ -15,6 +15,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import urllib.request
 from collections.abc import Iterator
@@ -44,10 +45,14 @@ WAIT_S = 20
 class RunProcess:
     """``ncgate run`` in a subprocess; its output read all along (a full pipe would stall it)."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, cwd: Path | None = None) -> None:
+        # A record started from the page goes to the folder run was started in: never
+        # the checkout's (``cwd``, or a fresh temporary folder).
+        self.own_folder = cwd is None
+        self.folder = cwd or Path(tempfile.mkdtemp(prefix="ncgate-run-"))
         self.proc = subprocess.Popen([sys.executable, "-m", "ncgate", "run", *args],
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True)
+                                     text=True, cwd=self.folder)
         self.lines: list[str] = []
         self.changed = threading.Condition()
         self.reader = threading.Thread(target=self._read, daemon=True)
@@ -78,6 +83,8 @@ class RunProcess:
         self.proc.send_signal(signal.SIGTERM)
         assert self.proc.wait(timeout=WAIT_S) == 0, "".join(self.lines)
         self.reader.join(WAIT_S)
+        if self.own_folder:
+            shutil.rmtree(self.folder, ignore_errors=True)
 
 
 def free_port() -> int:
@@ -454,7 +461,8 @@ def named_cell(tmp_path: Path, web_port: int, channel: str) -> RunProcess:
         f'[plc]\nlogic = "logic.st"\nretain_file = "{tmp_path / "r.sqlite"}"\n'
         + CELL_SYMBOLS)
     run = RunProcess("--config", str(tmp_path / "ncgate.toml"), "--port", "0", "--web",
-                     f"127.0.0.1:{web_port}", "--set", f"canopen.channel={channel}")
+                     f"127.0.0.1:{web_port}", "--set", f"canopen.channel={channel}",
+                     cwd=tmp_path)
     run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
     return run
 
@@ -621,7 +629,8 @@ def test_record_from_the_page_and_the_downloads(browser: Any, web_port: int,
         code, disposition, body = browser.execute_async_script(
             fetch, browser.find_element(By.ID, "dl-record").get_attribute("href"))
         assert code == 200 and disposition.startswith("attachment")
-        lines = [json.loads(line) for line in body.splitlines()]
+        record = body
+        lines = [json.loads(line) for line in record.splitlines()]
         assert lines[0]["ncgate_record"] == 2 and list(lines[-1]) == ["stop"]
         assert [(i["input"], i["changes"]) for i in lines if "input" in i] == [
             ("write", [["SYVAR", 5, "IN", 7]])]
@@ -629,6 +638,8 @@ def test_record_from_the_page_and_the_downloads(browser: Any, web_port: int,
             fetch, browser.find_element(By.ID, "dl-trace").get_attribute("href"))
         assert code == 200 and disposition.startswith("attachment")
         assert any(json.loads(line).get("var") == "SYVAR5" for line in body.splitlines())
+        # The file itself is in the folder run was started in.
+        assert [p.read_text() for p in tmp_path.glob("ncgate-record-*.jsonl")] == [record]
     finally:
         run.stop()
 
