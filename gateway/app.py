@@ -191,6 +191,7 @@ class Gateway:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
 
     def _stop_loading(self) -> None:
+        self.runtime.store.cancel()  # a child checking a big program is killed
         for task in list(self._loading):
             task.cancel()  # its reading thread is a daemon: it ends with the process
         for waiting in list(self._load_waits):
@@ -449,7 +450,7 @@ class Gateway:
             work()
             with contextlib.suppress(RuntimeError):  # the loop is gone: nobody waits
                 done.get_loop().call_soon_threadsafe(finish)
-            if then is not None:
+            if then is not None and not done.cancelled():  # (a close cancels what follows)
                 then()
 
         threading.Thread(target=run, name=name, daemon=True).start()

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ncgate.config import Config
+from ncgate.interpreter.child import ChildCancelled
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
 from ncgate.interpreter.dialect import DialectOptions, ExternalBinding, Version
 from ncgate.interpreter.dialects import dialect_of, parse_condition
@@ -102,9 +103,15 @@ class ProgramStore:
             result = self._reader.load(path, version, process)
         except (ProgramError, ProgramNotFoundError) as exc:
             result = exc
+        except ChildCancelled as exc:
+            return exc  # the gateway closes: kept for nobody, the file read anew next time
         with self._lock:
             self._cache[(path, process)] = (version, result)
         return result
+
+    def cancel(self) -> None:
+        """Stop the reads under way (the gateway closes; see ProgramReader.cancel)."""
+        self._reader.cancel()
 
     def ready(self, name: str, process: int) -> bool:
         """Read already, as the file is now (then :meth:`load` costs a stat): a start of it

@@ -81,6 +81,10 @@ class ProgramReader(Protocol):
         each section in its channel, spec 5.1); () when it names none -- it then runs in
         process 1."""
 
+    def cancel(self) -> None:
+        """Stop the reads under way (the gateway closes): a :meth:`load` waiting for one
+        raises ``ChildCancelled`` (interpreter/child.py); later loads read anew."""
+
 
 class DialectPlugin(Protocol):
     """Everything a dialect brings: its name, what it needs of the engine, its front end,

@@ -67,6 +67,9 @@ class _Reader:
         _, source, _ = self._entry(path, file_version(path))
         return tuple(section.channel for section in source.sections)
 
+    def cancel(self) -> None:
+        pass  # read in the caller's thread: nothing runs apart to stop
+
 
 class IsgDialect:
     name = Dialect.ISG

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import contextlib
 from collections import defaultdict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 
+from ncgate.interpreter.child import ChildFailed, ChildJobs
 from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
 from ncgate.interpreter.dialect import (
     DialectOptions,
@@ -55,22 +56,70 @@ def process_assignments(programs: Iterable[Program], main: str) -> dict[str, set
     return runs
 
 
+# A file this big is checked in a child process (interpreter/child.py): parsing it in a
+# thread would share the interpreter lock, and its blocks the garbage collector, with the loop.
+# Below it the child's start (~0.2 s) costs more than the thread's check does.
+CHILD_BYTES = 512 * 1024
+_ERRORS_PER_FRAME = 500
+
+
+def _errors(program: Program, options: DialectOptions, storage: Storage,
+            process: int) -> list[Diagnostic]:
+    diagnostics = check_program(program, check_context(options, storage, {process}))
+    return [d for d in diagnostics if d.is_error]
+
+
+def check_in_child(data: bytes, name: str, display: str, options: DialectOptions,
+                   storage: Storage, process: int) -> Iterator[object]:
+    """The child's side of :meth:`_Reader.load`: the program's EXE scan, then its errors a
+    few hundred a frame (an answer the parent unpickles in short calls)."""
+    try:
+        program = Program.from_data(data, name, display)
+        errors = _errors(program, options, storage, process)
+    except ProgramSyntaxError as exc:  # not UTF-8
+        program, errors = None, list(exc.diagnostics)
+    if program is not None:
+        exe_scan(program)
+    yield None if program is None else program.exe_scan
+    for first in range(0, len(errors), _ERRORS_PER_FRAME):
+        yield errors[first:first + _ERRORS_PER_FRAME]
+
+
 class _Reader:
     def __init__(self, options: DialectOptions, storage: Storage) -> None:
         self.options = options
         self.storage = storage
+        self.jobs = ChildJobs()
 
     def load(self, path: Path, version: Version, process: int) -> Program:
-        program = Program.from_path(path, display=path.name)
+        data = path.read_bytes()
+        name = program_name(path)
         # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
+        if not self.options.lazy_parse and len(data) >= CHILD_BYTES:
+            try:
+                scan, *frames = self.jobs.run(
+                    f"{__name__}:check_in_child",
+                    (name, path.name, self.options, self.storage, process), data)
+            except ChildFailed:
+                pass  # checked here instead, below
+            else:
+                errors = [d for frame in frames for d in frame]
+                if errors:
+                    raise ProgramSyntaxError(errors)
+                # Checked: its blocks are parsed when they run, on the loop (a few µs each).
+                program = Program.from_data(data, name, path.name)
+                program.exe_scan = scan
+                return program
+        program = Program.from_data(data, name, path.name)
         if not self.options.lazy_parse:
-            diagnostics = check_program(
-                program, check_context(self.options, self.storage, {process}))
-            errors = [d for d in diagnostics if d.is_error]
+            errors = _errors(program, self.options, self.storage, process)
             if errors:
                 raise ProgramSyntaxError(errors)
         exe_scan(program)  # here, not when it starts (a 10 MB text takes a while)
         return program
+
+    def cancel(self) -> None:
+        self.jobs.cancel()
 
     def channels(self, name: str) -> tuple[int, ...]:
         return ()  # a file is one program: it runs where it is started

@@ -703,13 +703,17 @@ class Program:
         """Read a program file (UTF-8, with or without a byte-order mark).  A file that is not
         UTF-8 is a diagnostic at its first bad byte (NC015), with the file's name."""
         p = Path(path)
-        shown = display if display is not None else str(path)
-        data = p.read_bytes()
+        return cls.from_data(p.read_bytes(), program_name(p),
+                             display if display is not None else str(path))
+
+    @classmethod
+    def from_data(cls, data: bytes, name: str, display: str) -> Program:
+        """A program file's bytes, as :meth:`from_path` reads them."""
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise ProgramSyntaxError([not_utf8(data, exc, shown)]) from None
-        return cls(program_name(p), shown, text)
+            raise ProgramSyntaxError([not_utf8(data, exc, display)]) from None
+        return cls(name, display, text)
 
     def __len__(self) -> int:
         return len(self.lines)

@@ -219,6 +219,48 @@ async def test_a_big_program_is_read_off_the_loop(tmp_path: Path) -> None:
         assert start["prog"] == "BIG" and start["by"].startswith("modbus 127.0.0.1:")
 
 
+async def test_a_close_while_a_big_program_is_checked_kills_its_child(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A program of 512 KB and more is checked in a child process (interpreter/child.py):
+    a gateway closed while it works kills the child, and the reading thread ends quietly
+    (nothing is kept of the cancelled read: the next start reads the file anew)."""
+    import signal
+    import subprocess
+    import threading
+
+    from ncgate.interpreter import child as child_module
+
+    lines = [f"N{n % 9999}G1X{n % 500}Y{(n * 7) % 500}F60000\n" for n in range(400_000)]
+    (tmp_path / "BIG.nc").write_text("".join(lines) + "M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "BIG"\n')
+    children: list[subprocess.Popen[bytes]] = []
+    spawned = threading.Event()
+    real_popen = subprocess.Popen
+
+    def popen(*args: object, **kwargs: object) -> subprocess.Popen[bytes]:
+        child: subprocess.Popen[bytes] = real_popen(*args, **kwargs)  # type: ignore[call-overload]
+        if child_module.__name__ in child.args:  # type: ignore[operator]
+            children.append(child)
+            spawned.set()
+        return child
+
+    monkeypatch.setattr(child_module.subprocess, "Popen", popen)
+    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
+        gw.command(1)  # cycle start: BIG is read in a thread, checked in a child
+        assert await asyncio.to_thread(spawned.wait, 30)
+        store = gw.runtime.store
+    # Closed: the child was killed, not left to check 8 MB for nobody.
+    (child,) = children
+    assert child.wait(timeout=10) == -signal.SIGKILL
+    readers = [t for t in threading.enumerate() if t.name == "ncgate load BIG"]
+    for reader in readers:
+        await asyncio.to_thread(reader.join, 30)
+    assert not any(t.is_alive() for t in readers)
+    assert not store.ready("BIG", 1)  # the cancelled read was not kept
+    assert [r.getMessage() for r in caplog.records if r.levelno >= 30] == []
+
+
 async def test_a_thread_keeps_the_loop_waiting_at_most_half_a_millisecond(
         tmp_path: Path) -> None:
     """While a gateway runs, the GIL changes hands every 0.5 ms, not Python's 5 ms: the
