@@ -41,6 +41,7 @@ from ncgate.plc.st.types import (
     ANY_INT,
     ANY_REAL,
     BITS,
+    CHARS,
     DATE_NAMES,
     DATES,
     DURATIONS,
@@ -93,8 +94,7 @@ STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL"
                  "UPPER_BOUND", *MATH_FUNCTIONS,
                  *STRING_FUNCTIONS)
 # IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
-UNSUPPORTED_TYPES = ("CHAR", "WCHAR", "LDATE", "LTOD", "LDT", "LDATE_AND_TIME",
-                     "LTIME_OF_DAY")
+UNSUPPORTED_TYPES = ("LDATE", "LTOD", "LDT", "LDATE_AND_TIME", "LTIME_OF_DAY")
 UNSUPPORTED_FUNCTIONS: tuple[str, ...] = ()
 # logi.CAD's functions for an ARRAY[..]'s bounds, and IEC's (plc.strict = false reads them).
 _LOGICAD_BOUNDS = {"_FIRSTINDEXOF": "LOWER_BOUND", "_LASTINDEXOF": "UPPER_BOUND"}
@@ -346,6 +346,28 @@ def _find(a: str, b: str) -> int:
     return a.find(b) + 1 if b else 0
 
 
+def _char_at(s: str, i: int) -> str:
+    """``s[i]``: the i-th character, counted from 1 (a CHAR or WCHAR)."""
+    if 1 <= i <= len(s):
+        return s[i - 1]
+    raise IndexError(f"character {i} of a string of {len(s)} (1..{len(s)})")
+
+
+def _set_char(s: str, i: int, c: str, length: int) -> str:
+    """``s[i] := c``: the string with its i-th character replaced; at LEN(s) + 1 (within the
+    declared length) the character is added (docs/decisions.md)."""
+    if 1 <= i <= len(s):
+        return f"{s[:i - 1]}{c}{s[i:]}"
+    if i == len(s) + 1 <= length:
+        return s + c
+    raise IndexError(f"character {i} of a string of {len(s)} (1..{min(len(s) + 1, length)})")
+
+
+def _code_char(code: int, t: str) -> str:
+    """The CHAR (WCHAR) of a code, cut to 8 (16) bits as a BYTE (WORD) is."""
+    return chr(code & (255 if t == "CHAR" else 65535))
+
+
 def _ranged(value: int, lo: int, hi: int) -> int:
     """A value stored in a subrange variable: outside its limits it is an error
     (IEC 61131-3, 6.4.4.4)."""
@@ -413,12 +435,17 @@ HELPERS: dict[str, Any] = {
     "_left": _left, "_right": _right, "_midstr": _midstr, "_insert": _insert,
     "_delete": _delete, "_replace": _replace, "_find": _find, "_ranged": _ranged,
     "_struct": _struct, "_fill": _fill, "_time_real": _time_real, "_tostr": _tostr,
-    "_strto": _strto,
+    "_strto": _strto, "_char_at": _char_at, "_set_char": _set_char,
+    "_code_char": _code_char,
     **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
 }
 _BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD", 64: "LWORD"}
 VOID = "VOID"  # the type of a call of a FUNCTION without a result: a statement only
 _TIMED = (*DURATIONS, *DATES)
+_ORDERED = (*_TIMED, *CHARS)  # besides numbers, strings and enumerations: MIN, MAX, LIMIT
+# CODESYS and logi.CAD have no CHAR: a string's character is a BYTE there (a WSTRING's a WORD).
+_AS_CODE = {"CHAR": "CODESYS and logi.CAD read a STRING's character as a BYTE",
+            "WCHAR": "CODESYS reads a WSTRING's character as a WORD"}
 # Integers a REAL holds exactly (24-bit mantissa): their conversion needs no rounding.
 _EXACT_IN_REAL = ("SINT", "INT", "USINT", "UINT", "BYTE", "WORD")
 
@@ -466,7 +493,7 @@ def wrap_code(code: str, t: Type) -> str:
 
 
 def const_code(value: Any, t: Type) -> str:
-    if isinstance(t, StringOf):
+    if isinstance(t, StringOf) or t in CHARS:
         return repr(str(value))
     if t == "REAL":
         return repr(_f32(value))
@@ -1071,6 +1098,8 @@ class Compiler:
             return bool(e.const)
         if isinstance(t, StringOf):
             return str(e.const)[:t.length]
+        if t in CHARS:
+            return e.const if isinstance(e.const, str) else _code_char(e.const, t)
         if isinstance(t, EnumOf):
             return int(e.const)
         if isinstance(t, Ranged):
@@ -1667,6 +1696,8 @@ class Compiler:
     def coerce(self, e: E, t: Type, span: n.Span) -> str:
         """The code storing ``e`` in a place of type ``t`` (wrapped, truncated, copied,
         checked against a subrange), or a diagnostic."""
+        if t in CHARS or e.type in CHARS:
+            return self._coerce_char(e, t, span)
         if isinstance(t, StringOf) and isinstance(e.type, StringOf) and t.wide == e.type.wide:
             # IEC 61131-3, 6.4.2: a longer value is truncated to the variable's length.
             if e.const is not None:
@@ -1697,6 +1728,41 @@ class Compiler:
                 return code
             return f"_ranged({code}, {t.lo}, {t.hi})"
         return code
+
+    def _coerce_char(self, e: E, t: Type, span: n.Span) -> str:
+        """A CHAR or WCHAR stored or taken: a character of its kind, or a STRING literal of
+        one character (6.3.3: 'A' is a CHAR where one is due); a CHAR goes into a STRING
+        (6.4.2, Figure 11).  CODESYS and logi.CAD read a string's character as a BYTE
+        (WORD): with plc.strict = false a character and an integer mix, with a warning."""
+        if e.type == t:
+            return e.code
+        one = _one_char(e, t)
+        if one is not None:
+            return one.code
+        if isinstance(t, StringOf) and widens(e.type, t):
+            return e.code
+        char = str(t if t in CHARS else e.type)
+        code_type = "BYTE" if char == "CHAR" else "WORD"
+        if t in CHARS and is_int(e.type):
+            self.lenient(StCode.TYPE_MISMATCH, StCode.VENDOR_EXTENSION, f"{_tname(e.type)} "
+                         f"where {t} is expected: {_AS_CODE[char]} (IEC: {code_type}_TO_{t})",
+                         span)
+            if e.const is not None:
+                return repr(_code_char(e.const, str(t)))
+            return f"_code_char({e.code}, {t!r})"
+        if e.type in CHARS and isinstance(t, str) and t in INTS:
+            self.lenient(StCode.TYPE_MISMATCH, StCode.VENDOR_EXTENSION, f"{e.type} where {t} "
+                         f"is expected: {_AS_CODE[char]} (IEC: {e.type}_TO_{code_type})", span)
+            code = f"ord({e.code})"
+            return code if limits(t)[1] >= (255 if e.type == "CHAR" else 65535) else \
+                wrap_code(code, t)
+        hint = ""
+        if t == "CHAR" and isinstance(e.type, StringOf):
+            hint = " (one character: s[i], or STRING_TO_CHAR)"
+        elif isinstance(t, StringOf) and e.type in CHARS:
+            hint = f" (convert it: {e.type}_TO_{'WSTRING' if t.wide else 'STRING'})"
+        raise self.error(StCode.TYPE_MISMATCH, f"{_tname(e.type)} where {t} is expected"
+                         + hint, span)
 
     def _coerce(self, e: E, t: Type, span: n.Span) -> str:
         if isinstance(t, AnyLength) or isinstance(e.type, AnyLength):
@@ -1872,6 +1938,8 @@ class Compiler:
 
     def literal(self, x: n.Literal) -> E:
         t = x.type
+        if isinstance(x.value, str) and t in CHARS:
+            return E(repr(x.value), t, x.value)
         if isinstance(x.value, str):
             return E(repr(x.value), StringOf(max(len(x.value), 1), t == "WSTRING"), x.value)
         if t is None:
@@ -1950,6 +2018,7 @@ class Compiler:
                 return E(repr(value), t, value)
             return E(f"({a.code} {py} {b.code})", t)
         if op in ("=", "<>", "<", ">", "<=", ">="):
+            a, b = self._char_operands(x, a, b)
             same = (a.type == b.type and isinstance(a.type, str | EnumOf)) or (
                 isinstance(a.type, StringOf) and isinstance(b.type, StringOf)
                 and a.type.wide == b.type.wide)
@@ -2015,6 +2084,24 @@ class Compiler:
         else:
             code = f"({ac} {op} {bc})"
         return E(real_code(code, t), t, None, real)
+
+    def _char_operands(self, x: n.Binary, a: E, b: E) -> tuple[E, E]:
+        """A character compared with a one-character literal (``c = 'A'``) or, with
+        plc.strict = false, with an integer (``s[i] >= 53``: compared as its code)."""
+        if (a.type in CHARS) == (b.type in CHARS):
+            return a, b
+        char, other = (a, b) if a.type in CHARS else (b, a)
+        one = _one_char(other, char.type)
+        if one is not None:
+            return (char, one) if char is a else (one, char)
+        if not is_int(other.type):
+            return a, b
+        code_type = "BYTE" if char.type == "CHAR" else "WORD"
+        self.lenient(StCode.TYPE_MISMATCH, StCode.VENDOR_EXTENSION, f"{x.op} of "
+                     f"{_tname(a.type)} and {_tname(b.type)}: {_AS_CODE[str(char.type)]} "
+                     f"(IEC: {char.type}_TO_{code_type})", x.span)
+        code = E(f"ord({char.code})", code_type)
+        return (code, other) if char is a else (other, code)
 
     def _time_arith(self, x: n.Binary, a: E, b: E) -> E:
         """Durations, times of day and dates (IEC 61131-3, 6.6.2.5.7, Table 30)."""
@@ -2151,6 +2238,9 @@ class Compiler:
         return [self.expr(a.expr, scope) for a in x.args if a.expr is not None]
 
     def _same(self, x: n.Call, values: Sequence[E]) -> Type:
+        char = next((v.type for v in values if v.type in CHARS), None)
+        if char is not None:  # MAX(c, 'A'): the literal is a character there
+            values = [_one_char(v, char) or v for v in values]
         t: Type | None = values[0].type
         for v in values[1:]:
             t = common(t, v.type) if t is not None else None
@@ -2202,14 +2292,14 @@ class Compiler:
         if key in ("MIN", "MAX"):
             values = self._args(x, scope, None, 2)
             t = self._same(x, values)
-            if not is_num(t) and t not in _TIMED and not isinstance(t, StringOf | EnumOf):
+            if not is_num(t) and t not in _ORDERED and not isinstance(t, StringOf | EnumOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"{key} of {t}", x.span)
             codes = ", ".join(self._as(v, t, x) for v in values)
             return E(f"{key.lower()}({codes})", t, None, _exact(values))
         if key == "LIMIT":
             values = self._args(x, scope, 3)
             t = self._same(x, values)
-            if not is_num(t) and t not in _TIMED and not isinstance(t, StringOf | EnumOf):
+            if not is_num(t) and t not in _ORDERED and not isinstance(t, StringOf | EnumOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"LIMIT of {t}", x.span)
             mn, v, mx = (self._as(e, t, x) for e in values)
             return E(f"min(max({v}, {mn}), {mx})", t, None, _exact(values))
@@ -2316,6 +2406,9 @@ class Compiler:
         for name, arg in zip(names, args, strict=True):
             assert arg.expr is not None
             e = self.expr(arg.expr, scope)
+            if e.type in CHARS and (key == "CONCAT" or (
+                    name == "IN2" and key in ("INSERT", "REPLACE", "FIND"))):
+                e = E(e.code, StringOf(1, e.type == "WCHAR"), e.const)  # ANY_CHARS there
             if name.startswith("IN") and not isinstance(e.type, StringOf):
                 raise self.error(StCode.TYPE_MISMATCH, f"{x.name}'s {name} is a STRING or "
                                  f"WSTRING, not {_tname(e.type)}", arg.span)
@@ -2371,6 +2464,10 @@ class Compiler:
                 ) -> E:
         (a,) = self._args(x, scope, 1) if given is None else (given,)
         texts = ("STRING", "WSTRING")
+        if src in CHARS or dst in CHARS:
+            return self._convert_char(x, src, dst, a)
+        if a.type in CHARS and src in INTS:  # BYTE_TO_INT(s[i]), plc.strict = false
+            a = E(self._coerce_char(a, src, x.span), src)
         if src in texts:
             if not (isinstance(a.type, StringOf) and a.type.wide == (src == "WSTRING")):
                 raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
@@ -2419,6 +2516,43 @@ class Compiler:
         if src == "BOOL":
             return E(f"int({code})", dst)
         return E(code, dst, None, False)
+
+    def _convert_char(self, x: n.Call, src: str, dst: str, a: E) -> E:
+        """CHAR and WCHAR (IEC 61131-3 3rd ed., 6.6.2.5): to and from a bit string (the
+        character's code, cut or zero-extended as bit strings are), to their STRING and
+        back (its first character; '$00' of an empty one), and to each other (a WCHAR
+        beyond Latin-1 becomes '?', as WSTRING_TO_STRING does)."""
+        wide = {"STRING": False, "WSTRING": True}
+        if src in CHARS:
+            a = _one_char(a, src) or a
+            if a.type != src:
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
+                                 f"{_tname(a.type)}", x.span)
+        elif src in wide:
+            if not (isinstance(a.type, StringOf) and a.type.wide == wide[src]):
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
+                                 f"{_tname(a.type)}", x.span)
+        elif not (a.type == src or widens(a.type, src)):
+            raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a {src}, not "
+                             f"{_tname(a.type)}", x.span)
+        if src in CHARS and dst in BITS:
+            code = f"ord({a.code})"
+            fits = limits(dst)[1] >= (255 if src == "CHAR" else 65535)
+            return E(code if fits else wrap_code(code, dst), dst)
+        if src in BITS and dst in CHARS:
+            return E(f"_code_char({a.code}, {dst!r})", dst)
+        if (src, dst) in (("CHAR", "STRING"), ("WCHAR", "WSTRING")):
+            return E(a.code, StringOf(1, dst == "WSTRING"), a.const)
+        if (src, dst) in (("STRING", "CHAR"), ("WSTRING", "WCHAR")):
+            return E(f"({a.code}[:1] or '\\0')", dst)
+        if (src, dst) == ("CHAR", "WCHAR"):
+            return E(a.code, dst, a.const)
+        if (src, dst) == ("WCHAR", "CHAR"):
+            return E(f"{a.code}.encode('latin-1', 'replace').decode('latin-1')", dst)
+        raise self.error(StCode.UNSUPPORTED, f"{x.name}: not a conversion of IEC 61131-3's "
+                         "(a CHAR converts to a bit string, its STRING and a WCHAR: "
+                         "CHAR_TO_BYTE; docs/plc.md)", x.span)
+
 
 class Scope:
     """The names a POU body sees, and how to reach them."""
@@ -2497,6 +2631,8 @@ class Scope:
                                   f"{_tname(i.type)}", sel.span)
                 code = f"{code}[_ix({i.code}, {code}__LO, len({code}))]"
                 t = t.element
+            elif isinstance(sel, n.Index) and isinstance(t, StringOf):
+                return self._character(var, sel, code, t, why, write)
             elif isinstance(sel, n.Index):
                 if not isinstance(t, ArrayOf):
                     raise c.error(StCode.TYPE_MISMATCH, f"{var.name} is {t}, not an array",
@@ -2565,6 +2701,30 @@ class Scope:
                           f"{_show(var)}", var.span)
         final = code
         return Place(final, t, (lambda value: f"{final} = {value}") if not why else None, why)
+
+    def _character(self, var: n.Var, sel: n.Index, code: str, t: StringOf, why: str,
+                   write: bool) -> Place:
+        """``s[i]``: one character of a STRING (a CHAR) or a WSTRING (a WCHAR), the first
+        at 1 (IEC 61131-3, 3rd ed.).  An index outside the string faults, as outside an
+        array; ``s[LEN(s) + 1] := c`` adds the character (docs/decisions.md)."""
+        c = self.c
+        after = var.selectors[var.selectors.index(sel) + 1:]
+        if after:
+            raise c.error(StCode.TYPE_MISMATCH, f"{_show(var)}: a character has no members, "
+                          "bits or indices", after[0].span)
+        i = c.expr(sel.expr, self)
+        if not is_int(i.type):
+            raise c.error(StCode.TYPE_MISMATCH, f"an index is an integer, not "
+                          f"{_tname(i.type)}", sel.span)
+        if i.const is not None and not 1 <= i.const <= t.length:
+            raise c.error(StCode.INDEX_RANGE, f"character {i.const} of a {t} "
+                          f"(1..{t.length})", sel.span)
+        if write and why:
+            raise c.error(StCode.READ_ONLY, f"cannot write {_show(var)}: {why}", var.span)
+        index, length = i.code, t.length
+        return Place(f"_char_at({code}, {index})", "WCHAR" if t.wide else "CHAR",
+                     (lambda v: f"{code} = _set_char({code}, {index}, {v}, {length})")
+                     if not why else None, why)
 
     def _symbol(self, var: n.Var, v: VarInfo) -> Place:
         """An I/O name of [symbols]: its image variable, read and written as SA[i], SAB[i],
@@ -2712,6 +2872,15 @@ def _fold(op: str, a: Any, b: Any, real: bool) -> Any:
     if op == "/":
         return a / b if real else _idiv(a, b)
     return _mod(a, b)
+
+
+def _one_char(e: E, t: Type) -> E | None:
+    """A STRING (WSTRING) literal of one character where a CHAR (WCHAR) is due: that
+    character (6.3.3: 'A' is a character literal too)."""
+    if t in CHARS and isinstance(e.type, StringOf) and e.type.wide == (t == "WCHAR") and \
+            isinstance(e.const, str) and len(e.const) == 1:
+        return E(repr(e.const), t, e.const)
+    return None
 
 
 def _exact(values: Sequence[E]) -> bool:
@@ -2968,6 +3137,9 @@ def _fits_scalar(value: Any, t: Type) -> bool:
         return isinstance(value, bool)
     if isinstance(t, StringOf):
         return isinstance(value, str) and len(value) <= t.length
+    if t in CHARS:
+        return isinstance(value, str) and len(value) == 1 and ord(value) <= (
+            255 if t == "CHAR" else 65535)
     if t in REALS:
         return isinstance(value, float | int) and not isinstance(value, bool) and \
             math.isfinite(value)

@@ -593,16 +593,21 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         token = children[0]
         text = str(token)
         wide = token.type == "WSTRING_LIT"
-        if token.type == "TYPED_STRING":  # STRING#'…' / WSTRING#"…": the type names it
+        kind = "STRING"
+        if token.type == "TYPED_STRING":  # STRING#'…', WCHAR#"…": the type names it
             prefix, _, text = text.partition("#")
-            wide = prefix.upper() == "WSTRING"
+            wide = prefix.upper().startswith("W")
+            kind = prefix.upper().lstrip("W")
         try:
             value = parse_string(text)
             if not wide and any(ord(c) > 255 for c in value):
                 raise ValueError("a STRING holds one byte a character (Latin-1)")
+            if kind == "CHAR" and len(value) != 1:
+                raise ValueError(f"a {prefix.upper()} literal is one character, not "
+                                 f"{len(value)}")
         except ValueError as exc:
             raise BadLiteral(token, str(exc)) from None
-        return n.Literal(value, "WSTRING" if wide else "STRING", _span(self.file, token))
+        return n.Literal(value, ("W" if wide else "") + kind, _span(self.file, token))
 
     def enum_lit(self, meta: Any, children: list[Token]) -> n.EnumLit:
         type_name, _, name = str(children[0]).partition("#")

@@ -21,7 +21,10 @@ REALS = ("REAL", "LREAL")
 INTS = (*SIGNED, *UNSIGNED, *BITS)
 DURATIONS = ("TIME", "LTIME")  # TIME: 32-bit ms; LTIME: 64-bit ns
 DATES = ("DATE", "TOD", "DT")  # DATE, DT: 32-bit s since 1970; TOD: ms since midnight
-ELEMENTARY = ("BOOL", *INTS, *REALS, *DURATIONS, *DATES)
+# One character (3rd ed., Table 10: 17a, 17b), a Python str of length 1: CHAR of a STRING
+# (Latin-1), WCHAR of a WSTRING.
+CHARS = ("CHAR", "WCHAR")
+ELEMENTARY = ("BOOL", *INTS, *REALS, *DURATIONS, *DATES, *CHARS)
 # The long names of the date types (6.4.2, Table 10) and what ncgate calls them.
 DATE_NAMES = {"TIME_OF_DAY": "TOD", "DATE_AND_TIME": "DT"}
 ANY_INT, ANY_REAL = "ANY_INT", "ANY_REAL"
@@ -132,6 +135,8 @@ def widens(src: Type, dst: Type) -> bool:
     """May a value of ``src`` be stored in ``dst`` without a conversion function?"""
     if src == dst:
         return True
+    if isinstance(dst, StringOf) and src in CHARS:  # 6.4.2, Figure 11: CHAR -> STRING
+        return (src == "WCHAR") == dst.wide
     if isinstance(src, StringOf) and isinstance(dst, StringOf):
         return src.wide == dst.wide  # a longer value is truncated where it is stored
     if not isinstance(src, str) or not isinstance(dst, str):
@@ -171,9 +176,11 @@ def common(a: Type, b: Type) -> Type | None:
 
 def default_value(t: Type) -> object:
     """The initial value of a variable declared without one (IEC 6.4.2, Table 10: 0, FALSE,
-    0.0, T#0s, D#1970-01-01, '', a subrange's lower limit)."""
+    0.0, T#0s, D#1970-01-01, '', '$00', a subrange's lower limit)."""
     if t == "BOOL":
         return False
+    if t in CHARS:
+        return "\0"
     if t in REALS:
         return 0.0
     if isinstance(t, ArrayOf):

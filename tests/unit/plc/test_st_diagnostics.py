@@ -24,7 +24,16 @@ CASES = [
     # names
     ("ST010", "PROGRAM p VAR counter : INT; END_VAR\n¦countr := 1; END_PROGRAM"),
     ("ST011", "PROGRAM p VAR x : ¦INTEGER; END_VAR\nEND_PROGRAM"),
-    ("ST031", "PROGRAM p VAR x : ¦CHAR; END_VAR\nEND_PROGRAM"),
+    ("ST031", "PROGRAM p VAR x : ¦LDATE; END_VAR\nEND_PROGRAM"),
+    # characters (IEC 61131-3 3rd ed.): a typed CHAR literal is one character, a constant
+    # character index lies in the declared length, s[i] is a CHAR (no implicit BYTE)
+    ("ST005", "PROGRAM p VAR c : CHAR; END_VAR\nc := ¦CHAR#'AB'; END_PROGRAM"),
+    ("ST022", "PROGRAM p VAR s : STRING[4]; c : CHAR; END_VAR\nc := s[¦5]; END_PROGRAM"),
+    ("ST022", "PROGRAM p VAR s : STRING[4]; END_VAR\ns[¦0] := 'A'; END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR s : STRING; b : BYTE; END_VAR\nb := ¦s[1]; END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR s : STRING; END_VAR\ns[1] := ¦65; END_PROGRAM"),
+    ("ST020", "PROGRAM p VAR s : STRING; c : CHAR; END_VAR\nc := ¦s; END_PROGRAM"),
+    ("ST031", "PROGRAM p VAR c : CHAR; i : INT; END_VAR\ni := ¦CHAR_TO_INT(c); END_PROGRAM"),
     ("ST012", "PROGRAM p VAR x : INT; END_VAR\nx := ¦FOO(1); END_PROGRAM"),
     ("ST012", "PROGRAM p VAR x : BOOL; END_VAR\nx := ¦TON(IN := TRUE); END_PROGRAM"),
     ("ST013", "PROGRAM p VAR a : INT; ¦a : BOOL; END_VAR\nEND_PROGRAM"),

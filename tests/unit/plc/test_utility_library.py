@@ -9,14 +9,15 @@ with forward declarations and ``USES``, ``IMPLEMENTATION``): that wrapper is no 
 so :func:`unwrap` blanks those lines (the line numbers stay the file's) and nothing else.
 
 The library is loaded with ``plc.strict = false``, as a CODESYS or logi.CAD user would load
-it: it is written in logi.CAD's dialect, and strict IEC refuses four of its spellings that
+it: it is written in logi.CAD's dialect, and strict IEC refuses five of its spellings that
 have an IEC equivalent -- ``ARRAY[..]`` (IEC: ``ARRAY[*]``, 6.5.3), ``_firstIndexOf(a)`` /
 ``_lastIndexOf(a)`` (IEC: ``LOWER_BOUND(a, 1)`` / ``UPPER_BOUND(a, 1)``), ``FUNCTION F : VOID``
-(IEC: no type) -- and its own ``INT_TO_STRING``, ``STRING_TO_INT``, ... (names IEC reserves for
-its conversions; the library's compute the same).  That is honest only if nothing else is
-let through: ``test_lenient_loading_uses_only_the_logicad_spellings`` checks that every
-warning is one of those, so no implicit narrowing (SW001) or enumeration-as-integer (SW003)
-hides in a function that "loads".
+(IEC: no type), a STRING's character ``s[i]`` taken as a BYTE (IEC: a CHAR, converted
+with CHAR_TO_BYTE and BYTE_TO_CHAR) -- and its own ``INT_TO_STRING``, ``STRING_TO_INT``, ...
+(names IEC reserves for its conversions; the library's compute the same).  That is honest
+only if nothing else is let through: ``test_lenient_loading_uses_only_the_logicad_spellings``
+checks that every warning is one of those, so no implicit narrowing (SW001) or
+enumeration-as-integer (SW003) hides in a function that "loads".
 
 What does not load is listed in ``NOT_LOADED`` with its code and reason, and the test checks
 that exactly those functions fail, with those codes: a function ncgate comes to load fails
@@ -53,16 +54,12 @@ WRAPPER = re.compile(r"^\s*(UNIT\s+\w+\s*;|INTERFACE|END_INTERFACE|IMPLEMENTATIO
 FUNCTION = re.compile(r"^\s*FUNCTION\s+(\w+)\s*:")
 END_FUNCTION = re.compile(r"^\s*END_FUNCTION\b")
 
-STRING_INDEX = ("s[i]: one character of a STRING by its index, which ncgate's ST does not "
-                "have (logi.CAD reads it as a BYTE; IEC 61131-3's third edition has CHAR)")
 VENDOR = ("calls ANYTYPE_TO_LITTLEBYTEARRAY / LITTLEBYTEARRAY_TO_ANYTYPE, logi.CAD's own "
           "functions, not IEC 61131-3's")
+EXPD = "calls EXPD, logi.CAD's own power of ten, not IEC 61131-3's (EXPT(10.0, x))"
 NEEDS = "calls a function above that does not load"
 NOT_LOADED: dict[str, tuple[str, str]] = {
-    **{name: ("ST020", STRING_INDEX) for name in (
-        "BYTES_TO_STRING", "STRING_TO_BYTES", "ENCODE_STRING", "DECODE_STRING", "ROUND_LREAL",
-        "ROUND_REAL", "COMPARE_STRINGS")},
-    "SORT_STRING_ARRAY": ("ST012", NEEDS + " (COMPARE_STRINGS)"),
+    **{name: ("ST012", EXPD) for name in ("ROUND_LREAL", "ROUND_REAL")},
     **{name: ("ST012", VENDOR) for name in (
         "DATE_TO_UDINT_INTERNAL", "UDINT_TO_DATE_INTERNAL", "TIME_OF_DAY_TO_UDINT_INTERNAL",
         "UDINT_TO_TIME_OF_DAY_INTERNAL")},
@@ -74,7 +71,8 @@ NOT_LOADED: dict[str, tuple[str, str]] = {
 # The warnings of loading it (all SW002, a vendor spelling with IEC's named): what each says.
 LOGICAD_SPELLINGS = ("ARRAY[..] is logi.CAD's spelling", "_firstIndexOf is logi.CAD's",
                      "_lastIndexOf is logi.CAD's", ": VOID (IEC: FUNCTION",
-                     "is a standard function: this FUNCTION replaces it")
+                     "is a standard function: this FUNCTION replaces it",
+                     "logi.CAD read a STRING's character as a BYTE (IEC: ")
 
 
 def unwrap(text: str) -> list[str]:
@@ -163,7 +161,7 @@ def test_exactly_the_listed_functions_do_not_load_and_for_the_listed_reason() ->
     assert {name: code for name, code in LIB.failed.items()} == {
         name: code for name, (code, _) in NOT_LOADED.items()}
     loaded = {name for found in LIB.where.values() for name in found} - set(LIB.failed)
-    assert len(loaded) == 73
+    assert len(loaded) == 79
 
 
 def test_string_functions_return_what_their_comments_say() -> None:
@@ -236,8 +234,15 @@ def test_lenient_loading_uses_only_the_logicad_spellings() -> None:
     assert warnings and all(w.code.code == "SW002" for w in warnings)
     assert [w.render() for w in warnings
             if not any(said in w.message for said in LOGICAD_SPELLINGS)] == []
-    # each spelling is met where the library writes it: 40 ARRAY[..] parameters load
-    assert sum("ARRAY[..]" in w.message for w in warnings) == 40
+    # each spelling is met where the library writes it: 45 ARRAY[..] parameters load
+    assert sum("ARRAY[..]" in w.message for w in warnings) == 45
+    # and 16 places mix a character with a BYTE: UTILITIES_BYTE lines 99-102, 106, 109
+    # (BYTES_TO_STRING), 171, 172, 174, 179 (STRING_TO_BYTES); UTILITIES_STRING 209 twice
+    # (COMPARE_STRINGS), 322, 325 (ENCODE_STRING), 356, 358 (DECODE_STRING)
+    assert sorted((w.span.file, w.span.line) for w in warnings if "as a BYTE" in w.message
+                  ) == sorted([*(("UTILITIES_BYTE", line) for line in (
+                      99, 100, 101, 102, 106, 109, 171, 172, 174, 179)), *(
+                      ("UTILITIES_STRING", line) for line in (209, 209, 322, 325, 356, 358))])
 
 
 def test_sort_reverse_and_search_take_an_array_of_any_bounds() -> None:
@@ -315,3 +320,62 @@ g := STRING_TO_UINT('60000'); h := STRING_TO_INT('-12345');
 h : INT;""")
     assert got == {"a": "255", "b": "-128", "c": "65535", "d": "-32768", "e": 200, "f": -100,
                    "g": 60000, "h": -12345}
+
+
+def test_base64_gives_rfc_4648s_test_vectors() -> None:
+    """BYTES_TO_STRING / STRING_TO_BYTES: "Base 64 Encoding as specified by RFC 4648".  Its
+    section 10 test vectors ('f' is 'Zg==', 'fo' 'Zm8=', 'foobar' 'Zm9vYmFy'); 16#FB 16#FF
+    is 111110 111111 1111(00): 62, 63, 60 -- '+/8=' in Table 1, '-_8=' in the URL
+    alphabet of Table 2.  STRING_TO_BYTES: "remaining bytes will be set to NULL (0)"."""
+    got = run("""
+f := BYTES_TO_STRING(b_f, BINARY_ENCODING#BASE64);
+fo := BYTES_TO_STRING(b_fo, BINARY_ENCODING#BASE64);
+foobar := BYTES_TO_STRING(b_foobar, BINARY_ENCODING#BASE64);
+plain := BYTES_TO_STRING(b_high, BINARY_ENCODING#BASE64);
+url := BYTES_TO_STRING(b_high, BINARY_ENCODING#BASE64_URL);
+STRING_TO_BYTES('Zm9vYmFy', BINARY_ENCODING#BASE64, decoded);
+STRING_TO_BYTES('-_8=', BINARY_ENCODING#BASE64_URL, decoded_url);
+""", """b_f : ARRAY[1..1] OF BYTE := [102]; b_fo : ARRAY[0..1] OF BYTE := [102, 111];
+b_foobar : ARRAY[1..6] OF BYTE := [102, 111, 111, 98, 97, 114];
+b_high : ARRAY[1..2] OF BYTE := [16#FB, 16#FF]; f : STRING; fo : STRING; foobar : STRING;
+plain : STRING; url : STRING; decoded : ARRAY[1..8] OF BYTE; decoded_url : ARRAY[0..1] OF BYTE;""")
+    assert (got["f"], got["fo"], got["foobar"]) == ("Zg==", "Zm8=", "Zm9vYmFy")
+    assert (got["plain"], got["url"]) == ("+/8=", "-_8=")
+    assert got["decoded"] == [102, 111, 111, 98, 97, 114, 0, 0]
+    assert got["decoded_url"] == [0xFB, 0xFF]
+
+
+def test_encode_and_decode_string_as_their_comments_say() -> None:
+    """ENCODE_STRING: ASCII puts '?' (63) for a character past 127, "remaining bytes will
+    be set to NULL (0)", a target too small cuts the string; DECODE_STRING "stops on first
+    NULL (0)" and, ASCII, reads a byte past 127 as '?'.  'é' is 16#E9 in ISO 8859-1."""
+    got = run("""
+ENCODE_STRING('Aé', STRING_ENCODING#ASCII, ascii);
+ENCODE_STRING('Aé', STRING_ENCODING#ISO8859_1, latin);
+ENCODE_STRING('ABCDE', STRING_ENCODING#ISO8859_1, short);
+text := DECODE_STRING(bytes, STRING_ENCODING#ISO8859_1);
+text_ascii := DECODE_STRING(bytes, STRING_ENCODING#ASCII);
+whole := DECODE_STRING(short, STRING_ENCODING#ISO8859_1);
+""", """ascii : ARRAY[1..4] OF BYTE; latin : ARRAY[1..4] OF BYTE; short : ARRAY[0..2] OF BYTE;
+bytes : ARRAY[1..5] OF BYTE := [110, 16#E9, 99, 0, 65]; text : STRING; text_ascii : STRING;
+whole : STRING;""")
+    assert got["ascii"] == [65, 63, 0, 0] and got["latin"] == [65, 0xE9, 0, 0]
+    assert got["short"] == [65, 66, 67]
+    assert (got["text"], got["text_ascii"], got["whole"]) == ("n\u00e9c", "n?c", "ABC")
+
+
+def test_compare_strings_faults_on_its_character_0() -> None:
+    """COMPARE_STRINGS loads but cannot run: its loop starts at ``in1[0]`` (UTILITIES_STRING
+    line 208), and a string's first character is 1 (IEC 61131-3; its sister functions
+    ENCODE_STRING and DECODE_STRING count from 1 too).  An index outside the string faults
+    as one outside an array does; SORT_STRING_ARRAY, which calls it, faults there too."""
+    for body in ("r := COMPARE_STRINGS('a', 'b');", "SORT_STRING_ARRAY(names);"):
+        logic = compile_logic(LIB.files(f"PROGRAM calls\nVAR\nr : INT; names : ARRAY[1..2] OF "
+                                        f"STRING := ['b', 'a'];\nEND_VAR\n{body}\n"
+                                        "END_PROGRAM\n"), CONTEXT)
+        runtime = PlcRuntime(logic, IOImage(64, 16, 8), RecordingNc(), ["calls"])
+        runtime.scan(0)
+        fault = runtime.status.fault
+        assert fault is not None and fault.span is not None
+        assert (fault.span.file, fault.span.line) == ("UTILITIES_STRING", 208)
+        assert "character 0 of a string" in fault.message
