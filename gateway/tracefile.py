@@ -18,8 +18,7 @@ import asyncio
 import os
 from pathlib import Path
 
-from ncgate.interpreter.engine.events import Event, as_dict
-from ncgate.interpreter.engine.trace import to_jsonl
+from ncgate.interpreter.engine.events import Event, as_line
 
 
 class TraceFile:
@@ -44,7 +43,7 @@ class TraceFile:
         return os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | flags, 0o644)
 
     def write(self, event: Event) -> None:
-        self.append(to_jsonl(as_dict(event)) + "\n")
+        self.append(as_line(event) + "\n")
 
     def append(self, line: str) -> None:
         """One whole line (ending in a newline), written with the next flush."""

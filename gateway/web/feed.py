@@ -6,7 +6,8 @@ shared ring, and every waiting stream is woken.  An event is rendered to JSON wh
 first asks for it (then kept rendered), at most SINCE_MAX at a time: with no page open
 nothing is rendered, and a busy cell's 50 ms of events never make one long callback that
 holds up the fieldbus (rendering a batch in the flush took 4 ms every 50 ms at the storm
-bench's rate).  So a stream sends at most
+bench's rate; 500 events a read with the JSON encoder took 6 ms, so the storm's 50 streams
+held the poller up 10 ms at p99 -- events.as_line renders one in ~2 µs).  So a stream sends at most
 one batch of events per BATCH_S whatever the rate: a PLC that writes 2,000 times a second
 gives a page 20 messages, not 2,000 (one message per write put the page minutes behind).
 A stream keeps only its position (a sequence number): memory does
@@ -20,14 +21,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 from collections import deque
 
-from ncgate.interpreter.engine.events import Event, as_dict
+from ncgate.interpreter.engine.events import Event, as_line
 
 RING = 5000  # events kept for streams that connect or fall behind
 BATCH_S = 0.05  # events reach the streams at most this often (bench/console_browser.py)
-SINCE_MAX = 500  # events rendered for one read of the ring (about 0.5 ms); the rest next time
+SINCE_MAX = 250  # events rendered for one read of the ring (about 0.5 ms); the rest next time
 
 
 class EventFeed:
@@ -92,7 +92,7 @@ class EventFeed:
             entry = ring[-k]
             item = entry[1]
             if not isinstance(item, str):
-                item = entry[1] = json.dumps(as_dict(item), separators=(",", ":"))  # type: ignore[arg-type]
+                item = entry[1] = as_line(item)  # type: ignore[arg-type]
             out.append(item)
         return out, missed
 

@@ -13,6 +13,7 @@ Stdlib only.
 
 from __future__ import annotations
 
+import json
 from typing import Any, Final, NamedTuple
 
 from ncgate.interpreter.codes import AlarmCode
@@ -386,6 +387,50 @@ def as_dict(event: Event) -> dict[str, Any]:
             continue  # only a condition's resume names the writer
         out[name] = _json(value)
     return out
+
+
+def as_line(event: Event) -> str:
+    """``to_jsonl(as_dict(event))`` (interpreter/engine/trace.py), the trace file's line
+    without its newline, made without the dict and the JSON encoder's machinery: the trace
+    file and the console's streams render every event (4-5x faster; the tests compare the
+    two on every kind of event)."""
+    kind = type(event)
+    names = _NAMES.get(kind)
+    if names is None:
+        names = _NAMES[kind] = [(n, f', "{n}": ') for n in kind._fields[4:]]
+    parts = [f'{{"seq": {event[0]}, "t": {round(event[1], 6):.6f}, "event": "{event.kind}", '
+             f'"proc": {event[2]}']
+    where = event[3]
+    if where is not None:
+        parts.append(f', "prog": {_text(where[0])}, "line": {_text(where[1])}, '
+                     f'"n": {_text(where[2])}')
+    for index, (name, key) in enumerate(names, 4):
+        value = event[index]
+        if value is None and name == "writer":
+            continue
+        parts.append(key)
+        parts.append(_text(value))
+    parts.append("}")
+    return "".join(parts)
+
+
+_NAMES: dict[type, list[tuple[str, str]]] = {}
+_encode_string = json.encoder.encode_basestring  # the C one: what json.dumps uses
+_DUMPS = json.JSONEncoder(separators=(", ", ": "), ensure_ascii=False).encode
+
+
+def _text(value: Any) -> str:
+    """``value`` as json.dumps(_json(value)) renders it in a trace line."""
+    kind = type(value)
+    if kind is str:
+        return _encode_string(value)
+    if kind is int:
+        return int.__repr__(value)
+    if value is None:
+        return "null"
+    if kind is float and value - value == 0.0:  # finite (nan and inf: as json.dumps has them)
+        return float.__repr__(value)
+    return _DUMPS(_json(value))
 
 
 def _json(value: Any) -> Any:

@@ -17,8 +17,8 @@ async def test_nothing_is_rendered_until_asked_and_a_read_is_bounded() -> None:
     assert feed.seq == 2000
     assert not any(isinstance(item, str) for _, item in feed._ring)  # nothing rendered yet
     texts, missed = feed.since(0)
-    assert (len(texts), missed) == (SINCE_MAX, 0) and '"message":"h1"' in texts[0]
+    assert (len(texts), missed) == (SINCE_MAX, 0) and '"message": "h1"' in texts[0]
     texts, _ = feed.since(SINCE_MAX)  # the next piece, from where the first stopped
-    assert f'"message":"h{SINCE_MAX + 1}"' in texts[0]
+    assert f'"message": "h{SINCE_MAX + 1}"' in texts[0]
     rendered = sum(isinstance(item, str) for _, item in feed._ring)
     assert rendered == 2 * SINCE_MAX  # kept rendered for the next reader
