@@ -43,6 +43,52 @@ async def test_a_pipelined_flood_does_not_hold_up_a_poller(ncgate_gateway: Gatew
     poller.close()
 
 
+async def test_many_greedy_clients_share_one_round_of_the_loop(
+        ncgate_gateway: Gateway, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Four clients with thousands of requests queued each: a poller waits for one round of
+    their turns, and a round is ROUND_S whatever their number (each gets its share of it), not
+    ROUND_S each.  Every request here costs 100 µs of the loop, so a 0.5 ms turn each (the old
+    rule) made a round of about 24 of their requests, the shared round about 8."""
+    import time
+
+    from ncgate.gateway.modbus import server as server_module
+
+    server = ncgate_gateway.modbus_server
+    assert server is not None
+    real_handle = server.handler.handle
+
+    def slow_handle(*args: object) -> bytes:
+        until = time.perf_counter() + 0.0001  # a request that costs the loop 100 µs
+        while time.perf_counter() < until:
+            pass
+        return real_handle(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(server.handler, "handle", slow_handle)  # the connections made next
+    address = ncgate_gateway.modbus_address
+    greedy = [await Raw.open(*address) for _ in range(4)]
+    poller = await Raw.open(*address)
+    assert (await poller.ask(READ))[0] == 3
+    for client in greedy:  # never read here: each keeps turns due
+        client.writer.write(b"".join(mbap(i, 1, READ) for i in range(1, 3001)))
+        await client.writer.drain()
+    for client in greedy:
+        await client.recv()  # every one has had a turn: the four are in the round
+    rounds = []
+    for _ in range(10):
+        before = server.handler.served
+        assert (await poller.ask(READ))[0] == 3
+        rounds.append(server.handler.served - before - 1)
+    # This poller shares the gateway's loop: its request goes out in one loop turn, is read
+    # and answered in the next, and its answer read in a third or fourth -- a round of the
+    # four greedy turns in each (ROUND_S over 100 µs requests, and the one request each turn
+    # answers whatever its share).  Four rounds: 36 at most; a turn of ROUND_S each: ~72.
+    bound = 4 * (round(server_module.ROUND_S / 0.0001) + 4)
+    assert max(rounds) <= bound, rounds
+    for client in greedy:
+        client.close()
+    poller.close()
+
+
 @pytest.mark.parametrize("ncgate_config", [{"modbus.max_clients": 4}], indirect=True)
 async def test_a_connect_flood_knocks_no_client_off(
         ncgate_gateway: Gateway, caplog: pytest.LogCaptureFixture) -> None:
