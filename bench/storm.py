@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import contextlib
 import json
 import multiprocessing
@@ -67,6 +68,7 @@ END_PROGRAM
 TIME_SCALE = 10.0
 DWELL_S = 0.01  # machine seconds per round trip of the SND/WAI loop
 NODE, MASTER = 1, 0x7F
+LOST_S = 0.15  # a SYNC whose TPDO has not come this long after it: dropped by the node
 LOG = open(os.environ.get("STORM_LOG", os.devnull), "a")  # noqa: SIM115 - the run's log
 SPAWN = multiprocessing.get_context("spawn")
 PHASES = ("quiet", "flood", "no-read", "connects", "load", "streams", "storm")
@@ -167,7 +169,13 @@ class Master(threading.Thread):
         self.delays: list[float] = []
         self.syncs = 0
         self.tpdos = 0
-        self._last_sync = 0.0
+        # The send times of the SYNCs whose TPDO has not come yet, oldest first: the node
+        # answers each SYNC with one TPDO, in order, so a TPDO is the oldest's.  (Measured
+        # from the last SYNC sent, a TPDO 12 ms late read as 2 ms: no delay could show over
+        # the 10 ms period.)  A SYNC older than LOST_S has lost its TPDO (the node drops a
+        # TPDO it could not send within max(period, 100 ms)).
+        self._pending: collections.deque[float] = collections.deque()
+        self._lock = threading.Lock()
         self._reader = threading.Thread(target=self._read, daemon=True)
 
     def sdo_write(self, index: int, sub: int, data: bytes) -> None:
@@ -189,6 +197,17 @@ class Master(threading.Thread):
         self.sdo_write(0x1800, 2, b"\x01")  # TPDO1 on every SYNC
         self.bus.send(can.Message(arbitration_id=0, is_extended_id=False,
                                   data=bytes((0x01, NODE))))  # NMT start
+        # SYNCs one by one until the node answers one: the measured SYNCs all find it
+        # operational (one sent before would wait for its TPDO for ever, and shift the pairs).
+        end = time.perf_counter() + 10.0
+        while time.perf_counter() < end:
+            self.bus.send(can.Message(arbitration_id=0x80, is_extended_id=False, data=b""))
+            answered = time.perf_counter() + 0.05
+            while (left := answered - time.perf_counter()) > 0:
+                msg = self.bus.recv(left)
+                if msg is not None and msg.arbitration_id == 0x180 + NODE:
+                    return
+        raise RuntimeError("the node answers no SYNC with its TPDO1")
 
     def _read(self) -> None:
         try:
@@ -200,9 +219,14 @@ class Master(threading.Thread):
         while not self.stop.is_set():
             msg = self.bus.recv(0.05)
             if msg is not None and msg.arbitration_id == 0x180 + NODE:
+                now = time.perf_counter()
                 self.tpdos += 1
-                if self._last_sync:
-                    self.delays.append(time.perf_counter() - self._last_sync)
+                with self._lock:
+                    while self._pending and now - self._pending[0] > LOST_S:
+                        self._pending.popleft()
+                    sent = self._pending.popleft() if self._pending else None
+                if sent is not None:
+                    self.delays.append(now - sent)
 
     def run(self) -> None:
         self._reader.start()
@@ -220,7 +244,8 @@ class Master(threading.Thread):
                                           data=b"\x05"))
                 next_beat += 0.1
             if now >= next_sync:
-                self._last_sync = time.perf_counter()
+                with self._lock:
+                    self._pending.append(time.perf_counter())
                 self.bus.send(can.Message(arbitration_id=0x80, is_extended_id=False, data=b""))
                 self.syncs += 1
                 next_sync += 0.01

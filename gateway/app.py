@@ -132,7 +132,8 @@ class Gateway:
         # A thread that reads a program (or serves the CAN side) keeps the GIL for up to
         # sys.getswitchinterval() each time the loop asks for it back: 5 ms by default, so
         # the loop's 1 ms ticks came 10.4 ms late at p99 while a 10 MB program was read, and
-        # 1.5-2.3 ms at 0.5 ms, the load itself no slower (alternating runs, issue 24).
+        # 1.5-2.3 ms at 0.5 ms, the load itself no slower (alternating runs, issue 24); the
+        # CANopen hub's frames need it at 0.2 ms (lifecycle.GIL_SWITCH_S).
         # `ncgate run` sets it for its whole process (cli/main.py); this gives it to every
         # gateway of the Python API too (a test's virtual PLC), restored on exit.
         previous = sys.getswitchinterval()

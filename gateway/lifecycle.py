@@ -14,9 +14,12 @@ from __future__ import annotations
 from typing import Protocol
 
 # The GIL switch interval while a gateway runs (seconds): how long another thread may keep
-# the loop waiting (Gateway._open says what it was measured against; `ncgate run` sets it for
-# its whole process).
-GIL_SWITCH_S = 0.0005
+# the loop waiting, and the loop a thread (Gateway._open and docs/decisions.md say what it was
+# measured against; `ncgate run` sets it for its whole process).  0.5 ms left the CANopen
+# hub's thread, which needs the lock a dozen times a frame, so short of turns beside a busy
+# loop that TPDOs came 50-90 ms after their SYNC (bench/storm.py, flood and storm phases;
+# 5-7 ms at 0.2 ms, quiet 1-2 ms either way).
+GIL_SWITCH_S = 0.0002
 
 
 class Adapter(Protocol):

@@ -399,9 +399,9 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     record = str(Path(args.record).resolve()) if args.record else None
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
-    # a program being read: a thread that wants the GIL gets it within half a millisecond,
+    # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
     # not CPython's default 5 ms, so none of them makes another late (measured with
-    # bench/storm.py: the flood and load phases).
+    # bench/storm.py: the flood, storm and load phases).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     loop = args.loop
     if loop == "auto":
