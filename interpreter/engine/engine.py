@@ -29,6 +29,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from ncgate.interpreter.cache import block_table
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError, RuntimeAlarm
 from ncgate.interpreter.engine import events as ev
@@ -336,7 +337,7 @@ class Engine:
         if block_skip is not None and block_skip != self.block_skip:
             self.block_skip = block_skip
             for loaded in self._loaded.values():
-                loaded.blocks[:] = [None] * len(loaded.blocks)
+                loaded.blocks = block_table(loaded.length)
 
     def single_block(self, on: bool, process: int | None = None) -> None:
         """Single-block mode of one process or the cell: after each block the process stops
@@ -661,7 +662,8 @@ class Engine:
         if lp is None or lp.program is not program:
             targets, dynamic = self.front_end.exe_targets(program)
             file = program.file.replace("\\", "/").rsplit("/", 1)[-1]
-            lp = LoadedProgram(program, file, [None] * len(program), targets, dynamic)
+            lp = LoadedProgram(program, file, block_table(len(program)), len(program), targets,
+                               dynamic)
             self._loaded[key] = lp  # a new version replaces the old one
         return lp
 
@@ -740,7 +742,7 @@ class Engine:
         loaded = p.loaded
         assert loaded is not None
         blocks = loaded.blocks
-        lines = len(blocks)
+        lines = loaded.length
         if p.spin_epoch != self._epoch:  # the engine stood still since: time could pass
             p.spin_epoch = self._epoch
             p.spin = 0

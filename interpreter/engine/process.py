@@ -7,6 +7,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from ncgate.interpreter.cache import BlockCache
 from ncgate.interpreter.engine.actions import Action, ItemKind, Step
 from ncgate.interpreter.engine.states import (
     DecoderHold,
@@ -45,7 +46,8 @@ class CompiledBlock:
 class LoadedProgram:
     program: ProgramText
     file: str  # display name in messages and the trace
-    blocks: list[CompiledBlock | None]
+    blocks: list[CompiledBlock | None] | BlockCache[CompiledBlock]  # by line (cache.py)
+    length: int  # its lines
     exe_targets: frozenset[int]  # the processes it may start (orphan-wait detection)
     dynamic_exe: bool  # it starts processes named by E parameters: any of them
 
@@ -120,7 +122,7 @@ class Process:
         if self.block is not None:
             return self.block.where
         if self.loaded is not None:  # between blocks: the line the decoder is at
-            return (self.loaded.file, min(self.pc + 1, len(self.loaded.blocks)), None)
+            return (self.loaded.file, min(self.pc + 1, self.loaded.length), None)
         return ("", 0, None)
 
     def waits(self) -> tuple[WaitRecord, ...]:

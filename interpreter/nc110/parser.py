@@ -31,6 +31,7 @@ from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from ncgate.interpreter.batch import gc_paused
+from ncgate.interpreter.cache import BlockCache, block_table
 from ncgate.interpreter.codes import MODELLED_CODES, UNMODELLED_CODES, DiagnosticCode
 from ncgate.interpreter.diagnostics import (
     LINE_END,
@@ -653,11 +654,13 @@ class Program:
             if text[end - 1] == "\n":
                 piece.pop()  # the "" after the piece's last newline
             lines += piece
-        self.lines: list[str] = lines
         # Diagnostics of the file as a whole, found before any block is parsed.
         self.notes: list[Diagnostic] = []
         if any(_CYRILLIC.search(text, start, end) for start, end in spans):
-            self._latinise()
+            self._latinise(lines)
+        # A tuple: the collector walks it once and then no more (a tuple of strings is
+        # untracked), where a list of a 10 MB program's lines cost every full collection 6 ms.
+        self.lines: tuple[str, ...] = tuple(lines)
         self.labels: dict[str, int] = {}
         self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
         line_no, last = 0, 0
@@ -668,12 +671,13 @@ class Program:
                 self.label_lines.append((m.group(1), line_no))
                 # A jump's name had its look-alikes read as Latin: so has the label it names.
                 self.labels.setdefault(m.group(1).upper().translate(_LOOKALIKES), line_no)
-        self._blocks: list[Block | None] = [None] * len(self.lines)
+        # Every block of a short program, the last ones parsed of a long one (cache.py).
+        self._blocks: list[Block | None] | BlockCache[Block] = block_table(len(self.lines))
 
-    def _latinise(self) -> None:
+    def _latinise(self, lines: list[str]) -> None:
         """Read the Cyrillic look-alikes of address letters as their Latin twins, outside
         quotes and comments (operators type Е4 for E4), with a warning naming them."""
-        for i, line in enumerate(self.lines):
+        for i, line in enumerate(lines):
             if not _CYRILLIC.search(line):
                 continue
             out: list[str] = []
@@ -690,7 +694,7 @@ class Program:
                     ch = ch.translate(_LOOKALIKES)
                 out.append(ch)
             if found:
-                self.lines[i] = "".join(out)
+                lines[i] = "".join(out)
                 letters = ", ".join(sorted({f"{ch}\u2192{ch.translate(_LOOKALIKES)}"
                                             for _, ch in found}))
                 self.notes.append(Diagnostic(
@@ -732,7 +736,10 @@ class Program:
     def parse_all(self) -> tuple[list[Block | None], list[Diagnostic]]:
         """Every block (None where a line does not parse) and every syntax diagnostic."""
         diagnostics: list[Diagnostic] = list(self.notes)
-        blocks = self._blocks
+        kept = self._blocks
+        # A long program's table keeps its last blocks only: the whole answer is a list.
+        blocks: list[Block | None] = (kept if isinstance(kept, list)
+                                      else [kept[i] for i in range(len(self.lines))])
         file = self.file
         with gc_paused():
             for i, text in enumerate(self.lines):

@@ -209,7 +209,7 @@ def test_cr_crlf_and_lf_each_end_a_block(end: str) -> None:
     # The file: with CR-only line ends it was one block, (WAI,...) swallowed into it.
     text = end.join(['E1=5', 'G1XE1F100', '"AGAIN"', '(WAI,SA1=1)', 'N5GXY', 'M30']) + end
     program = Program("P", "p.nc", text)
-    assert program.lines == ["E1=5", "G1XE1F100", '"AGAIN"', "(WAI,SA1=1)", "N5GXY", "M30"]
+    assert list(program.lines) == ["E1=5", "G1XE1F100", '"AGAIN"', "(WAI,SA1=1)", "N5GXY", "M30"]
     assert program.labels == {"AGAIN": 2}
     _, diagnostics = program.parse_all()
     assert [(d.code, d.span.line, d.span.column, d.source_line) for d in diagnostics] == [
@@ -218,7 +218,7 @@ def test_cr_crlf_and_lf_each_end_a_block(end: str) -> None:
 
 def test_a_mix_of_line_ends_counts_each_once() -> None:
     program = Program("P", "p.nc", "N1\r\nN2\rN3\nN4\r\r\nN6")
-    assert program.lines == ["N1", "N2", "N3", "N4", "", "N6"]
+    assert list(program.lines) == ["N1", "N2", "N3", "N4", "", "N6"]
 
 
 def test_a_bad_byte_in_a_cr_only_file_is_nc015_at_its_line_and_column(tmp_path: Path) -> None:
@@ -236,5 +236,5 @@ def test_line_ends_are_unified_piece_by_piece_without_cutting_a_crlf(
     # Pieces of 3 characters: every CR LF of this text straddles a piece boundary somewhere.
     monkeypatch.setattr("ncgate.interpreter.nc110.parser._PIECE", 3)
     text = "N1\r\nN2\r\r\nN3\rN4\n\r\nN5\r"
-    assert Program("P", "p.nc", text).lines == split_lines(text) == [
+    assert list(Program("P", "p.nc", text).lines) == split_lines(text) == [
         "N1", "N2", "", "N3", "N4", "", "N5"]

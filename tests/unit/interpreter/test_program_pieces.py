@@ -37,5 +37,5 @@ def test_pieces_give_what_the_whole_text_gives(lines: list[str], end: str) -> No
         patch.setattr(parser, "_PIECE", 7)  # many pieces, and some cut mid-line
         program = parser.Program("T", "T.nc", text)
     expected_lines, expected_labels = whole(text)
-    assert program.lines == expected_lines
+    assert list(program.lines) == expected_lines
     assert program.label_lines == expected_labels
