@@ -19,7 +19,6 @@ import asyncio
 import contextlib
 import logging
 import secrets
-import sys
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -32,7 +31,7 @@ from ncgate.gateway.canopen.clock import Clock
 from ncgate.gateway.canopen.node import CanopenNode
 from ncgate.gateway.door import Door, command_kind
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
-from ncgate.gateway.lifecycle import GIL_SWITCH_S, Adapter
+from ncgate.gateway.lifecycle import Adapter, tune_interpreter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import OnlineChange, ReloadOutcome, ScanDriver, start_plc
@@ -135,10 +134,9 @@ class Gateway:
         # 1.5-2.3 ms at 0.5 ms, the load itself no slower (alternating runs, issue 24); the
         # CANopen hub's frames need it at 0.2 ms (lifecycle.GIL_SWITCH_S).
         # `ncgate run` sets it for its whole process (cli/main.py); this gives it to every
-        # gateway of the Python API too (a test's virtual PLC), restored on exit.
-        previous = sys.getswitchinterval()
-        sys.setswitchinterval(min(previous, GIL_SWITCH_S))
-        stack.callback(sys.setswitchinterval, previous)
+        # gateway of the Python API too (a test's virtual PLC), restored on exit; and the
+        # young generation's size (lifecycle.GC_YOUNG_OBJECTS).
+        stack.callback(tune_interpreter())
         # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
         # for) every event.
         trace = Trace(keep=self.config.trace.ring)

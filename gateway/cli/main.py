@@ -16,7 +16,7 @@ from ncgate.config import Config, default_script_path, load_config
 from ncgate.errors import NcgateError
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
-from ncgate.gateway.lifecycle import GIL_SWITCH_S
+from ncgate.gateway.lifecycle import GIL_SWITCH_S, tune_interpreter
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
@@ -401,8 +401,9 @@ def _run(args: argparse.Namespace) -> int:
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
     # not CPython's default 5 ms, so none of them makes another late (measured with
-    # bench/storm.py: the flood, storm and load phases).
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    # bench/storm.py: the flood, storm and load phases); and the young generation's size
+    # (lifecycle.GC_YOUNG_OBJECTS).
+    tune_interpreter()
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
