@@ -15,13 +15,27 @@ the PLC status's max lateness) and the ratio of the two reload phases to the qui
 Target: off the loop, a reload holds no scan back by more than a few scan periods, where on
 the loop one compile (~1 s for this program) holds it back by the whole compile.
 
-    .venv/bin/python bench/reload.py [--reloads N]
+Then big logic (``--big`` statements, 20,000: ~0.8 MB of ST, ~1.9 MB of generated Python),
+reloaded off the loop ``--big-reloads`` times in two phases, alternating, twice each:
+
+- one compile(): the generated module compiled in one call (PIECE_LINES and PIECE_CHARS
+  set past its size: the code as it was before the pieces);
+- in pieces: as ncgate does it, a piece of about PIECE_CHARS at a time.
+
+Python's compile() holds the interpreter for the whole call, thread or not.  Each phase
+also prints its longest pause of the cyclic garbage collector (gc.callbacks), with the
+generation: a collection runs on whichever thread allocates, holding the interpreter.  Each
+phase begins with an unmeasured reload (it frees the other phase's logic).  Target: a big
+reload holds no scan back by more than a few scan periods.
+
+    .venv/bin/python bench/reload.py [--reloads N] [--big STATEMENTS] [--big-reloads N]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import importlib.util
 import sys
 import tempfile
@@ -32,16 +46,35 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.cli.main import SWITCH_INTERVAL_S
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind
+from ncgate.plc.st import compiler
 
 HERE = Path(__file__).resolve().parent
 
 
-def program() -> str:
+def program(statements: int = 1000) -> str:
     spec = importlib.util.spec_from_file_location("bench_plc", HERE / "plc.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return str(module.generate(1000))
+    return str(module.generate(statements))
+
+
+class GcPauses:
+    """The longest pause of the cyclic collector since ``reset`` (ms) and its generation."""
+
+    def __init__(self) -> None:
+        self.started = 0.0
+        self.reset()
+        gc.callbacks.append(self.note)
+
+    def reset(self) -> None:
+        self.longest, self.generation = 0.0, -1
+
+    def note(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self.started = time.perf_counter()
+        elif (took := (time.perf_counter() - self.started) * 1000) > self.longest:
+            self.longest, self.generation = took, info["generation"]
 
 
 async def phase(gw: Gateway, reloads: int, how: str) -> tuple[int, float]:
@@ -64,8 +97,41 @@ async def phase(gw: Gateway, reloads: int, how: str) -> tuple[int, float]:
     return status.max_lateness_us, (time.perf_counter() - started) / reloads
 
 
-async def main(reloads: int) -> None:
+async def big(statements: int, reloads: int, pauses: GcPauses) -> None:
+    """The big logic's two phases (docstring), alternating, twice each."""
+    pieces = compiler.PIECE_LINES, compiler.PIECE_CHARS
+    with tempfile.TemporaryDirectory() as folder:
+        root = Path(folder)
+        (root / "big.st").write_text(program(statements))
+        (root / "ncgate.toml").write_text('[plc]\nlogic = "big.st"\nscan_ms = 10\n'
+                                          "watchdog_ms = 0\n[canopen]\nenabled = false\n")
+        config = ncgate_test_config(root / "ncgate.toml")
+        async with Gateway(config) as gw:
+            results: dict[str, tuple[int, float, float, int]] = {}
+            for how in ("whole", "pieces", "whole", "pieces"):
+                compiler.PIECE_LINES, compiler.PIECE_CHARS = (
+                    (10**9, 10**12) if how == "whole" else pieces)
+                # (unmeasured: it swaps out the other phase's logic, freed on the loop)
+                assert (await gw.reload_plc()).ok
+                pauses.reset()
+                late, each = await phase(gw, reloads, "thread")
+                gc_ms, gen = pauses.longest, pauses.generation
+                best = results.get(how)
+                results[how] = (max(late, best[0]), max(each, best[1]), max(gc_ms, best[2]),
+                                gen if gc_ms >= best[2] else best[3]) if best else (
+                    late, each, gc_ms, gen)
+        compiler.PIECE_LINES, compiler.PIECE_CHARS = pieces
+    print(f"{statements:,}-statement program ({len(program(statements)) / 1e6:.1f} MB of ST),"
+          f" {reloads} reloads off the loop a phase, twice each, alternating")
+    for how, name in (("whole", "one compile()"), ("pieces", "in pieces")):
+        late, each, gc_ms, gen = results[how]
+        print(f"  {name:14} worst scan lateness {late / 1000:8.1f} ms, {each:.1f} s a reload, "
+              f"longest gc pause {gc_ms:.1f} ms (generation {gen})")
+
+
+async def main(reloads: int, statements: int, big_reloads: int) -> None:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    pauses = GcPauses()
     with tempfile.TemporaryDirectory() as folder:
         root = Path(folder)
         (root / "big.st").write_text(program())
@@ -86,9 +152,14 @@ async def main(reloads: int) -> None:
             print(f"  {name:22} worst scan lateness {late / 1000:8.1f} ms "
                   f"({late / quiet:6.1f}x quiet)" + (f", {each:.2f} s a reload"
                                                     if how != "quiet" else ""))
+    if statements:
+        await big(statements, big_reloads, pauses)
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--reloads", type=int, default=3)
-    asyncio.run(main(parser.parse_args().reloads))
+    parser.add_argument("--big", type=int, default=20000, help="statements (0: no big phase)")
+    parser.add_argument("--big-reloads", type=int, default=2)
+    args = parser.parse_args()
+    asyncio.run(main(args.reloads, args.big, args.big_reloads))

@@ -5,12 +5,14 @@ generated and then mutated programs finds each of them loads or gets coded diagn
 
 from __future__ import annotations
 
+import gc
 import random
 
 import pytest
 
 from ncgate.plc.scan import PlcState
-from ncgate.plc.st.compiler import compile_logic
+from ncgate.plc.st import compiler
+from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StCode
 from ncgate.plc.st.parser import parse_source
 
@@ -83,6 +85,24 @@ def test_return_continue_and_exit_from_deep_in_a_program_act_on_the_right_level(
     plc = Plc(program(deep_loop + deep_return, "n, after, c, m : DINT; k : INT;")).scan()
     assert (plc["main.n"], plc["main.after"]) == (100, 0)
     assert (plc["main.c"], plc["main.m"], plc["main.k"]) == (4, 2, 4)
+
+
+def test_a_long_body_runs_in_order_returns_and_faults_at_its_line() -> None:
+    """3,000 statements: the compiler cuts a long PROGRAM body into helper functions that
+    Logic compiles one piece at a time (PIECE_LINES, PIECE_CHARS); the statements still run
+    in their order, a RETURN ends the scan, and a fault in the last piece names its line."""
+    body = "".join(f"x := x * 3 + {k};\n" for k in range(3000))  # order matters to x
+    expected = 0
+    for k in range(3000):
+        expected = ((expected * 3 + k + 2**31) % 2**32) - 2**31
+    plc = Plc(program(body + "IF x <> 0 THEN RETURN; END_IF\nafter := 1;",
+                      "x, after : DINT;")).scan()
+    assert (plc["main.x"], plc["main.after"]) == (expected, 0)
+    assert len(plc.logic.python_source) > 3 * compiler.PIECE_CHARS  # (several pieces)
+    faulty = Plc(program(body + "v[x] := 1;", "x : DINT; v : ARRAY[1..2] OF INT;")).scan()
+    fault = faulty.runtime.status.fault
+    assert fault is not None and fault.span is not None
+    assert fault.span.line == 5 + 3000 and "outside 1..2" in fault.message
 
 
 def test_1000_elsifs_and_1000_case_arms_pick_their_branch() -> None:
@@ -315,3 +335,22 @@ def test_generated_typed_programs_load_or_get_coded_diagnostics(seed: int) -> No
         plc.scan(2)
         assert plc.runtime.status.state in (PlcState.RUNNING, PlcState.FAULT)
     assert loaded > 30 and refused > 30, (loaded, refused)
+
+
+def test_loaded_logic_leaves_the_syntax_tree_to_be_freed() -> None:
+    """The logic keeps what a fault's location needs, not the parsed program: a reload of
+    big logic otherwise left hundreds of thousands of nodes for the cyclic collector to walk
+    on every collection -- 130 to 340 ms pauses on the loop's thread (docs/decisions.md)."""
+    statements = 2000
+    body = "".join(f"x := x * 3 + {k};\nIF x > {k} THEN y := NOT y; END_IF\n"
+                   for k in range(statements))
+    source = program(body, "x : DINT; y : BOOL;")
+    compile_logic([parse_source(program("x := 1;", "x : INT;"), "warm.st")])  # (lark's own)
+    gc.collect()
+    before = len(gc.get_objects())
+    parsed = parse_source(source, "big.st")
+    logic = compile_logic([parsed], Context())
+    del parsed
+    gc.collect()
+    kept = len(gc.get_objects()) - before
+    assert logic.programs and kept < statements, kept  # the tree: > 30 nodes a statement
