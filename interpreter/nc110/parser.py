@@ -20,12 +20,13 @@ Must not import ``plc`` or ``gateway``.
 from __future__ import annotations
 
 import re
+from array import array
 from collections.abc import Callable, Iterator, Sequence
 from functools import cache
 from importlib import resources
 from itertools import accumulate
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, overload
 
 from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
@@ -624,6 +625,61 @@ def _lf_only(text: str) -> str:
     return "".join(pieces)
 
 
+class Lines(Sequence[str]):
+    """A program's lines: its text (LF line ends) and where each line starts, one number a
+    line -- not a string object a line.  A 10 MB program's 489,000 lines as strings were
+    ~35 MB more, a list (then a tuple) the garbage collector walked, and one long call into C
+    to make; here each line is cut from the text when asked for.  ``lines[i] = text`` (the
+    Cyrillic look-alikes read as Latin) keeps the new text beside the old."""
+
+    __slots__ = ("_changed", "_starts", "_text")
+
+    def __init__(self, text: str, spans: Sequence[tuple[int, int]]) -> None:
+        self._text = text
+        # starts[i]: the line's first character; starts[i + 1] - 1: its end (the newline,
+        # or len(text) for a last line without one).
+        starts = array("q", [0])
+        plus_newline = (1).__add__
+        for start, end in spans:  # a piece at a time: no long call into C
+            parts = text[start:end].split("\n")
+            if text[end - 1] == "\n":
+                parts.pop()  # the "" after the piece's last newline
+            starts.pop()  # the piece's start, which the piece before it ended with
+            starts.extend(accumulate(map(plus_newline, map(len, parts)), initial=start))
+        self._starts = starts
+        self._changed: dict[int, str] = {}
+
+    def __len__(self) -> int:
+        return len(self._starts) - 1
+
+    @overload
+    def __getitem__(self, index: int) -> str: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[str]: ...
+
+    def __getitem__(self, index: int | slice) -> str | list[str]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        if index < 0:
+            index += len(self)
+        if self._changed and index in self._changed:
+            return self._changed[index]
+        starts = self._starts
+        if not 0 <= index < len(starts) - 1:
+            raise IndexError("line index out of range")
+        return self._text[starts[index]:starts[index + 1] - 1]
+
+    def __setitem__(self, index: int, text: str) -> None:
+        if not 0 <= index < len(self):
+            raise IndexError("line index out of range")
+        self._changed[index] = text
+
+    def __iter__(self) -> Iterator[str]:
+        for i in range(len(self)):
+            yield self[i]
+
+
 class Program:
     """A program's text, parsed block by block on demand.
 
@@ -648,19 +704,11 @@ class Program:
         # into C holds the interpreter long while the loop serves the fieldbus beside the
         # thread that reads the program.
         spans = list(_spans(text))
-        lines: list[str] = []
-        for start, end in spans:
-            piece = text[start:end].split("\n")
-            if text[end - 1] == "\n":
-                piece.pop()  # the "" after the piece's last newline
-            lines += piece
+        self.lines = lines = Lines(text, spans)
         # Diagnostics of the file as a whole, found before any block is parsed.
         self.notes: list[Diagnostic] = []
         if any(_CYRILLIC.search(text, start, end) for start, end in spans):
             self._latinise(lines)
-        # A tuple: the collector walks it once and then no more (a tuple of strings is
-        # untracked), where a list of a 10 MB program's lines cost every full collection 6 ms.
-        self.lines: tuple[str, ...] = tuple(lines)
         self.labels: dict[str, int] = {}
         self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
         line_no, last = 0, 0
@@ -674,7 +722,7 @@ class Program:
         # Every block of a short program, the last ones parsed of a long one (cache.py).
         self._blocks: list[Block | None] | BlockCache[Block] = block_table(len(self.lines))
 
-    def _latinise(self, lines: list[str]) -> None:
+    def _latinise(self, lines: Lines) -> None:
         """Read the Cyrillic look-alikes of address letters as their Latin twins, outside
         quotes and comments (operators type Е4 for E4), with a warning naming them."""
         for i, line in enumerate(lines):
