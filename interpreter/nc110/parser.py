@@ -19,8 +19,10 @@ Must not import ``plc`` or ``gateway``.
 
 from __future__ import annotations
 
+import codecs
 import re
 from array import array
+from bisect import bisect_right
 from collections.abc import Callable, Iterator, Sequence
 from functools import cache
 from importlib import resources
@@ -610,6 +612,28 @@ def _spans(text: str) -> Iterator[tuple[int, int]]:
         start = end
 
 
+def _decoded_pieces(data: bytes) -> list[str]:
+    """``data`` as UTF-8, in line-aligned pieces of about _PIECE bytes, decoded a piece at
+    a time: one decode of a 10 MB file held the interpreter 6 ms, and joining pieces again 7
+    ms, beside the fieldbus's threads."""
+    if len(data) <= _PIECE:
+        return [data.decode("utf-8")] if data else []
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    view = memoryview(data)
+    pieces: list[str] = []
+    rest = ""
+    for start in range(0, len(data), _PIECE):
+        text = rest + decoder.decode(view[start:start + _PIECE])
+        cut = text.rfind("\n") + 1  # the rest of a line goes on with the next piece
+        if cut:
+            pieces.append(text[:cut])
+        rest = text[cut:]
+    rest += decoder.decode(b"", final=True)
+    if rest:
+        pieces.append(rest)
+    return pieces
+
+
 def _lf_only(text: str) -> str:
     """``text`` with each CR LF and each lone CR made one LF (diagnostics.LINE_END), so that the
     splitting, the label scan and the line counts below see LF alone.  Piece by piece, a CR LF
@@ -626,31 +650,35 @@ def _lf_only(text: str) -> str:
 
 
 class Lines(Sequence[str]):
-    """A program's lines: its text (LF line ends) and where each line starts, one number a
-    line -- not a string object a line.  A 10 MB program's 489,000 lines as strings were
-    ~35 MB more, a list (then a tuple) the garbage collector walked, and one long call into C
-    to make; here each line is cut from the text when asked for.  ``lines[i] = text`` (the
-    Cyrillic look-alikes read as Latin) keeps the new text beside the old."""
+    """A program's lines: its text's line-aligned pieces (LF line ends) and where each line
+    starts in its piece, one number a line -- not a string object a line.  A 10 MB
+    program's 489,000 lines as strings were ~35 MB more, a list (then a tuple) the garbage
+    collector walked, and one long call into C to make; here a line is cut from its piece
+    when asked for.  ``lines[i] = text`` (the Cyrillic look-alikes read as Latin) keeps the
+    new text beside the old."""
 
-    __slots__ = ("_changed", "_starts", "_text")
+    __slots__ = ("_changed", "_pieces", "_starts", "first_lines")
 
-    def __init__(self, text: str, spans: Sequence[tuple[int, int]]) -> None:
-        self._text = text
-        # starts[i]: the line's first character; starts[i + 1] - 1: its end (the newline,
-        # or len(text) for a last line without one).
-        starts = array("q", [0])
+    def __init__(self, pieces: Sequence[str]) -> None:
+        self._pieces = list(pieces)
+        # starts[k][j]: where piece k's line j starts; starts[k][j + 1] - 1: where it ends
+        # (its newline, or the piece's end for a last line without one).
+        self._starts: list[array[int]] = []
+        self.first_lines: list[int] = []  # the index of each piece's first line
+        count = 0
         plus_newline = (1).__add__
-        for start, end in spans:  # a piece at a time: no long call into C
-            parts = text[start:end].split("\n")
-            if text[end - 1] == "\n":
+        for piece in self._pieces:
+            parts = piece.split("\n")
+            if piece.endswith("\n"):
                 parts.pop()  # the "" after the piece's last newline
-            starts.pop()  # the piece's start, which the piece before it ended with
-            starts.extend(accumulate(map(plus_newline, map(len, parts)), initial=start))
-        self._starts = starts
+            self.first_lines.append(count)
+            self._starts.append(array("l", accumulate(map(plus_newline, map(len, parts)),
+                                                      initial=0)))
+            count += len(parts)
         self._changed: dict[int, str] = {}
 
     def __len__(self) -> int:
-        return len(self._starts) - 1
+        return (self.first_lines[-1] + len(self._starts[-1]) - 1) if self._starts else 0
 
     @overload
     def __getitem__(self, index: int) -> str: ...
@@ -665,10 +693,11 @@ class Lines(Sequence[str]):
             index += len(self)
         if self._changed and index in self._changed:
             return self._changed[index]
-        starts = self._starts
-        if not 0 <= index < len(starts) - 1:
+        if not 0 <= index < len(self):
             raise IndexError("line index out of range")
-        return self._text[starts[index]:starts[index + 1] - 1]
+        k = bisect_right(self.first_lines, index) - 1
+        starts, j = self._starts[k], index - self.first_lines[k]
+        return self._pieces[k][starts[j]:starts[j + 1] - 1]
 
     def __setitem__(self, index: int, text: str) -> None:
         if not 0 <= index < len(self):
@@ -676,15 +705,13 @@ class Lines(Sequence[str]):
         self._changed[index] = text
 
     def __iter__(self) -> Iterator[str]:
-        # 4,096 lines a split (a parse of the whole program reads them all: one call a line
-        # cost it 4 %, bench/parse.py).
-        text, starts, changed = self._text, self._starts, self._changed
-        count = len(starts) - 1
-        for first in range(0, count, 4096):
-            last = min(first + 4096, count)
-            lines = text[starts[first]:starts[last] - 1].split("\n")
+        changed = self._changed
+        for piece, first in zip(self._pieces, self.first_lines, strict=True):
+            lines = piece.split("\n")  # one split a piece (a whole parse reads them all)
+            if piece.endswith("\n"):
+                lines.pop()
             for index, line in changed.items():
-                if first <= index < last:
+                if first <= index < first + len(lines):
                     lines[index - first] = line
             yield from lines
 
@@ -699,31 +726,32 @@ class Program:
     __slots__ = ("_blocks", "exe_scan", "file", "label_lines", "labels", "lines", "name",
                  "notes")
 
-    def __init__(self, name: str, file: str, text: str) -> None:
+    def __init__(self, name: str, file: str, text: str | list[str]) -> None:
+        """``text``: the program's text, or its line-aligned pieces (each but the last
+        ending in a newline: from_data)."""
         self.name = name
         self.file = file
         # The processes its EXEs name, and whether one is not a constant: read from the text
         # once (the compiler's exe_targets), where the program is read (off the loop).
         self.exe_scan: tuple[frozenset[int], bool, frozenset[tuple[int, str]]] | None = None
-        if text.startswith("\ufeff"):  # a UTF-8 byte-order mark, as some editors write
-            text = text[1:]
-        if "\r" in text:
-            text = _lf_only(text)
-        # A long text is split and searched a line-aligned piece at a time: no single call
-        # into C holds the interpreter long while the loop serves the fieldbus beside the
-        # thread that reads the program.
-        spans = list(_spans(text))
-        self.lines = lines = Lines(text, spans)
+        # A long text is split, searched and kept a line-aligned piece at a time: no single
+        # call into C holds the interpreter long while the loop serves the fieldbus beside
+        # the thread that reads the program.
+        pieces = [text[a:b] for a, b in _spans(text)] if isinstance(text, str) else text
+        if pieces and pieces[0].startswith("\ufeff"):  # a UTF-8 byte-order mark
+            pieces[0] = pieces[0][1:]
+        pieces = [_lf_only(piece) if "\r" in piece else piece for piece in pieces]
+        self.lines = lines = Lines(pieces)
         # Diagnostics of the file as a whole, found before any block is parsed.
         self.notes: list[Diagnostic] = []
-        if any(_CYRILLIC.search(text, start, end) for start, end in spans):
+        if any(_CYRILLIC.search(piece) for piece in pieces):
             self._latinise(lines)
         self.labels: dict[str, int] = {}
         self.label_lines: list[tuple[str, int]] = []  # every definition, duplicates too
-        line_no, last = 0, 0
-        for start, end in spans:
-            for m in _LABELS.finditer(text, start, end):
-                line_no += text.count("\n", last, m.start())
+        for piece, first in zip(pieces, lines.first_lines, strict=True):
+            line_no, last = first, 0
+            for m in _LABELS.finditer(piece):
+                line_no += piece.count("\n", last, m.start())
                 last = m.start()
                 self.label_lines.append((m.group(1), line_no))
                 # A jump's name had its look-alikes read as Latin: so has the label it names.
@@ -771,9 +799,13 @@ class Program:
     def from_data(cls, data: bytes, name: str, display: str) -> Program:
         """A program file's bytes, as :meth:`from_path` reads them."""
         try:
-            text = data.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise ProgramSyntaxError([not_utf8(data, exc, display)]) from None
+            text = _decoded_pieces(data)
+        except UnicodeDecodeError:
+            try:  # again in one piece, for the error's position in the whole file
+                data.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise ProgramSyntaxError([not_utf8(data, exc, display)]) from None
+            raise
         return cls(name, display, text)
 
     def __len__(self) -> int:
