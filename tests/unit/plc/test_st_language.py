@@ -42,6 +42,24 @@ def test_division_truncates_toward_zero_and_mod_takes_the_dividends_sign() -> No
         -3, -1, 1, -3, 3.5)
 
 
+def test_by_a_positive_constant_the_same_rules_hold() -> None:
+    """By a positive constant the compiled code divides inline, not through a helper: the
+    standard's results all the same, nested and with a dividend that is read once."""
+    plc = run("""
+        a := -7;
+        q1 := a / 2;                    (* -3 *)
+        m1 := a MOD 2;                  (* -1 *)
+        m2 := a MOD 7;                  (* 0 *)
+        q2 := 7 / 2;                    (* 3 *)
+        q3 := (a / 2) MOD 2;            (* -3 MOD 2 = -1 *)
+        q4 := (a MOD 4) / 3 + a / 3;    (* -3 / 3 + -2 = -3 *)
+        n := n + 1;
+        q5 := (n * -5) / 2;             (* n = 1: -5 / 2 = -2 *)
+    """, "a, q1, q2, q3, q4, q5, m1, m2, n : INT;")
+    assert [plc[f"main.{v}"] for v in ("q1", "m1", "m2", "q2", "q3", "q4", "q5")] == [
+        -3, -1, 0, 3, -1, -3, -2]
+
+
 def test_precedence_of_the_standard() -> None:
     plc = run("""
         x1 := 2 + 3 * 4;                 (* 14 *)
