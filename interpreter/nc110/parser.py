@@ -657,28 +657,32 @@ class Lines(Sequence[str]):
     when asked for.  ``lines[i] = text`` (the Cyrillic look-alikes read as Latin) keeps the
     new text beside the old."""
 
-    __slots__ = ("_changed", "_pieces", "_starts", "first_lines")
+    __slots__ = ("_changed", "_count", "_pieces", "_starts", "first_lines")
 
     def __init__(self, pieces: Sequence[str]) -> None:
         self._pieces = list(pieces)
         # starts[k][j]: where piece k's line j starts; starts[k][j + 1] - 1: where it ends
-        # (its newline, or the piece's end for a last line without one).
-        self._starts: list[array[int]] = []
+        # (its newline, or the piece's end for a last line without one) -- made the first
+        # time a line of the piece is asked for (a parse of the whole reads them in order).
+        self._starts: list[array[int] | None] = [None] * len(self._pieces)
         self.first_lines: list[int] = []  # the index of each piece's first line
         count = 0
-        plus_newline = (1).__add__
         for piece in self._pieces:
-            parts = piece.split("\n")
-            if piece.endswith("\n"):
-                parts.pop()  # the "" after the piece's last newline
             self.first_lines.append(count)
-            self._starts.append(array("l", accumulate(map(plus_newline, map(len, parts)),
-                                                      initial=0)))
-            count += len(parts)
+            count += piece.count("\n") + (not piece.endswith("\n"))
+        self._count = count
         self._changed: dict[int, str] = {}
 
+    def _piece_starts(self, k: int) -> array[int]:
+        starts = self._starts[k]
+        if starts is None:
+            plus_newline = (1).__add__
+            starts = self._starts[k] = array("l", accumulate(
+                map(plus_newline, map(len, self._piece_lines(k, False))), initial=0))
+        return starts
+
     def __len__(self) -> int:
-        return (self.first_lines[-1] + len(self._starts[-1]) - 1) if self._starts else 0
+        return self._count
 
     @overload
     def __getitem__(self, index: int) -> str: ...
@@ -688,7 +692,16 @@ class Lines(Sequence[str]):
 
     def __getitem__(self, index: int | slice) -> str | list[str]:
         if isinstance(index, slice):
-            return [self[i] for i in range(*index.indices(len(self)))]
+            start, stop, step = index.indices(len(self))
+            if step != 1:
+                return [self[i] for i in range(start, stop, step)]
+            out: list[str] = []  # a piece split once for all its lines asked for
+            k = bisect_right(self.first_lines, start) - 1
+            while start < stop:
+                lines, first = self._piece_lines(k), self.first_lines[k]
+                out += lines[start - first:stop - first]
+                start, k = first + len(lines), k + 1
+            return out
         if index < 0:
             index += len(self)
         if self._changed and index in self._changed:
@@ -696,7 +709,7 @@ class Lines(Sequence[str]):
         if not 0 <= index < len(self):
             raise IndexError("line index out of range")
         k = bisect_right(self.first_lines, index) - 1
-        starts, j = self._starts[k], index - self.first_lines[k]
+        starts, j = self._piece_starts(k), index - self.first_lines[k]
         return self._pieces[k][starts[j]:starts[j + 1] - 1]
 
     def __setitem__(self, index: int, text: str) -> None:
@@ -705,15 +718,18 @@ class Lines(Sequence[str]):
         self._changed[index] = text
 
     def __iter__(self) -> Iterator[str]:
-        changed = self._changed
-        for piece, first in zip(self._pieces, self.first_lines, strict=True):
-            lines = piece.split("\n")  # one split a piece (a whole parse reads them all)
-            if piece.endswith("\n"):
-                lines.pop()
-            for index, line in changed.items():
-                if first <= index < first + len(lines):
-                    lines[index - first] = line
-            yield from lines
+        for k in range(len(self._pieces)):  # one split a piece (a whole parse reads them all)
+            yield from self._piece_lines(k)
+
+    def _piece_lines(self, k: int, changed: bool = True) -> list[str]:
+        piece, first = self._pieces[k], self.first_lines[k]
+        lines = piece.split("\n")
+        if piece.endswith("\n"):
+            lines.pop()
+        for index, line in self._changed.items() if changed else ():
+            if first <= index < first + len(lines):
+                lines[index - first] = line
+        return lines
 
 
 class Program:
