@@ -128,15 +128,11 @@ class Gateway:
 
     async def _open(self, stack: contextlib.AsyncExitStack,
                     loop: asyncio.AbstractEventLoop) -> None:
-        # A thread that reads a program (or serves the CAN side) keeps the GIL for up to
-        # sys.getswitchinterval() each time the loop asks for it back: 5 ms by default, so
-        # the loop's 1 ms ticks came 10.4 ms late at p99 while a 10 MB program was read, and
-        # 1.5-2.3 ms at 0.5 ms, the load itself no slower (alternating runs, issue 24); the
-        # CANopen hub's frames need it at 0.2 ms (lifecycle.GIL_SWITCH_S).
-        # `ncgate run` sets it for its whole process (cli/main.py); this gives it to every
-        # gateway of the Python API too (a test's virtual PLC), restored on exit; and the
-        # young generation's size (lifecycle.GC_YOUNG_OBJECTS).
-        stack.callback(tune_interpreter())
+        # The young generation's size (lifecycle.GC_YOUNG_OBJECTS) while this gateway is
+        # open, restored on exit.  The switch interval is the process's (lifecycle's
+        # tune_interpreter says why): `ncgate run` sets 0.2 ms for its whole process
+        # (cli/main.py), a program embedding a gateway calls tune_interpreter() for the same.
+        stack.callback(tune_interpreter(switch_interval=False))
         # A gateway runs for a shift: memory keeps a window of the trace, a file (if asked
         # for) every event.
         trace = Trace(keep=self.config.trace.ring)

@@ -31,12 +31,17 @@ GIL_SWITCH_S = 0.0002
 GC_YOUNG_OBJECTS = 5000
 
 
-def tune_interpreter() -> Callable[[], None]:
-    """Give this process the gateway's switch interval and young generation (at least): what
-    ``ncgate run`` does for its whole process and a :class:`Gateway` while it is open.
-    Returns what puts back what was there."""
+def tune_interpreter(switch_interval: bool = True) -> Callable[[], None]:
+    """Give this process the gateway's young generation and (``switch_interval``) its switch
+    interval, at least: ``ncgate run`` takes both for its whole process.  A :class:`Gateway`
+    of the Python API takes only the young generation while it is open: the switch interval
+    decides how every thread of the process takes turns -- a test's own CANopen master
+    receiving a TPDO storm in the same process was a quarter slower at 0.2 ms
+    (bench/canopen_node.py) -- so a program that embeds a gateway calls this itself to choose
+    ``run``'s.  Returns what puts back what was there."""
     interval, threshold = sys.getswitchinterval(), gc.get_threshold()
-    sys.setswitchinterval(min(interval, GIL_SWITCH_S))
+    if switch_interval:
+        sys.setswitchinterval(min(interval, GIL_SWITCH_S))
     gc.set_threshold(max(threshold[0], GC_YOUNG_OBJECTS), *threshold[1:])
 
     def restore() -> None:
