@@ -1,7 +1,7 @@
 """Online change of a big PLC program: does the scan stay on time (issue 29, item 5)?
 
 Load: ``bench/plc.py``'s generated 1,000-statement program (100 TONs, a FOR loop, IFs) as
-``[plc] logic`` of a running gateway (``plc.scan_ms`` 10, the switch interval ``run`` sets),
+``[plc] logic`` of a running gateway (``plc.scan_ms`` 10, the interpreter as ``run`` tunes it),
 reloaded ``--reloads`` times in each of three phases, side by side in one run:
 
 - quiet: no reload, the scan alone (the baseline);
@@ -37,13 +37,12 @@ import argparse
 import asyncio
 import gc
 import importlib.util
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 from ncgate.gateway import Gateway
-from ncgate.gateway.cli.main import SWITCH_INTERVAL_S
+from ncgate.gateway.lifecycle import tune_interpreter
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind
 from ncgate.plc.st import compiler
@@ -130,7 +129,7 @@ async def big(statements: int, reloads: int, pauses: GcPauses) -> None:
 
 
 async def main(reloads: int, statements: int, big_reloads: int) -> None:
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    tune_interpreter()  # what `ncgate run` sets for its process
     pauses = GcPauses()
     with tempfile.TemporaryDirectory() as folder:
         root = Path(folder)

@@ -25,7 +25,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Iterator
-from typing import IO, Any, BinaryIO
+from typing import IO, Any, BinaryIO, NoReturn
 
 from ncgate.errors import NcgateError
 
@@ -96,7 +96,7 @@ class ChildJobs:
                 child.kill()
                 child.wait()
 
-    def _raise_lost(self, child: subprocess.Popen[bytes], exc: BaseException) -> None:
+    def _raise_lost(self, child: subprocess.Popen[bytes], exc: BaseException) -> NoReturn:
         with self._lock:
             cancelled = child in self._cancelled
         if cancelled:

@@ -16,7 +16,7 @@ from ncgate.config import Config, default_script_path, load_config
 from ncgate.errors import NcgateError
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
-from ncgate.gateway.lifecycle import GIL_SWITCH_S, tune_interpreter
+from ncgate.gateway.lifecycle import tune_interpreter
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
@@ -25,7 +25,6 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_BUG = 70  # EX_SOFTWARE (sysexits.h): an internal error
-SWITCH_INTERVAL_S = GIL_SWITCH_S  # one figure, the gateway's (gateway/lifecycle.py)
 
 
 def build_parser() -> argparse.ArgumentParser:

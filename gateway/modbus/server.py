@@ -525,10 +525,9 @@ class _Connection(asyncio.Protocol):
         """Answer the complete frames in the buffer, in order, at most FRAMES_PER_TURN (or
         its share of ROUND_S of the loop's time) in one loop turn (then the next turn is due
         after everyone else's: a pipelining client gets its share and stalls nobody), unless
-        the client
-        stopped reading its answers (then the rest waits in the buffer until it does).  A
-        backlog above BACKLOG_HIGH stops reading from the client until its turns have brought
-        it under BACKLOG_LOW."""
+        the client stopped reading its answers (then the rest waits in the buffer until it
+        does).  A backlog above BACKLOG_HIGH stops reading from the client until its turns
+        have brought it under BACKLOG_LOW."""
         self.turn = None
         due = self.server.due_turns
         due.discard(self)

@@ -94,6 +94,7 @@ class _Reader:
     def load(self, path: Path, version: Version, process: int) -> Program:
         data = path.read_bytes()
         name = program_name(path)
+        checked = False  # by a child: its blocks are parsed when they run (a few µs each)
         # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
         if not self.options.lazy_parse and len(data) >= CHILD_BYTES:
             try:
@@ -106,11 +107,11 @@ class _Reader:
                 errors = [d for frame in frames for d in frame]
                 if errors:
                     raise ProgramSyntaxError(errors)
-                # Checked: its blocks are parsed when they run, on the loop (a few µs each).
-                program = Program.from_data(data, name, path.name)
-                program.exe_scan = scan
-                return program
+                checked = True
         program = Program.from_data(data, name, path.name)
+        if checked:
+            program.exe_scan = scan
+            return program
         if not self.options.lazy_parse:
             errors = _errors(program, self.options, self.storage, process)
             if errors:
