@@ -93,14 +93,16 @@ class ProgramStore:
             raise result.with_traceback(None)  # kept: no traceback piles up on it
         return result
 
-    def _read(self, path: Path, version: Version, process: int) -> ProgramText | Exception:
+    def _read(self, path: Path, version: Version, process: int,
+              apart: bool = False) -> ProgramText | Exception:
+        """``apart``: called from a thread of its own (preload, read_ahead), not the loop."""
         with self._lock:
             cached = self._cache.get((path, process))
         if cached is not None and cached[0] == version:
             return cached[1]
         result: ProgramText | Exception
         try:
-            result = self._reader.load(path, version, process)
+            result = self._reader.load(path, version, process, apart)
         except (ProgramError, ProgramNotFoundError) as exc:
             result = exc
         except ChildCancelled as exc:
@@ -130,7 +132,7 @@ class ProgramStore:
         what is wrong with it for the :meth:`load` that follows on the loop."""
         try:
             path = self.storage.locate(name, None)
-            self._read(path, file_version(path), process)
+            self._read(path, file_version(path), process, apart=True)
         except (ProgramNotFoundError, OSError):
             pass  # the load on the loop says so
 
@@ -150,7 +152,7 @@ class ProgramStore:
                     cached = self._cache.get((path, k))
                 if cached is None or cached[0] != version:
                     read += 1
-                program = self._read(path, version, k)
+                program = self._read(path, version, k, apart=True)
             except (ProgramNotFoundError, OSError):
                 continue  # the EXE says so, when it runs
             if isinstance(program, Exception):

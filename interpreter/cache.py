@@ -4,8 +4,9 @@ BIG_LINES lines, the last CACHED_BLOCKS used of a longer one.
 A parsed block is a few dozen objects the garbage collector walks in every full collection:
 with 20,000 blocks of a 10 MB program parsed, one took 89 ms (4,096 blocks: 10 ms; 1,024:
 4 ms), and a program run for a shift parses all of its 489,000.  A long program's blocks are
-parsed again when they run again (a few µs each), as a control that streams a program from
-disk reads it again.
+parsed and compiled again when they run again, as a control that streams a program from
+disk reads it again: about 27 µs a block, so a loop over more than CACHED_BLOCKS blocks of
+a long program decodes about half as fast as with every block kept (its trace the same).
 """
 
 from __future__ import annotations

@@ -70,8 +70,11 @@ class ProgramReader(Protocol):
     """Reads and checks a dialect's program files for the program store, which keeps the
     result per (file, process, version); the reader may keep what a file's processes share."""
 
-    def load(self, path: Path, version: Version, process: int) -> ProgramText:
-        """The program file ``path`` holds for ``process``, checked for it.
+    def load(self, path: Path, version: Version, process: int,
+             apart: bool = False) -> ProgramText:
+        """The program file ``path`` holds for ``process``, checked for it.  ``apart``: the
+        caller is a thread of its own that may wait (never the event loop's): a reader may
+        then check a big file in a child process, which the loop would only wait for.
 
         Raises ``ProgramSyntaxError`` with every error that keeps it from starting, or
         ``ProgramNotFoundError`` when the file has no program for the process."""

@@ -51,7 +51,8 @@ class _Reader:
             self._files[path] = cached
         return cached
 
-    def load(self, path: Path, version: Version, process: int) -> IsgProgram:
+    def load(self, path: Path, version: Version, process: int,
+             apart: bool = False) -> IsgProgram:
         _, source, diagnostics = self._entry(path, version)
         program = source.program(process)
         # A section is a program: only its own errors (and a file-wide one) keep it from

@@ -91,12 +91,15 @@ class _Reader:
         self.storage = storage
         self.jobs = ChildJobs()
 
-    def load(self, path: Path, version: Version, process: int) -> Program:
+    def load(self, path: Path, version: Version, process: int,
+             apart: bool = False) -> Program:
         data = path.read_bytes()
         name = program_name(path)
         checked = False  # by a child: its blocks are parsed when they run (a few µs each)
         # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
-        if not self.options.lazy_parse and len(data) >= CHILD_BYTES:
+        # On the loop (an EXE whose program was not read ahead) the child would only be
+        # waited for, and it checks slower than this process does: checked here then.
+        if apart and not self.options.lazy_parse and len(data) >= CHILD_BYTES:
             try:
                 scan, *frames = self.jobs.run(
                     f"{__name__}:check_in_child",

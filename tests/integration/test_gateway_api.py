@@ -327,8 +327,9 @@ async def test_the_programs_an_exe_starts_are_read_ahead_off_the_loop(
     read_on: dict[str, str] = {}
     real_read = ProgramStore._read
 
-    def spy(self: ProgramStore, path: Path, version: object, process: int) -> object:
-        result = real_read(self, path, version, process)  # type: ignore[arg-type]
+    def spy(self: ProgramStore, path: Path, version: object, process: int,
+            apart: bool = False) -> object:
+        result = real_read(self, path, version, process, apart)  # type: ignore[arg-type]
         read_on.setdefault(path.stem, threading.current_thread().name)
         return result
 

@@ -47,7 +47,7 @@ def test_a_good_big_program_is_checked_apart_and_parsed_here_as_it_runs(
         tmp_path: Path) -> None:
     (tmp_path / "SUB.nc").write_text("N1M30\n")
     path = write_big(tmp_path, "BIG", head="N1(EXE,2,SUB)\n")
-    program = reader(tmp_path).load(path, file_version(path), 1)
+    program = reader(tmp_path).load(path, file_version(path), 1, apart=True)
     # The check ran elsewhere: not one block was parsed in this process ...
     assert program._blocks.count(None) == len(program) == 30_002
     # ... and what the engine asks of the program is what reading it here gives.
@@ -64,7 +64,7 @@ def test_a_bad_big_program_has_the_errors_a_check_here_finds(tmp_path: Path) -> 
     bad = "".join(f"N{n}(WAI,SA99999=1)\n" for n in range(1200))
     path = write_big(tmp_path, "BAD", head=bad, tail="N9(EXE,2,NOWHERE)\nM30\n")
     with pytest.raises(ProgramSyntaxError) as caught:
-        reader(tmp_path).load(path, file_version(path), 1)
+        reader(tmp_path).load(path, file_version(path), 1, apart=True)
     found = [d.render() for d in caught.value.diagnostics]
     assert found == here(path, 1)
     assert len(found) == 1201 and "SA99999" in found[0] and "NOWHERE" in found[-1]
@@ -74,7 +74,7 @@ def test_a_big_file_that_is_not_utf8_names_its_first_bad_byte(tmp_path: Path) ->
     path = write_big(tmp_path, "LATIN")
     path.write_bytes(path.read_bytes() + b"N1(MSG,caf\xe9)\n")
     with pytest.raises(ProgramSyntaxError) as caught:
-        reader(tmp_path).load(path, file_version(path), 1)
+        reader(tmp_path).load(path, file_version(path), 1, apart=True)
     with pytest.raises(ProgramSyntaxError) as direct:
         Program.from_path(path, display=path.name)
     assert [d.render() for d in caught.value.diagnostics] == [
@@ -134,8 +134,25 @@ def test_a_reader_whose_child_fails_checks_here(tmp_path: Path,
     bad = "N1(WAI,SA99999=1)\n"
     path = write_big(tmp_path, "BAD", head=bad)
     with pytest.raises(ProgramSyntaxError) as caught:
-        reader(tmp_path).load(path, file_version(path), 1)
+        reader(tmp_path).load(path, file_version(path), 1, apart=True)
     assert [d.render() for d in caught.value.diagnostics] == here(path, 1)
     good = write_big(tmp_path, "GOOD")
-    program = reader(tmp_path).load(good, file_version(good), 1)
+    program = reader(tmp_path).load(good, file_version(good), 1, apart=True)
     assert program._blocks.count(None) == 0  # checked here: every block parsed
+
+
+def test_on_the_loop_a_big_program_is_checked_here(tmp_path: Path) -> None:
+    """An EXE whose program was not read ahead loads it on the loop: a child would only be
+    waited for (and checks slower than this process), so the check is done here."""
+    spawned: list[object] = []
+
+    class Watching(ChildJobs):
+        def run(self, *args: object) -> list[object]:  # type: ignore[override]
+            spawned.append(args)
+            return super().run(*args)  # type: ignore[arg-type]
+
+    path = write_big(tmp_path, "BIG")
+    on_the_loop = reader(tmp_path)
+    on_the_loop.jobs = Watching()
+    program = on_the_loop.load(path, file_version(path), 1)  # apart=False: the loop's call
+    assert spawned == [] and program._blocks.count(None) == 0  # every block parsed here
