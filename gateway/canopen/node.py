@@ -161,6 +161,7 @@ class CanopenNode:
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
         self._pending: set[asyncio.Handle] = set()  # callbacks handed to the loop, not yet run
+        self._unsubscribe: list[Callable[[], None]] = []  # from the trace and the image
         self._sdo_source = Source(SourceKind.CANOPEN, f"SDO 0x{0x600 + self.node_id:03X}")
         self._refusals = RateLimitedLog(log)
         # The second SDO server (0x1201), while its COB-IDs are valid: (rx, tx) and it.
@@ -198,9 +199,9 @@ class CanopenNode:
         self._configure_second_sdo()
         engine = self.backend.engine
         engine.state_listeners.append(self._on_state)
-        engine.trace.subscribe(self._on_event)
+        self._unsubscribe.append(engine.trace.subscribe(self._on_event))
         self._publish()
-        self._unsubscribe_image = self.backend.image.subscribe(self._on_image)
+        self._unsubscribe.append(self.backend.image.subscribe(self._on_image))
         self._boot()
         log.info("CANopen node %d on %s/%s (%s)", self.node_id, cfg.interface, cfg.channel,
                  self.node.nmt.state)
@@ -226,33 +227,50 @@ class CanopenNode:
                  "'ws://%s:%d/'", host, port)
 
     async def close(self) -> None:
-        # Nothing scheduled from the CAN thread runs after this: pending callbacks are
-        # cancelled, and any that race in are dropped (call_soon checks _closed).
-        self._closed = True
+        """Leave the bus; a second close does nothing.  The engine runs on meanwhile and
+        after (the gateway stops its clock once every adapter is closed), so first nothing of
+        it reaches the node any more, nothing the node armed or handed the loop runs, and
+        only then the bus goes: an SND, a write or a state change that reached the node after
+        that made a TPDO send on a bus that was gone ("Not connected to CAN bus", raised in
+        the engine's turn)."""
+        if self._closed:
+            return
+        self._closed = True  # call_soon drops what races in from the CAN thread from here
+        self._detach()
         for handle in list(self._pending):
             handle.cancel()
         self._pending.clear()
         self._refusals.flush()
-        if self._hub is not None:
-            # In a thread: the loop goes on serving (and the NC on running) while the hub's
-            # thread sees the request, within HUB_POLL_S.
-            await asyncio.to_thread(self._hub.shutdown)
-            self._hub.server_close()
-            self._hub = None
         self.pdos.close()
+        # Also the deadlines watched in OPERATIONAL (RPDO event timers, the SYNC's cycle
+        # period), which Pdos.close leaves armed: run out, they raised AL150 and its EMCY.
+        self.pdos.left_operational()
         if self._emcy_timer is not None:
             self._emcy_timer.cancel()
+        self._emcy_queue.clear()
         if self.heartbeats is not None:
             self.heartbeats.close()
         self.node.nmt.stop_heartbeat()
         self.node.sdo.close()  # type: ignore[attr-defined]
         if self._second_sdo is not None:
             self._second_sdo[2].close()
+        # Joins the receive thread: a timer it armed just before is disarmed by _closed.
+        self.network.disconnect()
+        if self._hub is not None:
+            # In a thread: the loop goes on serving (and the NC on running) while the hub's
+            # thread sees the request, within HUB_POLL_S.
+            hub, self._hub = self._hub, None
+            await asyncio.to_thread(hub.shutdown)
+            hub.server_close()
+
+    def _detach(self) -> None:
+        """No engine event (trace, process state, image write) reaches the node from now."""
         engine = self.backend.engine
         if self._on_state in engine.state_listeners:
             engine.state_listeners.remove(self._on_state)
-        self._unsubscribe_image()
-        self.network.disconnect()
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        self._unsubscribe = []
 
     def _boot(self) -> None:
         """Boot-up message, then PRE-OPERATIONAL (or OPERATIONAL with nmt_autostart)."""
@@ -274,7 +292,8 @@ class CanopenNode:
     # -- what the PDOs and the heartbeat consumer use (pdo.Host) ----------------------------
 
     def send(self, cob: int, data: bytes) -> None:
-        self.network.send_message(cob, data)
+        if not self._closed:  # (a timer the receive thread armed as close began)
+            self.network.send_message(cob, data)
 
     def subscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
         self.network.subscribe(cob, callback)
@@ -725,6 +744,8 @@ class CanopenNode:
     def _lost(self, what: str, source: Source, emcy: int, detail: int) -> None:
         """A communication error (loop): alarm AL150, its EMCY, 0x1029's NMT reaction,
         then canopen.on_master_lost's for the processes."""
+        if self._closed:
+            return  # a deadline that ran out as the node closed: nobody is lost
         reaction = self.config.canopen.on_master_lost
         done = {MasterLost.NONE: "no reaction (canopen.on_master_lost = \"none\")",
                 MasterLost.HOLD: "feed hold", MasterLost.RESET: "reset"}[reaction]
@@ -776,8 +797,8 @@ class CanopenNode:
         self._emit(0, b"")
 
     def _emit(self, code: int, data: bytes) -> None:
-        if self.stopped:
-            return  # no EMCY in STOPPED (CiA 301); the history keeps the error
+        if self.stopped or self._closed:
+            return  # no EMCY in STOPPED (CiA 301; the history keeps the error), nor closed
         if len(self._emcy_queue) == EMCY_QUEUE:
             self._emcy_queue.popleft()
         self._emcy_queue.append(struct.pack("<HB5s", code, self._error_register(), data))

@@ -7,16 +7,23 @@ import asyncio
 import logging
 import threading
 import time
+from pathlib import Path
+from typing import Any
 
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
 from ncgate.config import Config
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.gateway.canopen.codes import ABORT_GENERAL_ERROR
 from ncgate.gateway.canopen.dictionary import SA_BYTES
+from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.events import Event
 
-from .conftest import Master
+from .conftest import Master, u16, u32
+from .test_sync_mapping import operational
 
 
 @pytest.mark.parametrize("ncgate_config", [{"canopen.nmt_autostart": True}], indirect=True)
@@ -27,6 +34,109 @@ async def test_enter_and_leave_at_once_logs_nothing_amiss(
         pass
     await asyncio.sleep(0)  # one more turn: what the node left on the loop would run here
     assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
+
+
+# P1 sends to the external P4 (which never waits: no rendezvous) and dwells, again and again:
+# an SND event, and two state changes (RUNNING, DWELL), every 20 us of wall time.
+PUMP = '"TOP"N1(SND,4)\nN2(DLY,0.001)\nN3(BNC,TOP)\n'
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.nmt_autostart": True,
+                                            "canopen.hub": True}], indirect=True)
+async def test_no_engine_event_reaches_the_node_once_its_close_began(
+        cell: Path, master: Master, gw: Gateway) -> None:
+    """The engine runs on while the node closes (the hub's thread is stopped from a thread,
+    and the loop serves meanwhile) and after (the gateway stops its clock after every
+    adapter): its SNDs and state changes must not make the node send from then on.  They
+    did: after ``network.disconnect()`` the send raised "Not connected to CAN bus" inside
+    the driver's turn of the engine, in the loop's exception handler."""
+    (cell / "PUMP.nc").write_text(PUMP)
+    node = gw.canopen_node
+    assert node is not None
+    loop = asyncio.get_running_loop()
+    failures: list[dict[str, Any]] = []
+    enough = asyncio.Event()  # SNDs went on after the close, or something failed
+
+    def on_error(_: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        failures.append(context)
+        enough.set()
+
+    closed = False
+    snds_since = 0
+
+    def count(event: Event) -> None:
+        nonlocal snds_since
+        if closed and isinstance(event, ev.Snd):
+            snds_since += 1
+            if snds_since >= 50:
+                enough.set()
+
+    previous = loop.get_exception_handler()
+    loop.set_exception_handler(on_error)
+    gw.engine.trace.subscribe(count)
+    try:
+        await gw.start("PUMP")
+        await master.next(0x280 + master.node_id)  # TPDO2: an SND's frame went out
+        sent = node.pdos.sent
+        await node.close()
+        closed = True
+        async with asyncio.timeout(10):
+            await enough.wait()
+    finally:
+        loop.set_exception_handler(previous)
+    assert [str(c.get("exception") or c["message"]) for c in failures] == []
+    assert snds_since >= 50  # the engine ran on after the close: its SNDs came
+    assert node.pdos.sent == sent  # and none made the node send, nor did one while closing
+    await node.close()  # again, as the gateway's exit does: nothing happens
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.nmt_autostart": True}], indirect=True)
+async def test_a_gateway_stopped_under_a_poller_sends_nothing_once_its_bus_is_gone(
+        cell: Path, master: Master, ncgate_config: Config) -> None:
+    """The SIGTERM of a gateway with a Modbus poller connected: the Modbus server, closed
+    after the node, waits for its connections to be lost, and the engine runs meanwhile (the
+    clock stops last).  Its SNDs reached the closed node, whose send raised "Not connected to
+    CAN bus" in the driver's turn (the loop's exception handler; the engine stopped there)."""
+    (cell / "PUMP.nc").write_text(PUMP)
+    loop = asyncio.get_running_loop()
+    failures: list[dict[str, Any]] = []
+    previous = loop.get_exception_handler()
+    loop.set_exception_handler(lambda _, context: failures.append(context))
+    try:
+        async with Gateway(ncgate_config) as gw:
+            plc = VirtualPLC(*gw.modbus_address, ncgate_config)
+            await plc.connect()  # a read answered: the server holds the connection
+            try:
+                await gw.start("PUMP")
+                await master.next(0x280 + master.node_id)  # TPDO2: the SNDs' frames go out
+            except BaseException:
+                plc.close()
+                raise
+        plc.close()
+    finally:
+        loop.set_exception_handler(previous)
+    assert [str(c.get("exception") or c["message"]) for c in failures] == []
+
+
+async def test_no_timer_of_a_closed_node_acts(clocked: Gateway, master: Master,
+                                             clock: ManualClock) -> None:
+    """The deadlines the node watches (an RPDO's event timer, the SYNC's cycle period) were
+    left armed by close: run out after it, they raised AL150 on the gateway and sent the
+    EMCY on a bus that is gone ("Not connected to CAN bus")."""
+    node = clocked.canopen_node
+    assert node is not None
+    await master.download(0x1400, 5, u16(100))  # RPDO1: at least every 100 ms
+    await master.download(0x1006, 0, u32(10_000))  # a SYNC every 10 ms
+    await master.download(0x1800, 5, u16(50))  # TPDO1's event timer
+    await operational(master)
+    master.network.send_message(0x210, bytes(8))  # RPDO1 and SYNC: their deadlines armed
+    master.sync()
+    await master.barrier()
+    await node.close()
+    armed = clock.pending()
+    clock.advance(1.0)  # every deadline runs out
+    assert not [e for e in clocked.trace if e["event"] == "alarm"]
+    assert armed == 0  # nothing the node armed was left
 
 
 async def test_an_sdo_aborted_for_a_stalled_loop_is_never_applied(
