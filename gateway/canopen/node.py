@@ -175,6 +175,15 @@ class CanopenNode:
     # -- life cycle -----------------------------------------------------------------------
 
     async def start(self) -> None:
+        try:
+            self._start()
+        except BaseException:
+            # The gateway closes only an adapter that started: a node left half started
+            # stayed on the bus (its receive thread, SDO answers, heartbeat) for good.
+            await self.close()
+            raise
+
+    def _start(self) -> None:
         cfg = self.config.canopen
         self._closed = False
         self.loop = asyncio.get_running_loop()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 import time
 from pathlib import Path
@@ -18,7 +19,9 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.gateway.canopen.codes import ABORT_GENERAL_ERROR
 from ncgate.gateway.canopen.dictionary import SA_BYTES
+from ncgate.gateway.errors import ListenError
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 
@@ -137,6 +140,22 @@ async def test_no_timer_of_a_closed_node_acts(clocked: Gateway, master: Master,
     clock.advance(1.0)  # every deadline runs out
     assert not [e for e in clocked.trace if e["event"] == "alarm"]
     assert armed == 0  # nothing the node armed was left
+
+
+async def test_a_node_whose_start_failed_leaves_the_bus(cell: Path) -> None:
+    """The gateway closes only an adapter that started: a node whose hub could not listen
+    stayed on the bus (its receive thread, its answers to SDO, its heartbeat) for as long as
+    the process lived."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        config = ncgate_test_config(cell / "ncgate.toml", **{
+            "canopen.hub": True, "canopen.hub_port": taken.getsockname()[1]})
+        with pytest.raises(ListenError, match=r"canopen\.hub_port"):
+            async with Gateway(config):
+                pass
+    bus = f'"Virtual bus channel {config.canopen.channel}"'  # its receive thread's name ends so
+    assert [t.name for t in threading.enumerate() if t.name.endswith(bus)] == []
 
 
 async def test_an_sdo_aborted_for_a_stalled_loop_is_never_applied(
