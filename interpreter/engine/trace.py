@@ -15,6 +15,8 @@ log -- see every one).
 from __future__ import annotations
 
 import json
+import logging
+import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TextIO
@@ -25,6 +27,8 @@ from ncgate.interpreter.engine.states import Where
 EventDict = dict[str, Any]
 _new = tuple.__new__
 Listener = Callable[[Event], None]
+log = logging.getLogger("ncgate.trace")
+FAILURE_LOG_S = 60.0  # a listener that keeps failing: its count logged at most this often
 
 
 class Trace:
@@ -44,6 +48,8 @@ class Trace:
         self._dicts: list[EventDict] = []  # cached dicts of _all
         self._append = self._ring.append if keep is not None else self._all.append
         self._listeners: list[Listener] = []
+        # Listeners that raised: how often, and when that was last logged.
+        self.listener_failures: dict[str, list[float]] = {}
 
     @property
     def events(self) -> list[EventDict]:
@@ -70,7 +76,28 @@ class Trace:
             self.counter = (self.counter + 1) & 0xFFFFFFFF
         self._append(event)
         for listener in self._listeners:
-            listener(event)
+            try:
+                listener(event)
+            except Exception:
+                self._failed(listener, event)
+
+    def _failed(self, listener: Listener, event: Event) -> None:
+        """A listener raised: the event is recorded all the same, the other listeners get it,
+        and the engine's step goes on (a listener is an adapter -- the trace file, the CANopen
+        node, the console -- and one that fails must not stop the cell: it once left the
+        engine's turn halfway through an SND, and the clock never ran again).  Logged with
+        its traceback the first time, then counted and said at most once a minute."""
+        name = getattr(listener, "__qualname__", None) or repr(listener)
+        record = self.listener_failures.setdefault(name, [0, float("-inf")])
+        record[0] += 1
+        now = time.monotonic()
+        if record[0] == 1:
+            log.exception("trace listener %s failed on event %d (%s); the cell goes on",
+                          name, event.seq, type(event).__name__)
+            record[1] = now
+        elif now - record[1] >= FAILURE_LOG_S:
+            log.error("trace listener %s has failed %d times", name, int(record[0]))
+            record[1] = now
 
 
 def to_jsonl(event: EventDict) -> str:

@@ -31,6 +31,28 @@ def test_a_ring_keeps_the_latest_events_and_listeners_hear_every_one() -> None:
     assert trace.seq == 1000
 
 
+def test_a_listener_that_raises_stops_neither_the_others_nor_the_recording(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """One failing adapter (a listener) must not abort the engine's step: the event is kept,
+    the listeners after it hear it, and the failure is logged once with its traceback."""
+    trace = Trace()
+    heard: list[int] = []
+
+    def broken(event: ev.Event) -> None:
+        raise RuntimeError("Not connected to CAN bus")
+
+    trace.subscribe(broken)
+    trace.subscribe(lambda e: heard.append(e.seq))
+    with caplog.at_level("ERROR", logger="ncgate.trace"):
+        record(trace, 5)  # raised out of the first record before
+    assert heard == [1, 2, 3, 4, 5]
+    assert [e["seq"] for e in trace.events] == [1, 2, 3, 4, 5]
+    failures = [r for r in caplog.records if r.name == "ncgate.trace"]
+    assert len(failures) == 1 and failures[0].exc_info is not None
+    assert "broken" in failures[0].getMessage() and "event 1" in failures[0].getMessage()
+    assert [count for count, _ in trace.listener_failures.values()] == [5]
+
+
 def test_a_ring_of_zero_keeps_nothing_but_counts() -> None:
     trace = Trace(keep=0)
     trace.record(ev.Snd, 0.0, 1, ("A.nc", 3, 30), 2)
