@@ -219,6 +219,8 @@ def stored_form(index: int, subindex: int, data: bytes) -> bytes:
 
 # A SYNC handled later than one SYNC period (and at least this) after it arrived is stale.
 SYNC_WINDOW_MIN_S = 0.1
+# The node counts the SYNCs it answered later than each of these (seconds).
+SYNC_LATENCY_BOUNDS = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05)
 
 class Host(Protocol):
     """What the PDOs need of the node."""
@@ -422,6 +424,11 @@ class Pdos:
         self.sent = 0  # TPDO frames
         self.lost_snds = 0  # SND frames that fell out of a full queue
         self.sync_dropped = 0  # synchronous TPDOs not sent: their SYNC was handled too late
+        # From a SYNC frame's time stamp (its arrival on our bus) to its TPDOs sent: the
+        # node's own share of the master's SYNC->TPDO delay, over the SYNCs that sent any.
+        self.sync_answered = 0
+        self.sync_latency_max = 0.0  # seconds
+        self.sync_latency_over = [0] * len(SYNC_LATENCY_BOUNDS)  # answered later than each
         self._last_sync_stamp = 0.0
         self._sync_period = 0.0  # between the last two SYNCs (their frames' time stamps)
         self._lost_logged = 0.0
@@ -741,14 +748,26 @@ class Pdos:
         window_us = param(self.host.node, SYNC_WINDOW, 0)
         if window_us and timestamp and now - timestamp > window_us / 1e6:
             stale = True  # handled after the synchronous window closed (0x1007)
+        sent = self.sent
         for t in list(self.tpdos.values()):
             if t.valid and t.type <= 240:
                 self._sync_tpdo(t, counter, send=not stale)
+        if self.sent != sent and timestamp:
+            self._answered(time.time() - timestamp)
         batches = list(self._sync_pending.values())
         self._sync_pending.clear()
         self.handed += len(batches)
         if batches:
             self.host.call_soon(lambda: self._apply(batches))
+
+    def _answered(self, latency: float) -> None:
+        self.sync_answered += 1
+        if latency > self.sync_latency_max:
+            self.sync_latency_max = latency
+        for i, bound in enumerate(SYNC_LATENCY_BOUNDS):
+            if latency <= bound:
+                break
+            self.sync_latency_over[i] += 1
 
     def _sync_tpdo(self, t: Tpdo, counter: int | None, send: bool = True) -> None:
         if t.type == 0:

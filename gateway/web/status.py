@@ -24,6 +24,7 @@ from ncgate.plc.st.types import ArrayOf, FbOf, Type
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
+    from ncgate.gateway.canopen.pdo import Pdos
 
 WATCH_LIMIT = 200  # ST variables the status shows (the first ones, in declaration order)
 
@@ -168,8 +169,26 @@ def fieldbus(gw: Gateway) -> dict[str, Any]:
             "nmt": node.node.nmt.state,  # its name, e.g. "PRE-OPERATIONAL"
             "heartbeat_ms": gw.config.canopen.heartbeat_ms,
             "masters_lost": list(heartbeats.lost_nodes) if heartbeats is not None else [],
+            "sync": sync_status(node.pdos),
         }
     return out
+
+
+def sync_status(pdos: Pdos) -> dict[str, Any]:
+    """How the node kept up with the SYNC: the SYNCs it answered with TPDOs, the longest
+    time from a SYNC's arrival to its TPDOs sent and how many took longer than each bound,
+    the synchronous TPDOs it dropped (their SYNC handled too late) and the synchronous
+    RPDOs that came outside the window (0x1007)."""
+    from ncgate.gateway.canopen.pdo import SYNC_LATENCY_BOUNDS  # only with a node
+
+    return {
+        "answered": pdos.sync_answered,
+        "latency_max_ms": round(pdos.sync_latency_max * 1000, 3),
+        "later_than_ms": {f"{bound * 1000:g}": n for bound, n
+                          in zip(SYNC_LATENCY_BOUNDS, pdos.sync_latency_over, strict=True)},
+        "tpdos_dropped": pdos.sync_dropped,
+        "rpdos_late": pdos.sync_late_rpdos,
+    }
 
 
 def image_status(gw: Gateway) -> dict[str, Any]:

@@ -306,3 +306,35 @@ async def test_inhibit_time_is_kept_on_a_coarse_loop_clock(clocked: Gateway, mas
     assert master.frames[TPDO1].empty()  # not before the inhibit time is over
     clock.advance(0.0005)
     assert await master.next(TPDO1) == bytes((3, 3, 0, 0))
+
+
+async def test_the_status_says_how_late_the_node_answered_its_syncs(
+        gw: Gateway, master: Master) -> None:
+    """The console's fieldbus status keeps the node's own SYNC record: SYNCs answered, the
+    longest time from a SYNC's arrival to its TPDO sent, and how many took longer than each
+    bound.  A SYNC that waits behind a frame whose handling holds the receive thread 30 ms is
+    answered at least that late (a lower bound the hold guarantees: no time limit asserted)."""
+    import time
+
+    from ncgate.gateway.web.status import fieldbus
+
+    await set_type(master, 0x1800, 1)
+    await operational(master)
+    held = 0x7E0  # no object's COB-ID: a frame only this test listens to, on the node's side
+    gw.canopen_node.network.subscribe(held, lambda *_: time.sleep(0.03))
+    for _ in range(2):
+        master.sync()
+        await master.next(TPDO1)
+    master.network.send_message(held, b"")
+    master.sync()  # queued behind the held frame
+    await master.next(TPDO1)
+    await master.barrier()
+    sync = fieldbus(gw)["canopen"]["sync"]
+    assert sync["answered"] == 3
+    assert sync["latency_max_ms"] >= 30
+    later = sync["later_than_ms"]
+    assert list(later) == ["1", "2", "5", "10", "20", "50"]
+    assert later["20"] >= 1 and later["10"] >= 1
+    counts = list(later.values())
+    assert counts == sorted(counts, reverse=True) and counts[0] <= 3
+    assert sync["tpdos_dropped"] == 0 and sync["rpdos_late"] == 0
