@@ -14,6 +14,8 @@ section runs in its channel.  The dialect checks its files: ``DialectPlugin.chec
 from __future__ import annotations
 
 import glob
+import logging
+import time
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -35,6 +37,8 @@ from ncgate.plc.st.plcopen import read_logic_file
 LOGIC_SUFFIXES = (".st", ".xml")  # PLC logic (ST, PLCopen XML), checked as the PLC loads it
 
 CONFIG_BESIDE = "ncgate.toml"
+
+log = logging.getLogger("ncgate")
 
 
 
@@ -169,7 +173,13 @@ def start_problems(config: Config) -> tuple[list[str], list[FileReport]]:
         return problems, []
     if config.nc.lazy_parse:
         return problems, []
+    log.info("checking %s (%s bytes) before serving (--allow-missing skips this)", path.name,
+             f"{path.stat().st_size:,}")
+    began = time.perf_counter()
     reports = [r for r in check_files([path], config) if r.errors]
+    errors = sum(r.errors for r in reports)
+    log.info("checked %s in %.1f s: %s", path.name, time.perf_counter() - began,
+             f"{errors} error(s)" if errors else "no error")
     return problems, reports
 
 

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -102,7 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
         "run", help="run the gateway (Modbus TCP, CANopen, web console) until SIGINT/SIGTERM",
         description="The soft PLC, the processes on the wall clock, the Modbus TCP server, "
         "the CANopen node and the web console (http://127.0.0.1:8080/), until SIGINT or "
-        "SIGTERM (clean shutdown, exit 0).",
+        "SIGTERM (clean shutdown, exit 0; one before it serves, while it checks its "
+        "programs, stops it there, exit 0 too).",
     )
     run.add_argument("--config", metavar="C", help="config file (default: built-in)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -378,7 +380,52 @@ def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]
     return out, origins
 
 
+class _StoppedBeforeServing(BaseException):
+    """A SIGINT or SIGTERM before ``run`` serves, raised in the main thread wherever it is
+    (the start-up check of a big program, an import) and caught in :func:`_run`.  A
+    BaseException, as KeyboardInterrupt is, so that no ``except Exception`` on the way
+    swallows it."""
+
+    def __init__(self, signum: int) -> None:
+        self.name = signal.Signals(signum).name
+        super().__init__(self.name)
+
+
+def _stop_before_serving(signum: int, frame: object) -> None:
+    raise _StoppedBeforeServing(signum)
+
+
 def _run(args: argparse.Namespace) -> int:
+    # Until serve() hands SIGINT and SIGTERM to the event loop, they are ours: the check of
+    # a 3 MB main program takes seconds, and the default action would end the process then
+    # with no word (status -15), where a service manager expects a prompt, said, clean stop.
+    # Python runs the handler in the main thread between two bytecodes: it stops the check
+    # at once, but for a call into C, the longest of which (freeing the parse of every
+    # block) held it 70 ms for a 2.7 MB program.  A signal after the handlers are handed
+    # back and before the loop takes them (while the loop is made) is the default's.
+    previous = {sig: signal.signal(sig, _stop_before_serving)
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            serving = _before_serving(args)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    except _StoppedBeforeServing as exc:
+        # The same exit as a stop once serving (serve() returns; exit 0): the stop was asked
+        # for, and nothing had started that it cut short.
+        print(f"ncgate run: stopped before serving ({exc.name})", file=sys.stderr)
+        return EXIT_OK
+    if serving is None:
+        return EXIT_USAGE
+    serving()
+    return EXIT_OK
+
+
+def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
+    """Everything ``run`` does before it serves: the log, the config, the start-up check
+    of its programs, the interpreter's tuning and the event loop.  Returns the call that
+    serves until SIGINT or SIGTERM, or None when the programs cannot run (said)."""
     import asyncio
     import importlib.metadata
     import importlib.util
@@ -395,7 +442,7 @@ def _run(args: argparse.Namespace) -> int:
     overrides, origins = _overrides(args)
     config = load_config(args.config, overrides=overrides, origins=origins)
     if not args.allow_missing and not _programs_ready(config):
-        return EXIT_USAGE
+        return None
     record = str(Path(args.record).resolve()) if args.record else None
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
@@ -406,6 +453,7 @@ def _run(args: argparse.Namespace) -> int:
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
+    run: Callable[[Coroutine[Any, Any, None]], None] = asyncio.run
     if loop == "uvloop":
         try:
             import uvloop
@@ -414,13 +462,11 @@ def _run(args: argparse.Namespace) -> int:
                              "'ncgate[fast]')") from None
         logging.getLogger("ncgate").info("event loop: uvloop %s",
                                          importlib.metadata.version("uvloop"))
-        uvloop.run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                         watch=args.watch))
+        run = uvloop.run
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
-        asyncio.run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                          watch=args.watch))
-    return EXIT_OK
+    return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
+                             watch=args.watch))
 
 
 def _programs_ready(config: Config) -> bool:

@@ -269,3 +269,36 @@ async def test_sigterm_stops_run_while_a_big_program_is_read(tmp_path: Path) -> 
     code, log = await stop_run(proc, lines_before, timeout_s=30)
     assert code == 0 and "stopped" in log, log
     assert "P1 starts BIG" not in log, log  # stopped while it was still being read
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+async def test_a_signal_during_the_start_up_check_stops_run_at_once_and_says_so(
+        tmp_path: Path, sig: int) -> None:
+    """Before it serves, run checks its main program: seconds for 3 MB.  A SIGTERM then (a
+    service manager's stop) or a SIGINT ends it at once, in the check, not after it: a line
+    that says so and exit 0, as a stop once serving.  It was the default action: status -15
+    and not a word, or a KeyboardInterrupt's traceback."""
+    lines = [f"N{n % 9999}G1X{n % 500}Y{(n * 7) % 500}F6000\n" for n in range(150_000)]
+    (tmp_path / "BIG.nc").write_text("".join(lines) + "M30\n")  # 3 MB
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "BIG"\nautostart = true\n[nc.storage]\nMP0 = "."\n'
+                      '[modbus]\nport = 0\n[canopen]\nenabled = false\n')
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "ncgate", "run", "--config", str(config), "--no-web",
+        stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE)
+    assert proc.stderr is not None
+    said: list[str] = []
+    async with asyncio.timeout(20):
+        while not any("checking BIG.nc" in line for line in said):  # the check begins
+            line = (await proc.stderr.readline()).decode()
+            assert line and "Modbus TCP on" not in line, "".join([*said, line])
+            said.append(line)
+    proc.send_signal(sig)
+    async with asyncio.timeout(20):
+        said.append((await proc.stderr.read()).decode())
+        code = await proc.wait()
+    log = "".join(said)
+    assert code == 0, log
+    assert log.endswith(f"ncgate run: stopped before serving ({signal.Signals(sig).name})\n"), log
+    assert "checked BIG.nc" not in log, log  # the check was cut short, not waited for
+    assert "Traceback" not in log
