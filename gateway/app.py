@@ -20,7 +20,7 @@ import contextlib
 import logging
 import secrets
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -35,6 +35,7 @@ from ncgate.gateway.lifecycle import Adapter, tune_interpreter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import OnlineChange, ReloadOutcome, ScanDriver, start_plc
+from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
@@ -72,7 +73,8 @@ class Gateway:
                  canopen_clock: Clock | None = None, cold: bool = False,
                  console: bool = False, web_default_port: int = 0,
                  record: str | Path | None = None,
-                 overrides: Mapping[str, Any] | None = None) -> None:
+                 overrides: Mapping[str, Any] | None = None,
+                 checked: Iterable[CheckedFile] = ()) -> None:
         """``listeners`` hear every trace event from the start (before an autostart).
         ``canopen_clock`` drives the CANopen node's timers (inhibit, event timer, heartbeat
         consumer, SDO timeout): a test passes a
@@ -83,7 +85,9 @@ class Gateway:
         taken leaves the console off; see :attr:`web_address`); off by default in the API
         and the tests.
         ``record``: write the session to this file (``run --record``; ``overrides``: the
-        config overrides the session ran with, for its header)."""
+        config overrides the session ran with, for its header).
+        ``checked``: program files checked already with no error (``run``'s start-up check):
+        the program store does not check those versions again."""
         self.config = config if config is not None else load_config(None)
         self.session = secrets.token_hex(6)  # names this run to the console's pages
         self._console_wanted = console
@@ -91,6 +95,7 @@ class Gateway:
         self._console: WebConsole | None = None
         self._record_path = record
         self._overrides = dict(overrides or {})
+        self._checked = tuple(checked)
         self.recorder: SessionRecorder | None = None
         self._record_detach: Callable[[], None] = lambda: None
         self._listeners = tuple(listeners)
@@ -142,6 +147,7 @@ class Gateway:
             stack.callback(trace_file.close)
             trace.subscribe(trace_file.write)
         runtime = build_runtime(self.config, closed=False, trace=trace)
+        runtime.store.add_checked(self._checked)  # (before an autostart reads the main)
         driver = WallClockDriver(runtime.engine, self.config.nc.time_scale, loop,
                                  stall_s=self.config.nc.stall_s)
         self._runtime, self._driver = runtime, driver

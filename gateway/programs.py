@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ncgate.config import Config
@@ -56,6 +56,17 @@ def dialect_options(config: Config, dialect: Dialect | None = None) -> DialectOp
 READ_AHEAD = 64  # programs read ahead of the EXEs of one started program, at most
 
 
+@dataclasses.dataclass(frozen=True, slots=True)
+class CheckedFile:
+    """A version of a program file checked for a process with no error found, before the
+    store was made (``run``'s start-up check): the store reads it without checking it again
+    (:meth:`ProgramStore.add_checked`)."""
+
+    path: Path
+    version: Version
+    process: int
+
+
 class ProgramStore:
     def __init__(self, config: Config) -> None:
         self.config = config
@@ -75,6 +86,13 @@ class ProgramStore:
         # wiring): what read_ahead follows.
         self.calls: Callable[[ProgramText], frozenset[tuple[int, str]]] = (
             lambda program: frozenset())
+        self._checked: set[CheckedFile] = set()  # (add_checked)
+
+    def add_checked(self, files: Iterable[CheckedFile]) -> None:
+        """Versions of files checked already with no error (``run``'s start-up check): the
+        first read of one of them reads it without checking it again (the check of a 3 MB
+        NC-110 program takes seconds).  A file changed since is checked as any other."""
+        self._checked.update(files)
 
     def channels(self, name: str) -> tuple[int, ...]:
         """The processes program ``name`` starts in when run on its own (an ISG file's
@@ -102,7 +120,8 @@ class ProgramStore:
             return cached[1]
         result: ProgramText | Exception
         try:
-            result = self._reader.load(path, version, process, apart)
+            result = self._reader.load(path, version, process, apart,
+                                       CheckedFile(path, version, process) in self._checked)
         except (ProgramError, ProgramNotFoundError) as exc:
             result = exc
         except ChildCancelled as exc:

@@ -71,10 +71,12 @@ class ProgramReader(Protocol):
     result per (file, process, version); the reader may keep what a file's processes share."""
 
     def load(self, path: Path, version: Version, process: int,
-             apart: bool = False) -> ProgramText:
+             apart: bool = False, checked: bool = False) -> ProgramText:
         """The program file ``path`` holds for ``process``, checked for it.  ``apart``: the
         caller is a thread of its own that may wait (never the event loop's): a reader may
         then check a big file in a child process, which the loop would only wait for.
+        ``checked``: this version of the file was checked for ``process`` already, and had no
+        error (``run``'s start-up check): a reader need not check it again.
 
         Raises ``ProgramSyntaxError`` with every error that keeps it from starting, or
         ``ProgramNotFoundError`` when the file has no program for the process."""

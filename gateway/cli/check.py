@@ -24,11 +24,11 @@ from pathlib import Path
 from ncgate.config import Config, StorageConfig, load_config
 from ncgate.config.loader import BUILT_IN
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.programs import dialect_options, storage_of
+from ncgate.gateway.programs import CheckedFile, dialect_options, storage_of
 from ncgate.interpreter.diagnostics import Diagnostic
 from ncgate.interpreter.dialects import dialect_of
 from ncgate.interpreter.settings import Dialect
-from ncgate.interpreter.storage import PROGRAM_SUFFIXES
+from ncgate.interpreter.storage import PROGRAM_SUFFIXES, file_version
 from ncgate.plc.st.compiler import compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StDiagnostic
 from ncgate.plc.st.nodes import SourceFile
@@ -156,31 +156,43 @@ def missing_devices(config: Config) -> dict[str, str]:
             for name, folder in config.nc.storage.devices.items() if not folder.is_dir()}
 
 
-def start_problems(config: Config) -> tuple[list[str], list[FileReport]]:
+@dataclass(frozen=True, slots=True)
+class StartCheck:
+    """What ``run`` found of its configured programs before it serves (start_problems)."""
+
+    problems: tuple[str, ...]  # what keeps it from running them, said in words
+    reports: tuple[FileReport, ...]  # the main program's report, when it has errors
+    checked: tuple[CheckedFile, ...]  # found without error: the store need not check again
+
+
+def start_problems(config: Config) -> StartCheck:
     """What keeps ``run`` from running its configured programs: a storage folder that does
     not exist, a main program that is not on its device, and the main program's ``check``
-    diagnostics (with ``nc.lazy_parse`` a program is read only as it runs, so only found).
-    Returns the problems said in words, and the main program's report if it has errors."""
-    problems = list(missing_devices(config).values())
+    diagnostics (with ``nc.lazy_parse`` a program is read only as it runs, so only found)."""
+    problems = tuple(missing_devices(config).values())
     storage = storage_of(config)
     main = config.nc.main
     path = storage.find(main)
     if path is None:
         device = config.nc.storage.default
         folder = config.nc.storage.devices.get(device)
-        problems.append(f"{config.source or BUILT_IN}: nc.main: program {main} is not on "
-                        f"{device} ({folder})")
-        return problems, []
+        return StartCheck((*problems, f"{config.source or BUILT_IN}: nc.main: program {main} "
+                           f"is not on {device} ({folder})"), (), ())
     if config.nc.lazy_parse:
-        return problems, []
+        return StartCheck(problems, (), ())
+    version = file_version(path)
     log.info("checking %s (%s bytes) before serving (--allow-missing skips this)", path.name,
-             f"{path.stat().st_size:,}")
+             f"{version[1]:,}")
     began = time.perf_counter()
-    reports = [r for r in check_files([path], config) if r.errors]
+    reports = tuple(r for r in check_files([path], config) if r.errors)
     errors = sum(r.errors for r in reports)
     log.info("checked %s in %.1f s: %s", path.name, time.perf_counter() - began,
              f"{errors} error(s)" if errors else "no error")
-    return problems, reports
+    # The main program runs in process 1, and `check` checked it for process 1 (and for any
+    # process it EXEs itself in, which can only add errors): the program store, which would
+    # check it for process 1 again, takes this version as checked (seconds for 3 MB).
+    same = not errors and file_version(path) == version
+    return StartCheck(problems, reports, (CheckedFile(path, version, 1),) if same else ())
 
 
 def storage_files(config: Config) -> list[Path]:

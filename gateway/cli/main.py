@@ -10,7 +10,7 @@ import sys
 import traceback
 from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ncgate import __version__
 from ncgate.config import Config, default_script_path, load_config
@@ -21,6 +21,9 @@ from ncgate.gateway.lifecycle import tune_interpreter
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
+
+if TYPE_CHECKING:
+    from ncgate.gateway.programs import CheckedFile
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -441,8 +444,12 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
         logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO)
     overrides, origins = _overrides(args)
     config = load_config(args.config, overrides=overrides, origins=origins)
-    if not args.allow_missing and not _programs_ready(config):
-        return None
+    checked: tuple[CheckedFile, ...] = ()  # --allow-missing: nothing
+    if not args.allow_missing:
+        ready = _programs_ready(config)
+        if ready is None:
+            return None
+        checked = ready
     record = str(Path(args.record).resolve()) if args.record else None
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
@@ -466,25 +473,26 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
     return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                             watch=args.watch))
+                             watch=args.watch, checked=checked))
 
 
-def _programs_ready(config: Config) -> bool:
-    """Whether ``run`` can run its configured programs; if not, say why (as ``check`` does)
-    and how to start anyway.  Otherwise the first sign would be an alarm at cycle start."""
+def _programs_ready(config: Config) -> tuple[CheckedFile, ...] | None:
+    """Whether ``run`` can run its configured programs: what it checked and found no error
+    in (for the program store), or None after saying why not (as ``check`` does) and how to
+    start anyway.  Otherwise the first sign would be an alarm at cycle start."""
     from ncgate.gateway.cli.check import start_problems
 
-    problems, reports = start_problems(config)
-    for report in reports:
+    found = start_problems(config)
+    for report in found.reports:
         for diagnostic in report.diagnostics:
             print(diagnostic.render(), file=sys.stderr)
-    for problem in problems:
+    for problem in found.problems:
         print(f"ncgate run: {problem}", file=sys.stderr)
-    if not problems and not reports:
-        return True
+    if not found.problems and not found.reports:
+        return found.checked
     print("ncgate run: not started: the configured programs cannot run (give --allow-missing "
           "to start anyway, for a cell whose programs arrive later)", file=sys.stderr)
-    return False
+    return None
 
 
 def _map(args: argparse.Namespace) -> int:

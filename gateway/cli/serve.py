@@ -12,6 +12,7 @@ import asyncio
 import functools
 import logging
 import signal
+from collections.abc import Sequence
 from contextlib import suppress
 from typing import Any
 
@@ -20,6 +21,7 @@ from ncgate.config.loader import DEFAULT_WEB_PORT
 from ncgate.errors import InputRefused
 from ncgate.gateway.app import Gateway
 from ncgate.gateway.plc import LogicWatcher
+from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.inputs import Command, CommandKind, Source, SourceKind
 from ncgate.interpreter.diagnostics import fmt_number
@@ -127,8 +129,9 @@ LOG_LINES_PER_S = 100
 
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
                 record: str | None = None, overrides: dict[str, Any] | None = None,
-                watch: bool = False) -> None:
-    """``watch``: reload the PLC logic when one of its files changes (``run --watch``)."""
+                watch: bool = False, checked: Sequence[CheckedFile] = ()) -> None:
+    """``watch``: reload the PLC logic when one of its files changes (``run --watch``).
+    ``checked``: what the start-up check found no error in (``Gateway``'s ``checked``)."""
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
     installed = []
@@ -166,7 +169,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
     try:
         async with Gateway(config, listeners=[on_event], cold=cold, console=True,
                            web_default_port=DEFAULT_WEB_PORT, record=record,
-                           overrides=overrides) as gw:
+                           overrides=overrides, checked=checked) as gw:
             source = str(config.source) if config.source else "built-in default"
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,

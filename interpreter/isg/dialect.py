@@ -52,7 +52,9 @@ class _Reader:
         return cached
 
     def load(self, path: Path, version: Version, process: int,
-             apart: bool = False) -> IsgProgram:
+             apart: bool = False, checked: bool = False) -> IsgProgram:
+        # ``checked`` is not taken: a file is checked once for all its sections (_entry),
+        # and a section's errors are picked from that.
         _, source, diagnostics = self._entry(path, version)
         program = source.program(process)
         # A section is a program: only its own errors (and a file-wide one) keep it from

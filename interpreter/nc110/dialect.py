@@ -26,7 +26,7 @@ from ncgate.interpreter.nc110.compiler import NC110, exe_scan
 from ncgate.interpreter.nc110.nodes import Exe, Num
 from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.settings import Dialect
-from ncgate.interpreter.storage import Storage, program_name
+from ncgate.interpreter.storage import Storage, file_version, program_name
 
 
 def check_context(options: DialectOptions, storage: Storage,
@@ -92,14 +92,18 @@ class _Reader:
         self.jobs = ChildJobs()
 
     def load(self, path: Path, version: Version, process: int,
-             apart: bool = False) -> Program:
+             apart: bool = False, checked: bool = False) -> Program:
         data = path.read_bytes()
         name = program_name(path)
-        checked = False  # by a child: its blocks are parsed when they run (a few µs each)
+        # Checked already (run's start-up check, of this version): so only if the bytes just
+        # read are still of that version.
+        checked = checked and file_version(path) == version
         # nc.lazy_parse: start at once; a bad block is an alarm when it is reached.
+        check = not self.options.lazy_parse and not checked
+        scan = None  # the EXE scan, when a child checked it
         # On the loop (an EXE whose program was not read ahead) the child would only be
         # waited for, and it checks slower than this process does: checked here then.
-        if apart and not self.options.lazy_parse and len(data) >= CHILD_BYTES:
+        if apart and check and len(data) >= CHILD_BYTES:
             try:
                 scan, *frames = self.jobs.run(
                     f"{__name__}:check_in_child",
@@ -110,16 +114,16 @@ class _Reader:
                 errors = [d for frame in frames for d in frame]
                 if errors:
                     raise ProgramSyntaxError(errors)
-                checked = True
+                check = False  # by the child: its blocks are parsed when they run
         program = Program.from_data(data, name, path.name)
-        if checked:
-            program.exe_scan = scan
-            return program
-        if not self.options.lazy_parse:
+        if check:
             errors = _errors(program, self.options, self.storage, process)
             if errors:
                 raise ProgramSyntaxError(errors)
-        exe_scan(program)  # here, not when it starts (a 10 MB text takes a while)
+        if scan is not None:
+            program.exe_scan = scan
+        else:
+            exe_scan(program)  # here, not when it starts (a 10 MB text takes a while)
         return program
 
     def cancel(self) -> None:
