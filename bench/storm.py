@@ -2,9 +2,10 @@
 
 Each phase starts `ncgate run` afresh as its own process with the same cell: PLC logic
 scanning every 10 ms of the wall clock (scan_ms is machine time: 100 at time_scale 10), an
-SND/WAI loop (10 ms dwell) at time_scale 10, a CANopen master in this process reaching the
-node through the gateway's loopback hub (python-can-remote): its heartbeat every 100 ms (the
-node consumes it with 300 ms), SYNC every 10 ms with TPDO1 on every SYNC (type 1) -- and a
+SND/WAI loop (10 ms dwell) at time_scale 10, a CANopen master in a process of its own
+reaching the node through the gateway's loopback hub (python-can-remote): its heartbeat every
+100 ms (the node consumes it with 300 ms), SYNC every 10 ms with TPDO1 and TPDO2 on every
+SYNC (type 1) -- and a
 200 Hz Modbus poller (FC4: the PLC status block, whose last scan lateness it samples).  The
 first phase is quiet; each other adds one abuse for its duration, run by a process of its own
 (the measuring process stays quiet):
@@ -31,7 +32,12 @@ each figure's ratio to the quiet phase.  Targets under every abuse: poller p99 <
     .venv/bin/python bench/storm.py --phases quiet,flood --seconds 10
 
 The SYNC->TPDO delay includes the hub's websocket hop both ways (a master on real CAN would
-not have it): compare the phases with the quiet one.
+not have it): compare the phases with the quiet one.  Its two legs are shown apart (the hub
+stamps a TPDO when the node sends it, on this machine's clock: SYNC sent -> TPDO sent, and
+TPDO sent -> received here), and so is the node's own record from the console's status: the
+longest time from a SYNC's arrival on the gateway's bus to its TPDO sent (since the gateway
+started), and the SYNCs of the window it answered later than 5 and 10 ms.  ``--json FILE``
+writes every figure by phase.
 """
 
 from __future__ import annotations
@@ -41,7 +47,9 @@ import asyncio
 import collections
 import contextlib
 import json
+import math
 import multiprocessing
+import multiprocessing.connection
 import multiprocessing.synchronize
 import os
 import signal
@@ -50,8 +58,10 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Awaitable, Callable
+import urllib.request
+from collections.abc import Callable, Coroutine
 from pathlib import Path
+from typing import Any
 
 import can
 from memory import free_port, wait_listening  # bench/memory.py: the same way to start a run
@@ -174,7 +184,9 @@ class Master(threading.Thread):
         # from the last SYNC sent, a TPDO 12 ms late read as 2 ms: no delay could show over
         # the 10 ms period.)  A SYNC older than LOST_S has lost its TPDO (the node drops a
         # TPDO it could not send within max(period, 100 ms)).
-        self._pending: collections.deque[float] = collections.deque()
+        self._pending: collections.deque[tuple[float, float]] = collections.deque()
+        self.out: list[float] = []  # SYNC sent -> TPDO sent by the node (hub, node)
+        self.back: list[float] = []  # TPDO sent by the node -> here (hub, this process)
         self._lock = threading.Lock()
         self._reader = threading.Thread(target=self._read, daemon=True)
 
@@ -194,7 +206,13 @@ class Master(threading.Thread):
 
     def configure(self) -> None:
         self.sdo_write(0x1016, 1, struct.pack("<I", MASTER << 16 | 300))  # consume 300 ms
-        self.sdo_write(0x1800, 2, b"\x01")  # TPDO1 on every SYNC
+        # The TPDOs on every SYNC (type 1), as the issue's master configures them: TPDO1 (the
+        # process states) and TPDO2 (the last SND record), whose default is a frame on every
+        # SND -- 2,000 a second from this cell's loop, which a real master would not leave
+        # on (half of a 500 kbit/s bus), and which through the hub's FIFO (no arbitration:
+        # on CAN, 0x181 would win over 0x281) held TPDO1 up behind them.
+        self.sdo_write(0x1800, 2, b"\x01")
+        self.sdo_write(0x1801, 2, b"\x01")
         self.bus.send(can.Message(arbitration_id=0, is_extended_id=False,
                                   data=bytes((0x01, NODE))))  # NMT start
         # SYNCs one by one until the node answers one: the measured SYNCs all find it
@@ -219,14 +237,18 @@ class Master(threading.Thread):
         while not self.stop.is_set():
             msg = self.bus.recv(0.05)
             if msg is not None and msg.arbitration_id == 0x180 + NODE:
-                now = time.perf_counter()
+                now, wall = time.perf_counter(), time.time()
                 self.tpdos += 1
                 with self._lock:
-                    while self._pending and now - self._pending[0] > LOST_S:
+                    while self._pending and now - self._pending[0][0] > LOST_S:
                         self._pending.popleft()
                     sent = self._pending.popleft() if self._pending else None
                 if sent is not None:
-                    self.delays.append(now - sent)
+                    self.delays.append(now - sent[0])
+                    # The hub stamps the TPDO when the node sends it (the gateway's wall
+                    # clock, this machine's): the delay's two legs.
+                    self.out.append(msg.timestamp - sent[1])
+                    self.back.append(wall - msg.timestamp)
 
     def run(self) -> None:
         self._reader.start()
@@ -245,7 +267,7 @@ class Master(threading.Thread):
                 next_beat += 0.1
             if now >= next_sync:
                 with self._lock:
-                    self._pending.append(time.perf_counter())
+                    self._pending.append((time.perf_counter(), time.time()))
                 self.bus.send(can.Message(arbitration_id=0x80, is_extended_id=False, data=b""))
                 self.syncs += 1
                 next_sync += 0.01
@@ -261,6 +283,68 @@ class Master(threading.Thread):
             self.bus._is_shutdown = True  # (python-can's flag: no second try at exit)
 
 
+def master_process(hub: int, conn: multiprocessing.connection.Connection) -> None:
+    """The master in a process of its own, so that nothing of the measuring process (its
+    pollers' loop) shares its interpreter: it answers the measuring process's requests
+    ("mark": the window starts; "take": what it measured; "close") until told to close."""
+    sys.setswitchinterval(0.0002)  # its two threads hand over as the gateway's do
+    master = Master(hub)
+    try:
+        master.configure()
+    except Exception as exc:
+        conn.send(("failed", repr(exc)))
+        return
+    master.start()
+    conn.send(("ready", None))
+    while True:
+        request = conn.recv()
+        if request == "mark":
+            with master._lock:
+                master.delays.clear()
+                master.out.clear()
+                master.back.clear()
+            conn.send((master.syncs, master.tpdos))
+        elif request == "take":
+            with master._lock:
+                conn.send((master.syncs, master.tpdos, list(master.delays), list(master.out),
+                           list(master.back)))
+        else:
+            master.close()
+            conn.send("closed")
+            return
+
+
+class RemoteMaster:
+    """The measuring process's handle on :func:`master_process`."""
+
+    def __init__(self, hub: int) -> None:
+        self.conn, child = SPAWN.Pipe()
+        self.process = SPAWN.Process(target=master_process, args=(hub, child), daemon=True)
+        self.process.start()
+        child.close()
+
+    async def ask(self, request: str, within: float = 10.0) -> Any:
+        self.conn.send(request)
+        return await self.answer(within)
+
+    async def answer(self, within: float) -> Any:
+        if not await asyncio.to_thread(self.conn.poll, within):
+            raise RuntimeError(f"the master process did not answer within {within:g} s")
+        return self.conn.recv()
+
+    async def ready(self) -> None:
+        state, why = await self.answer(30.0)
+        if state != "ready":
+            raise RuntimeError(f"the master could not configure the node: {why}")
+
+    async def close(self) -> None:
+        with contextlib.suppress(Exception):
+            await self.ask("close", 5.0)
+        self.process.join(2)
+        if self.process.is_alive():
+            self.process.kill()
+
+
 async def input_registers(port: int, address: int, count: int) -> tuple[int, ...]:
     """``count`` input registers from ``address``, on a connection of their own (FC4)."""
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
@@ -273,6 +357,15 @@ async def plc_status(port: int) -> tuple[int, int, int]:
     """(scans, overruns, max lateness µs) from the PLC status registers (input 300..)."""
     regs = await input_registers(port, 300, 14)
     return (regs[1] << 16 | regs[2], regs[7] << 16 | regs[8], regs[12] << 16 | regs[13])
+
+
+def node_sync(web: int) -> dict[str, object]:
+    """The node's own SYNC record (the console's status): SYNCs answered, the longest time
+    from a SYNC's arrival on the gateway's bus to its TPDO sent, and how many took longer
+    than each bound.  The master's delay less this is the hub's hops and this process's."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{web}/api/status", timeout=10) as answer:
+        sync: dict[str, object] = json.load(answer)["fieldbus"]["canopen"]["sync"]
+    return sync
 
 
 async def snd_count(port: int) -> int:
@@ -369,7 +462,7 @@ async def storm(port: int, web: int, folder: Path, stop: asyncio.Event) -> None:
     await asyncio.gather(*(client(c) for c in range(4)))
 
 
-ABUSES: dict[str, Callable[[int, int, Path, asyncio.Event], Awaitable[None]]] = {
+ABUSES: dict[str, Callable[[int, int, Path, asyncio.Event], Coroutine[Any, Any, None]]] = {
     "flood": flood, "no-read": no_read, "connects": connects, "load": load,
     "streams": streams, "storm": storm}
 
@@ -412,13 +505,14 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
         control = SPAWN.Process(target=control_server, args=(control_port, control_ready),
                                 daemon=True)
         control.start()
-        master: Master | None = None
+        master: RemoteMaster | None = None
         try:
             await asyncio.to_thread(control_ready.wait, 30)
             await wait_listening(port)
-            master = Master(hub)
-            await asyncio.to_thread(master.configure)
-            master.start()
+            await wait_listening(hub)  # the node's hub starts after the Modbus server
+            await wait_listening(web)
+            master = RemoteMaster(hub)
+            await master.ready()
             stop = asyncio.Event()
             abuse_stop = SPAWN.Event()
             rtts: list[float] = []
@@ -430,9 +524,9 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
             rtts.clear()
             late.clear()
             control_rtts.clear()
-            master.delays.clear()
-            syncs0, tpdos0 = master.syncs, master.tpdos
+            syncs0, tpdos0 = await master.ask("mark")
             scans0, overruns0, _ = await plc_status(port)
+            sync0 = await asyncio.to_thread(node_sync, web)
             snds0 = await snd_count(port)
             t0 = time.perf_counter()
             cpu0 = cpu_s(gateway.pid)
@@ -446,10 +540,12 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
             await polling
             await control_polling
             scans, overruns, _ = await plc_status(port)
+            sync = await asyncio.to_thread(node_sync, web)
             snds = await snd_count(port) - snds0
             lateness_us = max(late, default=0)  # the scans the poller saw, in the window
-            syncs, tpdos = master.syncs - syncs0, master.tpdos - tpdos0
-            delays = list(master.delays)
+            syncs, tpdos, delays, outs, backs = await master.ask("take")
+            syncs, tpdos = syncs - syncs0, tpdos - tpdos0
+            out, back = max(outs, default=math.nan), max(backs, default=math.nan)
             elapsed = time.perf_counter() - t0
             cpu = cpu_s(gateway.pid) - cpu0
             # SIGTERM while the abuse goes on
@@ -465,7 +561,7 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
         finally:
             control.kill()
             if master is not None:
-                master.close()
+                await master.close()
             if gateway.returncode is None:
                 gateway.kill()
                 await gateway.wait()
@@ -492,26 +588,43 @@ async def phase(name: str, seconds: float) -> dict[str, float]:
         "plc_late": lateness_us / 1e3, "overrun_pct": 100 * (overruns - overruns0) / due_scans,
         "tpdo_p99": pct(delays, 0.99) * 1e3, "tpdo_max": (delays[-1] if delays else
                                                           float("nan")) * 1e3,
+        "out_max": out * 1e3, "back_max": back * 1e3,
+        "tpdo_over10": sum(1 for d in delays if d > 0.010),
         "tpdo_missing": max(0, syncs - tpdos), "lost": lost,
         "nc_kept_pct": 100 * min(1.0, snds / 2 / due), "sigterm_s": sigterm_s,
         "polls": len(rtts), "cpu_pct": 100 * cpu / elapsed,
-        "control_p99": pct(control_rtts, 0.99) * 1e3, "load_s": load_s,
+        "control_p99": pct(control_rtts, 0.99) * 1e3,
+        "control_max": (control_rtts[-1] if control_rtts else float("nan")) * 1e3,
+        "load_s": load_s,
+        "node_max": float(sync["latency_max_ms"]),  # type: ignore[arg-type]
+        "node_over5": node_over(sync0, sync, "5"), "node_over10": node_over(sync0, sync, "10"),
     }
+
+
+def node_over(before: dict[str, object], after: dict[str, object], bound: str) -> float:
+    """The SYNCs of the window the node answered later than ``bound`` ms."""
+    return float(after["later_than_ms"][bound]  # type: ignore[index]
+                 - before["later_than_ms"][bound])  # type: ignore[index]
 
 
 COLUMNS = [("poll_p50", "poll p50 ms", 5.0e9), ("poll_p99", "poll p99 ms", 5.0),
            ("poll_max", "poll max ms", 50.0), ("plc_late", "PLC late max ms", 20.0),
            ("overrun_pct", "overruns %", 1.0), ("tpdo_p99", "SYNC>TPDO p99 ms", 1e9),
-           ("tpdo_max", "SYNC>TPDO max ms", 10.0), ("tpdo_missing", "TPDOs missing", 1e9),
+           ("tpdo_max", "SYNC>TPDO max ms", 10.0), ("tpdo_over10", "TPDOs >10 ms", 1e9),
+           ("out_max", "SYNC>node max ms", 1e9), ("back_max", "node>TPDO max ms", 1e9),
+           ("tpdo_missing", "TPDOs missing", 1e9),
            ("lost", "false lost", 0.0), ("nc_kept_pct", "NC kept %", -95.0),
            ("sigterm_s", "SIGTERM s", 1.0), ("cpu_pct", "gateway CPU %", 1e9),
-           ("control_p99", "baseline p99 ms", 1e9)]
+           ("control_p99", "baseline p99 ms", 1e9), ("control_max", "baseline max ms", 1e9),
+           ("node_max", "node SYNC max ms", 1e9),
+           ("node_over5", "node >5 ms", 1e9), ("node_over10", "node >10 ms", 1e9)]
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=6.0)
     parser.add_argument("--phases", default=",".join(PHASES))
+    parser.add_argument("--json", metavar="FILE", help="also write every figure, by phase")
     args = parser.parse_args()
     names = [p.strip() for p in args.phases.split(",") if p.strip()]
     if "quiet" not in names:
@@ -520,6 +633,8 @@ def main() -> int:
     for name in names:
         results[name] = asyncio.run(phase(name, args.seconds))
     quiet = results["quiet"]
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
     print(f"bench/storm.py: {args.seconds:g} s a phase, time_scale {TIME_SCALE:g}, "
           f"PLC scan 10 ms, SYNC 10 ms, heartbeat 100 ms (consumer 300 ms), poller 200 Hz")
     print("phase     " + "".join(f"{label:>18}" for _, label, _ in COLUMNS))
