@@ -10,6 +10,8 @@ import gc
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from ncgate.interpreter import heap
+
 
 @contextmanager
 def gc_paused() -> Iterator[None]:
@@ -30,5 +32,6 @@ def gc_paused() -> Iterator[None]:
             # unfreeze: two list splices), so the first young collection after this does not
             # traverse the whole new tree once more.  Full collections still see it.
             gc.freeze()
-            gc.unfreeze()
+            if not heap.kept():  # else the heap stays frozen until the kept parse goes
+                gc.unfreeze()
             gc.enable()

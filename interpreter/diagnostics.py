@@ -76,9 +76,37 @@ def fmt_number(value: float | None) -> str:
 LINE_END: Final = re.compile(r"\r\n?|\n")
 
 
-def split_lines(text: str) -> list[str]:
-    """The lines of a program text; a line end at the very end opens no empty line."""
-    lines = LINE_END.split(text)
+# split_lines splits a long text this many characters at a time: one split of 10 MB is one
+# call into C that held the interpreter's lock ~90 ms (a reading thread's, the loop waiting).
+SPLIT_PIECE: Final = 1 << 16
+
+
+def split_lines(text: str, piece: int = SPLIT_PIECE) -> list[str]:
+    """The lines of a program text; a line end at the very end opens no empty line.  A long
+    text is split in pieces that end at a line end, a short call into C each."""
+    if len(text) <= piece:
+        lines = LINE_END.split(text)
+    else:
+        lines = []
+        start, size = 0, len(text)
+        while start < size:
+            end = start + piece
+            if end >= size:
+                lines.extend(LINE_END.split(text[start:]))
+                break
+            cut = max(text.rfind("\n", start, end), text.rfind("\r", start, end))
+            if cut < start:  # a line longer than a piece: up to its own end
+                found = LINE_END.search(text, end)
+                if found is None:
+                    lines.extend(LINE_END.split(text[start:]))
+                    break
+                cut = found.end() - 1
+            elif text[cut] == "\r" and cut + 1 < size and text[cut + 1] == "\n":
+                cut += 1  # a CR LF is one line end, never cut in two
+            lines.extend(LINE_END.split(text[start:cut + 1])[:-1])  # ends in a line end
+            start = cut + 1
+        else:
+            lines.append("")  # the text ended with a piece's line end
     if lines[-1] == "":
         lines.pop()
     return lines

@@ -11,8 +11,10 @@ operator may start any channel.  Its own settings are ``[nc.isg]`` (``max_events
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
 from pathlib import Path
 
+from ncgate.interpreter import heap
 from ncgate.interpreter.diagnostics import Diagnostic, ProgramSyntaxError
 from ncgate.interpreter.dialect import (
     DialectOptions,
@@ -46,8 +48,15 @@ class _Reader:
     def _entry(self, path: Path, version: Version) -> tuple[Version, IsgFile, list[Diagnostic]]:
         cached = self._files.get(path)
         if cached is None or cached[0] != version:
-            source = IsgFile.from_path(path, display=path.name)
-            cached = (version, source, check_file(source, self.context))
+            # A big file's parse is kept out of the full collections (interpreter/heap.py):
+            # each walked it all, holding every thread (2.6 s for 10 MB).
+            big = version[1] >= heap.BIG_BYTES  # (mtime_ns, size)
+            with heap.building() if big else nullcontext():
+                source = IsgFile.from_path(path, display=path.name)
+                diagnostics = check_file(source, self.context)
+            if big:
+                heap.keep(source)
+            cached = (version, source, diagnostics)
             self._files[path] = cached
         return cached
 

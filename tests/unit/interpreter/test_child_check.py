@@ -48,8 +48,12 @@ def test_a_good_big_program_is_checked_apart_and_parsed_here_as_it_runs(
     (tmp_path / "SUB.nc").write_text("N1M30\n")
     path = write_big(tmp_path, "BIG", head="N1(EXE,2,SUB)\n")
     program = reader(tmp_path).load(path, file_version(path), 1, apart=True)
-    # The check ran elsewhere: not one block was parsed in this process ...
-    assert program._blocks.count(None) == len(program) == 30_002
+    # The check ran elsewhere: of its blocks, only the first few were parsed in this process,
+    # by the reading thread, so that the loop finds the block parser built (45 ms, once) ...
+    warm = nc110_dialect.WARM_BLOCKS
+    assert len(program) == 30_002
+    assert None not in program._blocks[:warm]
+    assert program._blocks[warm:].count(None) == len(program) - warm
     # ... and what the engine asks of the program is what reading it here gives.
     assert program.exe_scan is not None
     fresh = Program.from_path(path, display=path.name)
