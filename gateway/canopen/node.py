@@ -37,7 +37,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import canopen
 from can_remote import RemoteServer
@@ -161,6 +161,9 @@ class CanopenNode:
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
         self._pending: set[asyncio.Handle] = set()  # callbacks handed to the loop, not yet run
+        # Futures the receive thread waits on for the loop (_on_loop): cancelled by close.
+        self._waiting: set[concurrent.futures.Future[Any]] = set()
+        self._closing: asyncio.Future[None] | None = None  # the close under way, or done
         self._unsubscribe: list[Callable[[], None]] = []  # from the trace and the image
         self._sdo_source = Source(SourceKind.CANOPEN, f"SDO 0x{0x600 + self.node_id:03X}")
         self._refusals = RateLimitedLog(log)
@@ -241,14 +244,27 @@ class CanopenNode:
         it reaches the node any more, nothing the node armed or handed the loop runs, and
         only then the bus goes: an SND, a write or a state change that reached the node after
         that made a TPDO send on a bus that was gone ("Not connected to CAN bus", raised in
-        the engine's turn)."""
-        if self._closed:
-            return
-        self._closed = True  # call_soon drops what races in from the CAN thread from here
+        the engine's turn).  A close while another is under way waits for that one: when it
+        returns, the hub no longer listens."""
+        if self._closing is None:
+            if self._closed:
+                return  # never started
+            self._closed = True  # call_soon drops what races in from the CAN thread now
+            self._stop()  # at once: the engine's next event or a timer must not reach it
+            self._closing = asyncio.ensure_future(self._close())
+        await asyncio.shield(self._closing)
+
+    def _stop(self) -> None:
+        """Close's first part, before it awaits anything: nothing reaches the node, nothing
+        it armed or handed the loop runs."""
         self._detach()
         for handle in list(self._pending):
             handle.cancel()
         self._pending.clear()
+        # An SDO read the receive thread waits on the loop for (_on_loop) is aborted now: the
+        # thread must be free before disconnect joins it, or the loop waits its 2 s timeout.
+        for future in list(self._waiting):
+            future.cancel()
         self._refusals.flush()
         self.pdos.close()
         # Also the deadlines watched in OPERATIONAL (RPDO event timers, the SYNC's cycle
@@ -263,14 +279,19 @@ class CanopenNode:
         self.node.sdo.close()  # type: ignore[attr-defined]
         if self._second_sdo is not None:
             self._second_sdo[2].close()
+
+    async def _close(self) -> None:
+        """Close's second part: the bus, then the hub."""
         # Joins the receive thread: a timer it armed just before is disarmed by _closed.
         self.network.disconnect()
         if self._hub is not None:
             # In a thread: the loop goes on serving (and the NC on running) while the hub's
             # thread sees the request, within HUB_POLL_S.
             hub, self._hub = self._hub, None
-            await asyncio.to_thread(hub.shutdown)
-            hub.server_close()
+            try:
+                await asyncio.to_thread(hub.shutdown)
+            finally:  # a cancelled close still closes the listening socket
+                hub.server_close()
 
     def _detach(self) -> None:
         """No engine event (trace, process state, image write) reaches the node from now."""
@@ -338,6 +359,9 @@ class CanopenNode:
         if threading.get_ident() == self._loop_thread:
             return fn()
         future: concurrent.futures.Future[T] = concurrent.futures.Future()
+        self._waiting.add(future)
+        if self._closed:  # closing: call_soon would drop run, and the wait be in vain
+            future.cancel()
 
         def run() -> None:
             if not future.set_running_or_notify_cancel():
@@ -355,6 +379,10 @@ class CanopenNode:
             if future.cancel():
                 raise
             return future.result()
+        except concurrent.futures.CancelledError:  # the node closes: the master gets an abort
+            raise SdoAbortedError(ABORT_GENERAL_ERROR) from None
+        finally:
+            self._waiting.discard(future)
 
     def _defer(self, work: Callable[[], None], done: Callable[[int | None], None],
                wanted: Callable[[], bool], timeout_s: float = 2.0) -> None:

@@ -748,12 +748,12 @@ class Pdos:
         window_us = param(self.host.node, SYNC_WINDOW, 0)
         if window_us and timestamp and now - timestamp > window_us / 1e6:
             stale = True  # handled after the synchronous window closed (0x1007)
-        sent = self.sent
+        answered = False
         for t in list(self.tpdos.values()):
             if t.valid and t.type <= 240:
-                self._sync_tpdo(t, counter, send=not stale)
-        if self.sent != sent and timestamp:
-            self._answered(time.time() - timestamp)
+                answered |= self._sync_tpdo(t, counter, send=not stale)
+        if answered:  # (a frame without a time stamp: counted, its latency unknown)
+            self._answered(time.time() - timestamp if timestamp else 0.0)
         batches = list(self._sync_pending.values())
         self._sync_pending.clear()
         self.handed += len(batches)
@@ -769,35 +769,38 @@ class Pdos:
                 break
             self.sync_latency_over[i] += 1
 
-    def _sync_tpdo(self, t: Tpdo, counter: int | None, send: bool = True) -> None:
+    def _sync_tpdo(self, t: Tpdo, counter: int | None, send: bool = True) -> bool:
+        """Whether this SYNC sent a frame of ``t``."""
         if t.type == 0:
             if t.sync_due:
                 t.sync_due = False
-                self._sync_send(t, send, unless=t.reference)  # not if changed back
-            return
+                return self._sync_send(t, send, unless=t.reference)  # not if changed back
+            return False
         if not t.started:
             if t.sync_start and counter is not None:
                 if counter != t.sync_start:
-                    return
+                    return False
                 t.started, t.sync_count = True, t.type - 1  # the first frame now
             else:
                 t.started = True
         t.sync_count += 1
         if t.sync_count >= t.type:
             t.sync_count = 0
-            self._sync_send(t, send)
+            return self._sync_send(t, send)
+        return False
 
-    def _sync_send(self, t: Tpdo, send: bool, unless: bytes | None = None) -> None:
+    def _sync_send(self, t: Tpdo, send: bool, unless: bytes | None = None) -> bool:
         if not send:
             self.sync_dropped += 1
-            return
+            return False
         try:
             data = t.frame()
         except Exception:  # a value the loop was changing at this instant: not sent
             self.sync_dropped += 1
-            return
+            return False
         if unless is not None and data == unless:
-            return
+            return False
         self._send(t, data)
         if t.type == 0:
             t.reference = data
+        return True

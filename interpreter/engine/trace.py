@@ -47,9 +47,12 @@ class Trace:
         self._all: list[Event] = []  # keep=None
         self._dicts: list[EventDict] = []  # cached dicts of _all
         self._append = self._ring.append if keep is not None else self._all.append
-        self._listeners: list[Listener] = []
-        # Listeners that raised: how often, and when that was last logged.
-        self.listener_failures: dict[str, list[float]] = {}
+        # A tuple, swapped whole by subscribe and unsubscribe: a listener that unsubscribes
+        # itself (or another) while an event is delivered does not make the next miss it.
+        self._listeners: tuple[Listener, ...] = ()
+        # Listeners that raised (by the listener's id): its name, how often, and when that
+        # was last logged.  An entry goes with its listener's unsubscribe.
+        self.listener_failures: dict[int, list[Any]] = {}
 
     @property
     def events(self) -> list[EventDict]:
@@ -62,8 +65,23 @@ class Trace:
         return self._dicts
 
     def subscribe(self, listener: Listener) -> Callable[[], None]:
-        self._listeners.append(listener)
-        return lambda: self._listeners.remove(listener)
+        """Add a listener; returns its unsubscribe (a second call does nothing)."""
+        self._listeners = (*self._listeners, listener)
+        done = False
+
+        def unsubscribe() -> None:
+            nonlocal done
+            if done:
+                return
+            done = True
+            listeners = list(self._listeners)
+            for i, other in enumerate(listeners):
+                if other is listener:
+                    del listeners[i]
+                    break
+            self._listeners = tuple(listeners)
+            self.listener_failures.pop(id(listener), None)
+        return unsubscribe
 
     def record(self, kind: type[Event], t: float, proc: int, where: Where | None,
                *fields: Any) -> None:
@@ -87,17 +105,18 @@ class Trace:
         node, the console -- and one that fails must not stop the cell: it once left the
         engine's turn halfway through an SND, and the clock never ran again).  Logged with
         its traceback the first time, then counted and said at most once a minute."""
-        name = getattr(listener, "__qualname__", None) or repr(listener)
-        record = self.listener_failures.setdefault(name, [0, float("-inf")])
-        record[0] += 1
+        record = self.listener_failures.get(id(listener))
         now = time.monotonic()
-        if record[0] == 1:
+        if record is None:
+            name = getattr(listener, "__qualname__", None) or type(listener).__qualname__
+            self.listener_failures[id(listener)] = [name, 1, now]
             log.exception("trace listener %s failed on event %d (%s); the cell goes on",
                           name, event.seq, type(event).__name__)
-            record[1] = now
-        elif now - record[1] >= FAILURE_LOG_S:
-            log.error("trace listener %s has failed %d times", name, int(record[0]))
-            record[1] = now
+            return
+        record[1] += 1
+        if now - record[2] >= FAILURE_LOG_S:
+            log.error("trace listener %s has failed %d times", record[0], record[1])
+            record[2] = now
 
 
 def to_jsonl(event: EventDict) -> str:

@@ -338,3 +338,8 @@ async def test_the_status_says_how_late_the_node_answered_its_syncs(
     counts = list(later.values())
     assert counts == sorted(counts, reverse=True) and counts[0] <= 3
     assert sync["tpdos_dropped"] == 0 and sync["rpdos_late"] == 0
+    # A SYNC frame without a time stamp (an interface that gives none) is counted all the
+    # same, its latency unknown (it was not counted before).
+    gw.canopen_node.network.notify(0x80, bytearray(), 0.0)
+    await master.next(TPDO1)
+    assert fieldbus(gw)["canopen"]["sync"]["answered"] == 4
