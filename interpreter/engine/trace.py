@@ -50,8 +50,9 @@ class Trace:
         # A tuple, swapped whole by subscribe and unsubscribe: a listener that unsubscribes
         # itself (or another) while an event is delivered does not make the next miss it.
         self._listeners: tuple[Listener, ...] = ()
-        # Listeners that raised (by the listener's id): its name, how often, and when that
-        # was last logged.  An entry goes with its listener's unsubscribe.
+        # Listeners that raised (by the listener's id): its name, how often, when that was
+        # last logged and the count then.  An entry goes with its listener's unsubscribe,
+        # which says a count not said yet (a burst that stopped within the minute).
         self.listener_failures: dict[int, list[Any]] = {}
 
     @property
@@ -80,7 +81,9 @@ class Trace:
                     del listeners[i]
                     break
             self._listeners = tuple(listeners)
-            self.listener_failures.pop(id(listener), None)
+            record = self.listener_failures.pop(id(listener), None)
+            if record is not None and record[1] > record[3]:  # what was not said yet
+                log.error("trace listener %s failed %d times in all", record[0], record[1])
         return unsubscribe
 
     def record(self, kind: type[Event], t: float, proc: int, where: Where | None,
@@ -109,14 +112,14 @@ class Trace:
         now = time.monotonic()
         if record is None:
             name = getattr(listener, "__qualname__", None) or type(listener).__qualname__
-            self.listener_failures[id(listener)] = [name, 1, now]
+            self.listener_failures[id(listener)] = [name, 1, now, 1]  # ..., count said
             log.exception("trace listener %s failed on event %d (%s); the cell goes on",
                           name, event.seq, type(event).__name__)
             return
         record[1] += 1
         if now - record[2] >= FAILURE_LOG_S:
             log.error("trace listener %s has failed %d times", record[0], record[1])
-            record[2] = now
+            record[2], record[3] = now, record[1]
 
 
 def to_jsonl(event: EventDict) -> str:

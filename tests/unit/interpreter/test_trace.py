@@ -50,7 +50,7 @@ def test_a_listener_that_raises_stops_neither_the_others_nor_the_recording(
     failures = [r for r in caplog.records if r.name == "ncgate.trace"]
     assert len(failures) == 1 and failures[0].exc_info is not None
     assert "broken" in failures[0].getMessage() and "event 1" in failures[0].getMessage()
-    assert [count for _, count, _ in trace.listener_failures.values()] == [5]
+    assert [count for _, count, _, _ in trace.listener_failures.values()] == [5]
 
 
 def test_a_ring_of_zero_keeps_nothing_but_counts() -> None:
@@ -67,3 +67,22 @@ def test_jsonl_has_six_decimals_and_the_spec_key_order() -> None:
     line = to_jsonl(trace.events[0])
     assert line.startswith('{"seq": 1, "t": 1.500000, "event": "snd", "proc": 1, "prog": "A.nc"')
     assert json.loads(line)["to"] == 2
+
+
+def test_a_failing_listeners_count_is_said_when_it_goes(caplog: pytest.LogCaptureFixture) -> None:
+    """A burst of failures within the minute is not lost: its listener's unsubscribe says
+    the count, and a second unsubscribe does nothing."""
+    trace = Trace()
+
+    def broken(event: ev.Event) -> None:
+        raise OSError("disk full")
+
+    unsubscribe = trace.subscribe(broken)
+    with caplog.at_level("ERROR", logger="ncgate.trace"):
+        record(trace, 7)
+        unsubscribe()
+        unsubscribe()
+        record(trace, 1)  # heard by nobody now
+    lines = [r.getMessage() for r in caplog.records if r.name == "ncgate.trace"]
+    assert len(lines) == 2 and "failed 7 times in all" in lines[1]
+    assert trace.listener_failures == {}
