@@ -266,10 +266,7 @@ class CanopenNode:
         for future in list(self._waiting):
             future.cancel()
         self._refusals.flush()
-        self.pdos.close()
-        # Also the deadlines watched in OPERATIONAL (RPDO event timers, the SYNC's cycle
-        # period), which Pdos.close leaves armed: run out, they raised AL150 and its EMCY.
-        self.pdos.left_operational()
+        self.pdos.close()  # its timers and deadlines
         if self._emcy_timer is not None:
             self._emcy_timer.cancel()
         self._emcy_queue.clear()

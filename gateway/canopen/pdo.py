@@ -518,8 +518,10 @@ class Pdos:
             self._begin(t)
 
     def close(self) -> None:
-        for t in self.tpdos.values():
-            t.idle()
+        """The node closes: nothing the PDOs armed runs any more -- the TPDOs' timers, and
+        the deadlines watched in OPERATIONAL (the RPDOs' event timers, the SYNC's cycle
+        period), which run out into AL150 and its EMCY."""
+        self.left_operational()
 
     # -- NMT (loop) -------------------------------------------------------------------------
 
