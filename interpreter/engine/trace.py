@@ -19,6 +19,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import Any, TextIO
 
 from ncgate.interpreter.engine.events import COUNTED, Event, as_dict
@@ -29,6 +30,17 @@ _new = tuple.__new__
 Listener = Callable[[Event], None]
 log = logging.getLogger("ncgate.trace")
 FAILURE_LOG_S = 60.0  # a listener that keeps failing: its count logged at most this often
+
+
+@dataclass(slots=True)
+class ListenerFailures:
+    """A listener that raised: its name, how often, when that was last logged, and the count
+    said then."""
+
+    name: str
+    count: int
+    logged_at: float
+    said: int
 
 
 class Trace:
@@ -50,10 +62,9 @@ class Trace:
         # A tuple, swapped whole by subscribe and unsubscribe: a listener that unsubscribes
         # itself (or another) while an event is delivered does not make the next miss it.
         self._listeners: tuple[Listener, ...] = ()
-        # Listeners that raised (by the listener's id): its name, how often, when that was
-        # last logged and the count then.  An entry goes with its listener's unsubscribe,
-        # which says a count not said yet (a burst that stopped within the minute).
-        self.listener_failures: dict[int, list[Any]] = {}
+        # Listeners that raised, by the listener's id.  An entry goes with its listener's
+        # unsubscribe, which says a count not said yet (a burst that stopped within the minute).
+        self.listener_failures: dict[int, ListenerFailures] = {}
 
     @property
     def events(self) -> list[EventDict]:
@@ -81,9 +92,10 @@ class Trace:
                     del listeners[i]
                     break
             self._listeners = tuple(listeners)
-            record = self.listener_failures.pop(id(listener), None)
-            if record is not None and record[1] > record[3]:  # what was not said yet
-                log.error("trace listener %s failed %d times in all", record[0], record[1])
+            failures = self.listener_failures.pop(id(listener), None)
+            if failures is not None and failures.count > failures.said:
+                log.error("trace listener %s failed %d times in all", failures.name,
+                          failures.count)
         return unsubscribe
 
     def record(self, kind: type[Event], t: float, proc: int, where: Where | None,
@@ -108,18 +120,18 @@ class Trace:
         node, the console -- and one that fails must not stop the cell: it once left the
         engine's turn halfway through an SND, and the clock never ran again).  Logged with
         its traceback the first time, then counted and said at most once a minute."""
-        record = self.listener_failures.get(id(listener))
+        failures = self.listener_failures.get(id(listener))
         now = time.monotonic()
-        if record is None:
+        if failures is None:
             name = getattr(listener, "__qualname__", None) or type(listener).__qualname__
-            self.listener_failures[id(listener)] = [name, 1, now, 1]  # ..., count said
+            self.listener_failures[id(listener)] = ListenerFailures(name, 1, now, 1)
             log.exception("trace listener %s failed on event %d (%s); the cell goes on",
                           name, event.seq, type(event).__name__)
             return
-        record[1] += 1
-        if now - record[2] >= FAILURE_LOG_S:
-            log.error("trace listener %s has failed %d times", record[0], record[1])
-            record[2], record[3] = now, record[1]
+        failures.count += 1
+        if now - failures.logged_at >= FAILURE_LOG_S:
+            log.error("trace listener %s has failed %d times", failures.name, failures.count)
+            failures.logged_at, failures.said = now, failures.count
 
 
 def to_jsonl(event: EventDict) -> str:

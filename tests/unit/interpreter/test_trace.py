@@ -50,7 +50,7 @@ def test_a_listener_that_raises_stops_neither_the_others_nor_the_recording(
     failures = [r for r in caplog.records if r.name == "ncgate.trace"]
     assert len(failures) == 1 and failures[0].exc_info is not None
     assert "broken" in failures[0].getMessage() and "event 1" in failures[0].getMessage()
-    assert [count for _, count, _, _ in trace.listener_failures.values()] == [5]
+    assert [f.count for f in trace.listener_failures.values()] == [5]
 
 
 def test_a_ring_of_zero_keeps_nothing_but_counts() -> None:
