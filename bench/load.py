@@ -21,23 +21,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from storm import big_program  # bench/storm.py's load phase writes the same program
+
 from ncgate.config import load_config
 from ncgate.gateway import Gateway
 from ncgate.gateway.lifecycle import tune_interpreter
-
-
-def big_program(path: Path, dialect: str, megabytes: float) -> None:
-    word = "G01" if dialect == "isg" else "G1"
-    with open(path, "w") as out:
-        if dialect == "isg":
-            out.write("%channel1\n")
-        size, n = 0, 0
-        while size < megabytes * 1_000_000:
-            line = f"N{n % 9999}{word}X{n % 500}Y{(n * 7) % 500}F6000\n"
-            out.write(line)
-            size += len(line)
-            n += 1
-        out.write("M30\n")
 
 
 async def probe(late: list[float], stop: asyncio.Event) -> None:
@@ -55,7 +43,7 @@ def summary(late: list[float]) -> tuple[float, float]:
 async def one(dialect: str, megabytes: float) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        big_program(folder / "BIG.nc", dialect, megabytes)
+        big_program(folder, megabytes, dialect)
         (folder / "ncgate.toml").write_text(
             f'[nc]\ndialect = "{dialect}"\nmain = "BIG"\n[nc.storage]\nMP0 = "."\n'
             '[modbus]\nport = 0\n[canopen]\nenabled = false\n[web]\nenabled = false\n')

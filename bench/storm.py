@@ -99,9 +99,12 @@ def write_cell(folder: Path, port: int, hub: int, web: int) -> Path:
     return config
 
 
-def big_program(folder: Path, megabytes: int = 10) -> None:
-    line = "N{n}G1X{x}Y{y}F6000\n"
+def big_program(folder: Path, megabytes: float = 10, dialect: str = "nc110") -> None:
+    """BIG.nc: G1 moves of ``megabytes`` MB (ISG: G01, in one ``%channel1`` section)."""
+    line = "N{n}G01X{x}Y{y}F6000\n" if dialect == "isg" else "N{n}G1X{x}Y{y}F6000\n"
     with open(folder / "BIG.nc", "w") as out:
+        if dialect == "isg":
+            out.write("%channel1\n")
         size, n = 0, 0
         while size < megabytes * 1_000_000:
             text = line.format(n=n % 9999, x=n % 500, y=(n * 7) % 500)
