@@ -625,8 +625,11 @@ COLUMNS = [("poll_p50", "poll p50 ms", 5.0e9), ("poll_p99", "poll p99 ms", 5.0),
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=6.0)
-    parser.add_argument("--phases", default=",".join(PHASES))
+    parser.add_argument("--seconds", type=float, default=6.0,
+                        help="length of each phase's measured window (default 6)")
+    parser.add_argument("--phases", default=",".join(PHASES),
+                        help="comma-separated phases among " + ", ".join(PHASES)
+                        + " (quiet always runs first)")
     parser.add_argument("--json", metavar="FILE", help="also write every figure, by phase")
     args = parser.parse_args()
     names = [p.strip() for p in args.phases.split(",") if p.strip()]
