@@ -13,11 +13,14 @@ pyproject.toml or constraints.txt changes.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tomllib
 import venv
 from pathlib import Path
 
@@ -44,20 +47,48 @@ def ensure_venv() -> None:
         STAMP.write_text(digest.hexdigest())
 
 
+def package_dirs() -> dict[str, Path]:
+    """pyproject.toml's package-dir: each package ncgate installs, and the folder it comes from.
+
+    The one list of the source folders: setuptools finds the sub-packages under each of them,
+    and the type-check tree below links them.
+    """
+    with (ROOT / "pyproject.toml").open("rb") as file:
+        table = tomllib.load(file)["tool"]["setuptools"]["package-dir"]
+    return {package: ROOT / folder for package, folder in table.items()}
+
+
 def typecheck_tree() -> Path:
     """build/typecheck/ncgate: links that lay the packages out as they install.
 
     setuptools maps ncgate.gateway to gateway/ (and so on) through package-dir; mypy cannot
-    follow that mapping, so it reads the package through these links instead.
+    follow that mapping, so it reads the package through these links instead: each file of
+    ncgate/ and each folder package-dir maps to ncgate.<name>, so a file or folder added to (or
+    dropped from) them is seen at the next lint.
     """
     tree = ROOT / "build" / "typecheck" / "ncgate"
+    links: dict[str, Path] = {}
+    for package, folder in package_dirs().items():
+        if package == "ncgate":
+            links.update({p.name: p for p in folder.iterdir() if p.name != "__pycache__"})
+        elif package.count(".") == 1 and package.startswith("ncgate."):
+            links[package.removeprefix("ncgate.")] = folder
+        else:
+            sys.exit(f"dev.py: cannot lay out package-dir's {package!r} for mypy: only "
+                     "ncgate and ncgate.<name> are mapped to folders")
+    # Brought up to date link by link, not laid out afresh: another `dev.py lint` may be
+    # reading the tree at the same time.
     tree.mkdir(parents=True, exist_ok=True)
-    links = {name: ROOT / "ncgate" / name for name in ("__init__.py", "errors.py", "py.typed")}
-    links.update({name: ROOT / name for name in ("config", "plc", "interpreter", "gateway")})
+    for old in tree.iterdir():
+        if old.is_symlink() and old.readlink() == links.get(old.name):
+            continue
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            old.unlink(missing_ok=True)
     for name, target in links.items():
-        link = tree / name
-        if not link.is_symlink():
-            link.symlink_to(target)
+        with contextlib.suppress(FileExistsError):
+            (tree / name).symlink_to(target)
     return tree.parent
 
 

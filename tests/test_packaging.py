@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -18,22 +19,64 @@ from ncgate.gateway.cli.main import main
 ROOT = Path(__file__).resolve().parent.parent
 
 
+# pyproject.toml's package-dir: each package ncgate installs and the source folder it comes from.
+PACKAGE_DIR: dict[str, str] = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"][
+    "setuptools"]["package-dir"]
+# Added to the copy the wheel is built from, as the next sub-package or an example's sub-folder
+# arrives: nothing lists them, and the wheel must take them all the same.
+NEWCOMERS = {"gateway/newcomer/__init__.py": "", "gateway/newcomer/inner/__init__.py": "",
+             "gateway/newcomer/inner/part.py": "PART = 1\n",
+             "examples/scheme3/newcomer/EXTRA.nc": "%EXTRA\nM30\n"}
+
+
 @pytest.fixture(scope="module")
-def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    # Built from a copy of the files git knows (as a clone has them): the build writes its
-    # own build/ and *.egg-info, which belong in no work tree.
-    source, out = tmp_path_factory.mktemp("source"), tmp_path_factory.mktemp("wheel")
+def source(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the files git knows (as a clone has them), and the NEWCOMERS: the build
+    writes its own build/ and *.egg-info, which belong in no work tree."""
+    source = tmp_path_factory.mktemp("source")
     listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT,
                             capture_output=True, check=True).stdout.decode().split("\0")
     for name in filter(None, listed):
         if (ROOT / name).is_file():
             (source / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, source / name)
+    for name, text in NEWCOMERS.items():
+        (source / name).parent.mkdir(parents=True, exist_ok=True)
+        (source / name).write_text(text)
+    return source
+
+
+@pytest.fixture(scope="module")
+def wheel(source: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("wheel")
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps",
                     "--no-build-isolation", "-w", str(out), str(source)], check=True,
                    capture_output=True)
     (built,) = out.glob("ncgate-*.whl")
     return built
+
+
+def installed_name(source: Path, path: Path) -> str:
+    """Where a file of a source folder lands in the wheel (package-dir's mapping)."""
+    for package, folder in PACKAGE_DIR.items():
+        if path.is_relative_to(source / folder):
+            return "/".join([*package.split("."), *path.relative_to(source / folder).parts])
+    raise AssertionError(f"{path} is in no folder of package-dir")
+
+
+def test_every_package_and_example_file_is_in_the_wheel(source: Path, wheel: Path) -> None:
+    """Every folder with an __init__.py under a source folder, each of its modules, and every
+    file of the examples reach the wheel, the NEWCOMERS too: package-dir is the one list, and
+    a new sub-package (gateway/plant/) or an example's sub-folder needs no pyproject edit."""
+    names = set(zipfile.ZipFile(wheel).namelist())
+    shipped = [path for folder in PACKAGE_DIR.values()
+               for init in (source / folder).rglob("__init__.py")
+               for path in init.parent.glob("*.py")]
+    shipped += [path for path in (source / PACKAGE_DIR["ncgate.examples"]).rglob("*")
+                if path.is_file()]
+    assert {source / name for name in NEWCOMERS} <= set(shipped)
+    expected = sorted(installed_name(source, path) for path in shipped)
+    assert [name for name in expected if name not in names] == []
 
 
 def test_the_wheel_holds_one_top_level_package_with_its_data(wheel: Path) -> None:
@@ -64,7 +107,7 @@ def test_installed_it_shadows_no_generic_module(wheel: Path, tmp_path: Path) -> 
         return subprocess.run([sys.executable, "-P", "-c", code], cwd=tmp_path, env=env,
                               capture_output=True, text=True, check=False)
 
-    for generic in ("config", "plc", "gateway", "interpreter"):
+    for generic in set(PACKAGE_DIR.values()) - {"ncgate"}:
         done = python(f"import {generic}")
         assert "ModuleNotFoundError" in done.stderr, generic
     done = python("import ncgate, ncgate.gateway; print(ncgate.__file__); "
