@@ -125,6 +125,19 @@ HUB_POLL_S = 0.02
 T = TypeVar("T")
 
 
+class _Handoff:
+    """A callback handed to the loop (:meth:`CanopenNode.call_soon`), until it runs."""
+
+    __slots__ = ("handle",)
+
+    def __init__(self) -> None:
+        self.handle: asyncio.Handle | None = None  # once scheduled
+
+    def cancel(self) -> None:
+        if self.handle is not None:
+            self.handle.cancel()
+
+
 class CanopenNode:
     """The node on the bus, wired to the gateway's image and processes."""
 
@@ -160,7 +173,7 @@ class CanopenNode:
         self._view: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
-        self._pending: set[asyncio.Handle] = set()  # callbacks handed to the loop, not yet run
+        self._pending: set[_Handoff] = set()  # callbacks handed to the loop, not yet run
         # Futures the receive thread waits on for the loop (_on_loop): cancelled by close.
         self._waiting: set[concurrent.futures.Future[Any]] = set()
         self._closing: asyncio.Future[None] | None = None  # the close under way, or done
@@ -258,8 +271,8 @@ class CanopenNode:
         """Close's first part, before it awaits anything: nothing reaches the node, nothing
         it armed or handed the loop runs."""
         self._detach()
-        for handle in list(self._pending):
-            handle.cancel()
+        for call in list(self._pending):
+            call.cancel()  # (one not scheduled yet finds the node closed when it runs)
         self._pending.clear()
         # An SDO read the receive thread waits on the loop for (_on_loop) is aborted now: the
         # thread must be free before disconnect joins it, or the loop waits its 2 s timeout.
@@ -408,26 +421,30 @@ class CanopenNode:
         self.call_soon(run)
 
     def call_soon(self, fn: Callable[[], None]) -> None:
-        """Run ``fn`` on the loop soon, from any thread; tracked, and dropped once closed."""
+        """Run ``fn`` on the loop soon, from any thread; tracked, and dropped once closed.
+
+        Tracked before it is scheduled and untracked by the callback itself, as anyio's
+        BlockingPortal keeps its futures: the loop may run a callback before
+        ``call_soon_threadsafe`` has returned its handle to this thread, and a handle added
+        after that stayed tracked for good (1-2 in 20,000 RPDOs)."""
         assert self.loop is not None
         if self._closed:
             return
-        handle: asyncio.Handle | None = None
+        call = _Handoff()
 
         def once() -> None:
-            if handle is not None:
-                self._pending.discard(handle)
+            self._pending.discard(call)
             if not self._closed:
                 fn()
 
-        if threading.get_ident() == self._loop_thread:
-            handle = self.loop.call_soon(once)
-        else:
-            try:
-                handle = self.loop.call_soon_threadsafe(once)
-            except RuntimeError:  # the loop is closed: the gateway is gone
-                return
-        self._pending.add(handle)
+        self._pending.add(call)
+        try:
+            if threading.get_ident() == self._loop_thread:
+                call.handle = self.loop.call_soon(once)
+            else:
+                call.handle = self.loop.call_soon_threadsafe(once)
+        except RuntimeError:  # the loop is closed: the gateway is gone
+            self._pending.discard(call)
 
     # -- NMT --------------------------------------------------------------------------------
 
