@@ -6,7 +6,9 @@ here touches the image or the processes from that thread: writes and status read
 to the asyncio loop and their result (or abort code) awaited (:meth:`CanopenNode._on_loop`);
 image reads use an immutable snapshot that the loop publishes after every write, once all of
 the write's values are stored (so never half a request), which keeps SDO reads of the image
-prompt however busy the loop is.
+prompt however busy the loop is.  A SYNC's TPDOs are built on that thread from the same
+snapshot, which holds the processes' status, the last SND and the PLC status too, published
+from the node's state and trace listeners (``snapshot``).
 
 The rooms:
 
@@ -37,6 +39,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any, TypeVar
 
 import canopen
@@ -89,6 +92,7 @@ from ncgate.gateway.canopen.dictionary import (
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
 from ncgate.gateway.canopen.sdo import Deferred, Device, SdoService
+from ncgate.gateway.canopen.snapshot import Snapshot, getter, plc_record
 from ncgate.gateway.door import SEARCH_WORDS, search_inputs
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.plc import plc_registers
@@ -168,9 +172,10 @@ class CanopenNode:
         self._emcy_timer: Timer | None = None
         self._emcy_last = -1e18
         self._hub: RemoteServer | None = None
-        # (SA bytes, K bytes, SYVARs) as of the last write: published by the loop, read by
-        # the CAN thread.  A tuple of immutable values, swapped in one assignment.
-        self._view: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())
+        # What a TPDO or an SDO read may map: published by the loop after each change it
+        # hears, read by the CAN thread (snapshot.py).  Immutable, swapped in one assignment.
+        self._view = Snapshot()
+        self._sampling = False  # the loop is to sample N, line and the PLC again (a SYNC)
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
         self._pending: set[_Handoff] = set()  # callbacks handed to the loop, not yet run
@@ -349,17 +354,31 @@ class CanopenNode:
         except InputRefused as exc:
             self._refusals.note(f"{source}: RPDO not applied: {exc}")
 
-    def getter(self, index: int, subindex: int) -> Callable[[], int]:
-        """A mapped object's value for a TPDO frame, from the loop or the receive thread (a
-        SYNC's TPDOs are built there): the image from the snapshot the loop publishes, the
-        rest from single reads of what the engine holds."""
+    @property
+    def view(self) -> Snapshot:
+        """What a TPDO or an SDO read may map, as the loop last published it (any thread)."""
+        return self._view
+
+    def sample(self) -> Snapshot:
+        """Publish the values that change without an event the node hears (block N and
+        line, the PLC status) as they are now, with the rest of the processes' status (on
+        the loop)."""
         engine = self.backend.engine
-        if index < COMMAND:
-            return lambda: self._image_value(index, subindex)
-        if STATUS_BASE <= index < LAST_SND and subindex == 1:
-            k = index - STATUS_BASE + 1
-            return lambda: int(engine.processes[k].state)
-        return lambda: self._read(index, subindex)
+        self._view = replace(self._view, status=tuple(
+            self._status_record(k) for k in range(1, self.config.nc.processes + 1)),
+            last_snd=_last_snd(engine), plc=self._plc_record())
+        return self._view
+
+    def sample_later(self) -> None:
+        """A SYNC sent sampled values (receive thread): the loop samples them again soon,
+        once however many SYNCs ask before it does."""
+        if not self._sampling:
+            self._sampling = True
+            self.call_soon(self._sample_again)
+
+    def _sample_again(self) -> None:
+        self._sampling = False  # first: a SYNC from now on asks again
+        self.sample()
 
     # -- threads ----------------------------------------------------------------------------
 
@@ -549,11 +568,28 @@ class CanopenNode:
     # -- SDO: the live image and status -------------------------------------------------------
 
     def _publish(self) -> None:
+        """Everything a TPDO or an SDO read may map, as it is now (loop)."""
+        self._publish_image()
+        self.sample()
+
+    def _publish_image(self) -> None:
         image = self.backend.image
-        self._view = (bytes(image.sa), bytes(image.k), tuple(image.syvar))
+        self._view = replace(self._view, sa=bytes(image.sa), k=bytes(image.k),
+                             syvar=tuple(image.syvar))
+
+    def _publish_process(self, k: int) -> None:
+        """Process k's status changed (its state, or an event of its own): published with
+        the last SND and the PLC status (loop)."""
+        view = self._view
+        if not 1 <= k <= len(view.status):
+            return
+        status = list(view.status)
+        status[k - 1] = self._status_record(k)
+        self._view = replace(view, status=tuple(status), last_snd=_last_snd(self.backend.engine),
+                             plc=self._plc_record())
 
     def _on_image(self, values: object, who: str) -> None:
-        self._publish()
+        self._publish_image()
         self.pdos.image_changed()
 
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
@@ -575,9 +611,18 @@ class CanopenNode:
         return self._on_loop(lambda: self._read(index, subindex))
 
     def _image_value(self, index: int, subindex: int) -> int:
-        sa, k, syvar = self._view
-        area, i, _ = image_target(index, subindex)
-        return (sa if area == "SA" else k if area == "SK" else syvar)[i]
+        return getter(index, subindex)(self._view)
+
+    def _status_record(self, k: int) -> tuple[int, ...]:
+        """0x2500+k-1 sub 1..8, as process k is now (loop)."""
+        s = self.backend.engine.status(k)
+        return (int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF, int(s.wait_kind),
+                s.wait_target, s.alarm_code & 0xFFFF, s.snd_sent & 0xFFFFFFFF,
+                s.snd_received & 0xFFFFFFFF)
+
+    def _plc_record(self) -> tuple[int, ...]:
+        """0x2700 sub 1..6, as the PLC is now (loop)."""
+        return plc_record(plc_registers(self.backend.plc_status))
 
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
@@ -592,23 +637,14 @@ class CanopenNode:
         if index < COMMAND:
             return self._image_value(index, subindex)
         if STATUS_BASE <= index < LAST_SND:
-            s = engine.status(index - STATUS_BASE + 1)
-            return [int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF, int(s.wait_kind),
-                    s.wait_target, s.alarm_code & 0xFFFF, s.snd_sent & 0xFFFFFFFF,
-                    s.snd_received & 0xFFFFFFFF][subindex - 1]
+            return self._status_record(index - STATUS_BASE + 1)[subindex - 1]
         if index == LAST_SND:
             return list(_last_snd(engine))[subindex - 1]
         if index in OVERRIDE_TOP:
             p = engine.processes[subindex]
             return p.feed_override if index == FEED_OVERRIDE else p.rapid_override
         if index == PLC_STATUS:
-            regs = plc_registers(self.backend.plc_status)
-            if subindex == 1:
-                return regs[0]
-            if subindex == 6:
-                return regs[9]
-            hi, lo = regs[2 * subindex - 3], regs[2 * subindex - 2]
-            return hi << 16 | lo
+            return self._plc_record()[subindex - 1]
         raise SdoAbortedError(ABORT_READ_WRITEONLY)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
@@ -878,9 +914,21 @@ class CanopenNode:
     # -- PDO triggers (loop) -------------------------------------------------------------------
 
     def _on_state(self, process: Process | None, old: ProcessState) -> None:
+        if process is None:
+            self.sample()
+        else:
+            self._publish_process(process.number)
         self.pdos.status_changed()
 
     def _on_event(self, event: Event) -> None:
+        # Published first, for the TPDOs below and the receive thread's next SYNC: an SND
+        # (or a signal, which counts like one) changes its sender's and its targets' counts
+        # and the last SND; any other event of a process its wait, alarm, N or line.  Not an
+        # image write: the image publishes itself, and a program may write every block.
+        if isinstance(event, ev.Snd | ev.Signal):
+            self.sample()
+        elif not isinstance(event, ev.Write) and event.proc:
+            self._publish_process(event.proc)
         if isinstance(event, ev.Alarm):
             if event.proc == 0:
                 return  # a fieldbus alarm: its own EMCY (above)

@@ -9,7 +9,10 @@ Two halves, on two threads:
   A refused write stores nothing.
 - **The runtime** (:class:`Pdos`): RPDO frames and SYNC arrive on the receive thread and are
   handed to the loop; TPDOs are built and sent on the loop, where the image and the processes
-  live.  Timers (inhibit, event timer) run on the node's clock, so tests drive them.
+  live, except a SYNC's: the receive thread sends them at once, built from the snapshot the
+  loop publishes (``snapshot``), never from the engine.  The TPDOs' state is changed by both
+  threads, each under ``Pdos.lock``.  Timers (inhibit, event timer) run on the node's clock,
+  so tests drive them.
 
 Transmission types.  TPDO: 0 (at the next SYNC after a change of its own frame), 1..240
 (every n-th SYNC;
@@ -27,14 +30,17 @@ data not yet applied.
 "On change" means: the image bytes or SYVARs a TPDO maps were written, a process it maps
 changed state, or an SND happened.  A TPDO that maps the last-SND record sends one frame per
 SND, spaced by its inhibit time (a queue of at most 256; older ones are counted as lost).
-Block N and line are sampled (by SYNC, the event timer or another change), not watched: a
-frame per block would flood the bus.
+Block N and line (and the PLC status) are sampled, not watched: a frame per block would flood
+the bus.  The loop samples them for a frame it builds (the event timer, another change), at
+each event of their process, and after each SYNC that sent them: a SYNC sends them as the
+loop last sampled them, after the SYNC before at the oldest.
 """
 
 from __future__ import annotations
 
 import logging
 import struct
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -77,6 +83,7 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.sdo import Device
+from ncgate.gateway.canopen.snapshot import Snapshot, getter, sampled
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.inputs import Source, SourceKind
 
@@ -240,7 +247,12 @@ class Host(Protocol):
     def unsubscribe(self, cob: int,
                     callback: Callable[[int, bytearray, float], None]) -> None: ...
 
-    def getter(self, index: int, subindex: int) -> Callable[[], int]: ...
+    @property
+    def view(self) -> Snapshot: ...
+
+    def sample(self) -> Snapshot: ...
+
+    def sample_later(self) -> None: ...
 
     def call_soon(self, fn: Callable[[], None]) -> None: ...
 
@@ -265,6 +277,7 @@ class Layout:
     status: bool  # maps a process status
     snd: bool  # maps the last SND
     only_snd: bool  # maps nothing else (TPDO2's default): nothing to say before an SND
+    sampled: bool  # maps a value that changes without an event (block N, line, the PLC)
 
     @classmethod
     def of(cls, device: Device, mapping: int) -> Layout:
@@ -282,11 +295,13 @@ class Layout:
                    image=any(i < COMMAND for i, _ in objects),
                    status=any(STATUS_BASE <= i < LAST_SND for i, _ in objects),
                    snd=any(i == LAST_SND for i, _ in objects),
-                   only_snd=bool(objects) and all(i == LAST_SND for i, _ in objects))
+                   only_snd=bool(objects) and all(i == LAST_SND for i, _ in objects),
+                   sampled=any(sampled(i, s) for i, s in objects))
 
 
 class Tpdo:
-    """One TPDO's configuration and transmission state (on the loop)."""
+    """One TPDO's configuration and transmission state: changed on the loop, and by a SYNC
+    on the receive thread, each under :attr:`Pdos.lock`."""
 
     def __init__(self, n: int) -> None:
         self.n = n
@@ -296,7 +311,7 @@ class Tpdo:
         self.event_s = 0.0
         self.sync_start = 0
         self.layout: Layout | None = None
-        self.getters: tuple[Callable[[], int], ...] = ()
+        self.getters: tuple[Callable[[Snapshot], int], ...] = ()
         self.last: bytes | None = None  # the last frame sent
         self.last_t = -1e18
         self.pending: bytes | None = None  # a change waiting for the inhibit time
@@ -315,9 +330,10 @@ class Tpdo:
     def valid(self) -> bool:
         return not self.cob & NOT_VALID
 
-    def frame(self) -> bytes:
+    def frame(self, view: Snapshot) -> bytes:
+        """The frame of what it maps, from the values the loop published."""
         assert self.layout is not None
-        return self.layout.frame.pack(*[get() for get in self.getters])
+        return self.layout.frame.pack(*[get(view) for get in self.getters])
 
     def idle(self) -> None:
         """Nothing pending, no timer armed."""
@@ -405,6 +421,11 @@ class Pdos:
     def __init__(self, host: Host) -> None:
         self.host = host
         self.tpdos = {n: Tpdo(n) for n in range(1, PDO_COUNT + 1)}
+        # The TPDOs' state: the loop changes it (configuration, NMT, changes, timers), and a
+        # SYNC on the receive thread (its counters, type 0's reference, the frame sent).
+        # Held for a frame's building and sending, never across a wait for the loop: the
+        # receive thread waits at most that long.  Reentrant: a change sends at once.
+        self.lock = threading.RLock()
         self.rpdos: dict[int, Rpdo] = {}
         self._subscribed: dict[int, int] = {}  # RPDO n -> the COB-ID it listens on
         self._rpdo_callbacks = {n: self._rpdo_callback(n) for n in range(1, PDO_COUNT + 1)}
@@ -506,16 +527,18 @@ class Pdos:
         """On the loop, after a write to TPDO n's parameters was stored."""
         device, t = self.host.node, self.tpdos[n]
         comm = TPDO_COMMUNICATION + n - 1
-        t.idle()
-        t.cob = param(device, comm, 1)
-        t.type = param(device, comm, 2)
-        t.inhibit_s = param(device, comm, 3) * 100e-6
-        t.event_s = param(device, comm, 5) / 1000
-        t.sync_start = param(device, comm, 6)
-        t.layout = Layout.of(device, TPDO_MAPPING + n - 1)
-        t.getters = tuple(self.host.getter(i, s) for i, s in t.layout.objects)
-        if self.host.operational and t.valid:
-            self._begin(t)
+        layout = Layout.of(device, TPDO_MAPPING + n - 1)
+        with self.lock:
+            t.idle()
+            t.cob = param(device, comm, 1)
+            t.type = param(device, comm, 2)
+            t.inhibit_s = param(device, comm, 3) * 100e-6
+            t.event_s = param(device, comm, 5) / 1000
+            t.sync_start = param(device, comm, 6)
+            t.layout = layout
+            t.getters = tuple(getter(i, s) for i, s in layout.objects)
+            if self.host.operational and t.valid:
+                self._begin(t)
 
     def close(self) -> None:
         """The node closes: nothing the PDOs armed runs any more -- the TPDOs' timers, and
@@ -526,10 +549,11 @@ class Pdos:
     # -- NMT (loop) -------------------------------------------------------------------------
 
     def entered_operational(self) -> None:
-        for t in self.tpdos.values():
-            t.idle()
-            if t.valid:
-                self._begin(t)
+        with self.lock:
+            for t in self.tpdos.values():
+                t.idle()
+                if t.valid:
+                    self._begin(t)
 
     def discard_sync_rpdos(self) -> None:
         """Leaving OPERATIONAL (receive thread): synchronous RPDO data not yet applied is
@@ -537,8 +561,9 @@ class Pdos:
         self._sync_pending.clear()
 
     def left_operational(self) -> None:
-        for t in self.tpdos.values():
-            t.idle()
+        with self.lock:
+            for t in self.tpdos.values():
+                t.idle()
         for deadline in self._deadlines.values():
             deadline.stop()  # no RPDO is expected outside OPERATIONAL
         if self._sync_watch is not None:
@@ -550,10 +575,10 @@ class Pdos:
         maps is the last SND: it speaks of SNDs only), and its event timer starts."""
         assert t.layout is not None
         if t.type == 0:
-            t.reference = t.frame()  # what a change is a change from
+            t.reference = self._frame(t)  # what a change is a change from
         if t.type in EVENT_TYPES:
             if not t.layout.only_snd:
-                t.pending = t.frame()
+                t.pending = self._frame(t)
                 self._ready(t)
             self._arm_event_timer(t)
 
@@ -569,33 +594,41 @@ class Pdos:
         """An SND happened: one frame each for the TPDOs that map the last SND."""
         if not self.host.operational:
             return
-        for t in self.tpdos.values():
-            if not t.valid or t.layout is None:
-                continue
-            if t.layout.snd and t.type in EVENT_TYPES:
-                if len(t.queue) == SND_QUEUE:
-                    t.queue.popleft()
-                    self._lost_snd(t)
-                t.queue.append(t.frame())
-                self._ready(t)
-            elif t.layout.snd or t.layout.status:
-                self._change(t)
+        with self.lock:
+            for t in self.tpdos.values():
+                if not t.valid or t.layout is None:
+                    continue
+                if t.layout.snd and t.type in EVENT_TYPES:
+                    if len(t.queue) == SND_QUEUE:
+                        t.queue.popleft()
+                        self._lost_snd(t)
+                    t.queue.append(self._frame(t))
+                    self._ready(t)
+                elif t.layout.snd or t.layout.status:
+                    self._change(t)
 
     def _changed(self, uses: Callable[[Layout], bool]) -> None:
         if not self.host.operational:
             return
-        for t in self.tpdos.values():
-            if t.valid and t.layout is not None and uses(t.layout):
-                self._change(t)
+        with self.lock:
+            for t in self.tpdos.values():
+                if t.valid and t.layout is not None and uses(t.layout):
+                    self._change(t)
+
+    def _frame(self, t: Tpdo) -> bytes:
+        """A frame the loop builds: what the loop published, with the values that change
+        without an event sampled now if it maps any (as a SYNC samples them)."""
+        assert t.layout is not None
+        return t.frame(self.host.sample() if t.layout.sampled else self.host.view)
 
     def _change(self, t: Tpdo) -> None:
         if t.type == 0:
             # A write of the same value, or of bytes this TPDO does not map, is no change of
             # its data (CiA 301 7.2.2.2: acyclic synchronous, "after an event").
-            if t.frame() != t.reference:
+            if self._frame(t) != t.reference:
                 t.sync_due = True
         elif t.type in EVENT_TYPES:
-            data = t.frame()
+            data = self._frame(t)
             if data != (t.pending if t.pending is not None else t.last):
                 t.pending = data
                 self._ready(t)
@@ -621,14 +654,16 @@ class Pdos:
             t.inhibit_timer = self.host.clock.call_later(wait, lambda: self._inhibit_over(t))
 
     def _inhibit_over(self, t: Tpdo) -> None:
-        t.inhibit_timer = None
-        # A loop whose timers have a millisecond's resolution (uvloop) may fire a hair
-        # early: the inhibit time is kept on the clock's own (nanosecond) reckoning.
-        wait = t.last_t + t.inhibit_s - self.host.clock.monotonic()
-        if wait > 0:
-            t.inhibit_timer = self.host.clock.call_later(wait, lambda: self._inhibit_over(t))
-            return
-        self._transmit(t)
+        with self.lock:
+            t.inhibit_timer = None
+            # A loop whose timers have a millisecond's resolution (uvloop) may fire a hair
+            # early: the inhibit time is kept on the clock's own (nanosecond) reckoning.
+            wait = t.last_t + t.inhibit_s - self.host.clock.monotonic()
+            if wait > 0:
+                t.inhibit_timer = self.host.clock.call_later(wait,
+                                                              lambda: self._inhibit_over(t))
+                return
+            self._transmit(t)
 
     def _transmit(self, t: Tpdo) -> None:
         if not (self.host.operational and t.valid):
@@ -641,7 +676,7 @@ class Pdos:
             if data == t.last and not t.force:
                 return  # changed and changed back within the inhibit time
         elif t.force:
-            data = t.frame()
+            data = self._frame(t)
         else:
             return
         t.force = False
@@ -664,13 +699,14 @@ class Pdos:
             t.event_timer = self.host.clock.call_later(t.event_s, lambda: self._event_due(t))
 
     def _event_due(self, t: Tpdo) -> None:
-        t.event_timer = None
-        wait = t.last_t + t.event_s - self.host.clock.monotonic()
-        if wait > 0:  # fired early (a coarse loop clock): not yet
-            t.event_timer = self.host.clock.call_later(wait, lambda: self._event_due(t))
-            return
-        t.force = True
-        self._ready(t)
+        with self.lock:
+            t.event_timer = None
+            wait = t.last_t + t.event_s - self.host.clock.monotonic()
+            if wait > 0:  # fired early (a coarse loop clock): not yet
+                t.event_timer = self.host.clock.call_later(wait, lambda: self._event_due(t))
+                return
+            t.force = True
+            self._ready(t)
 
     # -- RPDOs and SYNC (receive thread, then loop) -------------------------------------------
 
@@ -750,10 +786,16 @@ class Pdos:
         window_us = param(self.host.node, SYNC_WINDOW, 0)
         if window_us and timestamp and now - timestamp > window_us / 1e6:
             stale = True  # handled after the synchronous window closed (0x1007)
-        answered = False
-        for t in list(self.tpdos.values()):
-            if t.valid and t.type <= 240:
-                answered |= self._sync_tpdo(t, counter, send=not stale)
+        answered = sampled = False
+        view = self.host.view  # one snapshot for all of this SYNC's TPDOs
+        with self.lock:
+            for t in self.tpdos.values():
+                if t.valid and t.layout is not None and t.type <= 240 \
+                        and self._sync_tpdo(t, view, counter, send=not stale):
+                    answered = True
+                    sampled |= t.layout.sampled
+        if sampled:
+            self.host.sample_later()  # block N, line, the PLC: as of this SYNC for the next
         if answered:  # (a frame without a time stamp: counted, its latency unknown)
             self._answered(time.time() - timestamp if timestamp else 0.0)
         batches = list(self._sync_pending.values())
@@ -771,12 +813,13 @@ class Pdos:
                 break
             self.sync_latency_over[i] += 1
 
-    def _sync_tpdo(self, t: Tpdo, counter: int | None, send: bool = True) -> bool:
-        """Whether this SYNC sent a frame of ``t``."""
+    def _sync_tpdo(self, t: Tpdo, view: Snapshot, counter: int | None,
+                   send: bool = True) -> bool:
+        """Whether this SYNC sent a frame of ``t`` (receive thread, under the lock)."""
         if t.type == 0:
             if t.sync_due:
                 t.sync_due = False
-                return self._sync_send(t, send, unless=t.reference)  # not if changed back
+                return self._sync_send(t, view, send, unless=t.reference)  # unless changed back
             return False
         if not t.started:
             if t.sync_start and counter is not None:
@@ -788,18 +831,15 @@ class Pdos:
         t.sync_count += 1
         if t.sync_count >= t.type:
             t.sync_count = 0
-            return self._sync_send(t, send)
+            return self._sync_send(t, view, send)
         return False
 
-    def _sync_send(self, t: Tpdo, send: bool, unless: bytes | None = None) -> bool:
+    def _sync_send(self, t: Tpdo, view: Snapshot, send: bool,
+                   unless: bytes | None = None) -> bool:
         if not send:
             self.sync_dropped += 1
             return False
-        try:
-            data = t.frame()
-        except Exception:  # a value the loop was changing at this instant: not sent
-            self.sync_dropped += 1
-            return False
+        data = t.frame(view)  # the loop's snapshot: nothing here reads the engine
         if unless is not None and data == unless:
             return False
         self._send(t, data)

@@ -6,6 +6,8 @@ chance are forced here, not waited for."""
 from __future__ import annotations
 
 import asyncio
+import queue
+import struct
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -13,6 +15,7 @@ from typing import Any
 import pytest
 
 from ncgate.gateway import Gateway
+from ncgate.interpreter.engine import Engine
 
 from .conftest import Master
 
@@ -50,3 +53,102 @@ async def test_a_callback_the_loop_ran_before_its_handoff_returned_is_not_left_p
     await master.barrier()  # an SDO status read: handed to the loop the same way
     assert await master.upload(0x2000, 1) == bytes((20,))  # every RPDO was applied
     assert not node._pending  # nothing the loop ran is still tracked as waiting
+
+
+TPDO3 = 0x390
+
+
+def map_entry(index: int, sub: int, bits: int) -> int:
+    return index << 16 | sub << 8 | bits
+
+
+class _OnLoopOnly(dict[int, Any]):
+    """The engine's processes, read only on the loop's thread (others are recorded)."""
+
+    def __init__(self, items: dict[int, Any], check: Callable[[str], None]) -> None:
+        super().__init__(items)
+        self._check = check
+
+    def __getitem__(self, key: int) -> Any:
+        self._check(f"Engine.processes[{key}]")
+        return super().__getitem__(key)
+
+
+async def test_a_sync_answers_from_the_loops_snapshot_while_the_loop_is_blocked(
+        gw: Gateway, master: Master, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A synchronous TPDO that maps a process's state, block N and line, another's wait and
+    the PLC's state: the receive thread answers the SYNC while the loop is held, and reads
+    nothing of the engine or the PLC to do it (every such read off the loop is a fault)."""
+    engine, loop_thread = gw.engine, threading.get_ident()
+    off_loop: list[str] = []
+
+    def check(what: str) -> None:
+        if threading.get_ident() != loop_thread:
+            off_loop.append(f"{what} on {threading.current_thread().name}")
+            raise AssertionError(f"{what} read off the loop")
+
+    def on_loop_only(what: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def guarded(*args: Any, **kwargs: Any) -> Any:
+            check(what)
+            return fn(*args, **kwargs)
+        return guarded
+
+    # TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state.
+    for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
+                                 map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
+                                 map_entry(0x2700, 1, 8)), start=1):
+        await master.download(0x1A02, sub, entry.to_bytes(4, "little"))
+    await master.download(0x1A02, 0, b"\x05")
+    await master.download(0x1802, 2, b"\x01")
+    await master.download(0x1802, 1, (0x40000390).to_bytes(4, "little"))
+    master.listen(TPDO3)
+    master.nmt(0x01)
+    await master.barrier()
+
+    monkeypatch.setattr(Engine, "status", on_loop_only("Engine.status", Engine.status))
+    monkeypatch.setattr(Engine, "last_snd", property(on_loop_only(
+        "Engine.last_snd", Engine.last_snd.fget)))  # type: ignore[attr-defined]
+    monkeypatch.setattr(type(gw), "plc_status", property(on_loop_only(
+        "Gateway.plc_status", type(gw).plc_status.fget)))  # type: ignore[attr-defined]
+    monkeypatch.setattr(engine, "processes", _OnLoopOnly(engine.processes, check))
+
+    async def sync_while_the_loop_is_held() -> bytes | None:
+        """One SYNC, sent and answered while a loop callback blocks the loop."""
+        held, answered = threading.Event(), threading.Event()
+        frame: list[bytes] = []
+
+        def master_side() -> None:
+            try:
+                assert held.wait(5)
+                master.sync()
+                frame.append(master.frames[TPDO3].get(timeout=5))
+            except queue.Empty:
+                pass
+            finally:
+                answered.set()
+
+        def hold() -> None:
+            held.set()
+            answered.wait(10)  # the loop runs nothing else meanwhile
+
+        asyncio.get_running_loop().call_soon(hold)
+        await asyncio.to_thread(master_side)
+        return frame[0] if frame else None
+
+    def expected() -> bytes:  # on the loop
+        p1, p2 = engine.status(1), engine.status(2)
+        return struct.pack("<BHHBB", int(p1.state), p1.n or 0, p1.line, int(p2.wait_kind), 0)
+
+    gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2
+    await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+    await gw.wait_state(2, "WAIT_COND", timeout_s=5)
+    frame = await sync_while_the_loop_is_held()
+    assert off_loop == []
+    assert frame == expected() == struct.pack("<BHHBB", 3, 2, 2, int(engine.status(2).wait_kind),
+                                              0)
+    gw.write("SA10", 1)  # P1 goes on: SND to P4, then waits for P4 at N4
+    await gw.wait_state(1, "WAIT_PROC", timeout_s=5)
+    frame = await sync_while_the_loop_is_held()
+    assert off_loop == []
+    assert frame == expected()
+    assert frame is not None and frame[1:5] == struct.pack("<HH", 4, 4)
