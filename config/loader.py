@@ -29,6 +29,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ncgate.config.plant import FaultConfig, PlantModelConfig, read_faults, read_models
 from ncgate.errors import NcgateError
 from ncgate.interpreter.settings import (
     AUX_NC_CODES,
@@ -338,7 +339,7 @@ def _programs(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
     if not isinstance(raw, list) or not all(isinstance(x, str) and x for x in raw):
         raise r.fail(key, f"expected a list of PROGRAM names, got {raw!r}")
     if raw and not done.get("logic"):
-        raise r.fail(key, "names programs, but plc.logic names no file")
+        raise r.fail(key, f"names programs, but {key.rsplit('.', 1)[0]}.logic names no file")
     return tuple(raw)
 
 
@@ -753,6 +754,31 @@ class CanopenConfig:
         parse=_optional_path)
 
 
+def _plant_models(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    return read_models(t.get("model"), key, r.fail)
+
+
+def _plant_faults(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    return read_faults(t.get("fault"), key, r.fail)
+
+
+@dataclass(frozen=True, slots=True)
+class PlantConfig:
+    """The machine around the cell (docs/plant.md): models that answer the PLC's outputs,
+    an optional ST plant logic, and the faults to inject."""
+
+    model: tuple[PlantModelConfig, ...] = setting(
+        (), "[[plant.model]]: name, kind (delay, cylinder, motor, lag, generator, switch) and "
+        "the kind's keys (docs/plant.md)", parse=_plant_models)
+    scan_ms: int = setting(10, "the plant's step for what moves continuously (a position, a "
+                           "speed, a lag, a sine): its value is written every scan_ms of "
+                           "machine time while it moves; switch points are exact", lo=1,
+                           hi=60_000)
+    fault: tuple[FaultConfig, ...] = setting(
+        (), "[[plant.fault]]: target, kind, at / when, for_s and the kind's keys "
+        "(docs/plant.md)", parse=_plant_faults)
+
+
 @dataclass(frozen=True, slots=True)
 class TraceConfig:
     """What ``ncgate run`` keeps of the trace: memory stays flat however long it runs."""
@@ -802,6 +828,7 @@ class Config:
     modbus: ModbusConfig = setting(doc="[modbus]", factory=ModbusConfig)
     canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
     trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
+    plant: PlantConfig = setting(doc="[plant]", factory=PlantConfig)
     web: WebConfig = setting(doc="[web]", factory=WebConfig)
     symbols_file: Path | None = setting(
         None, "a CSV I/O list of more I/O names: a header of name, var and (optionally) "
@@ -1154,7 +1181,8 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
-    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, WebTlsConfig, WebConfig)})
+    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, PlantConfig, WebTlsConfig,
+    WebConfig)})
 
 
 def config_markdown() -> str:

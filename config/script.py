@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from ncgate.config.loader import ConfigError, read_toml
+from ncgate.config.plant import FaultConfig, read_fault
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,12 +45,35 @@ class ScriptEntry:
     on: bool = True  # break: set (or clear)
     feed: int | None = None  # override: the feed override in percent
     rapid: int | None = None  # override: the rapid override in percent
+    fault: FaultConfig | None = None  # fault: inject (or clear) a fault
+
+
+@dataclass(frozen=True, slots=True)
+class Expect:
+    """An expectation of a scenario (docs/plant.md): ``cond`` holds at some moment of the
+    window ``within`` (``by`` T is [0, T]), or at every moment of the run (``always``)."""
+
+    key: str  # "expect[0]"
+    name: str
+    cond: str  # "SA30=1", "P1 IDLE", "alarm AL145", "alarm", "no alarm"
+    within: tuple[float, float] | None = None
+    always: bool = False
 
 
 @dataclass(frozen=True, slots=True)
 class Script:
     file: str
     entries: tuple[ScriptEntry, ...]
+    expects: tuple[Expect, ...] = ()
+
+    @property
+    def horizon(self) -> float | None:
+        """The end of the last window, or of the last timed entry: how long a scenario runs."""
+        ends = [e.within[1] for e in self.expects if e.within is not None]
+        ends += [e.at for e in self.entries if e.at is not None]
+        ends += [e.fault.at + (e.fault.for_s or 0.0) for e in self.entries
+                 if e.fault is not None and e.fault.at is not None]
+        return max(ends) if ends else None
 
 
 def load_script(path: str | Path | None) -> Script:
@@ -63,18 +87,65 @@ def load_script(path: str | Path | None) -> Script:
         return ConfigError(f"{file}: {key}: {message}")
 
     for name in raw:
-        if name not in ("write", "snd", "command", "break", "override"):
-            raise fail(name, "unknown key (expected [[write]], [[snd]], [[command]], [[break]] "
-                       "or [[override]])")
+        if name not in SECTIONS:
+            raise fail(name, "unknown key (expected [[write]], [[snd]], [[command]], [[break]], "
+                       "[[override]], [[fault]] or [[expect]])")
     entries: list[ScriptEntry] = []
-    for section in ("write", "snd", "command", "break", "override"):
+    faults = raw.get("fault", [])
+    if not isinstance(faults, list):
+        raise fail("fault", "expected an array of tables ([[fault]])")
+    for i, table in enumerate(faults):
+        fault = read_fault(table, f"fault[{i}]", fail, script=True)
+        entries.append(ScriptEntry(fault.key, fault.at if fault.at is not None else (
+            0.0 if fault.when is None else None), fault.when, fault.after, fault=fault))
+    expects = raw.get("expect", [])
+    if not isinstance(expects, list):
+        raise fail("expect", "expected an array of tables ([[expect]])")
+    found = tuple(_expect(table, f"expect[{i}]", fail) for i, table in enumerate(expects))
+    for section in ("write", "snd", "command", "break", "override"):  # fault: above
         tables = raw.get(section, [])
         if not isinstance(tables, list):
             raise fail(section, f"expected an array of tables ([[{section}]])")
         for i, table in enumerate(tables):
             key = f"{section}[{i}]"
             entries.append(_entry(table, key, section, fail))
-    return Script(file, tuple(entries))
+    return Script(file, tuple(entries), found)
+
+
+SECTIONS = ("write", "snd", "command", "break", "override", "fault", "expect")
+
+
+def _expect(table: Any, key: str, fail: Any) -> Expect:
+    if not isinstance(table, dict):
+        raise fail(key, "expected a table")
+    for name in table:
+        if name not in ("name", "cond", "within", "by", "always"):
+            raise fail(f"{key}.{name}", "unknown key (name, cond, within, by, always)")
+    name, cond = table.get("name", key), table.get("cond")
+    if not isinstance(name, str) or not name.strip():
+        raise fail(f"{key}.name", f"expected a name, got {name!r}")
+    if not isinstance(cond, str) or not cond.strip():
+        raise fail(f"{key}.cond", "expected a condition such as \"SA30=1\", \"P1 IDLE\", "
+                   f"\"alarm AL145\", \"alarm\" or \"no alarm\"; got {cond!r}")
+    given = [k for k in ("within", "by", "always") if k in table]
+    if len(given) != 1:
+        raise fail(key, "give exactly one of within = [from, to], by = T and always = true")
+    window: tuple[float, float] | None = None
+    if "within" in table:
+        w = table["within"]
+        if (not isinstance(w, list) or len(w) != 2 or any(
+                isinstance(x, bool) or not isinstance(x, int | float) or x < 0 for x in w)
+                or w[0] > w[1]):
+            raise fail(f"{key}.within", f"expected [from, to] in seconds, from <= to, got {w!r}")
+        window = (float(w[0]), float(w[1]))
+    elif "by" in table:
+        b = table["by"]
+        if isinstance(b, bool) or not isinstance(b, int | float) or b < 0:
+            raise fail(f"{key}.by", f"expected a time in seconds >= 0, got {b!r}")
+        window = (0.0, float(b))
+    elif table["always"] is not True:
+        raise fail(f"{key}.always", "expected true")
+    return Expect(key, name.strip(), cond.strip(), window, window is None)
 
 
 def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:

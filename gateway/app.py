@@ -40,11 +40,13 @@ from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wallclock import WallClockDriver
-from ncgate.gateway.wiring import Runtime, build_runtime
+from ncgate.gateway.wiring import Runtime, build_runtime, start_plant
 from ncgate.inputs import (
     API,
+    ClearFault,
     Command,
     CommandKind,
+    Fault,
     Force,
     Input,
     Snd,
@@ -188,8 +190,32 @@ class Gateway:
             stack.callback(self._stop_plc, plc)
             if self.recorder is not None and isinstance(self.door.reload_plc, OnlineChange):
                 self.door.reload_plc.record_to(self.recorder.logic)  # (run --record)
+        # The plant answers from here on, beside the PLC: its models at rest, their outputs
+        # written, the config's faults armed (docs/plant.md).
+        from ncgate.config.script import Script
+        from ncgate.gateway.sim import ScriptPlayer, plant_faults
+
+        plant = start_plant(runtime, self.door.apply, closed=False)
+        stack.callback(plant.close)
+        if self._modbus is not None:
+            plant.fieldbus_listeners.append(self._modbus_faults)
+        ScriptPlayer(runtime, Script("<config>", ()), self.door, plant_faults(self.config)).arm()
+        self._driver.settle()
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
+
+    def _modbus_faults(self, faults: list[Any]) -> None:
+        """The Modbus faults in force, handed to the server (docs/plant.md)."""
+        server = self._modbus
+        setter = getattr(server, "set_faults", None)
+        if setter is None:
+            return
+        from ncgate.gateway.modbus.faults import ModbusFault
+
+        setter([ModbusFault(f.kind, code=int(f.params.get("code", 6)),
+                            ms=float(f.params.get("ms", 0.0)), unit=f.params.get("unit"),
+                            addresses=f.params.get("addresses"))
+                for f in faults if f.target == "modbus"])
 
     def _stop_loading(self) -> None:
         self.runtime.store.cancel()  # a child checking a big program is killed
@@ -549,6 +575,26 @@ class Gateway:
         """Force a variable (``"SA10"``, an I/O name of ``[symbols]``, or a PLC variable's
         path, ``"main.n"``) to ``value``; ``None`` releases it (docs/decisions.md)."""
         self.apply(Force(self.runtime.force_target(var), value, source))
+
+    def fault(self, target: str, kind: str, *, for_s: float | None = None,
+              source: Source = API, **params: object) -> None:
+        """Inject a fault (docs/plant.md): ``gw.fault("clamp", "never")``,
+        ``gw.fault("SA30", "stuck", value=0, for_s=2)``, ``gw.fault("modbus", "exception",
+        code=6, addresses=[0, 99])``."""
+        self.apply(Fault.of(target, kind, for_s=for_s, source=source, **params))
+
+    def clear_fault(self, target: str | None = None, source: Source = API) -> None:
+        """Clear the faults of ``target`` (a model, an output, a variable, ``modbus``), or
+        every fault (None)."""
+        self.apply(ClearFault(target, source))
+
+    @property
+    def plant(self) -> Any:
+        """The plant: ``gw.plant.status()``, ``gw.plant.models``."""
+        plant = self.runtime.plant
+        if plant is None:
+            raise GatewayError("the gateway is not running")
+        return plant
 
     def read(self, var: str) -> int:
         v = self.runtime.var(var)

@@ -30,8 +30,10 @@ from ncgate.inputs import (
     FEED_OVERRIDE_MAX,
     RAPID_OVERRIDE_MAX,
     Break,
+    ClearFault,
     Command,
     CommandKind,
+    Fault,
     FieldbusAlarm,
     Force,
     Input,
@@ -123,6 +125,11 @@ _SWITCHES: dict[CommandKind, dict[str, bool]] = {
 }
 
 
+# Inputs a replay gives again by itself: the PLC logic's and the plant's (same config, same
+# logic, same clock).
+_NOT_RECORDED: Final = frozenset({SourceKind.PLC, SourceKind.PLANT})
+
+
 class Door:
     """Applies inputs to one runtime (``run``'s, a ``sim``'s or a replay's)."""
 
@@ -165,6 +172,10 @@ class Door:
             self._break(item)  # type: ignore[arg-type]
         elif kind is Force:
             self._force(item)  # type: ignore[arg-type]
+        elif kind is Fault:
+            self._fault(item)  # type: ignore[arg-type]
+        elif kind is ClearFault:
+            self._clear_fault(item)  # type: ignore[arg-type]
         else:
             raise InputRefused(Reason.UNSUPPORTED, f"not an input of ncgate.inputs: {item!r}")
 
@@ -172,7 +183,7 @@ class Door:
         """Validated: now, the record, then the effect."""
         if self._sync is not None:
             self._sync()
-        if self.recorder is not None and item.source.kind is not SourceKind.PLC:
+        if self.recorder is not None and item.source.kind not in _NOT_RECORDED:
             self.recorder(item, self.runtime.engine.now)
 
     # -- each kind ------------------------------------------------------------------------------
@@ -454,6 +465,22 @@ class Door:
         self._enter(dataclasses.replace(item, program=name))  # recorded by its name
         runtime.engine.start(name, item.process, by=str(item.source), at=item.at,
                              with_calc=item.with_calc)
+
+    def _fault(self, item: Fault) -> None:
+        plant = self.runtime.plant
+        if plant is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no plant runs here")
+        fault = plant.check(item)
+        self._enter(item)
+        plant.inject(fault, item.for_s)
+
+    def _clear_fault(self, item: ClearFault) -> None:
+        plant = self.runtime.plant
+        if plant is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no plant runs here")
+        faults = plant.clear(item)
+        self._enter(item)
+        plant.remove(faults, str(item.source))
 
     def _alarm(self, item: FieldbusAlarm) -> None:
         if not isinstance(item.message, str):

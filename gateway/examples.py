@@ -32,6 +32,15 @@ class Example:
         path = self.folder / "script.toml"
         return path if path.is_file() else None
 
+    @property
+    def scripts(self) -> list[Path]:
+        """What ``sim --example`` plays: its scenario suite (``scenarios/*.toml``, each an
+        independent run), else its ``script.toml``."""
+        suite = sorted((self.folder / "scenarios").glob("*.toml"))
+        if suite:
+            return suite
+        return [self.script] if self.script is not None else []
+
 
 def examples_folder() -> Path:
     return Path(str(resources.files("ncgate.examples")))

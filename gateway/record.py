@@ -53,11 +53,13 @@ from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.plc import OnlineChange, start_plc
 from ncgate.gateway.tracefile import TraceFile
-from ncgate.gateway.wiring import Runtime, build_runtime
+from ncgate.gateway.wiring import Runtime, build_runtime, start_plant
 from ncgate.inputs import (
     Break,
+    ClearFault,
     Command,
     CommandKind,
+    Fault,
     FieldbusAlarm,
     Force,
     Input,
@@ -86,7 +88,8 @@ COMPARED: dict[str, tuple[str, ...]] = {
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
                     "plc_reload",
-                    "remove", "override", "break", "force", "forced"})
+                    "remove", "override", "break", "force", "forced", "fault",
+                    "fault_clear"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
 
 
@@ -141,8 +144,16 @@ def input_line(item: Input, t: float) -> dict[str, Any]:
         out.update(input="force", value=item.value,
                    var=None if var is None else str(var) if isinstance(var, PlcVar)
                    else list(var.address))
-    else:
+    elif isinstance(item, Fault):
+        out.update(input="fault", target=item.target, kind=item.kind,
+                   params={k: list(v) if isinstance(v, tuple) else v for k, v in item.params},
+                   for_s=item.for_s)
+    elif isinstance(item, ClearFault):
+        out.update(input="fault_clear", target=item.target)
+    elif isinstance(item, FieldbusAlarm):
         out.update(input="alarm", code=int(item.code), message=item.message)
+    else:
+        raise TypeError(f"no record line for {item!r}")
     return out
 
 
@@ -247,8 +258,19 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
                            _field(item, "rapid", int, "a percent or null", optional=True),
                            _field(item, "process", int, "a process number, or null for the "
                                   "cell", optional=True), source)
+    if kind == "fault":
+        params = _field(item, "params", dict, "an object of the fault's keys")
+        for_s = _field(item, "for_s", (int, float), "seconds or null", optional=True)
+        return t, Fault(_field(item, "target", str, "a fault's target"),
+                        _field(item, "kind", str, "a fault kind"),
+                        tuple(sorted((str(k), tuple(v) if isinstance(v, list) else v)
+                                     for k, v in params.items())),
+                        None if for_s is None else float(for_s), source)
+    if kind == "fault_clear":
+        return t, ClearFault(_field(item, "target", str, "a target or null", optional=True),
+                             source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
-                     "alarm, override, break, force)")
+                     "alarm, override, break, force, fault, fault_clear)")
 
 
 def _check_event(item: dict[str, Any]) -> None:
@@ -492,6 +514,12 @@ def replay(path: str | Path, config: str | Path | None = None,
               sources=recording.logic[0] if recording.logic else None)
     if recording.logic and isinstance(door.reload_plc, OnlineChange):
         door.reload_plc.recorded = list(recording.logic[1:])  # the session's reloads
+    # The plant as run started it: its models, and the config's faults (neither recorded).
+    from ncgate.config.script import Script
+    from ncgate.gateway.sim import ScriptPlayer, plant_faults
+
+    start_plant(runtime, door.apply, closed=False)
+    ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order

@@ -8,6 +8,7 @@ still to come: the PLC may press cycle start for the next part (docs/decisions.m
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import io
 import signal
@@ -17,21 +18,25 @@ from typing import Any, TextIO
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.script import Script, ScriptEntry
-from ncgate.errors import InputRefused
+from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.plc import start_plc
+from ncgate.gateway.scenario import Expectations, Verdict
 from ncgate.gateway.wiring import (
     ImageVar,
     Runtime,
     build_runtime,
     parse_assignment,
     parse_condition,
+    start_plant,
 )
 from ncgate.inputs import (
     Break,
+    ClearFault,
     Command,
     CommandKind,
+    Fault,
     Override,
     Snd,
     Source,
@@ -60,6 +65,7 @@ class SimResult:
     runtime: Runtime
     plc_alarms: int = 0  # alarms of the PLC/fieldbus side (process 0: AL160, a PLC fault)
     interrupted_by: str = ""  # "Ctrl-C" or "SIGTERM" when the outcome is "interrupted"
+    verdicts: list[Verdict] = dataclasses.field(default_factory=list)  # the script's [[expect]]
 
     @property
     def alarms(self) -> int:
@@ -91,18 +97,35 @@ SIM = Source(SourceKind.SCRIPT)  # the programs `ncgate sim` starts at t = 0
 class ScriptPlayer:
     """Feeds the script's writes and SNDs into the runtime at their times."""
 
-    def __init__(self, runtime: Runtime, script: Script, door: Door) -> None:
+    def __init__(self, runtime: Runtime, script: Script, door: Door,
+                 extra: Sequence[ScriptEntry] = ()) -> None:
+        """``extra``: entries of the config's own (``[[plant.fault]]``), played the same way."""
         self.runtime = runtime
         self.script = script
         self.door = door
+        self.entries = (*extra, *script.entries)
         self._state_watch: list[tuple[StateTrigger, ScriptEntry]] = []
         self.due = 0  # entries armed on the clock and not fired yet
-        for entry in script.entries:
+        for entry in self.entries:
             self._validate(entry)
         runtime.engine.state_listeners.append(self._on_state)
 
     def _fail(self, entry: ScriptEntry, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.script.file}: {entry.key}.{key}: {message}")
+        file = self.script.file
+        if entry.key.startswith("plant."):
+            file = str(self.runtime.config.source or "<config>")
+        return ConfigError(f"{file}: {entry.key}.{key}: {message}")
+
+    def _fault(self, entry: ScriptEntry) -> Fault | ClearFault:
+        f = entry.fault
+        assert f is not None
+        # The config's faults come with the plant: a replay arms them again, unrecorded.
+        source = Source(SourceKind.PLANT if entry.key.startswith("plant.") else
+                        SourceKind.SCRIPT, entry.key)
+        if f.clear:
+            return ClearFault(None if f.target == "*" else f.target, source)
+        assert f.kind is not None
+        return Fault(f.target, f.kind, f.params, f.for_s, source)
 
     def _validate(self, entry: ScriptEntry) -> None:
         config = self.runtime.config
@@ -129,6 +152,15 @@ class ScriptPlayer:
                                  f"({', '.join(kinds)})")
         if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
             raise self._fail(entry, "process", f"process {entry.process} is not configured")
+        if entry.fault is not None and not entry.fault.clear:
+            plant = self.runtime.plant
+            item = self._fault(entry)
+            try:
+                if plant is None:
+                    raise InputRefused(Reason.NOT_CONFIGURED, "no plant runs here")
+                plant.check(item)  # type: ignore[arg-type]
+            except InputRefused as exc:
+                raise self._fail(entry, "target", str(exc)) from None
         if entry.when is not None:
             self._parse_when(entry)
 
@@ -153,7 +185,7 @@ class ScriptPlayer:
 
     def arm(self) -> None:
         engine = self.runtime.engine
-        for entry in self.script.entries:
+        for entry in self.entries:
             if entry.at is not None:
                 self.due += 1
                 engine.call_at(entry.at, functools.partial(self._fire, entry))
@@ -196,6 +228,8 @@ class ScriptPlayer:
         try:
             if entry.set is not None:
                 self.door.apply(self._write(entry))
+            elif entry.fault is not None:
+                self.door.apply(self._fault(entry))
             elif entry.command is not None:
                 kind = next(k for k in CommandKind if k.label == entry.command)
                 self.door.apply(Command(kind, entry.process, source))
@@ -230,8 +264,13 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         raise UsageError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
-    player = ScriptPlayer(runtime, script, door)
+    start_plant(runtime, door.apply, closed=True)
+    player = ScriptPlayer(runtime, script, door, plant_faults(config))
+    expectations = Expectations(runtime, script)
     engine = runtime.engine
+    horizon = script.horizon if script.expects else None
+    if until is None and horizon is not None:
+        until = horizon  # a scenario runs until its last window closes
     if single_block:  # every process stops after each block: the script's steps go on
         door.apply(Command(CommandKind.SINGLE_BLOCK_ON, None, SIM))
     for point in breaks:  # --break: refused ones are usage errors
@@ -267,13 +306,15 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             plc_alarms += 1
 
     runtime.trace.subscribe(count_plc_alarm)
+    expectations.start()
     player.arm()
     start_plc(config, runtime, door, closed=True)
 
     def active() -> bool:
         """Something may still start a program: the PLC logic's scan, a scripted input."""
         plc = runtime.plc
-        return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING)
+        return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING) \
+            or (horizon is not None and engine.now < horizon)
 
     def plc_may_start(n: int) -> bool:
         """The PLC logic's NC.START is a cycle start: nc.main in process 1 (orphan check)."""
@@ -291,7 +332,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     except KeyboardInterrupt as exc:  # what happened so far is still reported and written
         engine.finish_stats()
         by = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
-        return SimResult("interrupted", EXIT_FAILED, runtime, plc_alarms, by)
+        return SimResult("interrupted", EXIT_FAILED, runtime, plc_alarms, by,
+                         expectations.verdicts())
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
@@ -299,11 +341,23 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():
         engine.record_stall()
-        return SimResult("stall", EXIT_FAILED, runtime, plc_alarms)
-    if process_alarms:  # "blocked" with nobody blocked: every process left is in ALARM
-        return SimResult("alarm", EXIT_FAILED, runtime, plc_alarms)
-    # Any alarm is exit 1 (README): a PLC fault (AL160) is one, though no process stopped.
-    return SimResult(outcome, EXIT_FAILED if plc_alarms else EXIT_OK, runtime, plc_alarms)
+        result = SimResult("stall", EXIT_FAILED, runtime, plc_alarms)
+    elif process_alarms:  # "blocked" with nobody blocked: every process left is in ALARM
+        result = SimResult("alarm", EXIT_FAILED, runtime, plc_alarms)
+    else:  # Any alarm is exit 1 (README): a PLC fault (AL160) is one, though no process stopped
+        result = SimResult(outcome, EXIT_FAILED if plc_alarms else EXIT_OK, runtime, plc_alarms)
+    if script.expects:  # a scenario: its verdicts decide (a bad case may expect an alarm)
+        expectations.stop()
+        result.verdicts = expectations.verdicts()
+        result.exit_status = EXIT_OK if all(v.ok for v in result.verdicts) else EXIT_FAILED
+    return result
+
+
+def plant_faults(config: Config) -> list[ScriptEntry]:
+    """``[[plant.fault]]`` as entries a script player plays: at a time, on a condition, or
+    (neither) at the start."""
+    return [ScriptEntry(f.key, f.at if f.at is not None else (0.0 if f.when is None else None),
+                        f.when, f.after, fault=f) for f in config.plant.fault]
 
 
 class Terminated(KeyboardInterrupt):
@@ -383,6 +437,8 @@ def report(result: SimResult, out: TextIO) -> None:
     if alarms and result.outcome != "alarm":
         verdict += f", {alarms} alarm{'s' if alarms > 1 else ''}"
     out.write(f"simulated {engine.now:.3f} s: {verdict}\n")
+    for v in result.verdicts:
+        out.write(v.line() + "\n")
 
 
 def _describe(event: EventDict) -> str:

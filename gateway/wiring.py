@@ -4,8 +4,9 @@ conversions between the config's and the interpreter's names for things."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from ncgate.config import Config
 from ncgate.errors import InputRefused
@@ -23,6 +24,9 @@ from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.settings import RuntimeSettings
 from ncgate.plc.image import Change, IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus
+
+if TYPE_CHECKING:
+    from ncgate.gateway.plant import Plant
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
@@ -48,6 +52,7 @@ class Runtime:
     engine: Engine
     trace: Trace
     plc: PlcRuntime | None = None  # the PLC logic, when [plc] logic names any
+    plant: Plant | None = None  # the plant's models and faults (start_plant)
     # The PLC's interlock inputs, levels ("feed hold", nc.feed_hold_input; "cycle start
     # inhibit"): while one is set, a cycle start is refused (the door asks).
     interlocks: tuple[tuple[str, Var], ...] = ()
@@ -105,6 +110,18 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
         ("cycle start inhibit", config.nc.cycle_start_inhibit_input)) if text)
     symbols = {name.upper(): _image_var(text) for name, text in config.symbols.items()}
     return Runtime(config, image, store, engine, trace, interlocks=interlocks, symbols=symbols)
+
+
+def start_plant(runtime: Runtime, apply: Callable[[Input], None], *, closed: bool) -> Plant:
+    """The plant of ``[plant]`` on ``runtime`` (its models at rest, their outputs written,
+    the faults of ``[[plant.fault]]`` armed by the caller); faults need it even without
+    models."""
+    from ncgate.gateway.plant import Plant
+
+    plant = Plant(runtime, apply, closed=closed)
+    runtime.plant = plant
+    plant.start()
+    return plant
 
 
 def _image_var(text: str) -> Var:

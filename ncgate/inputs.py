@@ -38,6 +38,7 @@ class SourceKind(enum.StrEnum):
     SCRIPT = "script"
     REPLAY = "replay"
     API = "api"
+    PLANT = "plant"  # a plant model's write (``plant clamp``), or the ST plant logic's
 
 
 @dataclass(frozen=True, slots=True)
@@ -337,13 +338,54 @@ class Force:
             object.__setattr__(self, "var", var)
 
 
-Input = Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break | Force
+FAULT_KINDS: Final = ("stuck", "wire_break", "chatter", "slow", "never", "exception", "delay",
+                      "no_reply", "heartbeat_stop", "emcy", "pdo_stop")
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """Inject a fault (docs/plant.md): ``target`` a plant model (``clamp``), one of its
+    outputs (``clamp.extended``), an image variable or I/O name (``SA30``, ``door_closed``),
+    ``modbus`` or ``canopen``; ``kind`` one of :data:`FAULT_KINDS`; ``params`` its keys
+    (``value``, ``period_ms``, ``factor``, ``live_zero``, ``code``, ``ms``, ``unit``,
+    ``addresses``) as sorted (key, value) pairs; ``for_s`` clears it after that long (None:
+    until cleared).  ``Fault.of("clamp", "slow", factor=3)`` builds one from keywords."""
+
+    target: str
+    kind: str
+    params: tuple[tuple[str, object], ...] = ()
+    for_s: float | None = None
+    source: Source = API
+
+    @classmethod
+    def of(cls, target: str, kind: str, *, for_s: float | None = None,
+           source: Source = API, **params: object) -> Fault:
+        items = ((k, tuple(v) if isinstance(v, list) else v) for k, v in params.items())
+        return cls(target, kind, tuple(sorted(items)), for_s, source)
+
+    def param(self, name: str, default: object = None) -> object:
+        return next((v for k, v in self.params if k == name), default)
+
+
+@dataclass(frozen=True, slots=True)
+class ClearFault:
+    """Clear the faults of ``target`` (as :class:`Fault` names it), or every fault (None)."""
+
+    target: str | None = None
+    source: Source = API
+
+
+Input = (Write | Writes | Command | Snd | Start | FieldbusAlarm | Override | Break | Force
+         | Fault | ClearFault)
 
 __all__ = [
     "API",
+    "FAULT_KINDS",
     "Break",
+    "ClearFault",
     "Command",
     "CommandKind",
+    "Fault",
     "FieldbusAlarm",
     "Force",
     "Input",

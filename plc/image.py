@@ -99,6 +99,10 @@ class IOImage:
         self._force_bytes: dict[tuple[str, int], tuple[int, int]] = {}
         self._force_syvars: dict[int, int] = {}
         self.on_overridden: Callable[[list[tuple[str, int, str, int]], str], None] | None = None
+        # Held variables: an injected fault (a stuck sensor, a wire break) holds what every
+        # reader sees, whatever writes it, as a force does; a force wins over a hold.  The
+        # writes a hold changes are not "forced" events (the fault's event says why).
+        self.held: dict[tuple[str, int, str], int] = {}
         self.generation = 0  # +1 on every write that changed something
         self._write_number = 0
 
@@ -155,7 +159,7 @@ class IOImage:
         if not checked:
             for area, index, view, value in items:
                 self.check(area, index, view, value)
-        if self.forced:
+        if self.forced or self.held:
             items = self._apply_forces(items, writer)
         done: list[Change] = []
         written: list[Change] = []
@@ -200,6 +204,19 @@ class IOImage:
             self.forced.pop((area, index, view), None)
         self._force_index()
 
+    def hold(self, area: str, index: int, view: str, value: int, writer: str) -> None:
+        """Hold a variable at ``value`` (a fault): stored now, and kept whatever writes it
+        until :meth:`unhold`; a force of it wins."""
+        self.check(area, index, view, value)
+        self.held[(area, index, view)] = value
+        self._force_index()
+        self.write([(area, index, view, value)], writer, checked=True)
+
+    def unhold(self, area: str, index: int, view: str) -> None:
+        """Release a held variable; its value stays until it is written."""
+        self.held.pop((area, index, view), None)
+        self._force_index()
+
     def forced_over(self, area: str, index: int, view: str) -> tuple[str, int, str] | None:
         """Another forced variable with bits of this one (SA1.BY over a forced SA10), or
         None: two forces of one bit would make the force list say what the image does not."""
@@ -217,7 +234,8 @@ class IOImage:
     def _force_index(self) -> None:
         self._force_bytes.clear()
         self._force_syvars.clear()
-        for (area, index, view), value in self.forced.items():
+        # Holds first, then forces over them: a force wins.
+        for (area, index, view), value in [*self.held.items(), *self.forced.items()]:
             if area == "SYVAR":
                 self._force_syvars[index] = value
                 continue
@@ -263,6 +281,8 @@ class IOImage:
             if kept != value:
                 overridden.append(change)
             out.append((area, index, view, kept))
+        if overridden and self.held:
+            overridden = [c for c in overridden if c[:3] not in self.held]
         if overridden and self.on_overridden is not None:
             self.on_overridden(overridden, writer)
         return out

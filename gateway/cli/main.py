@@ -76,7 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the programs' language (default: the config's nc.dialect)")
     sim.add_argument("--example", metavar="NAME", help="run an installed example: its config, "
                      "its script and its main program (see 'ncgate examples')")
-    sim.add_argument("--script", metavar="S", help="sim script: scripted PLC inputs (TOML); "
+    sim.add_argument("--junit", metavar="F.xml", help="write the scenarios' verdicts "
+                     "([[expect]]) as JUnit XML, for CI")
+    sim.add_argument("--script", metavar="S", action="append", default=[],
+                     help="sim script: scripted PLC inputs, faults and expectations (TOML); "
+                     "several: independent scenarios, each run on its own; "
                      "default: none, or the built-in one with the built-in config")
     sim.add_argument("--trace", metavar="T.jsonl", help="write the trace as JSON Lines")
     sim.add_argument("--until", type=float, metavar="SECONDS", help="stop at this time")
@@ -253,7 +257,7 @@ def _sim(args: argparse.Namespace) -> int:
             raise UsageError(f"the {example.name} example has no program to run: "
                              f"ncgate check --example {example.name}")
         args.config = str(example.config)
-        args.script = args.script or (str(example.script) if example.script else None)
+        args.script = args.script or ([str(s) for s in example.scripts])
         args.main = args.main or [example.main]
     overrides = _set_overrides(args.set)
     origins = dict.fromkeys(overrides, "--set")
@@ -263,19 +267,39 @@ def _sim(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides=overrides, origins=origins, serving=False)
     _require_default_device(config)
     # The built-in config comes with its PLC script; a user's config with none unless given.
-    script = load_script(args.script if args.script or args.config else default_script_path())
+    files = args.script or ([None] if args.config else [default_script_path()])
+    scripts = [load_script(f) for f in files]
     mains = args.main or [config.nc.main]
-    try:
-        result = run_sim(config, mains, script, args.until, signals=True,
-                         single_block=args.single_block, breaks=args.breaks,
-                         keep_going=args.keep_going, at=args.at, with_calc=args.with_calc)
-    except ProgramError as exc:
-        print(str(exc), file=sys.stderr)
-        storage = storage_of(config)
-        _suggest_dialect("sim", [(path, config) for name in mains
-                                 if (path := storage.find(name)) is not None])
-        return EXIT_USAGE
-    report(result, sys.stdout)
+    if len(scripts) > 1 and (args.trace or args.gantt):
+        raise UsageError("--trace and --gantt take one scenario: give one --script")
+    status = EXIT_OK
+    verdicts = []
+    for script in scripts:  # each an independent scenario, on a runtime of its own
+        if len(scripts) > 1:
+            print(f"== {script.file}")
+        try:
+            result = run_sim(config, mains, script, args.until, signals=True,
+                             single_block=args.single_block, breaks=args.breaks,
+                             keep_going=args.keep_going, at=args.at, with_calc=args.with_calc)
+        except ProgramError as exc:
+            print(str(exc), file=sys.stderr)
+            storage = storage_of(config)
+            _suggest_dialect("sim", [(path, config) for name in mains
+                                     if (path := storage.find(name)) is not None])
+            return EXIT_USAGE
+        report(result, sys.stdout)
+        verdicts.append((script.file, result.verdicts))
+        status = max(status, result.exit_status)
+    if args.junit:
+        from ncgate.gateway.scenario import write_junit
+
+        with open(args.junit, "w", encoding="utf-8") as out:
+            write_junit(verdicts, out)
+    if len(scripts) > 1:
+        failed = sum(1 for _, items in verdicts for v in items if not v.ok)
+        total = sum(len(items) for _, items in verdicts)
+        print(f"{len(scripts)} scenarios: {total - failed} of {total} expectations passed")
+        return status
     if args.trace:
         with open(args.trace, "w", encoding="utf-8") as out:
             write_trace(result, out)

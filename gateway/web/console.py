@@ -47,8 +47,10 @@ from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import LiveStatus, status
 from ncgate.inputs import (
     Break,
+    ClearFault,
     Command,
     CommandKind,
+    Fault,
     Force,
     Override,
     Source,
@@ -171,6 +173,7 @@ class WebConsole:
         app.router.add_post("/api/command", self._command)
         app.router.add_get("/api/force", self._forced)
         app.router.add_post("/api/force", self._force)
+        app.router.add_post("/api/fault", self._fault)
         app.router.add_delete("/api/force", self._unforce_all)
         app.router.add_get("/api/trace.jsonl", self._trace)
         app.router.add_get("/api/record", self._record)
@@ -512,6 +515,37 @@ class WebConsole:
             raise ApiError(HTTP_STATUS[exc.reason], f"{var}: {exc}") from None
         log.info("web %s: force %s = %s", request.remote, item.var, value)
         return web.json_response({"var": str(item.var), "value": value})
+
+    async def _fault(self, request: web.Request) -> web.StreamResponse:
+        """``{"target": "clamp", "kind": "never"}`` (and the kind's keys, ``for_s``) injects a
+        fault; ``{"clear": "clamp"}`` clears the target's, ``{"clear": "all"}`` every one."""
+        body = await self._body(request)
+        source = _source(request)
+        item: Fault | ClearFault
+        if "clear" in body:
+            target = body["clear"]
+            if set(body) != {"clear"} or not isinstance(target, str) or not target.strip():
+                raise ApiError(400, 'expected {"clear": "clamp"} or {"clear": "all"}')
+            item = ClearFault(None if target.strip() in ("all", "*") else target, source)
+        else:
+            target, kind = body.get("target"), body.get("kind")
+            if not isinstance(target, str) or not isinstance(kind, str):
+                raise ApiError(400, 'expected {"target": "clamp", "kind": "never"} (and the '
+                               'kind\'s keys) or {"clear": "clamp"}')
+            params = {k: v for k, v in body.items() if k not in ("target", "kind", "for_s")}
+            for_s = body.get("for_s")
+            if for_s is not None and (isinstance(for_s, bool)
+                                      or not isinstance(for_s, int | float)):
+                raise ApiError(400, f'"for_s": a time in seconds, got {for_s!r}')
+            item = Fault(target, kind, tuple(sorted((k, tuple(v) if isinstance(v, list) else v)
+                                                    for k, v in params.items())), for_s, source)
+        try:
+            self.gw.apply(item)
+        except InputRefused as exc:
+            raise ApiError(HTTP_STATUS[exc.reason], str(exc)) from None
+        log.info("web %s: %s", request.remote, item)
+        return web.json_response(self.gw.runtime.plant.status()["faults"]
+                                 if self.gw.runtime.plant is not None else [])
 
     async def _unforce_all(self, request: web.Request) -> web.StreamResponse:
         self.gw.apply(Force(None, None, _source(request)))

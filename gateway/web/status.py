@@ -53,6 +53,7 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "symbols": symbols(gw),
         "record": str(gw.recorder.path) if gw.recorder is not None else None,
         "plc": plc(gw),
+        "plant": gw.runtime.plant.status() if gw.runtime.plant is not None else None,
         "fieldbus": fieldbus(gw),
         "counters": {"events": gw.runtime.trace.seq, "sync_events": gw.runtime.trace.counter},
         "web": {"read_only": gw.config.web.read_only,

@@ -645,6 +645,16 @@ class Engine:
         """A write a force overrode (``value``: what ``who`` tried to store)."""
         self._record(ev.Forced, self.now, 0, None, var, value, who)
 
+    def note_fault(self, target: str, kind: str, params: dict[str, object], who: str) -> None:
+        """A fault injected from outside (docs/plant.md): in the trace."""
+        self.last_change = self.now
+        self._record(ev.Fault, self.now, 0, None, target, kind, params, who)
+
+    def note_fault_clear(self, target: str, kind: str, who: str) -> None:
+        """A fault cleared: in the trace."""
+        self.last_change = self.now
+        self._record(ev.FaultClear, self.now, 0, None, target, kind, who)
+
     def note_hazard(self, proc: int, message: str) -> None:
         """Record a hazard found outside the engine (a script's SND that could not go)."""
         self._record(ev.Hazard, self.now, proc, None, message)

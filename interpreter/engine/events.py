@@ -365,9 +365,47 @@ class AuxAck(NamedTuple):
         return "aux_ack"
 
 
+class Fault(NamedTuple):
+    """A fault injected (docs/plant.md): its ``target`` (a plant model, an output, a
+    variable, ``modbus``, ``canopen``), its kind (``kind`` in the trace: the field is named
+    apart from the event's own ``kind``), its parameters, and who injected it."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    target: str
+    fault_kind: str
+    params: dict[str, Any]
+    who: str
+
+    @property
+    def kind(self) -> str:
+        return "fault"
+
+
+class FaultClear(NamedTuple):
+    """A fault cleared: by ``who``, or by its own ``for_s`` (``who`` names the fault)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    target: str
+    fault_kind: str
+    who: str
+
+    @property
+    def kind(self) -> str:
+        return "fault_clear"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
          | PlcReload
-         | Display | Signal | Remove | Override | Break | Force | Forced | Aux | AuxAck)
+         | Display | Signal | Remove | Override | Break | Force | Forced | Aux | AuxAck
+         | Fault | FaultClear)
+# A field whose JSON key differs from its name (an event's own ``kind`` is its type's).
+_KEYS: Final = {"fault_kind": "kind"}
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal
 # counts like an SND (spec 5.6).
 COUNTED: Final = frozenset({Start, End, Wait, Resume, Snd, Alarm, Signal})
@@ -385,7 +423,7 @@ def as_dict(event: Event) -> dict[str, Any]:
         value = getattr(event, name)
         if value is None and name == "writer":
             continue  # only a condition's resume names the writer
-        out[name] = _json(value)
+        out[_KEYS.get(name, name)] = _json(value)
     return out
 
 
@@ -397,7 +435,7 @@ def as_line(event: Event) -> str:
     kind = type(event)
     names = _NAMES.get(kind)
     if names is None:
-        names = _NAMES[kind] = [(n, f', "{n}": ') for n in kind._fields[4:]]
+        names = _NAMES[kind] = [(n, f', "{_KEYS.get(n, n)}": ') for n in kind._fields[4:]]
     parts = [f'{{"seq": {event[0]}, "t": {round(event[1], 6):.6f}, "event": "{event.kind}", '
              f'"proc": {event[2]}']
     where = event[3]

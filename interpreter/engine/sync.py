@@ -114,6 +114,9 @@ class Sync:
         # operator may start any process (console Start, Gateway.start), so yes.  Closed
         # (sim, replay): no, unless the simulator says so (a script's start to come, the
         # PLC logic's cycle start) by setting this.
+        # What drives a variable a condition waits on (the plant's model, "clamp extends,
+        # 120 of 300 ms"), for the why-record; None: nothing to say.
+        self.explain: Callable[[tuple[str, int, str]], str | None] | None = None
         self.outside_starts: Callable[[int], bool] = (
             (lambda n: False) if host.settings.closed else (lambda n: True))
 
@@ -287,7 +290,15 @@ class Sync:
         wait.value = self.image.read(area, index, view)
         wait.writer = self.image.last_writer(area, index, view)
         image = self.image
-        wait.probe = lambda: (image.read(area, index, view), image.last_writer(area, index, view))
+        def probe() -> tuple[int, str | None]:
+            writer = image.last_writer(area, index, view)
+            explain = self.explain
+            note = explain((area, index, view)) if explain is not None else None
+            if note:  # the plant model that drives it: what it is doing now
+                writer = f"{writer}; {note}" if writer else note
+            return image.read(area, index, view), writer
+
+        wait.probe = probe
         self._begin_wait(p, stage, wait)
         return False
 

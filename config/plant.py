@@ -1,0 +1,263 @@
+"""The plant's tables (docs/plant.md): ``[[plant.model]]``, ``[[plant.fault]]`` and the sim
+script's ``[[fault]]``, read and checked key by key.
+
+A model's keys depend on its kind, so each kind lists its keys here once (:data:`MODEL_KEYS`):
+what the reader accepts, what docs/plant.md documents and what ``ncgate map`` lists as read or
+written.  Variables stay text (``"SA30"``, an I/O name of ``[symbols]``): the gateway resolves
+them against the image and names the dotted key of one that is not in it.  Stdlib only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+Fail = Callable[[str, str], Exception]  # (dotted key, message) -> the error to raise
+
+# Roles of a key: "in" a variable the model reads, "out" one it writes, "ms" a time in ms > 0,
+# "num" a number, "pct" a percentage, "choice:a|b" one of the words, "axis" an axis "P1.X".
+MODEL_KEYS: Final[dict[str, dict[str, tuple[str, bool, Any]]]] = {
+    # kind: {key: (role, required, default)}
+    "delay": {"input": ("in", True, None), "output": ("out", True, None),
+              "on_ms": ("ms0", False, 0.0), "off_ms": ("ms0", False, 0.0)},
+    "cylinder": {"extend": ("in", True, None), "retract": ("in", False, None),
+                 "extended": ("out", False, None), "retracted": ("out", False, None),
+                 "position": ("out", False, None), "travel_ms": ("ms", True, None),
+                 "retract_ms": ("ms", False, None)},
+    "motor": {"run": ("in", True, None), "reverse": ("in", False, None),
+              "speed": ("out", False, None), "at_speed": ("out", False, None),
+              "standstill": ("out", False, None), "rated_rpm": ("pos", True, None),
+              "ramp_rpm_s": ("pos", True, None), "tolerance": ("pct", False, 5.0)},
+    "lag": {"target": ("in", True, None), "actual": ("out", True, None),
+            "time_constant_ms": ("ms", True, None)},
+    "generator": {"output": ("out", True, None),
+                  "shape": ("choice:square|counter|sine|ramp", False, "square"),
+                  "period_ms": ("ms", True, None), "duty": ("frac", False, 0.5),
+                  "low": ("num", False, 0.0), "high": ("num", False, 1000.0)},
+    "switch": {"axis": ("axis", True, None), "output": ("out", True, None),
+               "above": ("num", False, None), "below": ("num", False, None)},
+}
+COMMON_KEYS: Final = ("name", "kind")
+
+# Fault kinds: which targets each takes and which keys.
+FAULT_KEYS: Final[dict[str, tuple[str, ...]]] = {
+    "stuck": ("value",),
+    "wire_break": ("live_zero",),
+    "chatter": ("period_ms",),
+    "slow": ("factor",),
+    "never": (),
+    "exception": ("code", "unit", "addresses"),
+    "delay": ("ms", "unit", "addresses"),
+    "no_reply": ("unit", "addresses"),
+    "heartbeat_stop": (),
+    "emcy": ("code",),
+    "pdo_stop": (),
+}
+MODEL_FAULTS: Final = frozenset({"slow", "never"})  # on a model: its behaviour
+VARIABLE_FAULTS: Final = frozenset({"stuck", "wire_break", "chatter"})  # on what is read
+MODBUS_FAULTS: Final = frozenset({"exception", "delay", "no_reply"})
+CANOPEN_FAULTS: Final = frozenset({"heartbeat_stop", "emcy", "pdo_stop"})
+WHEN_KEYS: Final = ("at", "when", "for_s")
+
+
+@dataclass(frozen=True, slots=True)
+class PlantModelConfig:
+    """One ``[[plant.model]]``: its name, kind and the kind's keys (:data:`MODEL_KEYS`)."""
+
+    name: str
+    kind: str
+    keys: Mapping[str, Any] = field(default_factory=dict)
+
+    def get(self, key: str) -> Any:
+        return self.keys.get(key, MODEL_KEYS[self.kind][key][2])
+
+
+@dataclass(frozen=True, slots=True)
+class FaultConfig:
+    """One ``[[plant.fault]]`` (or a script's ``[[fault]]``): what, when, for how long.
+    ``at`` and ``when`` both None: at the start.  ``clear``: a script's clearing entry."""
+
+    key: str  # "plant.fault[0]", "fault[1]": for messages
+    target: str
+    kind: str | None
+    params: tuple[tuple[str, Any], ...] = ()
+    at: float | None = None
+    when: str | None = None
+    after: float = 0.0
+    for_s: float | None = None
+    clear: bool = False
+
+
+def read_models(raw: Any, key: str, fail: Fail) -> tuple[PlantModelConfig, ...]:
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise fail(key, "expected an array of tables ([[plant.model]])")
+    out: list[PlantModelConfig] = []
+    names: set[str] = set()
+    for i, table in enumerate(raw):
+        item = f"{key}[{i}]"
+        if not isinstance(table, dict):
+            raise fail(item, "expected a table")
+        name, kind = table.get("name"), table.get("kind")
+        if not isinstance(name, str) or not name.strip() or not name.replace("_", "a").isalnum():
+            raise fail(f"{item}.name", f"expected a name of letters, digits and _, got {name!r}")
+        if name in names:
+            raise fail(f"{item}.name", f"{name!r} is the name of another model")
+        names.add(name)
+        if kind not in MODEL_KEYS:
+            raise fail(f"{item}.kind", f"expected one of {', '.join(MODEL_KEYS)}, got {kind!r}")
+        spec = MODEL_KEYS[kind]
+        values: dict[str, Any] = {}
+        for k, v in table.items():
+            if k in COMMON_KEYS:
+                continue
+            if k not in spec:
+                raise fail(f"{item}.{k}", f"unknown key for a {kind} (its keys: "
+                           f"{', '.join(spec)})")
+            values[k] = _value(spec[k][0], v, f"{item}.{k}", fail)
+        for k, (_, required, _) in spec.items():
+            if required and k not in values:
+                raise fail(f"{item}.{k}", f"missing (a {kind} needs it)")
+        if kind == "switch" and "above" not in values and "below" not in values:
+            raise fail(f"{item}.above", "give above, below or both (the switch's range)")
+        if kind == "cylinder" and not ({"extended", "retracted", "position"} & set(values)):
+            raise fail(f"{item}.extended", "a cylinder needs an output: extended, retracted "
+                       "or position")
+        out.append(PlantModelConfig(name, kind, values))
+    return tuple(out)
+
+
+def _value(role: str, v: Any, key: str, fail: Fail) -> Any:
+    number = not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+    if role in ("in", "out"):
+        if not isinstance(v, str) or not v.strip():
+            raise fail(key, f"expected a variable such as \"SA30\" or an I/O name, got {v!r}")
+        return v.strip()
+    if role == "axis":
+        parts = v.split(".") if isinstance(v, str) else []
+        if (len(parts) != 2 or parts[0][:1].upper() != "P" or not parts[0][1:].isdigit()
+                or len(parts[1]) != 1 or parts[1].upper() not in "XYZUVWABC"):
+            raise fail(key, f"expected a process's axis such as \"P1.X\", got {v!r}")
+        return f"P{int(parts[0][1:])}.{parts[1].upper()}"
+    if role.startswith("choice:"):
+        choices = role[7:].split("|")
+        if v not in choices:
+            raise fail(key, f"expected one of {', '.join(choices)}, got {v!r}")
+        return v
+    if not number:
+        raise fail(key, f"expected a number, got {v!r}")
+    if role == "ms" and v <= 0:
+        raise fail(key, f"expected a time in ms > 0, got {v!r}")
+    if role in ("ms0", "pos") and v < 0 or role == "pos" and v == 0:
+        raise fail(key, f"expected a number {'> 0' if role == 'pos' else '>= 0'}, got {v!r}")
+    if role == "pct" and not 0 <= v <= 100:
+        raise fail(key, f"expected a percentage 0..100, got {v!r}")
+    if role == "frac" and not 0 < v < 1:
+        raise fail(key, f"expected a fraction between 0 and 1, got {v!r}")
+    return float(v)
+
+
+def read_faults(raw: Any, key: str, fail: Fail, *, script: bool = False
+                ) -> tuple[FaultConfig, ...]:
+    """``[[plant.fault]]`` (``script``: a script's ``[[fault]]``, which may ``clear``)."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise fail(key, f"expected an array of tables ([[{key}]])")
+    return tuple(read_fault(table, f"{key}[{i}]", fail, script=script)
+                 for i, table in enumerate(raw))
+
+
+def read_fault(table: Any, key: str, fail: Fail, *, script: bool = False) -> FaultConfig:
+    if not isinstance(table, dict):
+        raise fail(key, "expected a table")
+    target, kind = table.get("target"), table.get("kind")
+    clear = table.get("clear", False)
+    if not isinstance(clear, bool) or (clear and not script):
+        raise fail(f"{key}.clear", "true clears the target's faults (a script's [[fault]] "
+                   "only)" if script else "unknown key")
+    if not isinstance(target, str) or not target.strip():
+        raise fail(f"{key}.target", "expected a model, a model's output (clamp.extended), a "
+                   f"variable or I/O name, \"modbus\" or \"canopen\"; got {target!r}")
+    if clear:
+        if target == "all":
+            target = "*"
+        known = {"target", "clear", "at", "when", "after"}
+    else:
+        if kind not in FAULT_KEYS:
+            raise fail(f"{key}.kind", f"expected one of {', '.join(FAULT_KEYS)}, got {kind!r}")
+        known = {"target", "kind", "at", "when", "after", "for_s", *FAULT_KEYS[kind]}
+        if script:
+            known.add("clear")
+    for name in table:
+        if name not in known:
+            raise fail(f"{key}.{name}", "unknown key" + (
+                f" for a {kind} fault (its keys: {', '.join(FAULT_KEYS[kind]) or 'none'})"
+                if kind in FAULT_KEYS else ""))
+    at, when, after = table.get("at"), table.get("when"), table.get("after", 0)
+    if at is not None and when is not None:
+        raise fail(key, "give at most one of 'at' and 'when'")
+    for name, v in (("at", at), ("after", after), ("for_s", table.get("for_s"))):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
+                              or not math.isfinite(v) or v < 0):
+            raise fail(f"{key}.{name}", f"expected a time in seconds >= 0, got {v!r}")
+    if when is not None and (not isinstance(when, str) or not when.strip()):
+        raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P1 "
+                   f"WAIT_COND\", got {when!r}")
+    if "after" in table and when is None:
+        raise fail(f"{key}.after", "only with 'when'")
+    params = [] if clear else fault_params(kind, table, key, fail)
+    for_s = table.get("for_s")
+    return FaultConfig(key, target.strip(), None if clear else kind, tuple(params),
+                       None if at is None else float(at), when, float(after),
+                       None if for_s is None else float(for_s), clear)
+
+
+def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
+                 ) -> list[tuple[str, Any]]:
+    """The parameters of a fault of ``kind`` from ``table`` (a config table, an API body),
+    checked and with their defaults, sorted by name."""
+    out: dict[str, Any] = {}
+    for name in FAULT_KEYS[kind]:
+        v = table.get(name)
+        where = f"{key}.{name}"
+        if name == "value":
+            if v is None:
+                raise fail(where, "missing (the value the variable is stuck at)")
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise fail(where, f"expected a whole number, got {v!r}")
+        elif name in ("period_ms", "factor", "ms"):
+            default = {"period_ms": 100.0, "factor": 2.0, "ms": 100.0}[name]
+            v = default if v is None else v
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
+                    or v <= 0:
+                raise fail(where, f"expected a number > 0, got {v!r}")
+            v = float(v)
+        elif name == "live_zero":
+            v = 0 if v is None else v
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise fail(where, f"expected a whole number, got {v!r}")
+        elif name == "code":
+            default = 6 if kind == "exception" else 0x1000
+            v = default if v is None else v
+            hi = 255 if kind == "exception" else 0xFFFF
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= hi:
+                raise fail(where, f"expected a code 1..{hi}, got {v!r}")
+        elif name == "unit":
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:
+                raise fail(where, f"expected a unit id 0..255, got {v!r}")
+        elif name == "addresses":
+            if v is None:
+                continue
+            if (not isinstance(v, list | tuple) or len(v) != 2
+                    or any(isinstance(a, bool) or not isinstance(a, int) or not 0 <= a <= 65535
+                           for a in v) or v[0] > v[1]):
+                raise fail(where, f"expected [first, last] protocol addresses, got {v!r}")
+            v = (v[0], v[1])
+        out[name] = v
+    return sorted(out.items())

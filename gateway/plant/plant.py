@@ -1,0 +1,470 @@
+"""The plant: the machine around the cell, as a source of inputs (docs/plant.md).
+
+Its models answer the PLC's outputs on the engine's clock -- the same clock as the NC and the
+PLC scan, in ``sim`` and on the wall clock in ``run`` -- and every value they drive goes in
+through the door as a :class:`~ncgate.inputs.Writes` from ``plant <name>``: it is checked,
+traced and attributed like any input, and a force wins over it.  It is never recorded: a
+replay runs the same plant from the same config, so it gives the same writes again.
+
+Faults (:class:`~ncgate.inputs.Fault`, through the door as well) change a model's behaviour
+(``never``, ``slow``), hold what every reader sees of a variable (``stuck``, ``wire_break``,
+``chatter``: the image's hold layer, which a force overrides), or go to a fieldbus adapter
+(``modbus``: ``exception``, ``delay``, ``no_reply``; ``canopen``: ``heartbeat_stop``,
+``emcy``, ``pdo_stop``) through :attr:`Plant.fieldbus_listeners`.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from ncgate.config.plant import (
+    CANOPEN_FAULTS,
+    FAULT_KEYS,
+    MODBUS_FAULTS,
+    MODEL_FAULTS,
+    MODEL_KEYS,
+    VARIABLE_FAULTS,
+    fault_params,
+)
+from ncgate.errors import InputRefused, Reason
+from ncgate.gateway.plant.models import KINDS, Model
+from ncgate.inputs import ClearFault, Fault, Source, SourceKind, Var, Writes
+from ncgate.interpreter.engine.timers import Timer
+from ncgate.interpreter.settings import AXES
+from ncgate.plc.image import ImageValueError, value_range
+
+if TYPE_CHECKING:
+    from ncgate.config.plant import PlantModelConfig
+    from ncgate.gateway.wiring import Runtime
+
+log = logging.getLogger("ncgate")
+# Outputs that carry a number, not a bit: they need a word (a SYVAR, an SK/SA .IN word).
+_NUMBER_OUTPUTS = frozenset({("cylinder", "position"), ("motor", "speed"), ("lag", "actual")})
+
+
+@dataclass(eq=False)
+class ActiveFault:
+    """A fault in force: what it targets, its kind and parameters, who injected it."""
+
+    target: str
+    kind: str
+    params: dict[str, Any]
+    who: str
+    since: float
+    variables: tuple[Var, ...] = ()  # what a variable fault holds
+    model: Model | None = None
+    timers: list[Timer] = field(default_factory=list)  # its for_s, its chatter
+
+    @property
+    def group(self) -> str:
+        """Faults of one group on one target replace each other."""
+        if self.kind in MODEL_FAULTS:
+            return "behaviour"
+        if self.kind in VARIABLE_FAULTS:
+            return "value"
+        return self.kind
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"target": self.target, "kind": self.kind, "params": self.params,
+                "by": self.who, "since": round(self.since, 6)}
+
+
+class Plant:
+    """The models of ``[[plant.model]]`` and the faults in force, on one runtime."""
+
+    def __init__(self, runtime: Runtime, apply: Callable[[Any], None], *,
+                 closed: bool) -> None:
+        """``apply``: the door's (the input goes in as any input does)."""
+        self.runtime = runtime
+        self._apply = apply
+        self.closed = closed
+        config = runtime.config.plant
+        self.scan_s = config.scan_ms / 1000.0
+        self.models: dict[str, Model] = {}
+        self.variables: dict[str, dict[str, Var]] = {}  # model -> key -> variable
+        self._drives: dict[tuple[str, int, str], tuple[Model, str]] = {}
+        self._timers: dict[str, Timer] = {}
+        self._written: dict[str, dict[str, int]] = {}
+        self._sources: dict[str, Source] = {}
+        self.faults: list[ActiveFault] = []
+        # Adapters hear the fieldbus faults in force (the Modbus server, the CANopen node).
+        self.fieldbus_listeners: list[Callable[[list[ActiveFault]], None]] = []
+        self._nc_change = 0.0
+        self._seq = itertools.count(1)
+        for i, model_config in enumerate(config.model):
+            self._build(model_config, f"plant.model[{i}]")
+        runtime.engine.state_listeners.append(self._on_state)
+        runtime.engine.sync.explain = self.explain
+
+    # -- building ---------------------------------------------------------------------------
+
+    def _build(self, config: PlantModelConfig, key: str) -> None:
+        from ncgate.config import ConfigError
+
+        where = self.runtime.config.source or "<config>"
+        variables: dict[str, Var] = {}
+        for name, (role, _, _) in MODEL_KEYS[config.kind].items():
+            text = config.keys.get(name)
+            if role not in ("in", "out") or text is None:
+                continue
+            try:
+                var = self.runtime.var(text)
+                self.runtime.image.read(*var.address)
+            except (InputRefused, IndexError) as exc:
+                raise ConfigError(f"{where}: {key}.{name}: {exc}") from None
+            if role == "out" and (config.kind, name) in _NUMBER_OUTPUTS | {
+                    ("generator", "output")} and not (
+                    config.kind == "generator" and config.keys.get("shape", "square")
+                    == "square"):
+                low, high = value_range(var.area, var.view)
+                if high < 1000:
+                    raise ConfigError(f"{where}: {key}.{name}: {var} holds {low}..{high}: a "
+                                      "number needs a word (SYVARn, SKn.IN)")
+            if role == "out":
+                drives = self._drives.get(var.address)
+                if drives is not None:
+                    raise ConfigError(f"{where}: {key}.{name}: {var} is driven by "
+                                      f"{drives[0].name}.{drives[1]} already")
+            variables[name] = var
+        if config.kind == "switch":
+            process = int(str(config.keys["axis"]).split(".")[0][1:])
+            if process not in self.runtime.engine.processes:
+                raise ConfigError(f"{where}: {key}.axis: no process {process}")
+        model = KINDS[config.kind](config, _ModelHost(self, variables), self.scan_s)
+        self.models[config.name] = model
+        self.variables[config.name] = variables
+        for name, var in variables.items():
+            if name in model.outputs_keys:
+                self._drives[var.address] = (model, name)
+        self._written[config.name] = {}
+        self._sources[config.name] = Source(SourceKind.PLANT, config.name)
+
+    def start(self) -> None:
+        """Each model from its state at rest, its outputs written, its inputs watched."""
+        now = self.runtime.engine.now
+        for model in self.models.values():
+            self._watch(model)
+            self._after(model, model.start(now), force=True)
+
+    def close(self) -> None:
+        for timer in self._timers.values():
+            timer.cancel()
+        self._timers.clear()
+        for fault in self.faults:
+            for timer in fault.timers:
+                timer.cancel()
+
+    # -- running ----------------------------------------------------------------------------
+
+    def _watch(self, model: Model) -> None:
+        image = self.runtime.image
+        for name in model.inputs:
+            var = self.variables[model.name].get(name)
+            if var is None:
+                continue
+            self._arm(model, var, image.read(*var.address))
+
+    def _arm(self, model: Model, var: Var, value: int) -> None:
+        """Hear the next change of ``var`` (the image's index of waits: no polling)."""
+        image = self.runtime.image
+
+        def changed() -> None:
+            now_value = image.read(*var.address)
+            self._arm(model, var, now_value)
+            # At the write's time, after the write: the model acts as an input of its own.
+            engine = self.runtime.engine
+            engine.call_at(engine.now, functools.partial(self._command, model))
+
+        handle = image.wait(*var.address, lambda v: v != value, changed)
+        if handle is None:  # changed already
+            changed()
+
+    def _command(self, model: Model) -> None:
+        self._after(model, model.command(self.runtime.engine.now))
+
+    def _advance(self, model: Model) -> None:
+        self._timers.pop(model.name, None)
+        engine = self.runtime.engine
+        nxt = model.advance(engine.now)
+        if nxt is not None and model.kind in ("switch", "generator") and self._idle():
+            nxt = None  # a closed run that stands still: let it end (a stall, or idle)
+        self._after(model, nxt)
+
+    def _idle(self) -> bool:
+        engine = self.runtime.engine
+        if not self.closed:
+            return False
+        stall_s = self.runtime.config.nc.stall_s
+        return (engine.all_idle or engine.stalled) and engine.now - self._nc_change >= stall_s
+
+    def _on_state(self, process: object, old: object) -> None:
+        self._nc_change = self.runtime.engine.now
+        # A sampling model that slept while the cell stood still wakes with it.
+        for model in self.models.values():
+            if model.kind == "switch" and model.name not in self._timers:
+                self._after(model, model.command(self._nc_change))
+
+    def _after(self, model: Model, nxt: float | None, force: bool = False) -> None:
+        self._write(model, force)
+        old = self._timers.pop(model.name, None)
+        if old is not None:
+            old.cancel()
+        if nxt is not None:
+            engine = self.runtime.engine
+            self._timers[model.name] = engine.call_at(
+                max(nxt, engine.now), functools.partial(self._advance, model))
+
+    def _write(self, model: Model, force: bool = False) -> None:
+        variables = self.variables[model.name]
+        written = self._written[model.name]
+        changes = []
+        for key, value in model.outputs(self.runtime.engine.now).items():
+            var = variables.get(key)
+            if var is None or (not force and written.get(key) == value):
+                continue
+            changes.append((var, value))
+            written[key] = value
+        if not changes:
+            return
+        try:
+            self._apply(Writes(tuple(changes), self._sources[model.name]))
+        except InputRefused as exc:
+            self.runtime.engine.note_hazard(0, f"plant {model.name}: {exc}")
+
+    # -- faults ----------------------------------------------------------------------------------
+
+    def check(self, item: Fault) -> ActiveFault:
+        """The fault ``item`` asks for, resolved; InputRefused (nothing applied) otherwise."""
+        target, kind = item.target, item.kind
+        if not isinstance(target, str) or not target.strip():
+            raise InputRefused(Reason.BAD_VALUE, f"a fault names its target, not {target!r}")
+        if kind not in FAULT_KEYS:
+            raise InputRefused(Reason.BAD_VALUE, f"fault kind {kind!r}: one of "
+                               f"{', '.join(FAULT_KEYS)}")
+        if item.for_s is not None and (isinstance(item.for_s, bool) or not isinstance(
+                item.for_s, int | float) or not 0 < item.for_s < 1e9):
+            raise InputRefused(Reason.BAD_VALUE, f"for_s: a time in seconds > 0, not "
+                               f"{item.for_s!r}")
+        raw = dict(item.params) if isinstance(item.params, tuple | list) else None
+        if raw is None or not all(isinstance(k, str) for k in raw):
+            raise InputRefused(Reason.BAD_VALUE, "a fault's parameters are (name, value) pairs")
+        unknown = sorted(set(raw) - set(FAULT_KEYS[kind]))
+        if unknown:
+            raise InputRefused(Reason.BAD_VALUE, f"a {kind} fault takes "
+                               f"{', '.join(FAULT_KEYS[kind]) or 'no parameter'}, not "
+                               f"{', '.join(unknown)}")
+
+        def fail(key: str, message: str) -> Exception:
+            return InputRefused(Reason.BAD_VALUE, f"{key}: {message}")
+
+        params = dict(fault_params(kind, raw, kind, fail))
+        fault = ActiveFault(target.strip(), kind, params, str(item.source),
+                            self.runtime.engine.now)
+        name = fault.target
+        if name.lower() in ("modbus", "canopen"):
+            fault.target = name.lower()
+            allowed = MODBUS_FAULTS if fault.target == "modbus" else CANOPEN_FAULTS
+            if kind not in allowed:
+                raise InputRefused(Reason.BAD_VALUE, f"{fault.target} takes "
+                                   f"{', '.join(sorted(allowed))}, not {kind}")
+            return fault
+        if kind in MODBUS_FAULTS | CANOPEN_FAULTS:
+            raise InputRefused(Reason.BAD_VALUE, f"a {kind} fault is a fieldbus's: target "
+                               f"{'modbus' if kind in MODBUS_FAULTS else 'canopen'}")
+        model_name, _, output = name.partition(".")
+        model = self.models.get(model_name)
+        if model is not None and not output:
+            fault.model = model
+            if kind in VARIABLE_FAULTS:
+                fault.variables = tuple(var for key, var in self.variables[model_name].items()
+                                        if key in model.outputs_keys)
+        elif model is not None:
+            if kind not in VARIABLE_FAULTS:
+                raise InputRefused(Reason.BAD_VALUE, f"{name}: an output takes "
+                                   f"{', '.join(sorted(VARIABLE_FAULTS))}; {kind} is the "
+                                   f"model's ({model_name})")
+            var = self.variables[model_name].get(output)
+            if var is None or output not in model.outputs_keys:
+                outs = [k for k in model.outputs_keys if k in self.variables[model_name]]
+                raise InputRefused(Reason.UNKNOWN_VARIABLE, f"{name}: {model_name} drives "
+                                   f"{', '.join(outs)}")
+            fault.variables = (var,)
+        else:
+            if kind in MODEL_FAULTS:
+                known = ", ".join(self.models) or "none configured"
+                raise InputRefused(Reason.UNKNOWN_VARIABLE, f"{name}: a {kind} fault is a "
+                                   f"plant model's ([[plant.model]]: {known})")
+            try:
+                var = self.runtime.var(name)
+                self.runtime.image.read(*var.address)
+            except IndexError as exc:
+                raise InputRefused(Reason.OUTSIDE_IMAGE, str(exc)) from None
+            fault.variables = (var,)
+        for var in fault.variables:
+            value = self._held_value(fault, var)
+            try:
+                self.runtime.image.check(*var.address, value)
+            except ImageValueError as exc:
+                raise InputRefused(Reason.BAD_VALUE, str(exc)) from None
+        return fault
+
+    def inject(self, fault: ActiveFault, for_s: float | None) -> None:
+        """Put a checked fault in force (the door's, after it recorded it)."""
+        engine = self.runtime.engine
+        fault.since = engine.now
+        for old in [f for f in self.faults if f.target == fault.target
+                    and f.group == fault.group and (f.group != fault.kind or f.params
+                                                    == fault.params)]:
+            self._remove(old, f"replaced by {fault.who}", notify=False)
+        self.faults.append(fault)
+        engine.note_fault(fault.target, fault.kind, fault.params, fault.who)
+        if for_s is not None:
+            fault.timers.append(engine.call_at(engine.now + for_s, functools.partial(
+                self._expire, fault, for_s)))
+        if fault.kind in VARIABLE_FAULTS:
+            self._hold(fault)
+        elif fault.model is not None:
+            self._behave(fault.model)
+        self._notify(fault)
+
+    def _expire(self, fault: ActiveFault, for_s: float) -> None:
+        if fault in self.faults:
+            self._remove(fault, f"for_s {for_s:g}")
+
+    def clear(self, item: ClearFault) -> list[ActiveFault]:
+        """The faults ``item`` clears (checked: InputRefused when it names nothing known)."""
+        target = item.target
+        if target is None or target in ("*", "all"):
+            return list(self.faults)
+        if not isinstance(target, str):
+            raise InputRefused(Reason.BAD_VALUE, f"clear names a target, not {target!r}")
+        name = target.strip()
+        found = [f for f in self.faults if f.target.lower() == name.lower()
+                 or f.target.split(".")[0] == name]
+        return found
+
+    def remove(self, faults: list[ActiveFault], who: str) -> None:
+        for fault in faults:
+            if fault in self.faults:
+                self._remove(fault, who)
+
+    def _remove(self, fault: ActiveFault, who: str, notify: bool = True) -> None:
+        self.faults.remove(fault)
+        for timer in fault.timers:
+            timer.cancel()
+        fault.timers.clear()
+        self.runtime.engine.note_fault_clear(fault.target, fault.kind, who)
+        if fault.kind in VARIABLE_FAULTS:
+            image = self.runtime.image
+            for var in fault.variables:
+                image.unhold(*var.address)
+            if notify:  # what the models drive is theirs again
+                for model in self.models.values():
+                    self._write(model, force=True)
+        elif fault.model is not None and notify:
+            self._behave(fault.model)
+        if notify:
+            self._notify(fault)
+
+    def _behave(self, model: Model) -> None:
+        never = any(f.model is model and f.kind == "never" for f in self.faults)
+        factor = next((float(f.params["factor"]) for f in self.faults
+                       if f.model is model and f.kind == "slow"), 1.0)
+        self._after(model, model.set_fault(self.runtime.engine.now, never, factor))
+
+    def _held_value(self, fault: ActiveFault, var: Var) -> int:
+        if fault.kind == "stuck":
+            return int(fault.params["value"])
+        if fault.kind == "wire_break":
+            return 0 if var.view == "bit" else int(fault.params["live_zero"])
+        value = self.runtime.image.read(*var.address)  # chatter: from what it reads now
+        return 1 - value if var.view == "bit" else value
+
+    def _hold(self, fault: ActiveFault) -> None:
+        image = self.runtime.image
+        who = f"fault {fault.kind} {fault.target}"
+        for var in fault.variables:
+            image.hold(*var.address, self._held_value(fault, var), who)
+        if fault.kind == "chatter":
+            period = float(fault.params["period_ms"]) / 1000.0
+            engine = self.runtime.engine
+            fault.timers.append(engine.call_at(engine.now + period, functools.partial(
+                self._chatter, fault, period)))
+
+    def _chatter(self, fault: ActiveFault, period: float) -> None:
+        if fault not in self.faults:
+            return
+        image = self.runtime.image
+        who = f"fault chatter {fault.target}"
+        for var in fault.variables:
+            value = image.read(*var.address)
+            low, high = value_range(var.area, var.view)
+            image.hold(*var.address, (1 - value) if var.view == "bit" else (
+                high if value == low else low), who)
+        engine = self.runtime.engine
+        fault.timers[:] = [t for t in fault.timers if t.callback is not None]
+        fault.timers.append(engine.call_at(engine.now + period, functools.partial(
+            self._chatter, fault, period)))
+
+    def _notify(self, fault: ActiveFault) -> None:
+        if fault.target not in ("modbus", "canopen"):
+            return
+        bus = [f for f in self.faults if f.target in ("modbus", "canopen")]
+        for listener in list(self.fieldbus_listeners):
+            listener(bus)
+
+    # -- what people see ---------------------------------------------------------------------
+
+    def explain(self, address: tuple[str, int, str]) -> str | None:
+        """What drives ``address``: its model and what that model is doing."""
+        held = [f for f in self.faults if f.kind in VARIABLE_FAULTS
+                and any(v.address == address for v in f.variables)]
+        if held:
+            f = held[-1]
+            return f"fault {f.kind} on {f.target} (by {f.who})"
+        drives = self._drives.get(address)
+        if drives is None:
+            return None
+        return drives[0].describe(self.runtime.engine.now)
+
+    def status(self) -> dict[str, Any]:
+        """The console's and ``/api/status``'s ``plant``: each model and the faults."""
+        now = self.runtime.engine.now
+        models = []
+        for name, model in self.models.items():
+            faults = [f.kind for f in self.faults if f.target.split(".")[0] == name]
+            models.append({
+                "name": name, "kind": model.kind, "state": model.state,
+                "since": round(model.since, 6), "detail": model.describe(now),
+                "fault": ", ".join(faults) or None,
+                "reads": {k: str(v) for k, v in self.variables[name].items()
+                          if k in model.inputs},
+                "writes": {k: str(v) for k, v in self.variables[name].items()
+                           if k in model.outputs_keys}})
+        return {"models": models, "faults": [f.as_dict() for f in self.faults]}
+
+    def fault_of(self, name: str) -> list[ActiveFault]:
+        return [f for f in self.faults if f.target.split(".")[0] == name]
+
+
+class _ModelHost:
+    """What a model reads: its inputs by key, and the NC's axes."""
+
+    def __init__(self, plant: Plant, variables: dict[str, Var]) -> None:
+        self._plant = plant
+        self._vars = variables
+
+    def read(self, key: str) -> int:
+        var = self._vars.get(key)
+        return 0 if var is None else self._plant.runtime.image.read(*var.address)
+
+    def axis(self, text: str) -> float:
+        process, axis = text.split(".")
+        position = self._plant.runtime.engine.status(int(process[1:])).position
+        i = AXES.index(axis)
+        return float(position[i]) if i < len(position) else 0.0

@@ -1,0 +1,262 @@
+"""Scenarios: a script's ``[[expect]]``, judged on the engine's clock (docs/plant.md).
+
+An expectation watches its condition from the moment the scenario starts -- an image
+condition through the image's listeners, a process state through the engine's, an alarm
+through the trace -- and keeps when it changed, so a verdict is decided from what happened,
+not from a sample: ``within = [a, b]`` passes when the condition holds at some moment of the
+window, ``by = T`` is ``within = [0, T]``, ``always`` when it never stops holding.  The same
+file is judged the same way by ``ncgate sim`` (virtual clock) and ``ncgate run --script`` (the
+wall clock, with real clients connected).
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TextIO
+
+from ncgate.config.script import Expect, Script
+from ncgate.errors import InputRefused
+from ncgate.gateway.wiring import Runtime, parse_condition
+from ncgate.inputs import Var
+from ncgate.interpreter.dialects import comparison
+from ncgate.interpreter.engine import Process, ProcessState
+from ncgate.interpreter.engine import events as ev
+from ncgate.interpreter.engine.events import Event
+from ncgate.plc.image import Change, PlcError
+
+
+class ScenarioError(ValueError):
+    """An expectation that cannot be read (the message names the file and the key)."""
+
+
+@dataclass
+class Verdict:
+    name: str
+    ok: bool
+    detail: str
+    script: str = ""
+
+    def line(self) -> str:
+        return f"{'PASS' if self.ok else 'FAIL'} {self.name}: {self.detail}"
+
+
+@dataclass
+class _Watch:
+    expect: Expect
+    kind: str  # "var", "state", "alarm", "no alarm"
+    holds: bool = False
+    changes: list[tuple[float, bool]] = field(default_factory=list)
+    var: Var | None = None
+    test: object = None
+    process: int = 0
+    state: ProcessState | None = None
+    code: int | None = None
+    alarms: list[tuple[float, str]] = field(default_factory=list)
+    written: tuple[float, str | None] = (0.0, None)  # the variable's last write: when, who
+
+
+class Expectations:
+    """The ``[[expect]]`` of one script, watching one runtime from :meth:`start` on."""
+
+    def __init__(self, runtime: Runtime, script: Script) -> None:
+        self.runtime = runtime
+        self.script = script
+        self.watches = [self._watch(e) for e in script.expects]
+        self.t0 = 0.0
+        self._undo: list[object] = []
+
+    def _fail(self, expect: Expect, message: str) -> ScenarioError:
+        return ScenarioError(f"{self.script.file}: {expect.key}.cond: {message}")
+
+    def _watch(self, expect: Expect) -> _Watch:
+        text = expect.cond
+        words = text.split()
+        lowered = [w.lower() for w in words]
+        if lowered[:1] == ["alarm"] or lowered[:2] == ["no", "alarm"]:
+            negative = lowered[0] == "no"
+            rest = words[2:] if negative else words[1:]
+            code = None
+            if rest:
+                number = rest[0].upper().removeprefix("AL")
+                if len(rest) > 1 or not number.isdigit():
+                    raise self._fail(expect, f"expected \"alarm\", \"alarm AL145\" or \"no "
+                                     f"alarm\", got {text!r}")
+                code = int(number)
+            return _Watch(expect, "no alarm" if negative else "alarm", holds=negative,
+                          code=code)
+        if len(words) == 2 and words[0][:1].upper() == "P" and words[0][1:].isdigit():
+            state = words[1].upper()
+            if state not in ProcessState.__members__:
+                raise self._fail(expect, f"unknown state {words[1]!r} (" +
+                                 ", ".join(ProcessState.__members__) + ")")
+            number = int(words[0][1:])
+            if number not in self.runtime.engine.processes:
+                raise self._fail(expect, f"no process {number}")
+            return _Watch(expect, "state", process=number, state=ProcessState[state])
+        try:
+            (area, index, view), op, value = parse_condition(self.runtime.resolve(text))
+            var = Var(area, index, view)
+            self.runtime.image.read(area, index, view)
+        except (ValueError, PlcError, InputRefused) as exc:
+            raise self._fail(expect, str(exc)) from None
+        return _Watch(expect, "var", var=var, test=comparison(op, value))
+
+    def start(self) -> None:
+        """Watch from now on: each condition as it is now, then every change."""
+        runtime = self.runtime
+        now = self.t0 = runtime.engine.now
+        for w in self.watches:
+            if w.kind == "var":
+                w.holds = self._var_holds(w)
+                w.written = (now, self._writer(w))
+            elif w.kind == "state":
+                w.holds = runtime.engine.processes[w.process].state is w.state
+            w.changes.append((now, w.holds))
+        if any(w.kind == "var" for w in self.watches):
+            self._undo.append(runtime.image.subscribe(self._on_write))  # type: ignore[arg-type]
+        if any(w.kind == "state" for w in self.watches):
+            runtime.engine.state_listeners.append(self._on_state)
+        if any(w.kind in ("alarm", "no alarm") for w in self.watches):
+            self._undo.append(runtime.trace.subscribe(self._on_event))
+
+    def stop(self) -> None:
+        for undo in self._undo:
+            undo()  # type: ignore[operator]
+        self._undo.clear()
+        listeners = self.runtime.engine.state_listeners
+        if self._on_state in listeners:
+            listeners.remove(self._on_state)
+
+    def _var_holds(self, w: _Watch) -> bool:
+        assert w.var is not None
+        return bool(w.test(self.runtime.image.read(*w.var.address)))  # type: ignore[operator]
+
+    def _writer(self, w: _Watch) -> str | None:
+        assert w.var is not None
+        return self.runtime.image.last_writer(*w.var.address)
+
+    def _note(self, w: _Watch, holds: bool) -> None:
+        if holds != w.holds:
+            w.holds = holds
+            w.changes.append((self.runtime.engine.now, holds))
+
+    def _on_write(self, changes: Sequence[Change], writer: str) -> None:
+        for w in self.watches:
+            if w.kind != "var" or w.var is None:
+                continue
+            holds = self._var_holds(w)
+            who = self._writer(w)
+            if holds != w.holds or who != w.written[1]:
+                w.written = (self.runtime.engine.now, who)
+            self._note(w, holds)
+
+    def _on_state(self, process: Process, old: ProcessState) -> None:
+        for w in self.watches:
+            if w.kind == "state" and w.process == process.number:
+                self._note(w, process.state is w.state)
+
+    def _on_event(self, event: Event) -> None:
+        if not isinstance(event, ev.Alarm):
+            return
+        for w in self.watches:
+            if w.kind in ("alarm", "no alarm") and (w.code is None or int(event.code) == w.code):
+                who = f"P{event.proc}" if event.proc else "PLC"
+                w.alarms.append((event.t, f"{who} alarm AL{int(event.code)}: {event.message}"))
+
+    # -- verdicts ----------------------------------------------------------------------------
+
+    def verdicts(self) -> list[Verdict]:
+        end = self.runtime.engine.now
+        return [self._verdict(w, end) for w in self.watches]
+
+    def _verdict(self, w: _Watch, end: float) -> Verdict:
+        e = w.expect
+        a, b = e.within if e.within is not None else (self.t0, end)
+        a, b = max(a, self.t0), b
+        cond = e.cond
+        if w.kind in ("alarm", "no alarm"):
+            inside = [(t, text) for t, text in w.alarms if a - 1e-9 <= t <= b + 1e-9]
+            if w.kind == "alarm":
+                if inside:
+                    return self._v(e, True, f"{inside[0][1]} at {inside[0][0]:.3f} s")
+                return self._v(e, False, f"no {cond} in {self._window(e, a, b)}"
+                               + self._short(end, b))
+            if inside:
+                t, text = inside[0]
+                return self._v(e, False, f"{text} at {t:.3f} s")
+            return self._v(e, True, f"no alarm{' AL' + str(w.code) if w.code else ''} in "
+                           f"{self._window(e, a, b)}")
+        holds_at_a = w.changes[0][1]
+        for t, holds in w.changes:
+            if t <= a + 1e-9:
+                holds_at_a = holds
+        if e.always:
+            broken = [t for t, holds in w.changes if not holds]
+            if not broken:
+                return self._v(e, True, f"{cond} held from {self.t0:.3f} to {end:.3f} s")
+            return self._v(e, False, f"{cond} stopped holding at {broken[0]:.3f} s"
+                           + self._now(w))
+        if holds_at_a:
+            return self._v(e, True, f"{cond} at {a:.3f} s")
+        became = [t for t, holds in w.changes if holds and a - 1e-9 <= t <= b + 1e-9]
+        if became:
+            return self._v(e, True, f"{cond} at {became[0]:.3f} s")
+        return self._v(e, False, self._still(w, min(b, end)) + self._short(end, b))
+
+    def _still(self, w: _Watch, t: float) -> str:
+        if w.kind == "var" and w.var is not None:
+            value = self.runtime.image.read(*w.var.address)
+            when, who = w.written
+            by = f" (set by {who} at {when:.3f} s)" if who else " (never written)"
+            note = self.runtime.plant.explain(w.var.address) if (
+                self.runtime.plant is not None) else None
+            return f"{w.var} still {value} at {t:.3f} s{by}" + (f"; {note}" if note else "")
+        state = self.runtime.engine.processes[w.process].state.name
+        return f"P{w.process} {state}, not {w.state.name if w.state else '?'}, at {t:.3f} s"
+
+    def _now(self, w: _Watch) -> str:
+        if w.kind == "var" and w.var is not None:
+            when, who = w.written
+            return f" ({w.var} = {self.runtime.image.read(*w.var.address)}, set by {who} at " \
+                   f"{when:.3f} s)"
+        return ""
+
+    @staticmethod
+    def _window(e: Expect, a: float, b: float) -> str:
+        return f"{a:.3f}..{b:.3f} s"
+
+    @staticmethod
+    def _short(end: float, b: float) -> str:
+        return f" (the run ended at {end:.3f} s)" if end + 1e-9 < b else ""
+
+    def _v(self, e: Expect, ok: bool, detail: str) -> Verdict:
+        return Verdict(e.name, ok, detail, self.script.file)
+
+    @property
+    def horizon(self) -> float | None:
+        return self.script.horizon
+
+
+def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO) -> None:
+    """JUnit XML: one testsuite per scenario, one testcase per expectation."""
+    total = sum(len(v) for _, v in verdicts)
+    failures = sum(1 for _, v in verdicts for x in v if not x.ok)
+    out.write('<?xml version="1.0" encoding="UTF-8"?>\n')
+    out.write(f'<testsuites name="ncgate scenarios" tests="{total}" failures="{failures}">\n')
+    for name, items in verdicts:
+        bad = sum(1 for x in items if not x.ok)
+        out.write(f'  <testsuite name="{html.escape(name)}" tests="{len(items)}" '
+                  f'failures="{bad}">\n')
+        for v in items:
+            out.write(f'    <testcase classname="{html.escape(name)}" '
+                      f'name="{html.escape(v.name)}"')
+            if v.ok:
+                out.write(f'>\n      <system-out>{html.escape(v.line())}</system-out>\n'
+                          '    </testcase>\n')
+            else:
+                out.write(f'>\n      <failure message="{html.escape(v.detail)}">'
+                          f'{html.escape(v.line())}</failure>\n    </testcase>\n')
+        out.write("  </testsuite>\n")
+    out.write("</testsuites>\n")
