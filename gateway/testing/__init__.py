@@ -1,14 +1,51 @@
 """What users' own test suites use: the pytest plugin (``ncgate[pytest]``), the virtual-PLC
-Modbus client (``modbus_kit``), the CANopen master (``canopen_kit``), and :func:`replay`,
-which turns a session recorded at the machine (``ncgate run --record``) into a regression
-test."""
+Modbus client (``modbus_kit``), the CANopen master (``canopen_kit``), :func:`wait_event`,
+which awaits an event of a running gateway's trace, and :func:`replay`, which turns a session
+recorded at the machine (``ncgate run --record``) into a regression test."""
 
 from __future__ import annotations
 
+import asyncio
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from ncgate.gateway.errors import WaitIdleTimeout
 from ncgate.gateway.record import ReplayResult
 from ncgate.gateway.record import replay as _replay
+from ncgate.interpreter.engine.events import Event
+
+if TYPE_CHECKING:
+    from ncgate.gateway.app import Gateway
+
+
+async def wait_event(gateway: Gateway, kind: str, timeout_s: float = 10.0,
+                     test: Callable[[Event], bool] | None = None) -> Event:
+    """Until ``gateway``'s trace records an event of ``kind`` (``"stall"``, ``"snd"``,
+    ``"alarm"``, ... as spec 4.4 names them) for which ``test`` holds, if given; returns that
+    typed event (``event.t``, ``event.proc``, and its own fields).  Only events recorded from
+    the call on count.  Event-driven: a trace listener, no polling.  Raises WaitIdleTimeout
+    with the why-records of the blocked processes when none comes in ``timeout_s``.
+
+        stall = await wait_event(gw, "stall", timeout_s=5)
+    """
+    seen: asyncio.Future[Event] = asyncio.get_running_loop().create_future()
+
+    def listener(event: Event) -> None:
+        # The trace calls its listeners on the loop's thread, inside the engine's step.
+        if event.kind == kind and not seen.done() and (test is None or test(event)):
+            seen.set_result(event)
+
+    unsubscribe = gateway.runtime.trace.subscribe(listener)
+    try:
+        async with asyncio.timeout(timeout_s):
+            return await seen
+    except TimeoutError:
+        which = f"{kind!r} event" + (" that passes the test" if test is not None else "")
+        raise WaitIdleTimeout(f"no {which} in {timeout_s:g} s\n"
+                              + gateway.describe_blocked()) from None
+    finally:
+        unsubscribe()
 
 
 def replay(record: str | Path, config: str | Path | None = None,
@@ -30,4 +67,4 @@ def replay(record: str | Path, config: str | Path | None = None,
     return result
 
 
-__all__ = ["replay"]
+__all__ = ["replay", "wait_event"]

@@ -11,24 +11,39 @@ plays the PLC with the real protocol:
     await plc.expect_aux("M08")              # P1 outputs M08 with its strobe ([nc.aux])
     await plc.ack_aux()                      # acknowledge, strobe drops, drop the ack
 
-A Modbus client learns of changes only by reading: the ``wait_*`` helpers poll the status
-registers every ``poll_s`` until the state is there or ``timeout_s`` runs out.
+A Modbus client learns of changes only by reading: the ``wait_*``/``next_*``/``expect_*``
+helpers poll every ``poll_s`` until what they wait for is there or ``timeout_s`` runs out.
+Each round checks the wait's own deadline, and each read is bounded by the time left, so a
+wait always ends by its deadline: one ``asyncio.timeout()`` around the whole loop did not,
+because the client's call can return an answer that arrived together with the cancellation
+(Python 3.11's ``asyncio.wait_for``, which pymodbus awaits each answer with, drops the
+cancellation then) and the loop polled on for ever.  When a wait fails, its message has
+every process's status as the gateway reports it (what ``Gateway.wait_idle`` says from the
+engine), read within ``EXPLAIN_S`` more.
 """
 
 from __future__ import annotations
 
 import asyncio
 import re
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import TypeVar, overload
 
 from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 from ncgate.config import Config
 from ncgate.gateway.errors import VirtualPLCError
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.wiring import parse_assignment
-from ncgate.interpreter.engine import ProcessState
+from ncgate.interpreter.engine import ProcessState, WaitKind
 from ncgate.plc.scan import PlcState
+
+T = TypeVar("T")
+# After a wait's deadline, at most this long to read the statuses its failure message shows
+# (a gateway that does not answer gets the message without them).
+EXPLAIN_S = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +53,59 @@ class SndSeen:
     n: int  # the N number of the SND block (0 when none)
     seq: int  # its sequence number in the SND log (1, 2, ... since the gateway started)
     id: int = 0  # an ISG signal's number (0 for an SND)
+
+
+def _int32(hi: int, lo: int) -> int:
+    value = hi << 16 | lo
+    return value - 0x1_0000_0000 if value & 0x8000_0000 else value
+
+
+@dataclass(frozen=True, slots=True)
+class ProcessSeen:
+    """Process k's status block as a Modbus client reads it (``modbus.map.status``).
+
+    Indexing reads the 18 registers by position, as :meth:`VirtualPLC.status` once returned
+    them (``status[1]`` the block N, ``status[6:8]`` the SNDs sent)."""
+
+    process: int
+    state: ProcessState
+    n: int  # the block's N number (0: none)
+    line: int  # its source line
+    wait_kind: WaitKind
+    wait_target: int  # the process (or channel) waited for; 0 when none
+    alarm_code: int  # 0: no alarm
+    snds_sent: int
+    snds_received: int
+    blocks: int  # blocks executed
+    position_um: tuple[int, int, int]  # X, Y, Z
+    registers: tuple[int, ...]
+
+    @classmethod
+    def from_registers(cls, process: int, r: list[int]) -> ProcessSeen:
+        return cls(process, ProcessState(r[0]), r[1], r[2], WaitKind(r[3]), r[4], r[5],
+                   r[6] << 16 | r[7], r[8] << 16 | r[9], r[10] << 16 | r[11],
+                   (_int32(r[12], r[13]), _int32(r[14], r[15]), _int32(r[16], r[17])),
+                   tuple(r))
+
+    @overload
+    def __getitem__(self, at: int) -> int: ...
+
+    @overload
+    def __getitem__(self, at: slice) -> list[int]: ...
+
+    def __getitem__(self, at: int | slice) -> int | list[int]:
+        return list(self.registers[at]) if isinstance(at, slice) else self.registers[at]
+
+    def why(self) -> str:
+        """One line, as a why-record says it: ``P2 WAIT_COND at line 3 N40, wait COND 0``."""
+        text = f"P{self.process} {self.state.name} at line {self.line}"
+        if self.n:
+            text += f" N{self.n}"
+        if self.wait_kind is not WaitKind.NONE:
+            text += f", wait {self.wait_kind.name} {self.wait_target}"
+        if self.alarm_code:
+            text += f", alarm AL{self.alarm_code}"
+        return text
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,25 +225,77 @@ class VirtualPLC:
 
     # -- processes ----------------------------------------------------------------------------
 
-    async def status(self, process: int) -> list[int]:
+    async def status(self, process: int) -> ProcessSeen:
+        """Process k's status block: state, N, line, wait kind and target, alarm, counters,
+        position (indexing it reads the 18 registers by position)."""
         base = self.map.STATUS_BASE + self.map.STATUS_STRIDE * (process - 1)
-        return await self._input(base, 18)
+        return ProcessSeen.from_registers(process, await self._input(base, 18))
+
+    async def _statuses(self) -> list[ProcessSeen]:
+        """Every process's status block, six to a request (a read takes 125 registers)."""
+        stride, processes = self.map.STATUS_STRIDE, self.config.nc.processes
+        out: list[ProcessSeen] = []
+        for first in range(1, processes + 1, 6):
+            count = min(6, processes - first + 1)
+            regs = await self._input(self.map.STATUS_BASE + stride * (first - 1),
+                                     stride * count)
+            out += [ProcessSeen.from_registers(first + i, regs[stride * i:stride * i + 18])
+                    for i in range(count)]
+        return out
 
     async def state(self, process: int) -> ProcessState:
-        return ProcessState((await self.status(process))[0])
+        return (await self.status(process)).state
+
+    async def _until(self, probe: Callable[[], Awaitable[T | None]], timeout_s: float,
+                     failed: Callable[[], str]) -> T:
+        """Poll ``probe`` until it returns something; VirtualPLCError with ``failed()`` and
+        every process's status once ``timeout_s`` has passed.
+
+        The deadline is checked each round and bounds each round's read, so the wait ends by
+        it even when a read returns an answer that came with its cancellation (the module's
+        docstring)."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while loop.time() < deadline:
+            try:
+                async with asyncio.timeout_at(deadline) as bound:
+                    found = await probe()
+            except TimeoutError:
+                if not bound.expired():
+                    raise
+                break
+            if found is not None:
+                return found
+            if loop.time() >= deadline:
+                break
+            # A Modbus client learns only by reading: poll.
+            await asyncio.sleep(min(self.poll_s, deadline - loop.time()))
+        raise VirtualPLCError(f"{failed()}\n{await self._why()}")
+
+    async def _why(self) -> str:
+        """Every process's status, one line each (the why-records a Modbus client can read),
+        read within EXPLAIN_S."""
+        try:
+            async with asyncio.timeout(EXPLAIN_S):
+                seen = await self._statuses()
+        except (TimeoutError, ModbusException, VirtualPLCError) as exc:
+            return f"(the processes' status could not be read in {EXPLAIN_S:g} s: {exc!r})"
+        return "\n".join(s.why() for s in seen)
 
     async def wait_state(self, process: int, state: str | ProcessState,
-                         timeout_s: float = 10.0) -> None:
+                         timeout_s: float = 10.0) -> ProcessSeen:
+        """Until process k is in ``state``; returns its status then."""
         wanted = state if isinstance(state, ProcessState) else ProcessState[state.upper()]
-        try:
-            async with asyncio.timeout(timeout_s):
-                # A Modbus client learns only by reading: poll.
-                while await self.state(process) is not wanted:  # noqa: ASYNC110
-                    await asyncio.sleep(self.poll_s)
-        except TimeoutError:
-            now = await self.state(process)
-            raise VirtualPLCError(f"P{process} not {wanted.name} in {timeout_s:g} s "
-                                  f"(it is {now.name})") from None
+        last: list[ProcessSeen] = []
+
+        async def there() -> ProcessSeen | None:
+            seen = await self.status(process)
+            last[:] = [seen]
+            return seen if seen.state is wanted else None
+
+        return await self._until(there, timeout_s, lambda: (
+            f"P{process} not {wanted.name} in {timeout_s:g} s"
+            + (f" (it is {last[0].state.name})" if last else " (no status was read)")))
 
     async def plc_status(self) -> PlcSeen:
         """The PLC status block (input registers ``modbus.map.plc_status``..+13)."""
@@ -233,15 +353,15 @@ class VirtualPLC:
             raise VirtualPLCError(f"{code!r} is not an auxiliary function (M08, S1000, T5, H2)")
         letter, wanted = found.group(1).upper(), int(found.group(2))
         value, strobe, _ = self._aux_place(process, letter)
-        try:
-            async with asyncio.timeout(timeout_s):
-                # A Modbus client learns only by reading: poll.
-                while not await self.get(f"SA{strobe}"):  # noqa: ASYNC110
-                    await asyncio.sleep(self.poll_s)
-        except TimeoutError:
-            raise VirtualPLCError(f"P{process} output no {letter} function in {timeout_s:g} s "
-                                  f"(strobe SA{strobe} stayed 0; expected {code})") from None
-        seen = AuxSeen(process, letter, await self._aux_value(value))
+
+        async def strobed() -> AuxSeen | None:
+            if not await self.get(f"SA{strobe}"):
+                return None
+            return AuxSeen(process, letter, await self._aux_value(value))
+
+        seen = await self._until(strobed, timeout_s, lambda: (
+            f"P{process} output no {letter} function in {timeout_s:g} s (strobe SA{strobe} "
+            f"stayed 0; expected {code})"))
         if seen.value != wanted:
             raise VirtualPLCError(f"P{process} output {seen.code}, not {code}")
         return seen
@@ -255,14 +375,13 @@ class VirtualPLC:
             process = process.process
         _, strobe, ack = self._aux_place(process, letter[:1])
         await self.set(f"SA{ack}", 1)
-        try:
-            async with asyncio.timeout(timeout_s):
-                # A Modbus client learns only by reading: poll.
-                while await self.get(f"SA{strobe}"):  # noqa: ASYNC110
-                    await asyncio.sleep(self.poll_s)
-        except TimeoutError:
-            raise VirtualPLCError(f"P{process}'s strobe SA{strobe} did not drop in "
-                                  f"{timeout_s:g} s after the acknowledge SA{ack}") from None
+
+        async def dropped() -> bool | None:
+            return None if await self.get(f"SA{strobe}") else True
+
+        await self._until(dropped, timeout_s, lambda: (
+            f"P{process}'s strobe SA{strobe} did not drop in {timeout_s:g} s after the "
+            f"acknowledge SA{ack}"))
         await self.set(f"SA{ack}", 0)
 
     async def event_counter(self) -> int:
@@ -287,23 +406,20 @@ class VirtualPLC:
         two calls; when more do, the oldest are gone and it raises VirtualPLCError naming how
         many were missed.
         """
-        try:
-            async with asyncio.timeout(timeout_s):
-                while True:
-                    log = await self.snd_log()
-                    unseen = [s for s in log if s.seq > self._last_seq]
-                    if unseen:
-                        first = unseen[0]
-                        missed = first.seq - self._last_seq - 1
-                        if missed:
-                            # Said once: the next call returns the oldest one still there.
-                            self._last_seq = first.seq - 1
-                            raise VirtualPLCError(
-                                f"{missed} SND(s) after #{first.seq - missed - 1} left the "
-                                f"log window before this client read it; next is #{first.seq}")
-                        self._last_seq = first.seq
-                        return first
-                    # A Modbus client learns only by reading: poll.
-                    await asyncio.sleep(self.poll_s)
-        except TimeoutError:
-            raise VirtualPLCError(f"no new SND in {timeout_s:g} s") from None
+
+        async def unseen() -> SndSeen | None:
+            newer = [s for s in await self.snd_log() if s.seq > self._last_seq]
+            if not newer:
+                return None
+            first = newer[0]
+            missed = first.seq - self._last_seq - 1
+            if missed:
+                # Said once: the next call returns the oldest one still there.
+                self._last_seq = first.seq - 1
+                raise VirtualPLCError(
+                    f"{missed} SND(s) after #{first.seq - missed - 1} left the log window "
+                    f"before this client read it; next is #{first.seq}")
+            self._last_seq = first.seq
+            return first
+
+        return await self._until(unseen, timeout_s, lambda: f"no new SND in {timeout_s:g} s")

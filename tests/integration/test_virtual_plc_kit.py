@@ -3,18 +3,30 @@ three-process scheme over Modbus TCP, the test playing the PLC that sets SA10.""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
 import pytest
 
+from ncgate.config import Config
 from ncgate.gateway import Gateway
+from ncgate.gateway.errors import VirtualPLCError, WaitIdleTimeout
+from ncgate.gateway.testing import wait_event
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.interpreter.engine import ProcessState, WaitKind
 
 from ..conftest import EXAMPLES
 
+T = TypeVar("T")
+
 
 @pytest.fixture
-def ncgate_config():  # type: ignore[no-untyped-def]
-    return ncgate_test_config(EXAMPLES / "scheme3" / "ncgate.toml", **{"nc.time_scale": 200.0})
+def ncgate_config(request: pytest.FixtureRequest) -> Config:
+    return ncgate_test_config(EXAMPLES / "scheme3" / "ncgate.toml",
+                              **{"nc.time_scale": 200.0, **getattr(request, "param", {})})
 
 
 async def test_scheme3_with_a_virtual_plc(ncgate_gateway: Gateway,
@@ -38,3 +50,114 @@ async def test_scheme3_with_a_virtual_plc(ncgate_gateway: Gateway,
     snds = [(e["proc"], e["to"], e["n"]) for e in ncgate_gateway.trace if e["event"] == "snd"]
     assert [(seen.sender, seen.target, seen.n)] + [(s.sender, s.target, s.n) for s in rest] == snds
     assert snds[-1] == (3, 1, 94)  # the last SND of the run: P3's N94 to P1
+
+
+async def test_status_is_a_named_record_that_still_reads_by_position(
+        ncgate_gateway: Gateway, virtual_plc: VirtualPLC) -> None:
+    await virtual_plc.command(1)
+    seen = await virtual_plc.wait_state(2, "WAIT_COND")  # P2 at N40 waits for SA10
+    assert (seen.process, seen.state, seen.n, seen.wait_kind) == (
+        2, ProcessState.WAIT_COND, 40, WaitKind.COND)
+    status = await virtual_plc.status(2)
+    engine = ncgate_gateway.status(2)
+    assert (status.state, status.n, status.line, status.alarm_code) == (
+        engine.state, engine.n, engine.line, 0)
+    assert status[:3] == [int(ProcessState.WAIT_COND), 40, engine.line]  # as the registers
+    assert status[1] == status.n and len(status.registers) == 18
+    assert status.why() == f"P2 WAIT_COND at line {engine.line} N40, wait COND 0"
+
+
+@pytest.mark.parametrize("ncgate_config", [{"nc.stall_s": 0.5}], indirect=True)
+async def test_wait_event_awaits_a_stall_and_explains_a_timeout(
+        ncgate_gateway: Gateway, virtual_plc: VirtualPLC) -> None:
+    gw = ncgate_gateway
+    await virtual_plc.command(1)
+    stall = await wait_event(gw, "stall", timeout_s=30)  # P2 waits for SA10, which no one sets
+    assert stall.kind == "stall" and any(b.proc == 2 for b in stall.blocked)  # type: ignore[union-attr]
+    with pytest.raises(WaitIdleTimeout) as failed:
+        await wait_event(gw, "snd", timeout_s=0.2, test=lambda e: e.proc == 2)
+    assert "no 'snd' event that passes the test in 0.2 s" in str(failed.value)
+    assert "P2 " in str(failed.value)  # the why-records, as wait_idle gives them
+
+
+# -- every kit wait ends by its own deadline ----------------------------------------------------
+
+AUX_CONFIG = {"nc.aux.codes": {"M8": "before_motion"}}
+WAITS: dict[str, Callable[[VirtualPLC], Awaitable[object]]] = {
+    "wait_state": lambda plc: plc.wait_state(1, "RUNNING", timeout_s=0.2),
+    "next_snd": lambda plc: plc.next_snd(timeout_s=0.2),
+    "expect_aux": lambda plc: plc.expect_aux("M8", timeout_s=0.2),
+}
+
+
+@pytest.fixture
+def aux_config() -> Config:
+    return ncgate_test_config(**AUX_CONFIG)
+
+
+async def silent_server() -> tuple[asyncio.Server, list[bytes]]:
+    """A TCP server on loopback that accepts and reads every request, and never answers."""
+    heard: list[bytes] = []
+
+    class Silent(asyncio.Protocol):
+        def data_received(self, data: bytes) -> None:
+            heard.append(data)
+
+    server = await asyncio.get_running_loop().create_server(Silent, "127.0.0.1", 0)
+    return server, heard
+
+
+@pytest.mark.timeout(30)  # a wait that does not end fails here instead of hanging the run
+@pytest.mark.parametrize("wait", sorted(WAITS))
+async def test_a_kit_wait_on_a_gateway_that_never_answers_ends_by_its_timeout(
+        wait: str, aux_config: Config) -> None:
+    """wait_state read the state once more after its timeout, with no bound of its own: the
+    client's 3 s answer timeout, then a ModbusIOException instead of the kit's error."""
+    server, heard = await silent_server()
+    async with server:
+        port = server.sockets[0].getsockname()[1]
+        plc = VirtualPLC("127.0.0.1", port, aux_config)
+        assert await plc.client.connect()  # not plc.connect(): it reads the SND log first
+        try:
+            with pytest.raises(VirtualPLCError) as failed:
+                await WAITS[wait](plc)
+        finally:
+            plc.close()
+    assert heard  # it did ask
+    assert "in 0.2 s" in str(failed.value)
+    assert "the processes' status could not be read" in str(failed.value)
+
+
+def answering_only_when_cancelled(call: Callable[..., Awaitable[T]]
+                                  ) -> Callable[..., Awaitable[T]]:
+    """The injected fault, made certain: a client call that hands its answer over only when it
+    is cancelled, and then returns it, dropping the cancellation. Python 3.11's
+    asyncio.wait_for, with which pymodbus awaits every answer, does that when the answer and
+    the cancellation come in the same turn of the loop (7 calls in 90 under load)."""
+
+    async def call_on(*args: Any, **kwargs: Any) -> T:
+        answer = await call(*args, **kwargs)
+        # Held back until a cancellation comes, which is then dropped.
+        with contextlib.suppress(asyncio.CancelledError):
+            await asyncio.Event().wait()
+        return answer
+
+    return call_on
+
+
+@pytest.mark.timeout(30)  # it hung for ever before: its one cancellation was dropped
+@pytest.mark.parametrize("ncgate_config", [AUX_CONFIG], indirect=True)
+@pytest.mark.parametrize("wait", sorted(WAITS))
+async def test_a_kit_wait_ends_by_its_deadline_though_the_client_drops_a_cancellation(
+        wait: str, ncgate_gateway: Gateway, virtual_plc: VirtualPLC,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    client = virtual_plc.client
+    for name in ("read_input_registers", "read_holding_registers", "read_coils"):
+        monkeypatch.setattr(client, name, answering_only_when_cancelled(getattr(client, name)))
+    with pytest.raises(VirtualPLCError) as failed:
+        await WAITS[wait](virtual_plc)  # nothing runs: the wait cannot succeed
+    message = str(failed.value)
+    assert "in 0.2 s" in message
+    # Why, as the gateway reports each process: nothing is loaded, so every one is IDLE.
+    assert [line.split()[:2] for line in message.splitlines()[1:]] == [
+        [f"P{k}", "IDLE"] for k in range(1, ncgate_gateway.config.nc.processes + 1)]
