@@ -43,7 +43,6 @@ from dataclasses import replace
 from typing import Any, TypeVar
 
 import canopen
-from can_remote import RemoteServer
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError
 
@@ -91,6 +90,7 @@ from ncgate.gateway.canopen.dictionary import (
     image_target,
 )
 from ncgate.gateway.canopen.heartbeat import HeartbeatConsumer, check_entries
+from ncgate.gateway.canopen.hub import Hub
 from ncgate.gateway.canopen.sdo import Deferred, Device, SdoService
 from ncgate.gateway.canopen.snapshot import Snapshot, getter, plc_record
 from ncgate.gateway.door import SEARCH_WORDS, search_inputs
@@ -171,7 +171,7 @@ class CanopenNode:
         self._emcy_queue: deque[bytes] = deque()  # EMCYs waiting for the inhibit time
         self._emcy_timer: Timer | None = None
         self._emcy_last = -1e18
-        self._hub: RemoteServer | None = None
+        self._hub: Hub | None = None
         # What a TPDO or an SDO read may map: published by the loop after each change it
         # hears, read by the CAN thread (snapshot.py).  Immutable, swapped in one assignment.
         self._view = Snapshot()
@@ -243,8 +243,8 @@ class CanopenNode:
         its own on our interface and channel (python-can-remote)."""
         cfg = self.config.canopen
         try:
-            hub = RemoteServer(host=cfg.hub_host, port=cfg.hub_port, interface=cfg.interface,
-                               channel=cfg.channel, bitrate=cfg.bitrate)
+            hub = Hub(cfg.hub_host, cfg.hub_port, interface=cfg.interface, channel=cfg.channel,
+                      bitrate=cfg.bitrate)
         except OSError as exc:  # name the key to change, as for the other ports
             raise listen_error(exc, "canopen.hub_port", cfg.hub_host, cfg.hub_port) from None
         thread = threading.Thread(target=hub.serve_forever, args=(HUB_POLL_S,),
@@ -305,8 +305,9 @@ class CanopenNode:
             hub, self._hub = self._hub, None
             try:
                 await asyncio.to_thread(hub.shutdown)
-            finally:  # a cancelled close still closes the listening socket
-                hub.server_close()
+            finally:  # a cancelled close still closes the listening socket, and the clients'
+                hub.server_close()  # sessions: what they asked the hub to send stops now
+                hub.end_sessions()
 
     def _detach(self) -> None:
         """No engine event (trace, process state, image write) reaches the node from now."""

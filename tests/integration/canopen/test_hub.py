@@ -5,11 +5,16 @@ from __future__ import annotations
 
 import asyncio
 import json
+import signal
 import sys
 
+import can
 import pytest
 
+from ncgate.config import Config
 from ncgate.gateway import Gateway
+
+from .conftest import Master, u32
 
 MASTER = """
 import json, sys, canopen
@@ -74,3 +79,107 @@ async def test_plugin_master_syncs_and_beats(ncgate_gateway: Gateway,
     emcy = await canopen_master.next_frame(0x90)
     assert emcy[:3] == b"\x30\x81\x11"  # 0x8130 heartbeat error, register 0x11
     assert [e["code"] for e in ncgate_gateway.trace if e["event"] == "alarm"] == ["AL150"]
+
+
+BEATING_MASTER = """
+import sys, time, canopen
+network = canopen.Network()
+network.NOTIFIER_CYCLE = 0.05
+network.connect(interface="remote", channel=sys.argv[1], bitrate=500000)
+# The hub sends it: python-can-remote hands send_periodic to the server (periodic_start).
+network.send_periodic(0x701, b"\\x05", 0.02)  # node 1's heartbeat, OPERATIONAL, every 20 ms
+print("beating", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.hub": True, "canopen.hub_port": 0,
+                                            "canopen.heartbeat_ms": 2}], indirect=True)
+async def test_a_killed_masters_heartbeat_ends_with_it_in_the_hub(gw: Gateway,
+                                                                   master: Master) -> None:
+    """The master's heartbeat is a periodic task in the hub, and the hub writes the bus's
+    traffic (here the node's own heartbeat, every 2 ms) to it when it is killed: its session
+    ends, the task with it, and the node sees the master lost within its consumer time."""
+    node = gw.canopen_node
+    assert node is not None and node.hub_address is not None
+    host, port = node.hub_address
+    beats = master.listen(0x701)
+    emcy = master.listen(0x90)
+    await master.download(0x1016, 1, u32(1 << 16 | 200))  # node 1's heartbeat, 200 ms
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-c", BEATING_MASTER, f"ws://{host}:{port}/",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    try:
+        assert proc.stdout is not None
+        async with asyncio.timeout(30):
+            assert await proc.stdout.readline() == b"beating\n"
+        for _ in range(3):
+            assert await master.next(0x701) == b"\x05"  # sent by the hub, for the master
+        assert emcy.empty()
+        # Hung, then killed: frames the hub wrote to it meanwhile are unread when it dies,
+        # so the hub's next write fails (a killed master that was reading may not).
+        proc.send_signal(signal.SIGSTOP)
+        node_beats = master.frames[0x700 + master.node_id]
+        while not node_beats.empty():
+            node_beats.get_nowait()
+        for _ in range(3):
+            await master.next(0x700 + master.node_id)  # the hub writes these to it too
+    finally:
+        proc.kill()  # SIGKILL: no goodbye, no periodic_stop
+        await proc.wait()
+    frame = await master.next(0x90, timeout_s=5)  # 200 ms after its last heartbeat
+    assert frame[:3] == b"\x30\x81\x11"  # EMCY 0x8130 heartbeat error, register 0x11
+    assert [e["code"] for e in gw.trace if e["event"] == "alarm"] == ["AL150"]
+    while not beats.empty():
+        beats.get_nowait()
+    await master.barrier()
+    assert beats.empty()  # nobody beats for the dead master
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.hub": True, "canopen.hub_port": 0}],
+                         indirect=True)
+async def test_a_masters_heartbeat_in_the_hub_ends_when_the_gateway_closes(
+        master: Master, ncgate_config: Config) -> None:
+    """The gateway closes under a master that lives on: what it asked the hub to send stops
+    with the hub (its session's thread is a daemon that would otherwise send on)."""
+    beats = master.listen(0x701)
+    ticks = master.listen(0x702)
+
+    async def ticks_from_now(count: int) -> None:
+        while not ticks.empty():
+            ticks.get_nowait()
+        for _ in range(count):
+            await master.next(0x702)
+
+    ticker = can.Bus(interface="virtual", channel=ncgate_config.canopen.channel)
+    tick = ticker.send_periodic(can.Message(arbitration_id=0x702, data=b"",
+                                            is_extended_id=False), 0.02)
+    try:
+        async with Gateway(ncgate_config) as gw:
+            node = gw.canopen_node
+            assert node is not None and node.hub_address is not None
+            host, port = node.hub_address
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-c", BEATING_MASTER, f"ws://{host}:{port}/",
+                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+            try:
+                assert proc.stdout is not None
+                async with asyncio.timeout(30):
+                    assert await proc.stdout.readline() == b"beating\n"
+                assert await master.next(0x701) == b"\x05"
+            except BaseException:
+                proc.kill()
+                await proc.wait()
+                raise
+        try:
+            await ticks_from_now(2)  # a beat on its way as the hub closed
+            while not beats.empty():
+                beats.get_nowait()
+            await ticks_from_now(10)  # 200 ms: ten of its beats, were it still beating
+            assert beats.empty()
+        finally:
+            proc.kill()
+            await proc.wait()
+    finally:
+        tick.stop()
+        ticker.shutdown()
