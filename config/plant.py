@@ -151,7 +151,7 @@ def _value(role: str, v: Any, key: str, fail: Fail) -> Any:
         raise fail(key, f"expected a number, got {v!r}")
     if role == "ms" and v <= 0:
         raise fail(key, f"expected a time in ms > 0, got {v!r}")
-    if role in ("ms0", "pos") and v < 0 or role == "pos" and v == 0:
+    if (role in ("ms0", "pos") and v < 0) or (role == "pos" and v == 0):
         raise fail(key, f"expected a number {'> 0' if role == 'pos' else '>= 0'}, got {v!r}")
     if role == "pct" and not 0 <= v <= 100:
         raise fail(key, f"expected a percentage 0..100, got {v!r}")
@@ -209,7 +209,7 @@ def read_fault(table: Any, key: str, fail: Fail, *, script: bool = False) -> Fau
                    f"WAIT_COND\", got {when!r}")
     if "after" in table and when is None:
         raise fail(f"{key}.after", "only with 'when'")
-    params = [] if clear else fault_params(kind, table, key, fail)
+    params = [] if clear or kind is None else fault_params(kind, table, key, fail)
     for_s = table.get("for_s")
     return FaultConfig(key, target.strip(), None if clear else kind, tuple(params),
                        None if at is None else float(at), when, float(after),

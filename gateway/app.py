@@ -195,7 +195,7 @@ class Gateway:
         from ncgate.config.script import Script
         from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
-        plant = start_plant(runtime, self.door.apply, closed=False)
+        plant = start_plant(runtime, self.door.apply_on_time, closed=False)
         stack.callback(plant.close)
         if self._modbus is not None:
             plant.fieldbus_listeners.append(self._modbus_faults)

@@ -153,6 +153,19 @@ class Door:
 
     def apply(self, item: Input) -> None:
         """Validate, record and apply ``item``; InputRefused (nothing applied) otherwise."""
+        self._dispatch(item)
+
+    def apply_on_time(self, item: Input) -> None:
+        """:meth:`apply` from inside an engine timer, at the timer's own time: the engine is
+        not brought to the wall clock first (the plant's writes, at their exact times, so
+        that ``run`` and a replay of it agree)."""
+        sync, self._sync = self._sync, None
+        try:
+            self._dispatch(item)
+        finally:
+            self._sync = sync
+
+    def _dispatch(self, item: Input) -> None:
         kind = type(item)
         if kind is Writes:  # the fieldbus's every request: first
             self._writes(item.changes, item)  # type: ignore[union-attr, arg-type]

@@ -518,7 +518,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.config.script import Script
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
-    start_plant(runtime, door.apply, closed=False)
+    start_plant(runtime, door.apply_on_time, closed=False)
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None

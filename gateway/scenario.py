@@ -91,10 +91,10 @@ class Expectations:
             if state not in ProcessState.__members__:
                 raise self._fail(expect, f"unknown state {words[1]!r} (" +
                                  ", ".join(ProcessState.__members__) + ")")
-            number = int(words[0][1:])
-            if number not in self.runtime.engine.processes:
-                raise self._fail(expect, f"no process {number}")
-            return _Watch(expect, "state", process=number, state=ProcessState[state])
+            k = int(words[0][1:])
+            if k not in self.runtime.engine.processes:
+                raise self._fail(expect, f"no process {k}")
+            return _Watch(expect, "state", process=k, state=ProcessState[state])
         try:
             (area, index, view), op, value = parse_condition(self.runtime.resolve(text))
             var = Var(area, index, view)
@@ -115,7 +115,7 @@ class Expectations:
                 w.holds = runtime.engine.processes[w.process].state is w.state
             w.changes.append((now, w.holds))
         if any(w.kind == "var" for w in self.watches):
-            self._undo.append(runtime.image.subscribe(self._on_write))  # type: ignore[arg-type]
+            self._undo.append(runtime.image.subscribe(self._on_write))
         if any(w.kind == "state" for w in self.watches):
             runtime.engine.state_listeners.append(self._on_state)
         if any(w.kind in ("alarm", "no alarm") for w in self.watches):

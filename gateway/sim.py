@@ -264,7 +264,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         raise UsageError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
-    start_plant(runtime, door.apply, closed=True)
+    start_plant(runtime, door.apply_on_time, closed=True)
     player = ScriptPlayer(runtime, script, door, plant_faults(config))
     expectations = Expectations(runtime, script)
     engine = runtime.engine
@@ -314,7 +314,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         """Something may still start a program: the PLC logic's scan, a scripted input."""
         plc = runtime.plc
         return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING) \
-            or (horizon is not None and engine.now < horizon)
+            or (horizon is not None and engine.now < horizon) \
+            or (runtime.plant is not None and runtime.plant.moving)
 
     def plc_may_start(n: int) -> bool:
         """The PLC logic's NC.START is a cycle start: nc.main in process 1 (orphan check)."""
@@ -337,6 +338,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+    if horizon is not None and engine.now < horizon:
+        engine.set_time(horizon)  # nothing can change any more: the windows close as stood
     engine.finish_stats()
     process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():

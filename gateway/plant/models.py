@@ -219,7 +219,7 @@ class Cylinder(Model):
 class Motor(Model):
     """``run`` (``reverse``: the other way) -> ``speed`` in rpm ramping at ``ramp_rpm_s`` to
     ``rated_rpm`` and back to 0; ``at_speed`` within ``tolerance`` % of the rated speed;
-    ``standstill`` at 0."""
+    ``standstill`` at 0 with no run command (it drops as the motor is told to run)."""
 
     kind = "motor"
     inputs = ("run", "reverse")
@@ -282,7 +282,7 @@ class Motor(Model):
         v = self._v(now)
         at = 1 if self.target and abs(v - self.target) <= self._band() + 1e-6 else 0
         return {"speed": max(-32768, min(32767, round(v))), "at_speed": at,
-                "standstill": 1 if v == 0 else 0}
+                "standstill": 1 if v == 0 and self.target == 0 else 0}
 
 
 class Lag(Model):
@@ -304,13 +304,6 @@ class Lag(Model):
     def _tau(self) -> float:
         return float(self.key("time_constant_ms")) / 1000.0 * self.factor
 
-    def _a(self, now: float) -> float:
-        if self.a0 == self.target:
-            return self.a0
-        diff = self.a0 - self.target
-        a = self.target + diff * math.exp(-(now - self.t_ref) / self._tau())
-        return self.target if abs(a - self.target) < 0.5 else a
-
     def settle(self, now: float) -> None:
         self.a0, self.t_ref = self._a(now), now
 
@@ -319,6 +312,16 @@ class Lag(Model):
         self.target = self.a0 if self.never else float(self.host.read("target"))
         return self.advance(now)
 
+    def _settle_at(self) -> float:
+        """When it comes within half a unit of the target: tau * ln(2 |a0 - target|)."""
+        return self.t_ref + self._tau() * math.log(2 * abs(self.a0 - self.target))
+
+    def _a(self, now: float) -> float:
+        if self.a0 == self.target or now + EPS >= self._settle_at():
+            return self.target
+        return self.target + (self.a0 - self.target) * math.exp(-(now - self.t_ref)
+                                                                 / self._tau())
+
     def advance(self, now: float) -> float | None:
         a = self._a(now)
         if a == self.target:
@@ -326,8 +329,7 @@ class Lag(Model):
             self._state(now, "settled")
             return None
         self._state(now, "follows")
-        settle_at = self.t_ref + self._tau() * math.log(2 * abs(self.a0 - self.target))
-        return min(max(settle_at, now), now + self.scan_s)
+        return min(self._settle_at(), now + self.scan_s)
 
     def outputs(self, now: float) -> dict[str, int]:
         return {"actual": max(-32768, min(32767, round(self._a(now))))}
@@ -385,7 +387,7 @@ class Generator(Model):
         if shape == "square":
             return {"output": 1 if frac < float(self.key("duty")) else 0}
         if shape == "counter":
-            return {"output": int(math.floor(phase)) % 32768}
+            return {"output": math.floor(phase) % 32768}
         if shape == "sine":
             value = low + (high - low) * (0.5 + 0.5 * math.sin(2 * math.pi * frac))
         else:

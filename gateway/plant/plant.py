@@ -176,24 +176,37 @@ class Plant:
         def changed() -> None:
             now_value = image.read(*var.address)
             self._arm(model, var, now_value)
-            # At the write's time, after the write: the model acts as an input of its own.
+            # After the write, at the write's time: the model acts as an input of its own.
+            # Its time is the write's, not the clock's when the loop gets round to it, so a
+            # replay (which applies the write at its recorded time) gives the same times.
             engine = self.runtime.engine
-            engine.call_at(engine.now, functools.partial(self._command, model))
+            engine.call_at(engine.now, functools.partial(self._command, model, engine.now))
 
         handle = image.wait(*var.address, lambda v: v != value, changed)
         if handle is None:  # changed already
             changed()
 
-    def _command(self, model: Model) -> None:
-        self._after(model, model.command(self.runtime.engine.now))
+    def _command(self, model: Model, t: float) -> None:
+        self._after(model, model.command(t), t=t)
 
-    def _advance(self, model: Model) -> None:
+    def _advance(self, model: Model, t: float) -> None:
         self._timers.pop(model.name, None)
-        engine = self.runtime.engine
-        nxt = model.advance(engine.now)
+        nxt = model.advance(t)
+        if nxt is not None and nxt <= t:  # a time that would never come: a bug
+            log.error("plant %s asked to be called again at %.9f s, now: next scan instead",
+                      model.name, nxt)
+            nxt = t + self.scan_s
         if nxt is not None and model.kind in ("switch", "generator") and self._idle():
             nxt = None  # a closed run that stands still: let it end (a stall, or idle)
-        self._after(model, nxt)
+        self._after(model, nxt, t=t)
+
+    @property
+    def moving(self) -> bool:
+        """A model is on its way somewhere (a stroke, a ramp, a relay's delay): with
+        ``--until``, a simulation whose processes are idle runs on while it is (free-running
+        generators and switches do not count: they would never end it)."""
+        return any(self.models[name].kind not in ("switch", "generator")
+                   for name in self._timers)
 
     def _idle(self) -> bool:
         engine = self.runtime.engine
@@ -209,21 +222,24 @@ class Plant:
             if model.kind == "switch" and model.name not in self._timers:
                 self._after(model, model.command(self._nc_change))
 
-    def _after(self, model: Model, nxt: float | None, force: bool = False) -> None:
-        self._write(model, force)
+    def _after(self, model: Model, nxt: float | None, force: bool = False,
+               t: float | None = None) -> None:
+        """Write what ``model`` drives at ``t`` (now), and call it again at ``nxt``."""
+        self._write(model, force, t)
         old = self._timers.pop(model.name, None)
         if old is not None:
             old.cancel()
         if nxt is not None:
             engine = self.runtime.engine
             self._timers[model.name] = engine.call_at(
-                max(nxt, engine.now), functools.partial(self._advance, model))
+                nxt, functools.partial(self._advance, model, nxt))
 
-    def _write(self, model: Model, force: bool = False) -> None:
+    def _write(self, model: Model, force: bool = False, t: float | None = None) -> None:
         variables = self.variables[model.name]
         written = self._written[model.name]
         changes = []
-        for key, value in model.outputs(self.runtime.engine.now).items():
+        now = self.runtime.engine.now if t is None else t
+        for key, value in model.outputs(now).items():
             var = variables.get(key)
             if var is None or (not force and written.get(key) == value):
                 continue

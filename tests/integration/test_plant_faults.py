@@ -1,0 +1,310 @@
+"""Faults and scenarios (docs/plant.md): each fault kind through the sim script and through
+the API, verdicts of [[expect]] on the virtual clock, the CLI's exit status and JUnit file,
+and a session with a plant and faults recorded and replayed."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import pytest
+
+from ncgate.config import ConfigError, load_config
+from ncgate.config.script import load_script
+from ncgate.errors import InputRefused, Reason
+from ncgate.gateway import Gateway
+from ncgate.gateway.cli.main import main
+from ncgate.gateway.record import read_record
+from ncgate.gateway.record import replay as run_replay
+from ncgate.gateway.sim import run_sim
+from ncgate.gateway.testing.modbus_kit import VirtualPLC
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+CELL = """
+[nc]
+processes = 1
+main = "O1"
+[plant]
+scan_ms = 10
+[[plant.model]]
+name = "clamp"
+kind = "cylinder"
+extend = "SA20"
+extended = "SA30"
+retracted = "SA31"
+travel_ms = 300
+[[plant.model]]
+name = "pressure"
+kind = "lag"
+target = "SYVAR1"
+actual = "SYVAR2"
+time_constant_ms = 50
+[symbols]
+clamp_closed = "SA30"
+"""
+
+
+@pytest.fixture
+def cell(tmp_path: Path) -> Path:
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SA30=1)\nN20 M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text(CELL)
+    return config
+
+
+def _run(cell: Path, script: str, until: float | None = 3.0) -> Any:
+    path = cell.parent / "s.toml"
+    path.write_text(script)
+    return run_sim(load_config(cell), "O1", load_script(path), until)
+
+
+def _edges(events: list[dict[str, Any]], var: str) -> list[tuple[float, int]]:
+    out: list[tuple[float, int]] = []
+    for e in events:
+        if e["event"] == "write" and e["var"] == var and (not out or out[-1][1] != e["value"]):
+            out.append((e["t"], e["value"]))
+    return out
+
+
+VALVE = '[[write]]\nat = 0.5\nset = "SA20=1"\n'
+
+
+def test_never_keeps_the_cylinder_where_it_is_until_cleared(cell: Path) -> None:
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp"\nkind = "never"\nat = 0.0\n'
+                  '[[fault]]\ntarget = "clamp"\nclear = true\nat = 1.0\n')
+    # Cleared at 1.0, it follows the valve that is on: arrives 0.3 s later.
+    assert _edges(result.events, "SA30") == [(0.0, 0), (1.3, 1)]
+    assert _edges(result.events, "SA31") == [(0.0, 1), (1.0, 0)]
+    faults = [(e["event"], e["t"], e["target"], e["kind"], e["who"]) for e in result.events
+              if e["event"] in ("fault", "fault_clear")]
+    assert faults == [("fault", 0.0, "clamp", "never", "script fault[0]"),
+                      ("fault_clear", 1.0, "clamp", "never", "script fault[1]")]
+
+
+def test_slow_multiplies_the_travel_time(cell: Path) -> None:
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp"\nkind = "slow"\nfactor = 3\n')
+    assert _edges(result.events, "SA30") == [(0.0, 0), (1.4, 1)]
+
+
+def test_stuck_holds_what_every_reader_sees_for_for_s_then_the_model_drives_again(
+        cell: Path) -> None:
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp.extended"\nkind = "stuck"\n'
+                  'value = 1\nat = 0.1\nfor_s = 0.2\n')
+    # Stuck at 1 from 0.1 to 0.3 (the NC's WAI resumes on it!), then the model's 0 again,
+    # and its own 1 when the rod arrives at 0.8.
+    assert _edges(result.events, "SA30") == [(0.0, 0), (0.1, 1), (0.3, 0), (0.8, 1)]
+    resume = next(e for e in result.events if e["event"] == "resume")
+    assert resume["t"] == 0.1 and resume["writer"] == "fault stuck clamp.extended"
+    clear = next(e for e in result.events if e["event"] == "fault_clear")
+    assert (clear["t"], clear["who"]) == (0.3, "for_s 0.2")
+
+
+def test_a_stuck_input_wins_over_an_outside_write_and_a_force_wins_over_it(cell: Path) -> None:
+    from ncgate.gateway.door import Door
+    from ncgate.gateway.wiring import build_runtime, start_plant
+    from ncgate.inputs import Fault, Force, Write
+
+    runtime = build_runtime(load_config(cell), closed=True)
+    door = Door(runtime)
+    start_plant(runtime, door.apply, closed=True)
+    door.apply(Fault.of("clamp_closed", "stuck", value=1))
+    door.apply(Write("SA30", 0))
+    assert runtime.image.read("SA", 30, "bit") == 1
+    door.apply(Force("SA30", 0))
+    assert runtime.image.read("SA", 30, "bit") == 0
+    # No "forced" event for what the fault held: only the force's own.
+    assert [e["event"] for e in runtime.trace.events].count("forced") == 0
+
+
+def test_wire_break_reads_zero_or_the_live_zero(cell: Path) -> None:
+    result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR1=1000"\n'
+                  '[[fault]]\ntarget = "SYVAR2"\nkind = "wire_break"\nlive_zero = -4000\n'
+                  'at = 0.5\n[[fault]]\ntarget = "SA31"\nkind = "wire_break"\nat = 0.5\n',
+                  until=1.0)
+    assert _edges(result.events, "SYVAR2")[-1] == (0.5, -4000)
+    assert _edges(result.events, "SA31")[-1] == (0.5, 0)
+
+
+def test_chatter_toggles_every_period_until_cleared(cell: Path) -> None:
+    result = _run(cell, '[[fault]]\ntarget = "SA31"\nkind = "chatter"\nperiod_ms = 50\n'
+                  'at = 1.0\nfor_s = 0.2\n', until=2.0)
+    assert _edges(result.events, "SA31") == [(0.0, 1), (1.0, 0), (1.05, 1), (1.1, 0),
+                                             (1.15, 1)]
+
+
+def test_a_fault_on_a_condition_fires_when_it_first_holds(cell: Path) -> None:
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp"\nkind = "never"\n'
+                  'when = "SA20=1"\nafter = 0.1\n')
+    # It leaves at 0.5 and stops a third of the way out at 0.6: neither switch on.
+    assert _edges(result.events, "SA31") == [(0.0, 1), (0.5, 0)]
+    assert _edges(result.events, "SA30") == [(0.0, 0)]
+
+
+@pytest.mark.parametrize(("fault", "words"), [
+    ('target = "nothing"\nkind = "never"', "plant model"),
+    ('target = "clamp.speed"\nkind = "stuck"\nvalue = 1', "clamp drives"),
+    ('target = "clamp.extended"\nkind = "never"', "the model's"),
+    ('target = "SA30"\nkind = "exception"', "fieldbus"),
+    ('target = "SYVAR2"\nkind = "stuck"\nvalue = 70000', "-32768..32767"),
+])
+def test_a_fault_that_cannot_be_is_an_error_naming_the_script_entry(
+        cell: Path, fault: str, words: str) -> None:
+    (cell.parent / "s.toml").write_text(f"[[fault]]\n{fault}\n")
+    with pytest.raises(ConfigError) as caught:
+        run_sim(load_config(cell), "O1", load_script(cell.parent / "s.toml"))
+    assert "s.toml: fault[0].target:" in str(caught.value)
+    assert words in str(caught.value)
+
+
+# -- expectations -----------------------------------------------------------------------------
+
+EXPECTS = """
+[[expect]]
+name = "clamp closes in time"
+cond = "clamp_closed=1"
+within = [0.7, 0.9]
+[[expect]]
+name = "P1 ends"
+cond = "P1 IDLE"
+by = 2.0
+[[expect]]
+name = "quiet"
+cond = "no alarm"
+always = true
+"""
+
+
+def test_the_good_case_passes_every_expectation(cell: Path) -> None:
+    result = _run(cell, VALVE + EXPECTS, until=None)
+    assert [v.line() for v in result.verdicts] == [
+        "PASS clamp closes in time: clamp_closed=1 at 0.800 s",
+        "PASS P1 ends: P1 IDLE at 0.800 s",
+        "PASS quiet: no alarm in 0.000..2.000 s"]
+    assert all(v.ok for v in result.verdicts)
+    assert result.exit_status == 0
+    assert result.runtime.engine.now == pytest.approx(2.0)  # the last window's end
+
+
+def test_a_bad_case_fails_naming_the_value_who_set_it_and_the_model(cell: Path) -> None:
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp"\nkind = "never"\n' + EXPECTS,
+                  until=None)
+    verdicts = {v.name: v for v in result.verdicts}
+    bad = verdicts["clamp closes in time"]
+    assert not bad.ok
+    assert bad.line().startswith("FAIL clamp closes in time: SA30 still 0 at 0.900 s "
+                                 "(set by plant clamp at 0.000 s)")
+    assert "clamp retracted (fault: never)" in bad.line()
+    assert not verdicts["P1 ends"].ok
+    assert verdicts["quiet"].ok
+    assert result.exit_status == 1
+
+
+def test_an_expected_alarm_is_a_pass_and_an_always_that_breaks_says_when(cell: Path) -> None:
+    (cell.parent / "ncgate.toml").write_text(CELL.replace("main = \"O1\"",
+                                                          "main = \"O1\"\nwait_timeout_s = 1.0"))
+    script = ('[[fault]]\ntarget = "clamp"\nkind = "never"\n'
+              '[[expect]]\nname = "timeout"\ncond = "alarm AL143"\nby = 2.0\n'
+              '[[expect]]\nname = "quiet"\ncond = "no alarm"\nalways = true\n') + VALVE
+    result = _run(cell, script, until=None)
+    lines = [v.line() for v in result.verdicts]
+    assert lines[0].startswith("PASS timeout: P1 alarm AL143")
+    assert lines[1].startswith("FAIL quiet: P1 alarm AL143")
+    assert lines[1].endswith("at 1.000 s")
+    assert result.exit_status == 1
+
+
+def test_the_cli_runs_each_script_as_a_scenario_and_writes_junit(
+        cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good, bad = cell.parent / "good.toml", cell.parent / "bad.toml"
+    good.write_text(VALVE + EXPECTS)
+    bad.write_text(VALVE + '[[fault]]\ntarget = "clamp"\nkind = "never"\n' + EXPECTS)
+    junit = cell.parent / "verdicts.xml"
+    status = main(["sim", "--config", str(cell), "--script", str(good), "--script", str(bad),
+                   "--junit", str(junit), "O1"])
+    out = capsys.readouterr().out
+    assert status == 1
+    assert f"== {good}" in out and f"== {bad}" in out
+    assert out.count("PASS ") == 4 and out.count("FAIL ") == 2
+    assert "2 scenarios: 4 of 6 expectations passed" in out
+    suites = ET.parse(junit).getroot()
+    assert suites.get("tests") == "6" and suites.get("failures") == "2"
+    assert [s.get("name") for s in suites] == [str(good), str(bad)]
+    failures = [c.get("name") for s in suites for c in s if c.find("failure") is not None]
+    assert failures == ["clamp closes in time", "P1 ends"]
+    assert main(["sim", "--config", str(cell), "--script", str(good), "O1"]) == 0
+
+
+def test_an_expectation_that_cannot_be_read_names_its_key(cell: Path) -> None:
+    (cell.parent / "s.toml").write_text('[[expect]]\nname = "x"\ncond = "SA30=1"\n')
+    with pytest.raises(ConfigError) as caught:
+        load_script(cell.parent / "s.toml")
+    assert "s.toml: expect[0]: give exactly one of within" in str(caught.value)
+
+
+# -- through the API and the console -----------------------------------------------------------
+
+async def test_faults_through_the_api_and_the_console_are_traced_and_shown(
+        cell: Path) -> None:
+    config = ncgate_test_config(cell, **{"nc.time_scale": 20.0})
+    async with Gateway(config, console=True) as gw:
+        await gw.start("O1")
+        gw.fault("clamp", "never")
+        gw.write("SA20", 1)
+        status = gw.plant.status()
+        assert status["faults"][0]["kind"] == "never"
+        assert "fault: never" in gw.describe_blocked()
+        host, port = gw.web_address
+        base = f"http://{host}:{port}"
+        async with aiohttp.ClientSession() as http:
+            async with http.post(f"{base}/api/fault", json={"target": "nope", "kind": "never"}
+                                 ) as answer:
+                assert answer.status == 422
+            async with http.post(f"{base}/api/fault", json={"target": "clamp",
+                                                            "kind": "melt"}) as answer:
+                assert answer.status == 422
+            async with http.post(f"{base}/api/fault", json={"clear": "clamp"}) as answer:
+                assert answer.status == 200 and await answer.json() == []
+            await gw.wait_idle(timeout_s=10)  # the rod arrives once the fault is gone
+            async with http.post(f"{base}/api/fault", json={
+                    "target": "SYVAR2", "kind": "stuck", "value": 7, "for_s": 100}) as answer:
+                assert answer.status == 200
+                assert (await answer.json())[0]["params"] == {"value": 7}
+            async with http.get(f"{base}/api/status") as answer:
+                plant = (await answer.json())["plant"]
+            assert [m["name"] for m in plant["models"]] == ["clamp", "pressure"]
+            assert plant["models"][0]["state"] == "extended"
+            assert plant["faults"][0]["target"] == "SYVAR2"
+            assert gw.read("SYVAR2") == 7
+            async with http.post(f"{base}/api/fault", json={"clear": "all"}) as answer:
+                assert answer.status == 200
+        events = [(e["event"], e["target"], e["who"].split(" ")[0]) for e in gw.trace
+                  if e["event"] in ("fault", "fault_clear")]
+        assert events == [("fault", "clamp", "api"), ("fault_clear", "clamp", "web"),
+                          ("fault", "SYVAR2", "web"), ("fault_clear", "SYVAR2", "web")]
+        with pytest.raises(InputRefused) as caught:
+            gw.fault("SA30", "slow")
+        assert caught.value.reason is Reason.UNKNOWN_VARIABLE
+
+
+async def test_a_session_with_a_plant_and_faults_replays_and_matches(
+        cell: Path, tmp_path: Path) -> None:
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0, "nc.time_scale": 20.0}
+    config = ncgate_test_config(cell, **overrides)
+    async with Gateway(config, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await gw.start("O1")
+        gw.fault("clamp", "slow", factor=2)
+        await plc.set("SA20", 1)
+        await gw.wait_idle(timeout_s=10)
+    recording = read_record(record)
+    kinds = [line["input"] for line in map(json.loads, record.read_text().splitlines())
+             if "input" in line]
+    assert kinds == ["start", "fault", "write"]  # the plant's writes are not inputs
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.compared >= 4
+    assert any(e["event"] == "fault" for e in recording.events)

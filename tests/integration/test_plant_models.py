@@ -1,0 +1,335 @@
+"""Each plant model against its timing diagram (docs/plant.md), on the virtual clock.
+
+The expected times are computed here from the documented rules (travel_ms, ramp_rpm_s, a
+first-order lag's exp(-t/tau), ...), not taken from a run: a model that drifts from its
+diagram fails, exact to one plant scan where the value moves continuously.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ncgate.config import ConfigError, load_config
+from ncgate.config.script import load_script
+from ncgate.gateway.sim import run_sim
+
+SCAN = 0.010  # plant.scan_ms = 10
+
+
+def _sim(tmp_path: Path, models: str, script: str, until: float = 3.0,
+         program: str = "N10 (DLY,5)\nN20 M30\n", extra: str = "") -> list[dict[str, Any]]:
+    (tmp_path / "O1.nc").write_text(program)
+    (tmp_path / "ncgate.toml").write_text(
+        f'[nc]\nprocesses = 1\nmain = "O1"\n{extra}\n[plant]\nscan_ms = 10\n{models}')
+    (tmp_path / "s.toml").write_text(script)
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1",
+                     load_script(tmp_path / "s.toml"), until)
+    return result.events
+
+
+def _writes(events: list[dict[str, Any]], var: str) -> list[tuple[float, int, str]]:
+    return [(e["t"], e["value"], e["who"]) for e in events
+            if e["event"] == "write" and e["var"] == var]
+
+
+def _edges(events: list[dict[str, Any]], var: str) -> list[tuple[float, int]]:
+    """When ``var`` changed, and to what (the first write is its start value)."""
+    out: list[tuple[float, int]] = []
+    for t, value, _ in _writes(events, var):
+        if not out or out[-1][1] != value:
+            out.append((t, value))
+    return out
+
+
+DELAY = """
+[[plant.model]]
+name = "relay"
+kind = "delay"
+input = "SA20"
+output = "SA30"
+on_ms = 200
+off_ms = 50
+"""
+
+
+def test_a_delay_switches_on_after_on_ms_off_after_off_ms_and_ignores_a_short_pulse(
+        tmp_path: Path) -> None:
+    script = """
+[[write]]
+at = 0.5
+set = "SA20=1"
+[[write]]
+at = 1.0
+set = "SA20=0"
+[[write]]
+at = 2.0
+set = "SA20=1"
+[[write]]
+at = 2.1
+set = "SA20=0"
+"""
+    events = _sim(tmp_path, DELAY, script)
+    assert _edges(events, "SA30") == [(0.0, 0), (0.7, 1), (1.05, 0)]
+    assert {who for _, _, who in _writes(events, "SA30")} == {"plant relay"}
+
+
+CYLINDER = """
+[[plant.model]]
+name = "clamp"
+kind = "cylinder"
+extend = "SA20"
+extended = "SA30"
+retracted = "SA31"
+position = "SYVAR10"
+travel_ms = 300
+retract_ms = 600
+"""
+
+
+def test_a_cylinder_leaves_its_end_at_once_and_arrives_after_its_travel_time(
+        tmp_path: Path) -> None:
+    script = """
+[[write]]
+at = 1.0
+set = "SA20=1"
+[[write]]
+at = 2.0
+set = "SA20=0"
+"""
+    events = _sim(tmp_path, CYLINDER, script)
+    # At rest it is retracted; extending: retracted drops at 1.0, extended at 1.0 + 0.3.
+    assert _edges(events, "SA31") == [(0.0, 1), (1.0, 0), (2.6, 1)]
+    assert _edges(events, "SA30") == [(0.0, 0), (1.3, 1), (2.0, 0)]
+    positions = _writes(events, "SYVAR10")
+    # The position follows the stroke every scan: within one scan's travel of t/travel_ms.
+    for t, value, _ in positions:
+        if 1.0 <= t <= 1.3:
+            assert abs(value - (t - 1.0) / 0.3 * 1000) <= SCAN / 0.3 * 1000 + 1
+    assert (1.3, 1000) in [(round(t, 6), v) for t, v, _ in positions]
+    assert positions[-1][:2] == (2.6, 0)
+
+
+def test_a_cylinder_reversed_mid_stroke_comes_back_the_way_it_went(tmp_path: Path) -> None:
+    script = """
+[[write]]
+at = 1.0
+set = "SA20=1"
+[[write]]
+at = 1.1
+set = "SA20=0"
+"""
+    events = _sim(tmp_path, CYLINDER, script)
+    # A third of the stroke out (0.1 of 0.3 s), so a third of retract_ms (0.6 s) back.
+    assert _edges(events, "SA31") == [(0.0, 1), (1.0, 0), (1.3, 1)]
+    assert _edges(events, "SA30") == [(0.0, 0)]
+
+
+def test_a_double_acting_cylinder_holds_mid_stroke_with_both_coils_off(tmp_path: Path) -> None:
+    models = CYLINDER.replace('extend = "SA20"', 'extend = "SA20"\nretract = "SA21"')
+    script = """
+[[write]]
+at = 1.0
+set = "SA20=1"
+[[write]]
+at = 1.15
+set = "SA20=0"
+[[write]]
+at = 2.0
+set = "SA20=1"
+"""
+    events = _sim(tmp_path, models, script)
+    # Half the stroke by 1.15, held there, the other half (0.15 s) from 2.0.
+    assert _edges(events, "SA30") == [(0.0, 0), (2.15, 1)]
+    held = [v for t, v, _ in _writes(events, "SYVAR10") if 1.15 <= t < 2.0]
+    assert held and set(held) == {500}
+
+
+MOTOR = """
+[[plant.model]]
+name = "spindle"
+kind = "motor"
+run = "SA21"
+reverse = "SA22"
+speed = "SYVAR11"
+at_speed = "SA32"
+standstill = "SA33"
+rated_rpm = 6000
+ramp_rpm_s = 12000
+tolerance = 5
+"""
+
+
+def test_a_motor_ramps_to_rated_speed_and_says_at_speed_within_its_tolerance(
+        tmp_path: Path) -> None:
+    script = """
+[[write]]
+at = 1.0
+set = "SA21=1"
+[[write]]
+at = 2.0
+set = "SA21=0"
+"""
+    events = _sim(tmp_path, MOTOR, script)
+    # 5 % of 6000 rpm below rated: 5700 rpm at 12000 rpm/s, 0.475 s after the start.
+    assert _edges(events, "SA32") == [(0.0, 0), (1.475, 1), (2.0, 0)]
+    assert _edges(events, "SA33") == [(0.0, 1), (1.0, 0), (2.5, 1)]
+    speeds = {round(t, 6): v for t, v, _ in _writes(events, "SYVAR11")}
+    assert speeds[1.5] == 6000 and speeds[2.5] == 0
+    for t, v in speeds.items():
+        if 1.0 <= t <= 1.5:
+            assert abs(v - (t - 1.0) * 12000) <= 1
+
+
+def test_a_motor_reversed_runs_to_minus_rated(tmp_path: Path) -> None:
+    script = """
+[[write]]
+at = 0.5
+set = "SA22=1"
+[[write]]
+at = 0.5
+set = "SA21=1"
+"""
+    events = _sim(tmp_path, MOTOR, script)
+    assert _writes(events, "SYVAR11")[-1][:2] == (1.0, -6000)
+    assert _edges(events, "SA32") == [(0.0, 0), (0.975, 1)]
+
+
+LAG = """
+[[plant.model]]
+name = "pressure"
+kind = "lag"
+target = "SYVAR1"
+actual = "SYVAR2"
+time_constant_ms = 100
+"""
+
+
+def test_a_lag_follows_its_target_as_a_first_order_lag(tmp_path: Path) -> None:
+    events = _sim(tmp_path, LAG, '[[write]]\nat = 1.0\nset = "SYVAR1=1000"\n')
+    values = [(t, v) for t, v, _ in _writes(events, "SYVAR2") if t >= 1.0]
+    assert values, "the lag wrote nothing"
+    for t, v in values:
+        expected = 1000 * (1 - math.exp(-(t - 1.0) / 0.1))
+        assert abs(v - expected) <= 1, (t, v, expected)
+    # Within half a unit of the target it is the target: at tau * ln(2 * 1000) after the step.
+    settle = 1.0 + 0.1 * math.log(2000)
+    assert values[-1][1] == 1000
+    assert settle - SCAN <= values[-1][0] <= settle + 1e-6
+
+
+def test_a_square_generator_and_a_counter_run_from_the_start(tmp_path: Path) -> None:
+    models = """
+[[plant.model]]
+name = "blink"
+kind = "generator"
+output = "SA40"
+period_ms = 200
+duty = 0.25
+[[plant.model]]
+name = "parts"
+kind = "generator"
+shape = "counter"
+output = "SYVAR5"
+period_ms = 500
+"""
+    events = _sim(tmp_path, models, "", until=1.0)
+    assert _edges(events, "SA40") == [(0.0, 1), (0.05, 0), (0.2, 1), (0.25, 0), (0.4, 1),
+                                      (0.45, 0), (0.6, 1), (0.65, 0), (0.8, 1), (0.85, 0),
+                                      (1.0, 1)]
+    assert _edges(events, "SYVAR5") == [(0.0, 0), (0.5, 1), (1.0, 2)]
+
+
+def test_a_switch_follows_the_part_programs_axis(tmp_path: Path) -> None:
+    models = """
+[[plant.model]]
+name = "ref"
+kind = "switch"
+axis = "P1.X"
+above = 100.0
+output = "SA50"
+"""
+    # G1 X200 at F1200 mm/min (20 mm/s): X passes 100 at t = 5 s.
+    program = "N10 G1 X200 F1200\nN20 M30\n"
+    events = _sim(tmp_path, models, "", until=12.0, program=program)
+    edges = _edges(events, "SA50")
+    assert edges[0] == (0.0, 0)
+    assert len(edges) == 2 and edges[1][1] == 1
+    assert 5.0 < edges[1][0] <= 5.0 + SCAN + 1e-6
+
+
+def test_an_nc_wait_on_an_end_switch_resumes_only_when_the_cylinder_arrives(
+        tmp_path: Path) -> None:
+    program = "N10 (WAI,SA30=1)\nN20 M30\n"
+    events = _sim(tmp_path, CYLINDER, '[[write]]\nat = 0.5\nset = "SA20=1"\n', until=None,
+                  program=program)
+    resumes = [e for e in events if e["event"] == "resume"]
+    assert [(e["t"], e["writer"]) for e in resumes] == [(0.8, "plant clamp")]
+
+
+def test_a_force_wins_over_a_model(tmp_path: Path) -> None:
+    from ncgate.gateway.door import Door
+    from ncgate.gateway.wiring import build_runtime, start_plant
+    from ncgate.inputs import Force
+
+    (tmp_path / "ncgate.toml").write_text(f'[nc]\nprocesses = 1\n{CYLINDER}')
+    runtime = build_runtime(load_config(tmp_path / "ncgate.toml"), closed=True)
+    door = Door(runtime)
+    start_plant(runtime, door.apply, closed=True)
+    door.apply(Force("SA30", 0))
+    runtime.engine.call_at(0.1, lambda: door.apply(__import__("ncgate.inputs").inputs.Write(
+        "SA20", 1)))
+    runtime.engine.advance_to(1.0)
+    assert runtime.image.read("SA", 30, "bit") == 0  # the model says 1: the force wins
+    assert runtime.plant is not None
+    assert runtime.plant.models["clamp"].state == "extended"
+    door.apply(Force("SA30", None))
+    runtime.engine.call_at(1.1, lambda: door.apply(__import__("ncgate.inputs").inputs.Write(
+        "SA20", 0)))
+    runtime.engine.advance_to(3.0)
+    assert runtime.image.read("SA", 31, "bit") == 1
+
+
+@pytest.mark.parametrize(("models", "key", "words"), [
+    ('[[plant.model]]\nname = "c"\nkind = "cylinder"\nextend = "SA1"\ntravel_ms = 100\n',
+     "plant.model[0].extended", "needs an output"),
+    ('[[plant.model]]\nname = "c"\nkind = "cylinder"\nextend = "SA1"\nextended = "SA2"\n',
+     "plant.model[0].travel_ms", "missing"),
+    ('[[plant.model]]\nname = "c"\nkind = "valve"\n', "plant.model[0].kind", "cylinder"),
+    ('[[plant.model]]\nname = "m"\nkind = "motor"\nrun = "SA1"\nrated_rpm = 10\n'
+     'ramp_rpm_s = 5\nextend = "SA2"\n', "plant.model[0].extend", "unknown key"),
+    ('[[plant.model]]\nname = "g"\nkind = "generator"\noutput = "SA1"\nperiod_ms = 0\n',
+     "plant.model[0].period_ms", "> 0"),
+    ('[[plant.model]]\nname = "s"\nkind = "switch"\naxis = "X"\noutput = "SA1"\nabove = 1\n',
+     "plant.model[0].axis", "P1.X"),
+    ('[[plant.fault]]\ntarget = "SA1"\nkind = "stuck"\n', "plant.fault[0].value", "missing"),
+    ('[[plant.fault]]\ntarget = "SA1"\nkind = "melt"\n', "plant.fault[0].kind", "stuck"),
+])
+def test_a_bad_plant_table_names_the_file_and_the_dotted_key(
+        tmp_path: Path, models: str, key: str, words: str) -> None:
+    (tmp_path / "ncgate.toml").write_text(models)
+    with pytest.raises(ConfigError) as caught:
+        load_config(tmp_path / "ncgate.toml")
+    assert f"ncgate.toml: {key}:" in str(caught.value)
+    assert words in str(caught.value)
+
+
+@pytest.mark.parametrize(("models", "key"), [
+    ('[[plant.model]]\nname = "c"\nkind = "cylinder"\nextend = "SA1"\nextended = "SA9999"\n'
+     'travel_ms = 100\n', "plant.model[0].extended"),
+    ('[[plant.model]]\nname = "c"\nkind = "cylinder"\nextend = "SA1"\nposition = "SA2"\n'
+     'travel_ms = 100\n', "plant.model[0].position"),
+    ('[[plant.model]]\nname = "a"\nkind = "delay"\ninput = "SA1"\noutput = "SA2"\n'
+     '[[plant.model]]\nname = "b"\nkind = "delay"\ninput = "SA3"\noutput = "SA2"\n',
+     "plant.model[1].output"),
+])
+def test_a_model_whose_variables_do_not_fit_the_image_does_not_start(
+        tmp_path: Path, models: str, key: str) -> None:
+    (tmp_path / "O1.nc").write_text("N10 M30\n")
+    (tmp_path / "ncgate.toml").write_text(f'[nc]\nmain = "O1"\n{models}')
+    with pytest.raises(ConfigError) as caught:
+        run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None))
+    assert f": {key}:" in str(caught.value)
