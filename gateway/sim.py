@@ -226,20 +226,23 @@ class ScriptPlayer:
         self.due -= 1
         source = Source(SourceKind.SCRIPT, entry.key)
         try:
+            # At the entry's own time, on the wall clock too (run --script): a scenario's
+            # times are the machine's, as in sim.
+            apply = self.door.apply_on_time
             if entry.set is not None:
-                self.door.apply(self._write(entry))
+                apply(self._write(entry))
             elif entry.fault is not None:
-                self.door.apply(self._fault(entry))
+                apply(self._fault(entry))
             elif entry.command is not None:
                 kind = next(k for k in CommandKind if k.label == entry.command)
-                self.door.apply(Command(kind, entry.process, source))
+                apply(Command(kind, entry.process, source))
             elif entry.point is not None:
-                self.door.apply(Break(entry.point, entry.on, source))
+                apply(Break(entry.point, entry.on, source))
             elif entry.feed is not None or entry.rapid is not None:
-                self.door.apply(Override(entry.feed, entry.rapid, entry.process, source))
+                apply(Override(entry.feed, entry.rapid, entry.process, source))
             else:
                 assert entry.sender is not None and entry.target is not None
-                self.door.apply(Snd(entry.sender, entry.target, source))
+                apply(Snd(entry.sender, entry.target, source))
         except InputRefused as exc:
             self.runtime.engine.note_hazard(entry.sender or 0, f"script {entry.key}: {exc}")
 

@@ -126,6 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--record", metavar="R.jsonl", help="record the session (every input "
                      "from outside, with its time, beside the trace) for 'ncgate sim "
                      "--replay'")
+    run.add_argument("--script", metavar="S.toml", help="play a scenario on the wall clock "
+                     "while real clients are connected: its writes and faults at their times, "
+                     "its [[expect]] judged as in sim (PASS/FAIL lines); it stops at its last "
+                     "window's end, exit 1 when an expectation failed (docs/plant.md)")
     run.add_argument("--trace", metavar="T.jsonl", help="write every event as JSON Lines, "
                      "rotated at trace.max_mb (default: none; memory keeps trace.ring events)")
     run.add_argument("--loop", choices=("auto", "asyncio", "uvloop"), default="auto",
@@ -445,11 +449,10 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_OK
     if serving is None:
         return EXIT_USAGE
-    serving()
-    return EXIT_OK
+    return EXIT_FAILED if serving() else EXIT_OK
 
 
-def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
+def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
     """Everything ``run`` does before it serves: the log, the config, the start-up check
     of its programs, the interpreter's tuning and the event loop.  Returns the call that
     serves until SIGINT or SIGTERM, or None when the programs cannot run (said)."""
@@ -484,7 +487,7 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
-    run: Callable[[Coroutine[Any, Any, None]], None] = asyncio.run
+    run: Callable[[Coroutine[Any, Any, int]], int] = asyncio.run
     if loop == "uvloop":
         try:
             import uvloop
@@ -496,8 +499,13 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], None] | None:
         run = uvloop.run
     else:
         logging.getLogger("ncgate").info("event loop: asyncio")
+    script = None
+    if args.script:
+        from ncgate.config.script import load_script
+
+        script = load_script(args.script)
     return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                             watch=args.watch, checked=checked))
+                             watch=args.watch, checked=checked, script=script))
 
 
 def _programs_ready(config: Config) -> tuple[CheckedFile, ...] | None:

@@ -18,6 +18,7 @@ from typing import Any
 
 from ncgate.config import Config
 from ncgate.config.loader import DEFAULT_WEB_PORT
+from ncgate.config.script import Script
 from ncgate.errors import InputRefused
 from ncgate.gateway.app import Gateway
 from ncgate.gateway.plc import LogicWatcher
@@ -129,9 +130,14 @@ LOG_LINES_PER_S = 100
 
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
                 record: str | None = None, overrides: dict[str, Any] | None = None,
-                watch: bool = False, checked: Sequence[CheckedFile] = ()) -> None:
+                watch: bool = False, checked: Sequence[CheckedFile] = (),
+                script: Script | None = None) -> int:
     """``watch``: reload the PLC logic when one of its files changes (``run --watch``).
-    ``checked``: what the start-up check found no error in (``Gateway``'s ``checked``)."""
+    ``checked``: what the start-up check found no error in (``Gateway``'s ``checked``).
+    ``script``: a scenario played on the wall clock (``run --script``): its inputs and faults
+    at their machine times, its expectations judged as in ``sim``; it stops at the end of
+    its last window (or at a signal) and returns 1 when an expectation failed, else 0."""
+    status = 0
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
     installed = []
@@ -190,13 +196,49 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if gw.recorder is not None:
                 log.info("recording the session to %s", gw.recorder.path)
             watcher = _watch(gw, config, loop) if watch else None
+            scenario = _play(gw, script, stop) if script is not None else None
             try:
                 await stop.wait()
             finally:
                 if watcher is not None:
                     watcher.close()
+            if scenario is not None:
+                status = scenario.finish()
             log.info("stopping")
     finally:
         for sig in installed:
             loop.remove_signal_handler(sig)
     log.info("stopped")
+    return status
+
+
+class _Scenario:
+    """A script played by ``run --script``: its player, its expectations, its end."""
+
+    def __init__(self, gw: Gateway, script: Script, stop: asyncio.Event) -> None:
+        from ncgate.gateway.scenario import Expectations
+        from ncgate.gateway.sim import ScriptPlayer
+
+        self.script = script
+        self.expectations = Expectations(gw.runtime, script)
+        self.expectations.start()
+        ScriptPlayer(gw.runtime, script, gw.door).arm()
+        horizon = script.horizon if script.expects else None
+        self._end = None
+        if horizon is not None:
+            self._end = gw.runtime.engine.call_at(horizon, stop.set)
+            log.info("scenario %s: %d expectations, ends at %.3f s of machine time",
+                     script.file, len(script.expects), horizon)
+
+    def finish(self) -> int:
+        if self._end is not None:
+            self._end.cancel()
+        self.expectations.stop()
+        verdicts = self.expectations.verdicts()
+        for v in verdicts:
+            print(v.line(), flush=True)
+        return 0 if all(v.ok for v in verdicts) else 1
+
+
+def _play(gw: Gateway, script: Script, stop: asyncio.Event) -> _Scenario:
+    return _Scenario(gw, script, stop)

@@ -1,0 +1,132 @@
+"""The plant on the wall clock: ``ncgate run`` as a process, a real Modbus client as the PLC
+(the test process), and ``run --script`` judging a scenario while that client drives it."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+from pymodbus.client import AsyncModbusTcpClient
+
+from .test_cli_run import start_run, stop_run
+
+CELL = """
+[nc]
+processes = 1
+main = "O1"
+autostart = true
+[modbus]
+port = 0
+[canopen]
+enabled = false
+[web]
+enabled = false
+[plant]
+scan_ms = 10
+[[plant.model]]
+name = "clamp"
+kind = "cylinder"
+extend = "SA20"
+extended = "SA30"
+retracted = "SA31"
+travel_ms = 300
+"""
+
+
+def _cell(tmp_path: Path) -> Path:
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SA30=1)\nN20 M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text(CELL)
+    return config
+
+
+async def _until(client: AsyncModbusTcpClient, coil: int, value: bool,
+                 timeout_s: float = 10.0) -> None:
+    """Poll a discrete state: a Modbus client learns of a change no other way."""
+    async with asyncio.timeout(timeout_s):
+        while True:
+            answer = await client.read_coils(coil, count=1, device_id=1)
+            if bool(answer.bits[0]) is value:
+                return
+            await asyncio.sleep(0.005)  # a Modbus poller learns of a change no other way
+
+
+async def test_an_external_plc_sets_the_valve_and_sees_the_end_switch_after_the_stroke(
+        tmp_path: Path) -> None:
+    trace = tmp_path / "trace.jsonl"
+    proc, port, lines = await start_run(_cell(tmp_path), "--trace", str(trace))
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    try:
+        assert await client.connect()
+        await _until(client, 31, True)  # at rest: retracted
+        assert not (await client.read_coils(30, count=1, device_id=1)).bits[0]
+        loop = asyncio.get_running_loop()
+        await client.write_coil(20, True, device_id=1)
+        sent = loop.time()
+        await _until(client, 31, False)  # it leaves its end switch as the valve switches
+        await _until(client, 30, True)
+        seen = loop.time()
+        # Not before the stroke's time on the wall clock (time_scale 1): cause and effect.
+        assert seen - sent >= 0.3 - 0.005
+    finally:
+        client.close()
+        code, log = await stop_run(proc, lines)
+    assert code == 0, log
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    valve = next(e for e in events if e["event"] == "write" and e["var"] == "SA20")
+    arrived = next(e for e in events if e["event"] == "write" and e["var"] == "SA30"
+                   and e["value"] == 1)
+    # On the engine's clock the stroke is exact: 300 ms after the valve's write.
+    assert arrived["t"] - valve["t"] == pytest.approx(0.3, abs=1e-6)
+    assert arrived["who"] == "plant clamp"
+    assert valve["who"].startswith("modbus 127.0.0.1:")
+    resume = next(e for e in events if e["event"] == "resume")
+    assert resume["t"] == arrived["t"] and resume["writer"] == "plant clamp"
+
+
+SCENARIO = """
+[[expect]]
+name = "clamp closes"
+cond = "SA30=1"
+by = 3.0
+[[expect]]
+name = "P1 ends"
+cond = "P1 IDLE"
+within = [1.0, 3.0]
+"""
+
+
+async def _scenario(tmp_path: Path, script: str) -> tuple[int, str]:
+    path = tmp_path / "scenario.toml"
+    path.write_text(script)
+    proc, port, lines = await start_run(_cell(tmp_path), "--script", str(path))
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    try:
+        assert await client.connect()
+        await client.write_coil(20, True, device_id=1)  # the PLC closes the clamp
+    finally:
+        client.close()
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):  # it ends by itself at the last window's end
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    return code, "".join(lines) + rest
+
+
+async def test_run_script_judges_the_good_case_with_a_real_plc_connected(
+        tmp_path: Path) -> None:
+    code, log = await _scenario(tmp_path, SCENARIO)
+    assert code == 0, log
+    assert "PASS clamp closes: SA30=1 at" in log
+    assert "PASS P1 ends: P1 IDLE at 1.000 s" in log
+
+
+async def test_run_script_fails_a_bad_case_and_exits_1(tmp_path: Path) -> None:
+    code, log = await _scenario(tmp_path, SCENARIO + '[[fault]]\ntarget = "clamp"\n'
+                                'kind = "never"\nat = 0.0\n')
+    assert code == 1, log
+    assert "FAIL clamp closes: SA30 still 0 at 3.000 s" in log
+    assert "clamp retracted (fault: never)" in log
+    assert "FAIL P1 ends:" in log
