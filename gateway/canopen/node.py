@@ -176,6 +176,10 @@ class CanopenNode:
         # hears, read by the CAN thread (snapshot.py).  Immutable, swapped in one assignment.
         self._view = Snapshot()
         self._sampling = False  # the loop is to sample N, line and the PLC again (a SYNC)
+        # Processes whose status changed since the snapshot was published (0: the last SND),
+        # and whether a loop callback is to publish them.
+        self._heard: set[int] = set()
+        self._publish_due = False
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
         self._pending: set[_Handoff] = set()  # callbacks handed to the loop, not yet run
@@ -355,20 +359,67 @@ class CanopenNode:
         except InputRefused as exc:
             self._refusals.note(f"{source}: RPDO not applied: {exc}")
 
+    def getter(self, index: int, subindex: int) -> Callable[[], int]:
+        """A mapped object's value as it is now, for a frame the loop builds of an
+        event-driven TPDO (on the loop only: a SYNC's TPDOs use :attr:`view`)."""
+        engine = self.backend.engine
+        if index < COMMAND:
+            return lambda: self._image_value(index, subindex)
+        if STATUS_BASE <= index < LAST_SND and subindex == 1:
+            k = index - STATUS_BASE + 1
+            return lambda: int(engine.processes[k].state)
+        return lambda: self._read(index, subindex)
+
     @property
     def view(self) -> Snapshot:
         """What a TPDO or an SDO read may map, as the loop last published it (any thread)."""
+        return self._view
+
+    def current(self, statuses: bool = True) -> Snapshot:
+        """The snapshot with the changes heard so far published (loop): what a frame the
+        loop builds is made of, so a SYNC after it sees what it saw.  The last SND always
+        (one read); the processes' status records when ``statuses`` (the frame maps one)."""
+        heard = self._heard
+        if heard and (statuses or heard == {0}):
+            self._heard = set()
+            view = self._view
+            status = list(view.status)
+            for k in heard:
+                if 1 <= k <= len(status):
+                    status[k - 1] = self._status_record(k)
+            self._view = replace(view, status=tuple(status),
+                                 last_snd=_last_snd(self.backend.engine), plc=self._plc_record())
+        elif 0 in heard:
+            heard.discard(0)
+            self._view = replace(self._view, last_snd=_last_snd(self.backend.engine))
         return self._view
 
     def sample(self) -> Snapshot:
         """Publish the values that change without an event the node hears (block N and
         line, the PLC status) as they are now, with the rest of the processes' status (on
         the loop)."""
+        self._heard = set()
         engine = self.backend.engine
         self._view = replace(self._view, status=tuple(
             self._status_record(k) for k in range(1, self.config.nc.processes + 1)),
             last_snd=_last_snd(engine), plc=self._plc_record())
         return self._view
+
+    def _hear(self, *processes: int) -> None:
+        """These processes' status changed (0: the last SND), on the loop: published when a
+        frame is built from them, or else once the loop's current callback (the engine's
+        turn, the write) is over -- one record per process however many events it had.
+        Only while a TPDO is synchronous: nothing else reads them off the loop."""
+        if not self.pdos.synchronous:
+            return  # nothing on the receive thread reads them (sample() when one does)
+        self._heard.update(processes)
+        if not self._publish_due:
+            self._publish_due = True
+            self.call_soon(self._publish_heard)
+
+    def _publish_heard(self) -> None:
+        self._publish_due = False
+        self.current()
 
     def sample_later(self) -> None:
         """A SYNC sent sampled values (receive thread): the loop samples them again soon,
@@ -577,17 +628,6 @@ class CanopenNode:
         image = self.backend.image
         self._view = replace(self._view, sa=bytes(image.sa), k=bytes(image.k),
                              syvar=tuple(image.syvar))
-
-    def _publish_process(self, k: int) -> None:
-        """Process k's status changed (its state, or an event of its own): published with
-        the last SND and the PLC status (loop)."""
-        view = self._view
-        if not 1 <= k <= len(view.status):
-            return
-        status = list(view.status)
-        status[k - 1] = self._status_record(k)
-        self._view = replace(view, status=tuple(status), last_snd=_last_snd(self.backend.engine),
-                             plc=self._plc_record())
 
     def _on_image(self, values: object, who: str) -> None:
         self._publish_image()
@@ -916,20 +956,24 @@ class CanopenNode:
 
     def _on_state(self, process: Process | None, old: ProcessState) -> None:
         if process is None:
-            self.sample()
+            self._hear(*range(1, self.config.nc.processes + 1))
         else:
-            self._publish_process(process.number)
+            self._hear(process.number)
         self.pdos.status_changed()
 
     def _on_event(self, event: Event) -> None:
-        # Published first, for the TPDOs below and the receive thread's next SYNC: an SND
-        # (or a signal, which counts like one) changes its sender's and its targets' counts
-        # and the last SND; any other event of a process its wait, alarm, N or line.  Not an
-        # image write: the image publishes itself, and a program may write every block.
-        if isinstance(event, ev.Snd | ev.Signal):
-            self.sample()
+        # Heard first, for the TPDOs below and the receive thread's next SYNC: an SND (or a
+        # signal, which counts like one) changes its sender's and its targets' counts and the
+        # last SND; any other event of a process its wait, alarm, N or line.  Not an image
+        # write: the image publishes itself, and a program may write every block.
+        if isinstance(event, ev.Snd):
+            self._hear(0, event.proc, event.to)
+        elif isinstance(event, ev.Signal):
+            targets = event.to if isinstance(event.to, tuple) else range(
+                1, self.config.nc.processes + 1)
+            self._hear(0, event.proc, *targets)
         elif not isinstance(event, ev.Write) and event.proc:
-            self._publish_process(event.proc)
+            self._hear(event.proc)
         if isinstance(event, ev.Alarm):
             if event.proc == 0:
                 return  # a fieldbus alarm: its own EMCY (above)

@@ -250,6 +250,10 @@ class Host(Protocol):
     @property
     def view(self) -> Snapshot: ...
 
+    def current(self, statuses: bool = True) -> Snapshot: ...
+
+    def getter(self, index: int, subindex: int) -> Callable[[], int]: ...
+
     def sample(self) -> Snapshot: ...
 
     def sample_later(self) -> None: ...
@@ -311,7 +315,8 @@ class Tpdo:
         self.event_s = 0.0
         self.sync_start = 0
         self.layout: Layout | None = None
-        self.getters: tuple[Callable[[Snapshot], int], ...] = ()
+        self.getters: tuple[Callable[[Snapshot], int], ...] = ()  # from a snapshot
+        self.live: tuple[Callable[[], int], ...] = ()  # as they are now (on the loop)
         self.last: bytes | None = None  # the last frame sent
         self.last_t = -1e18
         self.pending: bytes | None = None  # a change waiting for the inhibit time
@@ -334,6 +339,11 @@ class Tpdo:
         """The frame of what it maps, from the values the loop published."""
         assert self.layout is not None
         return self.layout.frame.pack(*[get(view) for get in self.getters])
+
+    def live_frame(self) -> bytes:
+        """The frame of what it maps as it is now (on the loop)."""
+        assert self.layout is not None
+        return self.layout.frame.pack(*[get() for get in self.live])
 
     def idle(self) -> None:
         """Nothing pending, no timer armed."""
@@ -426,6 +436,9 @@ class Pdos:
         # Held for a frame's building and sending, never across a wait for the loop: the
         # receive thread waits at most that long.  Reentrant: a change sends at once.
         self.lock = threading.RLock()
+        # Whether a valid TPDO is synchronous (0..240): only then the node keeps the
+        # processes' status in the snapshot up to date (configured on the loop).
+        self.synchronous = False
         self.rpdos: dict[int, Rpdo] = {}
         self._subscribed: dict[int, int] = {}  # RPDO n -> the COB-ID it listens on
         self._rpdo_callbacks = {n: self._rpdo_callback(n) for n in range(1, PDO_COUNT + 1)}
@@ -537,6 +550,11 @@ class Pdos:
             t.sync_start = param(device, comm, 6)
             t.layout = layout
             t.getters = tuple(getter(i, s) for i, s in layout.objects)
+            t.live = tuple(self.host.getter(i, s) for i, s in layout.objects)
+            synchronous = any(x.valid and x.type <= 240 for x in self.tpdos.values())
+            if synchronous and not self.synchronous:
+                self.host.sample()  # not kept up to date meanwhile: all of it, now
+            self.synchronous = synchronous
             if self.host.operational and t.valid:
                 self._begin(t)
 
@@ -616,10 +634,17 @@ class Pdos:
                     self._change(t)
 
     def _frame(self, t: Tpdo) -> bytes:
-        """A frame the loop builds: what the loop published, with the values that change
-        without an event sampled now if it maps any (as a SYNC samples them)."""
-        assert t.layout is not None
-        return t.frame(self.host.sample() if t.layout.sampled else self.host.view)
+        """A frame the loop builds.  An event-driven TPDO's: of the values as they are now
+        (only the loop sends it).  A synchronous one's (type 0's reference): from the
+        snapshot with what the loop heard published, so the SYNC after it compares what it
+        saw, and the values that change without an event sampled now if it maps any (as a
+        SYNC samples them)."""
+        layout = t.layout
+        assert layout is not None
+        if t.type in EVENT_TYPES:
+            return t.live_frame()
+        return t.frame(self.host.sample() if layout.sampled
+                       else self.host.current(statuses=layout.status))
 
     def _change(self, t: Tpdo) -> None:
         if t.type == 0:
