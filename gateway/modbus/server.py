@@ -9,9 +9,11 @@ module owns the layer where those are decided:
 - the transport: one ``asyncio.Protocol`` per connection; at most ``max_clients``, the rest
   closed at once; an allow-list; an idle connection closed after ``idle_timeout_s``; a partial
   frame must complete within 5 s.  No sleeps anywhere, least of all on an error path;
-- the MBAP framer: any number of requests per segment, a request split over any number of
+- the framing, sans-IO in ``ncgate.gateway.modbus.framer`` (its ``MbapFramer`` for plain TCP
+  and TLS alike): any number of requests per segment, a request split over any number of
   segments, each answered in order with its own transaction id; a protocol id other than 0 or
-  a length outside 2..254 closes that connection (and only that one);
+  a length outside 2..254 closes that connection (and only that one).  A connection keeps the
+  transport, the fairness and the backpressure, and feeds its framer;
 - the validation of each PDU, in libmodbus's order: function code (01), then length, quantity
   and byte count (03), then the address range (02), then values (03);
 
@@ -33,7 +35,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Final, cast
 
-from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu import ModbusPDU
 from pymodbus.pdu.bit_message import (
     ReadCoilsResponse,
     ReadDiscreteInputsResponse,
@@ -62,6 +64,12 @@ from ncgate.gateway.modbus.codes import (
     TARGET_NO_RESPONSE,
 )
 from ncgate.gateway.modbus.codes import FunctionCode as FC
+from ncgate.gateway.modbus.framer import (
+    Framer,
+    FramingError,
+    MbapFramer,
+    exception_pdu,
+)
 from ncgate.gateway.modbus.map import ModbusMap, Table
 from ncgate.gateway.modbus.security import TlsSession
 from ncgate.gateway.ratelimit import RateLimitedLog
@@ -96,7 +104,6 @@ BACKLOG_LOW: Final = 4 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
 
 
-_MBAP = struct.Struct(">HHHB")
 _ADDRESS_COUNT = struct.Struct(">HH")
 # A read-registers answer PDU of n registers: function code, byte count, the registers.
 _REGISTERS: Final = [struct.Struct(f">BB{n}H") for n in range(126)]
@@ -153,11 +160,6 @@ def validate(pdu: bytes) -> None:
             raise ModbusError(ILLEGAL_VALUE, "quantity")
         if pdu[9] != write_quantity * 2 or n != 10 + write_quantity * 2:
             raise ModbusError(ILLEGAL_VALUE, "byte count")
-
-
-def exception_pdu(fc: int, code: int) -> bytes:
-    response = ExceptionResponse(fc & 0x7F, code)
-    return bytes((response.function_code,)) + response.encode()
 
 
 def _pdu(response: ModbusPDU) -> bytes:
@@ -338,6 +340,9 @@ class RequestHandler:
 
 
 class _Connection(asyncio.Protocol):
+    """One client: the transport (plain, or TLS through a ``TlsSession``), its share of the
+    loop and its backpressure.  The bytes become requests in its framer."""
+
     def __init__(self, server: ModbusServer, tls: ssl.SSLContext | None = None) -> None:
         self.server = server
         # Modbus/TCP Security: the TLS session (None: plain Modbus/TCP) and what the client's
@@ -345,7 +350,7 @@ class _Connection(asyncio.Protocol):
         self.tls = TlsSession(tls) if tls is not None else None
         self.writable: frozenset[str] | None = None
         self.handle = server.handler.handle
-        self.buffer = bytearray()
+        self.framer: Framer = MbapFramer()
         self.transport: asyncio.Transport | None = None
         self.source = Source(SourceKind.MODBUS_TLS if tls is not None else SourceKind.MODBUS)
         self.who = str(self.source)  # for the log: the source, and the address if it has none
@@ -360,6 +365,14 @@ class _Connection(asyncio.Protocol):
         self.backlogged = False  # reading paused: a backlog of requests waits its turns
         self.turn: asyncio.Handle | None = None  # the next turn of _process, when one is due
         self.drain_mark = 0  # answers unsent at the last idle check (paused: is it reading?)
+        self.direct = False  # a whole request in a segment may be answered at once (below)
+        self.update_direct()
+
+    def update_direct(self) -> None:
+        """Whether data_received may answer a request that came whole in one segment on the
+        spot: plain TCP, the client reading its answers.  One flag, so that the pollers' path
+        tests one attribute, kept by whatever changes these (bench/modbus.py)."""
+        self.direct = self.tls is None and not self.paused
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
@@ -403,11 +416,13 @@ class _Connection(asyncio.Protocol):
         """Answers not yet sent passed the high-water mark: answer and read no more requests
         from this client until it reads its answers (the others are served meanwhile)."""
         self.paused = True
+        self.direct = False
         self.drain_mark = self._unsent()
         self._reading()
 
     def resume_writing(self) -> None:
         self.paused = False
+        self.update_direct()
         self._reading()
         self._process()  # what arrived before the pause
 
@@ -465,15 +480,17 @@ class _Connection(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         self.last_activity = now = self.loop.time()
         tls = self.tls
-        if tls is None and not self.buffer and not self.paused and len(data) >= 8:
+        if self.direct:
             # The common case, one whole request in one segment, answered without the
             # buffer's bookkeeping of _process: worth 10 % of poller throughput (measured with
             # bench/modbus.py, 16 connections).  Any other case goes through _process.
-            tid, protocol, length, unit = _MBAP.unpack_from(data)
-            if len(data) == 6 + length and protocol == 0 and length <= 254:
-                answer = self.handle(unit, data[7:], self.source, self.writable)
+            framer = self.framer
+            request = framer.whole(data)
+            if request is not None:
+                unit, pdu, _ = request
+                answer = self.handle(unit, pdu, self.source, self.writable)
                 assert self.transport is not None
-                self.transport.write(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
+                self.transport.write(framer.encode(request, answer))
                 self.partial_since = None
                 self.completed_at = now
                 return
@@ -495,7 +512,7 @@ class _Connection(asyncio.Protocol):
             if tls.closed:
                 self.close("the client closed the TLS session")
                 return
-        self.buffer += data
+        self.framer.feed(data)
         if self.turn is None:  # else its next turn, already due, takes it
             self._process()
 
@@ -522,7 +539,7 @@ class _Connection(asyncio.Protocol):
         self.server.chatter.note(f"{self.who}: {self.tls.version()} established")
 
     def _process(self) -> None:
-        """Answer the complete frames in the buffer, in order, at most FRAMES_PER_TURN (or
+        """Answer the whole requests in the framer, in order, at most FRAMES_PER_TURN (or
         its share of ROUND_S of the loop's time) in one loop turn (then the next turn is due
         after everyone else's: a pipelining client gets its share and stalls nobody), unless
         the client stopped reading its answers (then the rest waits in the buffer until it
@@ -531,46 +548,49 @@ class _Connection(asyncio.Protocol):
         self.turn = None
         due = self.server.due_turns
         due.discard(self)
-        buffer = self.buffer
-        handle = self.handle
+        framer = self.framer
+        next_request, encode, handle = framer.next_request, framer.encode, self.handle
         out: list[bytes] = []
         size = 0
-        answered = 0
+        taken = 0
         turn_ends = time.perf_counter() + max(MIN_TURN_S, ROUND_S / (len(due) + 1))
-        while len(buffer) >= 7 and not self.paused:
-            if answered >= FRAMES_PER_TURN or (answered and time.perf_counter() > turn_ends):
-                self.turn = self.loop.call_soon(self._process)
-                due.add(self)
+        while not self.paused:
+            if taken >= FRAMES_PER_TURN or (taken and time.perf_counter() > turn_ends):
+                if framer.buffered:
+                    self.turn = self.loop.call_soon(self._process)
+                    due.add(self)
                 break
-            tid, protocol, length, unit = _MBAP.unpack_from(buffer)
-            if protocol != 0 or not 2 <= length <= 254:
+            try:
+                request = next_request()
+            except FramingError as exc:
                 if out:
                     self._send(out)
-                self.close(f"bad MBAP header (protocol id {protocol}, length {length})")
+                self.close(str(exc))
                 return
-            end = 6 + length
-            if len(buffer) < end:
+            if request is None:
                 break
-            pdu = bytes(buffer[7:end])
-            del buffer[:end]
+            taken += 1
+            unit, pdu, _ = request
             answer = handle(unit, pdu, self.source, self.writable)
-            out.append(_MBAP.pack(tid, 0, len(answer) + 1, unit) + answer)
-            answered += 1
-            size += len(answer) + 7
+            frame = encode(request, answer)
+            out.append(frame)
+            size += len(frame)
             if size >= WRITE_LOW_WATER:  # in batches: the transport may pause us on a write
                 self._send(out)
                 out, size = [], 0
         if out:
             self._send(out)
-        backlogged = len(buffer) > (BACKLOG_LOW if self.backlogged else BACKLOG_HIGH)
+        buffered = framer.buffered
+        backlogged = buffered > (BACKLOG_LOW if self.backlogged else BACKLOG_HIGH)
         if backlogged != self.backlogged:
             self.backlogged = backlogged
             self._reading()
-        if answered:
+        if taken:
             self.completed_at = self.loop.time()
             self.partial_since = None  # each frame has its own 5 s, from its first byte
-        if not buffer or self.paused or self.turn is not None:  # nothing begun, a paused
-            # client, or whole frames waiting for their turn: not timed
+        if not buffered or self.paused or self.turn is not None:
+            # nothing begun, a paused client, or whole frames waiting for their turn: not
+            # timed
             self.partial_since = None
         elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
             self.partial_since = self.last_activity
