@@ -14,6 +14,8 @@ module owns the layer where those are decided:
   segments, each answered in order with its own transaction id; a protocol id other than 0 or
   a length outside 2..254 closes that connection (and only that one).  A connection keeps the
   transport, the fairness and the backpressure, and feeds its framer;
+- the fault table (``ncgate.gateway.modbus.faults``): exception, delay and no-reply faults the
+  gateway puts on requests, done by the connection;
 - the validation of each PDU, in libmodbus's order: function code (01), then length, quantity
   and byte count (03), then the address range (02), then values (03);
 
@@ -32,7 +34,7 @@ import logging
 import ssl
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Final, cast
 
 from pymodbus.pdu import ModbusPDU
@@ -64,10 +66,12 @@ from ncgate.gateway.modbus.codes import (
     TARGET_NO_RESPONSE,
 )
 from ncgate.gateway.modbus.codes import FunctionCode as FC
+from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
 from ncgate.gateway.modbus.framer import (
     Framer,
     FramingError,
     MbapFramer,
+    Request,
     exception_pdu,
 )
 from ncgate.gateway.modbus.map import ModbusMap, Table
@@ -341,7 +345,8 @@ class RequestHandler:
 
 class _Connection(asyncio.Protocol):
     """One client: the transport (plain, or TLS through a ``TlsSession``), its share of the
-    loop and its backpressure.  The bytes become requests in its framer."""
+    loop and its backpressure.  The bytes become requests in its framer; faults are done
+    here, since a delay and a silence are about when (and whether) answers are sent."""
 
     def __init__(self, server: ModbusServer, tls: ssl.SSLContext | None = None) -> None:
         self.server = server
@@ -365,14 +370,21 @@ class _Connection(asyncio.Protocol):
         self.backlogged = False  # reading paused: a backlog of requests waits its turns
         self.turn: asyncio.Handle | None = None  # the next turn of _process, when one is due
         self.drain_mark = 0  # answers unsent at the last idle check (paused: is it reading?)
+        # A delay fault: the request held, when (time.monotonic) it may be answered, and the
+        # timer; the requests after it wait in the framer.
+        self.held: tuple[Request, float] | None = None
+        self.hold_timer: asyncio.TimerHandle | None = None
+        self.silent = False  # a no_reply fault: this connection answers nothing any more
         self.direct = False  # a whole request in a segment may be answered at once (below)
         self.update_direct()
 
     def update_direct(self) -> None:
         """Whether data_received may answer a request that came whole in one segment on the
-        spot: plain TCP, the client reading its answers.  One flag, so that the pollers' path
-        tests one attribute, kept by whatever changes these (bench/modbus.py)."""
-        self.direct = self.tls is None and not self.paused
+        spot: plain TCP, the client reading its answers, no delayed request before it, not
+        silent, no fault table.  One flag, so that the pollers' path tests one attribute,
+        kept by whatever changes these (bench/modbus.py)."""
+        self.direct = (self.tls is None and not self.paused and self.held is None
+                       and not self.silent and self.server.fault_table is None)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
@@ -464,6 +476,9 @@ class _Connection(asyncio.Protocol):
             self.turn.cancel()
             self.turn = None
             self.server.due_turns.discard(self)
+        if self.hold_timer is not None:
+            self.hold_timer.cancel()
+            self.hold_timer = None
 
     def evict(self) -> None:
         """Out of the count at once (its connection_lost comes later), and closed."""
@@ -543,18 +558,20 @@ class _Connection(asyncio.Protocol):
         its share of ROUND_S of the loop's time) in one loop turn (then the next turn is due
         after everyone else's: a pipelining client gets its share and stalls nobody), unless
         the client stopped reading its answers (then the rest waits in the buffer until it
-        does).  A backlog above BACKLOG_HIGH stops reading from the client until its turns
-        have brought it under BACKLOG_LOW."""
+        does) or a delay fault holds a request (the rest waits until it is answered).  A
+        backlog above BACKLOG_HIGH stops reading from the client until its turns have
+        brought it under BACKLOG_LOW."""
         self.turn = None
         due = self.server.due_turns
         due.discard(self)
         framer = self.framer
         next_request, encode, handle = framer.next_request, framer.encode, self.handle
+        faulty = self.silent or self.server.fault_table is not None  # (set between turns)
         out: list[bytes] = []
         size = 0
         taken = 0
         turn_ends = time.perf_counter() + max(MIN_TURN_S, ROUND_S / (len(due) + 1))
-        while not self.paused:
+        while not self.paused and self.held is None:
             if taken >= FRAMES_PER_TURN or (taken and time.perf_counter() > turn_ends):
                 if framer.buffered:
                     self.turn = self.loop.call_soon(self._process)
@@ -570,8 +587,13 @@ class _Connection(asyncio.Protocol):
             if request is None:
                 break
             taken += 1
-            unit, pdu, _ = request
-            answer = handle(unit, pdu, self.source, self.writable)
+            if faulty:
+                answer = self._faulted(request)
+                if answer is None:  # held or dropped
+                    continue
+            else:
+                unit, pdu, _ = request
+                answer = handle(unit, pdu, self.source, self.writable)
             frame = encode(request, answer)
             out.append(frame)
             size += len(frame)
@@ -588,15 +610,59 @@ class _Connection(asyncio.Protocol):
         if taken:
             self.completed_at = self.loop.time()
             self.partial_since = None  # each frame has its own 5 s, from its first byte
-        if not buffered or self.paused or self.turn is not None:
-            # nothing begun, a paused client, or whole frames waiting for their turn: not
-            # timed
+        if not buffered or self.paused or self.turn is not None or self.held is not None:
+            # nothing begun, a paused client, whole frames waiting for their turn or behind
+            # a delayed request: not timed
             self.partial_since = None
         elif self.partial_since is None:  # a frame has begun: it has 5 s to complete
             self.partial_since = self.last_activity
             if self.timer is not None:
                 self.timer.cancel()
             self._arm(min(PARTIAL_FRAME_TIMEOUT_S, self.server.config.idle_timeout_s))
+
+    def _faulted(self, request: Request) -> bytes | None:
+        """The answer to ``request`` under the fault table, or None: none now (a delay holds
+        it, or the connection went silent)."""
+        server = self.server
+        table = server.fault_table
+        if self.silent:
+            server.fault_tally["silenced"] += 1
+            return None
+        fault = table.match(request.unit, request.pdu) if table is not None else None
+        if fault is None:
+            return self.handle(request.unit, request.pdu, self.source, self.writable)
+        if fault.kind == "exception":  # not executed: nothing of a write is stored
+            return exception_pdu(request.pdu[0], fault.code)
+        if fault.kind == "no_reply":
+            self.silent = True
+            self.direct = False
+            server.chatter.note(f"{self.who}: no answers any more (a no_reply fault)")
+            return None
+        seconds = fault.ms / 1000
+        self.held = (request, time.monotonic() + seconds)
+        self.direct = False
+        self.hold_timer = self.loop.call_later(seconds, self._release)
+        return None
+
+    def _release(self) -> None:
+        """A delayed request's time has come: execute it, answer it, go on with the rest."""
+        self.hold_timer = None
+        if self.held is None:
+            return
+        request, due = self.held
+        early = due - time.monotonic()
+        if early > 0:  # a timer may run early by its loop's clock granularity (libuv: 1 ms)
+            self.hold_timer = self.loop.call_later(early, self._release)
+            return
+        self.held = None
+        self.update_direct()
+        if self.transport is None or self.transport.is_closing():
+            return
+        answer = self.handle(request.unit, request.pdu, self.source, self.writable)
+        self._send([self.framer.encode(request, answer)])
+        self.completed_at = self.loop.time()
+        if self.turn is None:
+            self._process()
 
     def _send(self, answers: list[bytes]) -> None:
         assert self.transport is not None
@@ -618,8 +684,10 @@ class _Connection(asyncio.Protocol):
             self.close(f"{what} not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
             return
         unsent = self._unsent()
-        if self.paused and unsent < self.drain_mark:
-            self.last_activity = now  # answers still unsent, but the client is reading them
+        if (self.paused and unsent < self.drain_mark) or self.held is not None:
+            # answers still unsent, but the client is reading them; or it waits for a
+            # delayed answer: not silence
+            self.last_activity = now
         self.drain_mark = unsent
         # Answering its requests is activity too: a backlog being served is not silence.
         self.last_activity = max(self.last_activity, self.completed_at or 0.0)
@@ -654,6 +722,32 @@ class ModbusServer:
         # (host, port) of the plain Modbus/TCP listener and of the TLS one (None: off).
         self.address: tuple[str, int] | None = None
         self.tls_address: tuple[str, int] | None = None
+        # The fault table (ncgate.gateway.modbus.faults); fault_table is None while it has no
+        # row, the one test a request pays then.
+        self._faults = FaultTable()
+        self.fault_table: FaultTable | None = None
+        self.fault_tally = self._faults.counts
+
+    def set_faults(self, faults: Sequence[ModbusFault]) -> None:
+        """Put the fault table ``faults`` in force for every connection, from its next
+        request on (``()`` clears it).  A request a delay holds is answered when its time
+        comes; a connection a no_reply silenced stays silent (the module faults says why).
+        FaultError (a ValueError) for a row that is not a ModbusFault; nothing changes."""
+        self._faults.set(faults)
+        self.fault_table = self._faults if self._faults.rows else None
+        for connection in self.connections:
+            connection.update_direct()
+
+    @property
+    def faults(self) -> tuple[ModbusFault, ...]:
+        """The fault table in force."""
+        return self._faults.rows
+
+    @property
+    def fault_counts(self) -> dict[str, int]:
+        """Requests the faults caught since the server started, by kind (``exception``,
+        ``delay``, ``no_reply``), and ``silenced``: those a silent connection dropped."""
+        return dict(self.fault_tally)
 
     def make_room(self, newcomer: _Connection) -> _Connection | None:
         """Whom to close at ``max_clients`` so that ``newcomer`` may stay, or None: refuse it.
