@@ -380,7 +380,7 @@ class CanopenNode:
         loop builds is made of, so a SYNC after it sees what it saw.  The last SND always
         (one read); the processes' status records when ``statuses`` (the frame maps one)."""
         heard = self._heard
-        if heard and (statuses or heard == {0}):
+        if heard and statuses:
             self._heard = set()
             view = self._view
             status = list(view.status)
@@ -389,7 +389,7 @@ class CanopenNode:
                     status[k - 1] = self._status_record(k)
             self._view = replace(view, status=tuple(status),
                                  last_snd=_last_snd(self.backend.engine), plc=self._plc_record())
-        elif 0 in heard:
+        elif 0 in heard:  # (the records stay noted, for the end of the loop's callback)
             heard.discard(0)
             self._view = replace(self._view, last_snd=_last_snd(self.backend.engine))
         return self._view

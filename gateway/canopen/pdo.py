@@ -31,9 +31,9 @@ data not yet applied.
 changed state, or an SND happened.  A TPDO that maps the last-SND record sends one frame per
 SND, spaced by its inhibit time (a queue of at most 256; older ones are counted as lost).
 Block N and line (and the PLC status) are sampled, not watched: a frame per block would flood
-the bus.  The loop samples them for a frame it builds (the event timer, another change), at
-each event of their process, and after each SYNC that sent them: a SYNC sends them as the
-loop last sampled them, after the SYNC before at the oldest.
+the bus.  A frame the loop builds (the event timer, another change) reads them as they are; a
+SYNC sends them as the loop last published them (snapshot.py): at their process's last
+event, or after the SYNC before at the oldest.
 """
 
 from __future__ import annotations

@@ -3,13 +3,17 @@
 The loop owns the image and the processes (ARCHITECTURE.md, "The runtime"); python-can's
 receive thread answers a SYNC with the synchronous TPDOs, and an SDO read of the image, at
 once, without waiting for the loop.  So the node publishes a :class:`Snapshot`, frozen, and
-swapped whole in one assignment after each change the loop hears; the receive thread reads
-only that.  Exact: the image (published inside every write, once all of its values are
-stored), a process's state, wait, alarm and SND counts, and the last SND (at the change of
-state or the trace event that goes with them).  Sampled, as they change with every block
-and every scan without an event: a process's block N and source line (at each of its
-events), and the PLC status (at any publication); the loop samples them again after each
-SYNC that sent them, so a SYNC sends them as of the SYNC before at the oldest.
+swapped whole in one assignment; the receive thread reads only that.
+
+- The image: inside every write, once all of its values are stored.
+- A process's status record (state, wait, alarm, SND counts) and the last SND: noted by the
+  node's state and trace listeners, and published once the loop's callback in which they
+  changed is over (the engine's turn, the write), or sooner, before the loop builds a
+  synchronous TPDO's frame from them; only while a TPDO is synchronous, since nothing else
+  reads them off the loop (all of them are published when one becomes so).
+- Sampled, as they change with every block and every scan without an event: a process's
+  block N and source line (with its record), and the PLC status; the loop samples them again
+  after each SYNC that sent them, so a SYNC sends them as of the SYNC before at the oldest.
 
 Imports the dictionary's layout only; nothing of canopen, the engine or the image.
 """

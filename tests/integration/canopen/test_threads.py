@@ -93,6 +93,9 @@ async def test_a_sync_answers_from_the_loops_snapshot_while_the_loop_is_blocked(
             return fn(*args, **kwargs)
         return guarded
 
+    gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2 (before any TPDO is
+    await gw.wait_state(1, "WAIT_COND", timeout_s=5)  # synchronous: nothing kept the
+    await gw.wait_state(2, "WAIT_COND", timeout_s=5)  # status in the snapshot meanwhile)
     # TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state.
     for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
                                  map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
@@ -139,9 +142,6 @@ async def test_a_sync_answers_from_the_loops_snapshot_while_the_loop_is_blocked(
         p1, p2 = engine.status(1), engine.status(2)
         return struct.pack("<BHHBB", int(p1.state), p1.n or 0, p1.line, int(p2.wait_kind), 0)
 
-    gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2
-    await gw.wait_state(1, "WAIT_COND", timeout_s=5)
-    await gw.wait_state(2, "WAIT_COND", timeout_s=5)
     frame = await sync_while_the_loop_is_held()
     assert off_loop == []
     assert frame == expected() == struct.pack("<BHHBB", 3, 2, 2, int(engine.status(2).wait_kind),
