@@ -85,6 +85,8 @@ class ModbusFault:
             if not all(isinstance(a, int) and not isinstance(a, bool) for a in (first, last)) \
                     or not 0 <= first <= last <= 0xFFFF:
                 raise FaultError(f"addresses {self.addresses!r}: 0 <= first <= last <= 65535")
+            # A list from TOML or JSON ([first, last]) is kept as the tuple: a row is a value.
+            object.__setattr__(self, "addresses", (first, last))
 
     def matches(self, unit: int, pdu: bytes) -> bool:
         """Whether this row applies to the request ``pdu`` for ``unit``."""

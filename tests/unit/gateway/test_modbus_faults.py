@@ -32,6 +32,9 @@ def test_the_kinds_and_the_limits() -> None:
     assert ModbusFault("exception", code=255, unit=0, addresses=(0, 0xFFFF)).code == 255
     assert ModbusFault("delay", ms=0).ms == 0
     assert ModbusFault("no_reply", unit=255).unit == 255
+    row = ModbusFault("exception", addresses=[0, 99])  # type: ignore[arg-type]  # from TOML
+    assert row.addresses == (0, 99) and hash(row) == hash(ModbusFault("exception",
+                                                                      addresses=(0, 99)))
 
 
 @pytest.mark.parametrize(("request_pdu", "matched"), [
