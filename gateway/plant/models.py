@@ -2,9 +2,10 @@
 
 A model is event-driven on the engine's clock: it is told when one of its inputs changes
 (:meth:`Model.command`) and when the time it asked for has come (:meth:`Model.advance`), and
-each time it returns the next time it wants to be called (None: not until an input changes).
-Switch points (an end switch, "at speed", a relay) fall at their exact time; what moves
-continuously (a position, a speed, a lag, a sine) is written every ``scan_s`` while it moves.
+each time it returns the next switch point it wants to be called at (None: not until an input
+changes).  Switch points (an end switch, "at speed", a relay) fall at their exact time; what
+moves continuously (a position, a speed, a lag, a sine) says so with :attr:`Model.sampled`,
+and the plant samples it on its tick, every ``plant.scan_ms`` while it moves.
 So a plant that stands still costs nothing, and ``ncgate sim`` runs it far faster than real
 time.
 
@@ -18,7 +19,7 @@ import math
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from ncgate.config.plant import PlantModelConfig
+from ncgate.config.plant import MODEL_KEYS, PlantModelConfig
 
 EPS = 1e-9  # seconds: a timer that fires a hair before its time is on time
 
@@ -45,6 +46,8 @@ class Model:
         self.state = "at rest"
         self.since = 0.0
         self.progress: tuple[float, float] | None = None  # (done s, of s) of the current move
+        # Every key of its kind, its default filled in: read on every step.
+        self._keys = {name: config.get(name) for name in MODEL_KEYS[config.kind]}
 
     def _state(self, now: float, state: str) -> None:
         if state != self.state:
@@ -65,6 +68,16 @@ class Model:
         """What the model drives now, by output key."""
         raise NotImplementedError
 
+    @property
+    def sampled(self) -> bool:
+        """A continuous output of it moves now: the plant's tick writes it."""
+        return False
+
+    @property
+    def free_running(self) -> bool:
+        """It never stands still by itself (a generator, an axis switch)."""
+        return False
+
     def set_fault(self, now: float, never: bool, factor: float) -> float | None:
         self.settle(now)
         self.never, self.factor = never, factor
@@ -74,7 +87,7 @@ class Model:
         """Bring the model's state to ``now`` before its rules change (a fault)."""
 
     def key(self, name: str) -> Any:
-        return self.config.get(name)
+        return self._keys[name]
 
     def describe(self, now: float) -> str:
         """"clamp extends, 120 of 300 ms": the why-record of a wait on its output."""
@@ -204,9 +217,15 @@ class Cylinder(Model):
             return None
         total = self._time(self.dir)
         self.progress = (total - (self.arrive - now), total)
-        if self.config.keys.get("position") is not None:
-            return min(self.arrive, now + self.scan_s)
         return self.arrive
+
+    @property
+    def sampled(self) -> bool:
+        return self.dir != 0 and self.has_position
+
+    @property
+    def has_position(self) -> bool:
+        return self.config.keys.get("position") is not None
 
     def outputs(self, now: float) -> dict[str, int]:
         p = self._pos(now)
@@ -272,11 +291,13 @@ class Motor(Model):
         self.progress = (now - self.t_ref, reach - self.t_ref)
         nxt = reach
         band = self._band()
-        if self.target and abs(v - self.target) > band:  # the moment it comes within band
+        if self.target and abs(v - self.target) > band + 1e-6:  # when it comes within band
             nxt = min(nxt, now + (abs(v - self.target) - band) / rate)
-        if self.config.keys.get("speed") is not None:
-            nxt = min(nxt, now + self.scan_s)
         return nxt
+
+    @property
+    def sampled(self) -> bool:
+        return self.v != self.target and self.config.keys.get("speed") is not None
 
     def outputs(self, now: float) -> dict[str, int]:
         v = self._v(now)
@@ -329,7 +350,11 @@ class Lag(Model):
             self._state(now, "settled")
             return None
         self._state(now, "follows")
-        return min(self._settle_at(), now + self.scan_s)
+        return self._settle_at()
+
+    @property
+    def sampled(self) -> bool:
+        return self.a0 != self.target
 
     def outputs(self, now: float) -> dict[str, int]:
         return {"actual": max(-32768, min(32767, round(self._a(now))))}
@@ -373,11 +398,19 @@ class Generator(Model):
         phase = self._phase(now) + EPS
         shape = self.key("shape")
         if shape in ("sine", "ramp"):
-            return now + self.scan_s
+            return None  # sampled on the plant's tick
         whole, frac = math.floor(phase), phase - math.floor(phase)
         duty = float(self.key("duty")) if shape == "square" else 1.0
         edge = whole + (duty if frac < duty else 1.0)
         return now + (edge - self._phase(now)) * self._period()
+
+    @property
+    def sampled(self) -> bool:
+        return not self.never and self.key("shape") in ("sine", "ramp")
+
+    @property
+    def free_running(self) -> bool:
+        return True
 
     def outputs(self, now: float) -> dict[str, int]:
         phase = self._phase(now) + EPS
@@ -404,12 +437,18 @@ class Switch(Model):
     outputs_keys = ("output",)
 
     def command(self, now: float) -> float | None:
-        return now + self.scan_s
+        return None  # sampled on the plant's tick
 
     def advance(self, now: float) -> float | None:
-        on = self.outputs(now)["output"]
-        self._state(now, "on" if on else "off")
-        return now + self.scan_s
+        return None
+
+    @property
+    def sampled(self) -> bool:
+        return not self.never
+
+    @property
+    def free_running(self) -> bool:
+        return True
 
     def outputs(self, now: float) -> dict[str, int]:
         if self.never:
@@ -417,6 +456,7 @@ class Switch(Model):
         x = self.host.axis(str(self.key("axis")))
         above, below = self.key("above"), self.key("below")
         on = (above is None or x > above) and (below is None or x < below)
+        self._state(now, "on" if on else "off")
         return {"output": 1 if on else 0}
 
 

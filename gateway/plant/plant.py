@@ -16,8 +16,9 @@ Faults (:class:`~ncgate.inputs.Fault`, through the door as well) change a model'
 from __future__ import annotations
 
 import functools
-import itertools
 import logging
+import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -43,6 +44,10 @@ if TYPE_CHECKING:
     from ncgate.gateway.wiring import Runtime
 
 log = logging.getLogger("ncgate")
+# The share of the loop's time the plant's tick may take in run; past it the tick's period is
+# stretched (x2 each time, up to MAX_STRETCH scans), never the switch points.
+BUDGET = 0.2
+MAX_STRETCH = 64
 # Outputs that carry a number, not a bit: they need a word (a SYVAR, an SK/SA .IN word).
 _NUMBER_OUTPUTS = frozenset({("cylinder", "position"), ("motor", "speed"), ("lag", "actual")})
 
@@ -95,7 +100,11 @@ class Plant:
         # Adapters hear the fieldbus faults in force (the Modbus server, the CANopen node).
         self.fieldbus_listeners: list[Callable[[list[ActiveFault]], None]] = []
         self._nc_change = 0.0
-        self._seq = itertools.count(1)
+        self._sampling: dict[Model, None] = {}  # what the tick writes (in order)
+        self._asleep: list[Model] = []  # free runners stopped while a closed run stands still
+        self._tick: Timer | None = None
+        self.stretch = 1  # the tick's period in scans (run: the budget's)
+        self.stretched = 0  # how often the budget stretched it
         for i, model_config in enumerate(config.model):
             self._build(model_config, f"plant.model[{i}]")
         runtime.engine.state_listeners.append(self._on_state)
@@ -155,6 +164,9 @@ class Plant:
         for timer in self._timers.values():
             timer.cancel()
         self._timers.clear()
+        if self._tick is not None:
+            self._tick.cancel()
+            self._tick = None
         for fault in self.faults:
             for timer in fault.timers:
                 timer.cancel()
@@ -196,8 +208,9 @@ class Plant:
             log.error("plant %s asked to be called again at %.9f s, now: next scan instead",
                       model.name, nxt)
             nxt = t + self.scan_s
-        if nxt is not None and model.kind in ("switch", "generator") and self._idle():
+        if nxt is not None and model.free_running and self._idle():
             nxt = None  # a closed run that stands still: let it end (a stall, or idle)
+            self._asleep.append(model)
         self._after(model, nxt, t=t)
 
     @property
@@ -205,8 +218,8 @@ class Plant:
         """A model is on its way somewhere (a stroke, a ramp, a relay's delay): with
         ``--until``, a simulation whose processes are idle runs on while it is (free-running
         generators and switches do not count: they would never end it)."""
-        return any(self.models[name].kind not in ("switch", "generator")
-                   for name in self._timers)
+        return any(not self.models[name].free_running for name in self._timers) or any(
+            not m.free_running for m in self._sampling)
 
     def _idle(self) -> bool:
         engine = self.runtime.engine
@@ -217,14 +230,16 @@ class Plant:
 
     def _on_state(self, process: object, old: object) -> None:
         self._nc_change = self.runtime.engine.now
-        # A sampling model that slept while the cell stood still wakes with it.
-        for model in self.models.values():
-            if model.kind == "switch" and model.name not in self._timers:
-                self._after(model, model.command(self._nc_change))
+        # A free runner that slept while the cell stood still wakes with it.
+        if self._asleep:
+            asleep, self._asleep = self._asleep, []
+            for model in asleep:
+                self._after(model, model.command(self._nc_change), t=self._nc_change)
 
     def _after(self, model: Model, nxt: float | None, force: bool = False,
                t: float | None = None) -> None:
-        """Write what ``model`` drives at ``t`` (now), and call it again at ``nxt``."""
+        """Write what ``model`` drives at ``t`` (now), call it again at ``nxt``, and sample
+        it on the tick while it moves."""
         self._write(model, force, t)
         old = self._timers.pop(model.name, None)
         if old is not None:
@@ -233,6 +248,50 @@ class Plant:
             engine = self.runtime.engine
             self._timers[model.name] = engine.call_at(
                 nxt, functools.partial(self._advance, model, nxt))
+        if model.sampled:
+            self._sampling[model] = None
+            if self._tick is None:
+                self._arm_tick(self.runtime.engine.now if t is None else t)
+        else:
+            self._sampling.pop(model, None)
+
+    # -- the tick: what moves continuously, sampled -----------------------------------------
+
+    def _arm_tick(self, after: float) -> None:
+        """The next tick on the scan grid after ``after`` (every scan_ms from 0, times the
+        stretch the budget asks for in run)."""
+        period = self.scan_s * self.stretch
+        k = math.floor(after / period + 1e-9) + 1
+        t = k * period
+        self._tick = self.runtime.engine.call_at(t, functools.partial(self._on_tick, t))
+
+    def _on_tick(self, t: float) -> None:
+        self._tick = None
+        started = time.perf_counter()
+        for model in list(self._sampling):
+            if model.free_running and self._idle():
+                self._sampling.pop(model, None)
+                self._asleep.append(model)  # until the cell moves again
+                continue
+            self._write(model, t=t)
+            if not model.sampled:
+                self._sampling.pop(model, None)
+        if not self.closed:
+            self._budget(time.perf_counter() - started)
+        if self._sampling:
+            self._arm_tick(t)
+
+    def _budget(self, spent: float) -> None:
+        """On the wall clock the tick takes at most BUDGET of the loop's time: a tick that
+        took more stretches the sampling period (2x, 4x, ... up to MAX_STRETCH), one that
+        took less than a quarter of it shrinks it again.  Switch points stay exact; only how
+        often a moving value is written changes (``plant.stretch`` in the status)."""
+        period = self.scan_s * self.stretch
+        if spent > BUDGET * period and self.stretch < MAX_STRETCH:
+            self.stretch *= 2
+            self.stretched += 1
+        elif spent < BUDGET * period / 4 and self.stretch > 1:
+            self.stretch //= 2
 
     def _write(self, model: Model, force: bool = False, t: float | None = None) -> None:
         variables = self.variables[model.name]
@@ -462,7 +521,8 @@ class Plant:
                           if k in model.inputs},
                 "writes": {k: str(v) for k, v in self.variables[name].items()
                            if k in model.outputs_keys}})
-        return {"models": models, "faults": [f.as_dict() for f in self.faults]}
+        return {"models": models, "faults": [f.as_dict() for f in self.faults],
+                "scan_ms": self.runtime.config.plant.scan_ms, "stretch": self.stretch}
 
     def fault_of(self, name: str) -> list[ActiveFault]:
         return [f for f in self.faults if f.target.split(".")[0] == name]

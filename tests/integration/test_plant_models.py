@@ -333,3 +333,24 @@ def test_a_model_whose_variables_do_not_fit_the_image_does_not_start(
     with pytest.raises(ConfigError) as caught:
         run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None))
     assert f": {key}:" in str(caught.value)
+
+
+def test_on_the_wall_clock_a_tick_over_its_budget_stretches_the_sampling_not_the_switches(
+        tmp_path: Path) -> None:
+    from ncgate.gateway.door import Door
+    from ncgate.gateway.plant.plant import BUDGET, MAX_STRETCH
+    from ncgate.gateway.wiring import build_runtime, start_plant
+
+    (tmp_path / "ncgate.toml").write_text(f'[nc]\nprocesses = 1\n[plant]\nscan_ms = 1\n'
+                                          f'{CYLINDER}')
+    runtime = build_runtime(load_config(tmp_path / "ncgate.toml"), closed=False)
+    plant = start_plant(runtime, Door(runtime).apply_on_time, closed=False)
+    period = 0.001
+    plant._budget(BUDGET * period * 1.5)  # a tick that took more than its share
+    assert plant.stretch == 2 and plant.stretched == 1
+    for _ in range(20):
+        plant._budget(1.0)
+    assert plant.stretch == MAX_STRETCH
+    plant._budget(0.0)  # well under a quarter of the budget: back towards every scan
+    assert plant.stretch == MAX_STRETCH // 2
+    assert plant.status()["stretch"] == MAX_STRETCH // 2
