@@ -538,10 +538,13 @@ def _map(args: argparse.Namespace) -> int:
     buses = [args.bus] if args.bus else (["modbus"] if args.format == "csv" else
                                          ["modbus", "canopen"])
     rows = dictionary_rows(config) if "canopen" in buses else []
+    plant = plant_rows(config) if not args.bus else []
     if args.format == "json":
         data = json.loads(ModbusMap(config).render("json")) if "modbus" in buses else {}
         if rows:
             data["canopen"] = {"node_id": config.canopen.node_id, "objects": rows}
+        if plant:
+            data["plant"] = plant
         sys.stdout.write(json.dumps(data, indent=2) + "\n")
     elif args.format == "csv":
         if buses == ["canopen"]:
@@ -561,7 +564,37 @@ def _map(args: argparse.Namespace) -> int:
                 default = "" if r["default"] is None else r["default"]
                 sys.stdout.write(f"| {r['index']} | {r['sub']} | {r['name']} | {r['type']} | "
                                  f"{r['access']} | {default} |\n")
+        if plant:
+            sys.stdout.write("\n# Plant models (docs/plant.md)\n\n| model | kind | reads | "
+                             "writes |\n|---|---|---|---|\n")
+            for m in plant:
+                reads = ", ".join(f"{k} {v}" for k, v in m["reads"].items()) or "—"
+                writes = ", ".join(f"{k} {v}" for k, v in m["writes"].items())
+                sys.stdout.write(f"| {m['name']} | {m['kind']} | {reads} | {writes} |\n")
     return EXIT_OK
+
+
+def plant_rows(config: Config) -> list[dict[str, Any]]:
+    """Each plant model and the variables it reads and writes (an I/O name as its variable
+    too: ``clamp_valve (SA20)``)."""
+    from ncgate.config.plant import MODEL_KEYS
+
+    symbols = {name.upper(): text for name, text in config.symbols.items()}
+
+    def shown(text: str) -> str:
+        found = symbols.get(text.upper())
+        return f"{text} ({found})" if found else text
+
+    out = []
+    for model in config.plant.model:
+        spec = MODEL_KEYS[model.kind]
+        out.append({"name": model.name, "kind": model.kind,
+                    "reads": {k: shown(v) for k, v in model.keys.items() if spec[k][0] == "in"},
+                    "writes": {k: shown(v) for k, v in model.keys.items()
+                               if spec[k][0] == "out"}})
+        if model.kind == "switch":
+            out[-1]["reads"] = {"axis": str(model.keys["axis"])}
+    return out
 
 
 def _eds(args: argparse.Namespace) -> int:

@@ -308,3 +308,34 @@ async def test_a_session_with_a_plant_and_faults_replays_and_matches(
     assert result.divergence is None, result.divergence
     assert result.compared >= 4
     assert any(e["event"] == "fault" for e in recording.events)
+
+
+async def test_the_kits_plant_helper_beside_a_virtual_plc(cell: Path) -> None:
+    from ncgate.gateway.errors import WaitIdleTimeout
+    from ncgate.gateway.testing.plant_kit import PlantKit
+
+    config = ncgate_test_config(cell, **{"modbus.port": 0, "nc.time_scale": 10.0})
+    async with Gateway(config) as gw, VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        plant = PlantKit(gw)
+        await plant.fault("clamp", "slow", factor=2)
+        await plc.set("SA20", 1)
+        await plant.wait_state("clamp", "extended", timeout_s=10)
+        assert plant.state("clamp")["fault"] == "slow"
+        assert await plc.get("SA30") == 1
+        await plant.clear()
+        assert plant.faults() == []
+        with pytest.raises(WaitIdleTimeout) as caught:
+            await plant.wait_state("clamp", "retracted", timeout_s=0.2)
+        assert "clamp extended" in str(caught.value)
+        with pytest.raises(KeyError):
+            plant.state("nothing")
+
+
+def test_ncgate_map_lists_what_each_model_reads_and_writes(
+        cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["map", "--config", str(cell), "--format", "json"]) == 0
+    plant = json.loads(capsys.readouterr().out)["plant"]
+    assert plant[0] == {"name": "clamp", "kind": "cylinder", "reads": {"extend": "SA20"},
+                        "writes": {"extended": "SA30", "retracted": "SA31"}}
+    assert main(["map", "--config", str(cell)]) == 0
+    assert "| pressure | lag | target SYVAR1 | actual SYVAR2 |" in capsys.readouterr().out
