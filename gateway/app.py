@@ -207,12 +207,11 @@ class Gateway:
     def _modbus_faults(self, faults: list[Any]) -> None:
         """The Modbus faults in force, handed to the server (docs/plant.md)."""
         server = self._modbus
-        setter = getattr(server, "set_faults", None)
-        if setter is None:
+        if server is None:
             return
         from ncgate.gateway.modbus.faults import ModbusFault
 
-        setter([ModbusFault(f.kind, code=int(f.params.get("code", 6)),
+        server.set_faults([ModbusFault(f.kind, code=int(f.params.get("code", 6)),
                             ms=float(f.params.get("ms", 0.0)), unit=f.params.get("unit"),
                             addresses=f.params.get("addresses"))
                 for f in faults if f.target == "modbus"])
