@@ -293,19 +293,34 @@ async def test_a_gateway_tunes_the_collector_and_leaves_the_switch_interval(
 async def test_a_write_storm_does_not_slow_the_machine(tmp_path: Path) -> None:
     """Inputs bring the engine to now by running what was due before them, each at its own
     time: a dwell loop under a storm of writes keeps exactly its 10 ms a round (machine
-    time), instead of starting each dwell when a write happened to jump the clock."""
-    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 20.0\n')
+    time), instead of starting each dwell when a write happened to jump the clock.
+
+    lookahead = 0: each round's SYVAR1 write acts after its dwell, in motion order. With the
+    default look-ahead the decoder ran 16 rounds ahead at the start (16 writes at the same
+    time, each a hazard), which the test saw only while the 10,000-event trace ring had not
+    wrapped: it failed on a machine too slow to wrap it. The rounds are heard by a trace
+    listener, every one of them, and the storm lasts a number of rounds, not of seconds."""
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\ntime_scale = 20.0\n'
+                                          'lookahead = 0\n')
     (tmp_path / "A.nc").write_text('"L" N1(DLY,0.01)\nN2E1=E1+1\nN3SYVAR1=E1\nN4(BNC,L)\n')
-    async with Gateway(load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)) as gw:
+    rounds: list[float] = []
+    hazards: list[ev.Hazard] = []
+
+    def listen(event: ev.Event) -> None:
+        if isinstance(event, ev.Write) and event.var == "SYVAR1":
+            rounds.append(event.t)
+        elif isinstance(event, ev.Hazard):
+            hazards.append(event)
+
+    config = load_config(tmp_path / "ncgate.toml", overrides=FREE_PORT)
+    async with Gateway(config, listeners=[listen]) as gw:
         await gw.start()
-        loop = asyncio.get_running_loop()
-        end = loop.time() + 0.5
-        while loop.time() < end:  # the storm: writes as fast as they come, for 0.5 s
-            for _ in range(50):
-                gw.write("SK1", 1)
-            await asyncio.sleep(0)  # the loop runs the engine's timers between bursts
-        rounds = [e["t"] for e in gw.trace if e["event"] == "write" and e["var"] == "SYVAR1"]
-    assert len(rounds) > 20
+        async with asyncio.timeout(60):
+            while len(rounds) < 50:  # the storm: writes as fast as they come, for 50 rounds
+                for _ in range(50):
+                    gw.write("SK1", 1)
+                await asyncio.sleep(0)  # the loop runs the engine's timers between bursts
+    assert not hazards
     gaps = {round(b - a, 6) for a, b in itertools.pairwise(rounds)}
     assert gaps == {0.01}, sorted(gaps)[-5:]
 
