@@ -199,10 +199,21 @@ class Gateway:
         stack.callback(plant.close)
         if self._modbus is not None:
             plant.fieldbus_listeners.append(self._modbus_faults)
+        if self._canopen is not None:
+            plant.fieldbus_listeners.append(self._canopen_faults)
         ScriptPlayer(runtime, Script("<config>", ()), self.door, plant_faults(self.config)).arm()
         self._driver.settle()
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
+
+    def _canopen_faults(self, faults: list[Any]) -> None:
+        """The CANopen faults in force, handed to the node (docs/plant.md)."""
+        if self._canopen is None:
+            return
+        kinds = {f.kind: f for f in faults if f.target == "canopen"}
+        emcy = kinds.get("emcy")
+        self._canopen.set_faults("heartbeat_stop" in kinds, "pdo_stop" in kinds,
+                                 None if emcy is None else int(emcy.params["code"]))
 
     def _modbus_faults(self, faults: list[Any]) -> None:
         """The Modbus faults in force, handed to the server (docs/plant.md)."""

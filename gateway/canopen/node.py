@@ -182,6 +182,11 @@ class CanopenNode:
         self._publish_due = False
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
+        # The plant's CANopen faults in force (docs/plant.md): the heartbeat producer
+        # silenced, the TPDOs silenced, an EMCY error code raised by hand.
+        self._fault_heartbeat = False
+        self._fault_pdo = False
+        self._fault_emcy: int | None = None
         self._pending: set[_Handoff] = set()  # callbacks handed to the loop, not yet run
         # Futures the receive thread waits on for the loop (_on_loop): cancelled by close.
         self._waiting: set[concurrent.futures.Future[Any]] = set()
@@ -342,8 +347,27 @@ class CanopenNode:
     # -- what the PDOs and the heartbeat consumer use (pdo.Host) ----------------------------
 
     def send(self, cob: int, data: bytes) -> None:
-        if not self._closed:  # (a timer the receive thread armed as close began)
+        # (a timer the receive thread armed as close began; a pdo_stop fault)
+        if not self._closed and not self._fault_pdo:
             self.network.send_message(cob, data)
+
+    def set_faults(self, heartbeat_stop: bool, pdo_stop: bool, emcy: int | None) -> None:
+        """The plant's CANopen faults in force (on the loop): ``heartbeat_stop`` silences
+        the heartbeat producer (a master's consumer sees the node lost), ``pdo_stop`` every
+        TPDO, ``emcy`` raises an EMCY with that error code (its end: EMCY 0x0000)."""
+        if heartbeat_stop != self._fault_heartbeat:
+            self._fault_heartbeat = heartbeat_stop
+            if heartbeat_stop:
+                self.node.nmt.stop_heartbeat()
+            elif not self._closed:
+                self.node.nmt.start_heartbeat(int(pdo.param(self.node, 0x1017, 0)))
+        self._fault_pdo = pdo_stop
+        if emcy != self._fault_emcy:
+            if self._fault_emcy is not None:
+                self._emcy_reset()
+            self._fault_emcy = emcy
+            if emcy is not None:
+                self._emcy_error(emcy)
 
     def subscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
         self.network.subscribe(cob, callback)
@@ -670,7 +694,7 @@ class CanopenNode:
         lost = (REGISTER_GENERIC | REGISTER_COMMUNICATION
                 if self._master_lost or self._rpdo_lost or self._rpdo_length
                 or self._sync_errors else 0)
-        return int(alarms) | lost
+        return int(alarms) | lost | (REGISTER_GENERIC if self._fault_emcy is not None else 0)
 
     def _read(self, index: int, subindex: int) -> int:
         """Any manufacturer object, on the loop."""

@@ -1,0 +1,56 @@
+"""The plant's CANopen faults (docs/plant.md), as a canopen master on the virtual bus sees
+them: the heartbeat stops and comes back, an EMCY with the fault's code and its end, the
+TPDOs silenced and back."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from ncgate.gateway import Gateway
+
+from .conftest import Master
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.heartbeat_ms": 20}], indirect=True)
+async def test_heartbeat_stop_silences_the_producer_until_cleared(gw: Gateway,
+                                                                  master: Master) -> None:
+    assert await master.next(0x710) == b"\x00"  # boot-up
+    assert await master.next(0x710) == bytes((127,))  # a heartbeat
+    gw.fault("canopen", "heartbeat_stop")
+    node = gw.canopen_node
+    assert node is not None and node.node.nmt._send_task is None
+    while not master.frames[0x710].empty():  # what was on its way before the fault
+        master.frames[0x710].get_nowait()
+    await master.barrier()  # the node answered a request: time passed, no heartbeat came
+    assert master.frames[0x710].empty()
+    gw.clear_fault("canopen")
+    assert await master.next(0x710) == bytes((127,))
+
+
+async def test_an_emcy_fault_raises_its_code_and_its_clear_ends_it(gw: Gateway,
+                                                                   master: Master) -> None:
+    gw.fault("canopen", "emcy", code=0x3120)
+    code, register, _ = struct.unpack("<HB5s", await master.next(0x90))
+    assert code == 0x3120 and register & 1
+    history = await master.upload(0x1003, 1)
+    assert int.from_bytes(history, "little") & 0xFFFF == 0x3120
+    gw.clear_fault("canopen")
+    code, _, _ = struct.unpack("<HB5s", await master.next(0x90))
+    assert code == 0
+
+
+async def test_pdo_stop_silences_the_tpdos_until_cleared(gw: Gateway, master: Master) -> None:
+    assert await master.next(0x710) == b"\x00"
+    master.nmt(0x01)  # operational: TPDO1 (the process states) says where things stand
+    assert await master.next(0x190) == bytes(4)
+    gw.fault("canopen", "pdo_stop")
+    await gw.start("MAIN")  # P1 runs, starts P2, waits: state changes TPDO1 would carry
+    await gw.wait_state(1, "WAIT_COND")
+    await master.barrier()
+    assert master.frames[0x190].empty()
+    gw.clear_fault("canopen")
+    gw.write("SA10", 1)  # P1 goes on: TPDO1 again, with the states as they are
+    frame = await master.next(0x190)
+    assert frame != bytes(4)
