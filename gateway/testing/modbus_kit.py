@@ -286,16 +286,16 @@ class VirtualPLC:
                          timeout_s: float = 10.0) -> ProcessSeen:
         """Until process k is in ``state``; returns its status then."""
         wanted = state if isinstance(state, ProcessState) else ProcessState[state.upper()]
-        last: list[ProcessSeen] = []
+        last: ProcessSeen | None = None
 
         async def there() -> ProcessSeen | None:
-            seen = await self.status(process)
-            last[:] = [seen]
-            return seen if seen.state is wanted else None
+            nonlocal last
+            last = await self.status(process)
+            return last if last.state is wanted else None
 
         return await self._until(there, timeout_s, lambda: (
             f"P{process} not {wanted.name} in {timeout_s:g} s"
-            + (f" (it is {last[0].state.name})" if last else " (no status was read)")))
+            + (f" (it is {last.state.name})" if last is not None else " (no status was read)")))
 
     async def plc_status(self) -> PlcSeen:
         """The PLC status block (input registers ``modbus.map.plc_status``..+13)."""
