@@ -16,7 +16,7 @@ const WINDOW_S = 30;        // the timeline shows the last WINDOW_S seconds of m
 const TICK_MS = 250;        // the timeline is redrawn on this clock, never per message
 // What acts on the cell: disabled while the gateway does not answer, or read-only.
 const ACTING = "nav button, nav select, nav input:not(#token), #lanes button, #force-box button, " +
-  "#force-box input, #btn-record";
+  "#force-box input, #plant-box button, #plant-box input, #plant-box select, #btn-record";
 let token = sessionStorage.getItem("ncgate-token") || "";
 let session = null, lastSeq = -1, status = null, events = [], source = null;
 let pending = {};           // the status parts received but not drawn yet
@@ -206,6 +206,7 @@ function render() {
   controls();
   if (parts.image || parts.forced || parts.symbols) renderImage();
   if (parts.forced) renderForced();
+  if (parts.plant) renderPlant();
   if (parts.plc) renderPlc();
   if (parts.plc || parts.symbols || parts.image) trendNames();
   if (parts.fieldbus) renderFieldbus();
@@ -440,6 +441,66 @@ $("#force-form").addEventListener("submit", (e) => {
   if (confirmed("Force " + v + " = " + value + "? It keeps this value whatever writes it, " +
                 "until released.")) {
     post("/api/force", { var: v, value: Number(value) });
+  }
+});
+// The plant: each model's state (a fault marked), the faults in force with a button that
+// clears each, and a form that injects one -- asked first, as a force is.
+// The key a fault kind's one value goes in (docs/plant.md).
+const FAULT_VALUE = { stuck: "value", slow: "factor", wire_break: "live_zero",
+                      chatter: "period_ms", exception: "code", delay: "ms" };
+let drawnPlant = "";
+function renderPlant() {
+  const plant = status.plant || { models: [], faults: [] };
+  const key = JSON.stringify(plant);
+  if (key === drawnPlant) return;
+  drawnPlant = key;
+  $("#plant tbody").replaceChildren(...plant.models.map((m) => {
+    const r = el("tr", m.fault ? "faulted" : null);
+    r.id = "model-" + m.name;
+    const reads = Object.entries(m.reads).map(([k, v]) => k + " " + v).join(", ");
+    const writes = Object.entries(m.writes).map(([k, v]) => k + " " + v).join(", ");
+    r.title = "reads " + (reads || "nothing") + "; writes " + writes;
+    r.append(el("td", null, m.name), el("td", null, m.kind), el("td", null, m.detail),
+             el("td", "fault-mark", m.fault || ""));
+    return r;
+  }));
+  $("#faults tbody").replaceChildren(...plant.faults.map((f) => {
+    const r = el("tr");
+    const clear = el("button", null, "clear");
+    clear.title = "clear the faults of " + f.target;
+    clear.addEventListener("click", () => post("/api/fault", { clear: f.target }));
+    const params = Object.entries(f.params).map(([k, v]) => k + " " + v).join(", ");
+    r.append(el("td", "fault-mark", "!"), el("td", null, f.target + ": " + f.kind +
+             (params ? " (" + params + ")" : "")), el("td", null, "by " + f.by), el("td", null));
+    r.lastChild.append(clear);
+    return r;
+  }));
+  $("#btn-clear-faults").hidden = !plant.faults.length;
+  const targets = ["modbus"];
+  for (const m of plant.models) {
+    targets.push(m.name);
+    for (const k of Object.keys(m.writes)) targets.push(m.name + "." + k);
+  }
+  $("#fault-targets").replaceChildren(...targets.map((t) => {
+    const o = el("option");
+    o.value = t;
+    return o;
+  }));
+  controls();
+}
+$("#btn-clear-faults").addEventListener("click", () => {
+  if (confirmed($("#btn-clear-faults").dataset.confirm)) post("/api/fault", { clear: "all" });
+});
+$("#fault-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  const target = $("#fault-target").value.trim(), kind = $("#fault-kind").value;
+  const value = $("#fault-value").value;
+  if (!target) { say("fault: a target"); return; }
+  const body = { target, kind };
+  if (FAULT_VALUE[kind] && value !== "") body[FAULT_VALUE[kind]] = Number(value);
+  if (confirmed("Inject " + kind + " on " + target + (value !== "" && FAULT_VALUE[kind] ?
+                " (" + FAULT_VALUE[kind] + " " + value + ")" : "") + "? It stays until cleared.")) {
+    post("/api/fault", body);
   }
 });
 // The PLC's variables, a function block's members and an array's elements one row each

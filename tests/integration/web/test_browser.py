@@ -740,3 +740,38 @@ def test_a_lane_names_an_auxiliary_functions_handshake(browser: Any, web_port: i
               and text(d, "#lane-1 .wait.aux .since").startswith("for "))
     finally:
         run.stop()
+
+
+def test_the_plant_panel_shows_each_model_and_injects_and_clears_a_fault(
+        browser: Any, web_port: int, tmp_path: Path) -> None:
+    (tmp_path / "A.nc").write_text("N1(WAI,SA30=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+        '[[plant.model]]\nname = "clamp"\nkind = "cylinder"\nextend = "SA20"\n'
+        'extended = "SA30"\nretracted = "SA31"\ntravel_ms = 300\n')
+    run = RunProcess("--config", str(tmp_path / "ncgate.toml"), "--port", "0", "--web",
+                     f"127.0.0.1:{web_port}", "--set", "canopen.channel=ncgate-browser-plant",
+                     cwd=tmp_path)
+    run.wait_for(f"web console on http://127.0.0.1:{web_port}/")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "the clamp at rest", lambda d: "clamp retracted" in text(d, "#model-clamp"))
+        browser.find_element(By.ID, "fault-target").send_keys("clamp")
+        browser.find_element(By.CSS_SELECTOR, "#fault-kind option[value=never]").click()
+        browser.find_element(By.CSS_SELECTOR, "#fault-form button").click()
+        assert "Inject never on clamp" in answer_dialog(browser, accept=True)
+        until(browser, "the fault listed and the model marked",
+              lambda d: "clamp: never" in text(d, "#faults")
+              and "faulted" in d.find_element(By.ID, "model-clamp").get_attribute("class"))
+        api(web_port, "POST", "/api/write", {"var": "SA20", "value": 1})
+        assert api(web_port, "GET", "/api/status")["plant"]["models"][0]["state"] == "retracted"
+        browser.find_element(By.CSS_SELECTOR, "#faults button").click()
+        until(browser, "the clamp closing once cleared",
+              lambda d: "clamp extended" in text(d, "#model-clamp")
+              and not d.find_elements(By.CSS_SELECTOR, "#faults tr"))
+        events = [e for e in api(web_port, "GET", "/api/events")["events"]
+                  if e["event"] in ("fault", "fault_clear")]
+        assert [(e["event"], e["who"].split(" ")[0]) for e in events] == [
+            ("fault", "web"), ("fault_clear", "web")]
+    finally:
+        run.stop()
