@@ -71,8 +71,11 @@ async def test_status_is_a_named_record_that_still_reads_by_position(
 async def test_wait_event_awaits_a_stall_and_explains_a_timeout(
         ncgate_gateway: Gateway, virtual_plc: VirtualPLC) -> None:
     gw = ncgate_gateway
+    # Listening before the cycle start (the task subscribes in its first step, which runs
+    # before the gateway reads the command): only the events from then on count.
+    stalled = asyncio.create_task(wait_event(gw, "stall", timeout_s=30))
     await virtual_plc.command(1)
-    stall = await wait_event(gw, "stall", timeout_s=30)  # P2 waits for SA10, which no one sets
+    stall = await stalled  # P2 waits for SA10, which no one sets
     assert stall.kind == "stall" and any(b.proc == 2 for b in stall.blocked)  # type: ignore[union-attr]
     with pytest.raises(WaitIdleTimeout) as failed:
         await wait_event(gw, "snd", timeout_s=0.2, test=lambda e: e.proc == 2)
