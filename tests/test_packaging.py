@@ -168,7 +168,7 @@ def test_examples_are_listed_and_run(capsys: pytest.CaptureFixture[str]) -> None
         ["isg_dec_interp", "DECINT"],
         ["isg_decoders", "DECODERS"], ["isg_flush", "FLUSH"], ["isg_no_flush", "NOFLUSH"],
         ["isg_params", "PARAMS"], ["isg_paths", "PATHS"], ["isg_ve", "VE"],
-        ["isg_waits", "WAITS"], ["mutual", "MUT1"], ["plclogic", "PROG91"],
+        ["isg_waits", "WAITS"], ["machine", "PART"], ["mutual", "MUT1"], ["plclogic", "PROG91"],
         ["scheme3", "PROG91"], ["section4", "PR90"]]
     assert main(["sim", "--example", "scheme3"]) == 0
     assert "every program ended" in capsys.readouterr().out
