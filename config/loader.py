@@ -770,10 +770,17 @@ class PlantConfig:
     model: tuple[PlantModelConfig, ...] = setting(
         (), "[[plant.model]]: name, kind (delay, cylinder, motor, lag, generator, switch) and "
         "the kind's keys (docs/plant.md)", parse=_plant_models)
-    scan_ms: int = setting(10, "the plant's step for what moves continuously (a position, a "
-                           "speed, a lag, a sine): its value is written every scan_ms of "
-                           "machine time while it moves; switch points are exact", lo=1,
-                           hi=60_000)
+    logic: tuple[Path, ...] = setting((), "the plant's own Structured Text (or PLCopen XML): "
+                                      "a second ST task beside [plc] logic, scanned every "
+                                      "plant.scan_ms, its writes attributed to plant "
+                                      "(docs/plant.md)", parse=_logic)
+    programs: tuple[str, ...] = setting((), "the plant logic's PROGRAMs each scan runs, in "
+                                        "this order (empty: each in file order)",
+                                        parse=_programs)
+    scan_ms: int = setting(10, "the plant's step: the plant logic's scan period, and how often "
+                           "what moves continuously (a position, a speed, a lag, a sine) is "
+                           "written while it moves (switch points are exact), ms of machine "
+                           "time", lo=1, hi=60_000)
     fault: tuple[FaultConfig, ...] = setting(
         (), "[[plant.fault]]: target, kind, at / when, for_s and the kind's keys "
         "(docs/plant.md)", parse=_plant_faults)

@@ -34,7 +34,13 @@ from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeo
 from ncgate.gateway.lifecycle import Adapter, tune_interpreter
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import ModbusServer
-from ncgate.gateway.plc import OnlineChange, ReloadOutcome, ScanDriver, start_plc
+from ncgate.gateway.plc import (
+    OnlineChange,
+    ReloadOutcome,
+    ScanDriver,
+    start_plant_logic,
+    start_plc,
+)
 from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
@@ -197,6 +203,11 @@ class Gateway:
 
         plant = start_plant(runtime, self.door.apply_on_time, closed=False)
         stack.callback(plant.close)
+        plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
+                                        wall=driver.now)
+        if plant_logic is not None:
+            plant.logic = plant_logic[0]
+            stack.callback(plant_logic[1].close)
         if self._modbus is not None:
             plant.fieldbus_listeners.append(self._modbus_faults)
         if self._canopen is not None:

@@ -94,20 +94,21 @@ def load_logic(files: tuple[Path, ...], config: Config,
     return logic
 
 
-def program_order(logic: Logic, config: Config) -> list[str]:
-    """``plc.programs`` checked against the logic (ConfigError naming the key), or every
-    PROGRAM in file order."""
-    if not config.plc.programs:
+def program_order(logic: Logic, config: Config, section: str = "plc") -> list[str]:
+    """``plc.programs`` (``section``: ``plant`` for the plant's logic) checked against the
+    logic (ConfigError naming the key), or every PROGRAM in file order."""
+    programs: tuple[str, ...] = getattr(config, section).programs
+    if not programs:
         if not logic.programs:
             where = config.source or "<config>"
-            raise ConfigError(f"{where}: plc.logic: the files hold no PROGRAM to run")
+            raise ConfigError(f"{where}: {section}.logic: the files hold no PROGRAM to run")
         return list(logic.programs)
     order = []
-    for i, name in enumerate(config.plc.programs):
+    for i, name in enumerate(programs):
         if name.upper() not in logic.programs:
             known = ", ".join(logic.display.values()) or "none"
-            raise ConfigError(f"{config.source or '<config>'}: plc.programs[{i}]: no PROGRAM "
-                              f"{name} in plc.logic (PROGRAMs: {known})")
+            raise ConfigError(f"{config.source or '<config>'}: {section}.programs[{i}]: no "
+                              f"PROGRAM {name} in {section}.logic (PROGRAMs: {known})")
         order.append(name)
     return order
 
@@ -120,9 +121,11 @@ class EngineNc:
     and acts on it through the door, attributed ``plc FILE:LINE`` (where the logic set the
     output)."""
 
-    def __init__(self, engine: Engine, door: Door) -> None:
+    def __init__(self, engine: Engine, door: Door, kind: SourceKind = SourceKind.PLC) -> None:
+        """``kind``: the source its inputs carry (``plant`` for the plant's logic)."""
         self.engine = engine
         self.door = door
+        self.kind = kind
 
     def snapshot(self) -> list[NcSnapshot]:
         out: list[NcSnapshot] = []
@@ -144,13 +147,13 @@ class EngineNc:
         return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
 
     def command(self, word: int, where: str, process: int | None = None) -> None:
-        self.door.apply(Command(CommandKind(word), process, Source(SourceKind.PLC, where)))
+        self.door.apply(Command(CommandKind(word), process, Source(self.kind, where)))
 
     def override(self, feed: int, where: str, process: int | None = None) -> None:
-        self.door.apply(Override(feed, None, process, Source(SourceKind.PLC, where)))
+        self.door.apply(Override(feed, None, process, Source(self.kind, where)))
 
     def send(self, sender: int, target: int, where: str) -> None:
-        self.door.apply(Snd(sender, target, Source(SourceKind.PLC, where)))
+        self.door.apply(Snd(sender, target, Source(self.kind, where)))
 
     def aux_ack(self, process: int, letter: str, value: bool, where: str) -> None:
         """NC.P[k].MACK ..: a write of the acknowledge's SA bit, through the door."""
@@ -160,11 +163,12 @@ class EngineNc:
                                "config has no [nc.aux]")
         ack = aux.settings.place(process, letter)[2]
         self.door.apply(Write(Var("SA", ack, "bit"), int(value),
-                              Source(SourceKind.PLC, where)))
+                              Source(self.kind, where)))
 
     def fault(self, message: str) -> None:
-        self.door.apply(FieldbusAlarm(AlarmCode.PLC_FAULT, f"PLC fault: {message}",
-                                      Source(SourceKind.PLC)))
+        what = "plant logic" if self.kind is SourceKind.PLANT else "PLC"
+        self.door.apply(FieldbusAlarm(AlarmCode.PLC_FAULT, f"{what} fault: {message}",
+                                      Source(self.kind)))
 
     def hazard(self, message: str) -> None:
         self.engine.note_hazard(0, message)
@@ -447,6 +451,30 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
     return logic_runtime, driver
 
 
+def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: bool,
+                      wall: Callable[[], float] | None = None
+                      ) -> tuple[PlcRuntime, ScanDriver] | None:
+    """The plant's own logic (``[plant] logic``): a second ST task on the engine's clock,
+    every ``plant.scan_ms``, its image writes attributed to ``plant`` and its NC outputs to
+    ``plant FILE:LINE``; no RETAIN (a machine's physics has no memory to keep), no online
+    change.  None without it."""
+    plant = config.plant
+    if not plant.logic:
+        return None
+    logic = load_logic(plant.logic, config)
+    order = program_order(logic, config, "plant")
+    engine = runtime.engine
+    logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door, SourceKind.PLANT),
+                               order, config.plc.loop_limit,
+                               watchdog_ms=0 if closed else config.plc.watchdog_ms,
+                               writer="plant")
+    driver = ScanDriver(engine, logic_runtime, plant.scan_ms, wall=wall, closed=closed,
+                        scale=config.nc.time_scale, stall_s=config.nc.stall_s)
+    log.info("plant logic: %s, scan %d ms, programs %s",
+             ", ".join(p.name for p in plant.logic), plant.scan_ms, ", ".join(order))
+    return logic_runtime, driver
+
+
 def plc_registers(status: PlcStatus | None) -> list[int]:
     """The PLC status block; all 0 (state 0, stopped) when the PLC runs no logic."""
     if status is None:
@@ -464,4 +492,4 @@ def plc_registers(status: PlcStatus | None) -> list[int]:
 
 
 __all__ = ["EngineNc", "LogicWatcher", "OnlineChange", "PlcState", "ReloadOutcome", "ScanDriver",
-           "load_logic", "start_plc"]
+           "load_logic", "start_plant_logic", "start_plc"]

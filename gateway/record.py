@@ -51,7 +51,7 @@ from ncgate.config import Config, ConfigError, load_config
 from ncgate.errors import InputRefused
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.plc import OnlineChange, start_plc
+from ncgate.gateway.plc import OnlineChange, start_plant_logic, start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime, start_plant
 from ncgate.inputs import (
@@ -112,7 +112,8 @@ def _sha256(path: Path) -> str | None:
 
 def session_files(config: Config) -> dict[str, str]:
     """sha256 of the files a session uses from its start: the config, the PLC logic."""
-    paths = ([config.source] if config.source else []) + list(config.plc.logic)
+    paths = ([config.source] if config.source else []) + list(config.plc.logic) + list(
+        config.plant.logic)
     return {str(p): digest for p in paths if (digest := _sha256(Path(p))) is not None}
 
 
@@ -519,6 +520,9 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
     start_plant(runtime, door.apply_on_time, closed=False)
+    plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
+    if plant_logic is not None and runtime.plant is not None:
+        runtime.plant.logic = plant_logic[0]
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None

@@ -24,6 +24,7 @@ from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
+from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.image import Change, PlcError
 
 
@@ -55,6 +56,11 @@ class _Watch:
     code: int | None = None
     alarms: list[tuple[float, str]] = field(default_factory=list)
     written: tuple[float, str | None] = (0.0, None)  # the variable's last write: when, who
+    # What it was when: the variable's (t, value, writer since t) or the process's
+    # (t, state name, "") at each change, so a verdict says how things stood at a window's
+    # end, not at the run's.
+    history: list[tuple[float, int | str, str | None]] = field(default_factory=list)
+    note: str | None = None  # what the plant said of the variable as its window closed
 
 
 class Expectations:
@@ -66,6 +72,7 @@ class Expectations:
         self.watches = [self._watch(e) for e in script.expects]
         self.t0 = 0.0
         self._undo: list[object] = []
+        self._timers: list[Timer] = []
 
     def _fail(self, expect: Expect, message: str) -> ScenarioError:
         return ScenarioError(f"{self.script.file}: {expect.key}.cond: {message}")
@@ -111,17 +118,34 @@ class Expectations:
             if w.kind == "var":
                 w.holds = self._var_holds(w)
                 w.written = (now, self._writer(w))
+                assert w.var is not None
+                w.history.append((now, runtime.image.read(*w.var.address), w.written[1]))
             elif w.kind == "state":
-                w.holds = runtime.engine.processes[w.process].state is w.state
+                state = runtime.engine.processes[w.process].state
+                w.holds = state is w.state
+                w.history.append((now, state.name, None))
             w.changes.append((now, w.holds))
         if any(w.kind == "var" for w in self.watches):
             self._undo.append(runtime.image.subscribe(self._on_write))
+        plant = runtime.plant
+        for w in self.watches:  # what drives the variable, as its window closes
+            if w.kind == "var" and w.var is not None and plant is not None and (
+                    w.expect.within is not None):
+                address = w.var.address
+
+                def note(w: _Watch = w, address: tuple[str, int, str] = address) -> None:
+                    w.note = plant.explain(address)
+
+                self._timers.append(runtime.engine.call_at(w.expect.within[1], note))
         if any(w.kind == "state" for w in self.watches):
             runtime.engine.state_listeners.append(self._on_state)
         if any(w.kind in ("alarm", "no alarm") for w in self.watches):
             self._undo.append(runtime.trace.subscribe(self._on_event))
 
     def stop(self) -> None:
+        for timer in self._timers:
+            timer.cancel()
+        self._timers.clear()
         for undo in self._undo:
             undo()  # type: ignore[operator]
         self._undo.clear()
@@ -148,13 +172,17 @@ class Expectations:
                 continue
             holds = self._var_holds(w)
             who = self._writer(w)
-            if holds != w.holds or who != w.written[1]:
-                w.written = (self.runtime.engine.now, who)
+            value = self.runtime.image.read(*w.var.address)
+            now = self.runtime.engine.now
+            if holds != w.holds or who != w.written[1] or value != w.history[-1][1]:
+                w.written = (now, who)
+                w.history.append((now, value, who))
             self._note(w, holds)
 
     def _on_state(self, process: Process, old: ProcessState) -> None:
         for w in self.watches:
             if w.kind == "state" and w.process == process.number:
+                w.history.append((self.runtime.engine.now, process.state.name, None))
                 self._note(w, process.state is w.state)
 
     def _on_event(self, event: Event) -> None:
@@ -197,7 +225,7 @@ class Expectations:
             if not broken:
                 return self._v(e, True, f"{cond} held from {self.t0:.3f} to {end:.3f} s")
             return self._v(e, False, f"{cond} stopped holding at {broken[0]:.3f} s"
-                           + self._now(w))
+                           + self._now(w, broken[0]))
         if holds_at_a:
             return self._v(e, True, f"{cond} at {a:.3f} s")
         became = [t for t, holds in w.changes if holds and a - 1e-9 <= t <= b + 1e-9]
@@ -205,23 +233,34 @@ class Expectations:
             return self._v(e, True, f"{cond} at {became[0]:.3f} s")
         return self._v(e, False, self._still(w, min(b, end)) + self._short(end, b))
 
-    def _still(self, w: _Watch, t: float) -> str:
-        if w.kind == "var" and w.var is not None:
-            value = self.runtime.image.read(*w.var.address)
-            when, who = w.written
-            by = f" (set by {who} at {when:.3f} s)" if who else " (never written)"
-            note = self.runtime.plant.explain(w.var.address) if (
-                self.runtime.plant is not None) else None
-            return f"{w.var} still {value} at {t:.3f} s{by}" + (f"; {note}" if note else "")
-        state = self.runtime.engine.processes[w.process].state.name
-        return f"P{w.process} {state}, not {w.state.name if w.state else '?'}, at {t:.3f} s"
+    @staticmethod
+    def _at(w: _Watch, t: float) -> tuple[float, int | str, str | None]:
+        """How it stood at ``t``: the last change at or before it."""
+        found = w.history[0]
+        for entry in w.history:
+            if entry[0] > t + 1e-9:
+                break
+            found = entry
+        return found
 
-    def _now(self, w: _Watch) -> str:
+    def _still(self, w: _Watch, t: float) -> str:
+        when, value, who = self._at(w, t)
         if w.kind == "var" and w.var is not None:
-            when, who = w.written
-            return f" ({w.var} = {self.runtime.image.read(*w.var.address)}, set by {who} at " \
-                   f"{when:.3f} s)"
-        return ""
+            by = f" (set by {who} at {when:.3f} s)" if who else " (never written)"
+            note = w.note
+            if note is None and self.runtime.plant is not None and (
+                    t + 1e-9 >= self.runtime.engine.now):
+                note = self.runtime.plant.explain(w.var.address)  # (what it does now)
+            return f"{w.var} still {value} at {t:.3f} s{by}" + (f"; {note}" if note else "")
+        wanted = w.state.name if w.state is not None else "?"
+        return f"P{w.process} {value}, not {wanted}, at {t:.3f} s (since {when:.3f} s)"
+
+    def _now(self, w: _Watch, t: float) -> str:
+        """How it stood when it stopped holding (``t``)."""
+        when, value, who = self._at(w, t)
+        if w.kind == "var" and w.var is not None:
+            return f" ({w.var} = {value}, set by {who} at {when:.3f} s)"
+        return f" (P{w.process} {value})"
 
     @staticmethod
     def _window(e: Expect, a: float, b: float) -> str:

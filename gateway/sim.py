@@ -21,7 +21,7 @@ from ncgate.config.script import Script, ScriptEntry
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.plc import start_plc
+from ncgate.gateway.plc import start_plant_logic, start_plc
 from ncgate.gateway.scenario import Expectations, Verdict
 from ncgate.gateway.wiring import (
     ImageVar,
@@ -66,6 +66,7 @@ class SimResult:
     plc_alarms: int = 0  # alarms of the PLC/fieldbus side (process 0: AL160, a PLC fault)
     interrupted_by: str = ""  # "Ctrl-C" or "SIGTERM" when the outcome is "interrupted"
     verdicts: list[Verdict] = dataclasses.field(default_factory=list)  # the script's [[expect]]
+    scenario_end: bool = False  # it ran to its scenario's last window (no --until given)
 
     @property
     def alarms(self) -> int:
@@ -272,7 +273,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     expectations = Expectations(runtime, script)
     engine = runtime.engine
     horizon = script.horizon if script.expects else None
-    if until is None and horizon is not None:
+    to_horizon = until is None and horizon is not None
+    if to_horizon:
         until = horizon  # a scenario runs until its last window closes
     if single_block:  # every process stops after each block: the script's steps go on
         door.apply(Command(CommandKind.SINGLE_BLOCK_ON, None, SIM))
@@ -312,6 +314,9 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     expectations.start()
     player.arm()
     start_plc(config, runtime, door, closed=True)
+    plant_logic = start_plant_logic(config, runtime, door, closed=True)
+    if plant_logic is not None and runtime.plant is not None:
+        runtime.plant.logic = plant_logic[0]
 
     def active() -> bool:
         """Something may still start a program: the PLC logic's scan, a scripted input."""
@@ -353,6 +358,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     else:  # Any alarm is exit 1 (README): a PLC fault (AL160) is one, though no process stopped
         result = SimResult(outcome, EXIT_FAILED if plc_alarms else EXIT_OK, runtime, plc_alarms)
     if script.expects:  # a scenario: its verdicts decide (a bad case may expect an alarm)
+        result.scenario_end = to_horizon
         expectations.stop()
         result.verdicts = expectations.verdicts()
         result.exit_status = EXIT_OK if all(v.ok for v in result.verdicts) else EXIT_FAILED
@@ -437,7 +443,8 @@ def report(result: SimResult, out: TextIO) -> None:
                   f"{first['message']}{times}\n")
     out.write(summary_table(result))
     alarms = result.alarms
-    verdict = {"idle": "every program ended", "until": "stopped at --until",
+    until = "the scenario's last window closed" if result.scenario_end else "stopped at --until"
+    verdict = {"idle": "every program ended", "until": until,
                "stall": "stall", "alarm": "ended with alarms",
                "interrupted": f"interrupted ({result.interrupted_by})"}[result.outcome]
     if alarms and result.outcome != "alarm":

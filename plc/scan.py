@@ -120,8 +120,10 @@ class PlcRuntime:
 
     def __init__(self, logic: Logic, image: IOImage, nc: NcPort, order: Sequence[str],
                  loop_limit: int = 100_000, retain: RetainStore | None = None,
-                 watchdog_ms: int = 0) -> None:
-        """``watchdog_ms``: a scan running longer (wall clock) is stopped: FAULT (0: off)."""
+                 watchdog_ms: int = 0, writer: str = "plc") -> None:
+        """``watchdog_ms``: a scan running longer (wall clock) is stopped: FAULT (0: off).
+        ``writer``: whom its image writes are attributed to (``plant``: the plant's logic)."""
+        self.writer = writer
         self.logic = logic
         self.image = image
         self.nc = nc
@@ -286,7 +288,7 @@ class PlcRuntime:
             self._apply_forces(True)
         changes = self._changes(image.sa, image.k, image.syvar)
         if changes:
-            image.write(changes, "plc")
+            image.write(changes, self.writer)
         self._act()
         if self._retained:
             self._save_retained()

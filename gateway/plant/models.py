@@ -86,15 +86,20 @@ class Model:
     def settle(self, now: float) -> None:
         """Bring the model's state to ``now`` before its rules change (a fault)."""
 
+    def progress_at(self, now: float) -> tuple[float, float] | None:
+        """(done, of) seconds of the move under way at ``now``; None: none."""
+        return self.progress
+
     def key(self, name: str) -> Any:
         return self._keys[name]
 
     def describe(self, now: float) -> str:
         """"clamp extends, 120 of 300 ms": the why-record of a wait on its output."""
         text = f"{self.name} {self.state}"
-        if self.progress is not None:
-            done, total = self.progress
-            text += f", {done * 1000:.0f} of {total * 1000:.0f} ms"
+        progress = self.progress_at(now)
+        if progress is not None:
+            done, total = progress
+            text += f", {max(0.0, done) * 1000:.0f} of {total * 1000:.0f} ms"
         if self.never:
             text += " (fault: never)"
         elif self.factor != 1.0:
@@ -145,6 +150,11 @@ class Delay(Model):
             return None
         self.progress = (now - self.started, self.due - self.started)
         return self.due
+
+    def progress_at(self, now: float) -> tuple[float, float] | None:
+        if self.due is None:
+            return None
+        return (now - self.started, self.due - self.started)
 
     def outputs(self, now: float) -> dict[str, int]:
         return {"output": self.out}
@@ -223,6 +233,12 @@ class Cylinder(Model):
     def sampled(self) -> bool:
         return self.dir != 0 and self.has_position
 
+    def progress_at(self, now: float) -> tuple[float, float] | None:
+        if not self.dir or self.arrive is None:
+            return None
+        total = self._time(self.dir)
+        return (total - (self.arrive - now), total)
+
     @property
     def has_position(self) -> bool:
         return self.config.keys.get("position") is not None
@@ -298,6 +314,11 @@ class Motor(Model):
     @property
     def sampled(self) -> bool:
         return self.v != self.target and self.config.keys.get("speed") is not None
+
+    def progress_at(self, now: float) -> tuple[float, float] | None:
+        if self.v == self.target:
+            return None
+        return (now - self.t_ref, abs(self.target - self.v) / self._rate())
 
     def outputs(self, now: float) -> dict[str, int]:
         v = self._v(now)

@@ -104,6 +104,7 @@ class Plant:
         self._asleep: list[Model] = []  # free runners stopped while a closed run stands still
         self._tick: Timer | None = None
         self.stretch = 1  # the tick's period in scans (run: the budget's)
+        self.logic: Any = None  # the plant's ST logic ([plant] logic), its PlcRuntime
         self.stretched = 0  # how often the budget stretched it
         for i, model_config in enumerate(config.model):
             self._build(model_config, f"plant.model[{i}]")
@@ -521,8 +522,14 @@ class Plant:
                           if k in model.inputs},
                 "writes": {k: str(v) for k, v in self.variables[name].items()
                            if k in model.outputs_keys}})
+        logic = None
+        if self.logic is not None:
+            st = self.logic.status
+            logic = {"state": st.state.name, "scans": st.scans, "max_scan_us": st.max_scan_us,
+                     "fault": None if st.fault is None else str(st.fault)}
         return {"models": models, "faults": [f.as_dict() for f in self.faults],
-                "scan_ms": self.runtime.config.plant.scan_ms, "stretch": self.stretch}
+                "scan_ms": self.runtime.config.plant.scan_ms, "stretch": self.stretch,
+                "logic": logic}
 
     def fault_of(self, name: str) -> list[ActiveFault]:
         return [f for f in self.faults if f.target.split(".")[0] == name]

@@ -339,3 +339,18 @@ def test_ncgate_map_lists_what_each_model_reads_and_writes(
                         "writes": {"extended": "SA30", "retracted": "SA31"}}
     assert main(["map", "--config", str(cell)]) == 0
     assert "| pressure | lag | target SYVAR1 | actual SYVAR2 |" in capsys.readouterr().out
+
+
+def test_a_window_that_closes_before_the_run_says_how_things_stood_then(cell: Path) -> None:
+    script = VALVE + ('[[expect]]\nname = "early clamp"\ncond = "SA30=1"\nwithin = [0.0, 0.6]\n'
+                      '[[expect]]\nname = "early end"\ncond = "P1 IDLE"\nwithin = [0.1, 0.6]\n'
+                      '[[expect]]\nname = "late end"\ncond = "P1 IDLE"\nby = 2.0\n')
+    result = _run(cell, script, until=None)
+    lines = [v.line() for v in result.verdicts]
+    # At 0.6 s the clamp was on its way (it arrives at 0.8 s) and P1 waited for it; by the
+    # run's end (2.0 s) both had changed: the verdicts say how things stood at 0.6 s.
+    assert lines[0] == ("FAIL early clamp: SA30 still 0 at 0.600 s (set by plant clamp at "
+                        "0.000 s); clamp extends, 100 of 300 ms")
+    assert lines[1] == ("FAIL early end: P1 WAIT_COND, not IDLE, at 0.600 s (since "
+                        "0.000 s)")
+    assert lines[2] == "PASS late end: P1 IDLE at 0.800 s"

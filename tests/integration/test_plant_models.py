@@ -354,3 +354,42 @@ def test_on_the_wall_clock_a_tick_over_its_budget_stretches_the_sampling_not_the
     plant._budget(0.0)  # well under a quarter of the budget: back towards every scan
     assert plant.stretch == MAX_STRETCH // 2
     assert plant.status()["stretch"] == MAX_STRETCH // 2
+
+
+PLANT_ST = """PROGRAM tank
+VAR level : INT; END_VAR
+(* the pump fills the tank 10 units a scan while SA20 is on; it drains 2 a scan *)
+IF SA[20] THEN level := level + 10; ELSIF level > 0 THEN level := level - 2; END_IF;
+SYVAR[7] := level;
+SA[37] := level >= 100;
+END_PROGRAM
+"""
+
+
+def test_the_plant_logic_is_a_second_st_task_whose_writes_are_the_plants(
+        tmp_path: Path) -> None:
+    (tmp_path / "tank.st").write_text(PLANT_ST)
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SA37=1)\nN20 M30\n")
+    (tmp_path / "s.toml").write_text('[[write]]\nat = 0.5\nset = "SA20=1"\n')
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\n[plant]\nlogic = "tank.st"\nscan_ms = 10\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1",
+                     load_script(tmp_path / "s.toml"), None)
+    writes = [e for e in result.events if e["event"] == "write" and e["var"] == "SA37"]
+    assert writes[0]["who"] == "plant" and writes[0]["value"] == 1
+    # 10 a scan from the scan at 0.5 s on: 100 at the tenth, 0.59 s.
+    assert writes[0]["t"] == pytest.approx(0.59)
+    resume = next(e for e in result.events if e["event"] == "resume")
+    assert (resume["t"], resume["writer"]) == (writes[0]["t"], "plant")
+    assert result.runtime.plant is not None
+    assert result.runtime.plant.status()["logic"]["state"] == "RUNNING"
+
+
+def test_plant_programs_name_programs_of_the_plant_logic(tmp_path: Path) -> None:
+    (tmp_path / "tank.st").write_text(PLANT_ST)
+    (tmp_path / "O1.nc").write_text("N10 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "O1"\n[plant]\nlogic = "tank.st"\nprograms = ["pump"]\n')
+    with pytest.raises(ConfigError) as caught:
+        run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None))
+    assert "plant.programs[0]: no PROGRAM pump in plant.logic" in str(caught.value)

@@ -39,8 +39,17 @@ DISAGREE: dict[str, str] = {
 
 
 def ncgate_accepts(path: Path) -> bool:
+    """ncgate's verdict on a file: an example's logic with its cell's context (the I/O names
+    of its [symbols] are variables there), any other file with a bare one."""
+    context = CONTEXT
+    config = path.parent / "ncgate.toml"
+    if config.is_file():
+        from ncgate.config import load_config
+        from ncgate.gateway.plc import logic_context
+
+        context = logic_context(load_config(config, serving=False))
     try:
-        compile_logic([read_logic_file(path)], CONTEXT)
+        compile_logic([read_logic_file(path)], context)
     except LogicError:
         return False
     return True
