@@ -76,3 +76,95 @@ def test_the_readme_names_every_scenario() -> None:
     readme = (FOLDER / "README.md").read_text(encoding="utf-8")
     assert readme.splitlines()[0].startswith("# machine: ")
     assert all(f"`{p.name}`" in readme for p in SCENARIOS)
+
+
+EXTERNAL_SCENARIO = """
+# clamp_never_closes with a real PLC: the test process over Modbus, the ST logic off.
+[[fault]]
+target = "clamp"
+kind = "never"
+[[expect]]
+name = "the PLC raises its clamp alarm"
+cond = "clamp_alarm=1"
+by = 4.0
+[[expect]]
+name = "the cell holds"
+cond = "P1 HOLD"
+by = 4.0
+[[expect]]
+name = "never clamped"
+cond = "clamped=0"
+always = true
+[[expect]]
+name = "no NC alarm"
+cond = "no alarm"
+always = true
+"""
+
+
+async def _external_plc(port: int) -> None:
+    """The part of plc.st this case needs, as a PLC over Modbus would run it: close and lock
+    the door, say so, close the clamp, and give it 1 s before the clamp alarm and a hold."""
+    import asyncio
+
+    from pymodbus.client import AsyncModbusTcpClient
+
+    coil = {"clamp_valve": 20, "door_valve": 22, "door_lock": 23, "door_ready": 33,
+            "clamp_closed": 40, "door_closed": 43, "door_locked": 44, "clamp_alarm": 50}
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    assert await client.connect()
+    loop = asyncio.get_running_loop()
+
+    async def until(name: str, timeout_s: float) -> bool:
+        deadline = loop.time() + timeout_s
+        while loop.time() < deadline:
+            if (await client.read_coils(coil[name], count=1, device_id=1)).bits[0]:
+                return True
+            await asyncio.sleep(0.01)  # a PLC's scan: it polls its inputs
+        return False
+
+    try:
+        await client.write_coil(coil["door_valve"], True, device_id=1)
+        assert await until("door_closed", 5.0)
+        await client.write_coil(coil["door_lock"], True, device_id=1)
+        assert await until("door_locked", 5.0)
+        await client.write_coil(coil["door_ready"], True, device_id=1)
+        await client.write_coil(coil["clamp_valve"], True, device_id=1)
+        if not await until("clamp_closed", 1.0):  # the PLC's watchdog on the clamp
+            await client.write_coil(coil["clamp_alarm"], True, device_id=1)
+            await client.write_register(2000, 2, device_id=1)  # feed hold
+    finally:
+        client.close()
+
+
+async def test_a_bad_case_runs_on_the_wall_clock_with_an_external_plc(tmp_path: Path) -> None:
+    """ncgate run --script with the ST logic off and a Modbus client as the PLC: the same
+    clamp that never closes, judged on the wall clock."""
+    import asyncio
+    import re
+
+    scenario = tmp_path / "clamp_never_closes.toml"
+    scenario.write_text(EXTERNAL_SCENARIO)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "ncgate", "run", "--config", str(FOLDER / "ncgate.toml"),
+        "--set", "plc.logic=[]", "--set", "nc.autostart=true", "--port", "0", "--no-web",
+        "--set", "canopen.enabled=false", "--script", str(scenario), cwd=tmp_path,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    async with asyncio.timeout(60):
+        while True:
+            line = (await proc.stdout.readline()).decode()
+            assert line, "ncgate run ended early:\n" + "".join(lines)
+            lines.append(line)
+            found = re.search(r"Modbus TCP on [\d.]+:(\d+)", line)
+            if found:
+                break
+        await _external_plc(int(found.group(1)))
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines) + rest
+    verdicts = verdict_lines(log)
+    assert code == 0, log
+    assert len(verdicts) == 4 and all(v.startswith("PASS ") for v in verdicts), log
+    assert "clamp_alarm=1 at" in log
