@@ -628,11 +628,12 @@ class _Connection(asyncio.Protocol):
         if self.silent:
             server.fault_tally["silenced"] += 1
             return None
-        fault = table.match(request.unit, request.pdu) if table is not None else None
+        unit, pdu, _ = request
+        fault = table.match(unit, pdu) if table is not None else None
         if fault is None:
-            return self.handle(request.unit, request.pdu, self.source, self.writable)
+            return self.handle(unit, pdu, self.source, self.writable)
         if fault.kind == "exception":  # not executed: nothing of a write is stored
-            return exception_pdu(request.pdu[0], fault.code)
+            return exception_pdu(pdu[0], fault.code)
         if fault.kind == "no_reply":
             self.silent = True
             self.direct = False
@@ -658,7 +659,8 @@ class _Connection(asyncio.Protocol):
         self.update_direct()
         if self.transport is None or self.transport.is_closing():
             return
-        answer = self.handle(request.unit, request.pdu, self.source, self.writable)
+        unit, pdu, _ = request
+        answer = self.handle(unit, pdu, self.source, self.writable)
         self._send([self.framer.encode(request, answer)])
         self.completed_at = self.loop.time()
         if self.turn is None:

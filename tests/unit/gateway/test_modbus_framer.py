@@ -56,7 +56,7 @@ def mbap(tid: int, unit: int, pdu: bytes) -> bytes:
 def test_a_header_example_is_cut_field_by_field() -> None:
     framer = MbapFramer()
     framer.feed(H("1501 0000 0006 11 03006B0003"))  # tid 0x1501, unit 0x11: FC3 of 6.3
-    assert framer.next_request() == Request(unit=0x11, pdu=H("03006B0003"), tid=0x1501)
+    assert framer.next_request() == (0x11, H("03006B0003"), 0x1501)
     assert framer.next_request() is None and framer.buffered == 0
 
 
@@ -68,7 +68,7 @@ def test_a_request_fed_a_byte_at_a_time_comes_out_once_whole() -> None:
         assert framer.next_request() is None
         assert framer.buffered == i + 1
     framer.feed(frame[-1:])
-    assert framer.next_request() == Request(1, H("03 006B 0003"), 7)
+    assert framer.next_request() == (1, H("03 006B 0003"), 7)
     assert framer.next_request() is None and framer.buffered == 0
 
 
@@ -77,8 +77,7 @@ def test_several_requests_in_one_feed_come_out_in_order() -> None:
     pdus = [H("03 0000 0001"), H("06 0001 0003"), H("2B 0E 01 00")]
     framer.feed(b"".join(mbap(tid, 7, p) for tid, p in zip((0xFFFE, 0xFFFF, 0), pdus,
                                                              strict=True)))
-    assert drain(framer) == [Request(7, pdus[0], 0xFFFE), Request(7, pdus[1], 0xFFFF),
-                             Request(7, pdus[2], 0)]
+    assert drain(framer) == [(7, pdus[0], 0xFFFE), (7, pdus[1], 0xFFFF), (7, pdus[2], 0)]
 
 
 def test_requests_straddling_feeds_are_cut_where_their_lengths_say() -> None:
@@ -88,8 +87,7 @@ def test_requests_straddling_feeds_are_cut_where_their_lengths_say() -> None:
     for at in range(0, len(stream), 5):  # 5-byte segments: every frame is split somewhere
         framer.feed(stream[at:at + 5])
         got += drain(framer)
-    assert [r.tid for r in got] == [1, 2, 3, 4, 5]
-    assert {r.pdu for r in got} == {H("10 0001 0002 04 000A 0102")}
+    assert got == [(1, H("10 0001 0002 04 000A 0102"), tid) for tid in range(1, 6)]
 
 
 @pytest.mark.parametrize("header", [
@@ -103,7 +101,7 @@ def test_requests_straddling_feeds_are_cut_where_their_lengths_say() -> None:
 def test_a_bad_header_is_a_framing_error_as_soon_as_it_is_whole(header: bytes) -> None:
     framer = MbapFramer()
     framer.feed(mbap(1, 1, H("03 0000 0001")) + header[:6])
-    assert framer.next_request() == Request(1, H("03 0000 0001"), 1)  # the good one first
+    assert framer.next_request() == (1, H("03 0000 0001"), 1)  # the good one first
     assert framer.next_request() is None  # six bytes: not a header yet
     framer.feed(header[6:])  # the header is whole, its PDU has not come: already refused
     with pytest.raises(FramingError, match="bad MBAP header") as caught:
@@ -116,13 +114,13 @@ def test_the_lengths_at_the_limits_are_frames(pdu_length: int) -> None:
     framer = MbapFramer()
     pdu = bytes((3,)) + bytes(pdu_length - 1)
     framer.feed(mbap(9, 1, pdu))
-    assert framer.next_request() == Request(1, pdu, 9)
+    assert framer.next_request() == (1, pdu, 9)
 
 
 def test_whole_takes_exactly_one_request_when_nothing_is_buffered() -> None:
     framer = MbapFramer()
     frame = mbap(3, 1, H("04 0008 0001"))
-    assert framer.whole(frame) == Request(1, H("04 0008 0001"), 3)
+    assert framer.whole(frame) == (1, H("04 0008 0001"), 3)
     assert framer.buffered == 0  # nothing kept
     assert framer.whole(frame + frame) is None  # two: feed them
     assert framer.whole(frame[:-1]) is None  # a part
@@ -140,7 +138,7 @@ def test_each_function_code_of_the_spec(request_pdu: bytes, answer: bytes,
     framer = MbapFramer()
     framer.feed(mbap(0x0102, 0xFF, request_pdu))
     request = framer.next_request()
-    assert request == Request(0xFF, request_pdu, 0x0102)
+    assert request == (0xFF, request_pdu, 0x0102)
     assert request_pdu_length(request_pdu) == len(request_pdu)
     assert address_ranges(request_pdu) == ranges
     length = len(answer) + 1
@@ -154,8 +152,8 @@ def test_an_exception_answer() -> None:
     framer.feed(H("0021 0000 0006 01 01 04A1 0001"))
     request = framer.next_request()
     assert request is not None
-    assert exception_pdu(request.pdu[0], 2) == H("81 02")
-    assert framer.encode(request, exception_pdu(request.pdu[0], 2)) == H("0021 0000 0003 01 8102")
+    assert exception_pdu(request[1][0], 2) == H("81 02")
+    assert framer.encode(request, exception_pdu(request[1][0], 2)) == H("0021 0000 0003 01 8102")
     assert exception_pdu(0x2B, 6) == H("AB 06")  # busy, to FC43
     assert exception_pdu(0x83, 4) == H("83 04")  # an exception code's bit is set once
 
@@ -184,9 +182,9 @@ def test_rtu_a_request_fed_a_byte_at_a_time_and_two_in_one_feed() -> None:
         framer.feed(bytes((byte,)))
         assert framer.next_request() is None
     framer.feed(frame[-1:])
-    assert framer.next_request() == Request(0x11, H("03 006B 0003"))
+    assert framer.next_request() == (0x11, H("03 006B 0003"), 0)
     framer.feed(frame + H("01 03 0000 000A C5CD"))
-    assert drain(framer) == [Request(0x11, H("03 006B 0003")), Request(1, H("03 0000 000A"))]
+    assert drain(framer) == [(0x11, H("03 006B 0003"), 0), (1, H("03 0000 000A"), 0)]
     assert framer.buffered == 0
 
 
@@ -198,7 +196,7 @@ def test_rtu_a_bad_crc_is_dropped_with_what_follows_until_the_gap() -> None:
     assert framer.next_request() is None and framer.buffered == 0
     assert framer.gap() is None  # the silence: the next frame begins
     framer.feed(H("01 03 0000 000A C5CD"))
-    assert framer.next_request() == Request(1, H("03 0000 000A"))
+    assert framer.next_request() == (1, H("03 0000 000A"), 0)
 
 
 def test_rtu_a_frame_whose_code_gives_no_length_ends_at_the_gap() -> None:
@@ -207,7 +205,7 @@ def test_rtu_a_frame_whose_code_gives_no_length_ends_at_the_gap() -> None:
     crc = crc16(frame)
     framer.feed(frame + bytes((crc & 0xFF, crc >> 8)))
     assert framer.next_request() is None  # its end is the line's silence
-    assert framer.gap() == Request(1, H("64 0102"))
+    assert framer.gap() == (1, H("64 0102"), 0)
     framer.feed(H("01 03 00"))  # begun, then cut off
     assert framer.gap() is None and framer.discarded == 1 and framer.buffered == 0
 
@@ -215,10 +213,10 @@ def test_rtu_a_frame_whose_code_gives_no_length_ends_at_the_gap() -> None:
 def test_rtu_encode_and_whole() -> None:
     framer = RtuFramer()
     request = framer.whole(H("11 03 006B 0003 7687"))
-    assert request == Request(0x11, H("03 006B 0003"))
+    assert request == (0x11, H("03 006B 0003"), 0)
     answer = framer.encode(request, H("03 06 022B 0000 0064"))
     assert answer[:-2] == H("11 03 06 022B 0000 0064")
     assert crc16(answer[:-2]).to_bytes(2, "little") == answer[-2:]
     assert framer.whole(H("11 03 006B 0003 7688")) is None  # bad CRC: fed, it is dropped
     assert framer.whole(H("11 03 006B 0003")) is None  # a part
-    assert framer.encode(Request(1, b""), exception_pdu(3, 2)) == H("01 83 02 C0F1")
+    assert framer.encode((1, b"", 0), exception_pdu(3, 2)) == H("01 83 02 C0F1")
