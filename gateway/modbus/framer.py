@@ -12,7 +12,7 @@ Two frame formats share one interface:
   CRC-16 (low byte first).  The frame's length follows from its function code; a frame whose
   length the code does not give (a function code we do not know) ends at the line's silence
   of 3.5 characters, which the transport reports with :meth:`RtuFramer.gap`.  A bad CRC drops
-  the frame silently (a serial slave never answers one, 2.4.2) and is counted.
+  the frame silently (the slave discards it and does not answer, 2.5.1.2) and is counted.
 
 The framer pulls: ``feed`` only keeps the bytes, ``next_request`` cuts one request at a time.
 A connection answers a bounded number of requests in one loop turn (fairness) and stops
@@ -226,7 +226,7 @@ class RtuFramer:
     was begun and is not a whole frame is dropped.  A frame with a bad CRC is dropped (and
     counted in ``discarded``) with everything buffered after it, up to the next gap: once a
     frame is wrong, so may be the lengths that follow.  A broadcast (unit 0) is a request
-    like any other here; that it gets no answer is the server's rule (2.1)."""
+    like any other here; that it gets no answer is the server's rule (2.1, broadcast)."""
 
     __slots__ = ("_skip", "buffer", "discarded")
 
