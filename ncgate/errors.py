@@ -23,6 +23,8 @@ catch as narrowly as they like::
         ├── WaitIdleTimeout (TimeoutError)
         ├── ProcessAlarmError (RuntimeError)
         ├── ModbusError: a request answered with an exception code
+        ├── FramingError (ValueError): a Modbus byte stream that cannot be cut into frames
+        ├── FaultError (ValueError): a Modbus fault row the server cannot put in force
         └── VirtualPLCError (AssertionError): the test kit's client got an exception answer
 
 Imports nothing: every package may import it.

@@ -161,6 +161,11 @@ def fieldbus(gw: Gateway) -> dict[str, Any]:
             "tls_address": list(server.tls_address) if server.tls_address else None,
             "clients": sorted(c.source.peer or c.source.detail for c in server.connections),
             "max_clients": server.config.max_clients,
+            # The plant's Modbus faults in force and what they did (docs/plant.md).
+            "faults": [{"kind": f.kind, "code": f.code, "ms": f.ms, "unit": f.unit,
+                        "addresses": list(f.addresses) if f.addresses else None}
+                       for f in server.faults],
+            "fault_counts": server.fault_counts,
         }
     node = gw.canopen_node
     if node is not None:
