@@ -76,9 +76,30 @@ Sources = dict[str, str]  # a logic file's path -> its content (plcopen.read_log
 UNREAD = ""
 
 
+FileStat = tuple[int, int, int] | None  # mtime (ns), size, inode; None: no such file
+
+
+def file_stat(path: Path) -> FileStat:
+    try:
+        st = path.stat()
+    except OSError:  # being replaced (an editor's rename), or gone
+        return None
+    return (st.st_mtime_ns, st.st_size, st.st_ino)
+
+
+# run --watch's baseline: each logic file as it stood just BEFORE the PLC last read it.  A
+# save made while the files were being read and compiled is then a change the watcher sees
+# (its own first look, after the read, would take that save as the baseline and miss it).
+_stat_when_read: dict[Path, FileStat] = {}
+
+
 def read_sources(files: tuple[Path, ...]) -> Sources:
     """The content of every logic file, as the PLC loads it and a session record keeps it."""
-    return {str(path): read_logic_text(path) for path in files}
+    out: Sources = {}
+    for path in files:
+        _stat_when_read[path.absolute()] = file_stat(path)
+        out[str(path)] = read_logic_text(path)
+    return out
 
 
 def load_logic(files: tuple[Path, ...], config: Config,
@@ -331,19 +352,18 @@ class LogicWatcher:
     def close(self) -> None:
         self._stop.set()
 
-    def _look(self) -> tuple[tuple[int, int, int] | None, ...]:
-        out: list[tuple[int, int, int] | None] = []
-        for path in self.files:
-            try:
-                st = path.stat()
-            except OSError:  # being replaced (an editor's rename), or gone: a change too
-                out.append(None)
-                continue
-            out.append((st.st_mtime_ns, st.st_size, st.st_ino))
-        return tuple(out)
+    def _look(self) -> tuple[FileStat, ...]:
+        return tuple(file_stat(path) for path in self.files)  # (None, gone: a change too)
+
+    def baseline(self) -> tuple[FileStat, ...]:
+        """Each file as it stood before the running logic was read (read_sources), so that
+        a save made during the read is a change; a file this process never read, as now."""
+        now = self._look()
+        return tuple(_stat_when_read.get(path.absolute(), stat)
+                     for path, stat in zip(self.files, now, strict=True))
 
     def _watch(self) -> None:
-        seen = self._look()
+        seen = self.baseline()
         pending = None
         while not self._stop.wait(self.interval_s):
             now = self._look()
