@@ -29,7 +29,7 @@ import struct
 import sys
 import time
 import types as pytypes
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from typing import Any
@@ -1608,6 +1608,27 @@ class Compiler:
             raise self.error(StCode.NOT_CALLABLE, f"{_show(target)} is {fb}, not a function "
                              "block instance", s.span)
         members = self.members(fb)
+        en, eno = _en_eno(s.args, members)
+        if en is not None or eno is not None:
+            # EN FALSE: the instance is not called, its outputs stay as they are, nothing
+            # is bound (IEC 61131-3, 6.6.1.6); ENO is EN.
+            enabled = self.temp()
+            condition = "True"
+            if en is not None:
+                assert en.expr is not None
+                condition = self.coerce(self.typed_expr(en.expr, scope, "BOOL"), "BOOL",
+                                        _span_of(en.expr))
+            out.emit(f"{enabled} = {condition}", s.span)
+            out.emit(f"if {enabled}:", s.span)
+            out.indent += 1
+            try:
+                self.call_stmt(n.CallStmt(target, tuple(
+                    a for a in s.args if a is not en and a is not eno), s.span), scope)
+            finally:
+                out.indent -= 1
+            if eno is not None:
+                self.bind_eno(eno, enabled, scope)
+            return
         f = self.temp()
         out.emit(f"{f} = {place.read}", s.span)
         given: set[str] = set()
@@ -2169,6 +2190,9 @@ class Compiler:
     def call(self, x: n.Call, scope: Scope) -> E:
         key = x.name.upper()
         info = self.pous.get(key)
+        en, eno = _en_eno(x.args, info.vars if info is not None else {})
+        if en is not None or eno is not None:
+            return self.en_call(x, en, eno, scope)
         if info is None or info.pou.kind != "FUNCTION":  # (a user FUNCTION may replace one)
             conv = _conversion(key)
             if conv is not None:
@@ -2263,6 +2287,70 @@ class Compiler:
             if k in stores:
                 self.out.emit(stores[k](f"{t}[{i + 1}]"), x.span)
         return E(f"{t}[0]", result)
+
+    def en_call(self, x: n.Call, en: n.Arg | None, eno: n.Arg | None, scope: Scope) -> E:
+        """A call with EN and ENO (IEC 61131-3, 6.6.1.6): EN FALSE, the function is not
+        executed and its result is its type's default; ENO is EN (a runtime error faults
+        the PLC, so there is no executed call whose ENO is FALSE).  Inside an expression a
+        call takes EN only: binding ENO writes back, as an output does."""
+        inner = n.Call(x.name, tuple(a for a in x.args if a is not en and a is not eno),
+                       x.span)
+        condition = "True"
+        if en is not None:
+            assert en.expr is not None
+            condition = self.coerce(self.typed_expr(en.expr, scope, "BOOL"), "BOOL",
+                                    _span_of(en.expr))
+        statement = self._statement_call is x
+        if self._prelude_call is not x:  # inside an expression: EN alone
+            if eno is not None:
+                raise self.error(StCode.UNSUPPORTED, f"{x.name} binds ENO (it writes back): "
+                                 "call it as a statement or alone on the right of := (not "
+                                 "inside an expression)", eno.span)
+            e = self.expr(inner, scope)
+            return E(f"({e.code} if {condition} else {self._default_code(e.type)})", e.type)
+        out = self.out
+        enabled, result = self.temp(), self.temp()
+        out.emit(f"{enabled} = {condition}", x.span)
+        out.emit(f"if {enabled}:", x.span)
+        out.indent += 1
+        self._prelude_call = inner
+        if statement:
+            self._statement_call = inner
+        try:
+            e = self.expr(inner, scope)
+        finally:
+            out.indent -= 1
+            self._prelude_call = x
+            if statement:
+                self._statement_call = x
+        out.indent += 1
+        out.emit(f"{result} = {e.code}", x.span)
+        out.indent -= 1
+        out.emit("else:", x.span)
+        out.indent += 1
+        out.emit(f"{result} = {self._default_code(e.type)}", x.span)
+        out.indent -= 1
+        if eno is not None:
+            self.bind_eno(eno, enabled, scope)
+        return E(result, e.type)
+
+    def bind_eno(self, eno: n.Arg, enabled: str, scope: Scope) -> None:
+        if eno.output is None:
+            raise self.error(StCode.BAD_ARGUMENTS, "ENO is an output: bind it with =>",
+                             eno.span)
+        dest = scope.place(eno.output, write=True)
+        assert dest.store is not None
+        self.out.emit(dest.store(self.coerce(E(enabled, "BOOL"), dest.type,
+                                             eno.output.span)), eno.span)
+
+    def _default_code(self, t: Type) -> str:
+        if t == VOID:
+            return "None"
+        if t == ANY_INT:
+            return "0"
+        if t == ANY_REAL:
+            return "0.0"
+        return self.init_code(t, self.default(t))
 
     def _args(self, x: n.Call, scope: Scope, count: int | None, least: int = 1) -> list[E]:
         if any(a.name is not None or a.output is not None for a in x.args):
@@ -2952,6 +3040,20 @@ def _conversion(key: str) -> tuple[str, str] | None:
     if src in known and dst in known and src != dst:
         return src, dst
     return None
+
+
+def _en_eno(args: Sequence[n.Arg], declared: Mapping[str, Any]
+            ) -> tuple[n.Arg | None, n.Arg | None]:
+    """A call's EN input and ENO output (IEC 61131-3, 6.6.1.6), unless the POU declares a
+    variable of that name itself."""
+    en = eno = None
+    for arg in args:
+        key = (arg.name or "").upper()
+        if key == "EN" and "EN" not in declared:
+            en = arg
+        elif key == "ENO" and "ENO" not in declared:
+            eno = arg
+    return en, eno
 
 
 def _holds_fb(t: Type) -> bool:

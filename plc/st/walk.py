@@ -110,8 +110,13 @@ class Walker:
         elif isinstance(s, n.CallStmt):
             fb, t = self.locate(s.target, prog)
             assert isinstance(t, FbOf)
+            declared = fb.types if not t.std else {}
+            args, enabled = self._enabled(s.args, declared, prog)
+            if not enabled:  # EN FALSE (6.6.1.6): not called, nothing bound
+                self._eno(s.args, declared, enabled, prog)
+                return
             outputs = []
-            for arg in s.args:
+            for arg in args:
                 assert arg.name is not None
                 name = arg.name.upper()
                 if arg.output is None:
@@ -130,6 +135,7 @@ class Walker:
                     self.block(self.pous[t.name].pou.body, fb)
             for target, name in outputs:
                 self.store(target, getattr(fb, name) if t.std else fb.state[name], prog)
+            self._eno(s.args, declared, enabled, prog)
         elif isinstance(s, n.If):
             for cond, body in s.branches:
                 if self.value(cond, prog):
@@ -327,7 +333,34 @@ class Walker:
         if isinstance(x, n.EnumLit):
             return self.compiler.enums[x.type_name.upper()].values[x.name.upper()]
         key = x.name.upper()
-        args = [self.value(a.expr, prog) for a in x.args if a.expr is not None]
+        given, enabled = self._enabled(x.args, {}, prog)
+        args = [self.value(a.expr, prog) for a in given if a.expr is not None]
+        result = self._call(key, x, args)  # (the standard functions have no side effect)
+        self._eno(x.args, {}, enabled, prog)
+        return result if enabled else type(result)()  # EN FALSE: its type's default
+
+    def _enabled(self, args: tuple[n.Arg, ...], declared: dict[str, Any], prog: _Frame
+                 ) -> tuple[tuple[n.Arg, ...], bool]:
+        """A call's arguments but EN and ENO, and EN's value; ENO => stores it (IEC
+        61131-3, 6.6.1.6) -- unless the POU declares EN or ENO itself."""
+        enabled, rest = True, []
+        for arg in args:
+            name = (arg.name or "").upper()
+            if name == "EN" and name not in declared and arg.expr is not None:
+                enabled = bool(self.value(arg.expr, prog))
+            elif not (name == "ENO" and name not in declared):
+                rest.append(arg)
+        return tuple(rest), enabled
+
+    def _eno(self, args: tuple[n.Arg, ...], declared: dict[str, Any], enabled: bool,
+             prog: _Frame) -> None:
+        """ENO => v, after the call: v is EN."""
+        for arg in args:
+            if (arg.name or "").upper() == "ENO" and "ENO" not in declared and \
+                    arg.output is not None:
+                self.store(arg.output, enabled, prog)
+
+    def _call(self, key: str, x: n.Call, args: list[Any]) -> Any:
         if key == "ABS":
             return abs(args[0])
         if key == "MIN":
