@@ -27,13 +27,11 @@ from typing import TYPE_CHECKING, Any
 
 from ncgate.config import Config, load_config
 from ncgate.errors import InputRefused, Reason
-from ncgate.gateway.canopen.clock import Clock
-from ncgate.gateway.canopen.node import CanopenNode
+from ncgate.gateway.adapters import ADAPTERS, plugin
 from ncgate.gateway.door import Door, command_kind
 from ncgate.gateway.errors import GatewayError, ProcessAlarmError, WaitIdleTimeout
 from ncgate.gateway.lifecycle import Adapter, tune_interpreter
 from ncgate.gateway.modbus.map import ModbusMap
-from ncgate.gateway.modbus.server import ModbusServer
 from ncgate.gateway.plc import (
     OnlineChange,
     ReloadOutcome,
@@ -70,6 +68,9 @@ from ncgate.plc.image import ImageAddressError, IOImage
 from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 if TYPE_CHECKING:
+    from ncgate.gateway.canopen.clock import Clock
+    from ncgate.gateway.canopen.node import CanopenNode
+    from ncgate.gateway.modbus.server import ModbusServer
     from ncgate.gateway.web.console import WebConsole
 
 
@@ -98,21 +99,20 @@ class Gateway:
         the program store does not check those versions again."""
         self.config = config if config is not None else load_config(None)
         self.session = secrets.token_hex(6)  # names this run to the console's pages
-        self._console_wanted = console
-        self._web_default_port = web_default_port
-        self._console: WebConsole | None = None
+        self.console_wanted = console  # (the web adapter's enabled() asks)
+        self.web_default_port = web_default_port
+        self.canopen_clock = canopen_clock  # (the CANopen adapter takes it)
         self._record_path = record
         self._overrides = dict(overrides or {})
         self._checked = tuple(checked)
         self.recorder: SessionRecorder | None = None
         self._record_detach: Callable[[], None] = lambda: None
         self._listeners = tuple(listeners)
-        self._canopen_clock = canopen_clock
         self.map = ModbusMap(self.config)
         self._runtime: Runtime | None = None
         self._driver: WallClockDriver | None = None
-        self._modbus: ModbusServer | None = None
-        self._canopen: CanopenNode | None = None
+        # The adapters serving now, by their name in ncgate.gateway.adapters.ADAPTERS.
+        self.adapters: dict[str, Any] = {}
         self._trace_file: TraceFile | None = None
         self._cold = cold
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
@@ -171,22 +171,19 @@ class Gateway:
         stack.callback(self.stop_record)
         if self._record_path is not None:
             self.start_record(self._record_path)
-        adapters: list[Adapter] = []
-        if self.config.modbus.enabled:
-            self._modbus = ModbusServer(self.config.modbus, self.map, self)
-            adapters.append(self._modbus)
-        if self.config.canopen.enabled:
-            self._canopen = CanopenNode(self.config, self, self._canopen_clock)
-            adapters.append(self._canopen)
-        if self._console_wanted and self.config.web.enabled:
-            from ncgate.gateway.web.console import WebConsole  # aiohttp: only if served
-            self._console = WebConsole(self, self.config.web, self._web_default_port)
-            adapters.append(self._console)
-        for adapter in adapters:
+        # Each enabled adapter of the registry, in its order: its module is imported only
+        # now, and only if it is enabled (a cell without a console never loads aiohttp).
+        for name in ADAPTERS:
+            entry = plugin(name)
+            if not entry.enabled(self):
+                continue
+            adapter: Adapter = entry.factory(self)
+            self.adapters[name] = adapter
             await adapter.start()
             stack.push_async_callback(adapter.close)
-        if self._console is not None and self._console.address is None:
-            self._console = None  # an unset port that was taken: run goes on without it
+        console = self.adapters.get("web")
+        if console is not None and console.address is None:
+            del self.adapters["web"]  # an unset port that was taken: run goes on without it
         # The PLC scans from here: its first scan is due once the fieldbus is up, not while
         # the adapters start (which would make the next scans late from the start).
         plc = start_plc(self.config, runtime, self.door, closed=False, wall=driver.now,
@@ -203,40 +200,23 @@ class Gateway:
 
         plant = start_plant(runtime, self.door.apply_on_time, closed=False)
         stack.callback(plant.close)
+        plant.fieldbus_listeners.append(self._fieldbus_faults)
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
                                         wall=driver.now)
         if plant_logic is not None:
             plant.logic = plant_logic[0]
             stack.callback(plant_logic[1].close)
-        if self._modbus is not None:
-            plant.fieldbus_listeners.append(self._modbus_faults)
-        if self._canopen is not None:
-            plant.fieldbus_listeners.append(self._canopen_faults)
         ScriptPlayer(runtime, Script("<config>", ()), self.door, plant_faults(self.config)).arm()
         self._driver.settle()
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
 
-    def _canopen_faults(self, faults: list[Any]) -> None:
-        """The CANopen faults in force, handed to the node (docs/plant.md)."""
-        if self._canopen is None:
-            return
-        kinds = {f.kind: f for f in faults if f.target == "canopen"}
-        emcy = kinds.get("emcy")
-        self._canopen.set_faults("heartbeat_stop" in kinds, "pdo_stop" in kinds,
-                                 None if emcy is None else int(emcy.params["code"]))
-
-    def _modbus_faults(self, faults: list[Any]) -> None:
-        """The Modbus faults in force, handed to the server (docs/plant.md)."""
-        server = self._modbus
-        if server is None:
-            return
-        from ncgate.gateway.modbus.faults import ModbusFault
-
-        server.set_faults([ModbusFault(f.kind, code=int(f.params.get("code", 6)),
-                            ms=float(f.params.get("ms", 0.0)), unit=f.params.get("unit"),
-                            addresses=f.params.get("addresses"))
-                for f in faults if f.target == "modbus"])
+    def _fieldbus_faults(self, faults: list[Any]) -> None:
+        """The plant's fieldbus faults in force, to each adapter that takes them."""
+        for name, adapter in self.adapters.items():
+            take = plugin(name).faults
+            if take is not None:
+                take(adapter, faults)
 
     def _stop_loading(self) -> None:
         self.runtime.store.cancel()  # a child checking a big program is killed
@@ -307,13 +287,14 @@ class Gateway:
             if stack is not None:
                 await stack.aclose()
         finally:
-            self._console = self._modbus = self._canopen = None
+            self.adapters = {}
             self._driver = None
 
     @property
     def modbus_address(self) -> tuple[str, int]:
         """(host, port) the Modbus server listens on (port 0 in the config: a free one)."""
-        address = self._modbus.address if self._modbus is not None else None
+        server = self.modbus_server
+        address = server.address if server is not None else None
         if address is None:
             raise GatewayError("the Modbus server is not running (modbus.enabled = false? "
                                "modbus.tls.plain = false?)")
@@ -322,7 +303,8 @@ class Gateway:
     @property
     def modbus_tls_address(self) -> tuple[str, int]:
         """(host, port) of Modbus/TCP Security (``[modbus.tls]``)."""
-        address = self._modbus.tls_address if self._modbus is not None else None
+        server = self.modbus_server
+        address = server.tls_address if server is not None else None
         if address is None:
             raise GatewayError("Modbus/TCP Security is not on (modbus.tls.cert unset?)")
         return address
@@ -330,22 +312,26 @@ class Gateway:
     @property
     def web_address(self) -> tuple[str, int]:
         """(host, port) of the web console (``Gateway(..., console=True)``)."""
-        if self._console is None or self._console.address is None:
+        console = self.web_console
+        if console is None or console.address is None:
             raise GatewayError("the web console is not running (Gateway(config, console=True),"
                                " web.enabled = true?)")
-        return self._console.address
+        return console.address
 
     @property
     def web_console(self) -> WebConsole | None:
-        return self._console
+        console: WebConsole | None = self.adapters.get("web")
+        return console
 
     @property
     def modbus_server(self) -> ModbusServer | None:
-        return self._modbus
+        server: ModbusServer | None = self.adapters.get("modbus")
+        return server
 
     @property
     def canopen_node(self) -> CanopenNode | None:
-        return self._canopen
+        node: CanopenNode | None = self.adapters.get("canopen")
+        return node
 
     # -- what is inside -------------------------------------------------------------------
 

@@ -20,6 +20,7 @@ from ncgate.config import Config
 from ncgate.config.loader import DEFAULT_WEB_PORT
 from ncgate.config.script import Script
 from ncgate.errors import InputRefused
+from ncgate.gateway.adapters import plugin
 from ncgate.gateway.app import Gateway
 from ncgate.gateway.plc import LogicWatcher
 from ncgate.gateway.programs import CheckedFile
@@ -180,19 +181,9 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,
                      "started" if config.nc.autostart else "waits for cycle start")
-            server = gw.modbus_server
-            if server is not None:
-                units = ",".join(map(str, config.modbus.unit_ids))
-                if server.address is not None:
-                    log.info("Modbus TCP on %s:%d, unit ids %s, at most %d clients",
-                             *server.address, units, config.modbus.max_clients)
-                if server.tls_address is not None:
-                    log.info("Modbus/TCP Security (TLS) on %s:%d, roles %s", *server.tls_address,
-                             ", ".join(config.modbus.roles) or "none")
-            if gw.web_console is not None:
-                log.info("web console on %s%s%s", gw.web_console.url,
-                         " (read-only)" if config.web.read_only else "",
-                         " (writes need the token)" if config.web.token else "")
+            for name, adapter in gw.adapters.items():  # where each adapter serves
+                for line in plugin(name).describe(adapter):
+                    log.info("%s", line)
             if gw.recorder is not None:
                 log.info("recording the session to %s", gw.recorder.path)
             watcher = _watch(gw, config, loop) if watch else None

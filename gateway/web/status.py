@@ -24,7 +24,6 @@ from ncgate.plc.st.types import ArrayOf, FbOf, Type
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
-    from ncgate.gateway.canopen.pdo import Pdos
 
 WATCH_LIMIT = 200  # ST variables the status shows (the first ones, in declaration order)
 
@@ -153,48 +152,21 @@ def plain(value: Any, t: Type, fb_vars: dict[str, dict[str, ProgramVar]]) -> Any
 
 
 def fieldbus(gw: Gateway) -> dict[str, Any]:
-    out: dict[str, Any] = {"modbus": None, "canopen": None}
-    server = gw.modbus_server
-    if server is not None:
-        out["modbus"] = {
-            "address": list(server.address) if server.address else None,
-            "tls_address": list(server.tls_address) if server.tls_address else None,
-            "clients": sorted(c.source.peer or c.source.detail for c in server.connections),
-            "max_clients": server.config.max_clients,
-            # The plant's Modbus faults in force and what they did (docs/plant.md).
-            "faults": [{"kind": f.kind, "code": f.code, "ms": f.ms, "unit": f.unit,
-                        "addresses": list(f.addresses) if f.addresses else None}
-                       for f in server.faults],
-            "fault_counts": server.fault_counts,
-        }
-    node = gw.canopen_node
-    if node is not None:
-        heartbeats = node.heartbeats
-        out["canopen"] = {
-            "node_id": gw.config.canopen.node_id,
-            "nmt": node.node.nmt.state,  # its name, e.g. "PRE-OPERATIONAL"
-            "heartbeat_ms": gw.config.canopen.heartbeat_ms,
-            "masters_lost": list(heartbeats.lost_nodes) if heartbeats is not None else [],
-            "sync": sync_status(node.pdos),
-        }
+    """Each registered adapter's status (ncgate.gateway.adapters), by its name; None for one
+    that does not run.  The console itself has none."""
+    from ncgate.gateway.adapters import ADAPTERS, plugin
+
+    out: dict[str, Any] = {}
+    for name in ADAPTERS:
+        adapter = gw.adapters.get(name)
+        if adapter is None:
+            if name != "web":
+                out[name] = None
+            continue
+        shown = plugin(name).status(adapter)
+        if shown is not None:
+            out[name] = shown
     return out
-
-
-def sync_status(pdos: Pdos) -> dict[str, Any]:
-    """How the node kept up with the SYNC: the SYNCs it answered with TPDOs, the longest
-    time from a SYNC's arrival to its TPDOs sent and how many took longer than each bound,
-    the synchronous TPDOs it dropped (their SYNC handled too late) and the synchronous
-    RPDOs that came outside the window (0x1007)."""
-    from ncgate.gateway.canopen.pdo import SYNC_LATENCY_BOUNDS  # only with a node
-
-    return {
-        "answered": pdos.sync_answered,
-        "latency_max_ms": round(pdos.sync_latency_max * 1000, 3),
-        "later_than_ms": {f"{bound * 1000:g}": n for bound, n
-                          in zip(SYNC_LATENCY_BOUNDS, pdos.sync_latency_over, strict=True)},
-        "tpdos_dropped": pdos.sync_dropped,
-        "rpdos_late": pdos.sync_late_rpdos,
-    }
 
 
 def image_status(gw: Gateway) -> dict[str, Any]:
