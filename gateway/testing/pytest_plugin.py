@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
     from ncgate.gateway.testing.canopen_kit import CanopenMaster
     from ncgate.gateway.testing.modbus_kit import VirtualPLC
+    from ncgate.gateway.testing.plant_kit import PlantKit
     from ncgate.gateway.testing.plc_kit import PlcWatch
 
 try:
@@ -162,6 +163,15 @@ if HAVE_PYTEST_ASYNCIO:
 
         return PlcWatch(ncgate_gateway)
 
+    @pytest.fixture
+    def plant(ncgate_gateway: Gateway) -> PlantKit:
+        """The gateway's plant (docs/plant.md): ``await plant.fault("clamp", "never")``,
+        ``await plant.clear()``, ``plant.state("clamp")``, ``await plant.wait_state(...)``;
+        beside ``virtual_plc``, the faults act on what the PLC reads over Modbus."""
+        from ncgate.gateway.testing.plant_kit import PlantKit
+
+        return PlantKit(ncgate_gateway)
+
     @pytest_asyncio.fixture
     async def virtual_plc(ncgate_gateway: Gateway) -> AsyncIterator[VirtualPLC]:
         """A Modbus client connected to ``ncgate_gateway``, with PLC helpers."""
@@ -188,4 +198,8 @@ else:
 
     @pytest.fixture
     def virtual_plc() -> None:
+        pytest.fail(_MISSING)
+
+    @pytest.fixture
+    def plant() -> None:
         pytest.fail(_MISSING)
