@@ -107,6 +107,24 @@ def search_inputs(word: int, n: int, runtime: Runtime, source: Source) -> list[I
     return [Break(b.text, False, source) for b in runtime.engine.breakpoints]
 
 
+def only_releases_hold(runtime: Runtime, item: Command) -> str | None:
+    """What to tell whoever gave ``item`` when it is a cycle start that only releases a feed
+    hold (an interlock's, which holds an idle cell too) while the process it would start
+    is idle: it starts nothing, and a second cycle start starts the program
+    (docs/interfacing-a-plc.md).  None: any other command, or a cycle start that starts."""
+    if item.kind is not CommandKind.CYCLE_START:
+        return None
+    engine = runtime.engine
+    number = 1 if item.process is None else item.process
+    p = engine.processes.get(number)
+    targets = engine.processes.values() if item.process is None else (p,) if p else ()
+    if p is None or not any(t.held for t in targets) or p.external or p.loaded is not None:
+        return None
+    main = engine.main_of(number)
+    then = f": a second cycle start starts {main}" if main and p.alarm is None else ""
+    return f"released the feed hold; P{number} is idle and nothing started{then}"
+
+
 ImageChange = tuple[str, int, str, int]
 # Forced variables, the image's and the PLC logic's together: each forced PLC variable is set
 # twice a scan, and 9,600 of them took a scan to 41 ms at scan_ms 10 (docs/decisions.md).
@@ -228,17 +246,38 @@ class Door:
             raise InputRefused(Reason.UNKNOWN_PROCESS, f"no process {number!r} (1.."
                                f"{len(processes)})")
 
-    def _command(self, item: Command) -> None:
+    def _command_check(self, item: Command) -> CommandKind:
+        """Every refusal of a command, none of which depends on a program: the word, a
+        process where only the cell's is taken, the PLC logic a restart or a reload needs,
+        the interlocks of a cycle start or a step, the process known and not external."""
         kind = command_kind(item.kind)
         process = item.process
-        engine = self.runtime.engine
         if kind in _CELL_ONLY and process is not None:
             raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's (process null)")
+        if kind is CommandKind.RESTART_PLC and self._plc() is None:
+            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
+        if kind is CommandKind.RELOAD_PLC and (self._plc() is None or self.reload_plc is None):
+            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to reload ([plc] logic)")
+        if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
+            self._interlocks(kind)
+        if process is not None:  # (a cell-only command of a process is refused above)
+            self._own_process(process, kind.label)
+        return kind
+
+    def _command(self, item: Command) -> None:
+        kind = self._command_check(item)
+        process = item.process
+        engine = self.runtime.engine
         if kind is CommandKind.RESTART_PLC:
-            self._restart_plc(item)
+            self._enter(item)
+            plc = self._plc()
+            assert plc is not None  # (checked)
+            plc.restart()  # after a FAULT; a running one is left alone, the NC untouched
             return
         if kind is CommandKind.RELOAD_PLC:
-            self._reload_plc(item)
+            self._enter(item)  # a load error is no refusal: the old logic runs on, and the
+            assert self.reload_plc is not None  # diagnostics are in the log and plc_reload
+            self.reload_plc(str(item.source))
             return
         if kind is CommandKind.RUN_TO_SYNC:
             self._enter(item)
@@ -248,10 +287,6 @@ class Door:
             self._enter(item)
             engine.switch(**_SWITCHES[kind])
             return
-        if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
-            self._interlocks(kind)
-        if process is not None:
-            self._own_process(process, kind.label)
         self._enter(item)
         if kind is CommandKind.CYCLE_START:
             engine.cycle_start(by=str(item.source), process=process)
@@ -369,25 +404,6 @@ class Door:
         self._enter(item)
         self.runtime.engine.override(item.feed, item.rapid, item.process)
 
-    def _restart_plc(self, item: Command) -> None:
-        """The PLC logic starts again after a FAULT (a running one is left alone); the NC
-        processes and their waits are untouched."""
-        plc = self._plc()
-        if plc is None:
-            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
-        self._enter(item)
-        plc.restart()
-
-    def _reload_plc(self, item: Command) -> None:
-        """Online change: ``[plc] logic`` read again and swapped in now, between two scans
-        (``reload_plc``, set by ``start_plc``).  A load error is no refusal: the command
-        was taken, the old logic runs on, and the diagnostics are in the log and the
-        trace's ``plc_reload``."""
-        if self._plc() is None or self.reload_plc is None:
-            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to reload ([plc] logic)")
-        self._enter(item)
-        self.reload_plc(str(item.source))
-
     def _feed_hold_input(self, changes: object, writer: str) -> None:
         """The feed-hold input (nc.feed_hold_input) rose, by any write of its bit, byte or
         word: the cell holds, as on a feed hold.  It resumes with a cycle start once the input
@@ -433,10 +449,14 @@ class Door:
         engine.external_snd(item.sender, item.target)
 
     def precheck(self, item: Input) -> None:
-        """What of ``item`` can be refused before its program is read (a start: the program
-        named, the process able to take it); InputRefused, or nothing."""
+        """What of ``item`` can be refused before its program is read, so that a fieldbus
+        answers it: a start's program named and process able to take it; every refusal of a
+        command (interlocks, the process known and not external: none depends on a
+        program).  InputRefused, or nothing."""
         if type(item) is Start:
             self._start_check(item)
+        elif type(item) is Command:
+            self._command_check(item)
 
     def _start_check(self, item: Start) -> str:
         runtime = self.runtime

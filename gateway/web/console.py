@@ -39,6 +39,7 @@ from aiohttp import web
 
 from ncgate.config.loader import WebConfig, is_loopback
 from ncgate.errors import InputRefused, Reason
+from ncgate.gateway.door import only_releases_hold
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
@@ -628,6 +629,9 @@ class WebConsole:
             item = Start(program, process, source, at, with_calc)
         if isinstance(item, Command) and item.kind is CommandKind.RELOAD_PLC:
             return await self._reload_plc(item, request)
+        # (asked before it acts: after it, the hold is gone)
+        released = only_releases_hold(self.gw.runtime, item) if isinstance(item, Command) \
+            else None
         try:
             await self.gw.apply_async(item)  # a program is read off the loop
         except InputRefused as exc:
@@ -636,6 +640,9 @@ class WebConsole:
             log.info("web %s: start %s in P%d", request.remote, program, process)
             return web.json_response({"command": command, "program": program,
                                       "process": process})
+        if released is not None:
+            log.info("web %s: %s %s", request.remote, command, released)
+            return web.json_response({"command": command, "message": released})
         log.info("web %s: %s", request.remote, command)
         return web.json_response({"command": command})
 
