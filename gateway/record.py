@@ -85,6 +85,9 @@ COMPARED: dict[str, tuple[str, ...]] = {
     "exe": ("to", "target_prog"), "end": ("how",), "alarm": ("code",),
     # The auxiliary functions' handshake ([nc.aux]): each output and its acknowledge.
     "aux": ("code", "handshake"), "aux_ack": ("code",),
+    # Where the operator's stops stand: a single-block, step, M00/M01 or breakpoint stop, a
+    # step given, a feed hold on or off (a replay that stops elsewhere diverged).
+    "stop": ("cause",), "step": (), "hold": ("on",),
 }
 EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display", "signal",
                     "plc_reload",

@@ -99,6 +99,12 @@ def describe(event: Event) -> str | None:
         return f"P{proc} outputs {event.code} ({event.handshake}){at}"
     if isinstance(event, ev.AuxAck):
         return f"P{proc} {event.code} acknowledged by {event.by}{at}"
+    if isinstance(event, ev.Stop):
+        return f"P{proc} stopped after a block ({event.cause}){at}"
+    if isinstance(event, ev.Step):
+        return f"P{proc} steps{at}"
+    if isinstance(event, ev.Hold):
+        return f"P{proc} feed hold {'on' if event.on else 'off'}{at}"
     return None
 
 

@@ -72,6 +72,9 @@ from ncgate.interpreter.settings import RuntimeSettings
 
 NEXT, WAIT_NEXT, WAIT_RETRY, JUMP = Step.NEXT, Step.WAIT_NEXT, Step.WAIT_RETRY, Step.JUMP
 ActionHandler = Callable[[Process, Stage, Any, Where], bool]
+# A stop after a block as the stall report words its cause (Process.stopped).
+_STOPS = {"single_block": "single block", "step": "a step", "M00": "M00", "M01": "M01",
+          "break": "a breakpoint"}
 _new = tuple.__new__  # a NamedTuple without its generated __new__ (the SND/WAI hot path)
 
 
@@ -219,9 +222,14 @@ class Engine:
         held = self._any_held(process)
         for p in self._targets(process):
             p.step_once = False  # a breakpoint's pending stops: the cell goes on
+            p.stop_why = None
         if held:  # a hold and a stop after a block (a breakpoint's) go on together
             self.hold(False, process)
-        if self._release_steps(process) or held:
+            # A decoder that stopped ahead of the held motion (M00 after a move) keeps its
+            # stop: the machine has not felt it yet, and this start was the hold's.
+            self._release_steps(process, felt=True)
+            return
+        if self._release_steps(process):
             return
         number = 1 if process is None else process
         main = self.cycle_start_program(process)
@@ -256,14 +264,19 @@ class Engine:
         """The processes a command of the cell (None) or of one process acts on."""
         return self.processes.values() if process is None else (self.processes[process],)
 
-    def _release_steps(self, process: int | None) -> bool:
+    def _release_steps(self, process: int | None, only: str | None = None,
+                       felt: bool = False) -> bool:
         """Processes stopped after a block (single block) run their next block: True when
-        there was one."""
+        there was one.  ``only``: just those stopped for that cause (``Process.stopped``);
+        ``felt``: just those whose stop the machine has felt (STEP told) or a breakpoint's."""
         targets = self._targets(process)
         released = False
         for p in targets:
-            if p.dec_block is DecoderHold.STEP:
+            if p.dec_block is DecoderHold.STEP and (only is None or p.stopped == only) and (
+                    not felt or p.stop_told or p.stopped == "break"):
                 p.dec_block = None
+                p.stopped = None
+                p.stop_told = False
                 self._update_state(p)
                 self._make_runnable(p)
                 released = True
@@ -297,6 +310,7 @@ class Engine:
             if bp.at_block and bp.matches_block(p.number, file, line, n):
                 p.break_passed = pc
                 p.dec_block = DecoderHold.STEP
+                p.stopped = "break"
                 self._update_state(p)
                 self._hit(bp, p.number, where)
                 return True
@@ -320,6 +334,8 @@ class Engine:
         self._record(ev.Break, self.now, proc, where, bp.text)
         for p in self.processes.values():
             if p.loaded is not None and p.alarm is None and p.dec_block is not DecoderHold.STEP:
+                if not p.step_once:
+                    p.stop_why = "break"
                 p.step_once = True
         self.hold(True)
 
@@ -328,6 +344,7 @@ class Engine:
         stops after this block, its motion done (STEP), until a cycle start."""
         if not optional or self.optional_stop:
             p.step_once = True
+            p.stop_why = "M01" if optional else "M00"
 
     def switch(self, optional_stop: bool | None = None, block_skip: bool | None = None) -> None:
         """The operator's switches.  Block skip acts on the blocks decoded from now on (the
@@ -341,13 +358,14 @@ class Engine:
 
     def single_block(self, on: bool, process: int | None = None) -> None:
         """Single-block mode of one process or the cell: after each block the process stops
-        (STEP) until a cycle start; off, a process stopped so goes on."""
+        (STEP) until a cycle start; off, a process stopped by single block goes on.  A stop
+        of M00, M01, a step or a breakpoint stays: only NC start leaves it, as on a control."""
         targets = self._targets(process)
         for p in targets:
             if not p.external:
                 p.single_block = on
         if not on:
-            self._release_steps(process)
+            self._release_steps(process, only="single_block")
 
     def step(self, process: int | None = None) -> None:
         """Exactly one more block: a process stopped after a block runs its next one and stops
@@ -356,6 +374,8 @@ class Engine:
             if p.loaded is None or p.alarm is not None or p.external:
                 continue
             p.step_once = True
+            p.stop_why = "step"
+            self._record(ev.Step, self.now, p.number, p.where)
             self._release_steps(p.number)
 
     def _any_held(self, process: int | None) -> bool:
@@ -368,6 +388,8 @@ class Engine:
         for p in targets:
             if p.external or p.held == on:
                 continue
+            self._record(ev.Hold, self.now, p.number,
+                         p.where if p.loaded is not None else None, on)
             if on:
                 p.held = True
                 if p.int_timer is not None:
@@ -525,7 +547,8 @@ class Engine:
                 out.append(Blocked(p.number, *p.where, "held (a feed hold or a breakpoint's "
                                    "stop): a cycle start goes on"))
             elif p.dec_block is DecoderHold.STEP:
-                out.append(Blocked(p.number, *p.where, "stopped after a block (single block): "
+                why = _STOPS.get(p.stopped or "", "single block")
+                out.append(Blocked(p.number, *p.where, f"stopped after a block ({why}): "
                                    "a cycle start or a step runs the next"))
             else:
                 out.append(Blocked(p.number, *p.where, "blocked"))
@@ -727,6 +750,11 @@ class Engine:
             self.last_change = self.now
             self._account(p)
             old, p.state = p.state, state
+            if state is ProcessState.STEP and not p.stop_told and p.stopped is not None:
+                # The stop the machine feels: the block done and its motion run.  Told once
+                # (a feed hold over it and its release come back to STEP).
+                p.stop_told = True
+                self._record(ev.Stop, self.now, p.number, p.where, p.stopped)
             if self.state_listeners:  # copied: a listener may unsubscribe
                 for listener in list(self.state_listeners):
                     listener(p, old)
@@ -807,8 +835,16 @@ class Engine:
                 p.block = None
                 if block.counted:  # blocks as the statistics count them: not empty lines
                     budget -= 1
+                    p.last_where = block.where
                     if p.single_block or p.step_once:  # stop here until a cycle start
+                        # A program's or a breakpoint's stop is its own; in single block a
+                        # step's is single block's (the mode going off ends it).
+                        why = p.stop_why if p.step_once else None
+                        if why is None or (why == "step" and p.single_block):
+                            why = "single_block"
                         p.step_once = False
+                        p.stop_why = None
+                        p.stopped = why
                         p.dec_block = DecoderHold.STEP
                         self._update_state(p)
                         return

@@ -400,10 +400,54 @@ class FaultClear(NamedTuple):
         return "fault_clear"
 
 
+class Stop(NamedTuple):
+    """The process stopped after a block (``where``), until a cycle start (or a step):
+    ``cause`` "single_block", "step", "M00", "M01" or "break" (a breakpoint's stop: at the
+    block before the breakpoint's, or, for the other processes, after the block each was in)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    cause: str
+
+    @property
+    def kind(self) -> str:
+        return "stop"
+
+
+class Step(NamedTuple):
+    """A step was given to the process: it runs one more block and stops again."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+
+    @property
+    def kind(self) -> str:
+        return "step"
+
+
+class Hold(NamedTuple):
+    """A feed hold of the process went on (``on``) or off (a cycle start): ``where`` is where
+    its decoder stands (None: no program)."""
+
+    seq: int
+    t: float
+    proc: int
+    where: Where | None
+    on: bool
+
+    @property
+    def kind(self) -> str:
+        return "hold"
+
+
 Event = (Start | Wait | Resume | Snd | Exe | End | Write | Alarm | Deadlock | Stall | Hazard
          | PlcReload
          | Display | Signal | Remove | Override | Break | Force | Forced | Aux | AuxAck
-         | Fault | FaultClear)
+         | Fault | FaultClear | Stop | Step | Hold)
 # A field whose JSON key differs from its name (an event's own ``kind`` is its type's).
 _KEYS: Final = {"fault_kind": "kind"}
 # Events that count on the fieldbus event counter (spec 3.2: input registers 2, 3); a signal

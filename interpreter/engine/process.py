@@ -106,6 +106,15 @@ class Process:
         self.sync_i = 0
         self.dec_timer: Timer | None = None  # nc.block_time_ms: the block's processing time
         self.step_once = False  # a step: stop after the next block, single block or not
+        # Why the next stop after a block comes (with step_once): "step", "M00", "M01",
+        # "break"; and why the process stands stopped after a block now (DecoderHold.STEP):
+        # that, or "single_block".  Only a single block's stop ends when the mode goes off.
+        self.stop_why: str | None = None
+        self.stopped: str | None = None
+        self.stop_told = False  # its stop event is in the trace
+        # The last block the decoder finished: where the process stands between blocks (the
+        # block N and line a single-block stop, a breakpoint or M00 show).
+        self.last_where: Where | None = None
         self.break_passed = -1  # the line index a block breakpoint stopped before (passed once)
         # Runaway detection: blocks decoded since the engine last stood still (its epoch).
         self.spin = 0
@@ -121,7 +130,10 @@ class Process:
     def where(self) -> Where:
         if self.block is not None:
             return self.block.where
-        if self.loaded is not None:  # between blocks: the line the decoder is at
+        if self.loaded is not None:
+            if self.last_where is not None:  # between blocks: the block it stopped after
+                return self.last_where
+            # not a block finished yet: the line the decoder is at
             return (self.loaded.file, min(self.pc + 1, self.loaded.length), None)
         return ("", 0, None)
 

@@ -178,7 +178,7 @@ def test_sim_single_block_goes_on_with_the_scripts_steps(tmp_path: Path) -> None
     assert writes == [(0.0, 1), (1.0, 2), (2.5, 3)]
     assert [e["t"] for e in events if e["event"] == "end"] == [4.0]
     code, events, out = sim()  # no script: it stops after N1 for good
-    assert code == 1 and "A.nc:2" in out and "single block" in out
+    assert code == 1 and "A.nc:1 N1" in out and "single block" in out  # stopped after N1
 
 
 def test_a_script_command_that_does_not_exist_names_its_entry(tmp_path: Path) -> None:
@@ -499,5 +499,6 @@ async def test_a_session_using_every_control_replays_as_recorded(tmp_path: Path)
     kinds = {json.loads(line).get("input") for line in record.read_text().splitlines()}
     assert {"command", "override", "break"} <= kinds
     result = replay(record)
-    # Two starts and two ends compared, at their times: the stops and the 200 % move shaped them.
-    assert result.divergence is None and result.compared == 4, result.divergence
+    # Two starts and two ends compared, at their times: the stops and the 200 % move shaped
+    # them; and the stops themselves (single block, M01, the step's) and the step.
+    assert result.divergence is None and result.compared == 8, result.divergence
