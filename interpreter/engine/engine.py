@@ -550,6 +550,13 @@ class Engine:
                 why = _STOPS.get(p.stopped or "", "single block")
                 out.append(Blocked(p.number, *p.where, f"stopped after a block ({why}): "
                                    "a cycle start or a step runs the next"))
+            elif p.int_remaining is not None and p.int_move is not None:
+                # Not held, yet the timed item stands: its override is 0 % (_arm_item).
+                move = p.int_move.move
+                which = "rapid" if move is not None and move.rapid else "feed"
+                out.append(Blocked(p.number, *p.int_move.where,
+                                   f"{which} override 0 %: the move stands until the "
+                                   "override is raised"))
             else:
                 out.append(Blocked(p.number, *p.where, "blocked"))
         return tuple(out)

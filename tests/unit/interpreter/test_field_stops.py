@@ -94,6 +94,31 @@ def test_single_block_off_still_releases_a_single_block_stop() -> None:
     assert engine.status(1).state is ProcessState.IDLE and sim.image.read("SYVAR", 1, "IN") == 1
 
 
+# --- item 7: a stall under a 0 % override names the standing move --------------------------
+
+
+def test_a_stall_under_zero_rapid_override_names_the_move() -> None:
+    sim = make_sim({"A": "N10G0X100\nN20G1X0F600\nN30M30\n"})
+    engine = sim.engine
+    engine.override(rapid=0)
+    engine.start("A")
+    assert sim.run() == "blocked"
+    (blocked,) = engine.blocked()
+    assert (blocked.proc, blocked.line, blocked.n) == (1, 1, 10)
+    assert blocked.reason.startswith("rapid override 0 %")
+
+
+def test_a_stall_under_zero_feed_override_names_the_move() -> None:
+    sim = make_sim({"A": "N10G1X10F600\nN20E1=1\nN30M30\n"})
+    engine = sim.engine
+    engine.override(feed=0)
+    engine.start("A")
+    assert sim.run() == "blocked"
+    (blocked,) = engine.blocked()
+    assert (blocked.line, blocked.n) == (1, 10)
+    assert blocked.reason.startswith("feed override 0 %")
+
+
 # --- item 11: stops, steps and feed holds are trace events ---------------------------------
 
 
