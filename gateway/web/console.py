@@ -388,8 +388,12 @@ class WebConsole:
         ``syvar`` and ``writers`` apart), built at most once per STATUS_EVERY_S for every
         stream; a stream sends the parts that changed since it last sent them."""
         gw = self.gw
-        key = (gw.runtime.trace.seq, gw.image.generation, int(gw.engine.now * 1000))
         now = asyncio.get_running_loop().time()
+        # What the status shows changes with the trace, the image and the clock -- and, while
+        # the cell is idle and none of those move, with what is not traced: a record started
+        # or stopped, the breakpoints set; anything else at the latest a second later.
+        key = (gw.runtime.trace.seq, gw.image.generation, int(gw.engine.now * 1000),
+               id(gw.recorder), len(gw.engine.breakpoints), int(now))
         cached = self._status_cache
         if cached is None or (cached[0] != key and now - cached[1] >= STATUS_EVERY_S / 2):
             if self._live is None:

@@ -709,3 +709,26 @@ async def test_the_streams_status_built_from_changes_equals_the_whole_status() -
             assert image(live.parts()) == image(whole()), var
         assert "10.0.0.9" in live.parts()["image.writers"]
         live.close()
+
+
+async def test_an_idle_cells_page_hears_of_a_record_started(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The built-in cell without PLC logic stands still: no event, no write, no clock.  A
+    record started from the page still reaches every stream's status (it stayed "Record"
+    for 18 s, and a second click was refused)."""
+    monkeypatch.chdir(tmp_path)  # where run puts a record started from the page
+    async with await console() as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with http.get("/api/stream") as r:
+                stream = read_sse(r)
+                _, status = await next_of(stream, "status")
+                assert status.get("record") is None
+                async with http.post("/api/record", json={"on": True}) as answer:
+                    assert answer.status == 200
+                    path = (await answer.json())["record"]
+                while True:  # (next_of gives up after 10 s: the page never heard of it)
+                    _, status = await next_of(stream, "status")
+                    if status.get("record") == path:
+                        break
+            assert gw.stop_record() == Path(path)
