@@ -110,3 +110,8 @@ class DialectPlugin(Protocol):
               process: int | None) -> Mapping[Path, Sequence[Diagnostic]]:
         """``ncgate check``: every diagnostic of each file (a file that cannot be read has
         that diagnostic), ``process`` being the one they run in when given."""
+
+    def sync_statements(self, path: Path) -> int:
+        """How many synchronisation statements this dialect's reading of the file holds
+        (NC-110: EXE, REL, WAI, SND; ISG: #SIGNAL, #WAIT, #FLUSH): a hint that the file is
+        in this dialect must not drop the ones the file was written with."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import glob
 import logging
+import re
 import time
 from collections import defaultdict
 from collections.abc import Sequence
@@ -115,15 +116,33 @@ def check_files(
 
 def other_dialect(paths: Sequence[Path], config: Config, which: Dialect) -> Dialect | None:
     """Another dialect that reads every one of ``paths`` without an error, which ``which``
-    did not: the files are most likely in that language (an ISG file given to NC-110)."""
+    did not, and keeps their synchronisation: the files are most likely in that language
+    (an ISG file given to NC-110).  ISG reads ``(…)`` as a comment, so nearly every NC-110
+    program "reads" as ISG -- with every EXE, WAI, SND and REL gone: a dialect is named only
+    when its reading holds at least as many sync statements as the text has such codes."""
     for other in Dialect:
         if other is which:
             continue
-        found = dialect_of(other).check(list(paths), dialect_options(config, other),
-                                        storage_of(config), None)
-        if not any(d.is_error for path in paths for d in found.get(path, ())):
+        plugin = dialect_of(other)
+        found = plugin.check(list(paths), dialect_options(config, other), storage_of(config),
+                             None)
+        if any(d.is_error for path in paths for d in found.get(path, ())):
+            continue
+        if all(plugin.sync_statements(path) >= _sync_codes(path) for path in paths):
             return other
     return None
+
+
+# NC-110's synchronisation codes as a file's text has them, whatever reads it: what a reading
+# in another dialect must keep (the engine's notation, not a dialect's branch).
+_SYNC_CODE = re.compile(r"\(\s*(?:EXE|WAI|SND|REL)\b", re.IGNORECASE)
+
+
+def _sync_codes(path: Path) -> int:
+    try:
+        return len(_SYNC_CODE.findall(path.read_text(encoding="utf-8", errors="replace")))
+    except OSError:
+        return 0
 
 
 def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:

@@ -24,6 +24,7 @@ from ncgate.interpreter.dialect import (
 )
 from ncgate.interpreter.isg.checker import IsgCheckContext, check_file
 from ncgate.interpreter.isg.frontend import IsgFrontEnd, IsgOptions
+from ncgate.interpreter.isg.nodes import Flush, Signal, WaitSignal
 from ncgate.interpreter.isg.parser import IsgFile, IsgProgram
 from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import Storage, file_version
@@ -105,6 +106,14 @@ class IsgDialect:
             except ProgramSyntaxError as exc:  # not UTF-8
                 out[path] = exc.diagnostics
         return out
+
+    def sync_statements(self, path: Path) -> int:
+        try:
+            blocks = IsgFile.from_path(path).blocks
+        except ProgramSyntaxError:
+            return 0
+        return sum(isinstance(item, Signal | WaitSignal | Flush)
+                   for block in blocks if block is not None for item in block.items)
 
 
 DIALECT: DialectPlugin = IsgDialect()

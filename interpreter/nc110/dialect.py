@@ -23,7 +23,7 @@ from ncgate.interpreter.dialect import (
 )
 from ncgate.interpreter.nc110.checker import CheckContext, Limits, check_program
 from ncgate.interpreter.nc110.compiler import NC110, exe_scan
-from ncgate.interpreter.nc110.nodes import Exe, Num
+from ncgate.interpreter.nc110.nodes import Exe, Num, Rel, Snd, WaitCond, WaitProc
 from ncgate.interpreter.nc110.parser import Program
 from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import Storage, file_version, program_name
@@ -180,6 +180,14 @@ class Nc110Dialect:
             runs_in = {process} if process is not None else runs.get(program.name.upper(), set())
             out[path] = check_program(program, check_context(options, storage, runs_in))
         return out
+
+    def sync_statements(self, path: Path) -> int:
+        try:
+            blocks, _ = Program.from_path(path).parse_all()
+        except ProgramSyntaxError:
+            return 0
+        return sum(isinstance(item, Exe | Rel | WaitProc | WaitCond | Snd)
+                   for block in blocks if block is not None for item in block.items)
 
 
 DIALECT: DialectPlugin = Nc110Dialect()

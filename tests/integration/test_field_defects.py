@@ -1,0 +1,41 @@
+"""What the field found (the issue "What the field found"): the CLI's and the config's side
+of each defect, through the real commands."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ncgate.gateway.cli.main import main
+
+# --- item 8: the dialect hint keeps the sync codes --------------------------------------------
+
+
+def _cell(tmp_path: Path, programs: dict[str, str], dialect: str = "nc110") -> str:
+    (tmp_path / "ncgate.toml").write_text(
+        f'[nc]\ndialect = "{dialect}"\nmain = "A"\nprocesses = 3\n[nc.storage]\nMP0 = "."\n')
+    for name, text in programs.items():
+        (tmp_path / f"{name}.nc").write_text(text)
+    return str(tmp_path / "ncgate.toml")
+
+
+def test_no_isg_hint_for_an_nc110_error_whose_sync_codes_isg_would_drop(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # An NC-110 program with an error (>= is no NC-110 comparison): ISG reads its
+    # (EXE,…) and (WAI,…) as comments, so "reads without error as isg" would drop them.
+    config = _cell(tmp_path, {"A": "N1(EXE,2,B)\nN2(WAI,SYVAR2>=5)\nN3(WAI,2)\nN4M30\n",
+                              "B": "N1(SND,1)\nN2M30\n"})
+    assert main(["check", str(tmp_path / "A.nc"), "--config", config]) == 1
+    out, err = capsys.readouterr()
+    assert "error NC002" in out
+    assert "--dialect isg" not in err
+    assert main(["sim", "A", "--config", config]) == 2
+    assert "--dialect isg" not in capsys.readouterr().err
+
+
+def test_the_hint_still_names_isg_for_a_file_without_nc110_sync_codes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = _cell(tmp_path, {"A": "N10 G01 X10 F600\nN20 #SIGNAL[ID1]\nN30 M30\n"})
+    assert main(["check", str(tmp_path / "A.nc"), "--config", config]) == 1
+    assert "reads without error as isg: give --dialect isg" in capsys.readouterr().err
