@@ -90,10 +90,22 @@ MATH_FUNCTIONS = ("EXP", "LN", "LOG", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN
 # The character string functions (6.6.2.5.11, Table 43).
 STRING_FUNCTIONS = ("LEN", "LEFT", "RIGHT", "MID", "CONCAT", "INSERT", "DELETE", "REPLACE",
                     "FIND")
+# MUL_TIME and DIV_TIME (Table 30), and their 2nd-edition names: TIME * or / a number.
+TIME_FUNCTIONS = {"MUL_TIME": "*", "DIV_TIME": "/", "MULTIME": "*", "DIVTIME": "/"}
 STD_FUNCTIONS = ("ABS", "MIN", "MAX", "LIMIT", "SEL", "MUX", "SHL", "SHR", "ROL", "ROR",
                  "SQRT", "EXPT", "TRUNC", "MOVE", "CONCAT_DATE_TOD", "LOWER_BOUND",
                  "UPPER_BOUND", *MATH_FUNCTIONS,
-                 *STRING_FUNCTIONS)
+                 *STRING_FUNCTIONS, *TIME_FUNCTIONS)
+# The formal names of the standard functions' inputs (IEC 61131-3, Tables 22 to 31), for a
+# call that names them: SEL(G := g, IN0 := a, IN1 := b).  A name ending in "*" numbers the
+# inputs from there on: MAX(IN1 := a, IN2 := b, IN3 := c), MUX(K := k, IN0 := a, IN1 := b).
+FORMAL_INPUTS: dict[str, tuple[str, ...]] = {
+    **{name: ("IN",) for name in ("ABS", "SQRT", "TRUNC", "MOVE", *MATH_FUNCTIONS)},
+    "EXPT": ("IN1", "IN2"), "SHL": ("IN", "N"), "SHR": ("IN", "N"), "ROL": ("IN", "N"),
+    "ROR": ("IN", "N"), "SEL": ("G", "IN0", "IN1"), "LIMIT": ("MN", "IN", "MX"),
+    "MIN": ("IN1*",), "MAX": ("IN1*",), "MUX": ("K", "IN0*"),
+    "CONCAT_DATE_TOD": ("IN1", "IN2"), **{name: ("IN1", "IN2") for name in TIME_FUNCTIONS},
+}
 # IEC 61131-3 types and standard functions outside the subset: ST031, not "unknown".
 UNSUPPORTED_TYPES = ("LDATE", "LTOD", "LDT", "LDATE_AND_TIME", "LTIME_OF_DAY")
 UNSUPPORTED_FUNCTIONS: tuple[str, ...] = ()
@@ -1019,9 +1031,9 @@ class Compiler:
                                          f"{t}, the global is {found.type}", decl.span)
                     info.externals.add(key)
                     continue
-                if decl.qualifier == "RETAIN" and pou.kind != "PROGRAM":
-                    raise self.error(StCode.UNSUPPORTED, "RETAIN variables belong in a "
-                                     "PROGRAM", decl.span)
+                if decl.qualifier == "RETAIN" and pou.kind == "FUNCTION":
+                    raise self.error(StCode.UNSUPPORTED, "a FUNCTION keeps nothing from one "
+                                     "call to the next: no RETAIN variables", decl.span)
                 if decl.section == "VAR_IN_OUT" and (decl.initial is not None or _holds_fb(t)):
                     raise self.error(StCode.UNSUPPORTED, "a VAR_IN_OUT is a reference to the "
                                      "caller's variable: no initial value, no function block",
@@ -1730,6 +1742,18 @@ class Compiler:
                                      "process ([[nc.process]] external = true)", arg.span)
         self.out.emit(f"_NC_SEND({codes[0]}, {codes[1]}, {nc_where(s.span)!r})", s.span)
 
+    def retains(self, t: Type) -> bool:
+        """Whether a variable of type ``t`` holds an instance of a FUNCTION_BLOCK that
+        declares RETAIN (or PERSISTENT) variables: as CODESYS does, the whole instance is
+        then retained (docs/plc.md)."""
+        while isinstance(t, ArrayOf):
+            t = t.element
+        if not isinstance(t, FbOf) or t.std:
+            return False
+        info = self.pous.get(t.name)
+        return info is not None and any(v.qualifier == "RETAIN" or (
+            v.type != t and self.retains(v.type)) for v in info.vars.values())
+
     def members(self, fb: FbOf) -> dict[str, tuple[str, Type]]:
         if fb.std:
             return dict(STD_FBS[fb.name])
@@ -1825,6 +1849,10 @@ class Compiler:
                 return wrap_code(e.code, t)
             return e.code
         if e.type in (ANY_INT, ANY_REAL) and e.const is not None and isinstance(t, str):
+            if t == "BOOL" and e.type == ANY_INT and e.exact and e.const in (0, 1):
+                # the literals 0 and 1 are BOOL's too (IEC 61131-3, 6.3.2: boolean_literal
+                # ::= ['BOOL#'] ('1' | '0') | TRUE | FALSE), where a BOOL is due
+                return repr(e.const == 1)
             if t in INTS and e.type == ANY_INT:
                 lo, hi = limits(t)
                 if not e.exact:  # a constant expression: computed exactly, wrapped here
@@ -2196,10 +2224,10 @@ class Compiler:
         if info is None or info.pou.kind != "FUNCTION":  # (a user FUNCTION may replace one)
             conv = _conversion(key)
             if conv is not None:
-                return self.convert(x, *conv, scope)
+                return self.convert(self.formal(x, ("IN",)), *conv, scope)
             target = DATE_NAMES.get(key[3:], key[3:]) if key.startswith("TO_") else ""
             if target in (*ELEMENTARY, "STRING", "WSTRING"):
-                return self.convert_any(x, target, scope)
+                return self.convert_any(self.formal(x, ("IN",)), target, scope)
             if key in STD_FUNCTIONS:
                 return self.std_call(x, key, scope)
         if info is None and key in _LOGICAD_BOUNDS:
@@ -2374,11 +2402,48 @@ class Compiler:
                 _tname(v.type) for v in values), x.span)
         return t
 
+    def formal(self, x: n.Call, formal: tuple[str, ...]) -> n.Call:
+        """A standard function's call with its inputs named (``LIMIT(MN := 0, IN := v, MX :=
+        9)``) as the same call with them in order; given in order, the call as it is."""
+        if not any(a.name is not None for a in x.args):
+            return x
+        given: dict[str, n.Arg] = {}
+        for arg in x.args:
+            if arg.name is None or arg.output is not None:
+                raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} takes its inputs all in "
+                                 "order or all by name (" + ", ".join(formal) + ")", arg.span)
+            if arg.name.upper() in given:
+                raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is given twice", arg.span)
+            given[arg.name.upper()] = arg
+        names = [f for f in formal if not f.endswith("*")]
+        if formal[-1].endswith("*"):  # IN1, IN2, ... or IN0, IN1, ...: as many as given
+            stem, first = formal[-1][:-2], int(formal[-1][-2])
+            names += [f"{stem}{first + i}" for i in range(len(given) - len(names))]
+        for key, arg in given.items():
+            if key not in names:
+                raise self.error(StCode.BAD_ARGUMENTS, f"{x.name} has no input {arg.name}"
+                                 + did_you_mean(key, names), arg.span)
+        missing = [name for name in names if name not in given]
+        if missing:
+            raise self.error(StCode.BAD_ARGUMENTS, f"{x.name}'s input {missing[0]} is not "
+                             "given (its inputs: " + ", ".join(formal) + ")", x.span)
+        return n.Call(x.name, tuple(n.Arg(None, given[name].expr, None, given[name].span)
+                                    for name in names), x.span)
+
     def std_call(self, x: n.Call, key: str, scope: Scope) -> E:
         if key in STRING_FUNCTIONS:
             return self.string_call(x, key, scope)
         if key in ("LOWER_BOUND", "UPPER_BOUND"):
             return self.bound(x, key, scope)
+        if key in FORMAL_INPUTS:
+            x = self.formal(x, FORMAL_INPUTS[key])
+        if key in TIME_FUNCTIONS:
+            a, b = self._args(x, scope, 2)
+            if a.type not in DURATIONS or not is_num(b.type):
+                raise self.error(StCode.TYPE_MISMATCH, f"{x.name} takes a TIME and a "
+                                 f"number, not {_tname(a.type)} and {_tname(b.type)}", x.span)
+            return self.binary(n.Binary(TIME_FUNCTIONS[key], x.args[0].expr or x,
+                                        x.args[1].expr or x, x.span), a, b)
         if key == "MOVE":
             (a,) = self._args(x, scope, 1)
             return E(copy_code(a.code, a.type), a.type, a.const, a.exact)
@@ -3138,8 +3203,10 @@ class Logic:
         self.programs: dict[str, dict[str, ProgramVar]] = {}
         self.display: dict[str, str] = {}
         self.fb_vars: dict[str, dict[str, ProgramVar]] = {}
+        retains = compiler.retains
         for key, info in compiler.pous.items():
-            table = {k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN",
+            table = {k: ProgramVar(k, v.display, v.type,
+                                   v.qualifier == "RETAIN" or retains(v.type),
                                    v.qualifier == "CONSTANT")
                      for k, v in info.vars.items()}
             if info.pou.kind == "PROGRAM":
@@ -3151,7 +3218,7 @@ class Logic:
             key: {k: ProgramVar(k, v.display, v.type, False) for k, v in struct.fields.items()}
             for key, struct in compiler.structs.items()}
         self.globals: dict[str, ProgramVar] = {
-            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN",
+            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN" or retains(v.type),
                           v.qualifier == "CONSTANT")
             for k, v in compiler.globals.items() if v.image is None}
         self.enums = dict(compiler.enums)

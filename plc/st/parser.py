@@ -365,6 +365,8 @@ class _Build(Transformer_NonRecursive[Token, Any]):
         items = children[1:-1]
         while items and isinstance(items[0], Token):
             word = str(items[0]).upper()
+            if word == "PERSISTENT":  # CODESYS, TwinCAT: kept over a restart and a
+                word = "RETAIN"       # download; ncgate's RETAIN store does both
             if word != "NON_RETAIN":  # the default: nothing is kept over a restart
                 qualifier = word
             items = items[1:]

@@ -74,15 +74,13 @@ CASES = [
     # structure
     ("ST030", "¦FUNCTION f : INT VAR_INPUT a : INT; END_VAR f := f(a); END_FUNCTION"),
     ("ST030", "¦FUNCTION_BLOCK fb VAR me : fb; END_VAR END_FUNCTION_BLOCK"),
-    ("ST031", "FUNCTION_BLOCK fb VAR RETAIN ¦n : INT; END_VAR END_FUNCTION_BLOCK"),
+    ("ST031", "FUNCTION f : INT VAR RETAIN ¦n : INT; END_VAR f := n; END_FUNCTION"),
     ("ST031", "FUNCTION f : INT VAR t : ¦TON; END_VAR f := 1; END_FUNCTION"),
     # outside the subset (issue 29): ST031 where the construct starts
     ("ST031", "PROGRAM p VAR x ¦AT %IX0.0 : BOOL; END_VAR\nEND_PROGRAM"),
     ("ST031", "PROGRAM p VAR q : ¦POINTER TO INT; END_VAR\nEND_PROGRAM"),
     ("ST031", "PROGRAM p VAR q : ¦REF_TO INT; END_VAR\nEND_PROGRAM"),
     ("ST031", "PROGRAM p VAR w : WORD; b : BOOL; END_VAR\nb := w.¦%X3; END_PROGRAM"),
-    ("ST031", "FUNCTION_BLOCK fb VAR RETAIN ¦g : INT; END_VAR END_FUNCTION_BLOCK\n"
-              "PROGRAM p END_PROGRAM"),
     ("ST031", "PROGRAM p VAR_IN_OUT ¦x : INT; END_VAR END_PROGRAM"),
     ("ST031", "FUNCTION f : INT VAR_IN_OUT a : INT; END_VAR f := a; END_FUNCTION\n"
               "PROGRAM p VAR x : INT; END_VAR\nx := 1 + ¦f(x); END_PROGRAM"),

@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import random
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from ncgate.plc.image import IOImage
+from ncgate.plc.retain import RetainStore
 from ncgate.plc.scan import PlcRuntime, PlcState
 from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError
 from ncgate.plc.st.parser import parse_source
+from ncgate.plc.st.plcopen import read_logic_file
 from ncgate.plc.st.walk import Walker
 
 from .st_harness import Plc, RecordingNc, program
@@ -133,3 +136,101 @@ END_PROGRAM
             assert getattr(program, f"v_{name}") == state[name], (scan, name)
         assert program.v_U.CV == state["U"].CV
         assert image.syvar == walk_image.syvar
+
+
+# -- item 13: the standard functions' formal names, MUL_TIME, BOOL 0/1, PERSISTENT, RETAIN in
+# -- a FUNCTION_BLOCK ------------------------------------------------------------------------
+
+
+def test_standard_functions_take_their_inputs_by_their_iec_names() -> None:
+    plc = Plc(program(
+        "a := SEL(G := g, IN0 := 1, IN1 := 2); b := SEL(IN1 := 20, G := NOT g, IN0 := 10);\n"
+        "c := LIMIT(MN := 0, IN := 150, MX := 100); d := MUX(K := 2, IN0 := 5, IN1 := 6,\n"
+        "IN2 := 7); e := MAX(IN1 := 3, IN2 := 9, IN3 := 4); f := MIN(IN2 := 8, IN1 := -1);\n"
+        "r := EXPT(IN1 := 2.0, IN2 := 3.0); w := SHL(IN := WORD#1, N := 4);\n"
+        "x := INT_TO_DINT(IN := 70); y := TO_DINT(IN := a);",
+        "g : BOOL; a, b, c, d, e, f : INT; r : REAL; w : WORD; x, y : DINT;")).scan()
+    got = [plc[f"main.{v}"] for v in "abcdefrwxy"]
+    assert got == [1, 20, 100, 7, 9, -1, 8.0, 16, 70, 1]
+
+
+@pytest.mark.parametrize("marked", [
+    "a := SEL(G := TRUE, IN0 := 1, ¦IN2 := 2);",
+    "a := LIMIT(MN := 0, ¦5, MX := 9);",
+    "a := ¦SEL(G := TRUE, IN0 := 1);",
+])
+def test_a_standard_function_given_a_wrong_formal_name_is_st024_at_it(marked: str) -> None:
+    got, want = diagnosed(program(marked, "a : INT;"))
+    assert got == want and got[0] == "ST024"
+
+
+def test_mul_time_and_div_time_in_both_editions_spellings() -> None:
+    plc = Plc(program("a := MUL_TIME(T#1s, 3); b := DIV_TIME(IN1 := T#1s, IN2 := 4);\n"
+                      "c := MULTIME(T#100ms, 2.5); d := DIVTIME(T#1s, 3.0);",
+                      "a, b, c, d : TIME;")).scan()
+    assert [plc[f"main.{v}"] for v in "abcd"] == [3000, 250, 250, 333]
+
+
+def test_mul_time_of_no_time_is_st020() -> None:
+    got, want = diagnosed(program("a := ¦MUL_TIME(3, 4);", "a : TIME;"))
+    assert got == want and got[0] == "ST020"
+
+
+def test_the_literals_0_and_1_are_bools_where_a_bool_is_due() -> None:
+    plc = Plc(program("a := 1; b := 0; c := a AND NOT b;", "a : BOOL; b : BOOL := 1;\n"
+                      "c : BOOL := 0;")).scan()
+    assert (plc["main.a"], plc["main.b"], plc["main.c"]) == (True, False, True)
+    got, want = diagnosed(program("a := ¦2;", "a : BOOL;"))
+    assert got == want and got[0] == "ST020"
+
+
+PERSISTENT = """
+FUNCTION_BLOCK Tally
+VAR_INPUT pulse : BOOL; END_VAR
+VAR RETAIN n : INT; END_VAR
+VAR edge : R_TRIG; END_VAR
+edge(CLK := pulse);
+IF edge.Q THEN n := n + 1; END_IF
+END_FUNCTION_BLOCK
+PROGRAM keep
+VAR PERSISTENT hours : DINT; END_VAR
+VAR RETAIN PERSISTENT kept : INT; END_VAR
+VAR tally : Tally; tallies : ARRAY[1..2] OF Tally; pulse : BOOL; plain : INT; END_VAR
+pulse := NOT pulse; hours := hours + 1; kept := kept + 2; plain := plain + 1;
+tally(pulse := pulse); tallies[2](pulse := pulse);
+END_PROGRAM
+"""
+
+
+def test_persistent_and_retain_in_a_function_block_survive_a_restart(tmp_path: Path) -> None:
+    def runtime(store: RetainStore) -> PlcRuntime:
+        logic = compile_logic([parse_source(PERSISTENT, "keep.st")], Context())
+        return PlcRuntime(logic, IOImage(), RecordingNc(), ["keep"], retain=store)
+
+    store = RetainStore(tmp_path / "r.sqlite")
+    first = runtime(store)
+    for t in range(5):  # pulse TRUE, FALSE, TRUE, FALSE, TRUE: three rising edges
+        first.scan(t * 10)
+    store.close()
+    again = runtime(RetainStore(tmp_path / "r.sqlite"))
+    assert (again.read("keep.hours"), again.read("keep.kept"), again.read("keep.plain")) \
+        == (5, 10, 0)
+    # the instances of an FB that declares RETAIN are retained whole (as CODESYS does)
+    assert again.read("keep.tally.n") == 3 and again.read("keep.tallies[2].n") == 3
+
+
+def test_plcopen_persistent_variables_are_read_as_retained(tmp_path: Path) -> None:
+    text = (Path(__file__).parent / "plcopen" / "beremiz_conveyor.xml").read_text("utf-8")
+    assert text.count("<localVars>") >= 1
+    path = tmp_path / "conveyor.xml"
+    path.write_text(text.replace("<localVars>", '<localVars persistent="true">', 1),
+                    encoding="utf-8")
+    logic = compile_logic([read_logic_file(path)], Context())
+    assert any(v.retain for table in logic.programs.values() for v in table.values()) or \
+        any(v.retain for table in logic.fb_vars.values() for v in table.values())
+
+
+def test_retain_in_a_function_is_st031_at_its_variable() -> None:
+    got, want = diagnosed("FUNCTION F : INT VAR RETAIN ¦n : INT; END_VAR F := n; "
+                          "END_FUNCTION\nPROGRAM p VAR x : INT; END_VAR x := F(); END_PROGRAM")
+    assert got == want and got[0] == "ST031"
