@@ -943,7 +943,8 @@ class Compiler:
                                      f"{decl.name}", decl.span)
                 default = values[decl.initial.upper()]
             self.enums[key] = EnumInfo(decl.name, values, display, default)
-            return EnumOf(key)
+            return EnumOf(key, tuple((number, display[vkey])
+                                     for vkey, number in values.items()))
         if decl.kind == "STRUCT":
             info = StructInfo(decl, {})
             for f in decl.fields:

@@ -10,7 +10,7 @@ DINT -> REAL), REAL -> LREAL.  Narrowing needs a conversion function (``DINT_TO_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ncgate.plc.st.stdlib import INTEGER_TYPES, limits
 
@@ -68,12 +68,21 @@ class StructOf:
 
 @dataclass(frozen=True, slots=True)
 class EnumOf:
-    """An enumeration type; its values are integers (the compiler's ``enums[name]``)."""
+    """An enumeration type; its values are integers (the compiler's ``enums[name]``).
+    ``names``: each value's name as written, by its integer, on the type a declaration
+    resolves to (not part of its identity), so that whoever shows a variable's value --
+    the console's status -- shows ``RUN``, not ``5``."""
 
     name: str
+    names: tuple[tuple[int, str], ...] = field(default=(), compare=False, repr=False)
 
     def __str__(self) -> str:
         return self.name
+
+    def name_of(self, value: int) -> str | int:
+        """The value's name (the first, when two names share it), or the integer itself
+        when it is none of the type's (a CODESYS-lenient assignment stored it)."""
+        return next((name for number, name in self.names if number == value), value)
 
 
 @dataclass(frozen=True, slots=True)

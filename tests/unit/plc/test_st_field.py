@@ -16,6 +16,7 @@ from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError
 from ncgate.plc.st.parser import parse_source
 from ncgate.plc.st.plcopen import read_logic_file
+from ncgate.plc.st.types import ArrayOf, EnumOf
 from ncgate.plc.st.walk import Walker
 
 from .st_harness import Plc, RecordingNc, program
@@ -234,3 +235,30 @@ def test_retain_in_a_function_is_st031_at_its_variable() -> None:
     got, want = diagnosed("FUNCTION F : INT VAR RETAIN ¦n : INT; END_VAR F := n; "
                           "END_FUNCTION\nPROGRAM p VAR x : INT; END_VAR x := F(); END_PROGRAM")
     assert got == want and got[0] == "ST031"
+
+
+# -- item 17: an enumeration's value shown by its name ----------------------------------------
+
+ENUMS = """
+TYPE E_State : (IDLE, RUN := 5, DONE); E_Alias : E_State; END_TYPE
+FUNCTION_BLOCK Station VAR_OUTPUT step : E_State; END_VAR step := DONE; END_FUNCTION_BLOCK
+PROGRAM cell
+VAR st : E_State := RUN; al : E_Alias := DONE; steps : ARRAY[1..2] OF E_State; s : Station;
+    n : INT; END_VAR
+s(); steps[2] := RUN;
+END_PROGRAM
+"""
+
+
+def test_a_variable_of_an_enumeration_has_a_type_that_names_its_values() -> None:
+    plc = Plc(ENUMS).scan()
+    table = plc.logic.programs["CELL"]
+    st, al, steps = table["ST"].type, table["AL"].type, table["STEPS"].type
+    assert isinstance(st, EnumOf) and st.name_of(plc["cell.st"]) == "RUN"
+    assert isinstance(al, EnumOf) and al.name_of(plc["cell.al"]) == "DONE"
+    assert isinstance(steps, ArrayOf) and isinstance(steps.element, EnumOf)
+    assert [steps.element.name_of(v) for v in plc["cell.steps"]] == ["IDLE", "RUN"]
+    step = plc.logic.fb_vars["STATION"]["STEP"].type
+    assert isinstance(step, EnumOf) and step.name_of(plc["cell.s.step"]) == "DONE"
+    assert st.name_of(99) == 99  # no name: the integer, as stored
+    assert st == EnumOf("E_STATE")  # the names are no part of the type's identity
