@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
+from ncgate import commands
 from ncgate.config.loader import WebConfig, is_loopback
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import only_releases_hold
@@ -75,6 +76,7 @@ STREAMS_PER_TURN = 8  # streams that send in one loop turn; the others in the ne
 PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients keep it
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
+BODY_TIMEOUT_S = 5.0  # a request body not whole this long after its headers is refused (408)
 # On every answer, the page's included: nothing of another origin runs in it, no other site
 # may frame it (a framed console takes a click on a decoy as the operator's: clickjacking),
 # no answer is sniffed as another type, no address leaks in a Referer.  The page has no
@@ -86,13 +88,15 @@ SECURITY_HEADERS = {
     "Referrer-Policy": "no-referrer",
 }
 COMMANDS = {"start": 1, "hold": 2, "reset": 3}  # the page's words (start: a cycle start)
-# Every command by its name (issue 27): the command word's kinds, the switches (with "on"),
-# and "break" (with "at").
+# Every command by its name (issue 27), from the command table (ncgate.commands): the command
+# word's kinds, the switches (with "on"), and "break" (with "at").
 KINDS = {**{k.label: k for k in CommandKind}, "start": CommandKind.CYCLE_START,
          "hold": CommandKind.FEED_HOLD}
-SWITCHES = {"single_block": (CommandKind.SINGLE_BLOCK_ON, CommandKind.SINGLE_BLOCK_OFF),
-            "optional_stop": (CommandKind.OPTIONAL_STOP_ON, CommandKind.OPTIONAL_STOP_OFF),
-            "block_skip": (CommandKind.BLOCK_SKIP_ON, CommandKind.BLOCK_SKIP_OFF)}
+SWITCHES = {name: (CommandKind(on.word), CommandKind(off.word))
+            for name, (on, off) in commands.switches().items()}
+# The buttons on a process's lane (app.js asks /api/commands): (name, text) in word order.
+LANE_BUTTONS = [(c.name, c.button) for c in commands.COMMANDS
+                if c.button is not None and not c.cell_only]
 # Why the door refused an input -> the HTTP status the API answers (the JSON body says the
 # reason in words).  Total: a test checks that every Reason has a row.
 HTTP_STATUS: dict[Reason, int] = {
@@ -484,7 +488,20 @@ class WebConsole:
         if request.content_type != "application/json":
             raise ApiError(415, "send JSON (Content-Type: application/json)")
         try:
-            body = await request.json()
+            # A body is at most BODY_LIMIT bytes: one that has not come whole within
+            # BODY_TIMEOUT_S is not coming (a slow or stalled client holds nothing longer).
+            async with asyncio.timeout(BODY_TIMEOUT_S):
+                body = await request.json()
+        except TimeoutError:
+            log.info("web %s: %s %s: the body did not come within %g s", request.remote,
+                     request.method, request.path, BODY_TIMEOUT_S)
+            raise ApiError(408, f"the body did not come within {BODY_TIMEOUT_S:g} s") \
+                from None
+        except ConnectionResetError:  # the client went away mid-body: one line, no more
+            log.info("web %s: %s %s: the client went away before its body was whole",
+                     request.remote, request.method, request.path)
+            raise ApiError(400, "the connection was lost before the body was whole") \
+                from None
         except (ValueError, UnicodeDecodeError):
             raise ApiError(400, "the body is not JSON") from None
         except RecursionError:  # [[[[...: deeper than the parser's stack

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import json
+import logging
 import socket
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -732,3 +733,44 @@ async def test_an_idle_cells_page_hears_of_a_record_started(
                     if status.get("record") == path:
                         break
             assert gw.stop_record() == Path(path)
+
+
+async def _half_a_body(host: str, port: int) -> tuple[asyncio.StreamReader,
+                                                      asyncio.StreamWriter]:
+    reader, writer = await asyncio.open_connection(host, port)
+    writer.write(f"POST /api/write HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: "
+                 'application/json\r\nContent-Length: 100\r\n\r\n{"var": '.encode())
+    await writer.drain()
+    return reader, writer
+
+
+async def test_a_client_gone_mid_body_is_one_line_not_a_traceback(
+        gw: Gateway, caplog: pytest.LogCaptureFixture) -> None:
+    host, port = gw.web_address
+    with caplog.at_level(logging.INFO, logger="ncgate.web"):
+        _, writer = await _half_a_body(host, port)
+        writer.close()
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with asyncio.timeout(10):
+                while not any("went away" in r.getMessage() for r in caplog.records):
+                    # (the server's log is another task's: asked again until it is there)
+                    async with http.get("/api/status") as answer:
+                        assert answer.status == 200
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+    assert sum("went away before its body was whole" in r.getMessage()
+               for r in caplog.records) == 1
+
+
+async def test_a_body_that_does_not_come_is_timed_out_with_408(
+        gw: Gateway, monkeypatch: pytest.MonkeyPatch) -> None:
+    from ncgate.gateway.web import console as console_module
+
+    monkeypatch.setattr(console_module, "BODY_TIMEOUT_S", 0.2)
+    host, port = gw.web_address
+    slow = [await _half_a_body(host, port) for _ in range(5)]
+    for reader, writer in slow:
+        async with asyncio.timeout(10):
+            head = await reader.readuntil(b"\r\n")
+        assert head.startswith(b"HTTP/1.1 408"), head
+        writer.close()
+    assert gw.read("SA10") == 0  # nothing of a half body was applied
