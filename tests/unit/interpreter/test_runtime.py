@@ -322,8 +322,9 @@ def test_a_jump_out_of_an_rpt_body_ends_its_repeat() -> None:
     sim = make_sim({"A": '"L"(RPT,2)\nG91G1X0.001F6000\n(BNC,L)\n(ERP)\nM30\n'})
     sim.engine.start("A")
     depths = []
-    for until in range(1, 6):
-        sim.run(until=float(until))
+    # A move of 0.001 mm at 100 mm/s is 10 us: 0.02 s is 2,000 turns of the loop.
+    for until in (0.004, 0.008, 0.012, 0.016, 0.02):
+        sim.run(until=until)
         depths.append(len(sim.engine.processes[1].repeats))
     assert sim.engine.status(1).blocks > 1_000  # it looped
     assert depths == [1] * 5
