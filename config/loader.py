@@ -37,6 +37,7 @@ from ncgate.interpreter.settings import (
     BLOCK_S,
     TRAVEL_MM,
     AuxSettings,
+    BlockSearchSync,
     Dialect,
     Handshake,
     SndPolicy,
@@ -539,6 +540,9 @@ class NcConfig:
     snd: SndPolicy = setting(SndPolicy.RENDEZVOUS, "an SND waits for its target to wait "
                              "(rendezvous) or leaves a token (latched)")
     sync_reads: bool = setting(False, "a read of SA/SK/SYVAR waits for the motion queue to empty")
+    block_search_sync: BlockSearchSync = setting(
+        BlockSearchSync.REFUSE, 'a block search in a program with EXE, WAI or SND: "refuse" '
+        '(seed 000: impossible) or "skipped" (refused only when the skipped blocks hold one)')
     time_scale: float = setting(1.0, "run: simulated seconds per wall-clock second", lo=0,
                                 positive=True)
     wait_timeout_s: float = setting(0.0, "a wait longer than this is an alarm (0: off)", lo=0)

@@ -27,6 +27,17 @@ class SndPolicy(enum.Enum):
     LATCHED = "latched"  # never blocks: a token per sender->target pair (TwinCAT-style)
 
 
+class BlockSearchSync(enum.Enum):
+    """Which programs a block search refuses for their synchronisation codes."""
+
+    # Seed 000, section 4, note 4: "search is impossible on programs containing EXE, WAI,
+    # SND" -- anywhere in the program, before the target or after it.
+    REFUSE = "refuse"
+    # Only when the blocks the search skips hold one (ncgate's rule before): the codes after
+    # the target run as written.
+    SKIPPED = "skipped"
+
+
 class Dialect(enum.Enum):
     """The language of the part programs (spec 5.1)."""
 
@@ -110,6 +121,8 @@ class RuntimeSettings:
     names: tuple[tuple[tuple[str, int, str], str], ...] = ()
     # Closed simulation: nothing outside can start a program (orphan-wait detection).
     closed: bool = True
+    # Which programs a block search refuses for their EXE, WAI, SND (BlockSearchSync).
+    block_search_sync: BlockSearchSync = BlockSearchSync.REFUSE
     # Blocks one process decodes before the others (and, under run, the fieldbus) get a turn.
     slice_blocks: int = 10_000
     # Blocks a process may decode without time passing before it is a runaway (0: no limit).

@@ -3,11 +3,15 @@ with the modal state the blocks before it would have set.
 
 The blocks before the target are read in order, as the text has them, and nothing of them
 acts: their G modes, feed, tool and end positions make the modal state the program starts
-with; with calculation (``with_calc``) their E-parameter assignments are evaluated too. A
-block search is refused, with the reason, where the skipped blocks hold what cannot be
-skipped without changing what the cell does (seed 000, section 4, note 4): a synchronisation
-code (SND, WAI, EXE, REL), a write of the image (SYVAR), a jump or a repeat (the text would
-not be the path the program takes), or the program's end.
+with; with calculation (``with_calc``) their E-parameter assignments are evaluated too.
+
+A block search is refused, with the reason, in a program that holds an EXE, WAI or SND
+anywhere (seed 000, section 4, note 4: "search is impossible on programs containing EXE, WAI,
+SND"; ``nc.block_search_sync = "refuse"``, the default).  With ``"skipped"`` only the skipped
+blocks count there.  Either way it is refused where the skipped blocks hold what cannot be
+skipped without changing what the cell does: a synchronisation code (SND, WAI, EXE, REL), a
+write of the image (SYVAR), a jump or a repeat (the text would not be the path the program
+takes), or the program's end.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from ncgate.interpreter.nc110.nodes import (
     Word,
 )
 from ncgate.interpreter.nc110.parser import Program
-from ncgate.interpreter.settings import RuntimeSettings
+from ncgate.interpreter.settings import BlockSearchSync, RuntimeSettings
 
 _MOTION_WORDS = frozenset("XYZUVWABCIJKR")
 
@@ -69,6 +73,8 @@ def search(program: Program, at: str, modal: Modal, e_params: list[float],
            with_calc: bool) -> tuple[int, Modal, list[float]]:
     """(the target's line index, the modal state, the E parameters) of a start at ``at``."""
     index = target_index(program, at)
+    if settings.block_search_sync is BlockSearchSync.REFUSE:
+        _refuse_sync(program)
     modal = copy.deepcopy(modal)
     e = list(e_params)
     for i in range(index):
@@ -111,3 +117,20 @@ def search(program: Program, at: str, modal: Modal, e_params: list[float],
         except RuntimeAlarm as exc:
             raise SearchRefused(f"{where}: {exc}") from None
     return index, modal, e
+
+
+def _refuse_sync(program: Program) -> None:
+    """Seed 000, section 4, note 4: no block search in a program with EXE, WAI or SND (the
+    first one named).  A block that does not parse is the start's own error, not this."""
+    for i in range(len(program)):
+        try:
+            block = program.block(i)
+        except ProgramError:
+            continue
+        for item in block.items:
+            if isinstance(item, WaitProc | WaitCond | Snd | Exe):
+                raise SearchRefused(
+                    f"{program.file}:{i + 1}: {format_item(item)}: a block search is "
+                    "impossible in a program with EXE, WAI or SND (seed 000, section 4, note "
+                    '4); nc.block_search_sync = "skipped" refuses it only when the skipped '
+                    "blocks hold one")

@@ -368,7 +368,10 @@ async def test_a_block_search_through_the_api_is_refused_or_recorded(tmp_path: P
     from ncgate.errors import InputRefused, Reason
     from ncgate.gateway.record import replay
 
-    (tmp_path / "ncgate.toml").write_text(CELL)
+    # The rule by skipped blocks, by its option: the seed's default refuses any search in A
+    # (its WAI).  In the file: the replay reads the config again.
+    (tmp_path / "ncgate.toml").write_text(CELL.replace(
+        "[nc]\n", '[nc]\nblock_search_sync = "skipped"\n', 1))
     (tmp_path / "A.nc").write_text("N1G1F600\nN2(WAI,SA1=1)\nN3X10\nN4M30\n")
     (tmp_path / "B.nc").write_text("N1M30\n")
     cfg = load_config(tmp_path / "ncgate.toml", overrides={"modbus.enabled": False,

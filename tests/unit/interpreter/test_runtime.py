@@ -665,8 +665,11 @@ def test_a_block_search_starts_at_a_label_or_n_with_the_modal_state_before_it() 
 
 
 def test_a_block_search_is_refused_where_the_skipped_blocks_sync() -> None:
+    from ncgate.interpreter.settings import BlockSearchSync
+
     programs = {"A": '"L"N1G1X1F600\nN2(SND,2)\nN3X2\nN4(BNC,L)\nN5M30\n', "B": "N1M30\n"}
-    sim = make_sim(programs)
+    # The rule by skipped blocks (the default refuses any search in A: test_block_search_sync)
+    sim = make_sim(programs, block_search_sync=BlockSearchSync.SKIPPED)
     for at, reason in (("N3", "(SND,2) is a synchronisation code"),
                        ("N5", "(SND,2) is a synchronisation code"),
                        ("N9", "no block N9"), ("NOWHERE", "no label")):
