@@ -4,6 +4,7 @@ and a session with a plant and faults recorded and replayed."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -354,3 +355,44 @@ def test_a_window_that_closes_before_the_run_says_how_things_stood_then(cell: Pa
     assert lines[1] == ("FAIL early end: P1 WAIT_COND, not IDLE, at 0.600 s (since "
                         "0.000 s)")
     assert lines[2] == "PASS late end: P1 IDLE at 0.800 s"
+
+
+@pytest.mark.parametrize(("target", "kind", "params", "read"), [
+    ("clamp.retracted", "wire_break", {}, lambda v: v == 0),
+    ("SYVAR2", "wire_break", {"live_zero": -4000}, lambda v: v == -4000),
+    ("SA31", "stuck", {"value": 0}, lambda v: v == 0),
+])
+async def test_each_value_fault_through_the_api_holds_what_readers_see_until_cleared(
+        cell: Path, target: str, kind: str, params: dict[str, Any], read: Any) -> None:
+    config = ncgate_test_config(cell, **{"nc.time_scale": 10.0})
+    async with Gateway(config) as gw:
+        var = {"clamp.retracted": "SA31"}.get(target, target)
+        before = gw.read(var)
+        gw.fault(target, kind, **params)
+        assert read(gw.read(var))
+        gw.write(var, before)  # whatever writes it, the fault holds
+        assert read(gw.read(var))
+        gw.clear_fault(target)
+        assert gw.read(var) == before  # the model writes what it drives again
+
+
+async def test_chatter_through_the_api_toggles_on_the_wall_clock(cell: Path) -> None:
+    config = ncgate_test_config(cell, **{"nc.time_scale": 10.0})
+    async with Gateway(config) as gw:
+        seen: list[int] = []
+        changed = asyncio.Event()
+
+        def heard(changes: Any, writer: str) -> None:
+            if writer == "fault chatter SA31":
+                seen.append(gw.read("SA31"))
+                changed.set()
+
+        gw.image.subscribe(heard)
+        gw.fault("SA31", "chatter", period_ms=20)
+        async with asyncio.timeout(10):
+            while len(seen) < 4:
+                changed.clear()
+                await changed.wait()
+        assert seen[:4] in ([0, 1, 0, 1], [1, 0, 1, 0])
+        gw.clear_fault("SA31")
+        assert gw.read("SA31") == 1  # the clamp at rest is retracted: the model's value

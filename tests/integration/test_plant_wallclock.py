@@ -130,3 +130,42 @@ async def test_run_script_fails_a_bad_case_and_exits_1(tmp_path: Path) -> None:
     assert "FAIL clamp closes: SA30 still 0 at 3.000 s" in log
     assert "clamp retracted (fault: never)" in log
     assert "FAIL P1 ends:" in log
+
+
+async def test_a_scripts_modbus_fault_is_seen_by_the_client_inside_its_window(
+        tmp_path: Path) -> None:
+    """run --script with a [[fault]] on the Modbus server: the client's read is answered
+    with exception 06 while it is in force, and normally once its for_s has run out."""
+    path = tmp_path / "scenario.toml"
+    path.write_text('[[fault]]\ntarget = "modbus"\nkind = "exception"\ncode = 6\nat = 0.0\n'
+                    'for_s = 1.0\n[[expect]]\nname = "clamp at rest"\ncond = "SA31=1"\n'
+                    'by = 2.0\n')
+    trace = tmp_path / "trace.jsonl"
+    proc, port, lines = await start_run(_cell(tmp_path), "--script", str(path), "--trace",
+                                        str(trace))
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
+    answers = []
+    try:
+        assert await client.connect()
+        async with asyncio.timeout(10):
+            # (a read may come before the scenario is armed: the log says where Modbus
+            # listens first) -- until it has seen the fault and then its end
+            while 6 not in answers or answers[-1] != "ok":
+                answer = await client.read_coils(31, count=1, device_id=1)
+                answers.append(answer.exception_code if answer.isError() else "ok")
+                await asyncio.sleep(0.05)  # a poller polls
+    finally:
+        client.close()
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    assert code == 0, "".join(lines) + rest
+    first = answers.index(6)
+    assert set(answers[:first]) <= {"ok"} and answers[-1] == "ok"
+    assert set(answers[first:-1]) == {6}  # inside the window, every read: exception 06
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    fault = next(e for e in events if e["event"] == "fault")
+    clear = next(e for e in events if e["event"] == "fault_clear")
+    assert (fault["target"], fault["who"]) == ("modbus", "script fault[0]")
+    assert clear["t"] - fault["t"] == pytest.approx(1.0, abs=1e-6)
