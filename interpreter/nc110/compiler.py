@@ -591,6 +591,9 @@ def _matching_erp(program: Program, index: int) -> int:
 def _int16(value: float, name: str) -> int:
     stored = round_half_away(value)
     if not -32768 <= stored <= 32767:
+        # The rounded value is what is out of range (32767.5 rounds to 32768): say so, with
+        # what the program gave when it was not already whole.
+        given = "" if stored == value else f" ({value:g} rounded)"
         raise RuntimeAlarm(AlarmCode.VALUE_OUT_OF_RANGE,
-                           f"{name} holds -32768..32767, not {value:g}")
+                           f"{name} holds -32768..32767, not {stored}{given}")
     return stored

@@ -586,6 +586,14 @@ def _diagnose(exc: UnexpectedInput, ctx: _Ctx) -> Diagnostic:
                 f"a comparison (= > < #) is missing after {found.group(1).upper()}",
                 _span(ctx, col), text,
             )
+    before = text[:col - 1].rstrip(" \t")
+    if not at_end and before[-1:] in ("=", "<", ">", "#") and value[:1] in ("=", "<", ">"):
+        # >=, <=, <>, ==: a comparison of another language; the parser took its first
+        # character and stumbles on the second.
+        op = before[-1] + value[0]
+        return Diagnostic(DiagnosticCode.UNEXPECTED_TOKEN,
+                          f"'{op}' is no comparison of NC-110: it has = (equal), # (not "
+                          "equal), > and <", _span(ctx, len(before)), text)
     shown = "the end of the block" if at_end else repr(str(token.value))
     wanted = ", ".join(sorted({_describe(t) for t in expected}))
     return Diagnostic(DiagnosticCode.UNEXPECTED_TOKEN, f"unexpected {shown}; expected {wanted}",
