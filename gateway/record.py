@@ -424,6 +424,9 @@ def read_record(path: str | Path) -> Recording:
         except ValueError as exc:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
+        if text.strip():  # one line, cut by a crash of the writer before it ended
+            raise RecordError(f"{path}:1: cut inside its header: the session stopped before "
+                              "its record began (nothing to replay)")
         raise RecordError(f"{path}: empty: not an ncgate session record")
     last = 0.0
     for recorded in recording.inputs:

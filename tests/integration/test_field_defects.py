@@ -39,3 +39,33 @@ def test_the_hint_still_names_isg_for_a_file_without_nc110_sync_codes(
     config = _cell(tmp_path, {"A": "N10 G01 X10 F600\nN20 #SIGNAL[ID1]\nN30 M30\n"})
     assert main(["check", str(tmp_path / "A.nc"), "--config", config]) == 1
     assert "reads without error as isg: give --dialect isg" in capsys.readouterr().err
+
+
+# --- item 10: messages ---------------------------------------------------------------------
+
+
+def test_a_record_cut_inside_its_header_says_so(tmp_path: Path) -> None:
+    from ncgate.gateway.record import RecordError, read_record
+
+    record = tmp_path / "session.jsonl"
+    record.write_text('{"ncgate_record": 2, "config": "/x/ncgat')
+    with pytest.raises(RecordError, match=r"session\.jsonl:1: cut inside its header"):
+        read_record(record)
+    record.write_text("")
+    with pytest.raises(RecordError, match=r"session\.jsonl: empty"):
+        read_record(record)
+
+
+@pytest.mark.parametrize(("text", "said"), [
+    ('[nc]\nmain = "A"\nmain = "B"\n', r"ncgate\.toml:3: nc\.main is given twice"),
+    ('[nc]\nmain = "A"\n[modbus]\nport = 1\n[nc]\nprocesses = 3\n',
+     r"ncgate\.toml:5: nc is given twice"),
+    ('[nc.storage]\nMP0 = "."\n[nc]\nstorage.MP0 = "x"\n',
+     r"ncgate\.toml:4: nc\.storage is given twice"),
+])
+def test_a_duplicate_toml_key_names_its_dotted_key(tmp_path: Path, text: str, said: str) -> None:
+    from ncgate.config import ConfigError, load_config
+
+    (tmp_path / "ncgate.toml").write_text(text)
+    with pytest.raises(ConfigError, match=said):
+        load_config(tmp_path / "ncgate.toml")
