@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from ncgate.config.plant import FaultConfig, PlantModelConfig, read_faults, read_models
 from ncgate.errors import NcgateError
@@ -896,7 +896,40 @@ def read_toml(source: Path) -> dict[str, Any]:
         raise ConfigError(f"{source}: not UTF-8 text ({exc.reason} at byte "
                           f"{exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: {exc}") from exc
+        twice = _given_twice(source, str(exc))
+        raise ConfigError(twice or f"{source}: {exc}") from exc
+
+
+_TOML_AT: Final = re.compile(r"^(?P<what>.*) \(at line (?P<line>\d+), column \d+\)$")
+_TOML_HEADER: Final = re.compile(r"^\s*\[(\[?)\s*([^\]]+?)\s*\]")
+
+
+def _given_twice(source: Path, message: str) -> str | None:
+    """tomllib's words for a key or table given twice ("Cannot overwrite a value (at line 3,
+    column 11)") with the dotted key they leave out: "ncgate.toml:3: nc.main is given twice"."""
+    found = _TOML_AT.match(message)
+    if found is None or not found["what"].startswith("Cannot "):
+        return None
+    what, line = found["what"], int(found["line"])
+    named = re.search(r"\((.*)\)", what)
+    if named is not None:  # Cannot declare ('nc',) twice; Cannot redefine namespace (...)
+        dotted = ".".join(re.findall(r"'([^']*)'", named[1]))
+        return (f"{source}:{line}: {dotted} is given twice: a TOML table or key is given once "
+                "(put its keys together)")
+    try:
+        lines = source.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    if not 1 <= line <= len(lines):
+        return None
+    table = ""
+    for text in lines[:line - 1]:
+        header = _TOML_HEADER.match(text)
+        if header is not None:
+            table = header[2].replace('"', "").replace(" ", "")
+    key = lines[line - 1].split("=", 1)[0].strip().replace('"', "").replace(" ", "")
+    dotted = f"{table}.{key}" if table else key
+    return f"{source}:{line}: {dotted} is given twice: a TOML key is given once"
 
 
 def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
