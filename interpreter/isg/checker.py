@@ -73,8 +73,10 @@ class IsgCheckContext:
     external: Mapping[str, ExternalBinding] = field(default_factory=dict)
 
 
-def check_file(source: IsgFile, context: IsgCheckContext) -> list[Diagnostic]:
-    """Every diagnostic of the file: syntax first, then each program's rules."""
+def check_file(source: IsgFile, context: IsgCheckContext,
+               channel: int | None = None) -> list[Diagnostic]:
+    """Every diagnostic of the file: syntax first, then each program's rules.  ``channel``:
+    the one a file without sections runs in, when known (the main program's: 1)."""
     out = list(source.diagnostics)
     for section in source.sections:
         if not 1 <= section.channel <= context.processes:
@@ -86,7 +88,7 @@ def check_file(source: IsgFile, context: IsgCheckContext) -> list[Diagnostic]:
                                   source.lines[section.header]))
     ranges: list[tuple[int, int, int | None]] = (
         [(s.header + 1, s.end, s.channel) for s in source.sections]
-        or [(0, len(source.lines), None)])
+        or [(0, len(source.lines), channel)])
     for first, end, channel in ranges:
         out.extend(_Checker(source, context, channel).run(first, end))
     out.sort(key=lambda d: (d.span.line, d.span.column))

@@ -101,8 +101,13 @@ class IsgDialect:
         context = check_context(options)
         out: dict[Path, Sequence[Diagnostic]] = {}
         for path in paths:
+            # A file without sections runs where it is started: in ``process`` when given,
+            # and the main program in channel 1 (its own-channel rules, IW001, then apply).
+            channel = process if process is not None else (
+                1 if options.main and path.stem.upper() == options.main.upper() else None)
             try:
-                out[path] = check_file(IsgFile.from_path(path, display=str(path)), context)
+                out[path] = check_file(IsgFile.from_path(path, display=str(path)), context,
+                                       channel)
             except ProgramSyntaxError as exc:  # not UTF-8
                 out[path] = exc.diagnostics
         return out

@@ -69,3 +69,17 @@ def test_a_duplicate_toml_key_names_its_dotted_key(tmp_path: Path, text: str, sa
     (tmp_path / "ncgate.toml").write_text(text)
     with pytest.raises(ConfigError, match=said):
         load_config(tmp_path / "ncgate.toml")
+
+
+def test_iw001_for_an_unsectioned_isg_main_with_config(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # The main program runs in channel 1: its own #SIGNAL SYN before its #WAIT, with no
+    # #FLUSH, is the buffer deadlock, sections or none.
+    config = _cell(tmp_path, {"A": "G01 X250 F300\n#SIGNAL SYN [ID88 CH1]\nG01 X370 F80\n"
+                                    "#WAIT [ID88 CH1]\nM30\n"}, dialect="isg")
+    assert main(["check", str(tmp_path / "A.nc"), "--config", config]) == 0
+    assert "A.nc:4:1: warning IW001" in capsys.readouterr().out
+    # Another program, started by nobody the check can see, may run anywhere: no warning.
+    (tmp_path / "B.nc").write_text((tmp_path / "A.nc").read_text())
+    assert main(["check", str(tmp_path / "B.nc"), "--config", config]) == 0
+    assert "IW001" not in capsys.readouterr().out
