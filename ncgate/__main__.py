@@ -1,5 +1,5 @@
 """``python -m ncgate``: the same as the ``ncgate`` command."""
 
-from ncgate.gateway.cli.main import entry_point
+from ncgate._start import main
 
-entry_point()
+main()
