@@ -148,7 +148,7 @@ class WebConsole:
         self._next_turn: asyncio.Future[None] | None = None
         self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
-        self._status_cache: tuple[tuple[int, int, int], float, dict[str, str]] | None = None
+        self._status_cache: tuple[tuple[int, ...], float, dict[str, str]] | None = None
         self._last_record: Path | None = None  # the record GET /api/record serves
         self._live: LiveStatus | None = None  # the streams' status, built by what changed
         self._status_texts: dict[tuple[str, ...], str] = {}  # by the parts a stream lacks
@@ -174,6 +174,7 @@ class WebConsole:
         app.router.add_get("/api/stream", self._stream)
         app.router.add_get("/api/timeline.svg", self._timeline)
         app.router.add_get("/api/programs", self._programs)
+        app.router.add_get("/api/commands", self._commands)
         app.router.add_post("/api/write", self._write)
         app.router.add_post("/api/command", self._command)
         app.router.add_get("/api/force", self._forced)
@@ -329,6 +330,15 @@ class WebConsole:
         names = sorted({program_name(path) for path in program_files(self.gw.config)
                         if path.suffix.lower() in PROGRAM_SUFFIXES})
         return web.json_response({"programs": names, "main": self.gw.config.nc.main})
+
+    async def _commands(self, request: web.Request) -> web.StreamResponse:
+        """The command table (ncgate.commands): the names ``POST /api/command`` takes, and
+        the buttons of a process's lane, which the page draws from it."""
+        rows = [{"word": c.word, "name": c.name, "title": c.title, "help": c.help,
+                 "cell_only": c.cell_only, "switch": c.switch}
+                for c in commands.COMMANDS if not c.with_n]
+        return web.json_response({"commands": rows, "switches": sorted(SWITCHES),
+                                  "lane": [list(b) for b in LANE_BUTTONS]})
 
     async def _timeline(self, request: web.Request) -> web.StreamResponse:
         config = self.gw.config.nc
