@@ -12,8 +12,9 @@ session record and the console show for it::
     gw.apply(Command(CommandKind.CYCLE_START, source=Source.parse("web 127.0.0.1")))
 
 A refusal raises :class:`ncgate.errors.InputRefused` with a :class:`ncgate.errors.Reason`;
-nothing of a refused input is applied.  Imports only ``ncgate.errors``; the gateway and users
-import it (the engine, the PLC and the config stay below it: tests/test_layering.py).
+nothing of a refused input is applied.  Imports only ``ncgate.errors`` and the command table
+(``ncgate.commands``); the gateway and users import it (the engine, the PLC and the config
+stay below it: tests/test_layering.py).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Final
 
+from ncgate.commands import BY_WORD, COMMANDS, CommandWord
 from ncgate.errors import InputRefused, Reason
 
 
@@ -198,26 +200,47 @@ class Writes:
 
 
 class CommandKind(enum.IntEnum):
-    """The command word of the fieldbus maps (spec 3.2): its number is the word's value."""
+    """The command word of the fieldbus maps (spec 3.2): its number is the word's value.
+    What each does, and everything else about it, is its row of ``ncgate.commands.COMMANDS``
+    (``spec``); the members are spelled out for the type checker, and checked against that
+    table as this module loads: every row without an N number, by its word and its name.
+    (13..15 carry an N number and become other inputs: ``gateway.door.search_inputs``.)"""
 
     CYCLE_START = 1
     FEED_HOLD = 2
     RESET = 3
-    RESTART_PLC = 4  # the PLC logic after a FAULT, the NC processes untouched (the cell's)
-    STEP = 5  # exactly one more block, then stop (STEP)
-    SINGLE_BLOCK_ON = 6  # stop after each block until a cycle start
+    RESTART_PLC = 4
+    STEP = 5
+    SINGLE_BLOCK_ON = 6
     SINGLE_BLOCK_OFF = 7
-    OPTIONAL_STOP_ON = 8  # M01 stops (the operator's switch; the cell's)
+    OPTIONAL_STOP_ON = 8
     OPTIONAL_STOP_OFF = 9
-    BLOCK_SKIP_ON = 10  # blocks marked "/" are skipped (the cell's)
+    BLOCK_SKIP_ON = 10
     BLOCK_SKIP_OFF = 11
-    RUN_TO_SYNC = 12  # stop the cell at the next EXE/WAI/SND/REL/#SIGNAL/#WAIT of anyone
-    # (13..15: block search and breakpoints, with an N number: gateway.door.SEARCH_WORDS)
-    RELOAD_PLC = 16  # online change: [plc] logic read again, swapped in between two scans
+    RUN_TO_SYNC = 12
+    RELOAD_PLC = 16
 
     @property
     def label(self) -> str:
+        """Its name as a script, the console and the record write it (``cycle_start``)."""
         return self.name.lower()
+
+    @property
+    def spec(self) -> CommandWord:
+        """Its row of the command table."""
+        return BY_WORD[self.value]
+
+
+def _check_command_kinds() -> None:
+    table = {(c.word, c.name) for c in COMMANDS if not c.with_n}
+    kinds = {(k.value, k.label) for k in CommandKind}
+    if table != kinds:
+        raise AssertionError(f"CommandKind differs from ncgate.commands.COMMANDS: only in "
+                             f"the table {sorted(table - kinds)}, only in the enum "
+                             f"{sorted(kinds - table)}")
+
+
+_check_command_kinds()
 
 
 def command_word(word: int) -> tuple[CommandKind, int | None] | None:

@@ -31,10 +31,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from ncgate.commands import BY_NAME, plc_edges, plc_levels
 from ncgate.errors import NcgateError
 from ncgate.plc.image import IOImage, PlcError
 from ncgate.plc.retain import RetainStore
 from ncgate.plc.st.compiler import (
+    NC_OUTPUTS,
+    NC_PROCESS_OUTPUTS,
     REAL_OVERFLOW,
     REAL_OVERFLOW_MESSAGE,
     IterationGuard,
@@ -50,6 +53,17 @@ log = logging.getLogger("ncgate.plc")
 # See compiler.NC_PROCESS: state, N, line, waiting, alarm, alarm code, idle, held, then the
 # auxiliary functions' value and strobe for M, S, T, H.
 NcSnapshot = tuple[int, ...]
+# The NC outputs' slots (compiler.NC_OUTPUTS) and the command words they give, from the command
+# table (ncgate.commands): (slot, word) acting on a rising edge; (slot, word of TRUE, word of
+# FALSE) acting as a level changes; HOLD_LEVEL, which gives a feed hold as it rises.
+_EDGES = tuple((NC_OUTPUTS[name], word) for name, word in plc_edges())
+_LEVELS = tuple((NC_OUTPUTS[name], on, off) for name, on, off in plc_levels())
+_HOLD_LEVEL = NC_OUTPUTS["HOLD_LEVEL"]
+_FEED_HOLD = BY_NAME["feed_hold"].word
+# NC.P[k]'s: its commands on a rising edge, and its auxiliary functions' acknowledges (levels).
+_PROCESS_EDGES = tuple((NC_PROCESS_OUTPUTS[name], word) for name, word in plc_edges()
+                       if name in NC_PROCESS_OUTPUTS)
+_AUX_ACKS = tuple((NC_PROCESS_OUTPUTS[f"{letter}ACK"], letter) for letter in "MSTH")
 
 
 class PlcState(enum.IntEnum):
@@ -67,9 +81,9 @@ class NcPort(Protocol):
 
     def last_snd(self) -> tuple[int, int, int]: ...  # sender, target, sequence
 
-    # The command word (1 cycle start, 2 feed hold, 3 reset, 8/9 optional stop, 10/11 block
-    # skip), of the cell or of ``process``; ``where``: FILE:LINE of the logic that gave it.
-    # InputRefused when it cannot go (said as a hazard).
+    # A command word (ncgate.commands: those an NC output gives), of the cell or of
+    # ``process``; ``where``: FILE:LINE of the logic that gave it.  InputRefused when it
+    # cannot go (said as a hazard).
     def command(self, word: int, where: str, process: int | None = None) -> None: ...
 
     # The feed override in percent, of the cell or of ``process``.
@@ -341,27 +355,27 @@ class PlcRuntime:
     @property
     def hold_level(self) -> bool:
         """NC.HOLD_LEVEL as the last scan left it: while TRUE the NC refuses a cycle start."""
-        return bool(self._last_outputs[5]) and self.status.state is PlcState.RUNNING
+        return bool(self._last_outputs[_HOLD_LEVEL]) and self.status.state is PlcState.RUNNING
 
     def _act(self) -> None:
         outputs, last = self._outputs, self._last_outputs
         if outputs != last:
-            for i, word in enumerate((1, 2, 3)):
+            for i, word in _EDGES:
                 if outputs[i] and not last[i]:  # NC.START/HOLD/RESET act on a rising edge
                     self._command(word, self._outputs_at[i])
-            for i, on, off in ((3, 8, 9), (4, 10, 11)):  # OPT_STOP, BLOCK_SKIP: levels
+            for i, on, off in _LEVELS:  # OPT_STOP, BLOCK_SKIP: levels
                 if bool(outputs[i]) != bool(last[i]):
                     self._command(on if outputs[i] else off, self._outputs_at[i])
-            if outputs[5] and not last[5]:  # HOLD_LEVEL: holds as it rises
-                self._command(2, self._outputs_at[5])
+            if outputs[_HOLD_LEVEL] and not last[_HOLD_LEVEL]:  # holds as it rises
+                self._command(_FEED_HOLD, self._outputs_at[_HOLD_LEVEL])
             self._last_outputs = [bool(o) for o in outputs]
         for k, (now, before) in enumerate(zip(self._process_outputs,
                                               self._last_process_outputs, strict=True)):
             if now != before:
-                for i, word in enumerate((1, 2, 3)):
+                for i, word in _PROCESS_EDGES:
                     if now[i] and not before[i]:
                         self._command(word, self._process_outputs_at[k][i], k + 1)
-                for i, letter in enumerate("MSTH", 3):  # MACK ..: levels, on a change
+                for i, letter in _AUX_ACKS:  # MACK ..: levels, on a change
                     if bool(now[i]) != bool(before[i]):
                         self._aux_ack(k + 1, letter, bool(now[i]),
                                       self._process_outputs_at[k][i])

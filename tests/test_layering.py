@@ -5,7 +5,9 @@
 - interpreter: stdlib + lark (+ ``ncgate.errors``); never plc, gateway or config; its engine
   imports no dialect's front end;
 - plc: stdlib + lark, for its Structured Text compiler (+
-  ``ncgate.errors``); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
+  ``ncgate.errors``, and ``ncgate.commands``, the command table its NC outputs give words
+  of); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
+- ``ncgate.commands`` and ``ncgate.errors`` are leaves: the standard library only;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports
   aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
@@ -73,7 +75,8 @@ def allowed(name: str, prefixes: set[str]) -> bool:
 
 RULES = {
     "interpreter": STDLIB | {"lark", "ncgate.interpreter", "ncgate.errors"},
-    "plc": STDLIB | {"lark", "ncgate.plc", "ncgate.errors"},
+    # The PLC's NC outputs give command words: named by the one command table, a leaf.
+    "plc": STDLIB | {"lark", "ncgate.plc", "ncgate.errors", "ncgate.commands"},
     # The config names the engine's choices (the SND policy), defined once in its leaf module.
     "config": STDLIB | {"ncgate.config", "ncgate.errors", "ncgate.interpreter.settings"},
 }
@@ -88,6 +91,17 @@ def test_package_imports_only_what_it_may(folder: str) -> None:
         if not (allowed(name, RULES[folder]) or name.split(".")[0] in STDLIB)
     }
     assert not offenders
+
+
+# Leaves under every layer: they import the standard library only.
+LEAVES = ("ncgate/errors.py", "ncgate/commands.py")
+
+
+@pytest.mark.parametrize("leaf", LEAVES)
+def test_the_leaves_import_only_the_standard_library(leaf: str) -> None:
+    path = ROOT / leaf
+    assert {n for n in imports_of(path, module_name(path))
+            if n.split(".")[0] not in STDLIB} == set()
 
 
 def test_nothing_imports_the_generic_top_level_names() -> None:

@@ -19,6 +19,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ncgate import commands
 from ncgate.config import Config, ConfigError
 from ncgate.gateway.door import search_inputs
 from ncgate.gateway.errors import ModbusError
@@ -168,15 +169,13 @@ class ModbusMap:
                    access("sa_bytes", "rw"), "uint8",
                    "SA byte n (bits 8n..8n+7, the same bits as the coils)"),
             Region(Table.HOLDING, self.COMMAND, 1, Kind.COMMAND, access("command", "w"),
-                   "uint16", "command: 1 cycle start, 2 feed hold, 3 reset, 4 restart the "
-                   "PLC, 5 step, 6/7 single block on/off, 8/9 optional stop on/off, 10/11 "
-                   "block skip on/off, 12 run to sync, 16 reload the PLC logic; high byte: "
-                   "the process, 0 the cell (reads 0)"),
+                   "uint16", f"command: {commands.summary()}; high byte: the process, 0 "
+                   f"the cell (reads 0)"),
             Region(Table.HOLDING, self.MAILBOX, 2, Kind.MAILBOX, access("mailbox", "w"),
                    "uint16", "SND mailbox: sender, target in one FC16 (reads 0)"),
             Region(Table.HOLDING, self.SEARCH, 1, Kind.SEARCH, access("command", "rw"),
-                   "uint16", "the N number of command words 13 (block search), 14 "
-                   "(breakpoint)"),
+                          "uint16", "the N number of command words " + ", ".join(
+                       f"{c.word} ({c.title})" for c in commands.COMMANDS if c.with_n)),
             Region(Table.HOLDING, self.OVERRIDES, 2 * processes, Kind.OVERRIDES,
                    access("overrides", "rw"), "uint16",
                    f"process k at {self.OVERRIDES}+2(k-1): feed override (0..200 %), rapid "
@@ -425,11 +424,8 @@ class ModbusMap:
                 return
             command = command_word(word)
             if command is None:
-                raise ModbusError(ILLEGAL_VALUE, "command: 1 cycle start, 2 feed hold, 3 reset, "
-                                  "4 restart the PLC, 5 step, 6/7 single block on/off, 8/9 "
-                                  "optional stop on/off, 10/11 block skip on/off, 12 run to "
-                                  "sync, 13..15 block search and breakpoints, 16 reload the "
-                                  "PLC logic (high byte: the process, 0 for the cell)")
+                raise ModbusError(ILLEGAL_VALUE, f"command: {commands.summary()} (high byte: "
+                                  "the process, 0 for the cell)")
             backend.apply(Command(command[0], command[1], source))  # refusals: REFUSAL
         else:  # the mailbox: sender and target in one write
             if count != 2 or offset != 0:

@@ -233,8 +233,7 @@ function renderLanes() {
       lane.append(el("span", "num", "P" + p.number), el("span", "state"));
       if (!p.external) {  // this process's own commands (issue 27): the command of one process
         const controls = el("span", "controls");
-        for (const [command, label] of [["cycle_start", "Start"], ["feed_hold", "Hold"],
-                                        ["step", "Step"], ["reset", "Reset"]]) {
+        for (const [command, label] of laneButtons) {
           const b = el("button", "lane-" + command, label);
           b.title = label + " process " + p.number;
           b.addEventListener("click", () => {
@@ -951,6 +950,15 @@ async function loadPrograms() {
     }
   } catch (e) { /* the stream's reconnect will show that the server is away */ }
 }
+// The commands of one process, as the command table names them (GET /api/commands): asked
+// before the stream starts, so the first lanes drawn have their buttons.
+let laneButtons = [];
+async function loadCommands() {
+  try {
+    const r = await fetch("/api/commands");
+    laneButtons = (await r.json()).lane;
+  } catch (e) { /* the stream's reconnect will show that the server is away */ }
+}
 loadPrograms();
 controls();
-connect();
+loadCommands().finally(connect);
