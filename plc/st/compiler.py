@@ -34,6 +34,7 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from typing import Any
 
+from ncgate.commands import BY_WORD, plc_edges, plc_levels
 from ncgate.plc.image import PlcError
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
@@ -123,14 +124,17 @@ NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
               "SSTROBE": (11, "BOOL"), "T": (12, "DINT"), "TSTROBE": (13, "BOOL"),
               "H": (14, "DINT"), "HSTROBE": (15, "BOOL")}
 NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
-# NC outputs (BOOL, in _NCO): START/HOLD/RESET act on a rising edge; OPT_STOP, BLOCK_SKIP
-# and HOLD_LEVEL are levels (the operator's switches, and a feed-hold interlock).
-NC_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2, "OPT_STOP": 3, "BLOCK_SKIP": 4,
-              "HOLD_LEVEL": 5}
-# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge; the
-# acknowledges of its auxiliary functions ([nc.aux]), levels.
-NC_PROCESS_OUTPUTS = {"START": 0, "HOLD": 1, "RESET": 2, "MACK": 3, "SACK": 4, "TACK": 5,
-                      "HACK": 6}
+# NC outputs (BOOL, in _NCO), named by the command table (ncgate.commands): the commands that
+# act on a rising edge (START, HOLD, RESET), then the switches' levels (OPT_STOP, BLOCK_SKIP),
+# then HOLD_LEVEL, a feed-hold interlock.  plc/scan.py reads the words from the same table.
+NC_OUTPUTS = {name: slot for slot, name in enumerate(
+    [*(name for name, _ in plc_edges()), *(name for name, _, _ in plc_levels()), "HOLD_LEVEL"])}
+# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge (those
+# of the table that are not the cell's alone); the acknowledges of its auxiliary functions
+# ([nc.aux]), levels.
+NC_PROCESS_OUTPUTS = {name: slot for slot, name in enumerate(
+    [*(name for name, word in plc_edges() if not BY_WORD[word].cell_only),
+     "MACK", "SACK", "TACK", "HACK"])}
 NC_VALUE_OUTPUTS = {"FEED_OVERRIDE"}  # INT percent: NC.FEED_OVERRIDE, NC.P[k].FEED_OVERRIDE
 
 # Limits of the Python the logic compiles to (CPython 3.11): 100 levels of indentation, 20
