@@ -870,7 +870,11 @@ class Engine:
                     self._make_runnable(p)  # let the others run; this one goes on after
                     return
         except RuntimeAlarm as alarm:
-            self._alarm(p, alarm.code, alarm.message, p.where)
+            # A block that does not compile (lazy parsing) strikes at its own line, not at
+            # the block before, where the process stands (Process.where).
+            where = p.where if p.block is not None else (loaded.file, min(p.pc + 1, lines),
+                                                          None)
+            self._alarm(p, alarm.code, alarm.message, where)
         finally:
             p.spin += turn - budget
             self._decoded += turn - budget
