@@ -19,10 +19,11 @@ from ncgate.interpreter.engine.trace import EventDict
 
 COLOURS = {
     "RUNNING": "#4caf50", "WAIT_PROC": "#ff9800", "WAIT_COND": "#2196f3",
-    "WAIT_SND": "#e91e63", "WAIT_EXE": "#9c27b0", "ALARM": "#d32f2f",
+    "WAIT_SND": "#e91e63", "WAIT_EXE": "#9c27b0", "HOLD": "#9e9e9e", "ALARM": "#d32f2f",
 }
 LABELS = {"RUNNING": "running", "WAIT_PROC": "WAI,n", "WAIT_COND": "WAI,cond",
-          "WAIT_SND": "SND waits", "WAIT_EXE": "EXE waits", "ALARM": "alarm"}
+          "WAIT_SND": "SND waits", "WAIT_EXE": "EXE waits", "HOLD": "feed hold",
+          "ALARM": "alarm"}
 _ON = {"proc": "WAIT_PROC", "cond": "WAIT_COND", "snd": "WAIT_SND", "exe": "WAIT_EXE",
        "signal": "WAIT_PROC", "flush": "WAIT_COND", "aux": "WAIT_COND"}
 
@@ -36,6 +37,10 @@ def state_intervals(events: Iterable[EventDict], processes: int
     out: dict[int, list[tuple[float, float, str, str]]] = {k: [] for k in
                                                            range(1, processes + 1)}
     end_t = 0.0
+    # A feed hold (the trace's hold events) shows as HOLD over whatever the process does
+    # beneath it (``beneath``), which it shows again when the hold ends.
+    held: set[int] = set()
+    beneath: dict[int, tuple[str, str]] = {}
 
     def close(proc: int, t: float) -> None:
         if proc in current:
@@ -75,6 +80,21 @@ def state_intervals(events: Iterable[EventDict], processes: int
         elif kind == "alarm":
             close(proc, t)
             current[proc] = (t, "ALARM", str(e.get("code", "")))
+        elif kind == "hold":
+            if e["on"]:
+                held.add(proc)
+            else:
+                held.discard(proc)
+                if proc in current and current[proc][1] == "HOLD":
+                    close(proc, t)
+                    current[proc] = (t, *beneath.pop(proc, ("RUNNING", "")))
+        if kind == "end":
+            beneath.pop(proc, None)
+        if proc in held and proc in current and current[proc][1] not in ("HOLD", "ALARM"):
+            _, state, label = current[proc]
+            beneath[proc] = (state, label)
+            close(proc, t)
+            current[proc] = (t, "HOLD", "hold")
     end_t = max(end_t, 1e-6)
     for proc in list(current):
         close(proc, end_t)
@@ -104,7 +124,9 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
     lane_y = {k: TOP + (LANE + GAP) * k for k in range(1, processes + 1)}
     # The legend's entries, laid out in rows that fit the width (it was one row that ran
     # past the picture's right edge and was cut).
-    entries = [(COLOURS[state], LABELS[state]) for state in COLOURS] + [
+    drawn = {state for lane in lanes.values() for _, _, state, _ in lane}
+    entries = [(COLOURS[state], LABELS[state]) for state in COLOURS
+               if state != "HOLD" or "HOLD" in drawn] + [
         ("#222", "\u2192 SND"), ("#00796b", "\u2192 #SIGNAL"), ("#3f51b5", "\u25bc PLC write")]
     legend: list[tuple[float, int, str, str]] = []  # x, row, colour, label
     lx, row = float(LEFT), 0

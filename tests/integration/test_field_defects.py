@@ -83,3 +83,23 @@ def test_iw001_for_an_unsectioned_isg_main_with_config(
     (tmp_path / "B.nc").write_text((tmp_path / "A.nc").read_text())
     assert main(["check", str(tmp_path / "B.nc"), "--config", config]) == 0
     assert "IW001" not in capsys.readouterr().out
+
+
+# --- item 11: the timeline draws a feed hold --------------------------------------------------
+
+
+def test_the_timeline_draws_a_feed_hold_from_the_trace() -> None:
+    from ncgate.gateway.timeline import state_intervals
+
+    from ..helpers import make_sim
+
+    sim = make_sim({"A": "N10G1X10F600\nN20M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.call_at(0.25, lambda: engine.hold(True, 1))
+    engine.call_at(2.0, lambda: engine.cycle_start(process=1))
+    sim.run()
+    lanes, end_t = state_intervals(sim.events(), 5)
+    assert [(s, e, state) for s, e, state, _ in lanes[1]] == [
+        (0.0, 0.25, "RUNNING"), (0.25, 2.0, "HOLD"), (2.0, 2.75, "RUNNING")]
+    assert end_t == 2.75
