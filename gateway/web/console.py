@@ -9,6 +9,7 @@ The only module that imports the web library.  What it serves:
   ``GET /api/stream`` the live stream (server-sent events: ``status`` and ``events``);
   ``GET /api/timeline.svg`` the timeline picture of the latest events;
   ``GET /api/programs`` the programs on the storage devices;
+  ``GET /api/commands`` the command table (ncgate.commands) and the lanes' buttons;
 - ``POST /api/write`` ``{"var": "SA10", "value": 1}`` as writer ``web``;
   ``POST /api/command`` ``{"command": "start" | "hold" | "reset"}``, or ``{"command":
   "start", "program": "PROG92", "process": 2}``.
