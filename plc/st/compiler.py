@@ -675,7 +675,7 @@ class Compiler:
         self.files = list(files)
         self.ctx = context
         self.diagnostics: list[StDiagnostic] = []
-        self.warnings: list[StDiagnostic] = []
+        self.warnings: list[StDiagnostic] = [w for f in self.files for w in f.warnings]
         self.pous: dict[str, PouInfo] = {}
         self.type_decls: dict[str, tuple[n.TypeDecl, n.SourceFile]] = {}
         self.resolved: dict[str, Type] = {}
@@ -812,6 +812,7 @@ class Compiler:
                                          + (f"declared twice (first at {first.span})"
                                             if first.image is None else _symbol_clash(first)),
                                          decl.span)
+                    self.located(decl)
                     t = self.resolve_type(decl.type, False)
                     initial = self._initial(decl, t, scope)
                     self.globals[key] = VarInfo(decl.name, t, "VAR_GLOBAL", decl.qualifier,
@@ -1023,6 +1024,7 @@ class Compiler:
                 if symbol is not None and symbol.image is not None:
                     raise self.error(StCode.DUPLICATE_NAME, f"{decl.name} is "
                                      + _symbol_clash(symbol), decl.span)
+                self.located(decl)
                 t = self.resolve_type(decl.type, in_function, scope,
                                       decl.section == "VAR_IN_OUT" or (
                                           in_function and decl.section == "VAR_INPUT"))
@@ -1051,6 +1053,14 @@ class Compiler:
                                          decl.span, initial)
             except Problems:
                 continue
+
+    def located(self, decl: n.VarDecl) -> None:
+        """``x AT %IX0.0 : BOOL``: ST031 at AT, and the variable declared all the same, so
+        that the rest of the load is checked and every error of it reported."""
+        if decl.located is not None:
+            self.error(StCode.UNSUPPORTED, "located variables (AT %I…): not supported by "
+                       "ncgate's Structured Text; the image is SA[n], SAB[n], SK[n], SYVAR[n] "
+                       "or a [symbols] name (docs/plc.md)", decl.located)
 
     def _initial(self, decl: n.VarDecl, t: Type, scope: Scope) -> Any:
         if decl.initial is None:

@@ -49,11 +49,26 @@ class StCode(enum.Enum):
     DUPLICATE_POU = ("ST032", "two POUs with one name")
     EXTERNAL_SENDER = ("ST033", "NC.SEND from a process that is not external")
     DUPLICATE_LABEL = ("ST034", "a CASE value listed twice")
+    # -- what CODESYS, TwinCAT and matiec write beyond the subset: each its own code --------
+    INHERITANCE = ("ST035", "EXTENDS or IMPLEMENTS: a function block that inherits "
+                   "(object-oriented ST)")
+    QUALIFIED_TYPE = ("ST036", "a namespace-qualified type (Tc2_Standard.TON, Lib.T_Type)")
+    FB_INIT = ("ST037", "arguments for an instance's FB_init at its declaration "
+               "(fb : FB_Axis(nId := 1))")
+    FB_ARRAY_INIT = ("ST038", "FB_init arguments for an array of function blocks "
+                     "(ARRAY[1..2] OF FB_Axis[(nId := 1), (nId := 2)])")
+    TYPED_ENUM = ("ST039", "an enumeration with a base type ((A, B) DINT; INT (A := 1, B))")
+    ACCESS_SPECIFIER = ("ST041", "an access specifier or modifier on a POU (FUNCTION_BLOCK "
+                        "PUBLIC, ABSTRACT, FINAL)")
+    STRAY_SEMICOLON = ("ST042", "a ';' where none may stand (after END_PROGRAM, a POU's name, "
+                       "another ';' in a declaration)")
     # -- warnings (plc.strict = false: CODESYS's leniencies load, the IEC spelling said) ----
     IMPLICIT_NARROWING = ("SW001", "an implicit narrowing conversion (IEC: DINT_TO_INT …)")
     VENDOR_EXTENSION = ("SW002", "a vendor extension (E.RUN, AND_THEN, OR_ELSE): IEC's "
                         "spelling given")
     ENUM_AS_INTEGER = ("SW003", "an enumeration value used as an integer, or the reverse")
+    UNKNOWN_PRAGMA = ("SW004", "a pragma ncgate does not know (matiec's inline C {{ … }}, "
+                      "a CODESYS conditional {IF …}): ignored, in strict mode too")
     # -- PLCopen XML -------------------------------------------------------------------------------
     XML_PROJECT = ("ST040", "a PLCopen XML file that is not well-formed or not a TC6 project")
 
@@ -117,8 +132,9 @@ def did_you_mean(word: str, candidates: Iterable[str]) -> str:
 
 def codes_markdown() -> str:
     lines = ["", "## Structured Text (PLC logic)", "",
-             "Generated from `plc/st/diagnostics.py`. SW codes are warnings, given only with "
-             "`plc.strict = false` (where strict IEC refuses the construct).", "",
+             "Generated from `plc/st/diagnostics.py`. SW codes are warnings: SW001..SW003 "
+             "are given only with `plc.strict = false` (where strict IEC refuses the "
+             "construct), SW004 always.", "",
              "| code | what |", "|---|---|"]
     lines += [f"| {c.code} | {c.summary} |" for c in StCode]
     return "\n".join(lines) + "\n"

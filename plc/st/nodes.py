@@ -5,6 +5,10 @@ declarations, statements and expressions.  Frozen dataclasses; names are kept as
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # (diagnostics imports Span from here)
+    from ncgate.plc.st.diagnostics import StDiagnostic
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,6 +171,7 @@ class VarDecl:
     section: str  # VAR, VAR_INPUT, VAR_OUTPUT, VAR_IN_OUT, VAR_TEMP, VAR_EXTERNAL, VAR_GLOBAL
     qualifier: str | None  # RETAIN, CONSTANT
     span: Span
+    located: Span | None = None  # where ``AT %IX0.0`` starts (outside the subset: ST031)
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,6 +299,7 @@ class SourceFile:
     pous: tuple[Pou, ...]
     types: tuple[TypeDecl, ...] = ()
     globals: tuple[VarDecl, ...] = ()
+    warnings: tuple[StDiagnostic, ...] = ()  # the parser's (SW004: an unknown pragma)
 
     def line(self, number: int) -> str:
         lines = self.text.splitlines()

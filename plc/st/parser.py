@@ -57,12 +57,23 @@ class UnclosedComment(ValueError):
         self.what = what
 
 
-def blank_comments(text: str) -> str:
+# The pragmas (6.2) whose meaning ignoring them keeps: CODESYS's and TwinCAT's attributes,
+# messages, regions and library notes.  Any other -- matiec's inline C {{ ... }}, CODESYS's
+# conditional {IF defined(...)} -- changes what the code means where it is honoured: ignored
+# too, with a warning (SW004).
+KNOWN_PRAGMAS = frozenset({"ATTRIBUTE", "INFO", "WARNING", "ERROR", "TEXT", "REGION",
+                           "ENDREGION", "LIBRARY", "MESSAGEGUID", "BITACCESS", "FLAG"})
+_PRAGMA_WORD = re.compile(r"\{\s*([A-Za-z_]+)")
+
+
+def blank_comments(text: str, unknown_pragmas: list[int] | None = None) -> str:
     """The text with every comment and pragma turned into spaces (newlines kept, so every
     position is unchanged).  ``(* *)`` and ``/* */`` nest in themselves, as IEC 61131-3
     (6.1.5) allows: ``(* a (* b *) c *)`` is one comment.  A pragma ``{attribute …}``
-    (6.2) is accepted and ignored.  String literals are skipped: ``'(*'`` is text.
-    UnclosedComment at the opening of one that the file never closes."""
+    (6.2) is accepted and ignored, and matiec's ``{{ inline C }}`` is one pragma; where a
+    pragma ncgate does not know starts is added to ``unknown_pragmas``.  String literals
+    are skipped: ``'(*'`` is text.  UnclosedComment at the opening of one that the file
+    never closes."""
     if not any(mark in text for mark in ("(*", "/*", "//", "{")):
         return text
     pieces = []
@@ -81,10 +92,15 @@ def blank_comments(text: str) -> str:
             end = text.find("\n", start)
             end = len(text) if end < 0 else end
         elif opener == "{":
-            end = text.find("}", start)
+            inline_c = text.startswith("{{", start)
+            end = text.find("}}" if inline_c else "}", start)
             if end < 0:
                 raise UnclosedComment(start, "pragma")
-            end += 1
+            end += 2 if inline_c else 1
+            word = _PRAGMA_WORD.match(text, start)
+            if unknown_pragmas is not None and (inline_c or word is None or
+                                                word.group(1).upper() not in KNOWN_PRAGMAS):
+                unknown_pragmas.append(start)
         else:
             depth, end = 1, found.end()
             pair = _COMMENT_PAIR[opener]
@@ -120,6 +136,66 @@ def _unsupported(text: str, at: int) -> tuple[str, int] | None:
     previous = re.search(r"[A-Za-z_][A-Za-z0-9_]*$", before)
     if previous is not None and previous.group().upper() in UNSUPPORTED_WORDS:
         return UNSUPPORTED_WORDS[previous.group().upper()], previous.start()
+    return None
+
+
+_WORD = r"[A-Za-z_][A-Za-z0-9_]*"
+# A POU's access specifier or modifier (CODESYS, TwinCAT): FUNCTION_BLOCK PUBLIC FB_Axis.
+_SPECIFIER = re.compile(r"\b(?:FUNCTION_BLOCK|FUNCTION|PROGRAM)\s+((?:PUBLIC|PRIVATE|PROTECTED|"
+                        r"INTERNAL|ABSTRACT|FINAL)\b)", re.IGNORECASE)
+_INHERITS = re.compile(rf"\bFUNCTION_BLOCK\s+{_WORD}\s+((?:EXTENDS|IMPLEMENTS)\b)",
+                       re.IGNORECASE)
+_POU_HEAD = re.compile(rf"\b(?:FUNCTION_BLOCK|PROGRAM)\s+{_WORD}\s*(;)\s*$|"
+                       rf"\bFUNCTION\s+{_WORD}\s*:\s*{_WORD}\s*(;)\s*$", re.IGNORECASE)
+_SECTION = re.compile(r"\b(TYPE|END_TYPE|VAR\w*|END_VAR)\b", re.IGNORECASE)
+
+
+def _field_construct(text: str, at: int, token: Token) -> tuple[StCode, str, int] | None:
+    """What CODESYS, TwinCAT or matiec wrote at a syntax error at ``at`` (``text`` with its
+    comments blanked), if it is one of the constructs outside the subset that has its own
+    code: (code, message, where it starts)."""
+    for pattern, code, what in (
+            (_SPECIFIER, StCode.ACCESS_SPECIFIER, "an access specifier or modifier"),
+            (_INHERITS, StCode.INHERITANCE, "inheritance")):
+        found = next((m for m in pattern.finditer(text, 0, at)), None)
+        if found is not None:
+            return (code, f"{found.group(1).upper()}: {what} (object-oriented ST) is not "
+                    "supported by ncgate's Structured Text", found.start(1))
+    before = text[:at]
+    sections = _SECTION.findall(before)
+    section = sections[-1].upper() if sections else ""
+    kind = str(token.type)
+    head = _POU_HEAD.search(before)
+    if head is not None:
+        where = head.start(1) if head.group(1) is not None else head.start(2)
+        return (StCode.STRAY_SEMICOLON, "a ';' after the POU's name: its declarations "
+                "follow the name directly", where)
+    if kind == "SEMICOLON" and re.search(r"(;|\bEND_[A-Za-z_]+)\s*$", before):
+        return (StCode.STRAY_SEMICOLON, "a ';' where none may stand (delete it)", at)
+    if section == "TYPE" and re.search(r"\)\s*$", before) and kind == "NAME":
+        return (StCode.TYPED_ENUM, f"an enumeration with a base type ({token}): ncgate's "
+                "enumerations are of their own type; delete the base type", at)
+    if section == "TYPE" and re.search(rf":\s*{_WORD}\s*\([^;()]*$", before):
+        start = before.rfind("(")
+        name_at = re.search(rf"{_WORD}\s*\($", before[:start + 1])
+        return (StCode.TYPED_ENUM, "an enumeration with a base type (INT (A := 1, B)): "
+                "write (A := 1, B)", name_at.start() if name_at else start)
+    if section.startswith("VAR") and section != "END_VAR":
+        if kind == "DOT" and re.search(rf":\s*(?:ARRAY\s*\[[^;]*\]\s*OF\s*)?{_WORD}\s*$",
+                                       before, re.IGNORECASE):
+            name = re.search(rf"{_WORD}\s*$", before)
+            assert name is not None
+            return (StCode.QUALIFIED_TYPE, f"{name.group().strip()}.…: a namespace-qualified "
+                    "type; name the type alone", name.start())
+        array = re.search(rf"\bOF\s*{_WORD}\s*(\[)\s*\([^;]*$", before, re.IGNORECASE)
+        if array is not None:
+            return (StCode.FB_ARRAY_INIT, "FB_init arguments for an array of function "
+                    "blocks: not supported (set the inputs at the first call)",
+                    array.start(1))
+        init = re.search(rf":\s*{_WORD}\s*(\()[^;()]*$", before)
+        if init is not None and str(token) in (",", ":="):
+            return (StCode.FB_INIT, "arguments for the instance's FB_init: not supported "
+                    "(set the inputs at the first call)", init.start(1))
     return None
 
 
@@ -370,16 +446,21 @@ class _Build(Transformer_NonRecursive[Token, Any]):
             if word != "NON_RETAIN":  # the default: nothing is kept over a restart
                 qualifier = word
             items = items[1:]
-        return [n.VarDecl(d.name, d.type, d.initial, section, qualifier, d.span)
+        return [n.VarDecl(d.name, d.type, d.initial, section, qualifier, d.span, d.located)
                 for decl in items for d in decl]
 
     def var_decl(self, meta: Any, children: list[Any]) -> list[n.VarDecl]:
         names = [c for c in children if isinstance(c, Token) and c.type == "NAME"]
-        rest = [c for c in children if not (isinstance(c, Token) and c.type == "NAME")]
+        located = next((c for c in children if isinstance(c, n.Span)), None)
+        rest = [c for c in children if not (isinstance(c, Token) and c.type == "NAME")
+                and not isinstance(c, n.Span)]
         type_ref = rest[0]
         initial = rest[1] if len(rest) > 1 else None
-        return [n.VarDecl(str(t), type_ref, initial, "VAR", None, _span(self.file, t))
-                for t in names]
+        return [n.VarDecl(str(t), type_ref, initial, "VAR", None, _span(self.file, t),
+                          located) for t in names]
+
+    def located(self, meta: Any, children: list[Token]) -> n.Span:
+        return _span(self.file, children[0])
 
     def named_type(self, meta: Any, children: list[Token]) -> n.NamedType:
         return n.NamedType(str(children[0]), _span(self.file, children[0]))
@@ -661,8 +742,11 @@ def parse_source(text: str, file: str) -> n.SourceFile:
         return fail(StCode.UNSUPPORTED, f"{what}: not supported by ncgate's Structured Text "
                     "(docs/plc.md lists what is)", line, column)
 
+    unknown: list[int] = []
+    blanked = text
     try:
-        tree = _parser().parse(blank_comments(text))
+        blanked = blank_comments(text, unknown)
+        tree = _parser().parse(blanked)
     except UnclosedComment as exc:
         line, column = _position(text, exc.at)
         raise fail(StCode.UNEXPECTED_END, f"the file ends inside this {exc.what} (it is "
@@ -688,6 +772,12 @@ def parse_source(text: str, file: str) -> n.SourceFile:
             line = len(lines) or 1
             raise fail(StCode.UNEXPECTED_END, f"the file ends here; expected "
                        f"{_expected(exc)}", line, len(lines[-1]) + 1 if lines else 1) from None
+        construct = _field_construct(blanked, token.start_pos, token) \
+            if token.start_pos is not None else None
+        if construct is not None:
+            code, message, where = construct
+            line, column = _position(text, where)
+            raise fail(code, message, line, column) from None
         keyword = " (a keyword, not a name)" if "NAME" in exc.expected and \
             str(token).upper() == token.type else ""
         raise fail(StCode.UNEXPECTED_TOKEN, f"unexpected {str(token)!r}{keyword}; expected "
@@ -703,7 +793,13 @@ def parse_source(text: str, file: str) -> n.SourceFile:
                        cause.token.column or 1) from None
         raise
     _dismantle(tree)
-    return n.SourceFile(file, text, pous, types, globals_)
+    warnings = []
+    for at in unknown:
+        line, column = _position(text, at)
+        warnings.append(StDiagnostic(StCode.UNKNOWN_PRAGMA, "a pragma ncgate does not know: "
+                                     "ignored (what it asks for is not done)",
+                                     n.Span(file, line, column), lines[line - 1]))
+    return n.SourceFile(file, text, pous, types, globals_, tuple(warnings))
 
 
 def _dismantle(tree: Tree[Any]) -> None:

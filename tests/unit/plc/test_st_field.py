@@ -262,3 +262,61 @@ def test_a_variable_of_an_enumeration_has_a_type_that_names_its_values() -> None
     assert isinstance(step, EnumOf) and step.name_of(plc["cell.s.step"]) == "DONE"
     assert st.name_of(99) == 99  # no name: the integer, as stored
     assert st == EnumOf("E_STATE")  # the names are no part of the type's identity
+
+
+# -- item 14: every error of a load; each construct outside the subset its own code ----------
+
+
+def all_diagnosed(source: str) -> list[tuple[str, int, int]]:
+    with pytest.raises(LogicError) as caught:
+        compile_logic([parse_source(source, "t.st")], CONTEXT)
+    return [(d.code.code, d.span.line, d.span.column) for d in caught.value.diagnostics]
+
+
+def test_a_located_variable_is_st031_and_the_rest_of_the_load_is_still_checked() -> None:
+    source = ("VAR_GLOBAL lamp AT %QX0.1 : BOOL; END_VAR\n"
+              "PROGRAM p\nVAR start AT %IX0.0 : BOOL; i : INT; d : DINT; END_VAR\n"
+              "IF start THEN lamp := TRUE; END_IF\n"
+              "i := d;\nEND_PROGRAM\n")
+    assert sorted(all_diagnosed(source)) == [("ST020", 5, 6), ("ST031", 1, 17),
+                                             ("ST031", 3, 11)]
+
+
+FB = "FUNCTION_BLOCK FB_Axis VAR_INPUT nId : INT; END_VAR END_FUNCTION_BLOCK\n"
+
+
+@pytest.mark.parametrize(("code", "marked"), [
+    ("ST035", FB + "FUNCTION_BLOCK FB_Lin ¦EXTENDS FB_Axis\nEND_FUNCTION_BLOCK"),
+    ("ST035", "FUNCTION_BLOCK FB_Lin ¦IMPLEMENTS I_Axis\nEND_FUNCTION_BLOCK"),
+    ("ST036", "PROGRAM p VAR t : ¦Tc2_Standard.TON; END_VAR END_PROGRAM"),
+    ("ST036", "PROGRAM p VAR t : ARRAY[1..2] OF ¦Lib.T_Pos; END_VAR END_PROGRAM"),
+    ("ST037", FB + "PROGRAM p VAR ax : FB_Axis¦(nId := 1); END_VAR END_PROGRAM"),
+    ("ST038", FB + "PROGRAM p VAR ax : ARRAY[0..1] OF FB_Axis¦[(nId := 1), (nId := 2)];\n"
+              "END_VAR END_PROGRAM"),
+    ("ST039", "TYPE E_Mode : (AUTO, MANUAL) ¦DINT; END_TYPE PROGRAM p END_PROGRAM"),
+    ("ST039", "TYPE E_Mode : ¦INT (AUTO := 1, MANUAL); END_TYPE PROGRAM p END_PROGRAM"),
+    ("ST041", "FUNCTION_BLOCK ¦PUBLIC FB_Axis\nVAR x : INT; END_VAR\nEND_FUNCTION_BLOCK"),
+    ("ST041", "FUNCTION_BLOCK ¦ABSTRACT FB_Base\nEND_FUNCTION_BLOCK"),
+    ("ST042", "PROGRAM p VAR x : INT;¦; END_VAR x := 1; END_PROGRAM"),
+    ("ST042", "PROGRAM p VAR x : INT; END_VAR x := 1; END_PROGRAM¦;"),
+    ("ST042", "FUNCTION_BLOCK FB_Axis¦; VAR x : INT; END_VAR END_FUNCTION_BLOCK"),
+    ("ST042", "FUNCTION F : INT¦; VAR_INPUT a : INT; END_VAR F := a; END_FUNCTION"),
+])
+def test_what_codesys_and_twincat_write_beyond_the_subset_has_its_own_code(
+        code: str, marked: str) -> None:
+    got, want = diagnosed(marked)
+    assert got == want and got[0] == code
+
+
+def test_a_missing_expression_is_still_a_plain_syntax_error() -> None:
+    got, want = diagnosed("PROGRAM p VAR x : INT; END_VAR\nx := ¦; END_PROGRAM")
+    assert got == want and got[0] == "ST002"
+
+
+def test_an_unknown_pragma_warns_at_its_brace_and_the_logic_loads() -> None:
+    source = ("PROGRAM p VAR x : INT; END_VAR\n{attribute 'hide'}\n"
+              "x := 1; {{ printf(\"%d\\n\", x); }}\n{IF defined (SIM)}\nx := 2;\n{END_IF}\n"
+              "END_PROGRAM\n")
+    logic = compile_logic([parse_source(source, "t.st")], CONTEXT)
+    assert [(w.code.code, w.span.line, w.span.column) for w in logic.warnings] == [
+        ("SW004", 3, 9), ("SW004", 4, 1), ("SW004", 6, 1)]
