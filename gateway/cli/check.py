@@ -31,11 +31,17 @@ from ncgate.interpreter.dialects import dialect_of
 from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES, file_version
 from ncgate.plc.st.compiler import compile_logic
-from ncgate.plc.st.diagnostics import LogicError, StDiagnostic
-from ncgate.plc.st.nodes import SourceFile
+from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
+from ncgate.plc.st.nodes import SourceFile, Span
 from ncgate.plc.st.plcopen import read_logic_file
 
 LOGIC_SUFFIXES = (".st", ".xml")  # PLC logic (ST, PLCopen XML), checked as the PLC loads it
+# TwinCAT 3's own source files (a POU, a global variable list, a data type, ...): XML whose
+# root is TcPlcObject, which neither the PLC nor an NC dialect reads.  Known by the suffix,
+# or by the root element in the file's first bytes whatever its suffix.
+TWINCAT_SUFFIXES = (".tcpou", ".tcgvl", ".tcdut", ".tcio", ".tctto", ".tcplcproj")
+TWINCAT_ROOT = b"<TcPlcObject"
+SNIFF_BYTES = 4096
 
 CONFIG_BESIDE = "ncgate.toml"
 
@@ -100,6 +106,13 @@ def check_files(
         groups[None if config is not None else path.parent.resolve()].append(path)
     reports: dict[Path, FileReport] = {}
     for group in groups.values():
+        for path in group:
+            said = twincat_file(path)
+            if said is not None:
+                reports[path] = FileReport(path, (said,))
+        group = [p for p in group if p not in reports]
+        if not group:
+            continue
         cfg = config if config is not None else config_for(group[0], None)
         logic = [p for p in group if p.suffix.lower() in LOGIC_SUFFIXES]
         if logic:
@@ -112,6 +125,28 @@ def check_files(
                                         process)
         reports.update((path, FileReport(path, tuple(found[path]))) for path in paths)
     return [reports[p] for p in files]
+
+
+def twincat_file(path: Path) -> StDiagnostic | None:
+    """ST040 at its root element when ``path`` is a TwinCAT 3 source file (``.TcPOU``, ...),
+    which would otherwise be read as an NC program and drown in its syntax errors."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(SNIFF_BYTES)
+    except OSError:
+        return None  # (said where the file is read)
+    at = head.find(TWINCAT_ROOT)
+    if at < 0 and path.suffix.lower() not in TWINCAT_SUFFIXES:
+        return None
+    before = head[:max(at, 0)]
+    line = before.count(b"\n") + 1
+    column = len(before) - (before.rfind(b"\n") + 1) + 1
+    lines = head.decode("utf-8", "replace").splitlines()
+    return StDiagnostic(
+        StCode.XML_PROJECT, "a TwinCAT 3 source file (TcPlcObject XML), not an NC program "
+        "and not PLC logic ncgate reads: export the POUs as PLCopen XML (.xml), or save "
+        "their Structured Text as .st (docs/plc.md)",
+        Span(str(path), line, column), lines[line - 1] if line <= len(lines) else "")
 
 
 def other_dialect(paths: Sequence[Path], config: Config, which: Dialect) -> Dialect | None:
