@@ -103,3 +103,31 @@ def test_the_timeline_draws_a_feed_hold_from_the_trace() -> None:
     assert [(s, e, state) for s, e, state, _ in lanes[1]] == [
         (0.0, 0.25, "RUNNING"), (0.25, 2.0, "HOLD"), (2.0, 2.75, "RUNNING")]
     assert end_t == 2.75
+
+
+# --- item 4: every reader shows the block a stopped process stands after ----------------------
+
+
+async def test_a_single_block_stop_shows_its_block_n_on_modbus_and_the_api(
+        tmp_path: Path) -> None:
+    from pymodbus.client import AsyncModbusTcpClient
+
+    from ncgate.gateway import Gateway, load_config
+    from ncgate.interpreter.engine import ProcessState
+
+    config = _cell(tmp_path, {"A": "N10E1=1\nN20E1=2\nN30M30\n"})
+    cfg = load_config(config, overrides={"modbus.port": 0, "canopen.enabled": False})
+    async with Gateway(cfg, cold=True) as gw:
+        client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
+        assert await client.connect()
+        try:
+            assert not (await client.write_register(2000, 0x0106, device_id=1)).isError()
+            assert not (await client.write_register(2000, 1, device_id=1)).isError()
+            await gw.wait_state(1, "STEP", timeout_s=10)
+            regs = (await client.read_input_registers(100, count=3, device_id=1)).registers
+            # state, block N, line: after N10, on line 1
+            assert regs == [int(ProcessState.STEP), 10, 1]
+            status = gw.engine.status(1)
+            assert (status.n, status.line) == (10, 1)
+        finally:
+            client.close()
