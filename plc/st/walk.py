@@ -7,7 +7,8 @@ without a compile step does.  It covers what those programs use -- PROGRAMs, the
 function blocks and user FUNCTION_BLOCKs (inputs and outputs); elementary variables, arrays,
 structures (dictionaries), enumerations and STRINGs; assignments, IF, CASE, FOR, WHILE,
 REPEAT, EXIT, CONTINUE, RETURN; every operator on integers and BOOLs; ABS, MIN, MAX, LIMIT,
-SEL, LEN, LEFT, RIGHT, MID, CONCAT, FIND; the image -- and raises
+SEL, LEN, LEFT, RIGHT, MID, CONCAT, FIND (inputs in order or by their IEC names); EN and ENO
+on calls; the image -- and raises
 :class:`NotImplementedError` for the rest (user FUNCTIONs, VAR_IN_OUT, globals, NC
 access).  It computes REALs in double, untyped: it is no reading of REAL's single precision,
 which tests/unit/plc/test_st_iec_values.py checks instead.
@@ -22,8 +23,15 @@ from typing import Any
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
+from ncgate.plc.st.compiler import (
+    FORMAL_INPUTS,
+    Compiler,
+    Context,
+    IterationGuard,
+    _fold,
+    _pow,
+)
 from ncgate.plc.st.compiler import IMAGE_NAMES as IMAGE
-from ncgate.plc.st.compiler import Compiler, Context, IterationGuard, _fold, _pow
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, StringOf, StructOf, Type, default_value
 
 
@@ -334,6 +342,9 @@ class Walker:
             return self.compiler.enums[x.type_name.upper()].values[x.name.upper()]
         key = x.name.upper()
         given, enabled = self._enabled(x.args, {}, prog)
+        if key in FORMAL_INPUTS and any(a.name is not None for a in given):  # SEL(G := ..)
+            given = self.compiler.formal(n.Call(x.name, given, x.span),
+                                         FORMAL_INPUTS[key]).args
         args = [self.value(a.expr, prog) for a in given if a.expr is not None]
         result = self._call(key, x, args)  # (the standard functions have no side effect)
         self._eno(x.args, {}, enabled, prog)

@@ -114,7 +114,8 @@ total := total + step;
 END_FUNCTION_BLOCK
 PROGRAM main
 VAR ok1, ok2 : BOOL; z, out : INT; c : Count; u : CTU; END_VAR
-z := 1 + MAX(EN := SA[0], 3, 9) + LIMIT(EN := SA[1], 0, 50, 20);
+z := 1 + MAX(EN := SA[0], 3, 9) + LIMIT(EN := SA[1], IN := 50, MX := 20, MN := 0)
+     + SEL(G := SA[2], IN0 := 100, IN1 := 200);
 c(EN := SA[1], step := 2, total => out, ENO => ok1);
 u(EN := SA[0] XOR SA[1], CU := SA[2], PV := 5, ENO => ok2);
 SYVAR[0] := out + z + u.CV;
