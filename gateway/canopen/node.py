@@ -748,12 +748,14 @@ class CanopenNode:
                 raise SdoAbortedError(ABORT_INVALID_VALUE)
             raise Deferred(lambda: self._write(index, subindex, value))
         if index == COMMAND and subindex == 1:
-            # Accepted at once; the work (a cycle start may parse a long program) runs on,
-            # and its outcome shows in the status objects, the EMCY and the trace.
+            # Answered from the loop once the gateway has taken it: every refusal that does
+            # not depend on the program (an interlock, a process that cannot take it) is the
+            # answer's abort code.  A program to read first is read in a task of the
+            # gateway's: the answer does not wait for it, and its outcome shows in the status
+            # objects, the EMCY and the trace.
             if command_word(value) is None and (value & 0xFF) not in SEARCH_WORDS:
                 raise SdoAbortedError(ABORT_INVALID_VALUE)  # the Modbus command word's
-            self.call_soon(lambda: self._run_command(value))
-            return
+            raise Deferred(lambda: self._run_command(value))
         if index == COMMAND and subindex in (2, 4):
             if subindex == 2:
                 self._command(2, value)  # the mailbox's sender: checked here, then stored
@@ -810,8 +812,9 @@ class CanopenNode:
                     self.backend.apply(item)
                 return
             self.backend.apply(Command(command[0], command[1], self._sdo_source))
-        except InputRefused as exc:  # answered already: say it in the log
+        except InputRefused as exc:  # the answer: its abort code, and a line in the log
             self._refusals.note(f"command {word} written through 0x2400:1 refused: {exc}")
+            raise SdoAbortedError(REFUSAL[exc.reason]) from None
 
     def _write(self, index: int, subindex: int, value: int) -> None:
         try:

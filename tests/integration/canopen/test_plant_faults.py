@@ -54,3 +54,24 @@ async def test_pdo_stop_silences_the_tpdos_until_cleared(gw: Gateway, master: Ma
     gw.write("SA10", 1)  # P1 goes on: TPDO1 again, with the states as they are
     frame = await master.next(0x190)
     assert frame != bytes(4)
+
+
+@pytest.mark.parametrize("ncgate_config", [{"nc.cycle_start_inhibit_input": "SA100"}],
+                         indirect=True)
+async def test_an_interlocked_cycle_start_on_0x2400_is_refused_in_the_sdo_answer(
+        gw: Gateway, master: Master) -> None:
+    """The CANopen door decides what does not depend on the program before it answers, as
+    Modbus and the console do: the cycle start against a set interlock is abort 0x08000022
+    and nothing starts."""
+    import canopen
+
+    from ncgate.errors import Reason
+    from ncgate.gateway.canopen.codes import REFUSAL
+
+    gw.write("SA100", 1)
+    with pytest.raises(canopen.SdoAbortedError) as caught:
+        await master.download(0x2400, 1, struct.pack("<H", 0x0101))
+    assert caught.value.code == REFUSAL[Reason.INTERLOCK] == 0x08000022
+    gw.write("SA100", 0)
+    await master.download(0x2400, 1, struct.pack("<H", 0x0101))  # now taken
+    await gw.wait_state(1, "WAIT_COND")
