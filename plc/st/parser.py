@@ -147,7 +147,8 @@ _INHERITS = re.compile(rf"\bFUNCTION_BLOCK\s+{_WORD}\s+((?:EXTENDS|IMPLEMENTS)\b
                        re.IGNORECASE)
 _POU_HEAD = re.compile(rf"\b(?:FUNCTION_BLOCK|PROGRAM)\s+{_WORD}\s*(;)\s*$|"
                        rf"\bFUNCTION\s+{_WORD}\s*:\s*{_WORD}\s*(;)\s*$", re.IGNORECASE)
-_SECTION = re.compile(r"\b(TYPE|END_TYPE|VAR\w*|END_VAR)\b", re.IGNORECASE)
+_SECTION = re.compile(r"\b(TYPE|END_TYPE|STRUCT|END_STRUCT|END_VAR|VAR(?:_INPUT|_OUTPUT|"
+                      r"_IN_OUT|_TEMP|_EXTERNAL|_GLOBAL)?)\b", re.IGNORECASE)
 
 
 def _field_construct(text: str, at: int, token: Token) -> tuple[StCode, str, int] | None:
@@ -180,7 +181,7 @@ def _field_construct(text: str, at: int, token: Token) -> tuple[StCode, str, int
         name_at = re.search(rf"{_WORD}\s*\($", before[:start + 1])
         return (StCode.TYPED_ENUM, "an enumeration with a base type (INT (A := 1, B)): "
                 "write (A := 1, B)", name_at.start() if name_at else start)
-    if section.startswith("VAR") and section != "END_VAR":
+    if section.startswith("VAR") or section == "STRUCT":  # declarations
         if kind == "DOT" and re.search(rf":\s*(?:ARRAY\s*\[[^;]*\]\s*OF\s*)?{_WORD}\s*$",
                                        before, re.IGNORECASE):
             name = re.search(rf"{_WORD}\s*$", before)

@@ -291,6 +291,7 @@ FB = "FUNCTION_BLOCK FB_Axis VAR_INPUT nId : INT; END_VAR END_FUNCTION_BLOCK\n"
     ("ST035", "FUNCTION_BLOCK FB_Lin ¦IMPLEMENTS I_Axis\nEND_FUNCTION_BLOCK"),
     ("ST036", "PROGRAM p VAR t : ¦Tc2_Standard.TON; END_VAR END_PROGRAM"),
     ("ST036", "PROGRAM p VAR t : ARRAY[1..2] OF ¦Lib.T_Pos; END_VAR END_PROGRAM"),
+    ("ST036", "TYPE S : STRUCT t : ¦Lib.T_Pos; END_STRUCT END_TYPE PROGRAM p END_PROGRAM"),
     ("ST037", FB + "PROGRAM p VAR ax : FB_Axis¦(nId := 1); END_VAR END_PROGRAM"),
     ("ST038", FB + "PROGRAM p VAR ax : ARRAY[0..1] OF FB_Axis¦[(nId := 1), (nId := 2)];\n"
               "END_VAR END_PROGRAM"),
@@ -309,8 +310,13 @@ def test_what_codesys_and_twincat_write_beyond_the_subset_has_its_own_code(
     assert got == want and got[0] == code
 
 
-def test_a_missing_expression_is_still_a_plain_syntax_error() -> None:
-    got, want = diagnosed("PROGRAM p VAR x : INT; END_VAR\nx := ¦; END_PROGRAM")
+@pytest.mark.parametrize("marked", [
+    "PROGRAM p VAR x : INT; END_VAR\nx := ¦; END_PROGRAM",
+    "PROGRAM p VAR variance : INT; END_VAR\nCASE variance OF 1: variance := ¦: 2; END_CASE "
+    "END_PROGRAM",
+])
+def test_a_plain_syntax_error_is_still_st002(marked: str) -> None:
+    got, want = diagnosed(marked)
     assert got == want and got[0] == "ST002"
 
 
