@@ -20,7 +20,7 @@ from ncgate.interpreter.engine import ProcessState
 from ncgate.interpreter.settings import AXES
 from ncgate.plc.image import Change
 from ncgate.plc.st.compiler import ProgramVar
-from ncgate.plc.st.types import ArrayOf, FbOf, Type
+from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, Type
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
@@ -131,7 +131,10 @@ def plc(gw: Gateway) -> dict[str, Any] | None:
 def plain(value: Any, t: Type, fb_vars: dict[str, dict[str, ProgramVar]]) -> Any:
     """A PLC value as JSON has it, whatever its ST type: an array a list, a function block
     instance an object of its members (a TON's ``IN``, ``PT``, ``Q``, ``ET``; a user block's
-    variables), a REAL that is not finite its name (JSON has no inf or NaN)."""
+    variables), a REAL that is not finite its name (JSON has no inf or NaN), an
+    enumeration's value its name (``RUN``, not ``2``)."""
+    if isinstance(t, EnumOf):
+        return t.name_of(value)
     if isinstance(value, bool | int | str) or value is None:
         return value
     if isinstance(value, float):

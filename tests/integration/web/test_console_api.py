@@ -774,3 +774,24 @@ async def test_a_body_that_does_not_come_is_timed_out_with_408(
         assert head.startswith(b"HTTP/1.1 408"), head
         writer.close()
     assert gw.read("SA10") == 0  # nothing of a half body was applied
+
+
+async def test_the_status_shows_an_enumeration_by_its_value_name(tmp_path: Path) -> None:
+    (tmp_path / "logic.st").write_text(
+        "TYPE Mode : (STOPPED, SETUP, RUN); END_TYPE\n"
+        "PROGRAM main\nVAR m : Mode := RUN; modes : ARRAY[0..1] OF Mode; END_VAR\n"
+        "modes[1] := SETUP;\nEND_PROGRAM\n")
+    (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "logic.st"\n')
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **{"web.port": 0})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            async with asyncio.timeout(10):
+                while True:  # until the logic has scanned once (a client polls)
+                    async with http.get("/api/status") as answer:
+                        rows = (await answer.json())["plc"]["variables"]
+                    values = {row["path"]: row["value"] for row in rows}
+                    if values["main.modes"][1] == "SETUP":
+                        break
+                    await asyncio.sleep(0.02)
+    assert values["main.m"] == "RUN" and values["main.modes"] == ["STOPPED", "SETUP"]
