@@ -265,7 +265,8 @@ class Door:
         kind = command_kind(item.kind)
         process = item.process
         if kind in _CELL_ONLY and process is not None:
-            raise InputRefused(Reason.BAD_VALUE, f"{kind.label} is the cell's (process null)")
+            raise InputRefused(Reason.BAD_VALUE, f"{kind.label} acts on the whole cell: give "
+                               "it without a process")
         if kind is CommandKind.RESTART_PLC and self._plc() is None:
             raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
         if kind is CommandKind.RELOAD_PLC and (self._plc() is None or self.reload_plc is None):

@@ -683,7 +683,7 @@ class WebConsole:
         """Online change: 200 with what was kept, or 422 with the diagnostics when the logic
         did not load (the old logic runs on)."""
         if item.process is not None:
-            raise ApiError(400, "reload_plc is the cell's (process null)")
+            raise ApiError(400, "reload_plc acts on the whole cell: give it without a process")
         try:
             outcome = await self.gw.reload_plc(item.source)
         except InputRefused as exc:
