@@ -107,6 +107,7 @@ class ScriptPlayer:
         self.entries = (*extra, *script.entries)
         self._state_watch: list[tuple[StateTrigger, ScriptEntry]] = []
         self.due = 0  # entries armed on the clock and not fired yet
+        self._unfired: list[ScriptEntry] = []  # (filled by arm: what may still come)
         for entry in self.entries:
             self._validate(entry)
         runtime.engine.state_listeners.append(self._on_state)
@@ -184,8 +185,24 @@ class ScriptPlayer:
             raise self._fail(entry, "when", str(exc)) from None
         return CondTrigger(var, op, value)
 
+    def may_start(self, n: int) -> bool:
+        """A scripted input still to come may start a program in process ``n`` -- an
+        operator's start, which the orphan check of a wait on ``n`` takes into account: a
+        cycle start of ``n`` (or of the cell, for process 1) with a main program to start,
+        and, with PLC logic, a write (the logic's NC.START may read it) for process 1."""
+        engine = self.runtime.engine
+        for entry in self._unfired:
+            if entry.command == "cycle_start" and engine.main_of(n) and (
+                    entry.process == n or (entry.process is None and n == 1)):
+                return True
+            if entry.set is not None and n == 1 and self.runtime.plc is not None and (
+                    engine.settings.main is not None):
+                return True
+        return False
+
     def arm(self) -> None:
         engine = self.runtime.engine
+        self._unfired = list(self.entries)
         for entry in self.entries:
             if entry.at is not None:
                 self.due += 1
@@ -225,6 +242,8 @@ class ScriptPlayer:
 
     def _fire(self, entry: ScriptEntry) -> None:
         self.due -= 1
+        if entry in self._unfired:
+            self._unfired.remove(entry)
         source = Source(SourceKind.SCRIPT, entry.key)
         try:
             # At the entry's own time, on the wall clock too (run --script): a scenario's
@@ -331,7 +350,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         return (n == 1 and engine.settings.main is not None and plc is not None
                 and plc.status.state is PlcState.RUNNING)
 
-    engine.sync.outside_starts = plc_may_start
+    engine.sync.outside_starts = lambda n: plc_may_start(n) or player.may_start(n)
 
     previous: Any = None
     try:

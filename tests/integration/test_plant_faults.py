@@ -396,3 +396,21 @@ async def test_chatter_through_the_api_toggles_on_the_wall_clock(cell: Path) -> 
         assert seen[:4] in ([0, 1, 0, 1], [1, 0, 1, 0])
         gw.clear_fault("SA31")
         assert gw.read("SA31") == 1  # the clamp at rest is retracted: the model's value
+
+
+def test_a_wait_on_a_process_the_script_will_start_again_is_no_orphan(tmp_path: Path) -> None:
+    """O1 starts O2 in P2 and ends; O2 waits for P1.  The script's cycle start at 5 s runs
+    O1 again, which sends: no AL141 at 0 s (an orphan wait) and no AL111 at 5 s."""
+    (tmp_path / "O1.nc").write_text('N1(BGT,SYVAR1,0,SECOND)\nN2(EXE,2,O2)\nN3SYVAR1=1\n'
+                                    'N4M30\n"SECOND"N5(SND,2)\nN6M30\n')
+    (tmp_path / "O2.nc").write_text("N1(WAI,1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nprocesses = 2\nmain = "O1"\n'
+                                          '[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "s.toml").write_text('[[command]]\nat = 5.0\ncommand = "cycle_start"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1",
+                     load_script(tmp_path / "s.toml"))
+    alarms = [e for e in result.events if e["event"] == "alarm"]
+    assert alarms == [], alarms
+    resume = next(e for e in result.events if e["event"] == "resume" and e["proc"] == 2)
+    assert resume["t"] == 5.0 and resume["by"] == 1
+    assert result.exit_status == 0
