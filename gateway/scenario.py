@@ -167,9 +167,13 @@ class Expectations:
             w.changes.append((self.runtime.engine.now, holds))
 
     def _on_write(self, changes: Sequence[Change], writer: str) -> None:
+        touched = [_bytes(c.area, c.index, c.view) for c in changes]
         for w in self.watches:
             if w.kind != "var" or w.var is None:
                 continue
+            area, first, last = _bytes(*w.var.address)
+            if not any(a == area and f <= last and first <= t for a, f, t in touched):
+                continue  # a write of other bytes: its value and writer are as they were
             holds = self._var_holds(w)
             who = self._writer(w)
             value = self.runtime.image.read(*w.var.address)
@@ -276,6 +280,13 @@ class Expectations:
     @property
     def horizon(self) -> float | None:
         return self.script.horizon
+
+
+def _bytes(area: str, index: int, view: str) -> tuple[str, int, int]:
+    """The storage a variable occupies: (area, first, last) byte (a SYVAR is its own)."""
+    if area == "SA" and view == "bit":
+        return area, index >> 3, index >> 3
+    return area, index, index + 1 if view == "IN" else index
 
 
 def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO) -> None:
