@@ -409,6 +409,11 @@ class _Connection(asyncio.Protocol):
                                  f"{len(server.connections)} clients already (max_clients)")
             room.evict()
         server.connections.add(self)
+        # Whether a request may be answered at once is decided again now that the server
+        # knows the connection: uvloop makes the protocol at the accept and calls
+        # connection_made a turn later, and a fault table set in between (which updates the
+        # connections it knows) found it in none -- its requests then skipped the faults.
+        self.update_direct()
         server.connections_changed.set()
         server.chatter.note(f"{self.who} connected ({len(server.connections)} clients)")
         if self.tls is not None:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import shutil
 
@@ -62,3 +63,32 @@ async def test_a_write_under_an_exception_fault_stores_nothing_and_for_s_ends_it
         assert shown["fault_counts"]["exception"] == 1 and shown["fault_counts"]["delay"] == 1
     finally:
         client.close()
+
+
+async def test_a_connection_made_a_turn_after_its_protocol_obeys_a_fault_set_between(
+        ncgate_gateway: Gateway) -> None:
+    """uvloop makes a connection's protocol at the accept and calls connection_made a turn
+    later; a fault table set in between must hold for it too (it answered past the faults:
+    found by run --script under uvloop).  The order forced here, on a real socket."""
+    import socket
+
+    from ncgate.gateway.modbus.faults import ModbusFault
+    from ncgate.gateway.modbus.server import _Connection
+
+    gw = ncgate_gateway
+    server = gw.modbus_server
+    assert server is not None
+    protocol = _Connection(server)  # made at the accept: no fault yet
+    server.set_faults([ModbusFault("exception", code=6)])  # ... then a fault, before it is known
+    loop = asyncio.get_running_loop()
+    ours, theirs = socket.socketpair()
+    transport, _ = await loop.connect_accepted_socket(lambda: protocol, ours)  # connection_made
+    reader, writer = await asyncio.open_connection(sock=theirs)
+    try:
+        writer.write(bytes.fromhex("0001 0000 0006 01 01 000A 0001"))  # FC1, coil 10
+        answer = await asyncio.wait_for(reader.readexactly(9), 10)
+        assert answer[7:9] == bytes((0x81, 6)), answer.hex()  # exception 06
+    finally:
+        writer.close()
+        transport.close()
+        server.set_faults(())
