@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 
 from ncgate.interpreter.engine import Engine
 
@@ -18,6 +19,10 @@ LAG_WARN_EVERY_S = 60.0  # at most one such warning a minute
 # Blocks (and timers) the engine runs in one turn of the loop before the fieldbus gets one:
 # about a millisecond of a dense dwell loop (nc.slice_blocks may be smaller).
 TURN_BLOCKS = 1_000
+# And at most this long of the wall clock: timers differ in weight (a plant model's is a write
+# through the door, 30-50 us), and a hundred models switching at one instant held the loop
+# 25 ms in one turn (bench/plant.py, 50 generators and 50 cylinders at a 1 ms plant scan).
+TURN_S = 0.002
 
 
 class WallClockDriver:
@@ -85,6 +90,8 @@ class WallClockDriver:
     def _advance(self, now: float) -> None:
         """A turn of the engine up to ``now``; what it leaves is the next turn's, and how
         far behind the clock that leaves the engine is its lag."""
+        deadline = time.perf_counter() + TURN_S
+        self.engine.turn_over = lambda: time.perf_counter() >= deadline
         if self.engine.advance_to(now, self._turn):
             self.kick()
             self._note_lag(now - self.engine.now)
@@ -152,4 +159,5 @@ class WallClockDriver:
                 handle.cancel()
         self.engine.on_kick = None
         self.engine.on_timer = None
+        self.engine.turn_over = None
         self.engine.clock = None

@@ -142,6 +142,10 @@ class Engine:
         # Hooks for drivers and the gateway.
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
+        # The driver's say on when a turn has taken long enough (the wall clock's: timers
+        # differ in weight -- a dwell's is a few blocks, a plant model's a write through the
+        # door -- so a count of them does not bound a turn); None: only ``blocks`` does.
+        self.turn_over: Callable[[], bool] | None = None
         # The driver's clock, for what a status read shows between the engine's own moments
         # (the position along a move): the engine's time moves only when something is due
         # or an input arrives.  None: the engine's own time (the virtual clock).
@@ -501,7 +505,8 @@ class Engine:
                 return True
             fired += 1
             if budget_at is not None and blocks is not None and (
-                    self._decoded >= budget_at or fired >= blocks):
+                    self._decoded >= budget_at or fired >= blocks or (
+                        self.turn_over is not None and self.turn_over())):
                 later = self._timers.next_time()  # more due: the next call goes on from here
                 return later is not None and later <= t
         if t > self.now:
