@@ -19,10 +19,11 @@ LAG_WARN_EVERY_S = 60.0  # at most one such warning a minute
 # Blocks (and timers) the engine runs in one turn of the loop before the fieldbus gets one:
 # about a millisecond of a dense dwell loop (nc.slice_blocks may be smaller).
 TURN_BLOCKS = 1_000
-# And at most this long of the wall clock: timers differ in weight (a plant model's is a write
-# through the door, 30-50 us), and a hundred models switching at one instant held the loop
-# 25 ms in one turn (bench/plant.py, 50 generators and 50 cylinders at a 1 ms plant scan).
-TURN_S = 0.002
+# And at most this long of the wall clock (the millisecond TURN_BLOCKS meant): timers differ
+# in weight (a plant model's is a write through the door, 30-50 us), and a hundred models
+# switching at one instant held the loop 25 ms in one turn (bench/plant.py, 50 generators and
+# 50 cylinders at a 1 ms plant scan: poller max 54 -> 3-5 ms).
+TURN_S = 0.001
 
 
 class WallClockDriver:

@@ -48,6 +48,9 @@ log = logging.getLogger("ncgate")
 # stretched (x2 each time, up to MAX_STRETCH scans), never the switch points.
 BUDGET = 0.2
 MAX_STRETCH = 64
+# And one tick holds the loop this long at most (a poller waits no longer behind it); the
+# models it did not get to are written first at the next tick.
+TICK_S = 0.0003
 # Outputs that carry a number, not a bit: they need a word (a SYVAR, an SK/SA .IN word).
 _NUMBER_OUTPUTS = frozenset({("cylinder", "position"), ("motor", "speed"), ("lag", "actual")})
 
@@ -103,6 +106,7 @@ class Plant:
         self._sampling: dict[Model, None] = {}  # what the tick writes (in order)
         self._asleep: list[Model] = []  # free runners stopped while a closed run stands still
         self._tick: Timer | None = None
+        self._next_in_turn = 0  # the sampled model a tick starts with (run: round robin)
         self.stretch = 1  # the tick's period in scans (run: the budget's)
         self.logic: Any = None  # the plant's ST logic ([plant] logic), its PlcRuntime
         self.stretched = 0  # how often the budget stretched it
@@ -269,7 +273,17 @@ class Plant:
     def _on_tick(self, t: float) -> None:
         self._tick = None
         started = time.perf_counter()
-        for model in list(self._sampling):
+        models = list(self._sampling)
+        if not self.closed and self._next_in_turn:
+            # On the wall clock a tick holds the loop TICK_S at most: the models it did not
+            # get to come first at the next one (round robin), so none is left behind.
+            start = self._next_in_turn % len(models)
+            models = models[start:] + models[:start]
+        self._next_in_turn = 0
+        for done, model in enumerate(models):
+            if not self.closed and done and time.perf_counter() - started > TICK_S:
+                self._next_in_turn = list(self._sampling).index(model)
+                break
             if model.free_running and self._idle():
                 self._sampling.pop(model, None)
                 self._asleep.append(model)  # until the cell moves again
