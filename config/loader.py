@@ -83,7 +83,7 @@ def _storage_devices(r: _Reader, t: dict[str, Any], key: str, done: dict[str, An
     for name in STORAGE_DEVICES:
         if name in t:
             folder = r.str_(t[name], f"{base}.{name}")
-            devices[name] = (r.base / folder).resolve()
+            devices[name] = (r.base_of(f"{base}.{name}") / folder).resolve()
     return devices or {"MP0": r.base.resolve()}
 
 
@@ -137,7 +137,7 @@ _SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 def _symbols_file(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     if "symbols_file" not in t:
         return None
-    path = (r.base / r.str_(t["symbols_file"], key)).resolve()
+    path = (r.base_of(key) / r.str_(t["symbols_file"], key)).resolve()
     if not path.is_file():
         raise r.fail(key, f"no such file: {path}")
     return path
@@ -317,7 +317,7 @@ def _optional_path(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
     name = key.rsplit(".", 1)[1]
     if name not in t:
         return None
-    return (r.base / r.str_(t[name], key)).resolve()
+    return (r.base_of(key) / r.str_(t[name], key)).resolve()
 
 
 def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -327,7 +327,7 @@ def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
         raise r.fail(key, f"expected a file name or a list of them, got {raw!r}")
     paths = []
     for i, item in enumerate(items):
-        path = (r.base / item).resolve()
+        path = (r.base_of(key) / item).resolve()
         if not path.is_file():
             raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
                          f"no such file: {path}")
@@ -990,6 +990,12 @@ class _Reader:
 
     def fail(self, key: str, message: str) -> ConfigError:
         return ConfigError(f"{self._origin(key)}: {key}: {message}")
+
+    def base_of(self, key: str) -> Path:
+        """What a relative path of ``key`` is relative to: the config file's folder, or, for
+        a value given on the command line (``--set nc.storage.MP0=.``), the current folder,
+        as a shell user means it."""
+        return Path.cwd() if key in self.given else self.base
 
     def _origin(self, key: str) -> str:
         """The override that set ``key`` (or a table above it, or a key below it), else the

@@ -268,10 +268,15 @@ def _sim(args: argparse.Namespace) -> int:
     if args.dialect:
         overrides["nc.dialect"] = args.dialect
         origins["nc.dialect"] = "--dialect"
+    own = None if args.config else _programs_here(args.main, overrides)
+    if own is not None:  # sim FILE without --config: the file's folder is MP0, as check finds it
+        overrides["nc.storage.MP0"], args.main = own
+        origins["nc.storage.MP0"] = "the program's folder"
     config = load_config(args.config, overrides=overrides, origins=origins, serving=False)
     _require_default_device(config)
-    # The built-in config comes with its PLC script; a user's config with none unless given.
-    files = args.script or ([None] if args.config else [default_script_path()])
+    # The built-in config comes with its PLC script (for its own PROG91); a user's config, or
+    # a user's program run on the built-in one, with none unless given.
+    files = args.script or ([None] if args.config or own else [default_script_path()])
     scripts = [load_script(f) for f in files]
     mains = args.main or [config.nc.main]
     if len(scripts) > 1 and (args.trace or args.gantt):
@@ -312,6 +317,30 @@ def _sim(args: argparse.Namespace) -> int:
             write_gantt(result.events, result.runtime.config.nc.processes, out,
                         external=result.runtime.config.nc.external)
     return result.exit_status
+
+
+def _programs_here(mains: list[str], overrides: dict[str, Any]) -> tuple[str, list[str]] | None:
+    """``ncgate sim FILE ...`` on the built-in config: when every MAIN is a program file in one
+    folder (``A.nc``, ``work/A``), that folder as MP0 and the programs' names; None when the
+    names are the built-in storage's (``PROG91``) or MP0 is given."""
+    from ncgate.interpreter.storage import PROGRAM_SUFFIXES
+
+    if not mains or "nc.storage.MP0" in overrides:
+        return None
+    found = []
+    for main in mains:
+        path = Path(main)
+        file = next((path.with_name(path.name + s) for s in PROGRAM_SUFFIXES
+                     if path.with_name(path.name + s).is_file()), None)
+        if file is None and path.is_file():
+            file = path
+        if file is None:
+            return None
+        found.append(file.resolve())
+    folders = {f.parent for f in found}
+    if len(folders) != 1:
+        return None
+    return str(folders.pop()), [f.name[:-len(f.suffix)] if f.suffix else f.name for f in found]
 
 
 def _replay(args: argparse.Namespace) -> int:
