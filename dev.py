@@ -40,9 +40,12 @@ def ensure_venv() -> None:
         venv.EnvBuilder(with_pip=True).create(VENV)
     digest = hashlib.sha256(b"".join((ROOT / name).read_bytes() for name in INSTALL_INPUTS))
     if not STAMP.exists() or STAMP.read_text() != digest.hexdigest():
-        print("dev.py: installing ncgate and its locked dependencies into .venv", flush=True)
-        pip = [str(PY), "-m", "pip", "install", "--disable-pip-version-check", "-q",
-               "-c", str(ROOT / "constraints.txt")]
+        print("dev.py: installing ncgate and its locked dependencies into .venv (pymodbus, "
+              "python-can, canopen, lark, aiohttp, and for the tests pytest, selenium, blark, "
+              "ruff, mypy ...): a minute or more the first time; pip's progress follows",
+              flush=True)
+        pip = [str(PY), "-m", "pip", "install", "--disable-pip-version-check",
+               "--progress-bar", "on", "-c", str(ROOT / "constraints.txt")]
         subprocess.run([*pip, "-e", f"{ROOT}[test,dev]"], check=True)
         STAMP.write_text(digest.hexdigest())
 
@@ -117,6 +120,9 @@ def main(argv: list[str]) -> int:
     if what == "run":
         return run(str(BIN / "ncgate"), "run", *rest)
     if what == "test":
+        if not rest:
+            print("dev.py: the whole suite, about 7 minutes on two quiet cores (python3 dev.py "
+                  "test -x tests/unit for a quick look)", flush=True)
         return run(str(PY), "-m", "pytest", *rest)
     if what == "lint":
         os.environ["MYPYPATH"] = str(typecheck_tree())
