@@ -141,26 +141,17 @@ async def test_a_bad_case_runs_on_the_wall_clock_with_an_external_plc(tmp_path: 
     """ncgate run --script with the ST logic off and a Modbus client as the PLC: the same
     clamp that never closes, judged on the wall clock."""
     import asyncio
-    import re
+
+    from .test_cli_run import start_run
 
     scenario = tmp_path / "clamp_never_closes.toml"
     scenario.write_text(EXTERNAL_SCENARIO)
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "ncgate", "run", "--config", str(FOLDER / "ncgate.toml"),
-        "--set", "plc.logic=[]", "--set", "nc.autostart=true", "--port", "0", "--no-web",
-        "--set", "canopen.enabled=false", "--script", str(scenario), cwd=tmp_path,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    proc, port, lines = await start_run(
+        FOLDER / "ncgate.toml", "--set", "plc.logic=[]", "--set", "nc.autostart=true",
+        "--port", "0", "--no-web", "--set", "canopen.enabled=false", "--script", str(scenario))
     assert proc.stdout is not None
-    lines: list[str] = []
     async with asyncio.timeout(60):
-        while True:
-            line = (await proc.stdout.readline()).decode()
-            assert line, "ncgate run ended early:\n" + "".join(lines)
-            lines.append(line)
-            found = re.search(r"Modbus TCP on [\d.]+:(\d+)", line)
-            if found:
-                break
-        await _external_plc(int(found.group(1)))
+        await _external_plc(port)
         rest = (await proc.stdout.read()).decode()
         code = await proc.wait()
     log = "".join(lines) + rest
