@@ -1,5 +1,6 @@
 """The gateway in a Python program or a test (spec 4.5): the soft PLC's image, the processes
-on the wall clock, and (in later issues) the Modbus server and the CANopen node.
+on the wall clock, and the adapters that serve it (the Modbus server, the CANopen node, the
+console: ``ncgate.gateway.adapters``).
 
     from ncgate.gateway import Gateway, load_config
     async with Gateway(load_config(None)) as gw:
@@ -75,7 +76,7 @@ if TYPE_CHECKING:
 
 
 class Gateway:
-    """Soft PLC + processes (+ fieldbus servers in later issues), as an async context."""
+    """Soft PLC + processes + plant + the adapters that serve them, as an async context."""
 
     def __init__(self, config: Config | None = None,
                  listeners: Sequence[Callable[[Event], None]] = (),

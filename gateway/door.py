@@ -85,7 +85,7 @@ def command_kind(value: object) -> CommandKind:
 
 
 # Command words past the CommandKinds: they carry an N number written beside them (Modbus
-# holding command+3, CANopen 0x2400:4), and become other inputs (issue 27).
+# holding command+3, CANopen 0x2400:4), and become other inputs.
 SEARCH_WORDS: Final = {c.word: c.title for c in commands.COMMANDS if c.with_n}
 _BLOCK_SEARCH: Final = commands.BY_NAME["block_search"].word
 _BREAKPOINT: Final = commands.BY_NAME["breakpoint"].word

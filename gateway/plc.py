@@ -228,7 +228,7 @@ class ReloadOutcome:
 
 
 class OnlineChange:
-    """Reloads ``[plc] logic`` into the running PLC between two scans (issue 29): the
+    """Reloads ``[plc] logic`` into the running PLC between two scans: the
     command ``reload_plc`` from any door, and ``run --watch``.
 
     :meth:`prepare` reads and compiles the files -- slow for a big program, so ``run`` calls

@@ -167,7 +167,7 @@ class PlcRuntime:
         self._runs: list[Any] = []
         # Called after every scan and on a fault (a watch waits on these, never polls).
         self.scan_listeners: list[Callable[[], None]] = []
-        # Forcing (issue 28): the forced variables by path, as given and as stored; told of
+        # Forcing: the forced variables by path, as given and as stored; told of
         # each value of the logic's that a force overrode (path, the value the logic left).
         self.forced: dict[str, tuple[str, Any]] = {}
         self._forced_types: dict[str, Any] = {}  # each force's type when it was set
@@ -509,7 +509,7 @@ class PlcRuntime:
         obj = self._get(*self._place(path, members=True)[:2])
         return list(obj) if isinstance(obj, list) else obj
 
-    # -- forcing (issue 28, item 2; docs/decisions.md) -----------------------------------------
+    # -- forcing (docs/decisions.md, "Forcing") -----------------------------------------------
 
     def forceable(self, path: str) -> Any:
         """The type of the variable at ``path``; PlcPathError (a KeyError) for no such

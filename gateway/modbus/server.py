@@ -242,7 +242,7 @@ class RequestHandler:
         (the length, checked by the caller) without pymodbus's decoding, which formats every
         request for a debug log it does not write.  The answer is the request echoed
         (Modbus application protocol 6.5, 6.6).  It took bench/modbus.py's write -> resume
-        p50 inside the gateway from 24 to 19 us (issue 23)."""
+        p50 inside the gateway from 24 to 19 us."""
         address, value = _ADDRESS_COUNT.unpack_from(pdu, 1)
         m = self.map
         if fc == FC.WRITE_SINGLE_COIL:

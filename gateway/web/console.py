@@ -89,7 +89,7 @@ SECURITY_HEADERS = {
     "Referrer-Policy": "no-referrer",
 }
 COMMANDS = {"start": 1, "hold": 2, "reset": 3}  # the page's words (start: a cycle start)
-# Every command by its name (issue 27), from the command table (ncgate.commands): the command
+# Every command by its name, from the command table (ncgate.commands): the command
 # word's kinds, the switches (with "on"), and "break" (with "at").
 KINDS = {**{k.label: k for k in CommandKind}, "start": CommandKind.CYCLE_START,
          "hold": CommandKind.FEED_HOLD}

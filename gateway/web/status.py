@@ -41,7 +41,7 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "dialect": gw.config.nc.dialect.value,
         "held": any(p.held for p in engine.processes.values()),
         "lag_s": round(gw.lag_s, 6),  # behind the clock (machine s): 0 while on time
-        # The commissioning controls in force (issue 27).
+        # The commissioning controls in force.
         "controls": {"breakpoints": [b.text for b in engine.breakpoints],
                      "optional_stop": engine.optional_stop, "block_skip": engine.block_skip,
                      "forced": len(gw.image.forced)},

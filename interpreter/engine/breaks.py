@@ -1,4 +1,4 @@
-"""Breakpoints (issue 27, item 3): where the engine stops a cell being brought up.
+"""Breakpoints: where the engine stops a cell being brought up.
 
 A breakpoint is written as an engineer says it:
 

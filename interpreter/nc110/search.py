@@ -1,4 +1,4 @@
-"""Block search (issue 27, item 8): start a program in the middle, at a label or an N number,
+"""Block search: start a program in the middle, at a label or an N number,
 with the modal state the blocks before it would have set.
 
 The blocks before the target are read in order, as the text has them, and nothing of them

@@ -1,2 +1,3 @@
-"""IEC 61131-3 Structured Text for the soft PLC (issue 12): so far the standard function
-blocks and functions (``stdlib``); the compiler and the scan cycle build on them."""
+"""IEC 61131-3 Structured Text for the soft PLC: the parser, the compiler to a ``Logic`` the
+scan runs (``compiler``), the standard function blocks and functions (``stdlib``), PLCopen
+TC6 XML (``plcopen``) and the diagnostics (``diagnostics``)."""

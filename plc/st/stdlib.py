@@ -1,5 +1,5 @@
-"""The IEC 61131-3 standard function blocks and functions for the soft PLC's Structured Text
-(issue 12): timers, edge detectors, counters, bistables; the numeric, selection and bit-shift
+"""The IEC 61131-3 standard function blocks and functions for the soft PLC's Structured
+Text: timers, edge detectors, counters, bistables; the numeric, selection and bit-shift
 functions; integer wrap-around as on a PLC.
 
 A function block instance keeps its state between calls.  Timers take the scan's time in

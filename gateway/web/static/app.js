@@ -158,7 +158,7 @@ $("#start-form").addEventListener("submit", (e) => {
   post("/api/command", { command: "start", program: $("#start-program").value,
                          process: Number($("#start-process").value) });
 });
-// The commissioning controls (issue 27): the cell's single block, run to sync, breakpoints,
+// The commissioning controls: the cell's single block, run to sync, breakpoints,
 // the feed override.
 $("#single-block").addEventListener("change", () =>
   post("/api/command", { command: "single_block", on: $("#single-block").checked }));
@@ -231,7 +231,7 @@ function renderLanes() {
       lane = el("div", "lane");
       lane.id = "lane-" + p.number;
       lane.append(el("span", "num", "P" + p.number), el("span", "state"));
-      if (!p.external) {  // this process's own commands (issue 27): the command of one process
+      if (!p.external) {  // this process's own commands: the command of one process
         const controls = el("span", "controls");
         for (const [command, label] of laneButtons) {
           const b = el("button", "lane-" + command, label);
