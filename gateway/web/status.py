@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from ncgate import __version__
 from ncgate.inputs import var_name
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import ProcessState
+from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.settings import AXES
 from ncgate.plc.image import Change
 from ncgate.plc.st.compiler import ProgramVar
@@ -40,6 +40,10 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "main": gw.config.nc.main,
         "dialect": gw.config.nc.dialect.value,
         "held": any(p.held for p in engine.processes.values()),
+        # Why the cell stands, in the page's words (a breakpoint is no feed hold): the first
+        # process's that stands, or None.
+        "standing": next((why for p in engine.processes.values()
+                          if (why := standing(gw, p)) is not None), None),
         "lag_s": round(gw.lag_s, 6),  # behind the clock (machine s): 0 while on time
         # The commissioning controls in force.
         "controls": {"breakpoints": [b.text for b in engine.breakpoints],
@@ -61,6 +65,26 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
     if image:
         out["image"] = image_status(gw)
     return out
+
+
+# A stop after a block, by its cause (Process.stopped), as the page says it.
+_STOPPED = {"break": "breakpoint", "single_block": "single block", "step": "step",
+            "M00": "M00 (program stop)", "M01": "M01 (optional stop)"}
+
+
+def standing(gw: Gateway, p: Process) -> str | None:
+    """Why process ``p`` stands until a cycle start: a breakpoint, single block, a step,
+    M00/M01, the PLC's interlock input (``nc.feed_hold_input``) or a feed hold; None when it
+    does not stand for any of them."""
+    if p.stopped is not None:
+        return _STOPPED.get(p.stopped, p.stopped)
+    if not p.held:
+        return None
+    image = gw.image
+    for what, var in gw.runtime.interlocks:
+        if what == "feed hold" and image.read(*var.address):
+            return f"interlock {var}"
+    return "feed hold"
 
 
 def process(gw: Gateway, number: int) -> dict[str, Any]:
@@ -85,7 +109,8 @@ def process(gw: Gateway, number: int) -> dict[str, Any]:
                             "n": s.alarm_where[2]} if s.alarm_where is not None else None)}
     return {"number": number, "state": s.state.name, "external": s.external,
             "program": s.program, "line": s.line, "n": s.n, "block": block,
-            "held": s.held, "blocks": s.blocks, "snd_sent": s.snd_sent,
+            "held": s.held, "standing": standing(gw, p), "blocks": s.blocks,
+            "snd_sent": s.snd_sent,
             "single_block": p.single_block, "feed_override": p.feed_override,
             "rapid_override": p.rapid_override,
             # Where the axes are (the interpolator's position, mm) and the modal feed.

@@ -248,7 +248,9 @@ function renderLanes() {
       box.append(lane);
     }
     const state = lane.querySelector(".state");
-    state.textContent = p.state + (p.external ? " (external)" : "") + (p.held ? " held" : "");
+    // Why it stands, when it does: a breakpoint, single block, M01, an interlock, a feed hold.
+    state.textContent = p.state + (p.external ? " (external)" : "") +
+      (p.standing ? " · " + p.standing : "");
     state.className = "state s-" + p.state;
     const detail = lane.querySelector(".detail");
     detail.replaceChildren();
@@ -761,7 +763,7 @@ let statusAt = 0, live = false;
 function renderClock() {
   const lag = status.lag_s ? " (engine " + status.lag_s.toFixed(3) + " s behind the clock)" : "";
   setIfChanged($("#clock"), "t = " + machineNow().toFixed(1) + " s" +
-    (status.held ? " (feed hold)" : "") + lag);
+    (status.standing ? " (" + status.standing + ")" : "") + lag);
 }
 function machineNow() {
   if (!status || status.t === undefined) return 0;

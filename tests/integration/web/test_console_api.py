@@ -21,6 +21,7 @@ from ncgate.gateway.record import replay
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.plc_kit import PlcWatch
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.inputs import Break, CommandKind
 
 from ...conftest import EXAMPLES
 
@@ -795,3 +796,33 @@ async def test_the_status_shows_an_enumeration_by_its_value_name(tmp_path: Path)
                         break
                     await asyncio.sleep(0.02)
     assert values["main.m"] == "RUN" and values["main.modes"] == ["STOPPED", "SETUP"]
+
+
+async def test_the_status_says_why_a_process_stands(tmp_path: Path) -> None:
+    """A breakpoint's stop is no feed hold, nor an interlock's hold: /api/status says which,
+    per process and for the cell (the page showed "HOLD held" and "(feed hold)" for all)."""
+    (tmp_path / "A.nc").write_text("N10G1X10F600\nN20G1X20\nN30M30\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\nfeed_hold_input = "SA100"\n'
+                                          '[nc.storage]\nMP0 = "."\n')
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **{"web.port": 0,
+                                                             "nc.time_scale": 10.0})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+
+        async def shown() -> tuple[Any, Any]:
+            async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                    http.get("/api/status") as answer:
+                body = await answer.json()
+            return body["standing"], body["processes"][0]["standing"]
+
+        assert await shown() == (None, None)
+        gw.apply(Break("N20"))
+        await gw.start()
+        await gw.wait_state(1, "HOLD")
+        assert await shown() == ("breakpoint", "breakpoint")
+        gw.command(CommandKind.CYCLE_START)
+        await gw.wait_state(1, "RUNNING")
+        gw.command(CommandKind.FEED_HOLD)
+        assert await shown() == ("feed hold", "feed hold")
+        gw.write("SA100", 1)
+        assert await shown() == ("interlock SA100", "interlock SA100")
