@@ -306,3 +306,25 @@ async def test_a_busy_tls_port_names_the_key(cell: Path, pki: Pki) -> None:
                                           rf"{port}"):
             async with Gateway(config):
                 pass
+
+
+@pytest.mark.parametrize(("expired", "said"), [(True, "expired on"), (False, None)])
+def test_an_expired_certificate_is_warned_about_at_start(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, expired: bool, said: str | None
+) -> None:
+    """[web.tls] and [modbus.tls] load through one loader: a certificate past its date is a
+    warning at start, naming the file (a client would refuse it with no word on our side)."""
+    import logging
+
+    from ncgate.gateway.tls import server_context
+
+    from .pki import Authority
+
+    issued = Authority(tmp_path, "ca").issue("server", server=True, expired=expired)
+    with caplog.at_level(logging.WARNING, logger="ncgate"):
+        server_context(issued.cert, issued.key)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    if said is None:
+        assert warnings == []
+    else:
+        assert len(warnings) == 1 and said in warnings[0] and str(issued.cert) in warnings[0]
