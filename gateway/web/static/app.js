@@ -316,9 +316,32 @@ function grid(box, count, columns, prefix, make) {
     if (i % columns === 0) items.push(el("span", "idx", prefix + i));
     const c = make(i);
     c.classList.add("cell");
+    // Keyboard: one cell of the grid takes the tab (roving), the arrows move it, Enter or
+    // Space writes as a click does; a screen reader reads its name and value (aria-label).
+    c.setAttribute("role", "gridcell");
+    c.tabIndex = i === 0 ? 0 : -1;
+    c.setAttribute("aria-label", prefix + i);
     all.push(c);
     items.push(c);
   }
+  box.setAttribute("role", "grid");
+  box.setAttribute("aria-label", prefix + " (arrows move, Enter writes)");
+  box.onkeydown = (e) => {
+    const at = all.indexOf(document.activeElement);
+    if (at < 0) return;
+    const step = { ArrowRight: 1, ArrowLeft: -1, ArrowDown: columns, ArrowUp: -columns,
+                   Home: -at, End: all.length - 1 - at }[e.key];
+    if (step !== undefined) {
+      const next = Math.min(all.length - 1, Math.max(0, at + step));
+      all[at].tabIndex = -1;
+      all[next].tabIndex = 0;
+      all[next].focus();
+      e.preventDefault();
+    } else if (e.key === "Enter" || e.key === " ") {
+      all[at].click();
+      e.preventDefault();
+    }
+  };
   box.replaceChildren(...items);
   box.cells = all;
   return all;
@@ -362,6 +385,7 @@ function renderImage() {
     c.classList.toggle("named", !!symbol);
     c.classList.toggle("forced", forced !== undefined);
     c.title = name + " = " + (on ? 1 : 0) + note(who, symbol, forced);
+    c.setAttribute("aria-label", c.title);
     c.classList.toggle("ext", !!who && who !== "plc");
   }
   drawnSa = img.sa;
@@ -395,6 +419,7 @@ function bytes(box, values, name, writers, max) {
     c.classList.toggle("named", !!symbol);
     c.classList.toggle("forced", forced !== undefined);
     c.title = name + i + " = " + values[i] + note(who, symbol, forced);
+    c.setAttribute("aria-label", c.title);
   }
 }
 // The I/O names of [symbols], each with its variable and value now.

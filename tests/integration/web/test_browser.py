@@ -776,3 +776,35 @@ def test_the_plant_panel_shows_each_model_and_injects_and_clears_a_fault(
             ("fault", "web"), ("fault_clear", "web")]
     finally:
         run.stop()
+
+
+def test_the_image_grid_is_operated_from_the_keyboard(browser: Any, web_port: int) -> None:
+    """One cell of a grid takes the tab, the arrows move it, Enter writes as a click does;
+    each cell has a name for a screen reader."""
+    from selenium.webdriver.common.keys import Keys
+
+    run = start_run(web_port, "ncgate-browser-keys")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "the grid", lambda d: d.find_elements(By.ID, "sa-17"))
+        grid = browser.find_element(By.ID, "sa")
+        assert grid.get_attribute("role") == "grid"
+        first = browser.find_element(By.ID, "sa-0")
+        assert first.get_attribute("tabindex") == "0"
+        assert browser.find_element(By.ID, "sa-1").get_attribute("tabindex") == "-1"
+        first.click()  # (a click asks; dismissed)
+        answer_dialog(browser, accept=False)
+        first.send_keys(Keys.ARROW_RIGHT)
+        until(browser, "SA1 focused", lambda d: d.switch_to.active_element.get_attribute("id")
+              == "sa-1")
+        browser.switch_to.active_element.send_keys(Keys.ARROW_DOWN)  # 16 a row: SA17
+        until(browser, "SA17 focused", lambda d: d.switch_to.active_element.get_attribute("id")
+              == "sa-17")
+        browser.switch_to.active_element.send_keys(Keys.ENTER)
+        assert "SA17 = 1" in answer_dialog(browser, accept=True)
+        until(browser, "SA17 written", lambda d: "on" in d.find_element(By.ID, "sa-17")
+              .get_attribute("class"))
+        label = browser.find_element(By.ID, "sa-17").get_attribute("aria-label")
+        assert label.startswith("SA17 = 1")
+    finally:
+        run.stop()
