@@ -54,6 +54,8 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         # by the variable they name (the grid's names).
         "forced": {var_name(*key): value for key, value in sorted(gw.image.forced.items())},
         "symbols": symbols(gw),
+        # Each I/O name's comment of [symbols] (or the CSV I/O list), by its variable.
+        "symbol_comments": symbol_comments(gw),
         "record": str(gw.recorder.path) if gw.recorder is not None else None,
         "plc": plc(gw),
         "plant": gw.runtime.plant.status() if gw.runtime.plant is not None else None,
@@ -124,6 +126,12 @@ def symbols(gw: Gateway) -> dict[str, str]:
     """The I/O names by the variable they name: ``{"SA10": "door_closed"}``."""
     runtime = gw.runtime
     return {str(runtime.var(name)): name for name in gw.config.symbols}
+
+
+def symbol_comments(gw: Gateway) -> dict[str, str]:
+    """The I/O names' comments by the variable they name: ``{"SYVAR3": "rpm / 10"}``."""
+    runtime, comments = gw.runtime, gw.config.symbols.comments
+    return {str(runtime.var(name)): comment for name, comment in comments.items() if comment}
 
 
 def plc(gw: Gateway) -> dict[str, Any] | None:

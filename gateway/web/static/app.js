@@ -346,7 +346,11 @@ function grid(box, count, columns, prefix, make) {
   box.cells = all;
   return all;
 }
-function symbolOf(name) { return (status.symbols && status.symbols[name]) || ""; }
+function symbolOf(name) {
+  const symbol = (status.symbols && status.symbols[name]) || "";
+  const comment = symbol && status.symbol_comments && status.symbol_comments[name];
+  return comment ? symbol + ": " + comment : symbol;  // [symbols]' comment beside the name
+}
 function forcedOf(name) {
   return status.forced && name in status.forced ? status.forced[name] : undefined;
 }
@@ -426,17 +430,19 @@ function bytes(box, values, name, writers, max) {
 let drawnNames = "";
 function renderNames() {
   const rows = Object.entries(status.symbols || {}).map(([v, name]) => {
-    const value = valueOf(v);
+    const value = valueOf(v);  // (a comment changes with the config only: the key is enough)
     return [name, v, value === undefined ? "" : String(value),
             forcedOf(v) !== undefined ? "F" : ""];
   });
   const key = JSON.stringify(rows);
   if (key === drawnNames) return;
   drawnNames = key;
+  const comments = status.symbol_comments || {};
   $("#names tbody").replaceChildren(...rows.map(([name, v, value, f]) => {
     const r = el("tr");
-    r.append(el("td", null, name), el("td", null, v), el("td", null, value),
-             el("td", "forced-mark", f));
+    const cell = el("td", null, name);
+    if (comments[v]) cell.title = comments[v];  // the I/O list's comment, as a tooltip
+    r.append(cell, el("td", null, v), el("td", null, value), el("td", "forced-mark", f));
     return r;
   }));
 }

@@ -557,6 +557,11 @@ def test_the_image_grid_has_fixed_columns_index_labels_names_and_force_marks(
             [c.text for c in row.find_elements(By.TAG_NAME, "td")][:2]
             for row in d.find_elements(By.CSS_SELECTOR, "#names tr")] == [
             ["door_closed", "SA10"], ["spindle_speed", "SYVAR3"]])
+        # [symbols]' comments: a tooltip on the name, and beside the name in the cell's title.
+        names = browser.find_elements(By.CSS_SELECTOR, "#names tr td:first-child")
+        assert [n.get_attribute("title") for n in names] == ["", "rpm / 10"]
+        assert "spindle_speed: rpm / 10" in browser.find_element(By.ID, "syvar-3") \
+            .get_attribute("title")
         # A force by name from the form: listed, and the cell marked F.
         browser.find_element(By.ID, "force-var").send_keys("door_closed")
         browser.find_element(By.ID, "force-value").send_keys("1")
