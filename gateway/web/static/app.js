@@ -894,12 +894,19 @@ function renderTrends(now) {
   if (!trendWidth) trendWidth = svg.clientWidth || 600;
   const width = trendWidth, height = 150, left = 44, right = 8, top = 8, bottom = 20;
   const start = Math.max(0, now - TREND_S);  // from 0 until a minute has passed
-  let lo = Infinity, hi = -Infinity;
-  for (const t of trends) for (const [, v] of t.samples) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
-  if (lo === Infinity) { lo = 0; hi = 1; }
-  if (hi === lo) { hi += 1; lo -= hi === 1 ? 0 : 1; }
+  // Each trend on a scale of its own (a BOOL beside a 0..2000 value would be flat on a
+  // shared one): its own min..max, said in its legend; the axis says the first trend's.
+  const range = (t) => {
+    let lo = Infinity, hi = -Infinity;
+    for (const [, v] of t.samples) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+    if (lo === Infinity) { lo = 0; hi = 1; }
+    if (hi === lo) { hi += 1; lo -= hi === 1 ? 0 : 1; }
+    return [lo, hi];
+  };
+  const ranges = trends.map(range);
+  const [lo, hi] = ranges.length ? ranges[0] : [0, 1];
   const x = (t) => left + (width - left - right) * (t - start) / TREND_S;
-  const y = (v) => top + (height - top - bottom) * (1 - (v - lo) / (hi - lo));
+  const yOf = ([l, h]) => (v) => top + (height - top - bottom) * (1 - (v - l) / (h - l));
   const parts = [];
   const line = (x1, y1, x2, y2, cls) => {
     const l = document.createElementNS(SVG, "line");
@@ -929,6 +936,7 @@ function renderTrends(now) {
   label(left - 4, height - bottom, String(+lo.toFixed(3)), "end");
   trends.forEach((t, i) => {
     if (!t.samples.length) return;
+    const y = yOf(ranges[i]);
     const pl = document.createElementNS(SVG, "polyline");
     // A step line: a value holds until the next sample.
     const points = [];
@@ -947,7 +955,9 @@ function renderTrends(now) {
   for (const item of document.querySelectorAll("#trend-legend .item")) {
     const t = trends.find((tr) => tr.name === item.dataset.name);
     const last = t && t.samples.length ? t.samples[t.samples.length - 1][1] : "";
-    item.querySelector(".value").textContent = item.dataset.name + " = " + last;
+    const [tlo, thi] = t ? range(t) : [0, 1];
+    item.querySelector(".value").textContent = item.dataset.name + " = " + last +
+      (trends.length > 1 ? " (" + +tlo.toFixed(3) + ".." + +thi.toFixed(3) + ")" : "");
   }
 }
 

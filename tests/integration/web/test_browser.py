@@ -813,3 +813,34 @@ def test_the_image_grid_is_operated_from_the_keyboard(browser: Any, web_port: in
         assert label.startswith("SA17 = 1")
     finally:
         run.stop()
+
+
+def test_each_trend_has_a_scale_of_its_own(browser: Any, web_port: int,
+                                           tmp_path: Path) -> None:
+    """A bit beside a value of thousands: on one shared scale the bit was a flat line; each
+    trend now spans the chart on its own scale, which its legend says."""
+    run = named_cell(tmp_path, web_port, "ncgate-browser-scales")
+    try:
+        browser.get(f"http://127.0.0.1:{web_port}/")
+        until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
+        for name in ("SA12", "SYVAR3"):
+            browser.find_element(By.ID, "trend-var").send_keys(name)
+            browser.find_element(By.CSS_SELECTOR, "#trend-form button").click()
+        api(web_port, "POST", "/api/write", {"var": "SYVAR3", "value": 2000})
+        until(browser, "SA12 sampled at 0", lambda d: len(d.find_element(
+            By.CSS_SELECTOR, "#trend polyline[data-name='SA12']").get_attribute("points")
+            .split()) > 2)
+        api(web_port, "POST", "/api/write", {"var": "SA12", "value": 1})
+
+        def span(d: Any) -> float:
+            points = d.find_element(By.CSS_SELECTOR, "#trend polyline[data-name='SA12']") \
+                .get_attribute("points").split()
+            ys = [float(p.split(",")[1]) for p in points]
+            return max(ys) - min(ys)
+
+        # The chart's plot is 150 - 8 - 20 = 122 px high: the bit spans it from 0 to 1.
+        until(browser, "the bit spanning the chart", lambda d: span(d) > 100)
+        until(browser, "each range in the legend",
+              lambda d: "SA12 = 1 (0..1)" in text(d, "#trend-legend"))
+    finally:
+        run.stop()
