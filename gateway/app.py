@@ -72,6 +72,7 @@ if TYPE_CHECKING:
     from ncgate.gateway.canopen.clock import Clock
     from ncgate.gateway.canopen.node import CanopenNode
     from ncgate.gateway.modbus.server import ModbusServer
+    from ncgate.gateway.plant import Plant
     from ncgate.gateway.web.console import WebConsole
 
 
@@ -205,7 +206,6 @@ class Gateway:
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
                                         wall=driver.now)
         if plant_logic is not None:
-            plant.logic = plant_logic[0]
             stack.callback(plant_logic[1].close)
         ScriptPlayer(runtime, Script("<config>", ()), self.door, plant_faults(self.config)).arm()
         self._driver.settle()
@@ -597,7 +597,7 @@ class Gateway:
         self.apply(ClearFault(target, source))
 
     @property
-    def plant(self) -> Any:
+    def plant(self) -> Plant:
         """The plant: ``gw.plant.status()``, ``gw.plant.models``."""
         plant = self.runtime.plant
         if plant is None:

@@ -501,6 +501,8 @@ def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: b
                                writer="plant")
     driver = ScanDriver(engine, logic_runtime, plant.scan_ms, wall=wall, closed=closed,
                         scale=config.nc.time_scale, stall_s=config.nc.stall_s)
+    if runtime.plant is not None:
+        runtime.plant.logic = logic_runtime  # (its status in the plant's)
     log.info("plant logic: %s, scan %d ms, programs %s",
              ", ".join(p.name for p in plant.logic), plant.scan_ms, ", ".join(order))
     return logic_runtime, driver

@@ -526,9 +526,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
     start_plant(runtime, door.apply_on_time, closed=False)
-    plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
-    if plant_logic is not None and runtime.plant is not None:
-        runtime.plant.logic = plant_logic[0]
+    start_plant_logic(cfg, runtime, door, closed=True)
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None

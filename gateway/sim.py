@@ -333,9 +333,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     expectations.start()
     player.arm()
     start_plc(config, runtime, door, closed=True)
-    plant_logic = start_plant_logic(config, runtime, door, closed=True)
-    if plant_logic is not None and runtime.plant is not None:
-        runtime.plant.logic = plant_logic[0]
+    start_plant_logic(config, runtime, door, closed=True)
 
     def active() -> bool:
         """Something may still start a program: the PLC logic's scan, a scripted input."""

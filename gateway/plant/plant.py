@@ -42,6 +42,7 @@ from ncgate.plc.image import ImageValueError, value_range
 if TYPE_CHECKING:
     from ncgate.config.plant import PlantModelConfig
     from ncgate.gateway.wiring import Runtime
+    from ncgate.plc.scan import PlcRuntime
 
 log = logging.getLogger("ncgate")
 # The share of the loop's time the plant's tick may take in run; past it the tick's period is
@@ -108,7 +109,7 @@ class Plant:
         self._tick: Timer | None = None
         self._next_in_turn = 0  # the sampled model a tick starts with (run: round robin)
         self.stretch = 1  # the tick's period in scans (run: the budget's)
-        self.logic: Any = None  # the plant's ST logic ([plant] logic), its PlcRuntime
+        self.logic: PlcRuntime | None = None  # the plant's ST logic ([plant] logic)
         self.stretched = 0  # how often the budget stretched it
         for i, model_config in enumerate(config.model):
             self._build(model_config, f"plant.model[{i}]")
