@@ -34,7 +34,7 @@ MODEL_KEYS: Final[dict[str, dict[str, tuple[str, bool, Any]]]] = {
             "time_constant_ms": ("ms", True, None)},
     "generator": {"output": ("out", True, None),
                   "shape": ("choice:square|counter|sine|ramp", False, "square"),
-                  "period_ms": ("ms", True, None), "duty": ("frac", False, 0.5),
+                  "period_ms": ("period", True, None), "duty": ("frac", False, 0.5),
                   "low": ("num", False, 0.0), "high": ("num", False, 1000.0)},
     "switch": {"axis": ("axis", True, None), "output": ("out", True, None),
                "above": ("num", False, None), "below": ("num", False, None)},
@@ -60,6 +60,13 @@ VARIABLE_FAULTS: Final = frozenset({"stuck", "wire_break", "chatter"})  # on wha
 MODBUS_FAULTS: Final = frozenset({"exception", "delay", "no_reply"})
 CANOPEN_FAULTS: Final = frozenset({"heartbeat_stop", "emcy", "pdo_stop"})
 WHEN_KEYS: Final = ("at", "when", "for_s")
+# Bounds of what a fault or a generator may ask: a period shorter than a millisecond would
+# make the clock take billions of steps per simulated second (a hang, not a machine), a delay
+# or period over an hour or a slowing over 1,000x is no fault a commissioning rehearses.
+MIN_PERIOD_MS: Final = 1.0
+MAX_MS: Final = 3_600_000.0
+MAX_FACTOR: Final = 1000.0
+MAX_FOR_S: Final = 1e9  # a fault's own end: sooner than this (else it is one until cleared)
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,6 +158,8 @@ def _value(role: str, v: Any, key: str, fail: Fail) -> Any:
         raise fail(key, f"expected a number, got {v!r}")
     if role == "ms" and v <= 0:
         raise fail(key, f"expected a time in ms > 0, got {v!r}")
+    if role == "period" and not MIN_PERIOD_MS <= v <= MAX_MS:
+        raise fail(key, f"expected a period of {MIN_PERIOD_MS:g} ms .. 1 h (ms), got {v!r}")
     if (role in ("ms0", "pos") and v < 0) or (role == "pos" and v == 0):
         raise fail(key, f"expected a number {'> 0' if role == 'pos' else '>= 0'}, got {v!r}")
     if role == "pct" and not 0 <= v <= 100:
@@ -204,6 +213,10 @@ def read_fault(table: Any, key: str, fail: Fail, *, script: bool = False) -> Fau
         if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
                               or not math.isfinite(v) or v < 0):
             raise fail(f"{key}.{name}", f"expected a time in seconds >= 0, got {v!r}")
+    for_s = table.get("for_s")
+    if for_s is not None and not 0 < for_s < MAX_FOR_S:
+        raise fail(f"{key}.for_s", f"expected a time in seconds > 0 and < {MAX_FOR_S:g}, "
+                   f"got {for_s!r}")
     if when is not None and (not isinstance(when, str) or not when.strip()):
         raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P1 "
                    f"WAIT_COND\", got {when!r}")
@@ -231,10 +244,13 @@ def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
                 raise fail(where, f"expected a whole number, got {v!r}")
         elif name in ("period_ms", "factor", "ms"):
             default = {"period_ms": 100.0, "factor": 2.0, "ms": 100.0}[name]
+            low, high = {"period_ms": (MIN_PERIOD_MS, MAX_MS), "factor": (0.0, MAX_FACTOR),
+                         "ms": (0.0, MAX_MS)}[name]
             v = default if v is None else v
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
-                    or v <= 0:
-                raise fail(where, f"expected a number > 0, got {v!r}")
+                    or v <= 0 or not low <= v <= high:
+                raise fail(where, f"expected a number > 0 and <= {high:g}, got {v!r}"
+                           if not low else f"expected {low:g}..{high:g}, got {v!r}")
             v = float(v)
         elif name == "live_zero":
             v = 0 if v is None else v

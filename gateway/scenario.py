@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TextIO
 
+from ncgate.config import ConfigError
 from ncgate.config.script import Expect, Script
 from ncgate.errors import InputRefused
 from ncgate.gateway.wiring import Runtime, parse_condition
@@ -28,8 +29,9 @@ from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.image import Change, PlcError
 
 
-class ScenarioError(ValueError):
-    """An expectation that cannot be read (the message names the file and the key)."""
+class ScenarioError(ConfigError):
+    """An expectation that cannot be read (the message names the file and the key): a
+    mistake of the script, said as one (exit 2), as its other keys' are."""
 
 
 @dataclass

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from ncgate.config.plant import (
     CANOPEN_FAULTS,
     FAULT_KEYS,
+    MAX_FOR_S,
     MODBUS_FAULTS,
     MODEL_FAULTS,
     MODEL_KEYS,
@@ -338,9 +339,9 @@ class Plant:
             raise InputRefused(Reason.BAD_VALUE, f"fault kind {kind!r}: one of "
                                f"{', '.join(FAULT_KEYS)}")
         if item.for_s is not None and (isinstance(item.for_s, bool) or not isinstance(
-                item.for_s, int | float) or not 0 < item.for_s < 1e9):
-            raise InputRefused(Reason.BAD_VALUE, f"for_s: a time in seconds > 0, not "
-                               f"{item.for_s!r}")
+                item.for_s, int | float) or not 0 < item.for_s < MAX_FOR_S):
+            raise InputRefused(Reason.BAD_VALUE, f"for_s: a time in seconds > 0 and < "
+                               f"{MAX_FOR_S:g}, not {item.for_s!r}")
         raw = dict(item.params) if isinstance(item.params, tuple | list) else None
         if raw is None or not all(isinstance(k, str) for k in raw):
             raise InputRefused(Reason.BAD_VALUE, "a fault's parameters are (name, value) pairs")
@@ -437,7 +438,22 @@ class Plant:
         name = target.strip()
         found = [f for f in self.faults if f.target.lower() == name.lower()
                  or f.target.split(".")[0] == name]
+        if not found and not self._known(name):
+            raise InputRefused(Reason.UNKNOWN_VARIABLE, f"clear {name!r}: no such target (a "
+                               "plant model, its output, a variable or I/O name, modbus, "
+                               "canopen, or all)")
         return found
+
+    def _known(self, name: str) -> bool:
+        """Whether ``name`` is something a fault could target (a clear of it is no typo)."""
+        if name.lower() in ("modbus", "canopen") or name.split(".")[0] in self.models:
+            return True
+        try:
+            var = self.runtime.var(name)
+            self.runtime.image.read(*var.address)
+        except (InputRefused, IndexError):
+            return False
+        return True
 
     def remove(self, faults: list[ActiveFault], who: str) -> None:
         for fault in faults:

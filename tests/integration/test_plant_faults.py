@@ -414,3 +414,48 @@ def test_a_wait_on_a_process_the_script_will_start_again_is_no_orphan(tmp_path: 
     resume = next(e for e in result.events if e["event"] == "resume" and e["proc"] == 2)
     assert resume["t"] == 5.0 and resume["by"] == 1
     assert result.exit_status == 0
+
+
+@pytest.mark.parametrize(("script", "key"), [
+    ('[[expect]]\nname = "a"\ncond = "FOO=1"\nby = 1\n', "expect[0].cond"),
+    ('[[expect]]\nname = "a"\ncond = "P9 IDLE"\nby = 1\n', "expect[0].cond"),
+    ('[[expect]]\nname = "a"\ncond = "alarm XYZ"\nby = 1\n', "expect[0].cond"),
+    ('[[fault]]\ntarget = "SA31"\nkind = "chatter"\nperiod_ms = 1e-9\n', "fault[0].period_ms"),
+    ('[[fault]]\ntarget = "clamp"\nkind = "slow"\nfactor = 1e308\n', "fault[0].factor"),
+    ('[[fault]]\ntarget = "modbus"\nkind = "delay"\nms = 1e12\n', "fault[0].ms"),
+    ('[[fault]]\ntarget = "clamp"\nkind = "never"\nfor_s = 1e9\n', "fault[0].for_s"),
+])
+def test_a_hostile_scenario_is_a_usage_error_naming_its_key(
+        cell: Path, script: str, key: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Found by a hostile try: each was a traceback (exit 70), a hang (a chatter every
+    nanosecond) or accepted; each is one line naming the file and the key, exit 2."""
+    (cell.parent / "s.toml").write_text(script)
+    assert main(["sim", "--config", str(cell), "--script", str(cell.parent / "s.toml"),
+                 "O1"]) == 2
+    err = capsys.readouterr().err
+    assert f"s.toml: {key}:" in err and "Traceback" not in err, err
+
+
+def test_a_generator_faster_than_a_millisecond_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "ncgate.toml").write_text(
+        '[[plant.model]]\nname = "g"\nkind = "generator"\noutput = "SA61"\n'
+        'period_ms = 1e-9\n')
+    with pytest.raises(ConfigError, match=r"plant.model\[0\].period_ms: expected a period"):
+        load_config(tmp_path / "ncgate.toml")
+
+
+async def test_the_api_refuses_what_no_fault_is_and_a_clear_of_nothing_known(
+        cell: Path) -> None:
+    config = ncgate_test_config(cell, **{"web.port": 0})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            for body in ({"target": "modbus", "kind": "delay", "ms": 1e12},
+                         {"target": "SA31", "kind": "chatter", "period_ms": 1e-9},
+                         {"target": "clamp", "kind": "slow", "factor": 1e308},
+                         {"clear": "nosuch"}):
+                async with http.post("/api/fault", json=body) as answer:
+                    assert answer.status == 422, body
+            async with http.post("/api/fault", json={"clear": "clamp"}) as answer:
+                assert answer.status == 200  # a known target with no fault: nothing to clear
+        assert gw.plant.faults == []
