@@ -691,6 +691,74 @@ class ModbusTlsConfig:
         return self.cert is not None
 
 
+class Parity(enum.Enum):
+    """``modbus.rtu.parity``: the serial line's parity bit (Modbus over Serial Line 2.5.1)."""
+
+    EVEN = "E"  # the spec's default, and mbpoll's
+    ODD = "O"
+    NONE = "N"  # the spec asks for two stop bits then
+
+
+def _serial_device(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    return r.str_(t["port"], key) if "port" in t else None
+
+
+def _bytesize(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    value = t.get("bytesize", 8)
+    if value != 8 or isinstance(value, bool):
+        raise r.fail(key, f"expected 8, got {value!r}: an RTU frame is of 8-bit bytes (7 data "
+                     "bits are Modbus ASCII's, which ncgate does not serve)")
+    return 8
+
+
+def _rtu_unit_ids(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    if "unit_ids" not in t:
+        return ()
+    unit_ids = t["unit_ids"]
+    if not isinstance(unit_ids, list) or not unit_ids or not all(
+        isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in unit_ids
+    ):
+        raise r.fail(key, f"expected a non-empty list of serial addresses 1..247 (0 is the "
+                     f"broadcast), got {unit_ids!r}")
+    return tuple(unit_ids)
+
+
+def _optional_port(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    return _port_number(r, t["port"], key) if "port" in t else None
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusRtuConfig:
+    """Modbus RTU on a serial line (Modbus over Serial Line V1.02): on when ``port`` is set."""
+
+    port: str | None = setting(None, "the serial device (/dev/ttyUSB0, /dev/ttyS1, a pty); "
+                               "setting it turns Modbus RTU on", parse=_serial_device)
+    baudrate: int = setting(19200, "bit/s; it also sets the 3.5-character silence that ends a "
+                            "frame (1.75 ms above 19200)", lo=300, hi=4_000_000)
+    parity: Parity = setting(Parity.EVEN, '"E" (even, the spec\'s default), "O" (odd) or "N" '
+                             "(none: the spec asks for stopbits = 2 then)")
+    stopbits: int = setting(1, "stop bits, 1 or 2", lo=1, hi=2)
+    bytesize: int = setting(8, "data bits: 8, as RTU has them", parse=_bytesize)
+    unit_ids: tuple[int, ...] = setting((), "the addresses answered, 1..247 (default: "
+                                        "modbus.unit_ids' of them); 0, the broadcast, is "
+                                        "applied and not answered; others are not answered",
+                                        parse=_rtu_unit_ids)
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusRtuTcpConfig:
+    """RTU frames (with their CRC, no MBAP header) on a TCP listener, as a serial device
+    server delivers them: on when ``port`` is set."""
+
+    host: str = setting("127.0.0.1", "the address to listen on")
+    port: int | None = setting(None, "the port; setting it turns RTU over TCP on (0: a free "
+                               "one, for tests)", parse=_optional_port)
+    gap_ms: float = setting(20.0, "the silence that ends a frame whose length its function "
+                            "code does not give, and drops a frame begun and not finished "
+                            "(a serial line's 3.5 characters, stretched for TCP's segments)",
+                            lo=1, positive=True)
+
+
 class Evict(enum.Enum):
     """``modbus.evict``: who makes room when a client connects at ``max_clients``."""
 
@@ -720,6 +788,8 @@ class ModbusConfig:
                                      parse=_allow)
     map: ModbusMapConfig = setting(doc="[modbus.map]", factory=ModbusMapConfig)
     tls: ModbusTlsConfig = setting(doc="[modbus.tls]", factory=ModbusTlsConfig)
+    rtu: ModbusRtuConfig = setting(doc="[modbus.rtu]", factory=ModbusRtuConfig)
+    rtu_tcp: ModbusRtuTcpConfig = setting(doc="[modbus.rtu_tcp]", factory=ModbusRtuTcpConfig)
     roles: Mapping[str, frozenset[str]] = setting(
         doc="[modbus.roles]: role = [regions it may write] (of the map's read_only names); "
         "a TLS client's role comes from its certificate; any role reads, an unlisted one (or "
@@ -1231,8 +1301,8 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
-    ModbusTlsConfig, ModbusConfig, CanopenConfig, TraceConfig, PlantConfig, WebTlsConfig,
-    WebConfig)})
+    ModbusTlsConfig, ModbusRtuConfig, ModbusRtuTcpConfig, ModbusConfig, CanopenConfig,
+    TraceConfig, PlantConfig, WebTlsConfig, WebConfig)})
 
 
 def config_markdown() -> str:
@@ -1242,9 +1312,9 @@ def config_markdown() -> str:
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
              "`[nc.limits]`, `[nc.aux]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
-             "`[modbus.roles]`, `[canopen]`, `[trace]`, `[web]`); an unknown key or a bad "
-             "value is an error naming the file and the dotted key. Paths are relative "
-             "to the config file.", "",
+             "`[modbus.roles]`, `[modbus.rtu]`, `[modbus.rtu_tcp]`, `[canopen]`, `[trace]`, "
+             "`[web]`); an unknown key or a bad value is an error naming the file and the "
+             "dotted key. Paths are relative to the config file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):
         lines.append(f"| `{dotted}` | {_shown(default)} | {doc} |")

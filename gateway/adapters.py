@@ -49,6 +49,7 @@ class AdapterPlugin:
 # name -> "module:attribute" of its AdapterPlugin, in start order.
 ADAPTERS: dict[str, str] = {
     "modbus": "ncgate.gateway.modbus.plugin:PLUGIN",
+    "modbus_rtu": "ncgate.gateway.rtu.plugin:PLUGIN",
     "canopen": "ncgate.gateway.canopen.plugin:PLUGIN",
     "web": "ncgate.gateway.web.plugin:PLUGIN",
 }

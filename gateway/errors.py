@@ -13,7 +13,8 @@ class GatewayError(NcgateError):
 
 
 class ListenError(GatewayError, OSError):
-    """A port that cannot be listened on (an OSError too, with its errno)."""
+    """A port that cannot be served: a TCP port that cannot be listened on, a serial port
+    that cannot be opened (an OSError too, with its errno when the system gave one)."""
 
 
 def listen_error(exc: OSError, key: str, host: str, port: int) -> ListenError:

@@ -19,7 +19,7 @@ catch as narrowly as they like::
     └── GatewayError                              ncgate.gateway
         ├── UsageError (ValueError): bad command-line input, exit status 2
         │   └── RecordError: a session record's line that is not one
-        ├── ListenError (OSError): a port that cannot be listened on
+        ├── ListenError (OSError): a port (TCP or serial) that cannot be served
         ├── WaitIdleTimeout (TimeoutError)
         ├── ProcessAlarmError (RuntimeError)
         ├── ModbusError: a request answered with an exception code

@@ -34,6 +34,7 @@ class SourceKind(enum.StrEnum):
 
     MODBUS = "modbus"
     MODBUS_TLS = "modbus-tls"
+    MODBUS_RTU = "modbus-rtu"  # a serial line (its device) or RTU over TCP (the peer)
     CANOPEN = "canopen"
     WEB = "web"
     PLC = "plc"

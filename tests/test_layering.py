@@ -9,7 +9,8 @@
   of); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
 - ``ncgate.commands`` and ``ncgate.errors`` are leaves: the standard library only;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
-  ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports
+  ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``rtu/``
+  imports pyserial, only ``web/`` imports
   aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
   test kit are leaves that nothing else in the gateway imports;
 - a dialect is one folder: outside ``interpreter/<dialect>/`` and the registry
@@ -130,6 +131,8 @@ def test_fieldbus_libraries_stay_in_their_adapters() -> None:
                     or module == f"{kit}.canopen_kit"), module
         if "aiohttp" in tops:
             assert module.startswith("ncgate.gateway.web."), module
+        if "serial" in tops:  # pyserial
+            assert module.startswith("ncgate.gateway.rtu."), module
 
 
 def test_a_gateway_without_console_does_not_load_the_web_library() -> None:

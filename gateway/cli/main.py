@@ -119,6 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
                      "modbus.host=0.0.0.0 (a TOML value; a bare word is a string)")
     run.add_argument("--port", type=int, metavar="N", help="the Modbus TCP port "
                      "(modbus.port)")
+    run.add_argument("--rtu", metavar="DEVICE", help="also serve Modbus RTU on this serial "
+                     "port, e.g. /dev/ttyUSB0 (modbus.rtu.port; 19200 bit/s, even parity "
+                     "unless [modbus.rtu] says otherwise)")
+    run.add_argument("--rtu-tcp", type=int, metavar="PORT", help="also serve Modbus RTU "
+                     "frames on this TCP port, as a serial device server carries them "
+                     "(modbus.rtu_tcp.port)")
     web = run.add_mutually_exclusive_group()
     web.add_argument("--web", metavar="HOST:PORT", help="serve the console here "
                      "(web.host, web.port; default 127.0.0.1:8080)")
@@ -417,13 +423,19 @@ def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 
 def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]]:
-    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides, and
-    the option each key came from (an error names it)."""
+    """``--set``, ``--port``, ``--rtu``, ``--rtu-tcp``, ``--web``, ``--no-web``, ``--trace`` as
+    config overrides, and the option each key came from (an error names it)."""
     out = _set_overrides(args.set)
     origins = dict.fromkeys(out, "--set")
     if args.port is not None:
         out["modbus.port"] = args.port
         origins["modbus.port"] = "--port"
+    if args.rtu:
+        out["modbus.rtu.port"] = args.rtu
+        origins["modbus.rtu.port"] = "--rtu"
+    if args.rtu_tcp is not None:
+        out["modbus.rtu_tcp.port"] = args.rtu_tcp
+        origins["modbus.rtu_tcp.port"] = "--rtu-tcp"
     if args.web:
         host, sep, port = args.web.rpartition(":")
         if not sep or not port.isdigit() or not host:

@@ -223,30 +223,44 @@ class RtuFramer:
     """Modbus RTU framing, the frame format alone: no serial I/O, no timing.  The transport
     calls :meth:`gap` when the line has been silent for 3.5 characters (the end of a frame,
     2.5.1.1): a frame of a function code whose length is not known ends there, and whatever
-    was begun and is not a whole frame is dropped.  A frame with a bad CRC is dropped (and
-    counted in ``discarded``) with everything buffered after it, up to the next gap: once a
-    frame is wrong, so may be the lengths that follow.  A broadcast (unit 0) is a request
-    like any other here; that it gets no answer is the server's rule (2.1, broadcast)."""
+    was begun and is not a whole frame is dropped (counted in ``partial``).  A frame with a
+    bad CRC is dropped (counted in ``crc_errors``) with everything buffered after it, up to
+    the next gap: once a frame is wrong, so may be the lengths that follow; bytes past the
+    longest frame with no length known are noise, dropped the same way (``partial``).  A
+    broadcast (unit 0) is a request like any other here; that it gets no answer is the
+    server's rule (2.1, broadcast)."""
 
-    __slots__ = ("_skip", "buffer", "discarded")
+    __slots__ = ("_skip", "buffer", "crc_errors", "partial")
 
     def __init__(self) -> None:
         self.buffer = bytearray()
-        self.discarded = 0  # frames dropped: a bad CRC, or begun and cut off by a gap
+        self.crc_errors = 0  # frames dropped for their CRC
+        self.partial = 0  # frames begun and cut off by a gap, and runs of noise
         self._skip = False  # dropping what comes until the next gap
+
+    @property
+    def idle(self) -> bool:
+        """Nothing that the line's next silence would decide: no frame begun, no burst
+        being dropped."""
+        return not self.buffer and not self._skip
+
+    @property
+    def discarded(self) -> int:
+        """Frames dropped, for either reason."""
+        return self.crc_errors + self.partial
 
     def feed(self, data: bytes) -> None:
         if not self._skip:
             self.buffer += data
             if len(self.buffer) > RTU_FRAME_MAX and request_pdu_length(self.buffer, 1) == -1:
-                self._drop()  # no frame is this long: noise until the next gap
+                self.partial += 1  # no frame is this long: noise until the next gap
+                self._drop()
 
     @property
     def buffered(self) -> int:
         return len(self.buffer)
 
     def _drop(self) -> None:
-        self.discarded += 1
         self.buffer.clear()
         self._skip = True
 
@@ -254,6 +268,7 @@ class RtuFramer:
         buffer = self.buffer
         crc = buffer[end - 2] | buffer[end - 1] << 8
         if crc16(memoryview(buffer)[:end - 2]) != crc:
+            self.crc_errors += 1
             self._drop()
             return None
         request = buffer[0], bytes(buffer[1:end - 2]), 0
@@ -277,8 +292,10 @@ class RtuFramer:
         if not buffer:
             return None
         if len(buffer) >= 4 and request_pdu_length(buffer, 1) == -1:
-            return self._take(len(buffer))
-        self.discarded += 1
+            request = self._take(len(buffer))
+            self._skip = False  # a bad CRC's burst ended here: the next frame is heard
+            return request
+        self.partial += 1
         buffer.clear()
         return None
 

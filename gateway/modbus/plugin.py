@@ -9,6 +9,7 @@ from ncgate.gateway.adapters import AdapterPlugin
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
+    from ncgate.gateway.modbus.faults import ModbusFault
     from ncgate.gateway.modbus.server import ModbusServer
     from ncgate.gateway.plant import ActiveFault
 
@@ -48,14 +49,20 @@ def describe(server: ModbusServer) -> list[str]:
     return lines
 
 
-def faults(server: ModbusServer, faults: list[ActiveFault]) -> None:
-    """The plant's Modbus faults in force, as the server's fault table."""
+def fault_rows(faults: list[ActiveFault]) -> list[ModbusFault]:
+    """The plant's Modbus faults in force (target ``modbus``) as fault-table rows: the TCP
+    server's and the RTU lines' (ncgate.gateway.rtu)."""
     from ncgate.gateway.modbus.faults import ModbusFault
 
-    server.set_faults([ModbusFault(f.kind, code=int(f.params.get("code", 6)),  # type: ignore[arg-type]
-                                   ms=float(f.params.get("ms", 0.0)), unit=f.params.get("unit"),
-                                   addresses=f.params.get("addresses"))
-                       for f in faults if f.target == "modbus"])
+    return [ModbusFault(f.kind, code=int(f.params.get("code", 6)),  # type: ignore[arg-type]
+                        ms=float(f.params.get("ms", 0.0)), unit=f.params.get("unit"),
+                        addresses=f.params.get("addresses"))
+            for f in faults if f.target == "modbus"]
+
+
+def faults(server: ModbusServer, faults: list[ActiveFault]) -> None:
+    """The plant's Modbus faults in force, as the server's fault table."""
+    server.set_faults(fault_rows(faults))
 
 
 PLUGIN = AdapterPlugin(enabled=lambda gw: gw.config.modbus.enabled, factory=_factory,

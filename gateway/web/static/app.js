@@ -584,6 +584,14 @@ function renderFieldbus() {
     box.append(el("p", null, "Modbus TCP " + where + ": " + m.clients.length + " of " +
                   m.max_clients + " clients " + (m.clients.length ? "(" + m.clients.join(", ") + ")" : "")));
   } else box.append(el("p", null, "Modbus off"));
+  const r = status.fieldbus.modbus_rtu;
+  for (const port of r ? r.ports : []) {  // a serial line, RTU over TCP: each its counters
+    const what = port.settings ? "Modbus RTU " + port.port + " (" + port.settings + ")" +
+      (port.open ? "" : " not open: " + port.error) : "Modbus RTU over " + port.port;
+    box.append(el("p", null, what + ": " + port.frames + " frames, " + port.crc_errors +
+                  " CRC errors, " + port.partial + " partial, " + port.exceptions +
+                  " exceptions, " + port.other_units + " for other units"));
+  }
   if (c) {
     box.append(el("p", null, "CANopen node " + c.node_id + ": " + c.nmt + ", heartbeat " +
                   c.heartbeat_ms + " ms" + (c.masters_lost.length ? ", master lost: node " +

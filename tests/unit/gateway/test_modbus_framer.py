@@ -191,7 +191,7 @@ def test_rtu_a_request_fed_a_byte_at_a_time_and_two_in_one_feed() -> None:
 def test_rtu_a_bad_crc_is_dropped_with_what_follows_until_the_gap() -> None:
     framer = RtuFramer()
     framer.feed(H("11 03 006B 0003 7688") + H("01 03 0000 000A C5CD"))
-    assert framer.next_request() is None and framer.discarded == 1
+    assert framer.next_request() is None and (framer.crc_errors, framer.partial) == (1, 0)
     framer.feed(H("01 03 0000 000A C5CD"))  # still the same burst: dropped
     assert framer.next_request() is None and framer.buffered == 0
     assert framer.gap() is None  # the silence: the next frame begins
@@ -207,7 +207,28 @@ def test_rtu_a_frame_whose_code_gives_no_length_ends_at_the_gap() -> None:
     assert framer.next_request() is None  # its end is the line's silence
     assert framer.gap() == (1, H("64 0102"), 0)
     framer.feed(H("01 03 00"))  # begun, then cut off
-    assert framer.gap() is None and framer.discarded == 1 and framer.buffered == 0
+    assert framer.gap() is None and framer.buffered == 0
+    assert (framer.crc_errors, framer.partial, framer.discarded) == (0, 1, 1)
+
+
+def test_rtu_noise_longer_than_any_frame_is_dropped_until_the_gap() -> None:
+    framer = RtuFramer()
+    framer.feed(bytes((1, 100)) + bytes(300))  # a code with no known length, 302 bytes long
+    assert framer.buffered == 0 and framer.partial == 1
+    framer.feed(H("01 03 0000 000A C5CD"))  # the same burst: dropped
+    assert framer.next_request() is None and framer.gap() is None
+    framer.feed(H("01 03 0000 000A C5CD"))
+    assert framer.next_request() == (1, H("03 0000 000A"), 0)
+    assert (framer.crc_errors, framer.partial) == (0, 1)
+
+
+def test_rtu_a_frame_ended_by_the_gap_with_a_bad_crc_does_not_mute_the_next() -> None:
+    framer = RtuFramer()
+    framer.feed(H("01 64 0102 0000"))  # function code 100: its end is the gap; a bad CRC
+    assert framer.gap() is None and (framer.crc_errors, framer.partial) == (1, 0)
+    assert framer.idle
+    framer.feed(H("01 03 0000 000A C5CD"))
+    assert framer.next_request() == (1, H("03 0000 000A"), 0)
 
 
 def test_rtu_encode_and_whole() -> None:

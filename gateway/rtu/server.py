@@ -1,0 +1,542 @@
+"""The Modbus RTU server: a serial line and an RTU-over-TCP listener, each a :class:`RtuLink`.
+
+A link is the transport-free part of one line: its ``RtuFramer`` (the frame format, CRC and
+all), the timer that tells it the line fell silent, its counters and its fault state.  What
+it receives comes from the serial port's reader (:class:`SerialLine`, a file descriptor on
+the event loop: no thread) or from a TCP connection (:class:`_TcpConnection`); what it
+answers goes back the same way.  The rules are Modbus over Serial Line V1.02's:
+
+- a frame is cut by its function code's length, as libmodbus does, and answered as soon as
+  it is whole and its CRC is right; a frame whose code does not give its length ends at the
+  line's silence of 3.5 characters (``silence_s``: 11 bits a character, 1.75 ms above
+  19200 bit/s, 2.5.1.1); what was begun and is not whole at the silence is dropped and
+  counted (``partial``); a bad CRC is dropped and counted (``crc_errors``) with the rest of
+  its burst, and never answered (2.5.1.2);
+- unit 0 is the broadcast: a write is applied and not answered, anything else is ignored
+  (2.1); an address that is not ours is not answered (``other_units``);
+- every other request is answered by the TCP server's ``RequestHandler``, so the exception
+  codes, the door and the refusal table are the same as on TCP; its source is
+  ``modbus-rtu <device>`` on a serial line and ``modbus-rtu <peer>`` over TCP;
+- the plant's Modbus faults (docs/plant.md) apply: ``exception`` answers that code and
+  executes nothing, ``delay`` answers late (what follows waits behind it), ``no_reply``
+  silences the line until the fault table changes (a serial line has no connection to
+  close; a master meets the silence with its timeout, as it would a dead device).
+
+The serial port's settings (baud rate, parity, stop bits) are pyserial's to put on the
+device; a pseudo-terminal takes them and ignores them, which is how the tests run without a
+cable (``socat`` pty pairs, ``tests/integration/rtu/``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Final, cast
+
+from ncgate.config import ModbusConfig, Parity
+from ncgate.gateway.errors import ListenError, listen_error
+from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
+from ncgate.gateway.modbus.framer import Request, RtuFramer, exception_pdu
+from ncgate.gateway.modbus.map import ModbusMap
+from ncgate.gateway.modbus.server import WRITES, RequestHandler
+from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.gateway.wiring import Backend
+from ncgate.inputs import Source, SourceKind
+
+log = logging.getLogger("ncgate.modbus.rtu")
+
+BROADCAST: Final = 0
+# Frames one link answers in one loop turn before the others get theirs (an RTU-over-TCP
+# client may send many at once; a serial line at 19,200 bit/s brings a few a second).
+FRAMES_PER_TURN: Final = 16
+# Bytes waiting in a TCP link's framer above which its reading pauses (and below which it
+# resumes): a client that pipelines cannot make us buffer for it.
+BACKLOG_HIGH: Final = 16 * 1024
+BACKLOG_LOW: Final = 4 * 1024
+WRITE_HIGH_WATER: Final = 64 * 1024
+REOPEN_S: Final = 1.0  # a serial port that went away is looked for again this often
+COUNTERS: Final = ("frames", "answered", "crc_errors", "partial", "exceptions", "broadcasts",
+                   "other_units", "silenced")
+
+
+def silence_s(baudrate: int, parity: Parity, stopbits: int) -> float:
+    """The 3.5-character silence that ends an RTU frame (Modbus over Serial Line 2.5.1.1): a
+    character is a start bit, 8 data bits, the parity bit if any and the stop bits; above
+    19,200 bit/s the spec fixes it at 1.75 ms."""
+    if baudrate > 19200:
+        return 0.00175
+    bits = 1 + 8 + (0 if parity is Parity.NONE else 1) + stopbits
+    return 3.5 * bits / baudrate
+
+
+@dataclass
+class Counters:
+    """What one port saw, since the gateway started: ``frames`` whole with a right CRC,
+    ``answered``, ``crc_errors``, ``partial`` (begun and cut by a silence, or noise),
+    ``exceptions`` answered, ``broadcasts`` applied, ``other_units`` (frames for another
+    address, not answered) and ``silenced`` (requests a no_reply fault left unanswered)."""
+
+    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(COUNTERS, 0))
+
+    def add(self, framer: RtuFramer) -> None:
+        """A framer's drops, when its link ends (a TCP connection closed)."""
+        self.counts["crc_errors"] += framer.crc_errors
+        self.counts["partial"] += framer.partial
+
+
+class RtuLink:
+    """One RTU line, without its transport: ``received`` takes what came, ``write`` (given)
+    sends an answer, ``pause``/``resume`` (given, optional) hold the transport's reading
+    while a backlog waits.  Requests are answered in order; a delay fault holds the rest of
+    the line behind it."""
+
+    def __init__(self, server: RtuServer, source: Source, write: Callable[[bytes], None],
+                 silence: float, counters: Counters, *, reading: Callable[[bool], None]
+                 | None = None) -> None:
+        self.server = server
+        self.source = source
+        self.write = write
+        self.silence = silence
+        self.counters = counters
+        self.reading = reading
+        self.framer = RtuFramer()
+        self.loop = asyncio.get_running_loop()
+        self.last_byte = self.loop.time()
+        self.gap_timer: asyncio.TimerHandle | None = None
+        self.turn: asyncio.Handle | None = None
+        self.held: tuple[Request, asyncio.TimerHandle] | None = None  # a delay fault's
+        self.silent = False  # a no_reply fault caught a request: nothing is answered
+        self.backlogged = False
+        self.closed = False
+
+    @property
+    def crc_errors(self) -> int:
+        return self.framer.crc_errors
+
+    def received(self, data: bytes) -> None:
+        self.last_byte = self.loop.time()
+        self.framer.feed(data)
+        if self.turn is None:
+            self._process()
+        self._watch_silence()
+
+    def _watch_silence(self) -> None:
+        """Arm the silence timer while the framer has something the silence decides: a
+        frame begun, or a burst being dropped."""
+        if self.gap_timer is None and not self.framer.idle:
+            self.gap_timer = self.loop.call_at(self.last_byte + self.silence, self._silence)
+
+    def _silence(self) -> None:
+        self.gap_timer = None
+        if self.closed:
+            return
+        due = self.last_byte + self.silence
+        if self.loop.time() < due:  # bytes came since it was armed: the silence is later
+            self.gap_timer = self.loop.call_at(due, self._silence)
+            return
+        if self.turn is not None or self.held is not None:
+            return  # whole frames wait their turn: the silence counts after them
+        request = self.framer.gap()
+        if request is not None:
+            self._serve(request)
+
+    def _process(self) -> None:
+        """Answer the whole frames buffered, in order, at most FRAMES_PER_TURN in one loop
+        turn; a delayed request holds the rest until it is answered."""
+        self.turn = None
+        if self.closed:
+            return
+        framer = self.framer
+        taken = 0
+        while self.held is None:
+            if taken >= FRAMES_PER_TURN:
+                self.turn = self.loop.call_soon(self._process)
+                break
+            request = framer.next_request()
+            if request is None:
+                break
+            taken += 1
+            self._serve(request)
+        if self.reading is not None:
+            backlogged = framer.buffered > (BACKLOG_LOW if self.backlogged else BACKLOG_HIGH)
+            if backlogged != self.backlogged:
+                self.backlogged = backlogged
+                self.reading(not backlogged)
+        if self.turn is None and self.held is None:
+            self._watch_silence()
+
+    def _serve(self, request: Request) -> None:
+        unit, pdu, _ = request
+        counts = self.counters.counts
+        counts["frames"] += 1
+        server = self.server
+        if unit != BROADCAST and unit not in server.unit_ids:
+            counts["other_units"] += 1  # another slave's: not ours to answer
+            return
+        if self.silent:
+            counts["silenced"] += 1
+            return
+        table = server.fault_table
+        fault = table.match(unit, pdu) if table is not None else None
+        if fault is not None:
+            if fault.kind == "exception":  # not executed
+                self._answer(request, exception_pdu(pdu[0], fault.code))
+                return
+            if fault.kind == "no_reply":
+                self.silent = True
+                counts["silenced"] += 1
+                server.chatter.note(f"{self.source}: no answers any more (a no_reply fault)")
+                return
+            timer = self.loop.call_later(fault.ms / 1000, self._release)
+            self.held = (request, timer)
+            return
+        self._execute(request)
+
+    def _execute(self, request: Request) -> None:
+        unit, pdu, _ = request
+        if unit == BROADCAST:
+            if pdu[0] in WRITES:  # applied, never answered (2.1); a broadcast read is nothing
+                self.counters.counts["broadcasts"] += 1
+                self.server.handler.handle(self.server.any_unit, pdu, self.source)
+            return
+        self._answer(request, self.server.handler.handle(unit, pdu, self.source))
+
+    def _answer(self, request: Request, answer: bytes) -> None:
+        if request[0] == BROADCAST:
+            return
+        counts = self.counters.counts
+        counts["answered"] += 1
+        if answer[0] & 0x80:
+            counts["exceptions"] += 1
+        self.write(self.framer.encode(request, answer))
+
+    def _release(self) -> None:
+        """A delayed request's time has come: execute and answer it, then the rest."""
+        if self.held is None or self.closed:
+            return
+        request, _ = self.held
+        self.held = None
+        self._execute(request)
+        self._process()
+
+    def faults_changed(self) -> None:
+        """A new fault table: a silenced line answers again (the next request meets the new
+        table)."""
+        self.silent = False
+
+    def close(self) -> None:
+        self.closed = True
+        for timer in (self.gap_timer, self.turn, self.held[1] if self.held else None):
+            if timer is not None:
+                timer.cancel()
+        self.gap_timer = None
+        self.turn = None
+        self.held = None
+
+
+class SerialLine:
+    """A serial port on the event loop: pyserial opens and configures the device, then its
+    file descriptor is read by the loop (no thread) and written without blocking (what the
+    driver does not take at once goes when it can).  A port that goes away (a USB adapter
+    pulled, the other end of a pty closed) is logged once and looked for again every
+    REOPEN_S."""
+
+    def __init__(self, server: RtuServer) -> None:
+        self.server = server
+        rtu = server.config.rtu
+        assert rtu.port is not None
+        self.device = rtu.port
+        self.counters = Counters()
+        self.silence = silence_s(rtu.baudrate, rtu.parity, rtu.stopbits)
+        self.serial: Any = None
+        self.link: RtuLink | None = None
+        self.pending = bytearray()
+        self.error: str | None = None
+        self.reopen: asyncio.TimerHandle | None = None
+
+    def open(self) -> None:
+        """Open the device (ListenError naming modbus.rtu.port if it cannot be)."""
+        import serial  # pyserial: imported only when a serial line is served
+
+        rtu = self.server.config.rtu
+        parity = {Parity.EVEN: serial.PARITY_EVEN, Parity.ODD: serial.PARITY_ODD,
+                  Parity.NONE: serial.PARITY_NONE}[rtu.parity]
+        try:
+            port = serial.Serial(self.device, baudrate=rtu.baudrate, bytesize=rtu.bytesize,
+                                 parity=parity, stopbits=rtu.stopbits, timeout=0,
+                                 exclusive=True)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            number = getattr(exc, "errno", None)
+            if isinstance(number, int) and number:
+                raise ListenError(number, f"modbus.rtu.port: cannot open {self.device}: "
+                                  f"{os.strerror(number)}") from None
+            raise ListenError(f"modbus.rtu.port: cannot open {self.device}: {exc}") from None
+        self.serial = port
+        self.error = None
+        fd = port.fileno()
+        loop = asyncio.get_running_loop()
+        self.link = RtuLink(self.server, Source(SourceKind.MODBUS_RTU, self.device),
+                            self._write, self.silence, self.counters)
+        loop.add_reader(fd, self._readable)
+
+    @property
+    def is_open(self) -> bool:
+        return self.serial is not None
+
+    def _readable(self) -> None:
+        try:
+            data = os.read(self.serial.fileno(), 4096)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._lost(exc.strerror or str(exc))
+            return
+        if not data:
+            self._lost("end of file")
+            return
+        assert self.link is not None
+        self.link.received(data)
+
+    def _write(self, data: bytes) -> None:
+        if self.serial is None:
+            return
+        if self.pending:
+            self.pending += data
+            return
+        try:
+            sent = os.write(self.serial.fileno(), data)
+        except BlockingIOError:
+            sent = 0
+        except OSError as exc:
+            self._lost(exc.strerror or str(exc))
+            return
+        if sent < len(data):
+            self.pending += data[sent:]
+            asyncio.get_running_loop().add_writer(self.serial.fileno(), self._writable)
+
+    def _writable(self) -> None:
+        try:
+            sent = os.write(self.serial.fileno(), self.pending)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._lost(exc.strerror or str(exc))
+            return
+        del self.pending[:sent]
+        if not self.pending:
+            asyncio.get_running_loop().remove_writer(self.serial.fileno())
+
+    def _lost(self, why: str) -> None:
+        log.warning("modbus-rtu %s: the port went away (%s); looking for it again every "
+                    "%g s", self.device, why, REOPEN_S)
+        self.error = why
+        self._close_port()
+        self.reopen = asyncio.get_running_loop().call_later(REOPEN_S, self._try_reopen)
+
+    def _try_reopen(self) -> None:
+        self.reopen = None
+        try:
+            self.open()
+        except ListenError:
+            self.reopen = asyncio.get_running_loop().call_later(REOPEN_S, self._try_reopen)
+            return
+        log.info("modbus-rtu %s: open again", self.device)
+
+    def _close_port(self) -> None:
+        if self.link is not None:
+            self.counters.add(self.link.framer)
+            self.link.close()
+            self.link = None
+        if self.serial is not None:
+            loop = asyncio.get_running_loop()
+            fd = self.serial.fileno()
+            loop.remove_reader(fd)
+            loop.remove_writer(fd)
+            self.pending.clear()
+            self.serial.close()
+            self.serial = None
+
+    def close(self) -> None:
+        if self.reopen is not None:
+            self.reopen.cancel()
+            self.reopen = None
+        self._close_port()
+
+    def status(self) -> dict[str, Any]:
+        rtu = self.server.config.rtu
+        counts = dict(self.counters.counts)
+        if self.link is not None:
+            counts["crc_errors"] += self.link.framer.crc_errors
+            counts["partial"] += self.link.framer.partial
+        return {"port": self.device, "open": self.is_open, "error": self.error,
+                "settings": f"{rtu.baudrate} {rtu.bytesize}{rtu.parity.value}{rtu.stopbits}",
+                **counts}
+
+
+class _TcpConnection(asyncio.Protocol):
+    """One RTU-over-TCP client: a link whose bytes come from and go to its socket."""
+
+    def __init__(self, listener: RtuTcpListener) -> None:
+        self.listener = listener
+        self.transport: asyncio.Transport | None = None
+        self.link: RtuLink | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.Transport, transport)
+        peer = transport.get_extra_info("peername") or ("?", 0)
+        listener = self.listener
+        self.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
+        self.link = RtuLink(listener.server, Source(SourceKind.MODBUS_RTU,
+                                                    f"{peer[0]}:{peer[1]}"),
+                            self.transport.write, listener.silence, listener.counters,
+                            reading=self._reading)
+        listener.connections.add(self)
+        listener.server.chatter.note(f"{self.link.source} connected (RTU over TCP)")
+
+    def _reading(self, on: bool) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            if on:
+                self.transport.resume_reading()
+            else:
+                self.transport.pause_reading()
+
+    def pause_writing(self) -> None:  # the client does not read its answers
+        self._reading(False)
+
+    def resume_writing(self) -> None:
+        self._reading(True)
+
+    def data_received(self, data: bytes) -> None:
+        assert self.link is not None
+        self.link.received(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        listener = self.listener
+        listener.connections.discard(self)
+        if self.link is not None:
+            listener.counters.add(self.link.framer)
+            listener.server.chatter.note(f"{self.link.source} disconnected")
+            self.link.close()
+        if not listener.connections:
+            listener.all_closed.set()
+
+    def close(self) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.abort()
+
+
+class RtuTcpListener:
+    """RTU frames on a TCP listener (``[modbus.rtu_tcp]``)."""
+
+    def __init__(self, server: RtuServer) -> None:
+        self.server = server
+        self.counters = Counters()
+        self.silence = server.config.rtu_tcp.gap_ms / 1000
+        self.connections: set[_TcpConnection] = set()
+        self.all_closed = asyncio.Event()
+        self.address: tuple[str, int] | None = None
+        self._server: asyncio.Server | None = None
+
+    async def start(self) -> None:
+        config = self.server.config.rtu_tcp
+        assert config.port is not None
+        loop = asyncio.get_running_loop()
+        try:
+            self._server = await loop.create_server(lambda: _TcpConnection(self), config.host,
+                                                    config.port, reuse_address=True)
+        except OSError as exc:
+            raise listen_error(exc, "modbus.rtu_tcp.port", config.host, config.port) from None
+        host, port = self._server.sockets[0].getsockname()[:2]
+        self.address = (host, port)
+
+    def links(self) -> list[RtuLink]:
+        return [c.link for c in self.connections if c.link is not None]
+
+    async def close(self) -> None:
+        if self._server is None:
+            return
+        self._server.close()
+        if self.connections:
+            self.all_closed.clear()
+            for connection in list(self.connections):
+                connection.close()
+            await self.all_closed.wait()
+        await self._server.wait_closed()
+        self._server = None
+
+    def status(self) -> dict[str, Any]:
+        counts = dict(self.counters.counts)
+        for link in self.links():
+            counts["crc_errors"] += link.framer.crc_errors
+            counts["partial"] += link.framer.partial
+        return {"port": "tcp {}:{}".format(*self.address) if self.address else None,
+                "address": list(self.address) if self.address else None,
+                "clients": sorted(str(link.source.detail) for link in self.links()),
+                **counts}
+
+
+class RtuServer:
+    """Modbus RTU on ``[modbus.rtu]``'s serial port and ``[modbus.rtu_tcp]``'s listener,
+    whichever are set; the map and the door of Modbus TCP."""
+
+    def __init__(self, config: ModbusConfig, mmap: ModbusMap, backend: Backend) -> None:
+        self.config = config
+        rtu = config.rtu
+        units = rtu.unit_ids or tuple(u for u in config.unit_ids if 1 <= u <= 247) or (1,)
+        self.unit_ids = frozenset(units)
+        self.any_unit = min(units)  # what a broadcast is handled as
+        self.handler = RequestHandler(mmap, backend, self.unit_ids, strict_unit_id=True)
+        self.chatter = RateLimitedLog(log, level=logging.INFO, burst=10)
+        self._faults = FaultTable()
+        self.fault_table: FaultTable | None = None
+        self.serial = SerialLine(self) if rtu.port is not None else None
+        self.tcp = RtuTcpListener(self) if config.rtu_tcp.port is not None else None
+
+    async def start(self) -> None:
+        if self.serial is not None:
+            self.serial.open()
+        if self.tcp is not None:
+            try:
+                await self.tcp.start()
+            except BaseException:
+                if self.serial is not None:
+                    self.serial.close()
+                raise
+
+    async def close(self) -> None:
+        self.chatter.flush()
+        if self.serial is not None:
+            self.serial.close()
+        if self.tcp is not None:
+            await self.tcp.close()
+
+    def links(self) -> list[RtuLink]:
+        out = [self.serial.link] if self.serial is not None and self.serial.link else []
+        return out + (self.tcp.links() if self.tcp is not None else [])
+
+    def set_faults(self, faults: list[ModbusFault]) -> None:
+        """The plant's Modbus faults in force (``ModbusServer.set_faults``'s rows)."""
+        self._faults.set(faults)
+        self.fault_table = self._faults if self._faults.rows else None
+        for link in self.links():
+            link.faults_changed()
+
+    @property
+    def faults(self) -> tuple[ModbusFault, ...]:
+        return self._faults.rows
+
+    def status(self) -> dict[str, Any]:
+        ports = []
+        if self.serial is not None:
+            ports.append(self.serial.status())
+        if self.tcp is not None:
+            ports.append(self.tcp.status())
+        totals = {name: sum(p[name] for p in ports) for name in COUNTERS}
+        return {**totals, "unit_ids": sorted(self.unit_ids), "ports": ports,
+                "faults": [{"kind": f.kind, "code": f.code, "ms": f.ms, "unit": f.unit,
+                            "addresses": list(f.addresses) if f.addresses else None}
+                           for f in self.faults],
+                "fault_counts": dict(self._faults.counts)}
