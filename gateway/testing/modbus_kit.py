@@ -25,12 +25,14 @@ engine), read within ``EXPLAIN_S`` more.
 from __future__ import annotations
 
 import asyncio
+import os
 import re
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TypeVar, overload
 
-from pymodbus.client import AsyncModbusTcpClient
+from pymodbus import FramerType
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from ncgate.config import Config
@@ -141,13 +143,34 @@ _AUX_CODE = re.compile(r"([MSTH])(-?\d+)$", re.IGNORECASE)
 
 class VirtualPLC:
     def __init__(self, host: str, port: int, config: Config, unit: int | None = None,
-                 poll_s: float = 0.005) -> None:
+                 poll_s: float = 0.005, *,
+                 client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None) -> None:
         self.map = ModbusMap(config)
         self.config = config
         self.unit = unit if unit is not None else config.modbus.unit_ids[0]
         self.poll_s = poll_s
-        self.client = AsyncModbusTcpClient(host, port=port, retries=0)
+        self.client = client or AsyncModbusTcpClient(host, port=port, retries=0)
         self._last_seq = 0  # the newest SND log entry this client has returned
+
+    @classmethod
+    def rtu(cls, device: str, config: Config, unit: int | None = None,
+            poll_s: float = 0.02) -> VirtualPLC:
+        """The same PLC as a Modbus RTU master on the serial port ``device`` (the other end
+        of ``modbus.rtu.port``'s line: ``ncgate_rtu_line.plc_end``), with the line settings
+        of ``[modbus.rtu]`` and its first unit id."""
+        rtu = config.modbus.rtu
+        units = rtu.unit_ids or tuple(u for u in config.modbus.unit_ids if 1 <= u <= 247)
+        # A pty carries no parity bit: Linux's pty driver drops PARENB from what is set, and
+        # pymodbus's serial transport, which sets the port up twice, then fails (EINVAL) on
+        # the second -- so on a pty the client asks for none.  The gateway's side sets its
+        # port up once and keeps [modbus.rtu] parity.
+        pty = os.path.realpath(device).startswith("/dev/pts/")
+        client = AsyncModbusSerialClient(device, framer=FramerType.RTU, baudrate=rtu.baudrate,
+                                         bytesize=rtu.bytesize,
+                                         parity="N" if pty else rtu.parity.value,
+                                         stopbits=rtu.stopbits, retries=0, timeout=2)
+        return cls("", 0, config, unit if unit is not None else (units or (1,))[0], poll_s,
+                   client=client)
 
     async def connect(self) -> None:
         if not await self.client.connect():

@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from ncgate.gateway.testing.modbus_kit import VirtualPLC
     from ncgate.gateway.testing.plant_kit import PlantKit
     from ncgate.gateway.testing.plc_kit import PlcWatch
+    from ncgate.gateway.testing.rtu_kit import PtyPair
 
 try:
     import pytest_asyncio
@@ -181,6 +182,29 @@ if HAVE_PYTEST_ASYNCIO:
         async with VirtualPLC(host, port, ncgate_gateway.config) as plc:
             yield plc
 
+    @pytest_asyncio.fixture
+    async def ncgate_rtu_line() -> AsyncIterator[PtyPair]:
+        """A serial line of two ptys, relayed in this process: give ``gateway_end`` to the
+        gateway (``modbus.rtu.port`` in your ``ncgate_config``) and ``plc_end`` to the
+        master (``rtu_plc`` does)."""
+        from ncgate.gateway.testing.rtu_kit import PtyPair
+
+        async with PtyPair() as line:
+            yield line
+
+    @pytest_asyncio.fixture
+    async def rtu_plc(ncgate_gateway: Gateway, ncgate_rtu_line: PtyPair
+                      ) -> AsyncIterator[VirtualPLC]:
+        """``virtual_plc`` as a Modbus RTU master on ``ncgate_rtu_line``'s other end."""
+        from ncgate.gateway.testing.modbus_kit import VirtualPLC
+
+        if ncgate_gateway.config.modbus.rtu.port != ncgate_rtu_line.gateway_end:
+            pytest.fail("rtu_plc: the gateway does not serve ncgate_rtu_line: give "
+                        "ncgate_test_config(..., **{'modbus.rtu.port': "
+                        "ncgate_rtu_line.gateway_end}) in your ncgate_config fixture")
+        async with VirtualPLC.rtu(ncgate_rtu_line.plc_end, ncgate_gateway.config) as plc:
+            yield plc
+
 else:
     _MISSING = "the ncgate fixtures need pytest-asyncio: pip install 'ncgate[pytest]'"
 
@@ -202,4 +226,12 @@ else:
 
     @pytest.fixture
     def plant() -> None:
+        pytest.fail(_MISSING)
+
+    @pytest.fixture
+    def ncgate_rtu_line() -> None:
+        pytest.fail(_MISSING)
+
+    @pytest.fixture
+    def rtu_plc() -> None:
         pytest.fail(_MISSING)
