@@ -1318,7 +1318,55 @@ def config_markdown() -> str:
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):
         lines.append(f"| `{dotted}` | {_shown(default)} | {doc} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + _SERIAL_SECTION
+
+
+# docs/config.md's section on the serial line: what the keys above do not say on their own.
+_SERIAL_SECTION = """
+## Modbus RTU on a serial line
+
+`[modbus.rtu] port` (or `ncgate run --rtu DEVICE`) serves the Modbus map of `[modbus.map]` on
+a serial port, framed as Modbus over Serial Line V1.02 has it; `[modbus.rtu_tcp] port` (or
+`--rtu-tcp PORT`) serves the same frames on a TCP port, as a serial device server carries
+them. Either works with or without Modbus TCP (`modbus.enabled`), and with the other.
+
+```toml
+[modbus.rtu]
+port = "/dev/ttyUSB0"   # an RS-485 adapter; /dev/ttyS1; a pty
+baudrate = 19200        # the spec's default, and mbpoll's
+parity = "E"            # "E", "O" or "N" (then stopbits = 2, as the spec asks)
+stopbits = 1
+unit_ids = [1]          # default: modbus.unit_ids (those in 1..247)
+
+[modbus.rtu_tcp]
+port = 5021
+host = "127.0.0.1"
+```
+
+- A frame is answered as soon as it is whole -- its function code gives its length -- and its
+  CRC is right; a frame whose code does not give its length ends at the line's silence of 3.5
+  characters (2 ms at 19,200 bit/s 8E1; 1.75 ms above 19,200; `gap_ms` over TCP). What was
+  begun and is not whole at a silence is dropped and counted as `partial`; a bad CRC is
+  dropped, not answered, and counted as a `crc_error`.
+- Unit 0 is the broadcast: a write is applied and not answered. A frame for an address that
+  is not in `unit_ids` is not answered (counted as `other_units`); 0xFF, Modbus TCP's "the
+  server itself", is not an RTU address.
+- The exception codes, the refusals and the attribution are Modbus TCP's; writes are
+  attributed `modbus-rtu <device>` (serial) or `modbus-rtu <client address>` (RTU over TCP).
+- `GET /api/status` has `fieldbus.modbus_rtu`: totals of `frames`, `answered`,
+  `crc_errors`, `partial`, `exceptions`, `broadcasts`, `other_units` and `silenced`, and
+  the same per port under `ports` (the serial port with its settings and whether it is
+  open); the console's fieldbus panel shows them per port.
+- The plant's Modbus faults ([plant.md](plant.md)) apply to RTU too: `exception` answers that
+  code and stores nothing, `delay` answers late, `no_reply` silences the line until the
+  fault table changes.
+- A serial port that cannot be opened at start stops `ncgate run` with the key to change
+  (`modbus.rtu.port: cannot open /dev/ttyUSB0: No such file or directory`); one that goes
+  away while serving (a USB adapter pulled) is logged and looked for again every second.
+- Without a cable: a `socat` pty pair is a serial line (`socat pty,raw,echo=0,link=/tmp/gw
+  pty,raw,echo=0,link=/tmp/plc`); in a pytest suite, the `ncgate_rtu_line` and `rtu_plc`
+  fixtures ([testing.md](testing.md)) need nothing installed.
+"""
 
 
 def _shown(value: Any) -> str:
