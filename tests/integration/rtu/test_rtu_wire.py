@@ -122,3 +122,13 @@ async def test_the_plants_modbus_faults_apply_to_the_serial_line(raw_gateway: Ga
     assert await raw_line.answer(7) == frame("01 04 02 0004")
     status = fieldbus(gw)["modbus_rtu"]
     assert status["fault_counts"]["exception"] == 1 and status["silenced"] == 1
+
+
+async def test_a_delay_fault_answers_late_and_in_order(raw_gateway: Gateway,
+                                                       raw_line: RawLine) -> None:
+    gw = raw_gateway
+    gw.fault("modbus", "delay", ms=50, addresses=[0, 0])
+    raw_line.send(frame("01 04 0000 0001"))  # delayed: input 0 is in the fault's range
+    raw_line.send(frame("01 04 0001 0001"))  # not in it, but behind it on the line
+    assert await raw_line.answer(14) == frame("01 04 02 0001") + frame("01 04 02 0004")
+    assert fieldbus(gw)["modbus_rtu"]["fault_counts"]["delay"] == 1

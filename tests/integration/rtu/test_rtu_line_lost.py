@@ -1,0 +1,67 @@
+"""A serial port that goes away while served (a USB adapter pulled: here the socat relay
+killed) is logged, shown closed, and taken again when it comes back; the rest of the cell
+serves on meanwhile."""
+
+from __future__ import annotations
+
+import asyncio
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from ncgate.gateway import Gateway
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.gateway.web.status import fieldbus
+
+from .conftest import need
+from .test_rtu_mbpoll import mbpoll, rtu, tcp
+
+
+def relay(tmp_path: Path) -> subprocess.Popen[str]:
+    ends = [str(tmp_path / "ttyGW"), str(tmp_path / "ttyPLC")]
+    proc = subprocess.Popen(["socat", "-d", "-d", *(f"pty,raw,echo=0,link={e}" for e in ends)],
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if "starting data transfer loop" in line:
+            return proc
+    pytest.fail(f"socat ended: {proc.wait()}")
+
+
+async def until(what: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    """Poll the gateway's own status until ``what`` holds (the port is looked for every
+    second: there is no event to wait on from outside)."""
+    async with asyncio.timeout(timeout_s):
+        while not what():
+            await asyncio.sleep(0.05)
+
+
+async def test_a_port_that_goes_away_is_taken_again_when_it_comes_back(
+        tmp_path: Path, cell: Path, caplog: pytest.LogCaptureFixture) -> None:
+    need("socat", "socat")
+    need("mbpoll", "mbpoll")
+    first = relay(tmp_path)
+    async with Gateway(ncgate_test_config(
+            cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})) as gw:
+        def serial() -> dict[str, object]:
+            port: dict[str, object] = fieldbus(gw)["modbus_rtu"]["ports"][0]
+            return port
+
+        plc = str(tmp_path / "ttyPLC")
+        assert (await mbpoll(rtu(plc), "input", 1))[1] == {1: 4}
+        first.kill()
+        first.wait()
+        await until(lambda: serial()["open"] is False)
+        assert "the port went away" in caplog.text
+        assert (await mbpoll(tcp(gw), "input", 1))[1] == {1: 4}  # TCP serves on
+        second = relay(tmp_path)
+        try:
+            await until(lambda: serial()["open"] is True)
+            rc, values, text = await mbpoll(rtu(plc), "input", 1)
+            assert rc == 0 and values == {1: 4}, text
+            assert serial()["answered"] == 2  # counted across the two openings
+        finally:
+            second.terminate()
+            second.wait()
