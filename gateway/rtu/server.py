@@ -256,6 +256,7 @@ class SerialLine:
         self.pending = bytearray()
         self.error: str | None = None
         self.reopen: asyncio.TimerHandle | None = None
+        self.changed = asyncio.Event()  # set each time the port opens or goes away
 
     def open(self) -> None:
         """Open the device (ListenError naming modbus.rtu.port if it cannot be)."""
@@ -281,6 +282,7 @@ class SerialLine:
         self.link = RtuLink(self.server, Source(SourceKind.MODBUS_RTU, self.device),
                             self._write, self.silence, self.counters)
         loop.add_reader(fd, self._readable)
+        self.changed.set()
 
     @property
     def is_open(self) -> bool:
@@ -334,6 +336,7 @@ class SerialLine:
                     "%g s", self.device, why, REOPEN_S)
         self.error = why
         self._close_port()
+        self.changed.set()
         self.reopen = asyncio.get_running_loop().call_later(REOPEN_S, self._try_reopen)
 
     def _try_reopen(self) -> None:

@@ -30,12 +30,13 @@ def relay(tmp_path: Path) -> subprocess.Popen[str]:
     pytest.fail(f"socat ended: {proc.wait()}")
 
 
-async def until(what: Callable[[], bool], timeout_s: float = 10.0) -> None:
-    """Poll the gateway's own status until ``what`` holds (the port is looked for every
-    second: there is no event to wait on from outside)."""
+async def until(gw: Gateway, what: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    """Until ``what`` holds, woken each time the serial port opens or goes away."""
+    line = gw.adapters["modbus_rtu"].serial
     async with asyncio.timeout(timeout_s):
         while not what():
-            await asyncio.sleep(0.05)
+            line.changed.clear()
+            await line.changed.wait()
 
 
 async def test_a_port_that_goes_away_is_taken_again_when_it_comes_back(
@@ -53,12 +54,12 @@ async def test_a_port_that_goes_away_is_taken_again_when_it_comes_back(
         assert (await mbpoll(rtu(plc), "input", 1))[1] == {1: 4}
         first.kill()
         first.wait()
-        await until(lambda: serial()["open"] is False)
+        await until(gw, lambda: serial()["open"] is False)
         assert "the port went away" in caplog.text
         assert (await mbpoll(tcp(gw), "input", 1))[1] == {1: 4}  # TCP serves on
         second = relay(tmp_path)
         try:
-            await until(lambda: serial()["open"] is True)
+            await until(gw, lambda: serial()["open"] is True)
             rc, values, text = await mbpoll(rtu(plc), "input", 1)
             assert rc == 0 and values == {1: 4}, text
             assert serial()["answered"] == 2  # counted across the two openings
