@@ -130,6 +130,11 @@ def read_models(raw: Any, key: str, fail: Fail) -> tuple[PlantModelConfig, ...]:
                 raise fail(f"{item}.{k}", f"missing (a {kind} needs it)")
         if kind == "switch" and "above" not in values and "below" not in values:
             raise fail(f"{item}.above", "give above, below or both (the switch's range)")
+        if kind == "switch" and "above" in values and "below" in values \
+                and values["above"] >= values["below"]:
+            raise fail(f"{item}.below", f"{values['below']:g} is not above above = "
+                       f"{values['above']:g}: the switch is on between them, so it would "
+                       "never close")
         if kind == "cylinder" and not ({"extended", "retracted", "position"} & set(values)):
             raise fail(f"{item}.extended", "a cylinder needs an output: extended, retracted "
                        "or position")

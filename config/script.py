@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from ncgate.config.loader import ConfigError, read_toml
 from ncgate.config.plant import FaultConfig, read_fault
@@ -102,6 +102,17 @@ def load_script(path: str | Path | None) -> Script:
     if not isinstance(expects, list):
         raise fail("expect", "expected an array of tables ([[expect]])")
     found = tuple(_expect(table, f"expect[{i}]", fail) for i, table in enumerate(expects))
+    named: dict[str, str] = {}
+    for expect in found:  # a verdict line is known by its name
+        if expect.name in named:
+            raise fail(f"{expect.key}.name", f"{expect.name!r} is {named[expect.name]}'s name "
+                       "too: each expectation's verdict is told by its name")
+        named[expect.name] = expect.key
+    for entry in entries:  # a script fault's end is where the scenario runs to
+        f = entry.fault
+        if f is not None and f.at is not None and f.at + (f.for_s or 0.0) > MAX_SCENARIO_S:
+            raise fail(f"{f.key}.for_s", f"ends at {f.at + (f.for_s or 0.0):g} s, past "
+                       f"{MAX_SCENARIO_S:g} s (a day): a scenario's times are at most that")
     for section in ("write", "snd", "command", "break", "override"):  # fault: above
         tables = raw.get(section, [])
         if not isinstance(tables, list):
@@ -113,6 +124,16 @@ def load_script(path: str | Path | None) -> Script:
 
 
 SECTIONS = ("write", "snd", "command", "break", "override", "fault", "expect")
+# The longest a scenario's times reach (an expectation's window, an entry's `at`, a fault's
+# end), in seconds of machine time: a day.  `sim` runs to the last of them, scanning the PLC
+# every few ms of it; a window of 1e9 s was a run of years.
+MAX_SCENARIO_S: Final = 86_400.0
+
+
+def _time(x: Any) -> bool:
+    """A time of a scenario: a finite number of seconds, 0 .. MAX_SCENARIO_S."""
+    return (not isinstance(x, bool) and isinstance(x, int | float)
+            and 0 <= x <= MAX_SCENARIO_S)
 
 
 def _expect(table: Any, key: str, fail: Any) -> Expect:
@@ -133,15 +154,16 @@ def _expect(table: Any, key: str, fail: Any) -> Expect:
     window: tuple[float, float] | None = None
     if "within" in table:
         w = table["within"]
-        if (not isinstance(w, list) or len(w) != 2 or any(
-                isinstance(x, bool) or not isinstance(x, int | float) or x < 0 for x in w)
+        if (not isinstance(w, list) or len(w) != 2 or not all(_time(x) for x in w)
                 or w[0] > w[1]):
-            raise fail(f"{key}.within", f"expected [from, to] in seconds, from <= to, got {w!r}")
+            raise fail(f"{key}.within", f"expected [from, to] in seconds, 0 <= from <= to <= "
+                       f"{MAX_SCENARIO_S:g} (a day), got {w!r}")
         window = (float(w[0]), float(w[1]))
     elif "by" in table:
         b = table["by"]
-        if isinstance(b, bool) or not isinstance(b, int | float) or b < 0:
-            raise fail(f"{key}.by", f"expected a time in seconds >= 0, got {b!r}")
+        if not _time(b):
+            raise fail(f"{key}.by", f"expected a time in seconds, 0 .. {MAX_SCENARIO_S:g} (a "
+                       f"day), got {b!r}")
         window = (0.0, float(b))
     elif table["always"] is not True:
         raise fail(f"{key}.always", "expected true")
@@ -161,14 +183,16 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
     at, when = table.get("at"), table.get("when")
     if (at is None) == (when is None):
         raise fail(key, "give exactly one of 'at' and 'when'")
-    if at is not None and (isinstance(at, bool) or not isinstance(at, int | float) or at < 0):
-        raise fail(f"{key}.at", f"expected a time in seconds >= 0, got {at!r}")
+    if at is not None and not _time(at):
+        raise fail(f"{key}.at", f"expected a time in seconds, 0 .. {MAX_SCENARIO_S:g} (a day), "
+                   f"got {at!r}")
     if when is not None and (not isinstance(when, str) or not when.strip()):
         raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P3 WAIT_PROC\", "
                    f"got {when!r}")
     after = table.get("after", 0)
-    if isinstance(after, bool) or not isinstance(after, int | float) or after < 0:
-        raise fail(f"{key}.after", f"expected a delay in seconds >= 0, got {after!r}")
+    if not _time(after):
+        raise fail(f"{key}.after", f"expected a delay in seconds, 0 .. {MAX_SCENARIO_S:g} (a "
+                   f"day), got {after!r}")
     if at is not None and "after" in table:
         raise fail(f"{key}.after", "only with 'when'")
     if section == "write":

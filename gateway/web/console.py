@@ -78,6 +78,9 @@ PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients k
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
 BODY_TIMEOUT_S = 5.0  # a request body not whole this long after its headers is refused (408)
+# The longest variable, target or program name a request may give (the longest real one, an
+# I/O name of [symbols] or a PLC path, is far shorter); what is longer is refused unechoed.
+NAME_LIMIT = 200
 # On every answer, the page's included: nothing of another origin runs in it, no other site
 # may frame it (a framed console takes a click on a decoy as the operator's: clickjacking),
 # no answer is sniffed as another type, no address leaks in a Referer.  The page has no
@@ -513,12 +516,22 @@ class WebConsole:
                      request.remote, request.method, request.path)
             raise ApiError(400, "the connection was lost before the body was whole") \
                 from None
-        except (ValueError, UnicodeDecodeError):
+        except ValueError as exc:
+            if "integer string conversion" in str(exc):  # Python's limit, not bad JSON
+                raise ApiError(400, "a number in the body has more digits than any value "
+                               "here can hold") from None
+            raise ApiError(400, "the body is not JSON") from None
+        except UnicodeDecodeError:
             raise ApiError(400, "the body is not JSON") from None
         except RecursionError:  # [[[[...: deeper than the parser's stack
             raise ApiError(400, "the body is nested too deeply") from None
         if not isinstance(body, dict):
             raise ApiError(400, "expected a JSON object")
+        for key in ("var", "target", "clear"):  # names, echoed in the answers: never essays
+            named = body.get(key)
+            if isinstance(named, str) and len(named) > NAME_LIMIT:
+                raise ApiError(400, f'"{key}": a name of at most {NAME_LIMIT} characters, '
+                               f"got {len(named)}")
         return body
 
     async def _forced(self, request: web.Request) -> web.StreamResponse:

@@ -305,6 +305,8 @@ def test_a_force_wins_over_a_model(tmp_path: Path) -> None:
      "plant.model[0].period_ms", "1 ms .. 1 h"),
     ('[[plant.model]]\nname = "s"\nkind = "switch"\naxis = "X"\noutput = "SA1"\nabove = 1\n',
      "plant.model[0].axis", "P1.X"),
+    ('[[plant.model]]\nname = "s"\nkind = "switch"\naxis = "P1.X"\noutput = "SA1"\n'
+     'above = 5\nbelow = 2\n', "plant.model[0].below", "would never close"),
     ('[[plant.fault]]\ntarget = "SA1"\nkind = "stuck"\n', "plant.fault[0].value", "missing"),
     ('[[plant.fault]]\ntarget = "SA1"\nkind = "melt"\n', "plant.fault[0].kind", "stuck"),
 ])

@@ -43,7 +43,18 @@ to = 3
     ("text", "message"),
     [
         ("[[write]]\nset = \"SA1=1\"", "write[0]: give exactly one of 'at' and 'when'"),
-        ("[[write]]\nat = -1\nset = \"SA1=1\"", "write[0].at: expected a time in seconds >= 0"),
+        ("[[write]]\nat = -1\nset = \"SA1=1\"", "write[0].at: expected a time in seconds, 0 .."),
+        ("[[write]]\nat = nan\nset = \"SA1=1\"", "write[0].at: expected a time in seconds"),
+        ("[[write]]\nwhen = \"SA1=1\"\nafter = inf\nset = \"SA2=1\"",
+         "write[0].after: expected a delay in seconds, 0 .. 86400 (a day)"),
+        ("[[expect]]\ncond = \"SA1=1\"\nby = 1e9", "expect[0].by: expected a time in seconds"),
+        ("[[expect]]\ncond = \"SA1=1\"\nwithin = [0, nan]",
+         "expect[0].within: expected [from, to] in seconds, 0 <= from <= to <= 86400"),
+        ("[[expect]]\nname = \"a\"\ncond = \"SA1=1\"\nby = 1\n"
+         "[[expect]]\nname = \"a\"\ncond = \"SA2=1\"\nby = 2",
+         "expect[1].name: 'a' is expect[0]'s name too"),
+        ("[[fault]]\ntarget = \"SA1\"\nkind = \"stuck\"\nvalue = 1\nat = 10\n"
+         "for_s = 100000", "fault[0].for_s: ends at 100010 s, past 86400 s"),
         ("[[write]]\nat = 1\nset = \"SA1\"", "write[0].set: expected an assignment"),
         ("[[write]]\nat = 1\nafter = 2\nset = \"SA1=1\"", "write[0].after: only with 'when'"),
         ("[[write]]\nat = 1\nset = \"SA1=1\"\ncolour = 3", "write[0].colour: unknown key"),
