@@ -247,6 +247,10 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                 parts.append(f'<text x="{cx + 7:.1f}" y="{plc_y + 30}" font-size="10" '
                              f'class="write-label">{escape(label)}</text>')
                 label_end = cx + 7 + lw + 4
+            elif cx - 7 - lw >= max(label_end, LEFT):  # at the right edge: before the mark
+                parts.append(f'<text x="{cx - 7:.1f}" y="{plc_y + 30}" font-size="10" '
+                             f'text-anchor="end" class="write-label">{escape(label)}</text>')
+                label_end = cx - 7 + 4
     legend_y = axis_y + 56
     for lx, row, colour, label in legend:
         y = legend_y + 18 * row

@@ -309,11 +309,32 @@ function renderAlarms() {
 // touched.
 function grid(box, count, columns, prefix, make) {
   if (box.cells && box.cells.length === count) return box.cells;
-  const items = [el("span", "col")];
-  for (let c = 0; c < columns; c++) items.push(el("span", "col", String(c)));
+  // ARIA's grid is made of rows (role row: a header row of column numbers, then a row of
+  // cells led by its index); each row is display: contents, so the cells stay items of
+  // the one CSS grid that lays them out.
+  const header = el("div", "gridrow");
+  header.setAttribute("role", "row");
+  const corner = el("span", "col");
+  corner.setAttribute("role", "columnheader");
+  corner.setAttribute("aria-label", prefix);
+  header.append(corner);
+  for (let c = 0; c < columns; c++) {
+    const h = el("span", "col", String(c));
+    h.setAttribute("role", "columnheader");
+    header.append(h);
+  }
+  const items = [header];
   const all = [];
+  let row = null;
   for (let i = 0; i < count; i++) {
-    if (i % columns === 0) items.push(el("span", "idx", prefix + i));
+    if (i % columns === 0) {
+      row = el("div", "gridrow");
+      row.setAttribute("role", "row");
+      const idx = el("span", "idx", prefix + i);
+      idx.setAttribute("role", "rowheader");
+      row.append(idx);
+      items.push(row);
+    }
     const c = make(i);
     c.classList.add("cell");
     // Keyboard: one cell of the grid takes the tab (roving), the arrows move it, Enter or
@@ -322,7 +343,7 @@ function grid(box, count, columns, prefix, make) {
     c.tabIndex = i === 0 ? 0 : -1;
     c.setAttribute("aria-label", prefix + i);
     all.push(c);
-    items.push(c);
+    row.append(c);
   }
   box.setAttribute("role", "grid");
   box.setAttribute("aria-label", prefix + " (arrows move, Enter writes)");
