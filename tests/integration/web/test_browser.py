@@ -131,6 +131,21 @@ def until(driver: Any, what: str, check: Any) -> Any:
         raise AssertionError(f"the page never showed {what}:\n{page}") from exc
 
 
+def click(driver: Any, css: str) -> None:
+    """Click the element ``css`` names in a part the page redraws (the lanes, the lists of
+    breakpoints, faults and trends): one replaced between being found and clicked is found
+    again (a loaded machine's browser redrew the breakpoint list in between)."""
+    until(driver, f"{css} clicked", lambda d: _clicked(d, css))
+
+
+def _clicked(driver: Any, css: str) -> bool:
+    try:
+        driver.find_element(By.CSS_SELECTOR, css).click()
+    except StaleElementReferenceException:
+        return False
+    return True
+
+
 def text(driver: Any, css: str) -> str:
     for _ in range(5):  # an element replaced as it is read (the page redraws): find it again
         try:
@@ -368,7 +383,7 @@ def test_an_alarm_shows_in_the_header_and_in_its_lane_with_its_block(
               lambda d: text(d, "#alarms") == "P1 AL111 at MAIN.nc:2 N20"
               and "N20 (SND,3)" in text(d, "#lane-1 .block")
               and "AL111" in text(d, "#lane-1 .alarm"))
-        browser.find_element(By.CSS_SELECTOR, "#lane-1 .alarm button").click()  # Reset
+        click(browser, "#lane-1 .alarm button")  # Reset
         answer_dialog(browser, accept=True)
         until(browser, "the alarm cleared", lambda d: text(d, "#alarms") == ""
               and text(d, "#lane-1 .state") == "IDLE")
@@ -385,14 +400,14 @@ def test_a_lane_starts_holds_and_resets_its_own_process(browser: Any, web_port: 
         until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
         until(browser, "P1's lane buttons",
               lambda d: d.find_elements(By.CSS_SELECTOR, "#lane-1 .lane-cycle_start"))
-        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-cycle_start").click()
+        click(browser, "#lane-1 .lane-cycle_start")
         until(browser, "PROG91 in P1 and PROG92 in P2",
               lambda d: text(d, "#lane-1 .state") not in ("", "IDLE")
               and text(d, "#lane-2 .state") not in ("", "IDLE"))
-        browser.find_element(By.CSS_SELECTOR, "#lane-2 .lane-feed_hold").click()
+        click(browser, "#lane-2 .lane-feed_hold")
         until(browser, "P2 held", lambda d: "HOLD" in text(d, "#lane-2 .state"))
         assert "HOLD" not in text(browser, "#lane-1 .state")
-        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-reset").click()
+        click(browser, "#lane-1 .lane-reset")
         answer_dialog(browser, accept=True)
         until(browser, "P1 reset", lambda d: text(d, "#lane-1 .state") == "IDLE")
         assert "HOLD" in text(browser, "#lane-2 .state")
@@ -426,7 +441,7 @@ def test_the_commissioning_controls_of_the_page(browser: Any, web_port: int) -> 
               lambda d: all(p["single_block"] for p in status()["processes"]
                             if not p["external"])
               and status()["processes"][0]["feed_override"] == 50)
-        browser.find_element(By.CSS_SELECTOR, "#breakpoints .breakpoint").click()
+        click(browser, "#breakpoints .breakpoint")
         until(browser, "the breakpoint cleared",
               lambda d: status()["controls"]["breakpoints"] == [])
     finally:
@@ -525,7 +540,7 @@ def test_reset_and_a_write_are_asked_first(browser: Any, web_port: int) -> None:
         assert writes == ["SA10"]  # not SA12: that one was declined
         browser.find_element(By.ID, "btn-reset").click()
         assert "Reset" in answer_dialog(browser, accept=False)
-        browser.find_element(By.CSS_SELECTOR, "#lane-1 .lane-reset").click()
+        click(browser, "#lane-1 .lane-reset")
         answer_dialog(browser, accept=False)
         assert text(browser, "#lane-1 .state") != "IDLE"  # declined: still running
         browser.find_element(By.ID, "btn-reset").click()
@@ -614,7 +629,7 @@ def test_fb_members_and_a_trend_of_chosen_variables(browser: Any, web_port: int,
         assert len(seconds) >= 2 and all(t % 10 == 0 for t in seconds), ticks
         assert all(b - a == 10 for a, b in itertools.pairwise(seconds)), ticks
         # Removed with its button.
-        browser.find_element(By.CSS_SELECTOR, "#trend-legend .item button").click()
+        click(browser, "#trend-legend .item button")
         until(browser, "one line", lambda d: len(d.find_elements(By.CSS_SELECTOR,
                                                                  "#trend polyline")) == 1)
     finally:
@@ -775,7 +790,7 @@ def test_the_plant_panel_shows_each_model_and_injects_and_clears_a_fault(
               and "faulted" in d.find_element(By.ID, "model-clamp").get_attribute("class"))
         api(web_port, "POST", "/api/write", {"var": "SA20", "value": 1})
         assert api(web_port, "GET", "/api/status")["plant"]["models"][0]["state"] == "retracted"
-        browser.find_element(By.CSS_SELECTOR, "#faults button").click()
+        click(browser, "#faults button")
         until(browser, "the clamp closing once cleared",
               lambda d: "clamp extended" in text(d, "#model-clamp")
               and not d.find_elements(By.CSS_SELECTOR, "#faults tr"))
