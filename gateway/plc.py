@@ -104,12 +104,23 @@ def read_sources(files: tuple[Path, ...]) -> Sources:
     return out
 
 
-@functools.lru_cache(maxsize=16)
 def parsed_logic(path: str, text: str) -> SourceFile:
-    """A logic file's syntax tree, kept for the same path and text: a suite of scenarios (or a
-    sweep) runs the same logic again and again, and its parse is two thirds of starting it
-    (the machine example: 11 ms of 16).  The tree is immutable (frozen nodes), so a runtime
-    that compiles it shares nothing that changes; a file that does not parse is not kept."""
+    """A logic file's syntax tree, kept for the same path and text when the file is small
+    (PARSE_KEPT_MAX characters): a suite of scenarios (or a sweep) runs the same logic again
+    and again, and its parse is two thirds of starting it (the machine example: 11 ms of 16).
+    The tree is immutable (frozen nodes), so a runtime that compiles it shares nothing that
+    changes; a file that does not parse is not kept.  A big file's tree is not kept: the
+    cyclic collector would walk its nodes on every collection (docs/decisions.md)."""
+    if len(text) > PARSE_KEPT_MAX:
+        return logic_from_text(path, text)
+    return _kept_parse(path, text)
+
+
+PARSE_KEPT_MAX = 32 * 1024
+
+
+@functools.lru_cache(maxsize=16)
+def _kept_parse(path: str, text: str) -> SourceFile:
     return logic_from_text(path, text)
 
 

@@ -369,6 +369,29 @@ class PlcRuntime:
             if outputs[_HOLD_LEVEL] and not last[_HOLD_LEVEL]:  # holds as it rises
                 self._command(_FEED_HOLD, self._outputs_at[_HOLD_LEVEL])
             self._last_outputs = [bool(o) for o in outputs]
+        if self._process_outputs == self._last_process_outputs:
+            pass  # the common scan: no process output changed (one comparison, not k)
+        else:
+            self._act_processes()
+        if self._overrides[0] != self._last_overrides[0]:
+            self._last_overrides[0] = value = self._overrides[0]
+            self._override(value, self._overrides_at[0], None)
+        if self._process_overrides != self._last_process_overrides:
+            for k, value in enumerate(self._process_overrides):
+                if value != self._last_process_overrides[k]:
+                    self._last_process_overrides[k] = value
+                    self._override(value, self._process_overrides_at[k], k + 1)
+        if self._sends:
+            for sender, target, where in self._sends:
+                try:
+                    self.nc.send(sender, target, where)
+                except NcgateError as exc:
+                    self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
+            self._sends.clear()
+
+    def _act_processes(self) -> None:
+        """The per-process outputs that changed: NC.P[k].START .. on their rising edge, the
+        acknowledges (MACK ..) as levels."""
         for k, (now, before) in enumerate(zip(self._process_outputs,
                                               self._last_process_outputs, strict=True)):
             if now != before:
@@ -380,19 +403,6 @@ class PlcRuntime:
                         self._aux_ack(k + 1, letter, bool(now[i]),
                                       self._process_outputs_at[k][i])
                 self._last_process_outputs[k] = [bool(o) for o in now]
-        if self._overrides[0] != self._last_overrides[0]:
-            self._last_overrides[0] = value = self._overrides[0]
-            self._override(value, self._overrides_at[0], None)
-        for k, value in enumerate(self._process_overrides):
-            if value != self._last_process_overrides[k]:
-                self._last_process_overrides[k] = value
-                self._override(value, self._process_overrides_at[k], k + 1)
-        for sender, target, where in self._sends:
-            try:
-                self.nc.send(sender, target, where)
-            except NcgateError as exc:
-                self.nc.hazard(f"PLC NC.SEND({sender}, {target}): {exc}")
-        self._sends.clear()
 
     def _command(self, word: int, where: str, process: int | None = None) -> None:
         try:

@@ -167,6 +167,7 @@ class AuxInterface:
         self.image = host.image
         self.slots: dict[tuple[int, str], _Slot] = {}
         self.last: dict[tuple[int, str], int] = {}  # the last value output (ST: NC.P[k].M)
+        self._snapshot_places: dict[int, tuple[tuple[tuple[int, str], int], ...]] = {}
         for k in range(1, processes + 1):
             for letter in AUX_LETTERS:
                 value, strobe, ack = settings.place(k, letter)
@@ -241,13 +242,18 @@ class AuxInterface:
                 f"{shown}){stale}")
 
     def snapshot(self, process: int) -> tuple[int, bool, int, bool, int, bool, int, bool]:
-        """The value last output and whether its strobe is up, for M, S, T and H."""
-        out: list[int | bool] = []
-        for letter in AUX_LETTERS:
-            slot = self.slots[(process, letter)]
-            out += [self.last.get((process, letter), 0),
-                    bool(self.image.read("SA", slot.strobe, "bit"))]
-        return tuple(out)  # type: ignore[return-value]
+        """The value last output and whether its strobe is up, for M, S, T and H (the PLC
+        reads it every scan: each letter's key and strobe are looked up once)."""
+        places = self._snapshot_places.get(process)
+        if places is None:
+            places = self._snapshot_places[process] = tuple(
+                ((process, letter), self.slots[(process, letter)].strobe)
+                for letter in AUX_LETTERS)
+        read, last = self.image.read, self.last
+        (m, ms), (s, ss), (t, ts), (h, hs) = places
+        return (last.get(m, 0), bool(read("SA", ms, "bit")), last.get(s, 0),
+                bool(read("SA", ss, "bit")), last.get(t, 0), bool(read("SA", ts, "bit")),
+                last.get(h, 0), bool(read("SA", hs, "bit")))
 
     # ---- the acknowledge's edges -------------------------------------------------------
 

@@ -23,6 +23,8 @@ a call and back after it.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 import re
 import struct
@@ -161,6 +163,10 @@ CHAIN_OPS = 16
 # expressions nested this deep not counting a chain of operators (a + b + c ... is depth 1).
 MAX_NESTING = 512
 MAX_EXPR_DEPTH = 64
+# Compilations kept for the next load of the same parse (compile_logic), and the largest
+# generated module kept (bigger logic is compiled afresh: its syntax tree is not kept).
+COMPILED_KEPT = 8
+KEPT_SOURCE_MAX = 64 * 1024
 # Loop and return codes a helper function hands back to the Python function that called it.
 EXIT_CODE, RETURN_CODE, CONTINUE_CODE = 1, 2, 3
 
@@ -3203,7 +3209,9 @@ class Logic:
         self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
             d.span.file, d.span.line, d.span.column)))
         self._spans = [None if s is None else (s.file, s.line, s.column) for s in spans]
-        self._filename = f"<ncgate-st {id(self):x}>"
+        # One name for one generated module (its frames are told from others' by it): the
+        # code of an identical module is compiled once (_compiled_pieces keeps it).
+        self._filename = f"<ncgate-st {hashlib.sha1(source.encode()).hexdigest()[:12]}>"
         self.namespace: dict[str, Any] = dict(HELPERS)
         k = compiler.ctx.processes
         self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
@@ -3335,7 +3343,19 @@ class Logic:
         return None, ""
 
 
-def _compiled_pieces(source: str, filename: str) -> list[pytypes.CodeType]:
+def _compiled_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
+    """The module's code, kept for small logic (see _COMPILED)."""
+    if len(source) > KEPT_SOURCE_MAX:
+        return _compile_pieces(source, filename)
+    return _kept_pieces(source, filename)
+
+
+@functools.lru_cache(maxsize=COMPILED_KEPT)
+def _kept_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
+    return _compile_pieces(source, filename)
+
+
+def _compile_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
     """The module compiled a piece at a time (PIECE_CHARS: whole top-level definitions),
     each with the line numbers it has in ``source``; between pieces, a thread waiting for
     the interpreter gets it."""
@@ -3354,7 +3374,7 @@ def _compiled_pieces(source: str, filename: str) -> list[pytypes.CodeType]:
             pieces.append(_moved(code, first) if first else code)
             first, size = end, 0
             time.sleep(0)
-    return pieces
+    return tuple(pieces)
 
 
 def _moved(code: pytypes.CodeType, lines: int) -> pytypes.CodeType:
@@ -3422,14 +3442,36 @@ def _room_to_recurse(frames: int) -> Iterator[None]:
         sys.setrecursionlimit(old)
 
 
+# The last compilations, by the identity of their (immutable) parsed files and the context:
+# a suite of scenarios or a sweep compiles the same parse again and again (ncgate.gateway.plc
+# keeps the parse of a path and text), and its compilation was a fifth of a scenario's run.
+# Each entry keeps its files alive, so an identity is never another file's -- and so only
+# small logic is kept (a generated module up to KEPT_SOURCE_MAX characters): a big one's
+# syntax tree, kept, would be walked by every collection of the cyclic collector (the
+# reason Logic keeps none of it, docs/decisions.md).  A Logic is built afresh from an entry
+# every time: what it holds that changes (the namespace, the variables' tables) is its own.
+_COMPILED: dict[tuple[tuple[int, ...], Context],
+                tuple[tuple[n.SourceFile, ...], Compiler, str, list[n.Span | None]]] = {}
+
+
 def compile_logic(files: Sequence[n.SourceFile], context: Context | None = None) -> Logic:
     """Check and compile; raises :class:`LogicError` with every diagnostic found."""
-    compiler = Compiler(files, context or Context())
-    with _room_to_recurse(10 * MAX_NESTING + 10 * MAX_EXPR_DEPTH + 2000):
-        source, spans = compiler.compile()
-    if compiler.diagnostics:
-        raise LogicError(sorted(compiler.diagnostics,
-                                key=lambda d: (d.span.file, d.span.line, d.span.column)))
+    context = context or Context()
+    key = (tuple(map(id, files)), context)
+    kept = _COMPILED.get(key)
+    if kept is not None and all(a is b for a, b in zip(kept[0], files, strict=True)):
+        _, compiler, source, spans = kept
+    else:
+        compiler = Compiler(files, context)
+        with _room_to_recurse(10 * MAX_NESTING + 10 * MAX_EXPR_DEPTH + 2000):
+            source, spans = compiler.compile()
+        if compiler.diagnostics:
+            raise LogicError(sorted(compiler.diagnostics,
+                                    key=lambda d: (d.span.file, d.span.line, d.span.column)))
+        if len(source) <= KEPT_SOURCE_MAX:
+            if len(_COMPILED) >= COMPILED_KEPT:
+                del _COMPILED[next(iter(_COMPILED))]
+            _COMPILED[key] = (tuple(files), compiler, source, spans)
     try:
         return Logic(files, compiler, source, spans)
     except (SyntaxError, RecursionError, MemoryError) as exc:
