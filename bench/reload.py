@@ -45,7 +45,7 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.lifecycle import tune_interpreter
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind
-from ncgate.plc.st import compiler
+from ncgate.plc.st import compiler, logic
 
 HERE = Path(__file__).resolve().parent
 
@@ -98,7 +98,7 @@ async def phase(gw: Gateway, reloads: int, how: str) -> tuple[int, float]:
 
 async def big(statements: int, reloads: int, pauses: GcPauses) -> None:
     """The big logic's two phases (docstring), alternating, twice each."""
-    pieces = compiler.PIECE_LINES, compiler.PIECE_CHARS
+    pieces = compiler.PIECE_LINES, logic.PIECE_CHARS
     with tempfile.TemporaryDirectory() as folder:
         root = Path(folder)
         (root / "big.st").write_text(program(statements))
@@ -108,7 +108,7 @@ async def big(statements: int, reloads: int, pauses: GcPauses) -> None:
         async with Gateway(config) as gw:
             results: dict[str, tuple[int, float, float, int]] = {}
             for how in ("whole", "pieces", "whole", "pieces"):
-                compiler.PIECE_LINES, compiler.PIECE_CHARS = (
+                compiler.PIECE_LINES, logic.PIECE_CHARS = (
                     (10**9, 10**12) if how == "whole" else pieces)
                 # (unmeasured: it swaps out the other phase's logic, freed on the loop)
                 assert (await gw.reload_plc()).ok
@@ -119,7 +119,7 @@ async def big(statements: int, reloads: int, pauses: GcPauses) -> None:
                 results[how] = (max(late, best[0]), max(each, best[1]), max(gc_ms, best[2]),
                                 gen if gc_ms >= best[2] else best[3]) if best else (
                     late, each, gc_ms, gen)
-        compiler.PIECE_LINES, compiler.PIECE_CHARS = pieces
+        compiler.PIECE_LINES, logic.PIECE_CHARS = pieces
     print(f"{statements:,}-statement program ({len(program(statements)) / 1e6:.1f} MB of ST),"
           f" {reloads} reloads off the loop a phase, twice each, alternating")
     for how, name in (("whole", "one compile()"), ("pieces", "in pieces")):

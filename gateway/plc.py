@@ -50,8 +50,9 @@ from ncgate.interpreter.engine.states import WAITING_STATES
 from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
-from ncgate.plc.st.compiler import Context, Logic, compile_logic
+from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError
+from ncgate.plc.st.logic import Logic
 from ncgate.plc.st.nodes import SourceFile
 from ncgate.plc.st.plcopen import logic_from_text, read_logic_file, read_logic_text
 

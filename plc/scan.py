@@ -35,15 +35,13 @@ from ncgate.commands import BY_NAME, plc_edges, plc_levels
 from ncgate.errors import NcgateError
 from ncgate.plc.image import IOImage, PlcError
 from ncgate.plc.retain import RetainStore
-from ncgate.plc.st.compiler import (
-    NC_OUTPUTS,
-    NC_PROCESS_OUTPUTS,
+from ncgate.plc.st.intrinsics import NC_OUTPUTS, NC_PROCESS_OUTPUTS
+from ncgate.plc.st.logic import Logic, ProgramVar
+from ncgate.plc.st.runtime import (
     REAL_OVERFLOW,
     REAL_OVERFLOW_MESSAGE,
     IterationGuard,
-    Logic,
     PlcFault,
-    ProgramVar,
     to_real,
 )
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, limits

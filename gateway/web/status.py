@@ -19,7 +19,7 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.settings import AXES
 from ncgate.plc.image import Change
-from ncgate.plc.st.compiler import ProgramVar
+from ncgate.plc.st.logic import ProgramVar
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, Type
 
 if TYPE_CHECKING:

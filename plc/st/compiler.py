@@ -19,28 +19,45 @@ Generated names: ``self.v_X`` (a variable X of a program or FB), ``v_X`` (of a f
 outputs), ``_NOW`` (the scan's time in ms), ``_LEFT`` (iterations left this scan).
 Enumeration values are their integers; STRINGs Python str; a VAR_IN_OUT is copied in before
 a call and back after it.
+
+This module checks and generates (``Compiler``, ``Scope``, ``compile_logic``); what it builds
+on lives beside it: ``signatures`` (the declarations' model), ``intrinsics`` (the image's and
+the NC's names and slots), ``runtime`` (what the generated code calls) and ``logic`` (the
+compiled :class:`~ncgate.plc.st.logic.Logic`).
 """
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import math
 import re
-import struct
 import sys
-import time
-import types as pytypes
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
-from ncgate.commands import BY_WORD, plc_edges, plc_levels
-from ncgate.plc.image import PlcError
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic, did_you_mean
+from ncgate.plc.st.intrinsics import (
+    IMAGE_NAMES,
+    NC_LAST_SND,
+    NC_OUTPUTS,
+    NC_PROCESS,
+    NC_PROCESS_OUTPUTS,
+    NC_VALUE_OUTPUTS,
+)
+from ncgate.plc.st.logic import COMPILED_KEPT, KEPT_SOURCE_MAX, Logic
+from ncgate.plc.st.runtime import TOD_MS, _code_char, _f32, _f64, _idiv, _mod
+from ncgate.plc.st.signatures import (
+    EnumInfo,
+    PouInfo,
+    StructInfo,
+    VarInfo,
+    _leaf,
+    _leaf_count,
+    _reshape,
+)
 from ncgate.plc.st.types import (
     ANY_INT,
     ANY_REAL,
@@ -72,7 +89,6 @@ from ncgate.plc.st.types import (
     widens,
 )
 
-IMAGE_NAMES = ("SA", "SAB", "SK", "SYVAR")
 RESERVED = (*IMAGE_NAMES, "NC")
 # The standard function blocks: member -> (direction, type).
 STD_FBS: dict[str, dict[str, tuple[str, str]]] = {
@@ -116,28 +132,6 @@ UNSUPPORTED_FUNCTIONS: tuple[str, ...] = ()
 _LOGICAD_BOUNDS = {"_FIRSTINDEXOF": "LOWER_BOUND", "_LASTINDEXOF": "UPPER_BOUND"}
 # Each type's pure-integer carrier: what its value wraps as where it is stored.
 CARRIER = {"TIME": "DINT", "LTIME": "LINT", "DATE": "UDINT", "DT": "UDINT", "TOD": "UDINT"}
-TOD_MS = 86_400_000
-# NC.P[k] members: (index in the snapshot tuple, type).
-NC_PROCESS = {"STATE": (0, "INT"), "N": (1, "DINT"), "LINE": (2, "DINT"),
-              "WAITING": (3, "BOOL"), "ALARM": (4, "BOOL"), "ALARM_CODE": (5, "INT"),
-              "IDLE": (6, "BOOL"), "HELD": (7, "BOOL"),
-              # The auxiliary functions ([nc.aux]): the value last output, its strobe.
-              "M": (8, "DINT"), "MSTROBE": (9, "BOOL"), "S": (10, "DINT"),
-              "SSTROBE": (11, "BOOL"), "T": (12, "DINT"), "TSTROBE": (13, "BOOL"),
-              "H": (14, "DINT"), "HSTROBE": (15, "BOOL")}
-NC_LAST_SND = {"SENDER": (0, "INT"), "TARGET": (1, "INT"), "SEQ": (2, "UDINT")}
-# NC outputs (BOOL, in _NCO), named by the command table (ncgate.commands): the commands that
-# act on a rising edge (START, HOLD, RESET), then the switches' levels (OPT_STOP, BLOCK_SKIP),
-# then HOLD_LEVEL, a feed-hold interlock.  plc/scan.py reads the words from the same table.
-NC_OUTPUTS = {name: slot for slot, name in enumerate(
-    [*(name for name, _ in plc_edges()), *(name for name, _, _ in plc_levels()), "HOLD_LEVEL"])}
-# NC.P[k] outputs (BOOL, in _NCP[k]): the commands of one process, on a rising edge (those
-# of the table that are not the cell's alone); the acknowledges of its auxiliary functions
-# ([nc.aux]), levels.
-NC_PROCESS_OUTPUTS = {name: slot for slot, name in enumerate(
-    [*(name for name, word in plc_edges() if not BY_WORD[word].cell_only),
-     "MACK", "SACK", "TACK", "HACK"])}
-NC_VALUE_OUTPUTS = {"FEED_OVERRIDE"}  # INT percent: NC.FEED_OVERRIDE, NC.P[k].FEED_OVERRIDE
 
 # Limits of the Python the logic compiles to (CPython 3.11): 100 levels of indentation, 20
 # nested loops in one function, 200 nested parentheses, an `elif` chain of a few thousand
@@ -151,11 +145,10 @@ HOIST_INDENT = 24
 # A reload compiles in a thread, but Python's compile() holds the interpreter for the whole
 # call (~0.35 us a character of generated code, CPython 3.11): one compile of 1.9 MB stopped
 # the loop ~0.8 s.  So Logic compiles the module in pieces of whole top-level definitions of
-# about PIECE_CHARS characters, and a PROGRAM's or FB's body past PIECE_LINES lines of
-# Python goes into helper functions of about that size (bench/plc.py's body is cut into 7:
-# no change in its scan time).
+# about PIECE_CHARS characters (ncgate.plc.st.logic), and a PROGRAM's or FB's body past
+# PIECE_LINES lines of Python goes into helper functions of about that size (bench/plc.py's
+# body is cut into 7: no change in its scan time).
 PIECE_LINES = 250
-PIECE_CHARS = 32_000
 HOIST_LOOPS = 8
 CHAIN_BRANCHES = 64
 CHAIN_OPS = 16
@@ -163,27 +156,8 @@ CHAIN_OPS = 16
 # expressions nested this deep not counting a chain of operators (a + b + c ... is depth 1).
 MAX_NESTING = 512
 MAX_EXPR_DEPTH = 64
-# Compilations kept for the next load of the same parse (compile_logic), and the largest
-# generated module kept (bigger logic is compiled afresh: its syntax tree is not kept).
-COMPILED_KEPT = 8
-KEPT_SOURCE_MAX = 64 * 1024
 # Loop and return codes a helper function hands back to the Python function that called it.
 EXIT_CODE, RETURN_CODE, CONTINUE_CODE = 1, 2, 3
-
-
-class PlcFault(PlcError, RuntimeError):
-    """A runtime error of the logic: the PLC goes to FAULT.  ``span`` is the statement."""
-
-    def __init__(self, message: str, span: n.Span | None, source_line: str = "") -> None:
-        where = f"{span}: " if span is not None else ""
-        super().__init__(f"{where}{message}")
-        self.message = message
-        self.span = span
-        self.source_line = source_line
-
-
-class IterationGuard(RuntimeError):
-    """Raised inside the generated code when a scan's loop iterations run out."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,270 +180,11 @@ class Context:
 _SYMBOL_VAR = re.compile(r"(SYVAR|SA|SK|K)(\d+)(?:\.(BY|IN))?$", re.IGNORECASE)
 
 
-# ---- helpers the generated code calls -------------------------------------------------------
-
-def _ix(i: int, lo: int, length: int) -> int:
-    j = i - lo
-    if 0 <= j < length:
-        return j
-    raise IndexError(f"index {i} outside {lo}..{lo + length - 1}")
-
-
-def _mod(a: int, b: int) -> int:
-    if b == 0:
-        raise ZeroDivisionError("MOD by zero")
-    return a - b * int(a / b) if abs(a) < 1 << 52 else int(math.fmod(a, b))
-
-
-def _idiv(a: int, b: int) -> int:
-    if b == 0:
-        raise ZeroDivisionError("division by zero")
-    q = abs(a) // abs(b)
-    return q if (a < 0) == (b < 0) else -q
-
-
-def _fdiv(a: float, b: float) -> float:
-    if b == 0:
-        raise ZeroDivisionError("division by zero")
-    return a / b
-
-
-_SINGLE = struct.Struct("<f")
-
-
-def _f32(value: float) -> float:
-    """A REAL result: rounded to IEEE 754 single precision, to nearest, ties to even (the
-    double result of one +, -, *, / or SQRT rounded once is the single one: 53 >= 2*24+2).
-    Beyond single's range it is an error, as IEC 61131-3 says of a result outside its type
-    (an infinity would spread silently through a machine's logic)."""
-    try:
-        return _SINGLE.unpack(_SINGLE.pack(value))[0]  # type: ignore[no-any-return]
-    except OverflowError:
-        raise OverflowError(f"{float(value):g} is outside REAL's range (IEEE single, "
-                            "+-3.4E38)") from None
-
-
-to_real = _f32  # the value a REAL holds (RETAIN rounds what it restores with it)
-# struct's words for a REAL result beyond single's range, which the scan rewords.
-REAL_OVERFLOW = "float too large to pack with f format"
-REAL_OVERFLOW_MESSAGE = "a REAL result outside REAL's range (IEEE single, +-3.4E38)"
-
-
-def _f64(value: float) -> float:
-    """An LREAL result: already IEEE double; an overflow to infinity is an error."""
-    if math.isinf(value) or math.isnan(value):
-        raise OverflowError("the result is outside LREAL's range (IEEE double, +-1.8E308)")
-    return value
-
-
-def _pow(a: float, b: float) -> float:
-    try:
-        result = float(a) ** b
-    except ZeroDivisionError:
-        raise ValueError(f"EXPT: {float(a):g} to the negative power {float(b):g} has no "
-                         "value") from None
-    except OverflowError:
-        raise OverflowError(f"EXPT: {float(a):g} to the power {float(b):g} is outside the "
-                            "range of its type") from None
-    if isinstance(result, complex):
-        raise ValueError(f"EXPT: {float(a):g} to the power {float(b):g} has no real value")
-    return float(result)
-
-
-def _sqrt(a: float) -> float:
-    if a < 0:
-        raise ValueError(f"SQRT of {a}")
-    return math.sqrt(a)
-
-
-def _r2i(value: float, lo: int, hi: int, type_name: str) -> int:
-    """REAL -> integer: rounded half to even (IEC 61131-3, 6.6.2.5.6); a value outside the
-    integer type is an error (a conversion error of IEC's), not a wrap."""
-    if math.isnan(value) or math.isinf(value):
-        raise ValueError(f"{value} has no integer value")
-    v = round(value)
-    if not lo <= v <= hi:
-        raise OverflowError(f"{value:g} does not fit in {type_name} ({lo}..{hi})")
-    return v
-
-
-def _trunc(value: float) -> int:
-    if math.isnan(value) or math.isinf(value):
-        raise ValueError(f"{value} has no integer value")
-    v = int(value)
-    if not -(1 << 31) <= v < 1 << 31:
-        raise OverflowError(f"TRUNC({value:g}) does not fit in DINT")
-    return v
-
-
-def _math(name: str, function: Callable[[float], float]) -> Callable[[float], float]:
-    """EXP, LN, ... of IEC 61131-3 (Table 23): outside the function's domain, or beyond the
-    range of a double, the logic faults and says which."""
-    def call(x: float) -> float:
-        try:
-            return function(x)
-        except (ValueError, OverflowError):
-            raise ValueError(f"{name}({float(x):g}) has no value in LREAL") from None
-    return call
-
-
-_MATH = {"EXP": math.exp, "LN": math.log, "LOG": math.log10, "SIN": math.sin,
-         "COS": math.cos, "TAN": math.tan, "ASIN": math.asin, "ACOS": math.acos,
-         "ATAN": math.atan}
-
-
-def _mux(k: int, values: tuple[Any, ...]) -> Any:
-    if 0 <= k < len(values):
-        return values[k]
-    raise IndexError(f"MUX selector {k} outside 0..{len(values) - 1}")
-
-
-def _guard() -> None:
-    raise IterationGuard("the loop iteration guard ran out")
-
-
 # The string functions of IEC 61131-3 (6.6.2.5.11, Table 43), positions 1-based.  A negative
 # length, or a position before the first character, is an error of the standard's (the
 # logic faults); a length or position past the end takes what is there (docs/plc.md).
 
-def _length(name: str, value: int) -> int:
-    if value < 0:
-        raise ValueError(f"{name}: L = {value} is negative")
-    return value
 
-
-def _position_of(name: str, value: int, first: int = 1) -> int:
-    if value < first:
-        raise ValueError(f"{name}: P = {value}; positions start at {first}")
-    return value
-
-
-def _left(s: str, n: int) -> str:
-    return s[:_length("LEFT", n)]
-
-
-def _right(s: str, n: int) -> str:
-    n = _length("RIGHT", n)
-    return s[len(s) - n:] if n < len(s) else s
-
-
-def _midstr(s: str, n: int, p: int) -> str:
-    start = _position_of("MID", p) - 1
-    return s[start:start + _length("MID", n)]
-
-
-def _insert(a: str, b: str, p: int) -> str:
-    p = _position_of("INSERT", p, 0)
-    return a[:p] + b + a[p:]
-
-
-def _delete(s: str, n: int, p: int) -> str:
-    start = _position_of("DELETE", p) - 1
-    return s[:start] + s[start + _length("DELETE", n):]
-
-
-def _replace(a: str, b: str, n: int, p: int) -> str:
-    start = _position_of("REPLACE", p) - 1
-    return a[:start] + b + a[start + _length("REPLACE", n):]
-
-
-def _find(a: str, b: str) -> int:
-    return a.find(b) + 1 if b else 0
-
-
-def _char_at(s: str, i: int) -> str:
-    """``s[i]``: the i-th character, counted from 1 (a CHAR or WCHAR)."""
-    if 1 <= i <= len(s):
-        return s[i - 1]
-    raise IndexError(f"character {i} of a string of {len(s)} (1..{len(s)})")
-
-
-def _set_char(s: str, i: int, c: str, length: int) -> str:
-    """``s[i] := c``: the string with its i-th character replaced; at LEN(s) + 1 (within the
-    declared length) the character is added (docs/decisions.md)."""
-    if 1 <= i <= len(s):
-        return f"{s[:i - 1]}{c}{s[i:]}"
-    if i == len(s) + 1 <= length:
-        return s + c
-    raise IndexError(f"character {i} of a string of {len(s)} (1..{min(len(s) + 1, length)})")
-
-
-def _code_char(code: int, t: str) -> str:
-    """The CHAR (WCHAR) of a code, cut to 8 (16) bits as a BYTE (WORD) is."""
-    return chr(code & (255 if t == "CHAR" else 65535))
-
-
-def _ranged(value: int, lo: int, hi: int) -> int:
-    """A value stored in a subrange variable: outside its limits it is an error
-    (IEC 61131-3, 6.4.4.4)."""
-    if lo <= value <= hi:
-        return value
-    raise ValueError(f"{value} is outside the subrange {lo}..{hi}")
-
-
-def _fill(obj: Any, value: Any) -> None:
-    """A structure VAR_IN_OUT assigned whole: the caller's structure takes the members."""
-    for name in type(obj).__slots__:
-        setattr(obj, name, getattr(value, name))
-
-
-def _struct(obj: Any, values: dict[str, Any]) -> Any:
-    """A structure instance with the members of its declared initial value."""
-    for name, value in values.items():
-        setattr(obj, name, value)
-    return obj
-
-
-def _time_real(ms: int, factor: float, divide: bool) -> int:
-    """TIME * or / a number (IEC 61131-3, Table 30): rounded to the nearest unit, half to
-    even, as a REAL converts to an integer (6.6.2.5.6)."""
-    if divide:
-        if factor == 0:
-            raise ZeroDivisionError("division by zero")
-        value = ms / factor
-    else:
-        value = ms * factor
-    if math.isnan(value) or math.isinf(value):
-        raise OverflowError("a TIME result beyond any range")
-    return round(value)
-
-
-def _tostr(value: Any, t: str) -> str:
-    """X_TO_STRING: the literal's text without its type prefix, as CODESYS writes it."""
-    if t == "BOOL":
-        return "TRUE" if value else "FALSE"
-    if t in ("REAL", "LREAL"):
-        return repr(float(value)).upper().replace("E+", "E")
-    return str(value)
-
-
-def _strto(text: str, t: str) -> Any:
-    """STRING_TO_X: the number in the text (leading and trailing blanks ignored)."""
-    text = text.strip()
-    try:
-        if t == "BOOL":
-            return text.upper() in ("TRUE", "1")
-        if t in ("REAL", "LREAL"):
-            return float(text.replace("_", ""))
-        return int(text.replace("_", ""), 0) if text[:2].lower() in ("0x", "0b") else \
-            int(text.replace("_", ""))
-    except ValueError:
-        raise ValueError(f"STRING_TO_{t}: {text!r} is not a number") from None
-
-
-HELPERS: dict[str, Any] = {
-    "_ix": _ix, "_mod": _mod, "_idiv": _idiv, "_fdiv": _fdiv, "_pow": _pow, "_sqrt": _sqrt,
-    "_r2i": _r2i, "_trunc": _trunc, "_mux": _mux, "_guard": _guard, "_f32": _f32,
-    "_f64": _f64, "_F32P": _SINGLE.pack, "_F32U": _SINGLE.unpack,
-    **{f"_{name}": _math(name, f) for name, f in _MATH.items()},
-    "_shl": stdlib.SHL, "_shr": stdlib.SHR, "_rol": stdlib.ROL, "_ror": stdlib.ROR,
-    "_left": _left, "_right": _right, "_midstr": _midstr, "_insert": _insert,
-    "_delete": _delete, "_replace": _replace, "_find": _find, "_ranged": _ranged,
-    "_struct": _struct, "_fill": _fill, "_time_real": _time_real, "_tostr": _tostr,
-    "_strto": _strto, "_char_at": _char_at, "_set_char": _set_char,
-    "_code_char": _code_char,
-    **{f"_STD_{name}": cls for name, cls in stdlib.FUNCTION_BLOCKS.items()},
-}
 _BIT_TYPE = {8: "BYTE", 16: "WORD", 32: "DWORD", 64: "LWORD"}
 VOID = "VOID"  # the type of a call of a FUNCTION without a result: a statement only
 _TIMED = (*DURATIONS, *DATES)
@@ -564,99 +279,6 @@ def real_code(code: str, t: Type) -> str:
     call took 116 (timeit, CPython 3.11); its OverflowError is worded by the scan."""
     return (f"_F32U(_F32P({code}))[0]" if t == "REAL" else f"_f64({code})" if t == "LREAL"
             else code)
-
-
-# ---- signatures ------------------------------------------------------------------------------
-
-@dataclass
-class VarInfo:
-    display: str
-    type: Type
-    section: str
-    qualifier: str | None
-    span: n.Span
-    initial: Any = None
-    image: tuple[str, int] | None = None  # an I/O name of [symbols]: its image variable
-
-
-@dataclass
-class PouInfo:
-    pou: n.Pou
-    file: n.SourceFile
-    vars: dict[str, VarInfo] = field(default_factory=dict)
-    result: Type | None = None
-    externals: set[str] = field(default_factory=set)  # VAR_EXTERNAL: globals it names
-
-    @property
-    def inputs(self) -> list[tuple[str, VarInfo]]:
-        """A FUNCTION's parameters in order: VAR_INPUT and VAR_IN_OUT."""
-        return [(k, v) for k, v in self.vars.items()
-                if v.section in ("VAR_INPUT", "VAR_IN_OUT")]
-
-    @property
-    def in_outs(self) -> list[str]:
-        return [k for k, v in self.vars.items() if v.section == "VAR_IN_OUT"]
-
-    @property
-    def copied_in_outs(self) -> list[str]:
-        """The VAR_IN_OUTs a FUNCTION hands back for the caller to store (an array or a
-        structure is the caller's own object, written in place)."""
-        return [k for k in self.in_outs
-                if not isinstance(self.vars[k].type, ArrayOf | AnyLength | StructOf)]
-
-    @property
-    def returned(self) -> list[str]:
-        """What a FUNCTION returns beside its result, in this order: the copied in-outs,
-        then its VAR_OUTPUTs (6.6.2.2: a FUNCTION may have outputs, bound with =>)."""
-        return [*self.copied_in_outs,
-                *(k for k, v in self.vars.items() if v.section == "VAR_OUTPUT")]
-
-    @property
-    def names(self) -> list[str]:
-        """The Python names of its variables: v_X, and v_X__LO, the lower bound an
-        ARRAY[*] VAR_IN_OUT was given with."""
-        return [name for k, v in self.vars.items()
-                for name in ([f"v_{k}", f"v_{k}__LO"] if isinstance(v.type, AnyLength)
-                             else [f"v_{k}"])]
-
-
-@dataclass
-class StructInfo:
-    decl: n.TypeDecl
-    fields: dict[str, VarInfo]
-
-
-@dataclass
-class EnumInfo:
-    display: str
-    values: dict[str, int]  # value name (upper case) -> its integer
-    names: dict[str, str]  # value name (upper case) -> as written
-    default: int
-
-    def name_of(self, value: int) -> str:
-        return next((self.names[k] for k, v in self.values.items() if v == value), str(value))
-
-
-def _leaf(t: Type) -> Type:
-    while isinstance(t, ArrayOf):
-        t = t.element
-    return t
-
-
-def _leaf_count(t: Type) -> int:
-    count = 1
-    while isinstance(t, ArrayOf):
-        count *= t.length
-        t = t.element
-    return count
-
-
-def _reshape(flat: list[Any], t: ArrayOf) -> list[Any]:
-    """A flat list of initial values (row by row) as the nested lists of an array of arrays."""
-    if not isinstance(t.element, ArrayOf):
-        return flat
-    size = _leaf_count(t.element)
-    return [_reshape(flat[i * size:(i + 1) * size], t.element) for i in range(t.length)]
 
 
 class Problems(Exception):
@@ -3180,253 +2802,7 @@ def _calls(body: Iterable[n.Stmt]) -> set[str]:
     return found
 
 
-# ---- the result ----------------------------------------------------------------------------
-
-@dataclass
-class ProgramVar:
-    key: str
-    display: str
-    type: Type
-    retain: bool
-    constant: bool = False  # VAR CONSTANT: an online change gives it its new value
-
-
-class Logic:
-    """Compiled logic: the generated module, its programs, and the way back from a Python
-    line to the ST statement (for faults)."""
-
-    def __init__(self, files: Sequence[n.SourceFile], compiler: Compiler, source: str,
-                 spans: list[n.Span | None]) -> None:
-        # What a fault's location needs, and nothing of the syntax tree: kept, its hundreds
-        # of thousands of nodes (a 20,000-statement program: 460,000 objects) each stayed in
-        # the cyclic collector's care -- a 130 ms young and a 340 ms full collection, on
-        # whichever thread allocated next, after every reload.  Spans as tuples: those the
-        # collector stops tracking once it has seen them.
-        self.files = tuple(n.SourceFile(f.path, f.text, ()) for f in files)
-        self.python_source = source
-        self.reads_nc = compiler.reads_nc
-        # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
-        self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
-            d.span.file, d.span.line, d.span.column)))
-        self._spans = [None if s is None else (s.file, s.line, s.column) for s in spans]
-        # One name for one generated module (its frames are told from others' by it): the
-        # code of an identical module is compiled once (_compiled_pieces keeps it).
-        self._filename = f"<ncgate-st {hashlib.sha1(source.encode()).hexdigest()[:12]}>"
-        self.namespace: dict[str, Any] = dict(HELPERS)
-        k = compiler.ctx.processes
-        self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
-                              _NCO=[False] * len(NC_OUTPUTS), _NCW=[""] * len(NC_OUTPUTS),
-                              _NCV=[100], _NCVW=[""],
-                              _NCP=[[False] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
-                              _NCPW=[[""] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
-                              _NCPV=[100] * k, _NCPVW=[""] * k,
-                              _NC_SEND=lambda s, t, w: None)
-        for code in _compiled_pieces(source, self._filename):
-            exec(code, self.namespace)
-        self.programs: dict[str, dict[str, ProgramVar]] = {}
-        self.display: dict[str, str] = {}
-        self.fb_vars: dict[str, dict[str, ProgramVar]] = {}
-        retains = compiler.retains
-        for key, info in compiler.pous.items():
-            table = {k: ProgramVar(k, v.display, v.type,
-                                   v.qualifier == "RETAIN" or retains(v.type),
-                                   v.qualifier == "CONSTANT")
-                     for k, v in info.vars.items()}
-            if info.pou.kind == "PROGRAM":
-                self.programs[key] = table
-                self.display[key] = info.pou.name
-            elif info.pou.kind == "FUNCTION_BLOCK":
-                self.fb_vars[key] = table
-        self.struct_fields: dict[str, dict[str, ProgramVar]] = {
-            key: {k: ProgramVar(k, v.display, v.type, False) for k, v in struct.fields.items()}
-            for key, struct in compiler.structs.items()}
-        self.globals: dict[str, ProgramVar] = {
-            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN" or retains(v.type),
-                          v.qualifier == "CONSTANT")
-            for k, v in compiler.globals.items() if v.image is None}
-        self.enums = dict(compiler.enums)
-
-    def reset_globals(self) -> None:
-        """The VAR_GLOBALs at their initial values (a cold start of the logic)."""
-        self.namespace["_G"] = self.namespace["_Globals"]()
-
-    # -- RETAIN of aggregates: a value as JSON, and back ---------------------------------------
-
-    def dump(self, value: Any, t: Type) -> Any:
-        """A variable's value as JSON: a structure or an FB instance as an object of its
-        members (an FB's internal state too: a retained CTU keeps CV and its edge memory)."""
-        if isinstance(t, ArrayOf):
-            return [self.dump(v, t.element) for v in value]
-        if isinstance(t, StructOf):
-            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
-                    for k, f in self.struct_fields[t.name].items()}
-        if isinstance(t, FbOf):
-            if t.std:
-                return _dump_std(value)
-            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
-                    for k, f in self.fb_vars[t.name].items()}
-        return value
-
-    def members_of(self, t: Any) -> dict[str, ProgramVar] | None:
-        """The members of a user FB's instance or a structure (for a path: main.fb.x)."""
-        if isinstance(t, FbOf) and not t.std:
-            return self.fb_vars.get(t.name)
-        if isinstance(t, StructOf):
-            return self.struct_fields.get(t.name)
-        return None
-
-    def fresh(self, t: Type) -> Any:
-        """A new instance of an aggregate type (its initial value), None for a scalar."""
-        if isinstance(t, ArrayOf):
-            return [self.fresh(t.element) for _ in range(t.length)]
-        if isinstance(t, FbOf):
-            return self.namespace[f"_STD_{t.name}" if t.std else f"FB_{t.name}"]()
-        if isinstance(t, StructOf):
-            return self.namespace[f"S_{t.name}"]()
-        return None
-
-    def restore(self, stored: Any, t: Type) -> Any:
-        """A RETAIN value from the store as the logic holds it; ValueError when it no
-        longer fits its variable's type (retyped, resized, other members)."""
-        return self.load(stored, t, self.fresh(t))
-
-    def fits(self, stored: Any, t: Type) -> bool:
-        try:
-            self.restore(stored, t)
-        except (ValueError, TypeError, AttributeError, OverflowError):
-            return False
-        return True
-
-    def load(self, stored: Any, t: Type, fresh: Any) -> Any:
-        """A stored value into ``fresh`` (a new instance of ``t``), or ValueError when the
-        value no longer fits the type (the caller then keeps the initial value)."""
-        if isinstance(t, ArrayOf):
-            if not isinstance(stored, list) or len(stored) != t.length:
-                raise ValueError("not an array of that length")
-            return [self.load(s, t.element, f) for s, f in zip(stored, fresh, strict=True)]
-        if isinstance(t, StructOf | FbOf):
-            if isinstance(t, FbOf) and t.std:
-                _load_std(fresh, stored)
-                return fresh
-            table = self.struct_fields[t.name] if isinstance(t, StructOf) else \
-                self.fb_vars[t.name]
-            if not isinstance(stored, dict) or set(stored) != set(table):
-                raise ValueError("other members")
-            for k, f in table.items():
-                setattr(fresh, f"v_{k}", self.load(stored[k], f.type,
-                                                   getattr(fresh, f"v_{k}")))
-            return fresh
-        if not _fits_scalar(stored, t):
-            raise ValueError(f"not a {t}")
-        return to_real(stored) if t == "REAL" else stored
-
-    def new_program(self, key: str) -> Any:
-        return self.namespace[f"P_{key}"]()
-
-    def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
-        """The ST statement of the innermost generated frame in a traceback."""
-        line = None
-        while tb is not None:
-            if tb.tb_frame.f_code.co_filename == self._filename:
-                line = tb.tb_lineno
-            tb = tb.tb_next
-        if line is None:
-            return None, ""
-        for i in range(min(line, len(self._spans)) - 1, -1, -1):
-            where = self._spans[i]
-            if where is not None:
-                span = n.Span(*where)
-                for f in self.files:
-                    if f.path == span.file:
-                        return span, f.line(span.line)
-                return span, ""
-        return None, ""
-
-
-def _compiled_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
-    """The module's code, kept for small logic (see _COMPILED)."""
-    if len(source) > KEPT_SOURCE_MAX:
-        return _compile_pieces(source, filename)
-    return _kept_pieces(source, filename)
-
-
-@functools.lru_cache(maxsize=COMPILED_KEPT)
-def _kept_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
-    return _compile_pieces(source, filename)
-
-
-def _compile_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
-    """The module compiled a piece at a time (PIECE_CHARS: whole top-level definitions),
-    each with the line numbers it has in ``source``; between pieces, a thread waiting for
-    the interpreter gets it."""
-    lines = source.split("\n")
-    starts = [i for i, line in enumerate(lines) if line[:1] not in ("", " ")]
-    pieces: list[pytypes.CodeType] = []
-    first, size = 0, 0
-    for i, end in enumerate([*starts[1:], len(lines)]):
-        size += sum(len(line) + 1 for line in lines[starts[i]:end])
-        if size >= PIECE_CHARS or end == len(lines):
-            try:
-                code = compile("\n".join(lines[first:end]) + "\n", filename, "exec")
-            except SyntaxError as exc:  # (its line in the whole source, for the diagnostic)
-                exc.lineno = (exc.lineno or 1) + first
-                raise
-            pieces.append(_moved(code, first) if first else code)
-            first, size = end, 0
-            time.sleep(0)
-    return tuple(pieces)
-
-
-def _moved(code: pytypes.CodeType, lines: int) -> pytypes.CodeType:
-    """``code`` as if its source began ``lines`` lines further down (3.11: each code
-    object's line table counts from its co_firstlineno)."""
-    consts = tuple(_moved(c, lines) if isinstance(c, pytypes.CodeType) else c
-                   for c in code.co_consts)
-    return code.replace(co_firstlineno=code.co_firstlineno + lines, co_consts=consts)
-
-
-def _dump_std(fb: Any) -> dict[str, Any]:
-    import dataclasses
-
-    return {f.name: (_dump_std(v) if dataclasses.is_dataclass(v := getattr(fb, f.name))
-                     else v) for f in dataclasses.fields(fb)}
-
-
-def _load_std(fb: Any, stored: Any) -> None:
-    import dataclasses
-
-    fields = {f.name: f for f in dataclasses.fields(fb)}
-    if not isinstance(stored, dict) or set(stored) != set(fields):
-        raise ValueError("other members")
-    for name in fields:
-        current = getattr(fb, name)
-        if dataclasses.is_dataclass(current):
-            _load_std(current, stored[name])
-        elif type(stored[name]) is not type(current) and not (
-                current is None or stored[name] is None):
-            raise ValueError(f"{name} is not a {type(current).__name__}")
-        else:
-            setattr(fb, name, stored[name])
-
-
-def _fits_scalar(value: Any, t: Type) -> bool:
-    if t == "BOOL":
-        return isinstance(value, bool)
-    if isinstance(t, StringOf):
-        return isinstance(value, str) and len(value) <= t.length
-    if t in CHARS:
-        return isinstance(value, str) and len(value) == 1 and ord(value) <= (
-            255 if t == "CHAR" else 65535)
-    if t in REALS:
-        return isinstance(value, float | int) and not isinstance(value, bool) and \
-            math.isfinite(value)
-    if isinstance(t, EnumOf):
-        return isinstance(value, int) and not isinstance(value, bool)
-    if isinstance(t, str) and t in stdlib.INTEGER_TYPES:
-        lo, hi = limits(t) if t != "TOD" else (0, TOD_MS - 1)
-        ok = isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
-        return ok and (not isinstance(t, Ranged) or t.lo <= value <= t.hi)
-    return False
+# ---- the entry point (the compiled Logic: ncgate.plc.st.logic) -----------------------------
 
 
 @contextmanager

@@ -23,15 +23,9 @@ from typing import Any
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
-from ncgate.plc.st.compiler import (
-    FORMAL_INPUTS,
-    Compiler,
-    Context,
-    IterationGuard,
-    _fold,
-    _pow,
-)
-from ncgate.plc.st.compiler import IMAGE_NAMES as IMAGE
+from ncgate.plc.st.compiler import FORMAL_INPUTS, Compiler, Context, _fold
+from ncgate.plc.st.intrinsics import IMAGE_NAMES as IMAGE
+from ncgate.plc.st.runtime import IterationGuard, _pow
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, StringOf, StructOf, Type, default_value
 
 

@@ -14,7 +14,7 @@ from ncgate.errors import InputRefused
 from ncgate.gateway.door import _CELL_ONLY, _SWITCHES, SEARCH_WORDS, command_kind
 from ncgate.gateway.web.console import KINDS, LANE_BUTTONS, SWITCHES
 from ncgate.inputs import CommandKind
-from ncgate.plc.st.compiler import NC_OUTPUTS, NC_PROCESS_OUTPUTS
+from ncgate.plc.st.intrinsics import NC_OUTPUTS, NC_PROCESS_OUTPUTS
 
 ROOT = Path(__file__).resolve().parents[3]
 

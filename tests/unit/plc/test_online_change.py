@@ -10,7 +10,8 @@ from pathlib import Path
 
 from ncgate.plc.retain import RetainStore
 from ncgate.plc.scan import PlcRuntime, PlcState
-from ncgate.plc.st.compiler import Context, Logic, compile_logic
+from ncgate.plc.st.compiler import Context, compile_logic
+from ncgate.plc.st.logic import Logic
 from ncgate.plc.st.parser import parse_source
 
 from .st_harness import Plc

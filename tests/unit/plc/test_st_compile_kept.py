@@ -4,7 +4,7 @@ namespace, program instances and variables' tables.  Big logic is not kept."""
 
 from __future__ import annotations
 
-from ncgate.plc.st import compiler
+from ncgate.plc.st import logic
 from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.parser import parse_source
 
@@ -31,5 +31,5 @@ def test_a_big_logic_is_compiled_anew_each_time() -> None:
     body = "".join(f"x := x * 3 + {k};\n" for k in range(3000))
     parsed = parse_source(program(body, "x : DINT;"), "big.st")
     first = compile_logic([parsed], Context())
-    assert len(first.python_source) > compiler.KEPT_SOURCE_MAX
+    assert len(first.python_source) > logic.KEPT_SOURCE_MAX
     assert compile_logic([parsed], Context()).python_source is not first.python_source

@@ -11,7 +11,7 @@ import random
 import pytest
 
 from ncgate.plc.scan import PlcState
-from ncgate.plc.st import compiler
+from ncgate.plc.st import logic
 from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StCode
 from ncgate.plc.st.parser import parse_source
@@ -98,7 +98,7 @@ def test_a_long_body_runs_in_order_returns_and_faults_at_its_line() -> None:
     plc = Plc(program(body + "IF x <> 0 THEN RETURN; END_IF\nafter := 1;",
                       "x, after : DINT;")).scan()
     assert (plc["main.x"], plc["main.after"]) == (expected, 0)
-    assert len(plc.logic.python_source) > 3 * compiler.PIECE_CHARS  # (several pieces)
+    assert len(plc.logic.python_source) > 3 * logic.PIECE_CHARS  # (several pieces)
     faulty = Plc(program(body + "v[x] := 1;", "x : DINT; v : ARRAY[1..2] OF INT;")).scan()
     fault = faulty.runtime.status.fault
     assert fault is not None and fault.span is not None

@@ -11,8 +11,9 @@ import pytest
 
 from ncgate.plc.image import IOImage
 from ncgate.plc.scan import PlcRuntime
-from ncgate.plc.st.compiler import Context, IterationGuard, compile_logic
+from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.parser import parse_source
+from ncgate.plc.st.runtime import IterationGuard
 from ncgate.plc.st.walk import Walker
 
 from .st_harness import RecordingNc

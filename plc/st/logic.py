@@ -1,0 +1,294 @@
+"""Compiled logic (:class:`Logic`): the generated module exec'd into a namespace of its own,
+its programs' and function blocks' variables (:class:`ProgramVar`), the way back from a
+Python line to the ST statement (for faults), and RETAIN's dump and load of aggregates.
+
+The module's code is compiled a piece at a time (a waiting thread gets the interpreter in
+between) and kept for small logic, so a suite of scenarios does not compile it again."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+import time
+import types as pytypes
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from ncgate.plc.st import nodes as n
+from ncgate.plc.st import stdlib
+from ncgate.plc.st.intrinsics import NC_OUTPUTS, NC_PROCESS_OUTPUTS
+from ncgate.plc.st.runtime import HELPERS, TOD_MS, to_real
+from ncgate.plc.st.types import (
+    CHARS,
+    REALS,
+    ArrayOf,
+    EnumOf,
+    FbOf,
+    Ranged,
+    StringOf,
+    StructOf,
+    Type,
+    limits,
+)
+
+if TYPE_CHECKING:
+    from ncgate.plc.st.compiler import Compiler
+
+
+# The module is compiled in pieces of whole top-level definitions of about PIECE_CHARS
+# characters: Python's compile() holds the interpreter for the whole call (~0.35 us a
+# character), and a reload compiles in a thread (the compiler's PIECE_LINES cuts long bodies).
+PIECE_CHARS = 32_000
+# Compilations kept for the next load of the same parse (compile_logic), and the largest
+# generated module kept (bigger logic is compiled afresh: its syntax tree is not kept).
+COMPILED_KEPT = 8
+KEPT_SOURCE_MAX = 64 * 1024
+
+
+@dataclass
+class ProgramVar:
+    key: str
+    display: str
+    type: Type
+    retain: bool
+    constant: bool = False  # VAR CONSTANT: an online change gives it its new value
+
+
+class Logic:
+    """Compiled logic: the generated module, its programs, and the way back from a Python
+    line to the ST statement (for faults)."""
+
+    def __init__(self, files: Sequence[n.SourceFile], compiler: Compiler, source: str,
+                 spans: list[n.Span | None]) -> None:
+        # What a fault's location needs, and nothing of the syntax tree: kept, its hundreds
+        # of thousands of nodes (a 20,000-statement program: 460,000 objects) each stayed in
+        # the cyclic collector's care -- a 130 ms young and a 340 ms full collection, on
+        # whichever thread allocated next, after every reload.  Spans as tuples: those the
+        # collector stops tracking once it has seen them.
+        self.files = tuple(n.SourceFile(f.path, f.text, ()) for f in files)
+        self.python_source = source
+        self.reads_nc = compiler.reads_nc
+        # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
+        self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
+            d.span.file, d.span.line, d.span.column)))
+        self._spans = [None if s is None else (s.file, s.line, s.column) for s in spans]
+        # One name for one generated module (its frames are told from others' by it): the
+        # code of an identical module is compiled once (_compiled_pieces keeps it).
+        self._filename = f"<ncgate-st {hashlib.sha1(source.encode()).hexdigest()[:12]}>"
+        self.namespace: dict[str, Any] = dict(HELPERS)
+        k = compiler.ctx.processes
+        self.namespace.update(_NOW=0, _LEFT=0, _NCE=0, _NCL=(0, 0, 0), _NCS=[],
+                              _NCO=[False] * len(NC_OUTPUTS), _NCW=[""] * len(NC_OUTPUTS),
+                              _NCV=[100], _NCVW=[""],
+                              _NCP=[[False] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
+                              _NCPW=[[""] * len(NC_PROCESS_OUTPUTS) for _ in range(k)],
+                              _NCPV=[100] * k, _NCPVW=[""] * k,
+                              _NC_SEND=lambda s, t, w: None)
+        for code in _compiled_pieces(source, self._filename):
+            exec(code, self.namespace)
+        self.programs: dict[str, dict[str, ProgramVar]] = {}
+        self.display: dict[str, str] = {}
+        self.fb_vars: dict[str, dict[str, ProgramVar]] = {}
+        retains = compiler.retains
+        for key, info in compiler.pous.items():
+            table = {k: ProgramVar(k, v.display, v.type,
+                                   v.qualifier == "RETAIN" or retains(v.type),
+                                   v.qualifier == "CONSTANT")
+                     for k, v in info.vars.items()}
+            if info.pou.kind == "PROGRAM":
+                self.programs[key] = table
+                self.display[key] = info.pou.name
+            elif info.pou.kind == "FUNCTION_BLOCK":
+                self.fb_vars[key] = table
+        self.struct_fields: dict[str, dict[str, ProgramVar]] = {
+            key: {k: ProgramVar(k, v.display, v.type, False) for k, v in struct.fields.items()}
+            for key, struct in compiler.structs.items()}
+        self.globals: dict[str, ProgramVar] = {
+            k: ProgramVar(k, v.display, v.type, v.qualifier == "RETAIN" or retains(v.type),
+                          v.qualifier == "CONSTANT")
+            for k, v in compiler.globals.items() if v.image is None}
+        self.enums = dict(compiler.enums)
+
+    def reset_globals(self) -> None:
+        """The VAR_GLOBALs at their initial values (a cold start of the logic)."""
+        self.namespace["_G"] = self.namespace["_Globals"]()
+
+    # -- RETAIN of aggregates: a value as JSON, and back ---------------------------------------
+
+    def dump(self, value: Any, t: Type) -> Any:
+        """A variable's value as JSON: a structure or an FB instance as an object of its
+        members (an FB's internal state too: a retained CTU keeps CV and its edge memory)."""
+        if isinstance(t, ArrayOf):
+            return [self.dump(v, t.element) for v in value]
+        if isinstance(t, StructOf):
+            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
+                    for k, f in self.struct_fields[t.name].items()}
+        if isinstance(t, FbOf):
+            if t.std:
+                return _dump_std(value)
+            return {k: self.dump(getattr(value, f"v_{k}"), f.type)
+                    for k, f in self.fb_vars[t.name].items()}
+        return value
+
+    def members_of(self, t: Any) -> dict[str, ProgramVar] | None:
+        """The members of a user FB's instance or a structure (for a path: main.fb.x)."""
+        if isinstance(t, FbOf) and not t.std:
+            return self.fb_vars.get(t.name)
+        if isinstance(t, StructOf):
+            return self.struct_fields.get(t.name)
+        return None
+
+    def fresh(self, t: Type) -> Any:
+        """A new instance of an aggregate type (its initial value), None for a scalar."""
+        if isinstance(t, ArrayOf):
+            return [self.fresh(t.element) for _ in range(t.length)]
+        if isinstance(t, FbOf):
+            return self.namespace[f"_STD_{t.name}" if t.std else f"FB_{t.name}"]()
+        if isinstance(t, StructOf):
+            return self.namespace[f"S_{t.name}"]()
+        return None
+
+    def restore(self, stored: Any, t: Type) -> Any:
+        """A RETAIN value from the store as the logic holds it; ValueError when it no
+        longer fits its variable's type (retyped, resized, other members)."""
+        return self.load(stored, t, self.fresh(t))
+
+    def fits(self, stored: Any, t: Type) -> bool:
+        try:
+            self.restore(stored, t)
+        except (ValueError, TypeError, AttributeError, OverflowError):
+            return False
+        return True
+
+    def load(self, stored: Any, t: Type, fresh: Any) -> Any:
+        """A stored value into ``fresh`` (a new instance of ``t``), or ValueError when the
+        value no longer fits the type (the caller then keeps the initial value)."""
+        if isinstance(t, ArrayOf):
+            if not isinstance(stored, list) or len(stored) != t.length:
+                raise ValueError("not an array of that length")
+            return [self.load(s, t.element, f) for s, f in zip(stored, fresh, strict=True)]
+        if isinstance(t, StructOf | FbOf):
+            if isinstance(t, FbOf) and t.std:
+                _load_std(fresh, stored)
+                return fresh
+            table = self.struct_fields[t.name] if isinstance(t, StructOf) else \
+                self.fb_vars[t.name]
+            if not isinstance(stored, dict) or set(stored) != set(table):
+                raise ValueError("other members")
+            for k, f in table.items():
+                setattr(fresh, f"v_{k}", self.load(stored[k], f.type,
+                                                   getattr(fresh, f"v_{k}")))
+            return fresh
+        if not _fits_scalar(stored, t):
+            raise ValueError(f"not a {t}")
+        return to_real(stored) if t == "REAL" else stored
+
+    def new_program(self, key: str) -> Any:
+        return self.namespace[f"P_{key}"]()
+
+    def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
+        """The ST statement of the innermost generated frame in a traceback."""
+        line = None
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename == self._filename:
+                line = tb.tb_lineno
+            tb = tb.tb_next
+        if line is None:
+            return None, ""
+        for i in range(min(line, len(self._spans)) - 1, -1, -1):
+            where = self._spans[i]
+            if where is not None:
+                span = n.Span(*where)
+                for f in self.files:
+                    if f.path == span.file:
+                        return span, f.line(span.line)
+                return span, ""
+        return None, ""
+
+
+def _compiled_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
+    """The module's code, kept for small logic (see _COMPILED)."""
+    if len(source) > KEPT_SOURCE_MAX:
+        return _compile_pieces(source, filename)
+    return _kept_pieces(source, filename)
+
+
+@functools.lru_cache(maxsize=COMPILED_KEPT)
+def _kept_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
+    return _compile_pieces(source, filename)
+
+
+def _compile_pieces(source: str, filename: str) -> tuple[pytypes.CodeType, ...]:
+    """The module compiled a piece at a time (PIECE_CHARS: whole top-level definitions),
+    each with the line numbers it has in ``source``; between pieces, a thread waiting for
+    the interpreter gets it."""
+    lines = source.split("\n")
+    starts = [i for i, line in enumerate(lines) if line[:1] not in ("", " ")]
+    pieces: list[pytypes.CodeType] = []
+    first, size = 0, 0
+    for i, end in enumerate([*starts[1:], len(lines)]):
+        size += sum(len(line) + 1 for line in lines[starts[i]:end])
+        if size >= PIECE_CHARS or end == len(lines):
+            try:
+                code = compile("\n".join(lines[first:end]) + "\n", filename, "exec")
+            except SyntaxError as exc:  # (its line in the whole source, for the diagnostic)
+                exc.lineno = (exc.lineno or 1) + first
+                raise
+            pieces.append(_moved(code, first) if first else code)
+            first, size = end, 0
+            time.sleep(0)
+    return tuple(pieces)
+
+
+def _moved(code: pytypes.CodeType, lines: int) -> pytypes.CodeType:
+    """``code`` as if its source began ``lines`` lines further down (3.11: each code
+    object's line table counts from its co_firstlineno)."""
+    consts = tuple(_moved(c, lines) if isinstance(c, pytypes.CodeType) else c
+                   for c in code.co_consts)
+    return code.replace(co_firstlineno=code.co_firstlineno + lines, co_consts=consts)
+
+
+def _dump_std(fb: Any) -> dict[str, Any]:
+    import dataclasses
+
+    return {f.name: (_dump_std(v) if dataclasses.is_dataclass(v := getattr(fb, f.name))
+                     else v) for f in dataclasses.fields(fb)}
+
+
+def _load_std(fb: Any, stored: Any) -> None:
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(fb)}
+    if not isinstance(stored, dict) or set(stored) != set(fields):
+        raise ValueError("other members")
+    for name in fields:
+        current = getattr(fb, name)
+        if dataclasses.is_dataclass(current):
+            _load_std(current, stored[name])
+        elif type(stored[name]) is not type(current) and not (
+                current is None or stored[name] is None):
+            raise ValueError(f"{name} is not a {type(current).__name__}")
+        else:
+            setattr(fb, name, stored[name])
+
+
+def _fits_scalar(value: Any, t: Type) -> bool:
+    if t == "BOOL":
+        return isinstance(value, bool)
+    if isinstance(t, StringOf):
+        return isinstance(value, str) and len(value) <= t.length
+    if t in CHARS:
+        return isinstance(value, str) and len(value) == 1 and ord(value) <= (
+            255 if t == "CHAR" else 65535)
+    if t in REALS:
+        return isinstance(value, float | int) and not isinstance(value, bool) and \
+            math.isfinite(value)
+    if isinstance(t, EnumOf):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(t, str) and t in stdlib.INTEGER_TYPES:
+        lo, hi = limits(t) if t != "TOD" else (0, TOD_MS - 1)
+        ok = isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+        return ok and (not isinstance(t, Ranged) or t.lo <= value <= t.hi)
+    return False
