@@ -271,10 +271,15 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             until: float | None = None, *, signals: bool = False,
             single_block: bool = False, breaks: Sequence[str] = (),
             keep_going: bool = False, at: str | None = None,
-            with_calc: bool = False) -> SimResult:
+            with_calc: bool = False,
+            observers: Sequence[Callable[[Event], None]] = ()) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
+
+    ``observers`` hear every trace event from the start (``ncgate sweep`` stops a variant
+    past its virtual-time budget by raising from one: an exception that is not an Exception
+    ends the run; an Exception is logged, as any listener's).
 
     Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
     ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
@@ -286,6 +291,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     if len(mains) > processes:
         raise UsageError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
+    for observer in observers:
+        runtime.trace.subscribe(observer)
     door = Door(runtime, lambda: runtime.plc)
     start_plant(runtime, door.apply_on_time, closed=True)
     player = ScriptPlayer(runtime, script, door, plant_faults(config))

@@ -1,0 +1,145 @@
+"""``ncgate sweep``: run a spec's variants (locally, or on a Dask cluster), write the table,
+print the summary."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from ncgate.gateway.sweep.run import Result
+from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
+from ncgate.gateway.sweep.table import Parts, Row, csv_bytes, make_row, parquet_bytes, write_atomic
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+FLUSH_ROWS = 64  # rows a part holds at most
+FLUSH_S = 2.0  # and a part is written at least this often while rows come
+SLOWEST = 5
+WORST = 10
+
+
+@dataclass
+class Options:
+    output: Path
+    format: str = "csv"  # or "parquet"
+    workers: int | None = None
+    scheduler: str | None = None
+    resume: bool = False
+    timeout_s: float | None = 60.0
+    progress: bool | None = None  # None: on a terminal, not in CI
+
+
+def execute(variants: Sequence[Variant], options: Options) -> Iterator[tuple[Variant, Result]]:
+    if options.scheduler:
+        from ncgate.gateway.sweep.cluster import run_dask
+
+        yield from run_dask(variants, options.scheduler, options.timeout_s)
+    else:
+        from ncgate.gateway.sweep.pool import default_workers, run_local
+
+        yield from run_local(variants, options.workers or default_workers(), options.timeout_s)
+
+
+def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[int, list[Row]]:
+    """Run what the parts lack, write the table; the exit status and the rows by id."""
+    if options.format == "parquet":
+        parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
+    parts = Parts(options.output, spec)
+    done = parts.start(options.resume)
+    rows: dict[str, Row] = dict(done)
+    todo = [v for v in spec.variants if v.id not in rows]
+    if done:
+        print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
+              file=out)
+    show = options.progress
+    if show is None:
+        show = sys.stderr.isatty() and not os.environ.get("CI")
+    progress = Progress(len(todo)) if show else None
+    pending: list[Row] = []
+    last = time.monotonic()
+    for variant, result in execute(todo, options):
+        row = make_row(variant, result, spec.keys)
+        rows[variant.id] = row
+        pending.append(row)
+        if progress is not None:
+            progress.step()
+        if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
+            parts.add(pending)
+            pending = []
+            last = time.monotonic()
+    parts.add(pending)
+    if progress is not None:
+        progress.close()
+    ordered = [rows[v.id] for v in spec.variants]  # spec.variants is sorted by id
+    data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
+            else csv_bytes(ordered, spec.keys))
+    write_atomic(options.output, data)
+    parts.finish()
+    summary(ordered, spec.keys, out)
+    print(f"wrote {options.output}", file=out)
+    return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
+
+
+def label(row: Row, keys: Sequence[str]) -> str:
+    values = " ".join(f"{k}={row[k]}" for k in keys if row.get(k) is not None)
+    script = f" {Path(row['script']).name}" if row.get("script") else ""
+    return f"{row['program']}{script}" + (f" {values}" if values else "")
+
+
+def summary(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
+    counts = Counter(r["verdict"] for r in rows)
+    order = sorted(counts, key=lambda v: (v != "ok", -counts[v], v))
+    print(f"{len(rows)} variants: " + ", ".join(f"{counts[v]} {v}" for v in order), file=out)
+    ran = [r for r in rows if r["verdict"] not in ("crash", "error")]
+    if ran:
+        print("slowest (cycle time):", file=out)
+        for r in sorted(ran, key=lambda r: (-r["cycle_s"], r["id"]))[:SLOWEST]:
+            print(f"  {r['cycle_s']:10.3f} s  {r['id']}  {label(r, keys)}", file=out)
+    bad = [r for r in rows if r["verdict"] != "ok"]
+    if bad:
+        shown = f" (the first {WORST} of {len(bad)})" if len(bad) > WORST else ""
+        print(f"not ok{shown}:", file=out)
+        for r in bad[:WORST]:
+            print(f"  {r['id']}  {r['verdict']:<13} {label(r, keys)}: {r['report']}", file=out)
+
+
+class Progress:
+    """One line on stderr: done/total, rate, ETA."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.done = 0
+        self.start = time.monotonic()
+        self.shown = 0.0
+
+    def step(self) -> None:
+        self.done += 1
+        now = time.monotonic()
+        if now - self.shown < 0.2 and self.done < self.total:
+            return
+        self.shown = now
+        rate = self.done / max(now - self.start, 1e-9)
+        eta = (self.total - self.done) / rate if rate else 0.0
+        sys.stderr.write(f"\r{self.done}/{self.total} variants  {rate:.1f}/s  ETA {eta:.0f} s ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        sys.stderr.write("\n")
+
+
+def main(spec_path: str, options: Options, explore: int | None = None) -> int:
+    from ncgate.gateway.sweep.spec import load_spec
+
+    spec = load_spec(spec_path)
+    if options.output.suffix == "" and options.format == "parquet":
+        options.output = options.output.with_suffix(".parquet")
+    status, _ = run_sweep(spec, options)
+    return status
+
+
+__all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "Options", "SpecError", "main", "run_sweep"]
