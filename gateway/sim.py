@@ -272,14 +272,13 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             single_block: bool = False, breaks: Sequence[str] = (),
             keep_going: bool = False, at: str | None = None,
             with_calc: bool = False,
-            observers: Sequence[Callable[[Event], None]] = ()) -> SimResult:
+            before_time: Callable[[float], None] | None = None) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
 
-    ``observers`` hear every trace event from the start (``ncgate sweep`` stops a variant
-    past its virtual-time budget by raising from one: an exception that is not an Exception
-    ends the run; an Exception is logged, as any listener's).
+    ``before_time`` is called with each time the clock is about to move to (``ncgate sweep``
+    stops a variant past its virtual-time budget by raising from it).
 
     Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
     ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
@@ -291,8 +290,6 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     if len(mains) > processes:
         raise UsageError(f"{len(mains)} programs for {processes} processes")
     runtime = build_runtime(config, closed=True)
-    for observer in observers:
-        runtime.trace.subscribe(observer)
     door = Door(runtime, lambda: runtime.plc)
     start_plant(runtime, door.apply_on_time, closed=True)
     player = ScriptPlayer(runtime, script, door, plant_faults(config))
@@ -361,7 +358,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     try:
         if signals:  # installed inside the try: a SIGTERM from now on is always reported
             previous = signal.signal(signal.SIGTERM, _terminated)
-        outcome = _run_to_end(engine, until, active)
+        outcome = _run_to_end(engine, until, active, before_time)
     except KeyboardInterrupt as exc:  # what happened so far is still reported and written
         engine.finish_stats()
         by = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
@@ -404,12 +401,13 @@ def _terminated(signum: int, frame: object) -> None:
     raise Terminated
 
 
-def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool]) -> str:
+def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool],
+                before_time: Callable[[float], None] | None = None) -> str:
     """``run_virtual``, except that with ``until`` every process being idle does not end the
     run while ``active()``: the clock moves on to the next timer (the PLC's next scan, the
     next scripted input), which may start a program again."""
     while True:
-        outcome = run_virtual(engine, until)
+        outcome = run_virtual(engine, until, before_time)
         if outcome != "idle" or until is None or not active():
             return outcome
         t = engine.next_timer()
@@ -418,6 +416,8 @@ def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool])
         if t > until:
             engine.set_time(until)
             return "until"
+        if before_time is not None:
+            before_time(t)
         engine.advance_to(t)
 
 

@@ -127,7 +127,8 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
                     give(fresh)
                 elif timeout_s and now - worker.since > timeout_s + GRACE_S:
                     bury(worker)
-                    yield variant, _result("timeout", report=f"its worker did not answer "
+                    yield variant, _result("timeout", signature="timeout wall",
+                                           report=f"its worker did not answer "
                                            f"within the wall timeout of {timeout_s:g} s and "
                                            "was killed")
                     fresh = spawn()

@@ -86,12 +86,13 @@ def run_variant(variant: Variant, timeout_s: float | None) -> Result:
         with wall_limit(timeout_s):
             return _run(variant)
     except WallTimeout:
-        return _result("timeout", report=f"ran past the wall timeout of {timeout_s:g} s")
-    except BudgetExceeded as exc:
+        return _result("timeout", signature="timeout wall",
+                       report=f"ran past the wall timeout of {timeout_s:g} s")
+    except BudgetExceeded:
         return _result("timeout", cycle_s=variant.budget_s,
                        report=f"still running at the virtual-time budget of "
                               f"{variant.budget_s:g} s (give until, or a larger budget_s)",
-                       signature=str(exc))
+                       signature="timeout budget")
     except Exception as exc:
         last = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return _result("crash", report=last)
@@ -110,7 +111,6 @@ def _run(variant: Variant) -> Result:
     from ncgate.errors import NcgateError
     from ncgate.gateway.sim import report, run_sim
     from ncgate.interpreter.diagnostics import ProgramError, ProgramNotFoundError
-    from ncgate.interpreter.engine.events import Event
 
     overrides = variant.overrides()
     try:
@@ -120,16 +120,14 @@ def _run(variant: Variant) -> Result:
     except ConfigError as exc:
         return _result("error", report=str(exc).splitlines()[0])
     budget = variant.budget_s if variant.until is None else None
-    watch = None
-    if budget is not None:
-        def over_budget(event: Event) -> None:
-            if event.t > budget:
-                raise BudgetExceeded(f"past {budget:g} s")
 
-        watch = over_budget
+    def check(t: float) -> None:
+        if budget is not None and t > budget:
+            raise BudgetExceeded
+
     try:
         result = run_sim(config, [variant.main], script, variant.until,
-                         observers=() if watch is None else (watch,))
+                         before_time=None if budget is None else check)
     except (ProgramError, ProgramNotFoundError, NcgateError) as exc:
         return _result("error", report=str(exc).splitlines()[0])
     engine = result.runtime.engine

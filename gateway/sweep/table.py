@@ -39,8 +39,8 @@ def make_row(variant: Variant, result: Result, keys: Sequence[str]) -> Row:
     row.update({k: values.get(k) for k in keys})
     row.update({k: result[k] for k in RESULT_FIELDS})
     command = variant.command()
-    if result["verdict"] == "timeout" and variant.until is None and result["signature"]:
-        command += f" --until {render_value(variant.budget_s)}"  # sim alone would run on
+    if result["signature"] == "timeout budget":  # sim alone would run on: it stops there
+        command += f" --until {render_value(variant.budget_s)}"
     row["command"] = command
     return row
 
