@@ -595,7 +595,8 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.explore is not None and args.explore < 1:
         raise UsageError("--explore: expected 1 or more")
     suffix = ".parquet" if args.format == "parquet" else ".csv"
-    output = Path(args.output) if args.output else Path(Path(args.spec).stem + suffix)
+    stem = Path(args.spec).stem + ("-explore" if args.explore else "")
+    output = Path(args.output) if args.output else Path(stem + suffix)
     options = Options(output, args.format, args.workers, args.scheduler, args.resume,
                       args.timeout or None, False if args.quiet else None)
     return sweep(args.spec, options, explore=args.explore)

@@ -135,11 +135,32 @@ class Progress:
 def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     from ncgate.gateway.sweep.spec import load_spec
 
-    spec = load_spec(spec_path)
-    if options.output.suffix == "" and options.format == "parquet":
-        options.output = options.output.with_suffix(".parquet")
-    status, _ = run_sweep(spec, options)
+    spec = load_spec(spec_path, explore)
+    status, rows = run_sweep(spec, options)
+    if explore is not None:
+        findings(rows, spec.keys, sys.stdout)
     return status
+
+
+def findings(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
+    """``--explore``: the failures grouped by signature (the deadlock's cycle, the stall's
+    blocked processes, the first alarm's code and block), each with its smallest reproducer:
+    the variant that shows it in the least simulated time."""
+    groups: dict[tuple[str, str], list[Row]] = {}
+    for row in rows:
+        if row["verdict"] != "ok":
+            key = (row["verdict"], row["signature"] or row["report"])
+            groups.setdefault(key, []).append(row)
+    if not groups:
+        print(f"explored {len(rows)} variants: no failure", file=out)
+        return
+    print(f"explored {len(rows)} variants: {len(groups)} distinct failure"
+          f"{'s' if len(groups) > 1 else ''}", file=out)
+    for (verdict, signature), found in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):
+        smallest = min(found, key=lambda r: (r["cycle_s"], r["id"]))
+        print(f"{verdict} in {len(found)} of {len(rows)} variants: {signature}", file=out)
+        print(f"  smallest reproducer ({smallest['cycle_s']:.3f} s, {smallest['id']}): "
+              f"{smallest['command']}", file=out)
 
 
 __all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "Options", "SpecError", "main", "run_sweep"]

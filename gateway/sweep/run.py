@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import io
+import re
 import signal
 import threading
 import traceback
@@ -29,6 +30,9 @@ Result = dict[str, Any]  # verdict, cycle_s, alarms, hazards, running_s, waiting
 # report
 RESULT_FIELDS = ("verdict", "cycle_s", "alarms", "hazards", "running_s", "waiting_s",
                  "signature", "report")
+
+
+_NOW = re.compile(r"\s*\(now [^)]*\)$")  # a stall's blocked reason: the value when it stalled
 
 
 class WallTimeout(BaseException):
@@ -163,7 +167,8 @@ def _run(variant: Variant) -> Result:
     elif result.outcome == "stall" and stall is not None:
         verdict = "stall"
         signature = "stall " + "; ".join(
-            f"P{b['proc']} {b['prog']}:{b['line']} {b['reason']}" for b in stall["blocked"])
+            f"P{b['proc']} {b['prog']}:{b['line']} {_NOW.sub('', b['reason'])}"
+            for b in stall["blocked"])
     elif result.alarms:
         verdict = "alarm"
         assert alarm is not None
@@ -192,4 +197,12 @@ def _first_line(lines: list[str], verdicts: list[Any]) -> str:
         if failed:
             return str(failed[0].line())
         return f"{closing}; {len(verdicts)} of {len(verdicts)} expectations passed"
-    return next((line for line in lines if line.startswith("[")), closing)
+    for i, line in enumerate(lines):
+        if line.startswith("["):
+            blocked = []  # a stall's lines below it: who waits for what
+            for more in lines[i + 1:]:
+                if not more.startswith("    "):
+                    break
+                blocked.append(more.strip())
+            return line + (": " + "; ".join(blocked) if blocked else "")
+    return closing

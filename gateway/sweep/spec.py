@@ -17,6 +17,10 @@ budget_s = 3600.0                  # no until: virtual time a variant may run (t
 seed = 1
 samples = 10
 "nc.feed_override" = [50, 150]     # integers: an integer in the range; floats: a float
+
+[explore]                          # --explore N: N seeded samples of these instead of the
+seed = 0                           # grid and random ones (default: EXPLORE_RANGES)
+"nc.feed_override" = [50, 150]
 ```
 
 Every variant is a plain ``ncgate sim`` run: its row's ``command`` repeats it.  Its id is a
@@ -46,6 +50,10 @@ from ncgate.config.loader import read_toml
 Value = bool | int | float | str
 SWEEP_KEYS = ("programs", "examples", "config", "script", "until", "budget_s")
 DEFAULT_BUDGET_S = 3600.0
+# What --explore varies by default: when each process's motion ends (the feed override),
+# when the PLC logic sees a change (its scan period) and how long each block takes.
+EXPLORE_RANGES: dict[str, list[Value]] = {
+    "nc.feed_override": [50, 150], "plc.scan_ms": [1, 50], "nc.block_time_ms": [0.0, 20.0]}
 ID_LENGTH = 12  # hex digits of the sha-256: 48 bits, no collision in any sweep one runs
 
 
@@ -136,7 +144,9 @@ def variant_id(identity: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:ID_LENGTH]
 
 
-def load_spec(path: str | Path) -> Spec:
+def load_spec(path: str | Path, explore: int | None = None) -> Spec:
+    """The spec's variants; with ``explore``, that many seeded samples of its [explore]
+    ranges per program and script instead of its [grid] and [random]."""
     file = Path(path)
     raw = read_toml(file)
     where = str(file)
@@ -145,8 +155,8 @@ def load_spec(path: str | Path) -> Spec:
         return SpecError(f"{where}: {key}: {message}")
 
     for name in raw:
-        if name not in ("sweep", "grid", "random"):
-            raise fail(name, "unknown key (expected [sweep], [grid] or [random])")
+        if name not in ("sweep", "grid", "random", "explore"):
+            raise fail(name, "unknown key (expected [sweep], [grid], [random] or [explore])")
     sweep = _table(raw, "sweep", fail)
     for name in sweep:
         if name not in SWEEP_KEYS:
@@ -172,11 +182,21 @@ def load_spec(path: str | Path) -> Spec:
     if not runs:
         raise fail("sweep.programs", "no program to run (give programs or examples)")
     grid = _table(raw, "grid", fail)
+    rand = _table(raw, "random", fail)
+    if explore is not None:
+        table = _table(raw, "explore", fail)
+        ranges = {k: v for k, v in table.items() if k != "seed"} or EXPLORE_RANGES
+        grid = {}
+        rand = {"seed": table.get("seed", 0), "samples": explore, **ranges}
+        fail_ = fail
+
+        def fail(key: str, message: str) -> SpecError:
+            return fail_(key.replace("random", "explore", 1), message)
     combos, keys = _grid(grid, fail)
-    samples, seed, random_keys = _random(_table(raw, "random", fail), fail, set(keys))
+    samples, seed, random_keys = _random(rand, fail, set(keys))
     keys += random_keys
     choices = [{**g, **r} for g in combos for r in samples] if samples else combos
-    _check_values(runs, grid, _table(raw, "random", fail), where)
+    _check_values(runs, grid, rand, where, "random" if explore is None else "explore")
     variants = []
     files: set[Path] = {file.resolve()}
     for run in runs:
@@ -348,12 +368,12 @@ def _random(table: dict[str, Any], fail: Any,
 
 
 def _check_values(runs: Sequence[_Run], grid: dict[str, Any], rand: dict[str, Any],
-                  where: str) -> None:
+                  where: str, sampled: str) -> None:
     """Every swept value on every config the spec names: a value the config refuses is the
     spec's error (exit 2), not a row."""
     configs = {r.config for r in runs}
     values: list[tuple[str, str, Value]] = [("grid", k, v) for k, vs in grid.items() for v in vs]
-    values += [("random", k, b) for k, bs in rand.items() if k not in ("seed", "samples")
+    values += [(sampled, k, b) for k, bs in rand.items() if k not in ("seed", "samples")
                for b in bs]
     for config in sorted(configs, key=lambda c: str(c)):
         for section, key, value in values:

@@ -257,6 +257,49 @@ def test_random_samples_are_seeded_and_in_range(tmp_path: Path) -> None:
         assert 1000.0 <= values["nc.rapid_mm_min"] <= 20000.0
 
 
+# -- --explore finds a race --------------------------------------------------------------
+
+
+# P1 moves for 1 s at 100 % feed, then releases P2 with an SND and waits for its answer; P2,
+# once released, waits for the PLC's SA10 and answers.  The PLC (the script) raises SA10 at
+# 0.5 s and drops it at 1.2 s: when P1's SND comes after 1.2 s (a feed override below about
+# 83 %), P2 waits for an SA10 that never comes back while P1 waits for P2 -- a stall that the
+# program's own run at 100 % never shows.
+RACE = {
+    "A.nc": "N1(EXE,2,B)\nN2G1X100F6000\nN3(SND,2)\nN4(WAI,2)\nN5M30\n",
+    "B.nc": "N1(WAI,1)\nN2(WAI,SA10=1)\nN3(SND,1)\nN4M30\n",
+    "ncgate.toml": '[nc]\nprocesses = 2\nlookahead = 0\nmain = "A"\n[nc.storage]\nMP0 = "."\n',
+    "plc.toml": '[[write]]\nat = 0.5\nset = "SA10=1"\n[[write]]\nat = 1.2\nset = "SA10=0"\n',
+    "spec.toml": '[sweep]\nprograms = ["A.nc"]\nscript = "plc.toml"\n',
+}
+
+
+def test_explore_finds_the_planted_race_and_prints_its_reproducer(tmp_path: Path) -> None:
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    plain = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", cwd=tmp_path)
+    assert plain.returncode == 0 and "every program ended" in plain.stdout  # hidden at 100 %
+    done = ncgate("sweep", "spec.toml", "--explore", "40", "--workers", "2", cwd=tmp_path)
+    assert done.returncode == 1, done.stderr
+    rows = rows_of(tmp_path / "spec-explore.csv")
+    assert len(rows) == 40
+    for row in rows:  # late: the move (1 s at 100 %) and two blocks' time end after 1.2 s
+        late = 100 * 1.0 / int(row["nc.feed_override"]) + float(row["nc.block_time_ms"]) * \
+            2 / 1000 > 1.2
+        assert row["verdict"] == ("stall" if late else "ok"), row
+    assert {r["verdict"] for r in rows} == {"ok", "stall"}
+    found = re.search(r"^stall in (\d+) of 40 variants: (.*)\n  smallest reproducer "
+                      r"\(([\d.]+) s, (\w+)\): (.*)$", done.stdout, re.M)
+    assert found, done.stdout
+    assert int(found[1]) == sum(r["verdict"] == "stall" for r in rows)
+    assert "P1 A.nc:4 (WAI,2)" in found[2] and "P2 B.nc:2 (WAI,SA10=1)" in found[2]
+    stalls = [r for r in rows if r["verdict"] == "stall"]
+    first = min(stalls, key=lambda r: float(r["cycle_s"]))
+    assert found[4] == first["id"] and found[3] == f"{float(first['cycle_s']):.3f}"
+    again = ncgate(*shlex.split(found[5])[1:], cwd=tmp_path)
+    assert again.returncode == 1 and "stall: every process is blocked" in again.stdout
+
+
 # -- resume after kill -9, parquet --------------------------------------------------------
 
 
