@@ -300,6 +300,30 @@ def test_explore_finds_the_planted_race_and_prints_its_reproducer(tmp_path: Path
     assert again.returncode == 1 and "stall: every process is blocked" in again.stdout
 
 
+def test_the_pytest_kit_makes_one_test_per_variant_under_xdist(tmp_path: Path) -> None:
+    cell = tmp_path / "cell"
+    cell.mkdir()
+    for name, text in RACE.items():
+        (cell / name).write_text(text)
+    # 100 %: the SND comes at 1 s, in time; 70 %: at 1.43 s, after the PLC dropped SA10.
+    (cell / "spec.toml").write_text(RACE["spec.toml"] + '[grid]\n"nc.feed_override" = '
+                                    "[100, 70, 90, 80]\n")
+    (tmp_path / "test_library.py").write_text(
+        "from ncgate.gateway.testing import ncgate_sweep\n\n"
+        'test_library = ncgate_sweep("cell/spec.toml")\n')
+    done = subprocess.run([sys.executable, "-m", "pytest", "-n", "2", "-p", "no:cacheprovider",
+                           "-q", "test_library.py"], cwd=tmp_path, text=True,
+                          capture_output=True, timeout=300)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert re.search(r"^2 failed, 2 passed", done.stdout.splitlines()[-1]), done.stdout
+    failed = re.findall(r"^FAILED test_library.py::test_library\[(\w+)-A-nc.feed_override="
+                        r"(\d+)\]", done.stdout, re.M)
+    assert sorted(f for _, f in failed) == ["70", "80"]
+    assert "stall: [1.429] stall: every process is blocked" in done.stdout  # 1 s / 70 %
+    assert ("reproduce: ncgate sim A --config cell/ncgate.toml --script cell/plc.toml --set "
+            "nc.feed_override=70") in done.stdout
+
+
 # -- resume after kill -9, parquet --------------------------------------------------------
 
 
