@@ -407,7 +407,8 @@ def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool],
     run while ``active()``: the clock moves on to the next timer (the PLC's next scan, the
     next scripted input), which may start a program again."""
     while True:
-        outcome = run_virtual(engine, until, before_time)
+        outcome = (run_virtual(engine, until) if before_time is None
+                   else run_virtual(engine, until, before_time))
         if outcome != "idle" or until is None or not active():
             return outcome
         t = engine.next_timer()

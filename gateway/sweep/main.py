@@ -4,7 +4,9 @@ print the summary."""
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Iterator, Sequence
@@ -62,16 +64,31 @@ def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[i
     progress = Progress(len(todo)) if show else None
     pending: list[Row] = []
     last = time.monotonic()
-    for variant, result in execute(todo, options):
-        row = make_row(variant, result, spec.keys)
-        rows[variant.id] = row
-        pending.append(row)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        for variant, result in execute(todo, options):
+            row = make_row(variant, result, spec.keys)
+            rows[variant.id] = row
+            pending.append(row)
+            if progress is not None:
+                progress.step()
+            if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
+                parts.add(pending)
+                pending = []
+                last = time.monotonic()
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: keep what is done, for --resume
+        parts.add(pending)
         if progress is not None:
-            progress.step()
-        if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
-            parts.add(pending)
-            pending = []
-            last = time.monotonic()
+            progress.close()
+        print(f"ncgate sweep: stopped ({exc or 'Ctrl-C'}): {len(rows)} of "
+              f"{len(spec.variants)} variants done, kept in {parts.folder}; run again with "
+              "--resume to go on", file=sys.stderr)
+        return EXIT_FAILED, []
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     parts.add(pending)
     if progress is not None:
         progress.close()
@@ -83,6 +100,10 @@ def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[i
     summary(ordered, spec.keys, out)
     print(f"wrote {options.output}", file=out)
     return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt("SIGTERM")
 
 
 def label(row: Row, keys: Sequence[str]) -> str:
@@ -137,7 +158,7 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
 
     spec = load_spec(spec_path, explore)
     status, rows = run_sweep(spec, options)
-    if explore is not None:
+    if explore is not None and rows:
         findings(rows, spec.keys, sys.stdout)
     return status
 

@@ -375,6 +375,29 @@ def test_kill_9_mid_sweep_then_resume_gives_the_same_table(big_sweep: Path) -> N
     assert not (big_sweep / "resumed.csv.parts").exists()
 
 
+def test_sigterm_keeps_the_rows_done_for_resume(big_sweep: Path) -> None:
+    import json
+
+    total = len(rows_of(big_sweep / "whole.csv"))
+    sweep = start("sweep", "spec.toml", "-o", "stopped.csv", "--workers", "1", cwd=big_sweep)
+    try:
+        wait_for(lambda: len(parts_of(big_sweep, "stopped.csv")) >= 1 or sweep.poll() is not None,
+                 "the first part")
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        sweep.send_signal(signal.SIGTERM)
+        _, err = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 1, err
+    kept = [json.loads(line) for part in parts_of(big_sweep, "stopped.csv")
+            for line in part.read_text().splitlines()]
+    assert f"stopped (SIGTERM): {len(kept)} of {total} variants done" in err
+    assert "--resume" in err and not (big_sweep / "stopped.csv").exists()
+    again = ncgate("sweep", "spec.toml", "-o", "stopped.csv", "--resume", cwd=big_sweep)
+    assert f"resuming: {len(kept)} of {total} variants done" in again.stdout
+    assert (big_sweep / "stopped.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
 def test_resume_refuses_parts_of_another_spec(tmp_path: Path) -> None:
     (tmp_path / "OK.nc").write_text(LOOPS["OK"])
     (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
