@@ -173,6 +173,7 @@ LOOPS = {
     # Moves forever: the virtual-time budget stops it.
     "LOOP": 'E1=0\n"L"\nG1X10F6000\nG1X0\n(BLT,E1,1,L)\nM30\n',
     "OK": "G1X10F600\nM30\n",  # 1 s at 600 mm/min over 10 mm
+    "BAD": "N1G1X10F600\nN2(WAI,SA10=1\nM30\n",  # the ')' missing: sim refuses it, exit 2
 }
 
 
@@ -193,7 +194,29 @@ def test_a_hang_is_a_timeout_row_and_the_sweep_goes_on(tmp_path: Path) -> None:
     assert "budget" in rows["LOOP"]["report"]
     # The budget's row reproduces with --until at the budget: sim stops there.
     assert rows["LOOP"]["command"].endswith("--until 30.0")
-    assert "1 ok, 2 timeout" in done.stdout
+    assert rows["BAD"]["verdict"] == "error"
+    assert rows["BAD"]["report"].startswith("BAD.nc:2:14: error NC012")
+    alone = ncgate(*shlex.split(rows["BAD"]["command"])[1:], cwd=tmp_path)
+    assert alone.returncode == 2 and rows["BAD"]["report"] in alone.stderr
+    assert "4 variants: 1 ok, 2 timeout, 1 error" in done.stdout
+
+
+def test_a_terminal_gets_a_progress_line_with_rate_and_eta(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100, 150]\n')
+    code = ("import sys; from pathlib import Path\n"
+            "from ncgate.gateway.sweep.main import Options, run_sweep\n"
+            "from ncgate.gateway.sweep.spec import load_spec\n"
+            "spec = load_spec('spec.toml')\n"
+            "status, rows = run_sweep(spec, Options(Path('out.csv'), workers=1, progress=True))\n"
+            "sys.exit(status)\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                          timeout=120)  # bytes: text mode would read the \r as a new line
+    assert done.returncode == 0, done.stderr
+    assert re.search(rb"\r3/3 variants  [\d.]+/s  ETA 0 s", done.stderr), done.stderr
+    quiet = ncgate("sweep", "spec.toml", cwd=tmp_path)  # not a terminal: no progress line
+    assert quiet.returncode == 0 and "variants/s" not in quiet.stderr + quiet.stdout
 
 
 def test_an_exception_is_a_crash_row_with_its_last_line(monkeypatch: pytest.MonkeyPatch,
