@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import io
+import random
 import signal
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -289,6 +290,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     processes = config.nc.processes
     if len(mains) > processes:
         raise UsageError(f"{len(mains)} programs for {processes} processes")
+    script = timed_script(script, config)
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
     start_plant(runtime, door.apply_on_time, closed=True)
@@ -384,6 +386,25 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         result.verdicts = expectations.verdicts()
         result.exit_status = EXIT_OK if all(v.ok for v in result.verdicts) else EXIT_FAILED
     return result
+
+
+def timed_script(script: Script, config: Config) -> Script:
+    """The script with its inputs' times as ``[sim]`` has them: each ``at`` (or ``after``, past
+    its ``when``) times ``input_delay_scale``, plus a draw of 0..``input_jitter_ms`` from
+    ``seed``, one per entry in the script's order.  Its expectations keep their windows."""
+    sim = config.sim
+    if sim.input_delay_scale == 1.0 and not sim.input_jitter_ms:
+        return script
+    draws = random.Random(sim.seed)
+    entries = []
+    for entry in script.entries:
+        late = draws.uniform(0.0, sim.input_jitter_ms / 1000.0) if sim.input_jitter_ms else 0.0
+        if entry.at is not None:
+            entries.append(dataclasses.replace(entry, at=entry.at * sim.input_delay_scale + late))
+        else:
+            entries.append(dataclasses.replace(
+                entry, after=entry.after * sim.input_delay_scale + late))
+    return dataclasses.replace(script, entries=tuple(entries))
 
 
 def plant_faults(config: Config) -> list[ScriptEntry]:

@@ -21,6 +21,7 @@ samples = 10
 [explore]                          # --explore N: N seeded samples of these instead of the
 seed = 0                           # grid and random ones (default: EXPLORE_RANGES)
 "nc.feed_override" = [50, 150]
+"sim.input_delay_scale" = [0.5, 2.0]
 ```
 
 Every variant is a plain ``ncgate sim`` run: its row's ``command`` repeats it.  Its id is a
@@ -51,9 +52,12 @@ Value = bool | int | float | str
 SWEEP_KEYS = ("programs", "examples", "config", "script", "until", "budget_s")
 DEFAULT_BUDGET_S = 3600.0
 # What --explore varies by default: when each process's motion ends (the feed override),
-# when the PLC logic sees a change (its scan period) and how long each block takes.
+# how long each block takes, when the PLC logic sees a change (its scan period), and when the
+# scripted PLC answers (its times scaled, and jittered by draws from a seed).
 EXPLORE_RANGES: dict[str, list[Value]] = {
-    "nc.feed_override": [50, 150], "plc.scan_ms": [1, 50], "nc.block_time_ms": [0.0, 20.0]}
+    "nc.feed_override": [50, 150], "nc.block_time_ms": [0.0, 20.0], "plc.scan_ms": [1, 50],
+    "sim.input_delay_scale": [0.5, 2.0], "sim.input_jitter_ms": [0.0, 100.0],
+    "sim.seed": [0, 1_000_000]}
 ID_LENGTH = 12  # hex digits of the sha-256: 48 bits, no collision in any sweep one runs
 
 

@@ -297,6 +297,42 @@ RACE = {
 }
 
 
+@pytest.mark.parametrize(("sets", "expected"), [
+    ((), [0.5, 1.2]),
+    (("sim.input_delay_scale=2",), [1.0, 2.4]),
+    (("sim.input_delay_scale=0.5",), [0.25, 0.6]),
+])
+def test_sim_scales_the_scripts_input_times(tmp_path: Path, sets: tuple[str, ...],
+                                            expected: list[float]) -> None:
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    args = [w for item in sets for w in ("--set", item)]
+    done = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", "--trace",
+                  "t.jsonl", "--until", "3", *args, cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    import json
+
+    writes = [e for e in map(json.loads, (tmp_path / "t.jsonl").read_text().splitlines())
+              if e["event"] == "write" and e["var"] == "SA10"]
+    assert [w["t"] for w in writes] == pytest.approx(expected, abs=1e-6)
+
+
+def test_sim_jitters_each_input_by_a_draw_of_its_seed(tmp_path: Path) -> None:
+    import json
+
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    done = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", "--trace",
+                  "t.jsonl", "--until", "3", "--set", "sim.input_jitter_ms=300", "--set",
+                  "sim.seed=11", cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    draws = random.Random(11)
+    expected = [0.5 + draws.uniform(0, 0.3), 1.2 + draws.uniform(0, 0.3)]
+    writes = [e["t"] for e in map(json.loads, (tmp_path / "t.jsonl").read_text().splitlines())
+              if e["event"] == "write" and e["var"] == "SA10"]
+    assert writes == pytest.approx(expected, abs=1e-6)
+
+
 def test_explore_finds_the_planted_race_and_prints_its_reproducer(tmp_path: Path) -> None:
     for name, text in RACE.items():
         (tmp_path / name).write_text(text)
@@ -306,10 +342,16 @@ def test_explore_finds_the_planted_race_and_prints_its_reproducer(tmp_path: Path
     assert done.returncode == 1, done.stderr
     rows = rows_of(tmp_path / "spec-explore.csv")
     assert len(rows) == 40
-    for row in rows:  # late: the move (1 s at 100 %) and two blocks' time end after 1.2 s
-        late = 100 * 1.0 / int(row["nc.feed_override"]) + float(row["nc.block_time_ms"]) * \
-            2 / 1000 > 1.2
-        assert row["verdict"] == ("stall" if late else "ok"), row
+    for row in rows:
+        # The PLC drops SA10 at 1.2 s x the delay scale + the second of the seed's draws
+        # (docs/config.md: one draw per scripted input, in the script's order); P1's SND comes
+        # when its move (1 s at 100 %) and two blocks' processing time are done.
+        draws = random.Random(int(row["sim.seed"]))
+        jitter = float(row["sim.input_jitter_ms"]) / 1000
+        late = [draws.uniform(0.0, jitter) for _ in range(2)][1] if jitter else 0.0
+        drop = 1.2 * float(row["sim.input_delay_scale"]) + late
+        snd = 100 / int(row["nc.feed_override"]) + 2 * float(row["nc.block_time_ms"]) / 1000
+        assert row["verdict"] == ("stall" if snd > drop else "ok"), row
     assert {r["verdict"] for r in rows} == {"ok", "stall"}
     found = re.search(r"^stall in (\d+) of 40 variants: (.*)\n  smallest reproducer "
                       r"\(([\d.]+) s, (\w+)\): (.*)$", done.stdout, re.M)
