@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 
+from ncgate.gateway.sweep.pool import Runner
 from ncgate.gateway.sweep.run import Result, _result, run_variant
 from ncgate.gateway.sweep.spec import SpecError, Variant
 
@@ -26,17 +27,18 @@ MAX_CHUNK = 32
 CHUNKS_PER_THREAD = 24
 
 
-def run_chunk(variants: Sequence[Variant], timeout_s: float | None) -> list[Result]:
+def run_chunk(variants: Sequence[Variant], timeout_s: float | None,
+              runner: Runner = run_variant) -> list[Result]:
     """A task: each variant of the chunk, run in the worker's thread."""
-    return [run_variant(v, timeout_s) for v in variants]
+    return [runner(v, timeout_s) for v in variants]
 
 
 def chunk_size(variants: int, threads: int) -> int:
     return max(1, min(MAX_CHUNK, math.ceil(variants / max(1, threads * CHUNKS_PER_THREAD))))
 
 
-def run_dask(variants: Sequence[Variant], scheduler: str,
-             timeout_s: float | None) -> Iterator[tuple[Variant, Result]]:
+def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | None,
+             runner: Runner = run_variant) -> Iterator[tuple[Variant, Result]]:
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -54,7 +56,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str,
         futures = []
         for i in range(0, len(variants), size):
             chunk = list(variants[i:i + size])
-            future = client.submit(run_chunk, chunk, timeout_s, pure=False,
+            future = client.submit(run_chunk, chunk, timeout_s, runner, pure=False,
                                    key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}")
             chunks[future.key] = chunk
             futures.append(future)
@@ -66,7 +68,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str,
             except Exception as exc:
                 if len(chunk) > 1:  # find the one that kills its worker: one task each
                     for v in chunk:
-                        single = client.submit(run_chunk, [v], timeout_s, pure=False,
+                        single = client.submit(run_chunk, [v], timeout_s, runner, pure=False,
                                                key=f"ncgate-sweep-{v.id}-alone")
                         chunks[single.key] = [v]
                         pending.add(single)

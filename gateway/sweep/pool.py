@@ -26,7 +26,10 @@ GRACE_S = 5.0  # past the wall timeout, before the parent kills a silent worker
 DEATHS = 2  # a variant whose worker died this often is a crash
 
 
-def _serve(conn: Connection, timeout_s: float | None) -> None:
+Runner = Callable[[Variant, float | None], Result]  # run_variant, or a test's stand-in
+
+
+def _serve(conn: Connection, timeout_s: float | None, runner: Runner) -> None:
     """A worker: variants in, results out, until the pipe closes."""
     import signal
 
@@ -36,7 +39,7 @@ def _serve(conn: Connection, timeout_s: float | None) -> None:
             variant = conn.recv()
         except EOFError:
             return
-        conn.send(run_variant(variant, timeout_s))
+        conn.send(runner(variant, timeout_s))
 
 
 @dataclass
@@ -53,8 +56,9 @@ def default_workers() -> int:
 
 
 def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None,
-              on_start: Callable[[int], None] | None = None) -> Iterator[tuple[Variant, Result]]:
-    """Each variant's result, in the order they finish."""
+              runner: Runner = run_variant) -> Iterator[tuple[Variant, Result]]:
+    """Each variant's result, in the order they finish.  ``runner`` (a module-level function,
+    for the workers to import) runs one variant."""
     if not variants:
         return
     context = multiprocessing.get_context("forkserver")
@@ -65,7 +69,7 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
 
     def spawn() -> _Worker:
         parent, child = context.Pipe()
-        process = context.Process(target=_serve, args=(child, timeout_s), daemon=True)
+        process = context.Process(target=_serve, args=(child, timeout_s, runner), daemon=True)
         process.start()
         child.close()
         return _Worker(process, parent)
@@ -88,8 +92,6 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
     try:
         for _ in range(min(workers, len(variants))):
             pool.append(spawn())
-        if on_start is not None:
-            on_start(len(pool))
         for worker in pool:
             give(worker)
         while any(w.variant is not None for w in pool):
@@ -114,8 +116,8 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
                         continue
                 if worker.conn in ready or worker.process.sentinel in ready:
                     # The worker died with the variant: it runs again, on a new worker.
-                    code = worker.process.exitcode
                     bury(worker)
+                    code = worker.process.exitcode
                     deaths[variant.id] = deaths.get(variant.id, 0) + 1
                     if deaths[variant.id] >= DEATHS:
                         yield variant, _result("crash", report=f"its worker process died "

@@ -239,6 +239,35 @@ def test_an_exception_is_a_crash_row_with_its_last_line(monkeypatch: pytest.Monk
     assert result["report"] == "ZeroDivisionError: a bug of ncgate"
 
 
+def misbehaving_spec(folder: Path, programs: tuple[str, ...]) -> Path:
+    for name in programs:
+        (folder / name).write_text(LOOPS["OK"])
+    (folder / "spec.toml").write_text(f'[sweep]\nprograms = {list(programs)!r}\n[grid]\n'
+                                      '"nc.feed_override" = [50, 100]\n'.replace("'", '"'))
+    return folder / "spec.toml"
+
+
+def test_the_pool_survives_a_dying_and_a_stuck_worker(tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.pool import run_local
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import misbehaving
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "HANG.nc", "OK.nc", "FINE.nc")))
+    got = list(run_local(spec.variants, 2, 1.0, runner=misbehaving))
+    ids = [v.id for v, _ in got]
+    assert sorted(ids) == sorted(v.id for v in spec.variants)  # each once, none lost
+    by = {(Path(v.program).stem, dict(v.sets)["nc.feed_override"]): r for v, r in got}
+    for feed in (50, 100):
+        assert by["DIE", feed]["verdict"] == "crash"
+        assert "died 2 times (exit status 3)" in by["DIE", feed]["report"]
+        assert by["HANG", feed]["verdict"] == "timeout"
+        assert "was killed" in by["HANG", feed]["report"]
+        # 10 mm at 600 mm/min x the override: 2 s at 50 %, 1 s at 100 %
+        assert by["OK", feed]["verdict"] == by["FINE", feed]["verdict"] == "ok"
+        assert by["OK", feed]["cycle_s"] == 100 / feed
+
+
 @pytest.mark.parametrize(("spec", "said"), [
     ('[sweep]\nprograms = ["OK.nc"]\n[grid]\n"nc.lookahead" = [0, -1]\n', "nc.lookahead"),
     ('[sweep]\nprograms = ["OK.nc"]\n[grid]\n"nc.bogus" = [1]\n', "nc.bogus: unknown key"),
@@ -542,6 +571,24 @@ def test_dask_gives_the_same_table(cluster: object, big_sweep: Path) -> None:
                   cwd=big_sweep)
     assert done.returncode == 1, done.stderr
     assert (big_sweep / "dask.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
+def test_a_variant_that_kills_its_dask_workers_is_a_crash_row_alone(cluster: object,
+                                                                    tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.cluster import run_dask
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import misbehaving
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "OK.nc", "FINE.nc")))
+    address = cluster.scheduler.address  # type: ignore[attr-defined]
+    got = list(run_dask(spec.variants, address, 10.0, runner=misbehaving))
+    assert sorted(v.id for v, _ in got) == sorted(v.id for v in spec.variants)
+    for variant, result in got:
+        if Path(variant.program).stem == "DIE":
+            assert result["verdict"] == "crash" and "KilledWorker" in result["report"]
+        else:  # in a chunk with DIE, or not: each runs again alone and is ok
+            assert result["verdict"] == "ok", result
 
 
 def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
