@@ -595,7 +595,7 @@ def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
                                                                big_sweep: Path) -> None:
     client = cluster
     address = client.scheduler.address  # type: ignore[attr-defined]
-    pids = client.run(os.getpid)  # type: ignore[attr-defined]
+    client.wait_for_workers(2, timeout=120)  # type: ignore[attr-defined]
     sweep = start("sweep", "spec.toml", "-o", "dask-killed.csv", "--scheduler", address,
                   cwd=big_sweep)
     try:
@@ -607,7 +607,8 @@ def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
                  or sweep.poll() is not None, "a worker running a chunk after a first part")
         assert sweep.poll() is None
         victim = busy()[0]
-        os.kill(pids[victim], signal.SIGKILL)
+        pid = client.run(os.getpid, workers=[victim])[victim]  # type: ignore[attr-defined]
+        os.kill(pid, signal.SIGKILL)
         _out, err = sweep.communicate(timeout=300)
     finally:
         sweep.kill()
