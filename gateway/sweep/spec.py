@@ -185,10 +185,10 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
     runs = _programs(sweep, base, config_path, scripts, fail)
     if not runs:
         raise fail("sweep.programs", "no program to run (give programs or examples)")
-    grid = _table(raw, "grid", fail)
-    rand = _table(raw, "random", fail)
+    grid = _flat(_table(raw, "grid", fail))
+    rand = _flat(_table(raw, "random", fail))
     if explore is not None:
-        table = _table(raw, "explore", fail)
+        table = _flat(_table(raw, "explore", fail))
         ranges = {k: v for k, v in table.items() if k != "seed"} or EXPLORE_RANGES
         grid = {}
         rand = {"seed": table.get("seed", 0), "samples": explore, **ranges}
@@ -318,13 +318,22 @@ def _programs(sweep: dict[str, Any], base: Path, config: Path | None,
     return runs
 
 
+def _flat(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A table's dotted keys as written, quoted (``"nc.snd" = ...``) or not (``nc.snd = ...``,
+    which TOML reads as nested tables)."""
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[dict[str, Value]], list[str]]:
     keys = []
     lists = []
     for key, values in grid.items():
-        if isinstance(values, dict):
-            raise fail(f"grid.{key}", 'expected a list of values; quote a dotted key '
-                       '("nc.snd" = [...])')
         if not isinstance(values, list) or not values:
             raise fail(f"grid.{key}", "expected a non-empty list of values")
         for v in values:

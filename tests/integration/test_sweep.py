@@ -418,6 +418,20 @@ def test_the_pytest_kit_makes_one_test_per_variant_under_xdist(tmp_path: Path) -
             "nc.feed_override=70") in done.stdout
 
 
+def test_a_dotted_key_quoted_or_not_is_the_same_key(tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.spec import load_spec
+
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "a.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                     '"nc.snd" = ["rendezvous", "latched"]\n')
+    (tmp_path / "b.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                     'nc.snd = ["rendezvous", "latched"]\n')
+    a, b = load_spec(tmp_path / "a.toml"), load_spec(tmp_path / "b.toml")
+    assert a.keys == b.keys == ["nc.snd"]
+    assert [v.id for v in a.variants] == [v.id for v in b.variants]
+    assert len(a.variants) == 2
+
+
 # -- resume after kill -9, parquet --------------------------------------------------------
 
 
