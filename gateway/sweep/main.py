@@ -3,6 +3,7 @@ print the summary."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import sys
@@ -159,14 +160,16 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     spec = load_spec(spec_path, explore)
     status, rows = run_sweep(spec, options)
     if explore is not None and rows:
-        findings(rows, spec.keys, sys.stdout)
+        findings(rows, spec, sys.stdout, options.timeout_s)
     return status
 
 
-def findings(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
+def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
+             timeout_s: float | None = None) -> None:
     """``--explore``: the failures grouped by signature (the deadlock's cycle, the stall's
-    blocked processes, the first alarm's code and block), each with its smallest reproducer:
-    the variant that shows it in the least simulated time."""
+    blocked processes, the first alarm's code and block), each with the variant that shows it
+    in the least simulated time, and its smallest reproducer: that variant with each swept key
+    left at its default in turn, as long as the run still fails the same way."""
     groups: dict[tuple[str, str], list[Row]] = {}
     for row in rows:
         if row["verdict"] != "ok":
@@ -177,11 +180,28 @@ def findings(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
         return
     print(f"explored {len(rows)} variants: {len(groups)} distinct failure"
           f"{'s' if len(groups) > 1 else ''}", file=out)
+    variants = {v.id: v for v in spec.variants}
     for (verdict, signature), found in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):
-        smallest = min(found, key=lambda r: (r["cycle_s"], r["id"]))
+        first = min(found, key=lambda r: (r["cycle_s"], r["id"]))
         print(f"{verdict} in {len(found)} of {len(rows)} variants: {signature}", file=out)
-        print(f"  smallest reproducer ({smallest['cycle_s']:.3f} s, {smallest['id']}): "
-              f"{smallest['command']}", file=out)
+        print(f"  first in {first['cycle_s']:.3f} s of simulated time: {first['id']}", file=out)
+        smallest = reduce(variants[first["id"]], verdict, first["signature"], timeout_s)
+        print(f"  smallest reproducer: {smallest.command()}", file=out)
+
+
+def reduce(variant: Variant, verdict: str, signature: str,
+           timeout_s: float | None) -> Variant:
+    """``variant`` without each swept key (its default instead) that the failure does not
+    need: one key at a time, in column order, kept out when the run without it fails with
+    the same verdict and signature."""
+    from ncgate.gateway.sweep.run import run_variant
+
+    for key, _ in variant.sets:
+        fewer = dataclasses.replace(variant, sets=tuple(s for s in variant.sets if s[0] != key))
+        result = run_variant(fewer, timeout_s)
+        if (result["verdict"], result["signature"]) == (verdict, signature):
+            variant = fewer
+    return variant
 
 
 __all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "Options", "SpecError", "main", "run_sweep"]
