@@ -75,12 +75,21 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
         return _Worker(process, parent)
 
     def give(worker: _Worker) -> None:
-        if todo:
-            worker.variant = todo.popleft()
-            worker.since = time.monotonic()
-            worker.conn.send(worker.variant)
-        else:
-            worker.variant = None
+        worker.variant = None
+        if not todo:
+            return
+        variant = todo.popleft()
+        try:
+            worker.conn.send(variant)
+        except OSError:  # it died after its last answer: the variant goes to a new one
+            todo.appendleft(variant)
+            bury(worker)
+            fresh = spawn()
+            pool.append(fresh)
+            give(fresh)
+            return
+        worker.variant = variant
+        worker.since = time.monotonic()
 
     def bury(worker: _Worker) -> None:
         worker.conn.close()
