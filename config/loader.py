@@ -861,6 +861,21 @@ class PlantConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class SimConfig:
+    """How ``ncgate sim`` times its script's inputs: the PLC's answers slower, faster or
+    jittered, as keys that ``--set`` and ``ncgate sweep`` vary (docs/sweep.md)."""
+
+    input_delay_scale: float = setting(1.0, "sim: every scripted input's time (its `at`, or "
+                                       "its `after` past its `when`) multiplied by this: the "
+                                       "PLC answering slower (> 1) or faster", lo=0, hi=1000)
+    input_jitter_ms: float = setting(0.0, "sim: and each scripted input later by a random "
+                                     "0..this many ms, drawn in the script's order from "
+                                     "sim.seed", lo=0, hi=3_600_000)
+    seed: int = setting(0, "sim: the seed of sim.input_jitter_ms's draws", lo=0,
+                        hi=2**63 - 1)
+
+
+@dataclass(frozen=True, slots=True)
 class TraceConfig:
     """What ``ncgate run`` keeps of the trace: memory stays flat however long it runs."""
 
@@ -910,6 +925,7 @@ class Config:
     canopen: CanopenConfig = setting(doc="[canopen]", factory=CanopenConfig)
     trace: TraceConfig = setting(doc="[trace]", factory=TraceConfig)
     plant: PlantConfig = setting(doc="[plant]", factory=PlantConfig)
+    sim: SimConfig = setting(doc="[sim]", factory=SimConfig)
     web: WebConfig = setting(doc="[web]", factory=WebConfig)
     symbols_file: Path | None = setting(
         None, "a CSV I/O list of more I/O names: a header of name, var and (optionally) "
@@ -1302,7 +1318,7 @@ def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
 _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
     ModbusTlsConfig, ModbusRtuConfig, ModbusRtuTcpConfig, ModbusConfig, CanopenConfig,
-    TraceConfig, PlantConfig, WebTlsConfig, WebConfig)})
+    TraceConfig, PlantConfig, WebTlsConfig, WebConfig, SimConfig)})
 
 
 def config_markdown() -> str:
@@ -1313,8 +1329,8 @@ def config_markdown() -> str:
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
              "`[nc.limits]`, `[nc.aux]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
              "`[modbus.roles]`, `[modbus.rtu]`, `[modbus.rtu_tcp]`, `[canopen]`, `[trace]`, "
-             "`[web]`); an unknown key or a bad value is an error naming the file and the "
-             "dotted key. Paths are relative to the config file.", "",
+             "`[sim]`, `[web]`); an unknown key or a bad value is an error naming the file and "
+             "the dotted key. Paths are relative to the config file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):
         lines.append(f"| `{dotted}` | {_shown(default)} | {doc} |")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import io
+import random
 import signal
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -271,10 +272,14 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             until: float | None = None, *, signals: bool = False,
             single_block: bool = False, breaks: Sequence[str] = (),
             keep_going: bool = False, at: str | None = None,
-            with_calc: bool = False) -> SimResult:
+            with_calc: bool = False,
+            before_time: Callable[[float], None] | None = None) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
+
+    ``before_time`` is called with each time the clock is about to move to (``ncgate sweep``
+    stops a variant past its virtual-time budget by raising from it).
 
     Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
     ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
@@ -285,6 +290,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     processes = config.nc.processes
     if len(mains) > processes:
         raise UsageError(f"{len(mains)} programs for {processes} processes")
+    script = timed_script(script, config)
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
     start_plant(runtime, door.apply_on_time, closed=True)
@@ -354,7 +360,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     try:
         if signals:  # installed inside the try: a SIGTERM from now on is always reported
             previous = signal.signal(signal.SIGTERM, _terminated)
-        outcome = _run_to_end(engine, until, active)
+        outcome = _run_to_end(engine, until, active, before_time)
     except KeyboardInterrupt as exc:  # what happened so far is still reported and written
         engine.finish_stats()
         by = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
@@ -382,6 +388,25 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     return result
 
 
+def timed_script(script: Script, config: Config) -> Script:
+    """The script with its inputs' times as ``[sim]`` has them: each ``at`` (or ``after``, past
+    its ``when``) times ``input_delay_scale``, plus a draw of 0..``input_jitter_ms`` from
+    ``seed``, one per entry in the script's order.  Its expectations keep their windows."""
+    sim = config.sim
+    if sim.input_delay_scale == 1.0 and not sim.input_jitter_ms:
+        return script
+    draws = random.Random(sim.seed)
+    entries = []
+    for entry in script.entries:
+        late = draws.uniform(0.0, sim.input_jitter_ms / 1000.0) if sim.input_jitter_ms else 0.0
+        if entry.at is not None:
+            entries.append(dataclasses.replace(entry, at=entry.at * sim.input_delay_scale + late))
+        else:
+            entries.append(dataclasses.replace(
+                entry, after=entry.after * sim.input_delay_scale + late))
+    return dataclasses.replace(script, entries=tuple(entries))
+
+
 def plant_faults(config: Config) -> list[ScriptEntry]:
     """``[[plant.fault]]`` as entries a script player plays: at a time, on a condition, or
     (neither) at the start."""
@@ -397,12 +422,14 @@ def _terminated(signum: int, frame: object) -> None:
     raise Terminated
 
 
-def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool]) -> str:
+def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool],
+                before_time: Callable[[float], None] | None = None) -> str:
     """``run_virtual``, except that with ``until`` every process being idle does not end the
     run while ``active()``: the clock moves on to the next timer (the PLC's next scan, the
     next scripted input), which may start a program again."""
     while True:
-        outcome = run_virtual(engine, until)
+        outcome = (run_virtual(engine, until) if before_time is None
+                   else run_virtual(engine, until, before_time))
         if outcome != "idle" or until is None or not active():
             return outcome
         t = engine.next_timer()
@@ -411,6 +438,8 @@ def _run_to_end(engine: Engine, until: float | None, active: Callable[[], bool])
         if t > until:
             engine.set_time(until)
             return "until"
+        if before_time is not None:
+            before_time(t)
         engine.advance_to(t)
 
 

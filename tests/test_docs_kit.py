@@ -34,7 +34,8 @@ def signature(name: str, fn: Callable[..., Any], constructor: bool = False) -> s
 
 def helpers() -> list[str]:
     lines = [signature("ncgate_test_config", pytest_plugin.ncgate_test_config),
-             signature("replay", testing.replay)]
+             signature("replay", testing.replay),
+             signature("ncgate_sweep", testing.ncgate_sweep)]
     for cls in (VirtualPLC, CanopenMaster, PlcWatch, ManualClock):
         lines.append(signature(cls.__name__, cls.__init__, constructor=True))
         lines += [signature(f"{cls.__name__}.{name}", fn) for name, fn in vars(cls).items()
@@ -73,5 +74,6 @@ def test_the_page_names_each_import_path() -> None:
                   "from ncgate.gateway.testing.canopen_kit import CanopenMaster",
                   "from ncgate.gateway.testing.plc_kit import PlcWatch",
                   "from ncgate.gateway.canopen.clock import ManualClock",
-                  "from ncgate.gateway.testing import replay"):
+                  "from ncgate.gateway.testing import replay",
+                  "from ncgate.gateway.testing import ncgate_sweep"):
         assert where in DOC

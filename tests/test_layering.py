@@ -11,7 +11,8 @@
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``rtu/``
   imports pyserial, only ``web/`` imports
-  aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
+  aiohttp (and the gateway imports ``web/`` only when a console is served); only ``sweep/``
+  imports dask, distributed or pyarrow, each when used; the CLI and the
   test kit are leaves that nothing else in the gateway imports;
 - a dialect is one folder: outside ``interpreter/<dialect>/`` and the registry
   (``interpreter/dialects.py``) nothing imports a dialect's package or branches on a member of
@@ -133,6 +134,25 @@ def test_fieldbus_libraries_stay_in_their_adapters() -> None:
             assert module.startswith("ncgate.gateway.web."), module
         if "serial" in tops:  # pyserial
             assert module.startswith("ncgate.gateway.rtu."), module
+        if tops & {"dask", "distributed", "pyarrow"}:
+            assert module.startswith("ncgate.gateway.sweep."), module
+
+
+def test_a_sweep_loads_dask_and_pyarrow_only_when_asked() -> None:
+    """A local CSV sweep runs without the extras: the cluster and Parquet load on use."""
+    code = ("import sys; import ncgate.gateway.cli.main, ncgate.gateway.sweep.main, "
+            "ncgate.gateway.sweep.pool, ncgate.gateway.sweep.table, ncgate.gateway.sweep.cluster\n"
+            "bad = [m for m in ('dask', 'distributed', 'pyarrow') if m in sys.modules]\n"
+            "sys.exit(f'loaded: {bad}' if bad else 0)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
+def test_only_the_cli_imports_the_sweep() -> None:
+    for module, names in gateway_modules().items():
+        if not module.startswith(("ncgate.gateway.cli", "ncgate.gateway.sweep",
+                                  "ncgate.gateway.testing")):
+            assert not any(allowed(n, {"ncgate.gateway.sweep"}) for n in names), module
 
 
 def test_a_gateway_without_console_does_not_load_the_web_library() -> None:

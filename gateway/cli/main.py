@@ -154,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "(a cell whose programs arrive later); default: refuse, with the "
                      "diagnostics of 'ncgate check'")
 
+    _add_sweep(commands)
+
     map_ = commands.add_parser("map", help="print the Modbus map in force",
                                description="The Modbus map in force, with 0-based and 1-based "
                                "(0xxxx/1xxxx/3xxxx/4xxxx) addresses, types and access.")
@@ -189,6 +191,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run(args)
         if args.command == "map":
             return _map(args)
+        if args.command == "sweep":
+            return _sweep(args)
         if args.command == "eds":
             return _eds(args)
         if args.command == "examples":
@@ -566,6 +570,48 @@ def _programs_ready(config: Config) -> tuple[CheckedFile, ...] | None:
     print("ncgate run: not started: the configured programs cannot run (give --allow-missing "
           "to start anyway, for a cell whose programs arrive later)", file=sys.stderr)
     return None
+
+
+def _add_sweep(commands: Any) -> None:
+    sweep = commands.add_parser(
+        "sweep", help="run every variant of a spec as independent sims, into one table",
+        description="Run each variant of SPEC.toml (programs x scripts x [grid] x [random]) "
+        "as an independent 'ncgate sim', on every core or a Dask cluster; write one row per "
+        "variant, sorted by id (docs/sweep.md). Exit 0 when every row is ok, 1 when one is "
+        "not, 2 on a bad spec.")
+    sweep.add_argument("spec", metavar="SPEC.toml")
+    sweep.add_argument("-o", "--output", metavar="FILE", help="the table (default: "
+                       "SPEC's name with .csv or .parquet, in the working folder)")
+    sweep.add_argument("--format", choices=("csv", "parquet"), default="csv")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local worker processes "
+                       "(default: one per core)")
+    sweep.add_argument("--scheduler", metavar="URL", help="run on a Dask cluster "
+                       "(tcp://HOST:8786; pip install 'ncgate[dask]')")
+    sweep.add_argument("--resume", action="store_true", help="continue a stopped sweep: "
+                       "run only the variants its parts lack")
+    sweep.add_argument("--timeout", type=float, default=60.0, metavar="S", help="wall-clock "
+                       "seconds a variant may run (then: a timeout row; default 60, 0: none)")
+    sweep.add_argument("--explore", type=int, metavar="N", help="run N seeded random timing "
+                       "variants per program and group the failures by signature")
+    sweep.add_argument("-q", "--quiet", action="store_true", help="no progress line")
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from ncgate.gateway.sweep.main import Options
+    from ncgate.gateway.sweep.main import main as sweep
+
+    if args.workers is not None and args.workers < 1:
+        raise UsageError("--workers: expected 1 or more")
+    if args.timeout < 0:
+        raise UsageError("--timeout: expected seconds >= 0")
+    if args.explore is not None and args.explore < 1:
+        raise UsageError("--explore: expected 1 or more")
+    suffix = ".parquet" if args.format == "parquet" else ".csv"
+    stem = Path(args.spec).stem + ("-explore" if args.explore else "")
+    output = Path(args.output) if args.output else Path(stem + suffix)
+    options = Options(output, args.format, args.workers, args.scheduler, args.resume,
+                      args.timeout or None, False if args.quiet else None)
+    return sweep(args.spec, options, explore=args.explore)
 
 
 def _map(args: argparse.Namespace) -> int:

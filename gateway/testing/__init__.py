@@ -1,12 +1,14 @@
 """What users' own test suites use: the pytest plugin (``ncgate[pytest]``), the virtual-PLC
 Modbus client (``modbus_kit``), the CANopen master (``canopen_kit``), :func:`wait_event`,
-which awaits an event of a running gateway's trace, and :func:`replay`, which turns a session
-recorded at the machine (``ncgate run --record``) into a regression test."""
+which awaits an event of a running gateway's trace, :func:`replay`, which turns a session
+recorded at the machine (``ncgate run --record``) into a regression test, and
+:func:`ncgate_sweep`, which makes a sweep's variants one test each."""
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -67,4 +69,20 @@ def replay(record: str | Path, config: str | Path | None = None,
     return result
 
 
-__all__ = ["replay", "wait_event"]
+def ncgate_sweep(spec: str | Path, *, allow: Iterable[str] = ("ok",),
+                 timeout_s: float | None = 60.0) -> Callable[..., None]:
+    """One test per variant of a sweep's spec (``ncgate sweep``, docs/sweep.md); a relative
+    path is relative to the test file's folder.
+
+        test_library = ncgate_sweep("sweeps/library.toml")
+    """
+    from ncgate.gateway.testing.sweep_kit import ncgate_sweep as make
+
+    if not Path(spec).is_absolute():
+        caller = sys._getframe(1).f_globals.get("__file__")
+        if caller:
+            spec = Path(caller).resolve().parent / spec
+    return make(spec, allow=allow, timeout_s=timeout_s)
+
+
+__all__ = ["ncgate_sweep", "replay", "wait_event"]

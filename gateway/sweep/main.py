@@ -1,0 +1,207 @@
+"""``ncgate sweep``: run a spec's variants (locally, or on a Dask cluster), write the table,
+print the summary."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from ncgate.gateway.sweep.run import Result
+from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
+from ncgate.gateway.sweep.table import Parts, Row, csv_bytes, make_row, parquet_bytes, write_atomic
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+FLUSH_ROWS = 64  # rows a part holds at most
+FLUSH_S = 2.0  # and a part is written at least this often while rows come
+SLOWEST = 5
+WORST = 10
+
+
+@dataclass
+class Options:
+    output: Path
+    format: str = "csv"  # or "parquet"
+    workers: int | None = None
+    scheduler: str | None = None
+    resume: bool = False
+    timeout_s: float | None = 60.0
+    progress: bool | None = None  # None: on a terminal, not in CI
+
+
+def execute(variants: Sequence[Variant], options: Options) -> Iterator[tuple[Variant, Result]]:
+    if options.scheduler:
+        from ncgate.gateway.sweep.cluster import run_dask
+
+        yield from run_dask(variants, options.scheduler, options.timeout_s)
+    else:
+        from ncgate.gateway.sweep.pool import default_workers, run_local
+
+        yield from run_local(variants, options.workers or default_workers(), options.timeout_s)
+
+
+def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[int, list[Row]]:
+    """Run what the parts lack, write the table; the exit status and the rows by id."""
+    if options.format == "parquet":
+        parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
+    parts = Parts(options.output, spec)
+    done = parts.start(options.resume)
+    rows: dict[str, Row] = dict(done)
+    todo = [v for v in spec.variants if v.id not in rows]
+    if done:
+        print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
+              file=out)
+    show = options.progress
+    if show is None:
+        show = sys.stderr.isatty() and not os.environ.get("CI")
+    progress = Progress(len(todo)) if show else None
+    pending: list[Row] = []
+    last = time.monotonic()
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        for variant, result in execute(todo, options):
+            row = make_row(variant, result, spec.keys)
+            rows[variant.id] = row
+            pending.append(row)
+            if progress is not None:
+                progress.step()
+            if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
+                parts.add(pending)
+                pending = []
+                last = time.monotonic()
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: keep what is done, for --resume
+        parts.add(pending)
+        if progress is not None:
+            progress.close()
+        print(f"ncgate sweep: stopped ({exc or 'Ctrl-C'}): {len(rows)} of "
+              f"{len(spec.variants)} variants done, kept in {parts.folder}; run again with "
+              "--resume to go on", file=sys.stderr)
+        return EXIT_FAILED, []
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+    parts.add(pending)
+    if progress is not None:
+        progress.close()
+    ordered = [rows[v.id] for v in spec.variants]  # spec.variants is sorted by id
+    data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
+            else csv_bytes(ordered, spec.keys))
+    write_atomic(options.output, data)
+    parts.finish()
+    summary(ordered, spec.keys, out)
+    print(f"wrote {options.output}", file=out)
+    return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt("SIGTERM")
+
+
+def label(row: Row, keys: Sequence[str]) -> str:
+    values = " ".join(f"{k}={row[k]}" for k in keys if row.get(k) is not None)
+    script = f" {Path(row['script']).name}" if row.get("script") else ""
+    return f"{row['program']}{script}" + (f" {values}" if values else "")
+
+
+def summary(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
+    counts = Counter(r["verdict"] for r in rows)
+    order = sorted(counts, key=lambda v: (v != "ok", -counts[v], v))
+    print(f"{len(rows)} variants: " + ", ".join(f"{counts[v]} {v}" for v in order), file=out)
+    ran = [r for r in rows if r["verdict"] not in ("crash", "error")]
+    if ran:
+        print("slowest (cycle time):", file=out)
+        for r in sorted(ran, key=lambda r: (-r["cycle_s"], r["id"]))[:SLOWEST]:
+            print(f"  {r['cycle_s']:10.3f} s  {r['id']}  {label(r, keys)}", file=out)
+    bad = [r for r in rows if r["verdict"] != "ok"]
+    if bad:
+        shown = f" (the first {WORST} of {len(bad)})" if len(bad) > WORST else ""
+        print(f"not ok{shown}:", file=out)
+        for r in bad[:WORST]:
+            print(f"  {r['id']}  {r['verdict']:<13} {label(r, keys)}: {r['report']}", file=out)
+
+
+class Progress:
+    """One line on stderr: done/total, rate, ETA."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.done = 0
+        self.start = time.monotonic()
+        self.shown = 0.0
+
+    def step(self) -> None:
+        self.done += 1
+        now = time.monotonic()
+        if now - self.shown < 0.2 and self.done < self.total:
+            return
+        self.shown = now
+        rate = self.done / max(now - self.start, 1e-9)
+        eta = (self.total - self.done) / rate if rate else 0.0
+        sys.stderr.write(f"\r{self.done}/{self.total} variants  {rate:.1f}/s  ETA {eta:.0f} s ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        sys.stderr.write("\n")
+
+
+def main(spec_path: str, options: Options, explore: int | None = None) -> int:
+    from ncgate.gateway.sweep.spec import load_spec
+
+    spec = load_spec(spec_path, explore)
+    status, rows = run_sweep(spec, options)
+    if explore is not None and rows:
+        findings(rows, spec, sys.stdout, options.timeout_s)
+    return status
+
+
+def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
+             timeout_s: float | None = None) -> None:
+    """``--explore``: the failures grouped by signature (the deadlock's cycle, the stall's
+    blocked processes, the first alarm's code and block), each with the variant that shows it
+    in the least simulated time, and its smallest reproducer: that variant with each swept key
+    left at its default in turn, as long as the run still fails the same way."""
+    groups: dict[tuple[str, str], list[Row]] = {}
+    for row in rows:
+        if row["verdict"] != "ok":
+            key = (row["verdict"], row["signature"] or row["report"])
+            groups.setdefault(key, []).append(row)
+    if not groups:
+        print(f"explored {len(rows)} variants: no failure", file=out)
+        return
+    print(f"explored {len(rows)} variants: {len(groups)} distinct failure"
+          f"{'s' if len(groups) > 1 else ''}", file=out)
+    variants = {v.id: v for v in spec.variants}
+    for (verdict, signature), found in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):
+        first = min(found, key=lambda r: (r["cycle_s"], r["id"]))
+        print(f"{verdict} in {len(found)} of {len(rows)} variants: {signature}", file=out)
+        print(f"  first in {first['cycle_s']:.3f} s of simulated time: {first['id']}", file=out)
+        smallest = reduce(variants[first["id"]], verdict, first["signature"], timeout_s)
+        print(f"  smallest reproducer: {smallest.command()}", file=out)
+
+
+def reduce(variant: Variant, verdict: str, signature: str,
+           timeout_s: float | None) -> Variant:
+    """``variant`` without each swept key (its default instead) that the failure does not
+    need: one key at a time, in column order, kept out when the run without it fails with
+    the same verdict and signature."""
+    from ncgate.gateway.sweep.run import run_variant
+
+    for key, _ in variant.sets:
+        fewer = dataclasses.replace(variant, sets=tuple(s for s in variant.sets if s[0] != key))
+        result = run_variant(fewer, timeout_s)
+        if (result["verdict"], result["signature"]) == (verdict, signature):
+            variant = fewer
+    return variant
+
+
+__all__ = ["EXIT_FAILED", "EXIT_OK", "EXIT_USAGE", "Options", "SpecError", "main", "run_sweep"]

@@ -1,0 +1,403 @@
+"""A sweep's spec (``ncgate sweep SPEC.toml``): what to run, as a list of variants.
+
+```toml
+[sweep]
+programs = ["progs/*.nc"]          # main programs (globs, relative to this file)
+examples = ["scheme3", "hazard"]   # and/or installed examples ("*": every runnable one)
+config = "cell.toml"               # default: ncgate.toml beside each program, else built-in
+script = "plc.toml"                # or a list of globs: each script is a variant of its own
+until = 60.0                       # stop each run here (as sim --until)
+budget_s = 3600.0                  # no until: virtual time a variant may run (then: timeout)
+
+[grid]                             # every combination of these values
+"nc.snd" = ["rendezvous", "latched"]
+"nc.lookahead" = [0, 4, 16]
+
+[random]                           # and this many seeded samples of these ranges each
+seed = 1
+samples = 10
+"nc.feed_override" = [50, 150]     # integers: an integer in the range; floats: a float
+
+[explore]                          # --explore N: N seeded samples of these instead of the
+seed = 0                           # grid and random ones (default: EXPLORE_RANGES)
+"nc.feed_override" = [50, 150]
+"sim.input_delay_scale" = [0.5, 2.0]
+```
+
+Every variant is a plain ``ncgate sim`` run: its row's ``command`` repeats it.  Its id is a
+hash of its resolved inputs (the files' paths relative to the spec, the values), so the
+same spec gives the same ids wherever it runs.  Errors name the spec file and the dotted key.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import itertools
+import json
+import math
+import os
+import random
+import shlex
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ncgate.config import ConfigError, load_config
+from ncgate.config.loader import read_toml
+
+Value = bool | int | float | str
+SWEEP_KEYS = ("programs", "examples", "config", "script", "until", "budget_s")
+DEFAULT_BUDGET_S = 3600.0
+# What --explore varies by default: when each process's motion ends (the feed override),
+# how long each block takes, when the PLC logic sees a change (its scan period), and when the
+# scripted PLC answers (its times scaled, and jittered by draws from a seed).
+EXPLORE_RANGES: dict[str, list[Value]] = {
+    "nc.feed_override": [50, 150], "nc.block_time_ms": [0.0, 20.0], "plc.scan_ms": [1, 50],
+    "sim.input_delay_scale": [0.5, 2.0], "sim.input_jitter_ms": [0.0, 100.0],
+    "sim.seed": [0, 1_000_000]}
+ID_LENGTH = 12  # hex digits of the sha-256: 48 bits, no collision in any sweep one runs
+
+
+class SpecError(ConfigError):
+    """A spec that cannot be run: the message names the file and the dotted key."""
+
+
+@dataclass(frozen=True, slots=True)
+class Variant:
+    """One ``ncgate sim`` run of a sweep."""
+
+    id: str
+    program: str  # the main program's file, as shown (relative to the working folder)
+    main: str  # the name run_sim starts (with a config: the program's name on its storage)
+    config: str | None  # the config file (None: the built-in one, MP0 = the program's folder)
+    script: str | None
+    until: float | None
+    sets: tuple[tuple[str, Value], ...]  # the swept keys and their values, in column order
+    budget_s: float = DEFAULT_BUDGET_S
+    storage: str | None = None  # without a config: the program's folder, as MP0
+
+    def set_args(self) -> list[str]:
+        return [f"{key}={render_value(value)}" for key, value in self.sets]
+
+    def overrides(self) -> dict[str, Any]:
+        """The config overrides, parsed back from ``--set`` text exactly as ``sim`` does."""
+        out = {key: parse_value(text) for key, _, text in
+               (item.partition("=") for item in self.set_args())}
+        if self.storage is not None:
+            out["nc.storage.MP0"] = self.storage
+        return out
+
+    def command(self) -> str:
+        """The ``ncgate sim`` command line that runs this variant alone."""
+        words = ["ncgate", "sim", self.program if self.config is None else self.main]
+        if self.config is not None:
+            words += ["--config", self.config]
+        if self.script is not None:
+            words += ["--script", self.script]
+        if self.until is not None:
+            words += ["--until", render_value(self.until)]
+        for item in self.set_args():
+            words += ["--set", item]
+        return shlex.join(words)
+
+
+@dataclass
+class Spec:
+    file: Path
+    variants: list[Variant]
+    keys: list[str]  # the swept keys, one column each
+    fingerprint: str  # the spec and the files it names: a resumed sweep must match it
+    seed: int | None = None
+    files: list[Path] = field(default_factory=list)
+
+
+def render_value(value: Value) -> str:
+    """A value as ``--set`` text that ``parse_value`` reads back to the same value."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value) if isinstance(value, float) else str(value)
+    try:
+        same = parse_value(value) == value
+    except ValueError:
+        same = False
+    return value if same and value.strip() == value and value else json.dumps(value)
+
+
+def parse_value(text: str) -> Any:
+    """``--set``'s reading of a value (gateway/cli): TOML, and a bare word is a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def shown(path: Path) -> str:
+    """A path as rows show it: relative to the working folder when it is inside it."""
+    try:
+        return path.resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return str(path.resolve())
+
+
+def variant_id(identity: dict[str, Any]) -> str:
+    text = json.dumps(identity, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:ID_LENGTH]
+
+
+def load_spec(path: str | Path, explore: int | None = None) -> Spec:
+    """The spec's variants; with ``explore``, that many seeded samples of its [explore]
+    ranges per program and script instead of its [grid] and [random]."""
+    file = Path(path)
+    raw = read_toml(file)
+    where = str(file)
+
+    def fail(key: str, message: str) -> SpecError:
+        return SpecError(f"{where}: {key}: {message}")
+
+    for name in raw:
+        if name not in ("sweep", "grid", "random", "explore"):
+            raise fail(name, "unknown key (expected [sweep], [grid], [random] or [explore])")
+    sweep = _table(raw, "sweep", fail)
+    for name in sweep:
+        if name not in SWEEP_KEYS:
+            raise fail(f"sweep.{name}", f"unknown key (expected {', '.join(SWEEP_KEYS)})")
+    base = file.parent
+    until = _number(sweep, "until", fail, None)
+    budget = _number(sweep, "budget_s", fail, DEFAULT_BUDGET_S)
+    assert budget is not None
+    if until is not None and until < 0:
+        raise fail("sweep.until", f"expected a time >= 0, got {until}")
+    if not budget > 0:
+        raise fail("sweep.budget_s", f"expected a time > 0, got {budget}")
+    config = sweep.get("config")
+    if config is not None and not isinstance(config, str):
+        raise fail("sweep.config", "expected a file name")
+    config_path = None
+    if config is not None:
+        config_path = base / config
+        if not config_path.is_file():
+            raise fail("sweep.config", f"{config}: no such file")
+    scripts = _files(sweep, "script", base, fail) if "script" in sweep else [None]
+    runs = _programs(sweep, base, config_path, scripts, fail)
+    if not runs:
+        raise fail("sweep.programs", "no program to run (give programs or examples)")
+    grid = _flat(_table(raw, "grid", fail))
+    rand = _flat(_table(raw, "random", fail))
+    if explore is not None:
+        table = _flat(_table(raw, "explore", fail))
+        ranges = {k: v for k, v in table.items() if k != "seed"} or EXPLORE_RANGES
+        grid = {}
+        rand = {"seed": table.get("seed", 0), "samples": explore, **ranges}
+        fail_ = fail
+
+        def fail(key: str, message: str) -> SpecError:
+            return fail_(key.replace("random", "explore", 1), message)
+    combos, keys = _grid(grid, fail)
+    samples, seed, random_keys = _random(rand, fail, set(keys))
+    keys += random_keys
+    choices = [{**g, **r} for g in combos for r in samples] if samples else combos
+    _check_values(runs, grid, rand, where, "random" if explore is None else "explore")
+    variants = []
+    files: set[Path] = {file.resolve()}
+    for run in runs:
+        files.update(p.resolve() for p in run.files)
+        for values in choices:
+            sets = tuple((k, values[k]) for k in keys if k in values)
+            identity = {"program": _rel(run.program, base), "config": _rel(run.config, base),
+                        "script": _rel(run.script, base), "until": until, "sets": sets,
+                        "budget_s": budget if until is None else None}
+            variants.append(Variant(
+                variant_id(identity), shown(run.program), run.main,
+                None if run.config is None else shown(run.config),
+                None if run.script is None else shown(run.script), until, sets,
+                budget, None if run.config is not None else str(run.program.parent.resolve())))
+    ids = [v.id for v in variants]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise fail("sweep", f"two variants are the same run (id {dup}): a program, script "
+                   "or value is given twice")
+    digest = hashlib.sha256()
+    for f in sorted(files):
+        digest.update(str(f).encode() + b"\0" + f.read_bytes() + b"\0")
+    return Spec(file, sorted(variants, key=lambda v: v.id), keys, digest.hexdigest(), seed,
+                sorted(files))
+
+
+# -- the parts of a spec -------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Run:
+    program: Path
+    main: str
+    config: Path | None
+    script: Path | None
+    files: tuple[Path, ...]
+
+
+def _table(raw: dict[str, Any], key: str, fail: Any) -> dict[str, Any]:
+    table = raw.get(key, {})
+    if not isinstance(table, dict):
+        raise fail(key, "expected a table")
+    return table
+
+
+def _number(table: dict[str, Any], key: str, fail: Any, default: float | None) -> float | None:
+    value = table.get(key, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise fail(f"sweep.{key}", f"expected a number of seconds, got {value!r}")
+    return float(value)
+
+
+def _strings(table: dict[str, Any], key: str, fail: Any) -> list[str]:
+    value = table.get(key, [])
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise fail(f"sweep.{key}", "expected a list of names or globs")
+    return value
+
+
+def _files(table: dict[str, Any], key: str, base: Path, fail: Any) -> list[Path | None]:
+    out: list[Path | None] = []
+    for pattern in _strings(table, key, fail):
+        found = sorted(glob.glob(str(base / pattern), recursive=True))
+        if not found:
+            raise fail(f"sweep.{key}", f"{pattern}: no such file")
+        out += [Path(f) for f in found]
+    return out
+
+
+def _programs(sweep: dict[str, Any], base: Path, config: Path | None,
+              scripts: Sequence[Path | None], fail: Any) -> list[_Run]:
+    from ncgate.gateway.examples import examples
+    from ncgate.gateway.programs import storage_of
+
+    runs: list[_Run] = []
+    for found in _files(sweep, "programs", base, fail):
+        assert found is not None
+        if not found.is_file():
+            raise fail("sweep.programs", f"{found}: not a program file")
+        own = config
+        if own is None and (found.parent / "ncgate.toml").is_file():
+            own = found.parent / "ncgate.toml"
+        main = found.stem
+        if own is not None:
+            loaded = load_config(own, serving=False)
+            on_storage = storage_of(loaded).find(main)
+            if on_storage is None or on_storage.resolve() != found.resolve():
+                raise fail("sweep.programs", f"{found}: not the program {main} of the config "
+                           f"{own} (its storage devices hold "
+                           f"{'another' if on_storage else 'no'} {main})")
+        for script in scripts:
+            extra = tuple(p for p in (own, script) if p is not None)
+            runs.append(_Run(found, main, own, script, (found, *extra)))
+    names = _strings(sweep, "examples", fail)
+    if names:
+        known = {e.name: e for e in examples() if e.main is not None}
+        chosen = sorted(known) if "*" in names else names
+        for name in chosen:
+            if name not in known:
+                raise fail("sweep.examples", f"no runnable example {name!r} (there are: "
+                           f"{', '.join(sorted(known))})")
+            example = known[name]
+            loaded = load_config(example.config, serving=False)
+            program = storage_of(loaded).find(example.main or "")
+            assert program is not None
+            suite: list[Path | None] = list(example.scripts) or [None]
+            for script in suite:
+                extra = tuple(p for p in (example.config, script) if p is not None)
+                runs.append(_Run(program, example.main or "", example.config, script,
+                                 (program, *extra)))
+    return runs
+
+
+def _flat(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A table's dotted keys as written, quoted (``"nc.snd" = ...``) or not (``nc.snd = ...``,
+    which TOML reads as nested tables)."""
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[dict[str, Value]], list[str]]:
+    keys = []
+    lists = []
+    for key, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise fail(f"grid.{key}", "expected a non-empty list of values")
+        for v in values:
+            if not isinstance(v, bool | int | float | str):
+                raise fail(f"grid.{key}", f"expected numbers, strings or booleans, got {v!r}")
+        if len({json.dumps(v) for v in values}) != len(values):
+            raise fail(f"grid.{key}", "a value is given twice")
+        keys.append(key)
+        lists.append(values)
+    combos = [dict(zip(keys, c, strict=True)) for c in itertools.product(*lists)]
+    return combos, keys
+
+
+def _random(table: dict[str, Any], fail: Any,
+            taken: set[str]) -> tuple[list[dict[str, Value]], int | None, list[str]]:
+    if not table:
+        return [], None, []
+    seed = table.get("seed", 0)
+    samples = table.get("samples")
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise fail("random.seed", f"expected an integer, got {seed!r}")
+    if isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= 1_000_000:
+        raise fail("random.samples", f"expected an integer 1..1000000, got {samples!r}")
+    ranges = {k: v for k, v in table.items() if k not in ("seed", "samples")}
+    if not ranges:
+        raise fail("random", "no key to sample: give key = [low, high]")
+    for key, bounds in ranges.items():
+        if key in taken:
+            raise fail(f"random.{key}", "swept by [grid] too")
+        if (not isinstance(bounds, list) or len(bounds) != 2
+                or not all(isinstance(b, int | float) and not isinstance(b, bool)
+                           for b in bounds) or not bounds[0] <= bounds[1]):
+            raise fail(f"random.{key}", f"expected [low, high] with low <= high, got {bounds!r}")
+    rng = random.Random(seed)
+    out = []
+    for _ in range(samples):
+        sample: dict[str, Value] = {}
+        for key, (low, high) in ranges.items():  # in the spec's order: the same draws
+            if isinstance(low, int) and isinstance(high, int):
+                sample[key] = rng.randint(low, high)
+            else:
+                sample[key] = round(rng.uniform(float(low), float(high)), 6)
+        out.append(sample)
+    return out, seed, list(ranges)
+
+
+def _check_values(runs: Sequence[_Run], grid: dict[str, Any], rand: dict[str, Any],
+                  where: str, sampled: str) -> None:
+    """Every swept value on every config the spec names: a value the config refuses is the
+    spec's error (exit 2), not a row."""
+    configs = {r.config for r in runs}
+    values: list[tuple[str, str, Value]] = [("grid", k, v) for k, vs in grid.items() for v in vs]
+    values += [(sampled, k, b) for k, bs in rand.items() if k not in ("seed", "samples")
+               for b in bs]
+    for config in sorted(configs, key=lambda c: str(c)):
+        for section, key, value in values:
+            try:
+                load_config(config, overrides={key: parse_value(render_value(value))},
+                            origins={key: f"{where}: [{section}]"}, serving=False)
+            except ConfigError as exc:
+                raise SpecError(str(exc)) from None
+
+
+def _rel(path: Path | None, base: Path) -> str | None:
+    if path is None:
+        return None
+    return Path(os.path.relpath(path.resolve(), base.resolve())).as_posix()

@@ -1,0 +1,170 @@
+"""The results table: rows, written in parts as they come, then whole (CSV or Parquet).
+
+While a sweep runs, finished rows go to ``OUTPUT.parts/`` a part at a time; a part is a
+temporary file, flushed and fsynced, then renamed into place (``os.replace`` is atomic), so a
+``kill -9`` at any byte leaves whole parts and at most a temporary file, which is ignored.
+``--resume`` reads the parts and runs only what they lack.  The table itself, sorted by id,
+is written the same way at the end, and then the parts are removed: a file named OUTPUT is
+always a whole table.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from ncgate.gateway.sweep.run import RESULT_FIELDS, Result
+from ncgate.gateway.sweep.spec import Spec, SpecError, Variant, render_value
+
+Row = dict[str, Any]
+PARTS_FORMAT = "ncgate-sweep-parts/1"
+
+
+def columns(keys: Sequence[str]) -> list[str]:
+    return ["id", "verdict", "program", "script", *keys, "cycle_s", "alarms", "hazards",
+            "running_s", "waiting_s", "signature", "report", "command"]
+
+
+def make_row(variant: Variant, result: Result, keys: Sequence[str]) -> Row:
+    values = dict(variant.sets)
+    row: Row = {"id": variant.id, "program": variant.program, "script": variant.script or ""}
+    row.update({k: values.get(k) for k in keys})
+    row.update({k: result[k] for k in RESULT_FIELDS})
+    command = variant.command()
+    if result["signature"] == "timeout budget":  # sim alone would run on: it stops there
+        command += f" --until {render_value(variant.budget_s)}"
+    row["command"] = command
+    return row
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """The file whole or not at all: a temporary file beside it, fsynced, renamed over it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as out:
+            out.write(data)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    with contextlib.suppress(OSError):  # the rename itself, on the disk
+        folder = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(folder)
+        finally:
+            os.close(folder)
+
+
+def csv_bytes(rows: Iterable[Row], keys: Sequence[str]) -> bytes:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    names = columns(keys)
+    writer.writerow(names)
+    for row in rows:
+        writer.writerow([_cell(row[name]) for name in names])
+    return out.getvalue().encode("utf-8")
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool | int | float | str) and not isinstance(value, str):
+        return render_value(value)
+    return str(value)
+
+
+def parquet_bytes(rows: Sequence[Row], keys: Sequence[str]) -> bytes:
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise SpecError("--format parquet needs pyarrow: pip install 'ncgate[parquet]'") from None
+    names = columns(keys)
+    arrays = {}
+    for name in names:
+        values = [row[name] for row in rows]
+        if name == "cycle_s":
+            arrays[name] = pa.array(values, pa.float64())
+        elif name == "hazards":
+            arrays[name] = pa.array(values, pa.int64())
+        elif name in keys:
+            arrays[name] = pa.array(_one_type(values))
+        else:
+            arrays[name] = pa.array(values, pa.string())
+    sink = io.BytesIO()
+    pq.write_table(pa.table(arrays), sink)
+    return sink.getvalue()
+
+
+def _one_type(values: list[Any]) -> list[Any]:
+    """A swept key's values as one column type: ints and floats as floats, else as text."""
+    kinds = {type(v) for v in values if v is not None}
+    if kinds <= {int, float} and float in kinds:
+        return [None if v is None else float(v) for v in values]
+    if len(kinds) > 1:
+        return [None if v is None else render_value(v) for v in values]
+    return values
+
+
+class Parts:
+    """``OUTPUT.parts/``: the rows finished so far, in whole files."""
+
+    def __init__(self, output: Path, spec: Spec) -> None:
+        self.folder = output.with_name(output.name + ".parts")
+        self.spec = spec
+        self.count = 0
+
+    def manifest(self) -> dict[str, Any]:
+        return {"format": PARTS_FORMAT, "spec": str(self.spec.file),
+                "fingerprint": self.spec.fingerprint, "variants": len(self.spec.variants)}
+
+    def start(self, resume: bool) -> dict[str, Row]:
+        """The rows of a stopped sweep (``resume``), else none: the parts are cleared."""
+        done: dict[str, Row] = {}
+        if resume and self.folder.is_dir():
+            manifest = self.folder / "manifest.json"
+            try:
+                found = json.loads(manifest.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                found = None
+            if found is not None and found != self.manifest():
+                raise SpecError(f"{self.spec.file}: --resume: the spec or a file it names "
+                                f"changed since the sweep in {self.folder} was stopped; run "
+                                "again without --resume")
+            ids = {v.id for v in self.spec.variants}
+            for part in sorted(self.folder.glob("part-*.jsonl")):
+                number = part.stem.removeprefix("part-")
+                self.count = max(self.count, int(number) if number.isdigit() else 0)
+                for line in part.read_text(encoding="utf-8").splitlines():
+                    row = json.loads(line)
+                    if row["id"] in ids:
+                        done[row["id"]] = row
+            for tmp in self.folder.glob(".*.tmp"):
+                tmp.unlink()
+        else:
+            shutil.rmtree(self.folder, ignore_errors=True)
+        write_atomic(self.folder / "manifest.json",
+                     (json.dumps(self.manifest(), indent=1) + "\n").encode())
+        return done
+
+    def add(self, rows: Sequence[Row]) -> None:
+        if not rows:
+            return
+        self.count += 1
+        text = "".join(json.dumps(row, sort_keys=True) + "\n" for row in rows)
+        write_atomic(self.folder / f"part-{self.count:06d}.jsonl", text.encode("utf-8"))
+
+    def finish(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)

@@ -1,0 +1,637 @@
+"""``ncgate sweep``: every variant of a spec as an independent sim, into one table.
+
+Real processes throughout: the sweep runs as its own ``ncgate sweep`` process, its local
+workers are processes, a Dask cluster is a LocalCluster on loopback started here, and a killed
+worker is killed with SIGKILL.  Expected verdicts come from the examples' READMEs and from
+``ncgate sim``'s own output, never from the sweep's code.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import random
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from ..conftest import EXAMPLES
+
+SNDS = ["rendezvous", "latched"]
+LOOKAHEADS = [0, 4, 16]
+EXAMPLES_SPEC = f"""
+[sweep]
+examples = ["*"]
+[grid]
+"nc.snd" = {SNDS!r}
+"nc.lookahead" = {LOOKAHEADS!r}
+""".replace("'", '"')
+
+
+def ncgate(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "ncgate", *args], cwd=cwd, text=True,
+                          capture_output=True, timeout=timeout)
+
+
+def start(*args: str, cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, "-m", "ncgate", *args], cwd=cwd, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def rows_of(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="", encoding="utf-8") as file:
+        return list(csv.DictReader(file))
+
+
+def wait_for(condition: Callable[[], bool], what: str, seconds: float = 120) -> None:
+    """Until ``condition()`` holds (an event seen by polling; no fixed sleep decides)."""
+    deadline = time.monotonic() + seconds
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def runnable_examples() -> dict[str, list[str]]:
+    """Each example folder with a main program beside its config: its scripts (scenarios)."""
+    import tomllib
+
+    out = {}
+    for folder in sorted(p for p in EXAMPLES.iterdir() if (p / "ncgate.toml").is_file()):
+        main = tomllib.loads((folder / "ncgate.toml").read_text())["nc"].get("main")
+        if main and (folder / f"{main}.nc").is_file():
+            suite = sorted((folder / "scenarios").glob("*.toml"))
+            script = folder / "script.toml"
+            out[folder.name] = [str(s) for s in suite] or (
+                [str(script)] if script.is_file() else [""])
+    return out
+
+
+@pytest.fixture(scope="module")
+def examples_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The examples x both SND policies x 3 look-ahead depths, swept once (2 workers)."""
+    folder = tmp_path_factory.mktemp("sweep")
+    (folder / "spec.toml").write_text(EXAMPLES_SPEC)
+    done = ncgate("sweep", "spec.toml", "-o", "first.csv", "--workers", "2", cwd=folder)
+    assert done.returncode == 1, done.stderr  # the hazard example is not ok at depth 16
+    assert not (folder / "first.csv.parts").exists()
+    return folder
+
+
+def test_the_table_has_one_row_per_variant_sorted_by_id(examples_sweep: Path) -> None:
+    rows = rows_of(examples_sweep / "first.csv")
+    header = next(csv.reader((examples_sweep / "first.csv").open()))
+    for name in ("id", "verdict", "program", "nc.snd", "nc.lookahead", "cycle_s", "alarms",
+                 "hazards", "report", "command"):
+        assert name in header
+    expected = {(name, script, snd, str(depth))
+                for name, scripts in runnable_examples().items() for script in scripts
+                for snd in SNDS for depth in LOOKAHEADS}
+    seen = {(Path(r["program"]).parent.name, r["script"], r["nc.snd"], r["nc.lookahead"])
+            for r in rows}
+    assert len(rows) == len(expected) == len(seen)
+    assert seen == expected
+    ids = [r["id"] for r in rows]
+    assert ids == sorted(ids) and len(set(ids)) == len(ids)
+
+
+def test_the_examples_readmes_verdicts(examples_sweep: Path) -> None:
+    rows = rows_of(examples_sweep / "first.csv")
+
+    def verdicts(example: str, depth: int | None = None, snd: str = "") -> set[str]:
+        return {r["verdict"] for r in rows if Path(r["program"]).parent.name == example
+                and (depth is None or r["nc.lookahead"] == str(depth))
+                and r["nc.snd"].startswith(snd)}
+
+    # hazard/README.md: the control's default look-ahead makes N3's plain SND act early,
+    # one hazard; with lookahead = 0 (and the default rendezvous SND) it is gone.
+    assert verdicts("hazard", 16) == {"hazard"}
+    assert verdicts("hazard", 0, "rendezvous") == {"ok"}
+    # isg_no_flush/README.md: without #FLUSH the #WAIT deadlocks, naming the WAIT.
+    no_flush = [r for r in rows if "isg_no_flush" in r["program"] and r["nc.lookahead"] != "0"]
+    assert no_flush and {r["verdict"] for r in no_flush} == {"deadlock"}
+    assert all("AL140" in r["alarms"] and "#WAIT" in r["signature"] for r in no_flush)
+    # machine/: every scenario of the suite passes (each expects its own alarm).
+    assert verdicts("machine") == {"ok"}
+    assert verdicts("mutual", 0) == {"ok"}
+
+
+def test_a_second_run_gives_the_same_bytes(examples_sweep: Path) -> None:
+    again = ncgate("sweep", "spec.toml", "-o", "second.csv", "--workers", "1",
+                   cwd=examples_sweep)
+    assert again.returncode == 1, again.stderr
+    assert (examples_sweep / "second.csv").read_bytes() == \
+        (examples_sweep / "first.csv").read_bytes()
+
+
+def sim_verdict(out: str, status: int) -> tuple[str, str]:
+    """The verdict and cycle time ``ncgate sim``'s own report gives, read from its text."""
+    cycle = re.findall(r"^simulated (\d+\.\d{3}) s", out, re.M)
+    assert len(cycle) == 1, out
+    if re.search(r"^(PASS|FAIL) ", out, re.M):
+        return ("expect_failed" if re.search(r"^FAIL ", out, re.M) else "ok"), cycle[0]
+    if re.search(r"^\[[\d.]+\] deadlock: ", out, re.M):
+        return "deadlock", cycle[0]
+    if re.search(r"^\[[\d.]+\] stall: ", out, re.M):
+        return "stall", cycle[0]
+    if re.search(r"^\[[\d.]+\] (P\d+|PLC) alarm AL\d+", out, re.M):
+        return "alarm", cycle[0]
+    if re.search(r"^\[[\d.]+\] P\d+ hazard ", out, re.M):
+        return "hazard", cycle[0]
+    assert status == 0, out
+    return "ok", cycle[0]
+
+
+def test_twenty_rows_rerun_by_their_command_agree(examples_sweep: Path) -> None:
+    rows = rows_of(examples_sweep / "first.csv")
+    chosen = random.Random(20).sample(rows, 20)
+    kinds = set()
+    for row in chosen:
+        words = shlex.split(row["command"])
+        assert words[:2] == ["ncgate", "sim"]
+        done = ncgate(*words[1:], cwd=examples_sweep, timeout=120)
+        assert done.returncode in (0, 1), done.stderr
+        verdict, cycle = sim_verdict(done.stdout, done.returncode)
+        assert (verdict, cycle) == (row["verdict"], f"{float(row['cycle_s']):.3f}"), row
+        kinds.add(verdict)
+    assert len(kinds) >= 2  # the sample is not all of one kind: it compares something
+
+
+# -- robustness: budgets, timeouts, crashes, a bad spec --------------------------------------
+
+
+LOOPS = {
+    # Loops forever in no time: only the wall timeout stops it (no runaway limit here).
+    "SPIN": 'E1=0\n"L"\n(BLT,E1,1,L)\nM30\n',
+    # Moves forever: the virtual-time budget stops it.
+    "LOOP": 'E1=0\n"L"\nG1X10F6000\nG1X0\n(BLT,E1,1,L)\nM30\n',
+    "OK": "G1X10F600\nM30\n",  # 1 s at 600 mm/min over 10 mm
+    "BAD": "N1G1X10F600\nN2(WAI,SA10=1\nM30\n",  # the ')' missing: sim refuses it, exit 2
+}
+
+
+def test_a_hang_is_a_timeout_row_and_the_sweep_goes_on(tmp_path: Path) -> None:
+    (tmp_path / "progs").mkdir()
+    for name, text in LOOPS.items():
+        (tmp_path / "progs" / f"{name}.nc").write_text(text)
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["progs/*.nc"]\nbudget_s = 30\n'
+                                        '[grid]\n"nc.runaway_blocks" = [0]\n')
+    done = ncgate("sweep", "spec.toml", "--timeout", "2", "--workers", "2", cwd=tmp_path)
+    assert done.returncode == 1, done.stderr
+    rows = {Path(r["program"]).stem: r for r in rows_of(tmp_path / "spec.csv")}
+    assert rows["OK"]["verdict"] == "ok" and float(rows["OK"]["cycle_s"]) == 1.0
+    assert rows["SPIN"]["verdict"] == "timeout"
+    assert "wall timeout of 2 s" in rows["SPIN"]["report"]
+    assert rows["LOOP"]["verdict"] == "timeout"
+    assert float(rows["LOOP"]["cycle_s"]) == 30.0
+    assert "budget" in rows["LOOP"]["report"]
+    # The budget's row reproduces with --until at the budget: sim stops there.
+    assert rows["LOOP"]["command"].endswith("--until 30.0")
+    assert rows["BAD"]["verdict"] == "error"
+    assert rows["BAD"]["report"].startswith("BAD.nc:2:14: error NC012")
+    alone = ncgate(*shlex.split(rows["BAD"]["command"])[1:], cwd=tmp_path)
+    assert alone.returncode == 2 and rows["BAD"]["report"] in alone.stderr
+    assert "4 variants: 1 ok, 2 timeout, 1 error" in done.stdout
+
+
+def test_a_terminal_gets_a_progress_line_with_rate_and_eta(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100, 150]\n')
+    code = ("import sys; from pathlib import Path\n"
+            "from ncgate.gateway.sweep.main import Options, run_sweep\n"
+            "from ncgate.gateway.sweep.spec import load_spec\n"
+            "spec = load_spec('spec.toml')\n"
+            "status, rows = run_sweep(spec, Options(Path('out.csv'), workers=1, progress=True))\n"
+            "sys.exit(status)\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                          timeout=120)  # bytes: text mode would read the \r as a new line
+    assert done.returncode == 0, done.stderr
+    assert re.search(rb"\r3/3 variants  [\d.]+/s  ETA 0 s", done.stderr), done.stderr
+    quiet = ncgate("sweep", "spec.toml", cwd=tmp_path)  # not a terminal: no progress line
+    assert quiet.returncode == 0 and "variants/s" not in quiet.stderr + quiet.stdout
+
+
+def test_an_exception_is_a_crash_row_with_its_last_line(monkeypatch: pytest.MonkeyPatch,
+                                                         tmp_path: Path) -> None:
+    import ncgate.gateway.sim as sim
+    from ncgate.gateway.sweep.run import run_variant
+    from ncgate.gateway.sweep.spec import load_spec
+
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    variant = load_spec(tmp_path / "spec.toml").variants[0]
+    assert run_variant(variant, 10)["verdict"] == "ok"
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise ZeroDivisionError("a bug of ncgate")
+
+    monkeypatch.setattr(sim, "run_sim", broken)
+    result = run_variant(variant, 10)
+    assert result["verdict"] == "crash"
+    assert result["report"] == "ZeroDivisionError: a bug of ncgate"
+
+
+def misbehaving_spec(folder: Path, programs: tuple[str, ...]) -> Path:
+    for name in programs:
+        (folder / name).write_text(LOOPS["OK"])
+    (folder / "spec.toml").write_text(f'[sweep]\nprograms = {list(programs)!r}\n[grid]\n'
+                                      '"nc.feed_override" = [50, 100]\n'.replace("'", '"'))
+    return folder / "spec.toml"
+
+
+def test_the_pool_survives_a_dying_and_a_stuck_worker(tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.pool import run_local
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import misbehaving
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "HANG.nc", "OK.nc", "FINE.nc")))
+    got = list(run_local(spec.variants, 2, 1.0, runner=misbehaving))
+    ids = [v.id for v, _ in got]
+    assert sorted(ids) == sorted(v.id for v in spec.variants)  # each once, none lost
+    by = {(Path(v.program).stem, dict(v.sets)["nc.feed_override"]): r for v, r in got}
+    for feed in (50, 100):
+        assert by["DIE", feed]["verdict"] == "crash"
+        assert "died 2 times (exit status 3)" in by["DIE", feed]["report"]
+        assert by["HANG", feed]["verdict"] == "timeout"
+        assert "was killed" in by["HANG", feed]["report"]
+        # 10 mm at 600 mm/min x the override: 2 s at 50 %, 1 s at 100 %
+        assert by["OK", feed]["verdict"] == by["FINE", feed]["verdict"] == "ok"
+        assert by["OK", feed]["cycle_s"] == 100 / feed
+
+
+@pytest.mark.parametrize(("spec", "said"), [
+    ('[sweep]\nprograms = ["OK.nc"]\n[grid]\n"nc.lookahead" = [0, -1]\n', "nc.lookahead"),
+    ('[sweep]\nprograms = ["OK.nc"]\n[grid]\n"nc.bogus" = [1]\n', "nc.bogus: unknown key"),
+    ('[sweep]\nprograms = ["OK.nc"]\nbogus = 1\n', "sweep.bogus: unknown key"),
+    ('[sweep]\nprograms = ["nothing/*.nc"]\n', "sweep.programs: nothing/*.nc: no such file"),
+    ('[sweep]\nprograms = ["OK.nc"]\n[random]\nsamples = 3\n"nc.feed_override" = [150, 50]\n',
+     "random.nc.feed_override"),
+    ('[sweep]\nprograms = ["OK.nc"]\n[random]\nsamples = 3\n"nc.feed_override" = [50, 500]\n',
+     "nc.feed_override"),
+    ('[sweep]\nexamples = ["nope"]\n', "sweep.examples: no runnable example 'nope'"),
+])
+def test_a_bad_spec_is_exit_2_naming_the_file_and_the_key(tmp_path: Path, spec: str,
+                                                          said: str) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "bad.toml").write_text(spec)
+    done = ncgate("sweep", "bad.toml", cwd=tmp_path)
+    assert done.returncode == 2
+    assert "bad.toml" in done.stderr and said in done.stderr, done.stderr
+    assert not (tmp_path / "bad.csv").exists()
+
+
+def test_random_samples_are_seeded_and_in_range(tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.spec import load_spec
+
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    text = ('[sweep]\nprograms = ["OK.nc"]\n[grid]\n"nc.snd" = ["rendezvous", "latched"]\n'
+            '[random]\nseed = {}\nsamples = 25\n"nc.feed_override" = [50, 150]\n'
+            '"plc.scan_ms" = [1, 20]\n"nc.rapid_mm_min" = [1000.0, 20000.0]\n')
+    (tmp_path / "a.toml").write_text(text.format(7))
+    (tmp_path / "b.toml").write_text(text.format(8))
+    a, again, b = (load_spec(tmp_path / n) for n in ("a.toml", "a.toml", "b.toml"))
+    assert len(a.variants) == 2 * 25
+    assert [v.sets for v in a.variants] == [v.sets for v in again.variants]
+    assert {v.sets for v in a.variants} != {v.sets for v in b.variants}
+    for v in a.variants:
+        values = dict(v.sets)
+        assert type(values["nc.feed_override"]) is int and 50 <= values["nc.feed_override"] <= 150
+        assert 1 <= values["plc.scan_ms"] <= 20
+        assert 1000.0 <= values["nc.rapid_mm_min"] <= 20000.0
+
+
+# -- --explore finds a race --------------------------------------------------------------
+
+
+# P1 moves for 1 s at 100 % feed, then releases P2 with an SND and waits for its answer; P2,
+# once released, waits for the PLC's SA10 and answers.  The PLC (the script) raises SA10 at
+# 0.5 s and drops it at 1.2 s: when P1's SND comes after 1.2 s (a feed override below about
+# 83 %), P2 waits for an SA10 that never comes back while P1 waits for P2 -- a stall that the
+# program's own run at 100 % never shows.
+RACE = {
+    "A.nc": "N1(EXE,2,B)\nN2G1X100F6000\nN3(SND,2)\nN4(WAI,2)\nN5M30\n",
+    "B.nc": "N1(WAI,1)\nN2(WAI,SA10=1)\nN3(SND,1)\nN4M30\n",
+    "ncgate.toml": '[nc]\nprocesses = 2\nlookahead = 0\nmain = "A"\n[nc.storage]\nMP0 = "."\n',
+    "plc.toml": '[[write]]\nat = 0.5\nset = "SA10=1"\n[[write]]\nat = 1.2\nset = "SA10=0"\n',
+    "spec.toml": '[sweep]\nprograms = ["A.nc"]\nscript = "plc.toml"\n',
+}
+
+
+@pytest.mark.parametrize(("sets", "expected"), [
+    ((), [0.5, 1.2]),
+    (("sim.input_delay_scale=2",), [1.0, 2.4]),
+    (("sim.input_delay_scale=0.5",), [0.25, 0.6]),
+])
+def test_sim_scales_the_scripts_input_times(tmp_path: Path, sets: tuple[str, ...],
+                                            expected: list[float]) -> None:
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    args = [w for item in sets for w in ("--set", item)]
+    done = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", "--trace",
+                  "t.jsonl", "--until", "3", *args, cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    import json
+
+    writes = [e for e in map(json.loads, (tmp_path / "t.jsonl").read_text().splitlines())
+              if e["event"] == "write" and e["var"] == "SA10"]
+    assert [w["t"] for w in writes] == pytest.approx(expected, abs=1e-6)
+
+
+def test_sim_jitters_each_input_by_a_draw_of_its_seed(tmp_path: Path) -> None:
+    import json
+
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    done = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", "--trace",
+                  "t.jsonl", "--until", "3", "--set", "sim.input_jitter_ms=300", "--set",
+                  "sim.seed=11", cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    draws = random.Random(11)
+    expected = [0.5 + draws.uniform(0, 0.3), 1.2 + draws.uniform(0, 0.3)]
+    writes = [e["t"] for e in map(json.loads, (tmp_path / "t.jsonl").read_text().splitlines())
+              if e["event"] == "write" and e["var"] == "SA10"]
+    assert writes == pytest.approx(expected, abs=1e-6)
+
+
+def test_explore_finds_the_planted_race_and_prints_its_reproducer(tmp_path: Path) -> None:
+    for name, text in RACE.items():
+        (tmp_path / name).write_text(text)
+    plain = ncgate("sim", "A", "--config", "ncgate.toml", "--script", "plc.toml", cwd=tmp_path)
+    assert plain.returncode == 0 and "every program ended" in plain.stdout  # hidden at 100 %
+    done = ncgate("sweep", "spec.toml", "--explore", "40", "--workers", "2", cwd=tmp_path)
+    assert done.returncode == 1, done.stderr
+    rows = rows_of(tmp_path / "spec-explore.csv")
+    assert len(rows) == 40
+    for row in rows:
+        # The PLC drops SA10 at 1.2 s x the delay scale + the second of the seed's draws
+        # (docs/config.md: one draw per scripted input, in the script's order); P1's SND comes
+        # when its move (1 s at 100 %) and two blocks' processing time are done.
+        draws = random.Random(int(row["sim.seed"]))
+        jitter = float(row["sim.input_jitter_ms"]) / 1000
+        late = [draws.uniform(0.0, jitter) for _ in range(2)][1] if jitter else 0.0
+        drop = 1.2 * float(row["sim.input_delay_scale"]) + late
+        snd = 100 / int(row["nc.feed_override"]) + 2 * float(row["nc.block_time_ms"]) / 1000
+        assert row["verdict"] == ("stall" if snd > drop else "ok"), row
+    assert {r["verdict"] for r in rows} == {"ok", "stall"}
+    found = re.search(r"^stall in (\d+) of 40 variants: (.*)\n  first in ([\d.]+) s of "
+                      r"simulated time: (\w+)\n  smallest reproducer: (.*)$", done.stdout, re.M)
+    assert found, done.stdout
+    assert int(found[1]) == sum(r["verdict"] == "stall" for r in rows)
+    assert "P1 A.nc:4 (WAI,2)" in found[2] and "P2 B.nc:2 (WAI,SA10=1)" in found[2]
+    stalls = [r for r in rows if r["verdict"] == "stall"]
+    first = min(stalls, key=lambda r: float(r["cycle_s"]))
+    assert found[4] == first["id"] and found[3] == f"{float(first['cycle_s']):.3f}"
+    reproducer = shlex.split(found[5])
+    # The cell has no PLC logic: its scan period cannot matter, and the reduction drops it;
+    # what it keeps is a subset of the first stall's own values.
+    assert "plc.scan_ms" not in found[5]
+    kept = {w for w in reproducer if "=" in w}
+    assert kept < {w for w in shlex.split(first["command"]) if "=" in w}
+    again = ncgate(*reproducer[1:], cwd=tmp_path)
+    assert again.returncode == 1 and "stall: every process is blocked" in again.stdout
+
+
+def test_the_pytest_kit_makes_one_test_per_variant_under_xdist(tmp_path: Path) -> None:
+    cell = tmp_path / "cell"
+    cell.mkdir()
+    for name, text in RACE.items():
+        (cell / name).write_text(text)
+    # 100 %: the SND comes at 1 s, in time; 70 %: at 1.43 s, after the PLC dropped SA10.
+    (cell / "spec.toml").write_text(RACE["spec.toml"] + '[grid]\n"nc.feed_override" = '
+                                    "[100, 70, 90, 80]\n")
+    (tmp_path / "test_library.py").write_text(
+        "from ncgate.gateway.testing import ncgate_sweep\n\n"
+        'test_library = ncgate_sweep("cell/spec.toml")\n')
+    done = subprocess.run([sys.executable, "-m", "pytest", "-n", "2", "-p", "no:cacheprovider",
+                           "-q", "test_library.py"], cwd=tmp_path, text=True,
+                          capture_output=True, timeout=300)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert re.search(r"^2 failed, 2 passed", done.stdout.splitlines()[-1]), done.stdout
+    failed = re.findall(r"^FAILED test_library.py::test_library\[(\w+)-A-nc.feed_override="
+                        r"(\d+)\]", done.stdout, re.M)
+    assert sorted(f for _, f in failed) == ["70", "80"]
+    assert "stall: [1.429] stall: every process is blocked" in done.stdout  # 1 s / 70 %
+    assert ("reproduce: ncgate sim A --config cell/ncgate.toml --script cell/plc.toml --set "
+            "nc.feed_override=70") in done.stdout
+
+
+def test_a_dotted_key_quoted_or_not_is_the_same_key(tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.spec import load_spec
+
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "a.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                     '"nc.snd" = ["rendezvous", "latched"]\n')
+    (tmp_path / "b.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                     'nc.snd = ["rendezvous", "latched"]\n')
+    a, b = load_spec(tmp_path / "a.toml"), load_spec(tmp_path / "b.toml")
+    assert a.keys == b.keys == ["nc.snd"]
+    assert [v.id for v in a.variants] == [v.id for v in b.variants]
+    assert len(a.variants) == 2
+
+
+# -- resume after kill -9, parquet --------------------------------------------------------
+
+
+BIG_SPEC = """
+[sweep]
+examples = ["scheme3", "hazard", "mutual", "section4", "plclogic", "isg_paths"]
+[grid]
+"nc.snd" = ["rendezvous", "latched"]
+"nc.lookahead" = [0, 1, 2, 4, 8, 16]
+"nc.feed_override" = [50, 80, 100, 120, 150]
+"""
+
+
+@pytest.fixture(scope="module")
+def big_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("big")
+    (folder / "spec.toml").write_text(BIG_SPEC)
+    done = ncgate("sweep", "spec.toml", "-o", "whole.csv", "--workers", "2", cwd=folder)
+    assert done.returncode == 1, done.stderr
+    return folder
+
+
+def parts_of(folder: Path, output: str) -> list[Path]:
+    return sorted((folder / f"{output}.parts").glob("part-*.jsonl"))
+
+
+def test_kill_9_mid_sweep_then_resume_gives_the_same_table(big_sweep: Path) -> None:
+    total = len(rows_of(big_sweep / "whole.csv"))
+    sweep = start("sweep", "spec.toml", "-o", "resumed.csv", "--workers", "1", cwd=big_sweep)
+    try:
+        wait_for(lambda: len(parts_of(big_sweep, "resumed.csv")) >= 1 or sweep.poll() is not None,
+                 "the first part")
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        os.kill(sweep.pid, signal.SIGKILL)
+    finally:
+        sweep.kill()
+        sweep.wait()
+    assert not (big_sweep / "resumed.csv").exists()  # never a partial table
+    import json
+
+    done = [json.loads(line) for part in parts_of(big_sweep, "resumed.csv")
+            for line in part.read_text().splitlines()]
+    assert 0 < len(done) < total
+    again = ncgate("sweep", "spec.toml", "-o", "resumed.csv", "--resume", "--workers", "2",
+                   cwd=big_sweep)
+    assert again.returncode == 1, again.stderr
+    assert f"resuming: {len(done)} of {total} variants done" in again.stdout
+    assert (big_sweep / "resumed.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+    assert not (big_sweep / "resumed.csv.parts").exists()
+
+
+def test_sigterm_keeps_the_rows_done_for_resume(big_sweep: Path) -> None:
+    import json
+
+    total = len(rows_of(big_sweep / "whole.csv"))
+    sweep = start("sweep", "spec.toml", "-o", "stopped.csv", "--workers", "1", cwd=big_sweep)
+    try:
+        wait_for(lambda: len(parts_of(big_sweep, "stopped.csv")) >= 1 or sweep.poll() is not None,
+                 "the first part")
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        sweep.send_signal(signal.SIGTERM)
+        _, err = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 1, err
+    kept = [json.loads(line) for part in parts_of(big_sweep, "stopped.csv")
+            for line in part.read_text().splitlines()]
+    assert f"stopped (SIGTERM): {len(kept)} of {total} variants done" in err
+    assert "--resume" in err and not (big_sweep / "stopped.csv").exists()
+    again = ncgate("sweep", "spec.toml", "-o", "stopped.csv", "--resume", cwd=big_sweep)
+    assert f"resuming: {len(kept)} of {total} variants done" in again.stdout
+    assert (big_sweep / "stopped.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
+def test_resume_refuses_parts_of_another_spec(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    parts = tmp_path / "spec.csv.parts"
+    parts.mkdir()
+    (parts / "manifest.json").write_text('{"format": "ncgate-sweep-parts/1", "fingerprint": '
+                                         '"another"}')
+    done = ncgate("sweep", "spec.toml", "--resume", cwd=tmp_path)
+    assert done.returncode == 2 and "changed since" in done.stderr
+    assert ncgate("sweep", "spec.toml", cwd=tmp_path).returncode == 0  # no --resume: anew
+
+
+def test_parquet_holds_the_same_rows(big_sweep: Path) -> None:
+    import pyarrow.parquet as pq
+
+    done = ncgate("sweep", "spec.toml", "--format", "parquet", "-o", "whole.parquet",
+                  "--workers", "2", cwd=big_sweep)
+    assert done.returncode == 1, done.stderr
+    table = pq.read_table(big_sweep / "whole.parquet").to_pylist()
+    rows = rows_of(big_sweep / "whole.csv")
+    assert [r["id"] for r in table] == [r["id"] for r in rows]
+    for got, want in zip(table, rows, strict=True):
+        assert got["verdict"] == want["verdict"]
+        assert got["cycle_s"] == float(want["cycle_s"])
+        assert got["hazards"] == int(want["hazards"])
+        assert got["nc.lookahead"] == int(want["nc.lookahead"])
+        assert got["command"] == want["command"]
+
+
+# -- the local pool loses nothing when a worker is killed ----------------------------------
+
+
+def descendants(pid: int) -> list[int]:
+    import psutil
+
+    return [p.pid for p in psutil.Process(pid).children(recursive=True)]
+
+
+def test_a_killed_local_worker_loses_and_duplicates_nothing(big_sweep: Path) -> None:
+    import psutil
+
+    sweep = start("sweep", "spec.toml", "-o", "killed.csv", "--workers", "2", cwd=big_sweep)
+    try:
+        # The workers are the forkserver's children: the sweep's grandchildren.
+        def workers() -> list[psutil.Process]:
+            return [p for p in psutil.Process(sweep.pid).children(recursive=True)
+                    if p.ppid() != sweep.pid]
+
+        wait_for(lambda: (len(workers()) >= 2 and len(parts_of(big_sweep, "killed.csv")) >= 1)
+                 or sweep.poll() is not None, "two workers and a first part")
+        assert sweep.poll() is None
+        victim = workers()[0]
+        victim.send_signal(signal.SIGKILL)
+        victim.wait(30)
+        _out, err = sweep.communicate(timeout=300)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 1, err
+    assert (big_sweep / "killed.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
+# -- Dask -------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[object]:
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as local, Client(local) as client:
+        yield client
+
+
+def test_dask_gives_the_same_table(cluster: object, big_sweep: Path) -> None:
+    address = cluster.scheduler.address  # type: ignore[attr-defined]
+    done = ncgate("sweep", "spec.toml", "-o", "dask.csv", "--scheduler", address,
+                  cwd=big_sweep)
+    assert done.returncode == 1, done.stderr
+    assert (big_sweep / "dask.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
+def test_a_variant_that_kills_its_dask_workers_is_a_crash_row_alone(cluster: object,
+                                                                    tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.cluster import run_dask
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import misbehaving
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "OK.nc", "FINE.nc")))
+    address = cluster.scheduler.address  # type: ignore[attr-defined]
+    got = list(run_dask(spec.variants, address, 10.0, runner=misbehaving))
+    assert sorted(v.id for v, _ in got) == sorted(v.id for v in spec.variants)
+    for variant, result in got:
+        if Path(variant.program).stem == "DIE":
+            assert result["verdict"] == "crash" and "KilledWorker" in result["report"]
+        else:  # in a chunk with DIE, or not: each runs again alone and is ok
+            assert result["verdict"] == "ok", result
+
+
+def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
+                                                               big_sweep: Path) -> None:
+    client = cluster
+    address = client.scheduler.address  # type: ignore[attr-defined]
+    client.wait_for_workers(2, timeout=120)  # type: ignore[attr-defined]
+    sweep = start("sweep", "spec.toml", "-o", "dask-killed.csv", "--scheduler", address,
+                  cwd=big_sweep)
+    try:
+        def busy() -> list[str]:
+            return [w for w, keys in client.processing().items()  # type: ignore[attr-defined]
+                    if any("ncgate-sweep" in str(k) for k in keys)]
+
+        wait_for(lambda: (bool(busy()) and len(parts_of(big_sweep, "dask-killed.csv")) >= 1)
+                 or sweep.poll() is not None, "a worker running a chunk after a first part")
+        assert sweep.poll() is None
+        victim = busy()[0]
+        pid = client.run(os.getpid, workers=[victim])[victim]  # type: ignore[attr-defined]
+        os.kill(pid, signal.SIGKILL)
+        _out, err = sweep.communicate(timeout=300)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 1, err
+    assert (big_sweep / "dask-killed.csv").read_bytes() == \
+        (big_sweep / "whole.csv").read_bytes()
