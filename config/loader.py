@@ -1045,14 +1045,49 @@ def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
 
 
 def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> None:
-    *parents, last = dotted.split(".")
-    table = raw
+    """Set ``dotted`` in the raw tables.  In an array of tables (``[[plant.model]]``,
+    ``[[nc.process]]``) an entry is named by its ``name`` or ``number`` key, or by its index
+    in brackets: ``plant.model.clamp.travel_ms``, ``nc.process.2.external``,
+    ``plant.model[0].travel_ms`` -- what a sweep varies of one model or process."""
+    parts = [p for part in dotted.split(".") for p in _indexed(part)]
+    *parents, last = parts
+    table: Any = raw
     for i, name in enumerate(parents):
+        above = ".".join(parents[:i + 1]).replace(".[", "[")
+        if isinstance(table, list):  # an array of tables: the entry that name or index names
+            table = _entry_of(table, name, dotted, above, origin)
+            continue
         table = table.setdefault(name, {})
-        if not isinstance(table, dict):
-            above = ".".join(parents[:i + 1])
+        if not isinstance(table, dict | list):
             raise ConfigError(f"{origin}: {dotted}: {above} is a value, not a table")
+    if isinstance(table, list):
+        raise ConfigError(f"{origin}: {dotted}: {'.'.join(parents).replace('.[', '[')} is an "
+                          "array of tables: "
+                          "name one of its entries (by its name, number or [index])")
     table[last] = value
+
+
+def _indexed(part: str) -> list[str]:
+    """``model[0]`` as ``model``, ``[0]``."""
+    found = re.fullmatch(r"(.+?)\[(\d+)\]", part)
+    return [found.group(1), f"[{found.group(2)}]"] if found else [part]
+
+
+def _entry_of(entries: list[Any], name: str, dotted: str, above: str,
+              origin: str) -> dict[str, Any]:
+    index = re.fullmatch(r"\[(\d+)\]", name)
+    if index is not None:
+        i = int(index.group(1))
+        if i < len(entries) and isinstance(entries[i], dict):
+            return entries[i]  # type: ignore[no-any-return]
+        raise ConfigError(f"{origin}: {dotted}: {above}: there are {len(entries)} entries")
+    for entry in entries:
+        if isinstance(entry, dict) and name in (str(entry.get("name")),
+                                                str(entry.get("number"))):
+            return entry
+    known = [str(e.get("name", e.get("number"))) for e in entries if isinstance(e, dict)]
+    raise ConfigError(f"{origin}: {dotted}: no entry {name!r} (entries: "
+                      f"{', '.join(known) or 'none'})")
 
 
 def _fields(cls: type) -> list[dataclasses.Field[Any]]:

@@ -116,7 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", metavar="C", help="config file (default: built-in)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="set any config key, e.g. --set nc.time_scale=10 --set "
-                     "modbus.host=0.0.0.0 (a TOML value; a bare word is a string)")
+                     "modbus.host=0.0.0.0 --set plant.model.clamp.travel_ms=900 (a TOML "
+                     "value; a bare word is a string; an entry of an array of tables by its "
+                     "name, number or [index])")
     run.add_argument("--port", type=int, metavar="N", help="the Modbus TCP port "
                      "(modbus.port)")
     run.add_argument("--rtu", metavar="DEVICE", help="also serve Modbus RTU on this serial "

@@ -635,3 +635,23 @@ def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
     assert sweep.returncode == 1, err
     assert (big_sweep / "dask-killed.csv").read_bytes() == \
         (big_sweep / "whole.csv").read_bytes()
+
+
+def test_a_plant_models_key_is_swept_by_the_models_name(tmp_path: Path) -> None:
+    """`plant.model.clamp.travel_ms`: the machine example's PLC alarms when the clamp takes
+    over 1 s to close (plc.st: clamp_slow, PT := T#1s), so a 300 ms stroke passes the good
+    scenario and a 2,500 ms one fails it; each row's command says so again alone."""
+    import shutil
+
+    shutil.copytree(EXAMPLES / "machine", tmp_path / "machine")
+    (tmp_path / "spec.toml").write_text(
+        '[sweep]\nprograms = ["machine/PART.nc"]\nconfig = "machine/ncgate.toml"\n'
+        'script = "machine/scenarios/good.toml"\n'
+        '[grid]\n"plant.model.clamp.travel_ms" = [300, 2500]\n')
+    done = ncgate("sweep", "spec.toml", "-q", cwd=tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    rows = {r["plant.model.clamp.travel_ms"]: r for r in rows_of(tmp_path / "spec.csv")}
+    assert (rows["300"]["verdict"], rows["2500"]["verdict"]) == ("ok", "expect_failed")
+    again = ncgate(*shlex.split(rows["2500"]["command"])[1:], cwd=tmp_path)
+    assert again.returncode == 1 and "FAIL" in again.stdout, again.stdout + again.stderr
+    assert "--set plant.model.clamp.travel_ms=2500" in rows["2500"]["command"]

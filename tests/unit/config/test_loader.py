@@ -158,3 +158,26 @@ def test_nc_limits_reach_the_engine_by_axis(tmp_path: Path) -> None:
     assert settings.travel_limits[8] == (-float("inf"), float("inf"))  # C: no limit
     assert settings.block_limit_s == 60.0
     assert runtime_settings(load_config(None), closed=True).block_limit_s == 86_400.0
+
+
+def test_an_override_names_an_entry_of_an_array_of_tables(tmp_path: Path) -> None:
+    """`--set plant.model.clamp.travel_ms=900` (by name), `plant.model[1]...` (by index),
+    `nc.process.2.external` (by number): what a sweep varies of one model or process."""
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 2\n[[nc.process]]\nnumber = 2\nexternal = false\n'
+        '[[plant.model]]\nname = "clamp"\nkind = "delay"\ninput = "SA1"\noutput = "SA2"\n'
+        'on_ms = 100\n'
+        '[[plant.model]]\nname = "door"\nkind = "delay"\ninput = "SA3"\noutput = "SA4"\n'
+        'on_ms = 100\n')
+    config = load_config(tmp_path / "ncgate.toml", overrides={
+        "plant.model.clamp.on_ms": 900, "plant.model[1].on_ms": 50,
+        "nc.process.2.external": True})
+    delays = {m.name: m.get("on_ms") for m in config.plant.model}
+    assert delays == {"clamp": 900, "door": 50}
+    assert [(p.number, p.external) for p in config.nc.process] == [(2, True)]
+    for dotted, said in (("plant.model.vise.on_ms", "no entry 'vise' (entries: clamp, door)"),
+                         ("plant.model[5].on_ms", "plant.model[5]: there are 2 entries"),
+                         ("plant.model.on_ms", "plant.model is an array of tables: name one")):
+        with pytest.raises(ConfigError) as caught:
+            load_config(tmp_path / "ncgate.toml", overrides={dotted: 1})
+        assert said in str(caught.value), caught.value
