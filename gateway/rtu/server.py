@@ -118,7 +118,15 @@ class RtuLink:
 
     def received(self, data: bytes) -> None:
         self.last_byte = self.loop.time()
-        self.framer.feed(data)
+        framer = self.framer
+        if framer.idle and self.turn is None and self.held is None:
+            # The common case, one whole frame in one read: answered without the buffer's
+            # bookkeeping (a bad CRC is not whole: fed below, dropped and counted there).
+            request = framer.whole(data)
+            if request is not None:
+                self._serve(request)
+                return
+        framer.feed(data)
         if self.turn is None:
             self._process()
         self._watch_silence()
