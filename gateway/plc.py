@@ -25,7 +25,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ncgate.config import Config, ConfigError
 from ncgate.config.state import state_folder
@@ -50,11 +50,16 @@ from ncgate.interpreter.engine.states import WAITING_STATES
 from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
-from ncgate.plc.st.compiler import Context, compile_logic
 from ncgate.plc.st.diagnostics import LogicError
 from ncgate.plc.st.logic import Logic
-from ncgate.plc.st.nodes import SourceFile
-from ncgate.plc.st.plcopen import logic_from_text, read_logic_file, read_logic_text
+
+if TYPE_CHECKING:
+    from ncgate.plc.st.compiler import Context
+    from ncgate.plc.st.nodes import SourceFile
+
+# The Structured Text toolchain (its parser, its compiler, PLCopen's reader: 10 MB resident)
+# is imported by the functions that read and compile logic, when a cell has some: `run` of a
+# cell without PLC logic never loads it (bench/modbus.py 3.).
 
 log = logging.getLogger("ncgate.plc")
 
@@ -68,6 +73,8 @@ PLC_REGISTERS = ("state (0 stopped, 1 running, 2 fault)", "scans (hi)", "scans (
 
 
 def logic_context(config: Config) -> Context:
+    from ncgate.plc.st.compiler import Context
+
     plc, nc = config.plc, config.nc
     return Context(plc.sa_bits, plc.k_bytes, plc.syvars, nc.processes, nc.external,
                    tuple(config.symbols.items()), plc.strict)
@@ -98,6 +105,8 @@ _stat_when_read: dict[Path, FileStat] = {}
 
 def read_sources(files: tuple[Path, ...]) -> Sources:
     """The content of every logic file, as the PLC loads it and a session record keeps it."""
+    from ncgate.plc.st.plcopen import read_logic_text
+
     out: Sources = {}
     for path in files:
         _stat_when_read[path.absolute()] = file_stat(path)
@@ -113,6 +122,8 @@ def parsed_logic(path: str, text: str) -> SourceFile:
     changes; a file that does not parse is not kept.  A big file's tree is not kept: the
     cyclic collector would walk its nodes on every collection (docs/decisions.md)."""
     if len(text) > PARSE_KEPT_MAX:
+        from ncgate.plc.st.plcopen import logic_from_text
+
         return logic_from_text(path, text)
     return _kept_parse(path, text)
 
@@ -122,6 +133,8 @@ PARSE_KEPT_MAX = 32 * 1024
 
 @functools.lru_cache(maxsize=16)
 def _kept_parse(path: str, text: str) -> SourceFile:
+    from ncgate.plc.st.plcopen import logic_from_text
+
     return logic_from_text(path, text)
 
 
@@ -130,6 +143,9 @@ def load_logic(files: tuple[Path, ...], config: Config,
     """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix) --
     from ``sources`` when given (a replay runs the logic its record carries); raises
     LogicError with all the diagnostics."""
+    from ncgate.plc.st.compiler import compile_logic
+    from ncgate.plc.st.plcopen import read_logic_file
+
     parsed = ([read_logic_file(path) for path in files] if sources is None else
               [parsed_logic(path, text) for path, text in sources.items()])
     logic = compile_logic(parsed, logic_context(config))

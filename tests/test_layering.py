@@ -164,6 +164,20 @@ def test_a_gateway_without_console_does_not_load_the_web_library() -> None:
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
 
 
+def test_a_cell_without_plc_logic_does_not_load_the_st_toolchain() -> None:
+    """The ST parser, compiler and PLCopen reader (10 MB resident) load when a cell has
+    logic to compile, not for every gateway (bench/modbus.py 3.: `run`'s memory)."""
+    code = ("import sys, asyncio; from ncgate.gateway import Gateway\n"
+            "async def main():\n"
+            "    async with Gateway() as gw: pass\n"
+            "asyncio.run(main())\n"
+            "heavy = [m for m in ('ncgate.plc.st.compiler', 'ncgate.plc.st.parser', "
+            "'ncgate.plc.st.plcopen') if m in sys.modules]\n"
+            "sys.exit(f'loaded: {heavy}' if heavy else 0)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
 def test_the_cli_and_the_test_kit_are_leaves() -> None:
     for module, names in gateway_modules().items():
         for leaf in ("ncgate.gateway.cli", "ncgate.gateway.testing"):
