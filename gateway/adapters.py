@@ -50,6 +50,7 @@ class AdapterPlugin:
 ADAPTERS: dict[str, str] = {
     "modbus": "ncgate.gateway.modbus.plugin:PLUGIN",
     "canopen": "ncgate.gateway.canopen.plugin:PLUGIN",
+    "opcua": "ncgate.gateway.opcua.plugin:PLUGIN",
     "web": "ncgate.gateway.web.plugin:PLUGIN",
 }
 

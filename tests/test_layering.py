@@ -10,7 +10,8 @@
 - ``ncgate.commands`` and ``ncgate.errors`` are leaves: the standard library only;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``web/`` imports
-  aiohttp (and the gateway imports ``web/`` only when a console is served); the CLI and the
+  aiohttp (and the gateway imports ``web/`` only when a console is served), only ``opcua/``
+  imports asyncua; the CLI and the
   test kit are leaves that nothing else in the gateway imports;
 - a dialect is one folder: outside ``interpreter/<dialect>/`` and the registry
   (``interpreter/dialects.py``) nothing imports a dialect's package or branches on a member of
@@ -130,6 +131,8 @@ def test_fieldbus_libraries_stay_in_their_adapters() -> None:
                     or module == f"{kit}.canopen_kit"), module
         if "aiohttp" in tops:
             assert module.startswith("ncgate.gateway.web."), module
+        if "asyncua" in tops:
+            assert module.startswith("ncgate.gateway.opcua."), module
 
 
 def test_a_gateway_without_console_does_not_load_the_web_library() -> None:

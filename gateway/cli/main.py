@@ -123,6 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
     web.add_argument("--web", metavar="HOST:PORT", help="serve the console here "
                      "(web.host, web.port; default 127.0.0.1:8080)")
     web.add_argument("--no-web", action="store_true", help="no web console")
+    run.add_argument("--opcua", type=int, metavar="PORT", help="serve OPC UA on this port "
+                     "(opcua.enabled, opcua.port; docs/opcua.md)")
     run.add_argument("--record", metavar="R.jsonl", help="record the session (every input "
                      "from outside, with its time, beside the trace) for 'ncgate sim "
                      "--replay'")
@@ -417,8 +419,8 @@ def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 
 def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]]:
-    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--trace`` as config overrides, and
-    the option each key came from (an error names it)."""
+    """``--set``, ``--port``, ``--web``, ``--no-web``, ``--opcua``, ``--trace`` as config
+    overrides, and the option each key came from (an error names it)."""
     out = _set_overrides(args.set)
     origins = dict.fromkeys(out, "--set")
     if args.port is not None:
@@ -434,6 +436,9 @@ def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]
     if args.no_web:
         out["web.enabled"] = False
         origins["web.enabled"] = "--no-web"
+    if args.opcua is not None:
+        out["opcua.enabled"], out["opcua.port"] = True, args.opcua
+        origins["opcua.enabled"] = origins["opcua.port"] = "--opcua"
     if args.trace:
         out["trace.file"] = str(Path(args.trace).resolve())
         origins["trace.file"] = "--trace"

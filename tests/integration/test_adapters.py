@@ -104,9 +104,10 @@ def test_an_adapter_that_is_not_enabled_is_not_imported(tmp_path: Path) -> None:
             async with Gateway(config) as gw:
                 assert gw.adapters == {}, gw.adapters
         asyncio.run(main())
-        loaded = [m for m in ("pymodbus", "canopen", "can", "aiohttp",
+        loaded = [m for m in ("pymodbus", "canopen", "can", "aiohttp", "asyncua",
                               "ncgate.gateway.modbus.server", "ncgate.gateway.canopen.node",
-                              "ncgate.gateway.web.console") if m in sys.modules]
+                              "ncgate.gateway.web.console", "ncgate.gateway.opcua.server")
+                  if m in sys.modules]
         print("loaded:", loaded)
     ''')
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
