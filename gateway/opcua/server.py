@@ -57,6 +57,7 @@ from ncgate.gateway.opcua.model import (
 from ncgate.inputs import Source, SourceKind, Var, Write
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine.events import Alarm, Display
+from ncgate.interpreter.engine.states import describe_where
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
@@ -199,8 +200,10 @@ class OpcuaServer:
         kind = type(event)
         if kind is Alarm:
             code = AlarmCode(event.code).label
-            self._push(("event", EventView(True, event.proc, code, event.message,
-                                           ALARM_SEVERITY)))
+            # The report names the process and the block, as the console's alarm line does.
+            where = f" {describe_where(event.where)}" if event.where is not None else ""
+            report = f"P{event.proc}{where}: {code} {event.message}"
+            self._push(("event", EventView(True, event.proc, code, report, ALARM_SEVERITY)))
         elif kind is Display:
             self._push(("event", EventView(False, event.proc, "", event.text,
                                            MESSAGE_SEVERITY)))
