@@ -10,7 +10,7 @@ import pytest
 from ncgate.config import ConfigError, load_config
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
-from ncgate.gateway.opcua.server import password_matches
+from ncgate.gateway.opcua.space import password_matches
 
 
 def test_every_reason_has_a_bad_status_code() -> None:
