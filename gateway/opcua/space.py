@@ -13,7 +13,7 @@ import asyncio
 import concurrent.futures
 import hashlib
 import hmac
-from pathlib import Path
+import logging
 from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
@@ -31,6 +31,7 @@ from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.model import EventView, ProcessView
 from ncgate.gateway.opcua.server import REGION
+from ncgate.gateway.tls import expiry_warning
 from ncgate.inputs import Var
 
 if TYPE_CHECKING:
@@ -38,6 +39,8 @@ if TYPE_CHECKING:
     from asyncua.server.event_generator import EventGenerator
 
     from ncgate.gateway.opcua.server import OpcuaServer
+
+log = logging.getLogger("ncgate.opcua")
 
 # The companion specifications' namespaces (their URIs as the OPC Foundation publishes them).
 DI = "http://opcfoundation.org/UA/DI/"
@@ -121,8 +124,15 @@ class Space:
         await server.set_application_uri(f"urn:ncgate:{layout['cell']}")
         server.set_security_policy(_SECURITY[config.security])
         if config.certificate is not None and config.private_key is not None:
-            await server.load_certificate(str(config.certificate))
-            await server.load_private_key(Path(config.private_key))
+            # The PEM files as Modbus/TLS and the console take them, with the same warning of
+            # a certificate that has expired or is about to (gateway/tls.py).
+            warning = expiry_warning(config.certificate)
+            if warning is not None:
+                log.warning("%s", warning)
+            pem = config.certificate.read_bytes().lstrip().startswith(b"-----")
+            await server.load_certificate(config.certificate.read_bytes(),
+                                          "pem" if pem else "der")
+            await server.load_private_key(config.private_key.read_bytes(), format="pem")
         server.iserver.create_session = self._session  # type: ignore[method-assign]
         await self._build(server, layout)
         await server.start()
