@@ -42,7 +42,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-
 HERE = str(Path(__file__).resolve().parent)  # bench/storm.py's cell and poller are reused
 
 
