@@ -23,7 +23,10 @@
    writes SYVAR0..63 by Modbus at 20 Hz, so the image changes as a busy cell's does.  In the
    quiet phase no OPC UA client connects; in the storm phase 10 asyncua clients in that
    process each monitor 2,000 items (publishing interval 50 ms).  Printed: the poller's p99
-   and the PLC's largest lateness in each phase and their ratio to quiet (target <= 1.5x).
+   and the PLC's largest lateness in each phase and their ratio to quiet (target <= 1.5x),
+   the gateway process's CPU share, and the p99 of bench/storm.py's control (a bare asyncio
+   server in a process of its own, polled alike): the clients and the server run on this
+   machine too, so what the machine's load does to any server shows there.
 
     .venv/bin/python bench/opcua.py                  # 300 rounds of each
     .venv/bin/python bench/opcua.py --rounds 1000 --storm --seconds 10
@@ -110,7 +113,7 @@ async def startup() -> None:
             await gateway.__aenter__()
         gap, took = await ticker_gap(start)
         await gateway.__aexit__(None, None, None)
-        what = ("ncgate's server on its own thread" if opcua
+        what = ("ncgate's server in a process of its own" if opcua
                 else "the baseline, a gateway without [opcua]")
         print(f"start-up, {what}: the loop held up to {gap:.0f} ms (the gateway's start "
               f"{took:.2f} s)")
@@ -256,13 +259,15 @@ def abuse(uap: int, mb: int, clients: int, items: int, ready: Any, stop: Any) ->
     asyncio.run(main())
 
 
-async def storm_phase(clients: int, seconds: float) -> tuple[float, float, float]:
-    """(poller p99 ms, PLC max lateness ms, the gateway's CPU share) with ``clients`` OPC UA
-    clients of 2,000 items each."""
+async def storm_phase(clients: int, seconds: float) -> tuple[float, float, float, float]:
+    """(poller p99 ms, PLC max lateness ms, the gateway's CPU share, the control's poller p99
+    ms) with ``clients`` OPC UA clients of 2,000 items each.  The control is bench/storm.py's
+    bare asyncio server in a process of its own, polled alike: what the machine's load does
+    to any Python server."""
     import multiprocessing
 
     sys.path.insert(0, HERE)
-    from storm import cpu_s, poller, wait_listening, write_cell
+    from storm import control_server, cpu_s, poller, wait_listening, write_cell
 
     spawn = multiprocessing.get_context("spawn")
     with tempfile.TemporaryDirectory() as tmp:
@@ -274,6 +279,10 @@ async def storm_phase(clients: int, seconds: float) -> tuple[float, float, float
         gateway = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "ncgate", "run", "--config", str(config), "-q",
             stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL, cwd=tmp)
+        control_port, control_ready = free_port(), spawn.Event()
+        control = spawn.Process(target=control_server, args=(control_port, control_ready),
+                                daemon=True)
+        control.start()
         ready, stop_abuse = spawn.Event(), spawn.Event()
         load = spawn.Process(target=abuse, args=(uap, port, clients, 2000, ready, stop_abuse),
                              daemon=True)
@@ -285,36 +294,44 @@ async def storm_phase(clients: int, seconds: float) -> tuple[float, float, float
             stop = asyncio.Event()
             rtts: list[float] = []
             late: list[int] = []
+            await asyncio.to_thread(control_ready.wait, 30)
+            control_rtts: list[float] = []
             polling = asyncio.create_task(poller(port, stop, rtts, late))
+            control_polling = asyncio.create_task(poller(control_port, stop, control_rtts, []))
             await asyncio.sleep(1.0)  # warm-up
             rtts.clear()
             late.clear()
+            control_rtts.clear()
             cpu0, t0 = cpu_s(gateway.pid), time.perf_counter()
             await asyncio.sleep(seconds)
             cpu = (cpu_s(gateway.pid) - cpu0) / (time.perf_counter() - t0)
             stop.set()
             await polling
+            await control_polling
         finally:
+            control.terminate()
             stop_abuse.set()
             await asyncio.to_thread(load.join, 30)
             gateway.terminate()
             await gateway.wait()
-    return pct(rtts, .99) * 1000, max(late, default=0) / 1000, cpu
+    return pct(rtts, .99) * 1000, max(late, default=0) / 1000, cpu, pct(control_rtts, .99) * 1000
 
 
 async def storm(seconds: float, rounds: int) -> None:
     """Quiet and storm phases in alternating rounds (a shared machine's load drifts); the
     median of each figure over the rounds."""
-    runs: dict[str, list[tuple[float, float, float]]] = {"quiet": [], "storm": []}
+    runs: dict[str, list[tuple[float, float, float, float]]] = {"quiet": [], "storm": []}
     for _ in range(rounds):
         runs["quiet"].append(await storm_phase(0, seconds))
         runs["storm"].append(await storm_phase(10, seconds))
-    quiet = [statistics.median(f[i] for f in runs["quiet"]) for i in range(3)]
+    quiet = [statistics.median(f[i] for f in runs["quiet"]) for i in range(4)]
     for name, label in (("quiet", "quiet"), ("storm", "10 clients x 2,000 items")):
-        p99, late, cpu = (statistics.median(f[i] for f in runs[name]) for i in range(3))
+        p99, late, cpu, control = (statistics.median(f[i] for f in runs[name])
+                                   for i in range(4))
         print(f"storm, {label} (median of {rounds}): poller p99 {p99:.2f} ms "
               f"({p99 / quiet[0]:.2f}x quiet), PLC lateness max {late:.2f} ms "
-              f"({late / max(quiet[1], 1e-3):.2f}x quiet), gateway CPU {100 * cpu:.0f} %")
+              f"({late / max(quiet[1], 1e-3):.2f}x quiet), gateway CPU {100 * cpu:.0f} %; "
+              f"the control's poller p99 {control:.2f} ms ({control / quiet[3]:.2f}x quiet)")
 
 
 def main() -> int:

@@ -1,10 +1,12 @@
-"""The OPC UA server: asyncua on a thread and an event loop of its own, fed by the gateway's
-loop (docs/decisions.md, "OPC UA: a thread of its own fed snapshots").
+"""The OPC UA server: asyncua in a process of its own, fed by the gateway's loop
+(docs/decisions.md, "OPC UA: a process of its own fed snapshots").
 
-asyncua's ``init`` builds the standard address space in one go (measured: 0.3-1 s with the
-loop held), and its subscriptions publish with no budget; on the gateway's loop either would
-make the PLC scan late.  So the server runs on a thread with its own loop, and the gateway's
-loop only hands it what changed (:mod:`ncgate.gateway.opcua.model`):
+asyncua's ``init`` builds the standard address space in one go, holding the interpreter for
+0.2 s even on a thread, and its subscriptions publish with no budget: on the gateway's loop,
+or on a thread of the gateway's process, they would make the PLC scan and the pollers late
+(bench/opcua.py).  So the server is ``python -m ncgate.gateway.opcua.space``, and this module
+is the gateway's side of it: it imports no asyncua, and hands the process what changed
+(:mod:`ncgate.gateway.opcua.model`), in the frames of :mod:`ncgate.gateway.opcua.wire`:
 
 - a process's view inside each change of its state (the engine's state listeners), so that a
   subscription sees every state, in order;
@@ -12,14 +14,9 @@ loop only hands it what changed (:mod:`ncgate.gateway.opcua.model`):
   ``call_soon`` sends it), and alarms and part-program messages as they are traced;
 - the sampled values (the block, the line, the positions, the PLC status) every ``SAMPLE_S``.
 
-The thread writes them into the nodes (only the values that changed); asyncua's subscriptions
-take it from there.  A client's write of an image node hops onto the gateway's loop, goes
-through ``Gateway.apply`` attributed ``opcua <peer>`` (or ``opcua <user>``), and its refusal
-comes back as the status code of :data:`ncgate.gateway.opcua.codes.REFUSAL`.
-
-This module is the gateway loop's side and imports no asyncua: the server's side
-(:mod:`ncgate.gateway.opcua.space`) is imported on the thread, since importing asyncua holds
-the interpreter for 0.2-0.5 s (bench/opcua.py).
+A client's write of an image node comes back as a frame, goes through ``Gateway.apply``
+attributed ``opcua <peer>`` (or ``opcua <user>``), and the refusal's reason goes back, which
+the process answers with the status code of :data:`ncgate.gateway.opcua.codes.REFUSAL`.
 """
 
 from __future__ import annotations
@@ -27,7 +24,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import threading
+import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -43,6 +40,7 @@ from ncgate.gateway.opcua.model import (
     plc_view,
     process_view,
 )
+from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.inputs import Source, SourceKind, Write
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine.events import Alarm, Display
@@ -50,13 +48,14 @@ from ncgate.interpreter.engine.states import describe_where
 
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
-    from ncgate.gateway.opcua.space import Space
     from ncgate.interpreter.engine import Process, ProcessState
 
 log = logging.getLogger("ncgate.opcua")
 
 SAMPLE_S = 0.1  # how often the values without an event (line, block, position, PLC) are read
-START_TIMEOUT_S = 30.0
+START_TIMEOUT_S = 60.0  # the process's start: an interpreter, asyncua, 2,000 nodes
+STOP_TIMEOUT_S = 10.0
+BEHIND_BYTES = 4 << 20  # frames not yet read by the process: past this, they wait here
 REGION = {"SA": "sa_bits", "SK": "k_bytes", "SYVAR": "syvars"}  # opcua.writable's names
 
 
@@ -71,11 +70,11 @@ class OpcuaServer:
         self.sessions = 0
         self.writes = 0
         self.refused = 0
-        self.config_symbols = frozenset(gw.config.symbols)  # (the server's thread reads it)
         self._loop: asyncio.AbstractEventLoop | None = None  # the gateway's
-        self.space: Space | None = None  # the server's side, set on its thread
-        self._thread: threading.Thread | None = None
-        self._done: asyncio.Future[None] | None = None
+        self._process: asyncio.subprocess.Process | None = None
+        self._reader: asyncio.Task[None] | None = None
+        self._ready: asyncio.Future[int] | None = None
+        self._closing = False
         self._detach: list[Callable[[], None]] = []
         self._batch: list[tuple[str, Any]] = []
         self._flush_due = False
@@ -88,16 +87,20 @@ class OpcuaServer:
 
     async def start(self) -> None:
         loop = self._loop = asyncio.get_running_loop()
-        ready: asyncio.Future[tuple[str, int]] = loop.create_future()
-        self._done = loop.create_future()
-        layout = self._layout()
-        self._thread = threading.Thread(target=self._run, args=(ready, layout),
-                                        name="ncgate-opcua", daemon=True)
-        self._thread.start()
-        async with asyncio.timeout(START_TIMEOUT_S):
-            self.address = await ready
-        host, port = self.address
-        self.endpoint = f"opc.tcp://{host}:{port}/"
+        self._ready = loop.create_future()
+        self._process = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "ncgate.gateway.opcua.space",
+            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE)
+        self._send(("start", self.config, self._layout()))
+        self._reader = loop.create_task(self._read())
+        try:
+            async with asyncio.timeout(START_TIMEOUT_S):
+                port = await self._ready
+        except BaseException:
+            await self.close()
+            raise
+        self.address = (self.config.host, port)
+        self.endpoint = f"opc.tcp://{self.config.host}:{port}/"
         engine, image = self.gw.engine, self.gw.image
         engine.state_listeners.append(self._on_state)
         self._detach.append(lambda: engine.state_listeners.remove(self._on_state))
@@ -105,6 +108,33 @@ class OpcuaServer:
         self._detach.append(self.gw.runtime.trace.subscribe(self._on_event))
         self._image_dirty = True
         self._sample()
+
+    def _send(self, message: Any) -> None:
+        process = self._process
+        if process is not None and process.stdin is not None and not self._closing:
+            process.stdin.write(frame(message))
+
+    async def _read(self) -> None:
+        """The process's frames: ready, an error at its start, a client's write."""
+        process, ready = self._process, self._ready
+        assert process is not None and process.stdout is not None and ready is not None
+        try:
+            while True:
+                message = await read_frame(process.stdout)
+                kind = message[0]
+                if kind == "ready" and not ready.done():
+                    ready.set_result(message[1])
+                elif kind == "error" and not ready.done():
+                    ready.set_exception(GatewayError(f"OPC UA server: {message[1]}"))
+                elif kind == "write":
+                    _, number, key, value, who = message
+                    self._send(("result", number, self.write_on_loop(key, value, who)))
+        except EOFError:
+            if not ready.done():
+                ready.set_exception(GatewayError("OPC UA server: its process ended before "
+                                                 "it served (its log is on stderr)"))
+            elif not self._closing:
+                log.error("the OPC UA server's process ended (its log is on stderr)")
 
     def _layout(self) -> dict[str, Any]:
         """What the address space is made of, read here once (the thread builds it)."""
@@ -166,15 +196,18 @@ class OpcuaServer:
             self._loop.call_soon(self._flush)
 
     def _flush(self) -> None:
-        """Hand what changed in this loop turn to the server's thread, in order."""
+        """Hand what changed in this loop turn to the server's process, in order."""
         self._flush_due = False
         if self._image_dirty:
             self._image_dirty = False
             self._batch.append(("image", self.gw.image.snapshot()))
+        process = self._process
+        if not self._batch or process is None or process.stdin is None:
+            return
+        if process.stdin.transport.get_write_buffer_size() > BEHIND_BYTES:
+            return  # the process is behind: this turn's changes join the next hand-over
         batch, self._batch = self._batch, []
-        space = self.space
-        if batch and space is not None and space.loop is not None and space.inbox is not None:
-            space.loop.call_soon_threadsafe(space.inbox.put_nowait, batch)
+        self._send(("batch", batch))
 
     async def close(self) -> None:
         for detach in self._detach:
@@ -182,17 +215,24 @@ class OpcuaServer:
         self._detach = []
         if self._sampler is not None:
             self._sampler.cancel()
-        space = self.space
-        if space is not None and space.loop is not None and space.stop is not None:
-            with contextlib.suppress(RuntimeError):  # its loop has ended already
-                space.loop.call_soon_threadsafe(space.stop.set)
-        if self._done is not None:
-            await self._done
-
-    @property
-    def gateway_loop(self) -> asyncio.AbstractEventLoop:
-        assert self._loop is not None
-        return self._loop
+        process, self._process = self._process, None
+        if process is not None:
+            if process.stdin is not None and not self._closing:
+                with contextlib.suppress(ConnectionError):
+                    process.stdin.write(frame(("stop",)))
+                process.stdin.close()
+            self._closing = True
+            try:
+                async with asyncio.timeout(STOP_TIMEOUT_S):
+                    await process.wait()
+            except TimeoutError:
+                process.kill()
+                await process.wait()
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await reader
 
     def write_on_loop(self, key: str, value: Any, who: str) -> Reason | None:
         """A client's write of an image node (``key``: ``SA10`` or an I/O name), on the
@@ -218,23 +258,3 @@ class OpcuaServer:
         return None
 
     # -- the server's thread ---------------------------------------------------------------
-
-    def _run(self, ready: asyncio.Future[tuple[str, int]], layout: dict[str, Any]) -> None:
-        """The server's thread: asyncua imported and served here, never on the loop."""
-        loop = self.gateway_loop
-        try:
-            from ncgate.gateway.opcua.space import serve
-
-            serve(self, ready, layout)
-        except BaseException as exc:  # to the gateway's loop, which raises it in start()
-            error = GatewayError(f"OPC UA server: {exc}")
-
-            def fail() -> None:
-                if not ready.done():
-                    ready.set_exception(error)
-            if not loop.is_closed():
-                loop.call_soon_threadsafe(fail)
-        finally:
-            done = self._done
-            if done is not None and not loop.is_closed():
-                loop.call_soon_threadsafe(lambda: None if done.done() else done.set_result(None))

@@ -1,19 +1,24 @@
-"""The OPC UA server's side, on its own thread and event loop: asyncua's server, the address
-space (docs/opcua.md has the node set), the values the gateway's loop hands over written into
-the nodes, the events raised, and a client's write of an image node sent to the gateway's loop.
+"""The OPC UA server's process (``python -m ncgate.gateway.opcua.space``, started by
+:class:`ncgate.gateway.opcua.server.OpcuaServer`): asyncua's server, the address space
+(docs/opcua.md has the node set), the values the gateway's loop sends written into the nodes,
+the events raised, and a client's write of an image node sent back to the gateway's loop.
 
-Imported on that thread only (:meth:`ncgate.gateway.opcua.server.OpcuaServer.start`):
-importing asyncua takes 0.2-0.5 s, which the gateway's loop must not wait for
-(bench/opcua.py).  Never touches the engine or the image; it reads what the loop sends it.
+A process of its own (docs/decisions.md, "OPC UA: a process of its own fed snapshots"):
+asyncua's import and init, and its publishing, never take the gateway's interpreter.  It
+talks to the gateway through its stdin and stdout in the frames of
+:mod:`ncgate.gateway.opcua.wire`; its log goes to stderr.  It never touches the engine or the
+image; it reads what the loop sends it, and ends when its stdin does.
 """
 
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import hashlib
 import hmac
+import itertools
 import logging
+import os
+import sys
 from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
@@ -26,19 +31,18 @@ from asyncua.ua.object_ids import ObjectIds
 from asyncua.ua.status_codes import StatusCodes
 
 from ncgate import __version__
-from ncgate.config.loader import UaSecurity
+from ncgate.config.loader import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.model import EventView, ProcessView
 from ncgate.gateway.opcua.server import REGION
+from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.tls import expiry_warning
 from ncgate.inputs import Var
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
     from asyncua.server.event_generator import EventGenerator
-
-    from ncgate.gateway.opcua.server import OpcuaServer
 
 log = logging.getLogger("ncgate.opcua")
 
@@ -86,22 +90,71 @@ class _Users(UserManager):
 
 
 
-def serve(adapter: OpcuaServer, ready: asyncio.Future[tuple[str, int]],
-          layout: dict[str, Any]) -> None:
-    """The server's thread: serve until the adapter sets ``stop``."""
-    space = Space(adapter)
-    adapter.space = space
-    asyncio.run(space.serve(ready, layout))
+class Link:
+    """The gateway at the other end of the pipes: what this process sends it, and the
+    answers to the writes it asked the gateway's loop to apply."""
+
+    def __init__(self, config: OpcuaConfig, symbols: frozenset[str], out: Any) -> None:
+        self.config = config
+        self.symbols = symbols  # the I/O names of [symbols] (their nodes' ids)
+        self._out = out
+        self._numbers = itertools.count(1)
+        self._pending: dict[int, asyncio.Future[Reason | None]] = {}
+
+    def send(self, message: Any) -> None:
+        # A blocking write: the gateway's loop reads its end at once, and frames are small.
+        self._out.write(frame(message))
+
+    async def write(self, key: str, value: Any, who: str) -> Reason | None:
+        """A client's write, applied by the gateway's loop: why it was refused, or None."""
+        number = next(self._numbers)
+        answer: asyncio.Future[Reason | None] = asyncio.get_running_loop().create_future()
+        self._pending[number] = answer
+        self.send(("write", number, key, value, who))
+        return await answer
+
+    def answered(self, number: int, refused: Reason | None) -> None:
+        answer = self._pending.pop(number, None)
+        if answer is not None and not answer.done():
+            answer.set_result(refused)
+
+
+def main() -> None:
+    """The process: serve until the gateway sends stop or closes the pipe."""
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # Its warnings of a None endpoint and of its revised values are asyncua's to itself.
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
+    # stdout carries the frames only: anything printed goes to stderr.
+    out = os.fdopen(os.dup(1), "wb", buffering=0)
+    os.dup2(2, 1)
+    # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
+    os.nice(5)
+    asyncio.run(_serve(out))
+
+
+async def _serve(out: Any) -> None:
+    loop = asyncio.get_running_loop()
+    reader = asyncio.StreamReader()
+    await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin.buffer)
+    try:
+        _, config, layout = await read_frame(reader)
+    except EOFError:
+        return
+    link = Link(config, frozenset(layout["symbols"]), out)
+    space = Space(link)
+    try:
+        await space.serve(reader, layout)
+    except Exception as exc:  # said to the gateway, whose start raises it
+        link.send(("error", f"{type(exc).__name__}: {exc}"))
+        raise
 
 
 class Space:
-    """asyncua's server and what its nodes show (the server's thread only)."""
+    """asyncua's server and what its nodes show."""
 
-    def __init__(self, adapter: OpcuaServer) -> None:
-        self.adapter = adapter
-        self.loop: asyncio.AbstractEventLoop | None = None
-        self.stop: asyncio.Event | None = None
-        self.inbox: asyncio.Queue[list[tuple[str, Any]]] | None = None
+    def __init__(self, link: Link) -> None:
+        self.link = link
         self._server: Server | None = None
         self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
         self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
@@ -110,13 +163,9 @@ class Space:
         self._messages: EventGenerator | None = None
         self.image_ns = 0
 
-    async def serve(self, ready: asyncio.Future[tuple[str, int]],
-                     layout: dict[str, Any]) -> None:
-        gateway_loop = self.adapter.gateway_loop
-        self.loop = asyncio.get_running_loop()
-        self.stop = asyncio.Event()
-        self.inbox = asyncio.Queue()
-        config = self.adapter.config
+    async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
+        """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
+        config = self.link.config
         server = self._server = Server(user_manager=_Users(dict(config.users)))
         await server.init()
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
@@ -137,12 +186,19 @@ class Space:
         await self._build(server, layout)
         await server.start()
         try:
-            port = int(server.bserver.port or 0)  # type: ignore[union-attr]
-            gateway_loop.call_soon_threadsafe(
-                lambda: None if ready.done() else ready.set_result((config.host, port)))
-            consumer = asyncio.create_task(self._consume())
-            await self.stop.wait()
-            consumer.cancel()
+            self.link.send(("ready", int(server.bserver.port or 0)))  # type: ignore[union-attr]
+            while True:
+                try:
+                    message = await read_frame(reader)
+                except EOFError:
+                    return
+                kind = message[0]
+                if kind == "batch":
+                    await self._apply(message[1])
+                elif kind == "result":
+                    self.link.answered(message[1], message[2])
+                elif kind == "stop":
+                    return
         finally:
             await server.stop()
 
@@ -154,20 +210,18 @@ class Space:
         return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
                         user=user, external=external)
 
-    async def _consume(self) -> None:
-        assert self.inbox is not None
-        while True:
-            batch = await self.inbox.get()
-            for kind, item in batch:
-                if kind == "process":
-                    await self._show_process(item)
-                elif kind == "image":
-                    await self._show_image(*item)
-                elif kind == "plc":
-                    await self._show({"plc.State": item.state, "plc.Scans": item.scans,
-                                      "plc.Fault": item.fault})
-                elif kind == "event":
-                    await self._raise(item)
+    async def _apply(self, batch: list[tuple[str, Any]]) -> None:
+        """One loop turn's changes, in the order they happened."""
+        for kind, item in batch:
+            if kind == "process":
+                await self._show_process(item)
+            elif kind == "image":
+                await self._show_image(*item)
+            elif kind == "plc":
+                await self._show({"plc.State": item.state, "plc.Scans": item.scans,
+                                  "plc.Fault": item.fault})
+            elif kind == "event":
+                await self._raise(item)
 
     async def _show(self, values: dict[str, Any]) -> None:
         server = self._server
@@ -333,7 +387,7 @@ class Space:
         return node
 
     async def _build_image(self, vendor: Node, img: int, layout: dict[str, Any]) -> None:
-        writable = self.adapter.config.writable
+        writable = self.link.config.writable
         areas = (("SA", layout["sa_bits"], False), ("SK", layout["k_bytes"], 0),
                  ("SYVAR", layout["syvars"], 0))
         names = {var: name for name, var in layout["symbols"].items()}
@@ -420,16 +474,7 @@ class _Session(InternalSession):
                 results.extend(await super().write(one))
                 continue
             value = item.Value.Value.Value if item.Value.Value is not None else None
-            future: concurrent.futures.Future[Reason | None] = concurrent.futures.Future()
-
-            def act(key: str = key, value: Any = value,
-                    future: concurrent.futures.Future[Reason | None] = future) -> None:
-                try:
-                    future.set_result(owner.adapter.write_on_loop(key, value, self._who()))
-                except BaseException as exc:
-                    future.set_exception(exc)
-            owner.adapter.gateway_loop.call_soon_threadsafe(act)
-            refused = await asyncio.wrap_future(future)
+            refused = await owner.link.write(key, value, self._who())
             code = StatusCodes.Good if refused is None else REFUSAL[refused]
             results.append(ua.StatusCode(code))  # type: ignore[arg-type]
         return results
@@ -443,6 +488,10 @@ def _image_key(owner: Space, node: ua.NodeId) -> str | None:
     area = ident.rstrip("0123456789")
     if area in _VTYPE and ident[len(area):].isdigit():
         return ident
-    if ident in owner.adapter.config_symbols:
+    if ident in owner.link.symbols:
         return ident
     return None
+
+
+if __name__ == "__main__":
+    main()
