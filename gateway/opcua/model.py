@@ -1,6 +1,6 @@
 """What the OPC UA nodes show, read on the gateway's loop and handed whole to the server's
-thread (ARCHITECTURE.md, "The runtime"): the same rule as the CANopen node's snapshot, the
-server's thread never touches the engine or the image.
+process (ARCHITECTURE.md, "The runtime"): the same rule as the CANopen node's snapshot, the
+server never touches the engine or the image.
 
 Pure data and the loop's side only; no asyncua here (``server.py`` owns the nodes).  The
 mappings from a process's state to the companion specifications' enumerations are here, once:

@@ -137,7 +137,7 @@ class OpcuaServer:
                 log.error("the OPC UA server's process ended (its log is on stderr)")
 
     def _layout(self) -> dict[str, Any]:
-        """What the address space is made of, read here once (the thread builds it)."""
+        """What the address space is made of, read here once (the process builds it)."""
         gw = self.gw
         plc = gw.config.plc
         runtime = gw.runtime
@@ -256,5 +256,3 @@ class OpcuaServer:
             return refused.reason
         self.writes += 1
         return None
-
-    # -- the server's thread ---------------------------------------------------------------

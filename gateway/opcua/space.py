@@ -277,7 +277,7 @@ class Space:
             event.ErrorCode = e.code
         await generator.trigger(message=e.message)
 
-    # -- the address space (the server's thread, before it serves) -------------------------
+    # -- the address space (before it serves) ----------------------------------------------
 
     async def _build(self, server: Server, layout: dict[str, Any]) -> None:
         di = await server.register_namespace(DI)
