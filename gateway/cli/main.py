@@ -598,6 +598,8 @@ def _map(args: argparse.Namespace) -> int:
                 default = "" if r["default"] is None else r["default"]
                 sys.stdout.write(f"| {r['index']} | {r['sub']} | {r['name']} | {r['type']} | "
                                  f"{r['access']} | {default} |\n")
+        if config.opcua.enabled and not args.bus:
+            _ua_nodes(config)
         if plant:
             sys.stdout.write("\n# Plant models (docs/plant.md)\n\n| model | kind | reads | "
                              "writes |\n|---|---|---|---|\n")
@@ -606,6 +608,21 @@ def _map(args: argparse.Namespace) -> int:
                 writes = ", ".join(f"{k} {v}" for k, v in m["writes"].items())
                 sys.stdout.write(f"| {m['name']} | {m['kind']} | {reads} | {writes} |\n")
     return EXIT_OK
+
+
+def _ua_nodes(config: Config) -> None:
+    """The OPC UA nodes beside the registers (``[opcua]`` enabled; docs/opcua.md)."""
+    from ncgate.gateway.opcua.model import node_rows
+
+    cell = config.source.stem if config.source is not None else "ncgate"
+    plc = config.plc
+    rows = node_rows(cell, list(range(1, config.nc.processes + 1)),
+                     {"sa_bits": plc.sa_bits, "k_bytes": plc.k_bytes, "syvars": plc.syvars},
+                     config.opcua.writable, dict(config.symbols))
+    sys.stdout.write("\n# OPC UA nodes (docs/opcua.md)\n\n| browse path | node id | type | "
+                     "access | what |\n|---|---|---|---|---|\n")
+    for row in rows:
+        sys.stdout.write("| " + " | ".join(row) + " |\n")
 
 
 def plant_rows(config: Config) -> list[dict[str, Any]]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
+from ncgate.inputs import Var
 from ncgate.interpreter.engine import ProcessState
 
 if TYPE_CHECKING:
@@ -80,6 +81,9 @@ class PlcView(NamedTuple):
     fault: str
 
 
+# The view of each area that is a node of the image namespace (a bit, a byte, a word).
+SHOWN_VIEW = {"SA": "bit", "SK": "BY", "SYVAR": "IN"}
+
 ALARM_SEVERITY = 700  # OPC 10000-5 6.4.2 ranges: 667..800 is "high"
 MESSAGE_SEVERITY = 300  # "medium low": information for the operator
 
@@ -108,3 +112,47 @@ def plc_view(gw: Gateway) -> PlcView:
         return PlcView("NONE", 0, "")
     return PlcView(status.state.name, status.scans,
                    str(status.fault) if status.fault is not None else "")
+
+
+def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
+              writable: frozenset[str], symbols: dict[str, str]) -> list[tuple[str, ...]]:
+    """The UA nodes as ``ncgate map`` lists them beside the registers (docs/opcua.md):
+    (browse path, node id, type, access, what)."""
+    rw = {area: "read/write" if region in writable else "read"
+          for area, region in (("SA", "sa_bits"), ("SK", "k_bytes"), ("SYVAR", "syvars"))}
+    machine = f"Objects/Machines/{cell}"
+    rows: list[tuple[str, ...]] = [
+        (machine, f"ns=urn:ncgate:ua;s=Machines/{cell}", "MachineToolType", "read", "the cell"),
+        (f"{machine}/Notification/Messages", "ns=urn:ncgate:ua;s=Messages", "events", "read",
+         "AlertType (alarms), NotificationEventType (DIS)")]
+    for k in processes:
+        p = f"Process {k}"
+        for name, kind, what in (("ChannelState", "Int32", "0 Active, 1 Interrupted, 2 Reset"),
+                                 ("FeedOverride", "Double", "percent"),
+                                 ("RapidOverride", "Double", "percent")):
+            rows.append((f"{machine}/Monitoring/{p}/{name}", f"ns=urn:ncgate:ua;s=P{k}/{name}",
+                         kind, "read", what))
+        for name, kind, what in (
+                ("ActProgramStatus", "Int32", "0 Stopped, 1 Running, 2 Waiting, "
+                 "3 Interrupted, 4 Canceled"),
+                ("ActProgramName", "String", "the program"),
+                ("ActProgramBlock", "String[3]", "previous, current, next block"),
+                ("ActProgramLine", "Int32", "the source line"),
+                ("ActFeedrate", "Double", "mm/min"), ("X", "Double", "mm"),
+                ("Y", "Double", "mm"), ("Z", "Double", "mm")):
+            rows.append((f"Objects/CncInterface/CncChannelList/{p}/{name}",
+                         f"ns=urn:ncgate:ua;s=P{k}/{name}", kind, "read", what))
+        rows.append((f"Objects/Image/Processes/{p}/State", f"ns=urn:ncgate:image;s={p}.State",
+                     "String", "read", "the state as /api/status names it"))
+    for area, kind, size in (("SA", "Boolean", sizes["sa_bits"]),
+                             ("SK", "Byte", sizes["k_bytes"]),
+                             ("SYVAR", "Int16", sizes["syvars"])):
+        rows.append((f"Objects/Image/{area}/{area}0 .. {area}{size - 1}",
+                     f"ns=urn:ncgate:image;s={area}<i>", kind, rw[area], f"{size} variables"))
+    for name, text in symbols.items():
+        var = Var.parse(text)
+        if var.view != SHOWN_VIEW[var.area]:
+            continue  # a byte or word view of SA, a word of SK: no node (its variables have)
+        rows.append((f"Objects/Image/Symbols/{name}", f"ns=urn:ncgate:image;s={name}",
+                     f"as {var}", rw[var.area], f"the I/O name of {var}"))
+    return rows

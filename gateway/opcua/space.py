@@ -34,7 +34,7 @@ from ncgate import __version__
 from ncgate.config.loader import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
-from ncgate.gateway.opcua.model import EventView, ProcessView
+from ncgate.gateway.opcua.model import SHOWN_VIEW, EventView, ProcessView
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.tls import expiry_warning
@@ -409,7 +409,7 @@ class Space:
                                          ua.QualifiedName("Symbols", img))
         for name, var in layout["symbols"].items():
             parsed = Var.parse(var)
-            if parsed.view != {"SA": "bit", "SK": "BY", "SYVAR": "IN"}[parsed.area]:
+            if parsed.view != SHOWN_VIEW[parsed.area]:
                 continue  # a byte or word view of SA, a word of SK: shown by its variables
             node = await folder.add_variable(_id(name, img), ua.QualifiedName(name, img),
                                              ua.Variant(self._values.get(var, 0),

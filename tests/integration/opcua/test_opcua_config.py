@@ -1,14 +1,17 @@
 """[opcua]'s keys and refusals without a client: the one refusal table, a public bind without
-security, security without a certificate, the regions and users it takes."""
+security, security without a certificate, the regions and users it takes, and `ncgate map`'s
+list of the UA nodes."""
 
 from __future__ import annotations
 
 import hashlib
+from pathlib import Path
 
 import pytest
 
 from ncgate.config import ConfigError, load_config
 from ncgate.errors import Reason
+from ncgate.gateway.cli.main import main
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.space import password_matches
 
@@ -44,3 +47,23 @@ def test_a_user_is_a_pbkdf2_hash_that_the_server_checks() -> None:
     assert not password_matches(config.opcua.users["alice"], "guess")
     with pytest.raises(ConfigError, match=r"opcua\.users\.bob"):
         load_config(None, overrides={"opcua.users": {"bob": "plain-text"}})
+
+
+def test_map_lists_the_ua_nodes_beside_the_registers_when_opcua_is_on(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "press.toml"
+    config.write_text('[opcua]\nenabled = true\nwritable = ["sa_bits"]\n[symbols]\n'
+                      'door_closed = "SA10"\nspeed = "SYVAR3"\nstatus_byte = "SA1.BY"\n')
+    assert main(["map", "--config", str(config), "--format", "md"]) == 0
+    out = capsys.readouterr().out
+    assert "# OPC UA nodes" in out
+    assert ("| Objects/Machines/press/Monitoring/Process 1/ChannelState | "
+            "ns=urn:ncgate:ua;s=P1/ChannelState | Int32 | read |") in out
+    assert ("| Objects/Image/Symbols/door_closed | ns=urn:ncgate:image;s=door_closed | as SA10 "
+            "| read/write |") in out
+    assert "| Objects/Image/Symbols/speed | ns=urn:ncgate:image;s=speed | as SYVAR3 | read |" in out
+    assert "Symbols/status_byte" not in out  # a byte of SA is no node of its own
+    assert "| Objects/Image/SYVAR/SYVAR0 .. SYVAR255 |" in out
+    config.write_text("")
+    assert main(["map", "--config", str(config), "--format", "md"]) == 0
+    assert "OPC UA" not in capsys.readouterr().out
