@@ -17,7 +17,8 @@ async def start_run(tmp_path: Path) -> tuple[asyncio.subprocess.Process, int, li
     config.write_text("[modbus]\nport = 0\n[canopen]\nenabled = false\n")
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "ncgate", "run", "--config", str(config), "--no-web",
-        "--opcua", "0", "--allow-missing", stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+        "--opcua", "0", "--allow-missing", stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT)
     assert proc.stdout is not None
     lines: list[str] = []
     async with asyncio.timeout(60):
@@ -39,7 +40,7 @@ async def port_closed(port: int) -> None:
             except OSError:
                 return
             writer.close()
-            await asyncio.sleep(0.05)  # noqa: ASYNC110 - another process's socket
+            await asyncio.sleep(0.05)  # another process's socket: nothing to wait on
 
 
 async def test_run_opcua_serves_the_cell_and_stops_cleanly_on_sigterm(
