@@ -106,6 +106,30 @@ def process_view(gw: Gateway, number: int) -> ProcessView:
                        position)  # type: ignore[arg-type]
 
 
+class PlantView(NamedTuple):
+    """A plant model (docs/plant.md) as its nodes show it."""
+
+    name: str
+    state: str
+    fault: str  # the faults in force on it, by kind ("" none)
+
+
+SND_LOG = 16  # the SNDs the log node keeps, as the Modbus SND log does
+
+
+def snd_text(t: float, sender: int, to: int, where: str) -> str:
+    """One SND log line: ``t=1.250 P1 -> P2 PROG91.nc:7 N24``."""
+    return f"t={t:.3f} P{sender} -> P{to}" + (f" {where}" if where else "")
+
+
+def plant_views(gw: Gateway) -> tuple[PlantView, ...]:
+    plant = gw.runtime.plant
+    if plant is None:
+        return ()
+    return tuple(PlantView(m["name"], str(m["state"]), m["fault"] or "")
+                 for m in plant.status()["models"])
+
+
 def plc_view(gw: Gateway) -> PlcView:
     status = gw.plc_status
     if status is None:

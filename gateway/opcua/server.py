@@ -35,15 +35,18 @@ from ncgate.gateway.opcua.model import (
     ALARM_SEVERITY,
     MESSAGE_SEVERITY,
     EventView,
+    PlantView,
     PlcView,
     ProcessView,
+    plant_views,
     plc_view,
     process_view,
+    snd_text,
 )
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.inputs import Source, SourceKind, Write
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine.events import Alarm, Display
+from ncgate.interpreter.engine.events import Alarm, Display, Snd
 from ncgate.interpreter.engine.states import describe_where
 
 if TYPE_CHECKING:
@@ -82,6 +85,7 @@ class OpcuaServer:
         self._sampler: asyncio.TimerHandle | None = None
         self._last: dict[int, ProcessView] = {}
         self._last_plc: PlcView | None = None
+        self._last_plant: tuple[PlantView, ...] = ()
 
     # -- the gateway's loop ----------------------------------------------------------------
 
@@ -144,6 +148,7 @@ class OpcuaServer:
         symbols = {name: str(runtime.var(name)) for name in gw.config.symbols}
         source = gw.config.source
         return {"cell": source.stem if source is not None else "ncgate",
+                "plant": [model.name for model in gw.config.plant.model],
                 "processes": sorted(gw.engine.processes),
                 "sa_bits": plc.sa_bits, "k_bytes": plc.k_bytes, "syvars": plc.syvars,
                 "symbols": symbols, "comments": dict(gw.config.symbols.comments)}
@@ -170,6 +175,9 @@ class OpcuaServer:
             where = f" {describe_where(event.where)}" if event.where is not None else ""
             report = f"P{event.proc}{where}: {code} {event.message}"
             self._push(("event", EventView(True, event.proc, code, report, ALARM_SEVERITY)))
+        elif kind is Snd:
+            where = describe_where(event.where) if event.where is not None else ""
+            self._push(("snd", snd_text(event.t, event.proc, event.to, where)))
         elif kind is Display:
             self._push(("event", EventView(False, event.proc, "", event.text,
                                            MESSAGE_SEVERITY)))
@@ -179,6 +187,10 @@ class OpcuaServer:
         assert self._loop is not None
         for number in self.gw.engine.processes:
             self._send_process(number)
+        plant = plant_views(self.gw)
+        if plant != self._last_plant:
+            self._last_plant = plant
+            self._push(("plant", plant))
         plc = plc_view(self.gw)
         if plc != self._last_plc:
             self._last_plc = plc

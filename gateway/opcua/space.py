@@ -34,7 +34,7 @@ from ncgate import __version__
 from ncgate.config.loader import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
-from ncgate.gateway.opcua.model import SHOWN_VIEW, EventView, ProcessView
+from ncgate.gateway.opcua.model import SHOWN_VIEW, SND_LOG, EventView, ProcessView
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.tls import expiry_warning
@@ -162,6 +162,7 @@ class Space:
         self._alerts: EventGenerator | None = None
         self._messages: EventGenerator | None = None
         self.image_ns = 0
+        self._snds: list[str] = []  # the SND log, oldest first
 
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
         """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
@@ -222,6 +223,12 @@ class Space:
                                   "plc.Fault": item.fault})
             elif kind == "event":
                 await self._raise(item)
+            elif kind == "snd":
+                self._snds = [*self._snds, item][-SND_LOG:]
+                await self._show({"SndLog": list(self._snds)})
+            elif kind == "plant":
+                await self._show({f"plant.{m.name}.{part}": value for m in item
+                                  for part, value in (("State", m.state), ("Fault", m.fault))})
 
     async def _show(self, values: dict[str, Any]) -> None:
         server = self._server
@@ -375,6 +382,14 @@ class Space:
         await self._var(plc, "plc.State", img, img, "State", "NONE", node_key="PLC.State")
         await self._var(plc, "plc.Scans", img, img, "Scans", 0, node_key="PLC.Scans")
         await self._var(plc, "plc.Fault", img, img, "Fault", "", node_key="PLC.Fault")
+        await self._var(vendor, "SndLog", img, img, "SndLog", [], node_key="SndLog")
+        plant = await vendor.add_folder(_id("Plant", img), ua.QualifiedName("Plant", img))
+        for name in layout["plant"]:
+            model = await plant.add_object(_id(f"Plant/{name}", img), ua.QualifiedName(name, img))
+            await self._var(model, f"plant.{name}.State", img, img, "State", "",
+                            node_key=f"Plant/{name}.State")
+            await self._var(model, f"plant.{name}.Fault", img, img, "Fault", "",
+                            node_key=f"Plant/{name}.Fault")
         await self._build_image(vendor, img, layout)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,

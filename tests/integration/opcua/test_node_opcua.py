@@ -184,3 +184,28 @@ async def test_a_ua_client_satisfies_a_wai_by_writing_sa10_and_sees_the_process_
     resumes = [e for e in gw.trace if e["event"] == "resume" and e["proc"] == 1]
     assert resumes and any(e["who"].startswith("opcua ") for e in gw.trace
                            if e["event"] == "write" and e["var"] == "SA10")
+
+
+async def test_the_snd_log_and_a_plant_model_are_nodes_of_the_image_namespace(
+        tmp_path: Path, ua_client: UaClient) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "A"\nprocesses = 2\n[nc.storage]\nMP0 = "."\n'
+               '[[plant.model]]\nname = "relay"\nkind = "delay"\ninput = "SA20"\n'
+               'output = "SA30"\non_ms = 50\n',
+               {"A": "N10 (EXE,2,B)\nN20 (SND,2)\nN30 M30\n", "B": "N1 (WAI,1)\nN2 M30\n"})
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **{
+        "opcua.enabled": True, "opcua.port": 0, "canopen.enabled": False})
+    async with Gateway(config) as gw:
+        await ua_client.call("connect", url=gw.opcua_endpoint)
+        await ua_client.call("subscribe", interval=20)
+        await ua_client.call("monitor", tag="snd", node={"ns": IMAGE, "id": "SndLog"})
+        await ua_client.call("monitor", tag="relay",
+                             node={"ns": IMAGE, "id": "Plant/relay.State"})
+        first = (await ua_client.until("relay", lambda seen: len(seen) >= 1))[-1]
+        await gw.start()
+        await gw.wait_idle()
+        log = await ua_client.until("snd", lambda seen: bool(seen and seen[-1]))
+        assert len(log[-1]) == 1
+        assert log[-1][0].endswith("P1 -> P2 A.nc:2 N20"), log[-1]
+        gw.write("SA20", 1)  # the relay's input: its state changes
+        seen = await ua_client.until("relay", lambda seen: seen[-1] != first)
+        assert seen[-1] != first
