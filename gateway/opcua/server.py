@@ -70,7 +70,6 @@ class OpcuaServer:
         self.config: OpcuaConfig = gw.config.opcua
         self.endpoint: str | None = None
         self.address: tuple[str, int] | None = None
-        self.sessions = 0
         self.writes = 0
         self.refused = 0
         self._loop: asyncio.AbstractEventLoop | None = None  # the gateway's
@@ -132,13 +131,19 @@ class OpcuaServer:
                     ready.set_exception(GatewayError(f"OPC UA server: {message[1]}"))
                 elif kind == "write":
                     _, number, key, value, who = message
-                    self._send(("result", number, self.write_on_loop(key, value, who)))
+                    try:
+                        result: Reason | str | None = self.write_on_loop(key, value, who)
+                    except Exception:  # not a refusal: the client gets BadInternalError
+                        log.exception("opcua %s: write of %s", who, key)
+                        result = "error"
+                    self._send(("result", number, result))
         except EOFError:
             if not ready.done():
                 ready.set_exception(GatewayError("OPC UA server: its process ended before "
                                                  "it served (its log is on stderr)"))
             elif not self._closing:
                 log.error("the OPC UA server's process ended (its log is on stderr)")
+                self._closing = True  # nothing reads its pipe any more
 
     def _layout(self) -> dict[str, Any]:
         """What the address space is made of, read here once (the process builds it)."""

@@ -99,21 +99,23 @@ class Link:
         self.symbols = symbols  # the I/O names of [symbols] (their nodes' ids)
         self._out = out
         self._numbers = itertools.count(1)
-        self._pending: dict[int, asyncio.Future[Reason | None]] = {}
+        self._pending: dict[int, asyncio.Future[Reason | str | None]] = {}
 
     def send(self, message: Any) -> None:
         # A blocking write: the gateway's loop reads its end at once, and frames are small.
         self._out.write(frame(message))
 
-    async def write(self, key: str, value: Any, who: str) -> Reason | None:
-        """A client's write, applied by the gateway's loop: why it was refused, or None."""
+    async def write(self, key: str, value: Any, who: str) -> Reason | str | None:
+        """A client's write, applied by the gateway's loop: why it was refused, None, or
+        ``"error"`` when it failed otherwise."""
         number = next(self._numbers)
-        answer: asyncio.Future[Reason | None] = asyncio.get_running_loop().create_future()
+        answer: asyncio.Future[Reason | str | None] = (
+            asyncio.get_running_loop().create_future())
         self._pending[number] = answer
         self.send(("write", number, key, value, who))
         return await answer
 
-    def answered(self, number: int, refused: Reason | None) -> None:
+    def answered(self, number: int, refused: Reason | str | None) -> None:
         answer = self._pending.pop(number, None)
         if answer is not None and not answer.done():
             answer.set_result(refused)
@@ -490,7 +492,9 @@ class _Session(InternalSession):
                 continue
             value = item.Value.Value.Value if item.Value.Value is not None else None
             refused = await owner.link.write(key, value, self._who())
-            code = StatusCodes.Good if refused is None else REFUSAL[refused]
+            code = (StatusCodes.Good if refused is None
+                    else REFUSAL[refused] if isinstance(refused, Reason)
+                    else StatusCodes.BadInternalError)
             results.append(ua.StatusCode(code))  # type: ignore[arg-type]
         return results
 

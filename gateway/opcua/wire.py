@@ -4,7 +4,7 @@ is safe here: nothing else writes to these pipes.  No asyncua here (the loop's s
 it).
 
 Gateway -> server: ``("start", OpcuaConfig, layout)``, ``("batch", [(kind, item), ...])``,
-``("result", n, Reason | None)``, ``("stop",)``.
+``("result", n, Reason | None | "error")``, ``("stop",)``.
 Server -> gateway: ``("ready", port)``, ``("error", text)``,
 ``("write", n, key, value, who)``.
 """

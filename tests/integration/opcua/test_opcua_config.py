@@ -67,3 +67,18 @@ def test_map_lists_the_ua_nodes_beside_the_registers_when_opcua_is_on(
     config.write_text("")
     assert main(["map", "--config", str(config), "--format", "md"]) == 0
     assert "OPC UA" not in capsys.readouterr().out
+
+
+async def test_a_port_in_use_stops_the_start_with_the_server_s_error() -> None:
+    from ncgate.gateway import Gateway
+    from ncgate.gateway.errors import GatewayError
+    from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+    async with Gateway(ncgate_test_config(**{"opcua.enabled": True,
+                                             "canopen.enabled": False})) as first:
+        port = int(first.opcua_endpoint.rsplit(":", 1)[1].strip("/"))
+        second = Gateway(ncgate_test_config(**{"opcua.enabled": True, "opcua.port": port,
+                                               "canopen.enabled": False}))
+        with pytest.raises(GatewayError, match=r"OPC UA server: .*(in use|Errno 98)"):
+            async with second:
+                pass
