@@ -131,7 +131,8 @@ def main() -> None:
     out = os.fdopen(os.dup(1), "wb", buffering=0)
     os.dup2(2, 1)
     # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
-    os.nice(5)
+    if hasattr(os, "nice"):  # (POSIX)
+        os.nice(5)
     asyncio.run(_serve(out))
 
 
