@@ -51,6 +51,20 @@ async def api_state(gw: Gateway, process: int) -> str:
     return state
 
 
+async def channel_states_match_api_status(gw: Gateway, ua_client: UaClient) -> None:
+    """Every process's ChannelState (40501) is what /api/status's state maps to."""
+    host, port = gw.web_address
+    async with aiohttp.ClientSession() as http, \
+            http.get(f"http://{host}:{port}/api/status") as r:
+        status = await r.json()
+    for p in status["processes"]:
+        path = [*CHANNEL_STATE[:3], (NCGATE, f"Process {p['number']}"),
+                (MACHINE_TOOL, "ChannelState")]
+        node = await ua_client.call("translate", path=path)
+        assert await ua_client.call("read", node=node) == channel_state(
+            ProcessState[p["state"]]), p
+
+
 STATE = {"ns": IMAGE, "id": "Process 1.State"}
 CHANNEL_STATE = [(MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Monitoring"),
                  (NCGATE, "Process 1"), (MACHINE_TOOL, "ChannelState")]
@@ -96,6 +110,7 @@ async def test_channel_state_equals_api_status_and_a_subscription_hears_every_st
     await ua_client.call("monitor", tag="program", node=program_status)
     await ua_client.until("state", lambda seen: seen == ["IDLE"])
     assert await api_state(gw, 1) == "IDLE"
+    await channel_states_match_api_status(gw, ua_client)
     await gw.start()
     await gw.wait_state(1, "WAIT_COND")
     await ua_client.until("state", lambda seen: seen[-1:] == ["WAIT_COND"])
@@ -103,10 +118,12 @@ async def test_channel_state_equals_api_status_and_a_subscription_hears_every_st
     assert api == "WAIT_COND"
     assert await ua_client.call("read", node=channel) == channel_state(ProcessState[api])
     assert await ua_client.call("read", node=program_status) == 2  # Waiting
+    await channel_states_match_api_status(gw, ua_client)
     gw.write("SA10", 1)  # the door closes: on to the SND to an idle P2
     await gw.wait_state(1, "ALARM")
     seen = await ua_client.until("state", lambda seen: seen[-1:] == ["ALARM"])
     assert await api_state(gw, 1) == "ALARM"
+    await channel_states_match_api_status(gw, ua_client)
     # Every state the process went through, once each and in order.
     assert seen == ["IDLE", "RUNNING", "WAIT_COND", "RUNNING", "ALARM"]
     channel_seen = await ua_client.until("channel", lambda seen: seen[-1:] == [1])
