@@ -22,6 +22,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
+from asyncua.common.structures104 import new_enum
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.server import Server
@@ -358,20 +359,32 @@ class Space:
                                           ua.QualifiedName("Image", img))
         vendor_processes = await vendor.add_folder(_id("Processes", img),
                                                    ua.QualifiedName("Processes", img))
+        # The enumerations, as the specifications name their values (their numbers are
+        # model.py's); DataTypes of ncgate's ids, like the stand-in types above.
+        channel_state_t = (await new_enum(server, _id("ChannelState", own), ua.QualifiedName(
+            "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
+        program_status_t = (await new_enum(
+            server, _id("CncChannelProgramStatus", own),
+            ua.QualifiedName("CncChannelProgramStatus", cnc),
+            ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
         for number in layout["processes"]:
             k, name = f"P{number}.", f"Process {number}"
             mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
                                               ua.QualifiedName(name, own),
                                               objecttype=channel_type.nodeid)
-            await self._var(mon, k + "ChannelState", own, mt, "ChannelState", 2)
+            await self._var(mon, k + "ChannelState", own, mt, "ChannelState", 2,
+                            datatype=channel_state_t)
             await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0)  # Automatic
             await self._var(mon, k + "FeedOverride", own, mt, "FeedOverride", 100.0)
             await self._var(mon, k + "RapidOverride", own, mt, "RapidOverride", 100.0)
             ch = await channels.add_object(_id(f"CncChannelList/{name}", own),
                                            ua.QualifiedName(name, own),
                                            objecttype=cnc_channel_type.nodeid)
-            for var, initial in (("ActStatus", 2), ("ActProgramStatus", 0),
-                                 ("ActProgramName", ""), ("ActMainProgramName", ""),
+            await self._var(ch, k + "ActStatus", own, cnc, "ActStatus", 2,
+                            datatype=channel_state_t)
+            await self._var(ch, k + "ActProgramStatus", own, cnc, "ActProgramStatus", 0,
+                            datatype=program_status_t)
+            for var, initial in (("ActProgramName", ""), ("ActMainProgramName", ""),
                                  ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", 0),
                                  ("ActFeedrate", 0.0), ("ActOverride", 100.0)):
                 await self._var(ch, k + var, own, cnc, var, initial)
@@ -396,10 +409,11 @@ class Space:
         await self._build_image(vendor, img, layout)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
-                   initial: Any, node_key: str | None = None) -> Node:
+                   initial: Any, node_key: str | None = None,
+                   datatype: ua.NodeId | None = None) -> Node:
         node_id = _id(node_key or key.replace(".", "/"), ns)
         node = await parent.add_variable(node_id, ua.QualifiedName(name, browse_ns),
-                                         _variant(key, initial))
+                                         _variant(key, initial), datatype=datatype)
         self._nodes[key] = node.nodeid
         self._values[key] = initial
         return node

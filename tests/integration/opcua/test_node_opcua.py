@@ -99,11 +99,17 @@ async def test_the_cell_is_found_under_machines_by_its_type_with_its_identificat
 
 async def test_channel_state_equals_api_status_and_a_subscription_hears_every_state_in_order(
         gw: Gateway, ua_client: UaClient) -> None:
-    await ua_client.call("connect", url=gw.opcua_endpoint)
+    namespaces = await ua_client.call("connect", url=gw.opcua_endpoint)
     channel = await ua_client.call("translate", path=CHANNEL_STATE)
     program_status = await ua_client.call("translate", path=[
         (CNC, "CncInterface"), (CNC, "CncChannelList"), (NCGATE, "Process 1"),
         (CNC, "ActProgramStatus")])
+    # Typed by the specifications' enumerations (their names, on ncgate's DataType nodes).
+    for node, ns, name in ((channel, MACHINE_TOOL, "ChannelState"),
+                           (program_status, CNC, "CncChannelProgramStatus")):
+        datatype = await ua_client.call("read", node=node, attribute="DataType")
+        assert await ua_client.call("read", node=datatype, attribute="BrowseName") == (
+            f"{namespaces.index(ns)}:{name}")
     await ua_client.call("subscribe", interval=20)
     await ua_client.call("monitor", tag="state", node=STATE)
     await ua_client.call("monitor", tag="channel", node=channel)
