@@ -204,6 +204,11 @@ class OpcuaServer:
         self._sampler = self._loop.call_later(SAMPLE_S, self._sample)
 
     def _push(self, item: tuple[str, Any]) -> None:
+        if self._image_dirty:
+            # A write that changed the image comes before what it caused (a WAI that resumed,
+            # an alarm): the image as it is now goes first.
+            self._image_dirty = False
+            self._batch.append(("image", self.gw.image.snapshot()))
         self._batch.append(item)
         self._schedule()
 
