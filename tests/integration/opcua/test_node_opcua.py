@@ -187,6 +187,13 @@ async def test_a_write_of_a_writable_region_goes_through_the_door_traced_opcua(
     assert await ua_client.call("write", node={"ns": IMAGE, "id": "SK2"}, type="Byte",
                                 value=3) == "BadNotWritable"
     assert gw.read("SK2") == 0
+    # /api/status shows the server and what its clients did.
+    host, port = gw.web_address
+    async with aiohttp.ClientSession() as http, \
+            http.get(f"http://{host}:{port}/api/status") as r:
+        status = (await r.json())["fieldbus"]["opcua"]
+    assert status == {"endpoint": gw.opcua_endpoint, "security": "none",
+                      "writable": ["sa_bits"], "writes": 1, "refused": 1}
 
 
 async def test_a_ua_client_satisfies_a_wai_by_writing_sa10_and_sees_the_process_resume(
