@@ -872,12 +872,20 @@ def _opcua_users(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) 
     raw = t.get("users", {})
     if not isinstance(raw, dict):
         raise r.fail(key, f"expected a table of name = \"pbkdf2_sha256$...\", got {raw!r}")
-    for name, hashed in raw.items():
-        parts = hashed.split("$") if isinstance(hashed, str) else []
+    users: dict[str, str | Path] = {}
+    for name, given in raw.items():
+        if isinstance(given, dict) and set(given) == {"certificate"}:
+            # A certificate user: the client presents this certificate as its identity.
+            users[name] = (r.base_of(key) / r.str_(given["certificate"],
+                                                   f"{key}.{name}.certificate")).resolve()
+            continue
+        parts = given.split("$") if isinstance(given, str) else []
         if len(parts) != 4 or parts[0] != "pbkdf2_sha256" or not parts[1].isdigit():
             raise r.fail(f"{key}.{name}", "expected \"pbkdf2_sha256$<iterations>$<salt>$<hex>\" "
-                         "(docs/opcua.md has the one-liner that makes it)")
-    return dict(raw)
+                         "(docs/opcua.md has the one-liner that makes it) or "
+                         "{ certificate = \"user.crt\" }")
+        users[name] = given
+    return users
 
 
 @dataclass(frozen=True, slots=True)
@@ -897,10 +905,11 @@ class OpcuaConfig:
     writable: frozenset[str] = setting(frozenset(), "image regions clients may write: "
                                        + ", ".join(OPCUA_REGIONS) + " (empty: read-only)",
                                        parse=_opcua_writable)
-    users: Mapping[str, str] = setting(
-        doc="[opcua.users]: name = \"pbkdf2_sha256$<iterations>$<salt>$<hex>\"; when any is "
-        "set, writes need one of them (anonymous sessions only read)", parse=_opcua_users,
-        factory=dict)
+    users: Mapping[str, str | Path] = setting(
+        doc="[opcua.users]: name = \"pbkdf2_sha256$<iterations>$<salt>$<hex>\" (a password) "
+        "or { certificate = \"user.crt\" } (an X.509 identity, with sign or sign_encrypt); when "
+        "any is set, writes need one of them (anonymous sessions only read)",
+        parse=_opcua_users, factory=dict)
 
 
 @dataclass(frozen=True, slots=True)

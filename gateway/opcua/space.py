@@ -19,6 +19,8 @@ import itertools
 import logging
 import os
 import sys
+from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
@@ -30,6 +32,8 @@ from asyncua.server.user_managers import UserManager
 from asyncua.ua.attribute_ids import AttributeIds
 from asyncua.ua.object_ids import ObjectIds
 from asyncua.ua.status_codes import StatusCodes
+from cryptography import x509
+from cryptography.hazmat.primitives import serialization
 
 from ncgate import __version__
 from ncgate.config.loader import OpcuaConfig, UaSecurity
@@ -75,16 +79,32 @@ def password_matches(stored: str, password: str) -> bool:
 
 
 class _Users(UserManager):
-    """Anonymous sessions read; a name and password of ``[opcua.users]`` may write."""
+    """Anonymous sessions read; a user of ``[opcua.users]`` -- a name and its password, or a
+    client presenting a user's certificate as its identity -- may write."""
 
-    def __init__(self, users: dict[str, str]) -> None:
-        self.users = users
+    def __init__(self, users: Mapping[str, str | Path]) -> None:
+        self.passwords = {name: v for name, v in users.items() if isinstance(v, str)}
+        # A certificate user by its certificate's DER bytes (what the identity token carries).
+        self.certificates: dict[bytes, str] = {}
+        for name, path in users.items():
+            if isinstance(path, Path):
+                cert = path.read_bytes()
+                pem = cert.lstrip().startswith(b"-----")
+                loaded = (x509.load_pem_x509_certificate(cert) if pem
+                          else x509.load_der_x509_certificate(cert))
+                self.certificates[loaded.public_bytes(serialization.Encoding.DER)] = name
+        # Set while a session activates with an X.509 identity token: asyncua passes the
+        # secure channel's client certificate for every token, an anonymous one too.
+        self.x509 = False
 
     def get_user(self, iserver: Any, username: str | None = None,
                  password: str | None = None, certificate: Any = None) -> User | None:
+        if self.x509:  # asyncua has checked the token's signature
+            name = self.certificates.get(bytes(certificate))
+            return None if name is None else User(role=UserRole.User, name=name)
         if username is None:  # asyncua's rules let its Anonymous role read nothing
             return User(role=UserRole.User)
-        stored = self.users.get(username)
+        stored = self.passwords.get(username)
         if stored is None or password is None or not password_matches(stored, password):
             return None  # asyncua answers BadUserAccessDenied
         return User(role=UserRole.User, name=username)
@@ -171,7 +191,8 @@ class Space:
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
         """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
         config = self.link.config
-        server = self._server = Server(user_manager=_Users(dict(config.users)))
+        self.users = _Users(config.users)
+        server = self._server = Server(user_manager=self.users)
         await server.init()
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
         server.set_server_name(f"ncgate {layout['cell']} (virtual)")
@@ -485,6 +506,15 @@ class _Session(InternalSession):
     def __init__(self, owner: Space, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.owner = owner
+
+    def activate_session(self, params: ua.ActivateSessionParameters,
+                         peer_certificate: bytes | None) -> ua.ActivateSessionResult:
+        users = self.owner.users
+        users.x509 = isinstance(params.UserIdentityToken, ua.X509IdentityToken)
+        try:  # (synchronous: no other session activates meanwhile)
+            return super().activate_session(params, peer_certificate)
+        finally:
+            users.x509 = False
 
     def _who(self) -> str:
         user = self.user

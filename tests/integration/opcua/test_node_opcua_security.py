@@ -18,7 +18,7 @@ from .conftest import IMAGE, UaClient
 x509 = pytest.importorskip("cryptography.x509")
 
 
-def server_certificate(folder: Path, uri: str) -> tuple[Path, Path]:
+def server_certificate(folder: Path, uri: str, name: str = "server") -> tuple[Path, Path]:
     """A self-signed RSA 2048 certificate as OPC 10000-6 6.2.2 wants it for Basic256Sha256:
     the application URI in the subject alternative name, the key usages it lists."""
     from cryptography.hazmat.primitives import hashes, serialization
@@ -26,9 +26,9 @@ def server_certificate(folder: Path, uri: str) -> tuple[Path, Path]:
     from cryptography.x509.oid import NameOID
 
     key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
-    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "ncgate test")])
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"ncgate test {name}")])
     now = datetime.datetime.now(datetime.UTC)
-    cert = (x509.CertificateBuilder().subject_name(name).issuer_name(name)
+    cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
             .public_key(key.public_key()).serial_number(x509.random_serial_number())
             .not_valid_before(now - datetime.timedelta(days=1))
             .not_valid_after(now + datetime.timedelta(days=30))
@@ -41,7 +41,7 @@ def server_certificate(folder: Path, uri: str) -> tuple[Path, Path]:
                 crl_sign=False, encipher_only=False, decipher_only=False), critical=True)
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .sign(key, hashes.SHA256()))
-    cert_path, key_path = folder / "server.crt", folder / "server.key"
+    cert_path, key_path = folder / f"{name}.crt", folder / f"{name}.key"
     cert_path.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
     key_path.write_bytes(key.private_bytes(serialization.Encoding.PEM,
                                            serialization.PrivateFormat.PKCS8,
@@ -92,3 +92,25 @@ async def test_with_users_set_an_anonymous_session_reads_and_only_a_user_writes(
         writes = [e for e in gw.trace if e["event"] == "write"]
         assert [(w["var"], w["value"], w["who"]) for w in writes] == [
             ("SYVAR7", 5, "opcua alice")]
+
+
+async def test_a_certificate_user_writes_and_a_stranger_s_certificate_is_refused(
+        tmp_path: Path, ua_client: UaClient) -> None:
+    cert, key = server_certificate(tmp_path, "urn:ncgate:ncgate")
+    bob, bob_key = server_certificate(tmp_path, "urn:bob", "bob")
+    eve, eve_key = server_certificate(tmp_path, "urn:eve", "eve")
+    config = ncgate_test_config(**{
+        "opcua.enabled": True, "opcua.security": "sign_encrypt", "opcua.certificate": str(cert),
+        "opcua.private_key": str(key), "opcua.writable": ["syvars"],
+        "opcua.users": {"bob": {"certificate": str(bob)}}, "canopen.enabled": False})
+    secure = {"mode": "SignAndEncrypt", "policy": "Basic256Sha256"}
+    async with Gateway(config) as gw:
+        with pytest.raises(AssertionError, match="node-opcua"):
+            await ua_client.call("connect", url=gw.opcua_endpoint, certificate=str(eve),
+                                 key=str(eve_key), **secure)
+        await ua_client.call("connect", url=gw.opcua_endpoint, certificate=str(bob),
+                             key=str(bob_key), **secure)
+        assert await ua_client.call("write", node={"ns": IMAGE, "id": "SYVAR7"}, type="Int16",
+                                    value=9) == "Good"
+        assert gw.read("SYVAR7") == 9
+        assert [e["who"] for e in gw.trace if e["event"] == "write"] == ["opcua bob"]

@@ -82,3 +82,13 @@ async def test_a_port_in_use_stops_the_start_with_the_server_s_error() -> None:
         with pytest.raises(GatewayError, match=r"OPC UA server: .*(in use|Errno 98)"):
             async with second:
                 pass
+
+
+def test_a_certificate_user_is_a_path_beside_the_config_and_other_tables_are_refused(
+        tmp_path: Path) -> None:
+    config = tmp_path / "cell.toml"
+    config.write_text('[opcua.users]\nbob = { certificate = "pki/bob.crt" }\n')
+    assert load_config(config).opcua.users == {"bob": tmp_path / "pki" / "bob.crt"}
+    config.write_text('[opcua.users]\nbob = { cert = "bob.crt" }\n')
+    with pytest.raises(ConfigError, match=r"opcua\.users\.bob"):
+        load_config(config)

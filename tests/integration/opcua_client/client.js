@@ -10,6 +10,8 @@ const {
     TimestampsToReturn, ClientMonitoredItem, constructEventFilter, makeBrowsePath,
     UserTokenType, NodeClass, BrowseDirection,
 } = require("node-opcua-client");
+const {readCertificate} = require("node-opcua-crypto");
+const fs = require("fs");
 
 let client = null;
 let session = null;
@@ -63,15 +65,18 @@ const ops = {
             tokens: (e.userIdentityTokens || []).map(t => UserTokenType[t.tokenType]),
         }));
     },
-    async connect({url, user, password, mode, policy}) {
+    async connect({url, user, password, mode, policy, certificate, key}) {
         client = OPCUAClient.create({
             endpointMustExist: false, connectionStrategy: {maxRetry: 0},
             securityMode: MessageSecurityMode[mode || "None"],
             securityPolicy: SecurityPolicy[policy || "None"],
         });
         await client.connect(url);
-        const identity = user ? {type: UserTokenType.UserName, userName: user, password}
-                              : {type: UserTokenType.Anonymous};
+        const identity = certificate
+            ? {type: UserTokenType.Certificate, certificateData: readCertificate(certificate),
+               privateKey: fs.readFileSync(key, "utf8")}  // PrivateKeyPEM
+            : user ? {type: UserTokenType.UserName, userName: user, password}
+                   : {type: UserTokenType.Anonymous};
         session = await client.createSession(identity);
         const ns = await session.read({nodeId: "ns=0;i=2255", attributeId: AttributeIds.Value});
         namespaces = ns.value.value;
