@@ -6,6 +6,8 @@ ErrorCode, a write refused when the region is not writable and accepted (traced 
 
 from __future__ import annotations
 
+import asyncio
+import json
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -15,6 +17,7 @@ import pytest
 
 from ncgate.gateway import Gateway
 from ncgate.gateway.opcua.model import channel_state
+from ncgate.gateway.record import replay
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.interpreter.engine import ProcessState
 
@@ -26,14 +29,14 @@ from .conftest import CNC, DI, IMAGE, MACHINE_TOOL, MACHINERY, NCGATE, UaClient
 PROGRAM = 'N10 (DIS,"close the door")\nN20 (WAI,SA10=1)\nN30 G1X10F6000\nN40 (SND,2)\nN50 M30\n'
 
 
-def cell(tmp_path: Path, **overrides: Any) -> Gateway:
+def cell(tmp_path: Path, record: Path | None = None, **overrides: Any) -> Gateway:
     write_cell(tmp_path, '[nc]\nmain = "A"\nprocesses = 2\n[nc.storage]\nMP0 = "."\n'
                '[symbols]\ndoor_closed = { var = "SA10", comment = "the guard door" }\n',
                {"A": PROGRAM})
     config = ncgate_test_config(tmp_path / "ncgate.toml",
                                 **{"opcua.enabled": True, "opcua.port": 0,
                                    "canopen.enabled": False, **overrides})
-    return Gateway(config, console=True)
+    return Gateway(config, console=True, record=record)
 
 
 @pytest.fixture
@@ -239,3 +242,21 @@ async def test_the_snd_log_and_a_plant_model_are_nodes_of_the_image_namespace(
         gw.write("SA20", 1)  # the relay's input: its state changes
         seen = await ua_client.until("relay", lambda seen: seen[-1] != first)
         assert seen[-1] != first
+
+
+async def test_a_session_with_a_ua_write_is_recorded_as_opcua_and_replays_without_divergence(
+        tmp_path: Path, ua_client: UaClient) -> None:
+    record = tmp_path / "session.jsonl"
+    async with cell(tmp_path, record, **{"opcua.writable": ["sa_bits"]}) as gw:
+        await ua_client.call("connect", url=gw.opcua_endpoint)
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND")
+        assert await ua_client.call("write", node={"ns": IMAGE, "id": "SA10"},
+                                    type="Boolean", value=True) == "Good"
+        await gw.wait_state(1, "ALARM")
+    text = await asyncio.to_thread(record.read_text)
+    lines = [json.loads(line) for line in text.splitlines()]
+    writes = [i for i in lines if i.get("input") == "write"]
+    assert len(writes) == 1 and writes[0]["who"].startswith("opcua 127.0.0.1:"), writes
+    result = replay(record)
+    assert result.divergence is None, result.divergence
