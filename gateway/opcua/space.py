@@ -18,6 +18,7 @@ import hmac
 import itertools
 import logging
 import os
+import signal
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -151,6 +152,9 @@ def main() -> None:
     # stdout carries the frames only: anything printed goes to stderr.
     out = os.fdopen(os.dup(1), "wb", buffering=0)
     os.dup2(2, 1)
+    # Ctrl-C in a terminal reaches the whole process group: the gateway stops this process
+    # itself, by its stdin, after its own clean shutdown.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
     if hasattr(os, "nice"):  # (POSIX)
         os.nice(5)

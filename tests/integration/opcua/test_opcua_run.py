@@ -4,6 +4,7 @@ stopped by a signal -- and its server's process gone with it, even after a kill 
 from __future__ import annotations
 
 import asyncio
+import os
 import re
 import signal
 import sys
@@ -12,13 +13,14 @@ from pathlib import Path
 from .conftest import DI, MACHINERY, NCGATE, UaClient
 
 
-async def start_run(tmp_path: Path) -> tuple[asyncio.subprocess.Process, int, list[str]]:
+async def start_run(tmp_path: Path, new_group: bool = False
+                    ) -> tuple[asyncio.subprocess.Process, int, list[str]]:
     config = tmp_path / "ncgate.toml"
     config.write_text("[modbus]\nport = 0\n[canopen]\nenabled = false\n")
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "ncgate", "run", "--config", str(config), "--no-web",
         "--opcua", "0", "--allow-missing", stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.STDOUT)
+        stderr=asyncio.subprocess.STDOUT, start_new_session=new_group)
     assert proc.stdout is not None
     lines: list[str] = []
     async with asyncio.timeout(60):
@@ -66,4 +68,19 @@ async def test_the_server_process_ends_when_run_is_killed(tmp_path: Path) -> Non
     proc, port, _ = await start_run(tmp_path)
     proc.kill()  # no close: the server's process sees its stdin end
     await proc.wait()
+    await port_closed(port)
+
+
+async def test_ctrl_c_to_the_process_group_stops_run_and_its_server_cleanly(
+        tmp_path: Path) -> None:
+    """A terminal's Ctrl-C reaches every process of its group: the server's process leaves its
+    end to the gateway, which stops it once it has shut down itself."""
+    proc, port, lines = await start_run(tmp_path, new_group=True)
+    os.killpg(proc.pid, signal.SIGINT)
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):
+        log = "".join(lines) + (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    assert code == 0, log
+    assert "Traceback" not in log and "process ended" not in log, log
     await port_closed(port)
