@@ -51,6 +51,7 @@ if TYPE_CHECKING:
     from asyncua.server.event_generator import EventGenerator
 
 log = logging.getLogger("ncgate.opcua")
+NICE = 10
 
 # The companion specifications' namespaces (their URIs as the OPC Foundation publishes them).
 DI = "http://opcfoundation.org/UA/DI/"
@@ -156,8 +157,10 @@ def main() -> None:
     # itself, by its stdin, after its own clean shutdown.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
+    # Nice 10, as the program checker's child (interpreter/child.py: weight 110 beside the
+    # gateway's 1024).
     if hasattr(os, "nice"):  # (POSIX)
-        os.nice(5)
+        os.nice(NICE)
     asyncio.run(_serve(out))
 
 
