@@ -917,6 +917,86 @@ class WebConfig:
     tls: WebTlsConfig = setting(doc="[web.tls]", factory=WebTlsConfig)
 
 
+OPCUA_REGIONS = ("sa_bits", "k_bytes", "syvars")  # the image regions a UA client may write
+
+
+class UaSecurity(enum.Enum):
+    """``opcua.security``: the message security mode of the endpoint (Basic256Sha256)."""
+
+    NONE = "none"
+    SIGN = "sign"
+    SIGN_ENCRYPT = "sign_encrypt"
+
+
+def _opcua_security(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("security", "none")
+    try:
+        security = UaSecurity(raw)
+    except ValueError:
+        names = " or ".join(f'"{c.value}"' for c in UaSecurity)
+        raise r.fail(key, f"expected {names}, got {raw!r}") from None
+    host = done["host"]
+    loopback = host in ("localhost", "::1") or host.startswith("127.")
+    if security is UaSecurity.NONE and not loopback:
+        # Anyone on the network could read the cell and write what `writable` lists.
+        raise r.fail(key, f'"none" serves only loopback; opcua.host = {host!r} needs '
+                     '"sign" or "sign_encrypt" (and a certificate)')
+    if security is not UaSecurity.NONE and not ("certificate" in t and "private_key" in t):
+        raise r.fail(key, f'"{security.value}" needs opcua.certificate and opcua.private_key')
+    return security
+
+
+def _opcua_writable(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("writable", [])
+    if not isinstance(raw, list) or any(x not in OPCUA_REGIONS for x in raw):
+        raise r.fail(key, f"expected a list of {', '.join(OPCUA_REGIONS)}, got {raw!r}")
+    return frozenset(raw)
+
+
+def _opcua_users(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("users", {})
+    if not isinstance(raw, dict):
+        raise r.fail(key, f"expected a table of name = \"pbkdf2_sha256$...\", got {raw!r}")
+    users: dict[str, str | Path] = {}
+    for name, given in raw.items():
+        if isinstance(given, dict) and set(given) == {"certificate"}:
+            # A certificate user: the client presents this certificate as its identity.
+            users[name] = (r.base_of(key) / r.str_(given["certificate"],
+                                                   f"{key}.{name}.certificate")).resolve()
+            continue
+        parts = given.split("$") if isinstance(given, str) else []
+        if len(parts) != 4 or parts[0] != "pbkdf2_sha256" or not parts[1].isdigit():
+            raise r.fail(f"{key}.{name}", "expected \"pbkdf2_sha256$<iterations>$<salt>$<hex>\" "
+                         "(docs/opcua.md has the one-liner that makes it) or "
+                         "{ certificate = \"user.crt\" }")
+        users[name] = given
+    return users
+
+
+@dataclass(frozen=True, slots=True)
+class OpcuaConfig:
+    """The OPC UA server (docs/opcua.md): the cell as a machine tool for dashboards."""
+
+    enabled: bool = setting(False, "serve OPC UA (also `ncgate run --opcua PORT`)")
+    host: str = setting("127.0.0.1", "the address to listen on; any but loopback needs "
+                        "security")
+    port: int = setting(4840, "the port (0: a free one, for tests)", lo=0, hi=65535)
+    certificate: Path | None = setting(None, "the server's certificate (PEM or DER)",
+                                       parse=_optional_path)
+    private_key: Path | None = setting(None, "its private key (PEM)", parse=_optional_path)
+    security: UaSecurity = setting(UaSecurity.NONE, '"none" (loopback only), "sign" or '
+                                   '"sign_encrypt" (Basic256Sha256; needs certificate and '
+                                   "private_key)", parse=_opcua_security)
+    writable: frozenset[str] = setting(frozenset(), "image regions clients may write: "
+                                       + ", ".join(OPCUA_REGIONS) + " (empty: read-only)",
+                                       parse=_opcua_writable)
+    users: Mapping[str, str | Path] = setting(
+        doc="[opcua.users]: name = \"pbkdf2_sha256$<iterations>$<salt>$<hex>\" (a password) "
+        "or { certificate = \"user.crt\" } (an X.509 identity, with sign or sign_encrypt); when "
+        "any is set, writes need one of them (anonymous sessions only read)",
+        parse=_opcua_users, factory=dict)
+
+
 @dataclass(frozen=True, slots=True)
 class Config:
     nc: NcConfig = setting(doc="[nc]", factory=NcConfig)
@@ -927,6 +1007,7 @@ class Config:
     plant: PlantConfig = setting(doc="[plant]", factory=PlantConfig)
     sim: SimConfig = setting(doc="[sim]", factory=SimConfig)
     web: WebConfig = setting(doc="[web]", factory=WebConfig)
+    opcua: OpcuaConfig = setting(doc="[opcua]", factory=OpcuaConfig)
     symbols_file: Path | None = setting(
         None, "a CSV I/O list of more I/O names: a header of name, var and (optionally) "
         "comment, comma- or semicolon-separated (as PLC tools export them); its names join "
@@ -1354,6 +1435,7 @@ _SECTIONS.update({cls.__name__: cls for cls in (
     StorageConfig, NcConfig, LimitsConfig, IsgConfig, PlcConfig, ModbusMapConfig,
     ModbusTlsConfig, ModbusRtuConfig, ModbusRtuTcpConfig, ModbusConfig, CanopenConfig,
     TraceConfig, PlantConfig, WebTlsConfig, WebConfig, SimConfig)})
+_SECTIONS["OpcuaConfig"] = OpcuaConfig
 
 
 def config_markdown() -> str:

@@ -51,6 +51,7 @@ ADAPTERS: dict[str, str] = {
     "modbus": "ncgate.gateway.modbus.plugin:PLUGIN",
     "modbus_rtu": "ncgate.gateway.rtu.plugin:PLUGIN",
     "canopen": "ncgate.gateway.canopen.plugin:PLUGIN",
+    "opcua": "ncgate.gateway.opcua.plugin:PLUGIN",
     "web": "ncgate.gateway.web.plugin:PLUGIN",
 }
 

@@ -320,6 +320,15 @@ class Gateway:
         return console.address
 
     @property
+    def opcua_endpoint(self) -> str:
+        """The OPC UA server's endpoint URL, ``opc.tcp://host:port/`` (``[opcua]``)."""
+        server = self.adapters.get("opcua")
+        if server is None or server.endpoint is None:
+            raise GatewayError("the OPC UA server is not running (opcua.enabled = false?)")
+        endpoint: str = server.endpoint
+        return endpoint
+
+    @property
     def web_console(self) -> WebConsole | None:
         console: WebConsole | None = self.adapters.get("web")
         return console

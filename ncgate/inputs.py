@@ -42,6 +42,7 @@ class SourceKind(enum.StrEnum):
     REPLAY = "replay"
     API = "api"
     PLANT = "plant"  # a plant model's write (``plant clamp``), or the ST plant logic's
+    OPCUA = "opcua"  # an OPC UA client's write (``opcua 127.0.0.1:50312``, ``opcua alice``)
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,8 +11,9 @@
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``rtu/``
   imports pyserial, only ``web/`` imports
-  aiohttp (and the gateway imports ``web/`` only when a console is served); only ``sweep/``
-  imports dask, distributed or pyarrow, each when used; the CLI and the
+  aiohttp (and the gateway imports ``web/`` only when a console is served), only ``opcua/``
+  imports asyncua; only ``sweep/`` imports dask, distributed or pyarrow, each when used; the
+  CLI and the
   test kit are leaves that nothing else in the gateway imports;
 - a dialect is one folder: outside ``interpreter/<dialect>/`` and the registry
   (``interpreter/dialects.py``) nothing imports a dialect's package or branches on a member of
@@ -132,6 +133,8 @@ def test_fieldbus_libraries_stay_in_their_adapters() -> None:
                     or module == f"{kit}.canopen_kit"), module
         if "aiohttp" in tops:
             assert module.startswith("ncgate.gateway.web."), module
+        if "asyncua" in tops:
+            assert module.startswith("ncgate.gateway.opcua."), module
         if "serial" in tops:  # pyserial
             assert module.startswith("ncgate.gateway.rtu."), module
         if tops & {"dask", "distributed", "pyarrow"}:

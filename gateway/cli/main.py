@@ -131,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     web.add_argument("--web", metavar="HOST:PORT", help="serve the console here "
                      "(web.host, web.port; default 127.0.0.1:8080)")
     web.add_argument("--no-web", action="store_true", help="no web console")
+    run.add_argument("--opcua", type=int, metavar="PORT", help="serve OPC UA on this port "
+                     "(opcua.enabled, opcua.port; docs/opcua.md)")
     run.add_argument("--record", metavar="R.jsonl", help="record the session (every input "
                      "from outside, with its time, beside the trace) for 'ncgate sim "
                      "--replay'")
@@ -429,8 +431,8 @@ def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 
 def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]]:
-    """``--set``, ``--port``, ``--rtu``, ``--rtu-tcp``, ``--web``, ``--no-web``, ``--trace`` as
-    config overrides, and the option each key came from (an error names it)."""
+    """``--set``, ``--port``, ``--rtu``, ``--rtu-tcp``, ``--web``, ``--no-web``, ``--opcua``,
+    ``--trace`` as config overrides, and the option each key came from (an error names it)."""
     out = _set_overrides(args.set)
     origins = dict.fromkeys(out, "--set")
     if args.port is not None:
@@ -452,6 +454,9 @@ def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]
     if args.no_web:
         out["web.enabled"] = False
         origins["web.enabled"] = "--no-web"
+    if args.opcua is not None:
+        out["opcua.enabled"], out["opcua.port"] = True, args.opcua
+        origins["opcua.enabled"] = origins["opcua.port"] = "--opcua"
     if args.trace:
         out["trace.file"] = str(Path(args.trace).resolve())
         origins["trace.file"] = "--trace"
@@ -653,6 +658,8 @@ def _map(args: argparse.Namespace) -> int:
                 default = "" if r["default"] is None else r["default"]
                 sys.stdout.write(f"| {r['index']} | {r['sub']} | {r['name']} | {r['type']} | "
                                  f"{r['access']} | {default} |\n")
+        if config.opcua.enabled and not args.bus:
+            _ua_nodes(config)
         if plant:
             sys.stdout.write("\n# Plant models (docs/plant.md)\n\n| model | kind | reads | "
                              "writes |\n|---|---|---|---|\n")
@@ -661,6 +668,21 @@ def _map(args: argparse.Namespace) -> int:
                 writes = ", ".join(f"{k} {v}" for k, v in m["writes"].items())
                 sys.stdout.write(f"| {m['name']} | {m['kind']} | {reads} | {writes} |\n")
     return EXIT_OK
+
+
+def _ua_nodes(config: Config) -> None:
+    """The OPC UA nodes beside the registers (``[opcua]`` enabled; docs/opcua.md)."""
+    from ncgate.gateway.opcua.model import node_rows
+
+    cell = config.source.stem if config.source is not None else "ncgate"
+    plc = config.plc
+    rows = node_rows(cell, list(range(1, config.nc.processes + 1)),
+                     {"sa_bits": plc.sa_bits, "k_bytes": plc.k_bytes, "syvars": plc.syvars},
+                     config.opcua.writable, dict(config.symbols))
+    sys.stdout.write("\n# OPC UA nodes (docs/opcua.md)\n\n| browse path | node id | type | "
+                     "access | what |\n|---|---|---|---|---|\n")
+    for row in rows:
+        sys.stdout.write("| " + " | ".join(row) + " |\n")
 
 
 def plant_rows(config: Config) -> list[dict[str, Any]]:

@@ -56,8 +56,8 @@ except ImportError:  # the ncgate[pytest] extra is not installed
 def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Config:
     """A config for a test: the file (None: built-in; a relative path is relative to the
     test file's folder) with every port the gateway opens free (``modbus.port``,
-    ``modbus.tls.port``, ``canopen.hub_port``, ``web.port``: 0), its CANopen node on a
-    virtual CAN channel of its own (so tests, and pytest-xdist workers, never hear each
+    ``modbus.tls.port``, ``canopen.hub_port``, ``web.port``, ``opcua.port``: 0), its CANopen
+    node on a virtual CAN channel of its own (so tests, and pytest-xdist workers, never hear each
     other), and every file the gateway writes (``plc.retain_file``, ``canopen.store_file``,
     ``trace.file`` when set) in the test's ``tmp_path``, unless ``overrides`` names it: RETAIN
     values and a 0x1010 "save" last as long as the test (two configs made in one test share
@@ -69,6 +69,7 @@ def ncgate_test_config(path: str | Path | None = None, **overrides: Any) -> Conf
     channel = f"ncgate-test-{os.environ.get('PYTEST_XDIST_WORKER', 'main')}-{next(_channels)}"
     config = load_config(path, overrides={"modbus.port": 0, "modbus.tls.port": 0,
                                           "canopen.hub_port": 0, "web.port": 0,
+                                          "opcua.port": 0,
                                           "canopen.channel": channel, **overrides})
     folder = _files_folder()
     plc, canopen, trace = config.plc, config.canopen, config.trace

@@ -104,9 +104,10 @@ def test_an_adapter_that_is_not_enabled_is_not_imported(tmp_path: Path) -> None:
             async with Gateway(config) as gw:
                 assert gw.adapters == {}, gw.adapters
         asyncio.run(main())
-        loaded = [m for m in ("pymodbus", "canopen", "can", "aiohttp", "serial",
+        loaded = [m for m in ("pymodbus", "canopen", "can", "aiohttp", "serial", "asyncua",
                               "ncgate.gateway.modbus.server", "ncgate.gateway.canopen.node",
-                              "ncgate.gateway.rtu.server", "ncgate.gateway.web.console")
+                              "ncgate.gateway.rtu.server", "ncgate.gateway.web.console",
+                              "ncgate.gateway.opcua.server")
                   if m in sys.modules]
         print("loaded:", loaded)
     ''')

@@ -1,0 +1,568 @@
+"""The OPC UA server's process (``python -m ncgate.gateway.opcua.space``, started by
+:class:`ncgate.gateway.opcua.server.OpcuaServer`): asyncua's server, the address space
+(docs/opcua.md has the node set), the values the gateway's loop sends written into the nodes,
+the events raised, and a client's write of an image node sent back to the gateway's loop.
+
+A process of its own (docs/decisions.md, "OPC UA: a process of its own fed snapshots"):
+asyncua's import and init, and its publishing, never take the gateway's interpreter.  It
+talks to the gateway through its stdin and stdout in the frames of
+:mod:`ncgate.gateway.opcua.wire`; its log goes to stderr.  It never touches the engine or the
+image; it reads what the loop sends it, and ends when its stdin does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import hmac
+import itertools
+import logging
+import os
+import signal
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from asyncua import ua
+from asyncua.common.structures104 import new_enum
+from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.internal_session import InternalSession
+from asyncua.server.server import Server
+from asyncua.server.user_managers import UserManager
+from asyncua.ua.attribute_ids import AttributeIds
+from asyncua.ua.object_ids import ObjectIds
+from asyncua.ua.status_codes import StatusCodes
+from cryptography import x509
+from cryptography.hazmat.primitives import serialization
+
+from ncgate import __version__
+from ncgate.config.loader import OpcuaConfig, UaSecurity
+from ncgate.errors import Reason
+from ncgate.gateway.opcua.codes import REFUSAL
+from ncgate.gateway.opcua.model import SHOWN_VIEW, SND_LOG, EventView, ProcessView
+from ncgate.gateway.opcua.server import REGION
+from ncgate.gateway.opcua.wire import frame, read_frame
+from ncgate.gateway.tls import expiry_warning
+from ncgate.inputs import Var
+
+if TYPE_CHECKING:
+    from asyncua.common.node import Node
+    from asyncua.server.event_generator import EventGenerator
+
+log = logging.getLogger("ncgate.opcua")
+NICE = 10
+
+# The companion specifications' namespaces (their URIs as the OPC Foundation publishes them).
+DI = "http://opcfoundation.org/UA/DI/"
+MACHINERY = "http://opcfoundation.org/UA/Machinery/"
+MACHINE_TOOL = "http://opcfoundation.org/UA/MachineTool/"
+CNC = "http://opcfoundation.org/UA/CNC"
+IMAGE = "urn:ncgate:image"  # the image, the PLC, the processes as ncgate names them
+NCGATE = "urn:ncgate:ua"  # ncgate's own nodes (the instances, the stand-in types)
+# The numeric ids OPC 40501-1's nodeset gives its types (what a client may look a type up by).
+MACHINE_TOOL_TYPE_ID = 13
+ALERT_TYPE_ID = 39
+
+_VTYPE = {"SA": ua.VariantType.Boolean, "SK": ua.VariantType.Byte,
+          "SYVAR": ua.VariantType.Int16}
+_SECURITY = {
+    UaSecurity.NONE: [ua.SecurityPolicyType.NoSecurity],
+    UaSecurity.SIGN: [ua.SecurityPolicyType.Basic256Sha256_Sign],
+    UaSecurity.SIGN_ENCRYPT: [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt],
+}
+
+
+def password_matches(stored: str, password: str) -> bool:
+    """``stored`` is ``pbkdf2_sha256$<iterations>$<salt>$<hex>`` (``[opcua.users]``)."""
+    _, iterations, salt, digest = stored.split("$")
+    mine = hashlib.pbkdf2_hmac("sha256", password.encode(), salt.encode(), int(iterations))
+    return hmac.compare_digest(mine.hex(), digest)
+
+
+class _Users(UserManager):
+    """Anonymous sessions read; a user of ``[opcua.users]`` -- a name and its password, or a
+    client presenting a user's certificate as its identity -- may write."""
+
+    def __init__(self, users: Mapping[str, str | Path]) -> None:
+        self.passwords = {name: v for name, v in users.items() if isinstance(v, str)}
+        # A certificate user by its certificate's DER bytes (what the identity token carries).
+        self.certificates: dict[bytes, str] = {}
+        for name, path in users.items():
+            if isinstance(path, Path):
+                cert = path.read_bytes()
+                pem = cert.lstrip().startswith(b"-----")
+                loaded = (x509.load_pem_x509_certificate(cert) if pem
+                          else x509.load_der_x509_certificate(cert))
+                self.certificates[loaded.public_bytes(serialization.Encoding.DER)] = name
+        # Set while a session activates with an X.509 identity token: asyncua passes the
+        # secure channel's client certificate for every token, an anonymous one too.
+        self.x509 = False
+
+    def get_user(self, iserver: Any, username: str | None = None,
+                 password: str | None = None, certificate: Any = None) -> User | None:
+        if self.x509:  # asyncua has checked the token's signature
+            name = self.certificates.get(bytes(certificate))
+            return None if name is None else User(role=UserRole.User, name=name)
+        if username is None:  # asyncua's rules let its Anonymous role read nothing
+            return User(role=UserRole.User)
+        stored = self.passwords.get(username)
+        if stored is None or password is None or not password_matches(stored, password):
+            return None  # asyncua answers BadUserAccessDenied
+        return User(role=UserRole.User, name=username)
+
+
+
+class Link:
+    """The gateway at the other end of the pipes: what this process sends it, and the
+    answers to the writes it asked the gateway's loop to apply."""
+
+    def __init__(self, config: OpcuaConfig, symbols: frozenset[str], out: Any) -> None:
+        self.config = config
+        self.symbols = symbols  # the I/O names of [symbols] (their nodes' ids)
+        self._out = out
+        self._numbers = itertools.count(1)
+        self._pending: dict[int, asyncio.Future[Reason | str | None]] = {}
+
+    def send(self, message: Any) -> None:
+        # A blocking write: the gateway's loop reads its end at once, and frames are small.
+        self._out.write(frame(message))
+
+    async def write(self, key: str, value: Any, who: str) -> Reason | str | None:
+        """A client's write, applied by the gateway's loop: why it was refused, None, or
+        ``"error"`` when it failed otherwise."""
+        number = next(self._numbers)
+        answer: asyncio.Future[Reason | str | None] = (
+            asyncio.get_running_loop().create_future())
+        self._pending[number] = answer
+        self.send(("write", number, key, value, who))
+        return await answer
+
+    def answered(self, number: int, refused: Reason | str | None) -> None:
+        answer = self._pending.pop(number, None)
+        if answer is not None and not answer.done():
+            answer.set_result(refused)
+
+
+def main() -> None:
+    """The process: serve until the gateway sends stop or closes the pipe."""
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    # Its warnings of a None endpoint and of its revised values are asyncua's to itself.
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
+    # stdout carries the frames only: anything printed goes to stderr.
+    out = os.fdopen(os.dup(1), "wb", buffering=0)
+    os.dup2(2, 1)
+    # Ctrl-C in a terminal reaches the whole process group: the gateway stops this process
+    # itself, by its stdin, after its own clean shutdown.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
+    # Nice 10, as the program checker's child (interpreter/child.py: weight 110 beside the
+    # gateway's 1024).
+    if hasattr(os, "nice"):  # (POSIX)
+        os.nice(NICE)
+    asyncio.run(_serve(out))
+
+
+async def _serve(out: Any) -> None:
+    loop = asyncio.get_running_loop()
+    reader = asyncio.StreamReader()
+    await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin.buffer)
+    try:
+        _, config, layout = await read_frame(reader)
+    except EOFError:
+        return
+    link = Link(config, frozenset(layout["symbols"]), out)
+    space = Space(link)
+    try:
+        await space.serve(reader, layout)
+    except Exception as exc:  # said to the gateway, whose start raises it
+        link.send(("error", f"{type(exc).__name__}: {exc}"))
+        raise
+
+
+class Space:
+    """asyncua's server and what its nodes show."""
+
+    def __init__(self, link: Link) -> None:
+        self.link = link
+        self._server: Server | None = None
+        self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
+        self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
+        self._values: dict[str, Any] = {}  # what each node shows now
+        self._alerts: EventGenerator | None = None
+        self._messages: EventGenerator | None = None
+        self.image_ns = 0
+        self._snds: list[str] = []  # the SND log, oldest first
+
+    async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
+        """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
+        config = self.link.config
+        self.users = _Users(config.users)
+        server = self._server = Server(user_manager=self.users)
+        await server.init()
+        server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
+        server.set_server_name(f"ncgate {layout['cell']} (virtual)")
+        await server.set_application_uri(f"urn:ncgate:{layout['cell']}")
+        server.set_security_policy(_SECURITY[config.security])
+        if config.certificate is not None and config.private_key is not None:
+            # The PEM files as Modbus/TLS and the console take them, with the same warning of
+            # a certificate that has expired or is about to (gateway/tls.py).
+            warning = expiry_warning(config.certificate)
+            if warning is not None:
+                log.warning("%s", warning)
+            pem = config.certificate.read_bytes().lstrip().startswith(b"-----")
+            await server.load_certificate(config.certificate.read_bytes(),
+                                          "pem" if pem else "der")
+            await server.load_private_key(config.private_key.read_bytes(), format="pem")
+        server.iserver.create_session = self._session  # type: ignore[method-assign]
+        await self._build(server, layout)
+        await server.start()
+        try:
+            self.link.send(("ready", int(server.bserver.port or 0)))  # type: ignore[union-attr]
+            while True:
+                try:
+                    message = await read_frame(reader)
+                except EOFError:
+                    return
+                kind = message[0]
+                if kind == "batch":
+                    await self._apply(message[1])
+                elif kind == "result":
+                    self.link.answered(message[1], message[2])
+                elif kind == "stop":
+                    return
+        finally:
+            await server.stop()
+
+    def _session(self, name: Any, user: User = User(role=UserRole.Anonymous),  # noqa: B008
+                 external: bool = False) -> InternalSession:
+        server = self._server
+        assert server is not None
+        iserver = server.iserver
+        return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
+                        user=user, external=external)
+
+    async def _apply(self, batch: list[tuple[str, Any]]) -> None:
+        """One loop turn's changes, in the order they happened."""
+        for kind, item in batch:
+            if kind == "process":
+                await self._show_process(item)
+            elif kind == "image":
+                await self._show_image(*item)
+            elif kind == "plc":
+                await self._show({"plc.State": item.state, "plc.Scans": item.scans,
+                                  "plc.Fault": item.fault})
+            elif kind == "event":
+                await self._raise(item)
+            elif kind == "snd":
+                self._snds = [*self._snds, item][-SND_LOG:]
+                await self._show({"SndLog": list(self._snds)})
+            elif kind == "plant":
+                await self._show({f"plant.{m.name}.{part}": value for m in item
+                                  for part, value in (("State", m.state), ("Fault", m.fault))})
+
+    async def _show(self, values: dict[str, Any]) -> None:
+        server = self._server
+        assert server is not None
+        for key, value in values.items():
+            if self._values.get(key, _UNSET) == value:
+                continue
+            self._values[key] = value
+            node = self._nodes.get(key)
+            if node is None:
+                continue
+            shown = ua.DataValue(_variant(key, value))
+            await server.write_attribute_value(node, shown)
+            for alias in self._symbol_nodes.get(key, ()):
+                await server.write_attribute_value(alias, shown)
+
+    async def _show_process(self, v: ProcessView) -> None:
+        k = f"P{v.number}."
+        await self._show({
+            k + "ChannelState": v.channel_state, k + "FeedOverride": float(v.feed_override),
+            k + "RapidOverride": float(v.rapid_override), k + "State": v.state,
+            k + "ActStatus": v.channel_state, k + "ActProgramStatus": v.program_status,
+            k + "ActProgramName": v.program, k + "ActMainProgramName": v.program,
+            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": v.line,
+            k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
+            k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
+            k + "N": v.n})
+        if v.number == 1:  # the cell's ActiveProgram is its first process's
+            await self._show({"ActiveProgram.Name": v.program,
+                              "ActiveProgram.State": v.state})
+
+    async def _show_image(self, sa: bytes, k: bytes, syvar: tuple[int, ...]) -> None:
+        values: dict[str, Any] = {}
+        for i, byte in enumerate(sa):
+            if self._values.get(f"SA.{i}") == byte:
+                continue  # 8 bits unchanged: skipped whole
+            self._values[f"SA.{i}"] = byte
+            for bit in range(8):
+                values[f"SA{8 * i + bit}"] = bool(byte >> bit & 1)
+        values.update((f"SK{i}", byte) for i, byte in enumerate(k))
+        values.update((f"SYVAR{i}", word) for i, word in enumerate(syvar))
+        await self._show(values)
+
+    async def _raise(self, e: EventView) -> None:
+        generator = self._alerts if e.alarm else self._messages
+        if generator is None:
+            return
+        event: Any = generator.event
+        event.Message = ua.LocalizedText(e.message)
+        event.Severity = e.severity
+        event.SourceName = f"Process {e.process}" if e.process else "cell"
+        if e.alarm:
+            event.ErrorCode = e.code
+        await generator.trigger(message=e.message)
+
+    # -- the address space (before it serves) ----------------------------------------------
+
+    async def _build(self, server: Server, layout: dict[str, Any]) -> None:
+        di = await server.register_namespace(DI)
+        machinery = await server.register_namespace(MACHINERY)
+        mt = await server.register_namespace(MACHINE_TOOL)
+        cnc = await server.register_namespace(CNC)
+        own = await server.register_namespace(NCGATE)
+        img = self.image_ns = await server.register_namespace(IMAGE)
+        objects = server.nodes.objects
+        base_object = server.get_node(ObjectIds.BaseObjectType)
+        base_event = server.get_node(ObjectIds.BaseEventType)
+
+        # The types a dashboard looks for.  The whole DI/Machinery/IA/MachineTool/CNC
+        # nodesets are not loaded (docs/opcua.md says why): MachineToolType and AlertType
+        # have the ids of OPC 40501-1's nodeset, the rest are ncgate's stand-ins.
+        machine_tool_type = await base_object.add_object_type(
+            _id(MACHINE_TOOL_TYPE_ID, mt), ua.QualifiedName("MachineToolType", mt))
+        channel_type = await base_object.add_object_type(
+            _id("ChannelMonitoringType", own),
+            ua.QualifiedName("ChannelMonitoringType", mt))
+        cnc_channel_type = await base_object.add_object_type(
+            _id("CncChannelType", own), ua.QualifiedName("CncChannelType", cnc))
+        alert_type = await base_event.add_object_type(
+            _id(ALERT_TYPE_ID, mt), ua.QualifiedName("AlertType", mt))
+        await alert_type.add_property(_id("AlertType.ErrorCode", own),
+                                      ua.QualifiedName("ErrorCode", mt), "",
+                                      varianttype=ua.VariantType.String)
+        message_type = await base_event.add_object_type(
+            _id("NotificationEventType", own),
+            ua.QualifiedName("NotificationEventType", mt))
+
+        cell = layout["cell"]
+        machines = await objects.add_folder(_id("Machines", own),
+                                            ua.QualifiedName("Machines", machinery))
+        machine = await machines.add_object(_id(f"Machines/{cell}", own),
+                                            ua.QualifiedName(cell, own),
+                                            objecttype=machine_tool_type.nodeid)
+        ident = await machine.add_object(_id("Identification", own),
+                                         ua.QualifiedName("Identification", machinery))
+        for name, value in (("Manufacturer", ua.LocalizedText("ncgate (virtual)")),
+                            ("Model", ua.LocalizedText(cell)),
+                            ("SoftwareRevision", __version__),
+                            ("ProductInstanceUri", f"urn:ncgate:{cell}")):
+            await ident.add_property(_id(f"Identification.{name}", own),
+                                     ua.QualifiedName(name, di), value)
+        monitoring = await machine.add_object(_id("Monitoring", own),
+                                              ua.QualifiedName("Monitoring", mt))
+        production = await machine.add_object(_id("Production", own),
+                                              ua.QualifiedName("Production", mt))
+        active = await production.add_object(_id("ActiveProgram", own),
+                                              ua.QualifiedName("ActiveProgram", mt))
+        await self._var(active, "ActiveProgram.Name", own, mt, "Name", "")
+        await self._var(active, "ActiveProgram.State", own, mt, "State", "IDLE")
+        notification = await machine.add_object(_id("Notification", own),
+                                                ua.QualifiedName("Notification", mt))
+        messages = await notification.add_object(_id("Messages", own),
+                                                 ua.QualifiedName("Messages", mt))
+        await messages.write_attribute(AttributeIds.EventNotifier, ua.DataValue(
+            ua.Variant(1, ua.VariantType.Byte)))  # SubscribeToEvents
+        self._alerts = await server.get_event_generator(alert_type, messages.nodeid)
+        self._messages = await server.get_event_generator(message_type, messages.nodeid)
+
+        cnc_interface = await objects.add_object(_id("CncInterface", own),
+                                                 ua.QualifiedName("CncInterface", cnc))
+        channels = await cnc_interface.add_object(_id("CncChannelList", own),
+                                                  ua.QualifiedName("CncChannelList", cnc))
+        vendor = await objects.add_folder(_id("Image", img),
+                                          ua.QualifiedName("Image", img))
+        vendor_processes = await vendor.add_folder(_id("Processes", img),
+                                                   ua.QualifiedName("Processes", img))
+        # The enumerations, as the specifications name their values (their numbers are
+        # model.py's); DataTypes of ncgate's ids, like the stand-in types above.
+        channel_state_t = (await new_enum(server, _id("ChannelState", own), ua.QualifiedName(
+            "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
+        program_status_t = (await new_enum(
+            server, _id("CncChannelProgramStatus", own),
+            ua.QualifiedName("CncChannelProgramStatus", cnc),
+            ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
+        for number in layout["processes"]:
+            k, name = f"P{number}.", f"Process {number}"
+            mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
+                                              ua.QualifiedName(name, own),
+                                              objecttype=channel_type.nodeid)
+            await self._var(mon, k + "ChannelState", own, mt, "ChannelState", 2,
+                            datatype=channel_state_t)
+            await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0)  # Automatic
+            await self._var(mon, k + "FeedOverride", own, mt, "FeedOverride", 100.0)
+            await self._var(mon, k + "RapidOverride", own, mt, "RapidOverride", 100.0)
+            ch = await channels.add_object(_id(f"CncChannelList/{name}", own),
+                                           ua.QualifiedName(name, own),
+                                           objecttype=cnc_channel_type.nodeid)
+            await self._var(ch, k + "ActStatus", own, cnc, "ActStatus", 2,
+                            datatype=channel_state_t)
+            await self._var(ch, k + "ActProgramStatus", own, cnc, "ActProgramStatus", 0,
+                            datatype=program_status_t)
+            for var, initial in (("ActProgramName", ""), ("ActMainProgramName", ""),
+                                 ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", 0),
+                                 ("ActFeedrate", 0.0), ("ActOverride", 100.0)):
+                await self._var(ch, k + var, own, cnc, var, initial)
+            for axis in "XYZ":
+                await self._var(ch, k + axis, own, cnc, axis, 0.0)
+            p = await vendor_processes.add_object(_id(name, img),
+                                                  ua.QualifiedName(name, img))
+            await self._var(p, k + "State", img, img, "State", "IDLE", node_key=f"{name}.State")
+            await self._var(p, k + "N", img, img, "N", -1, node_key=f"{name}.N")
+        plc = await vendor.add_object(_id("PLC", img), ua.QualifiedName("PLC", img))
+        await self._var(plc, "plc.State", img, img, "State", "NONE", node_key="PLC.State")
+        await self._var(plc, "plc.Scans", img, img, "Scans", 0, node_key="PLC.Scans")
+        await self._var(plc, "plc.Fault", img, img, "Fault", "", node_key="PLC.Fault")
+        await self._var(vendor, "SndLog", img, img, "SndLog", [], node_key="SndLog")
+        plant = await vendor.add_folder(_id("Plant", img), ua.QualifiedName("Plant", img))
+        for name in layout["plant"]:
+            model = await plant.add_object(_id(f"Plant/{name}", img), ua.QualifiedName(name, img))
+            await self._var(model, f"plant.{name}.State", img, img, "State", "",
+                            node_key=f"Plant/{name}.State")
+            await self._var(model, f"plant.{name}.Fault", img, img, "Fault", "",
+                            node_key=f"Plant/{name}.Fault")
+        await self._build_image(vendor, img, layout)
+
+    async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
+                   initial: Any, node_key: str | None = None,
+                   datatype: ua.NodeId | None = None) -> Node:
+        node_id = _id(node_key or key.replace(".", "/"), ns)
+        node = await parent.add_variable(node_id, ua.QualifiedName(name, browse_ns),
+                                         _variant(key, initial), datatype=datatype)
+        self._nodes[key] = node.nodeid
+        self._values[key] = initial
+        return node
+
+    async def _build_image(self, vendor: Node, img: int, layout: dict[str, Any]) -> None:
+        writable = self.link.config.writable
+        areas = (("SA", layout["sa_bits"], False), ("SK", layout["k_bytes"], 0),
+                 ("SYVAR", layout["syvars"], 0))
+        names = {var: name for name, var in layout["symbols"].items()}
+        for area, size, initial in areas:
+            folder = await vendor.add_folder(_id(area, img), ua.QualifiedName(area, img))
+            for i in range(size):
+                key = f"{area}{i}"
+                node = await folder.add_variable(_id(key, img), ua.QualifiedName(key, img),
+                                                 ua.Variant(initial, _VTYPE[area]))
+                if REGION[area] in writable:
+                    await node.set_writable()
+                if key in names:
+                    await node.write_attribute(AttributeIds.Description, ua.DataValue(
+                        ua.Variant(ua.LocalizedText(f"I/O name {names[key]}"))))
+                self._nodes[key] = node.nodeid
+                self._values[key] = initial
+        # Each I/O name of [symbols] is a node of its own showing its variable's value.
+        folder = await vendor.add_folder(_id("Symbols", img),
+                                         ua.QualifiedName("Symbols", img))
+        for name, var in layout["symbols"].items():
+            parsed = Var.parse(var)
+            if parsed.view != SHOWN_VIEW[parsed.area]:
+                continue  # a byte or word view of SA, a word of SK: shown by its variables
+            node = await folder.add_variable(_id(name, img), ua.QualifiedName(name, img),
+                                             ua.Variant(self._values.get(var, 0),
+                                                        _VTYPE[parsed.area]))
+            comment = layout["comments"].get(name)
+            if comment:
+                await node.write_attribute(AttributeIds.Description, ua.DataValue(
+                    ua.Variant(ua.LocalizedText(comment))))
+            if REGION[parsed.area] in writable:
+                await node.set_writable()
+            self._symbol_nodes.setdefault(var, []).append(node.nodeid)
+
+
+_UNSET = object()
+
+
+
+def _id(identifier: int | str, ns: int) -> ua.NodeId:
+    """A NodeId (asyncua types its fields with NewTypes that plain ints and strs are)."""
+    return ua.NodeId(identifier, ns)  # type: ignore[arg-type]
+
+
+def _variant(key: str, value: Any) -> ua.Variant:
+    area = key.rstrip("0123456789")
+    if area in _VTYPE and key[len(area):].isdigit():
+        return ua.Variant(value, _VTYPE[area])
+    if isinstance(value, bool):
+        return ua.Variant(value, ua.VariantType.Boolean)
+    if isinstance(value, int):
+        return ua.Variant(value, ua.VariantType.Int32)
+    if isinstance(value, float):
+        return ua.Variant(value, ua.VariantType.Double)
+    if isinstance(value, list):
+        return ua.Variant(value, ua.VariantType.String)
+    return ua.Variant(value, ua.VariantType.String)
+
+
+class _Session(InternalSession):
+    """A client's session: its writes of the image go through the gateway's door."""
+
+    def __init__(self, owner: Space, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.owner = owner
+
+    def activate_session(self, params: ua.ActivateSessionParameters,
+                         peer_certificate: bytes | None) -> ua.ActivateSessionResult:
+        users = self.owner.users
+        users.x509 = isinstance(params.UserIdentityToken, ua.X509IdentityToken)
+        try:  # (synchronous: no other session activates meanwhile)
+            return super().activate_session(params, peer_certificate)
+        finally:
+            users.x509 = False
+
+    def _who(self) -> str:
+        user = self.user
+        if user is not None and user.name:
+            return f"user {user.name}"
+        name = self.name
+        if isinstance(name, tuple) and len(name) >= 2:
+            return f"{name[0]}:{name[1]}"
+        return str(name)
+
+    async def write(self, params: ua.WriteParameters) -> list[ua.StatusCode]:
+        owner = self.owner
+        results: list[ua.StatusCode] = []
+        for item in params.NodesToWrite:
+            node = item.NodeId
+            key = _image_key(owner, node)
+            if key is None or item.AttributeId != AttributeIds.Value:
+                one = ua.WriteParameters(NodesToWrite=[item])
+                results.extend(await super().write(one))
+                continue
+            value = item.Value.Value.Value if item.Value.Value is not None else None
+            refused = await owner.link.write(key, value, self._who())
+            code = (StatusCodes.Good if refused is None
+                    else REFUSAL[refused] if isinstance(refused, Reason)
+                    else StatusCodes.BadInternalError)
+            results.append(ua.StatusCode(code))  # type: ignore[arg-type]
+        return results
+
+
+def _image_key(owner: Space, node: ua.NodeId) -> str | None:
+    """The image variable or I/O name an image node shows (None: not an image node)."""
+    if node.NamespaceIndex != owner.image_ns or not isinstance(node.Identifier, str):
+        return None
+    ident = node.Identifier
+    area = ident.rstrip("0123456789")
+    if area in _VTYPE and ident[len(area):].isdigit():
+        return ident
+    if ident in owner.link.symbols:
+        return ident
+    return None
+
+
+if __name__ == "__main__":
+    main()

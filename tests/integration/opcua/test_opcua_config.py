@@ -1,0 +1,94 @@
+"""[opcua]'s keys and refusals without a client: the one refusal table, a public bind without
+security, security without a certificate, the regions and users it takes, and `ncgate map`'s
+list of the UA nodes."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from ncgate.config import ConfigError, load_config
+from ncgate.errors import Reason
+from ncgate.gateway.cli.main import main
+from ncgate.gateway.opcua.codes import REFUSAL
+from ncgate.gateway.opcua.space import password_matches
+
+
+def test_every_reason_has_a_bad_status_code() -> None:
+    assert set(REFUSAL) == set(Reason)
+    assert all(code & 0x80000000 for code in REFUSAL.values())  # each one Bad_
+
+
+def test_a_bind_beyond_loopback_without_security_is_refused_naming_the_key() -> None:
+    with pytest.raises(ConfigError, match=r"opcua\.security: .*0\.0\.0\.0"):
+        load_config(None, overrides={"opcua.host": "0.0.0.0"})
+    assert load_config(None, overrides={"opcua.host": "127.0.0.2"}).opcua.host == "127.0.0.2"
+
+
+def test_security_needs_a_certificate_and_a_key() -> None:
+    with pytest.raises(ConfigError, match=r"opcua\.security: .*opcua\.certificate"):
+        load_config(None, overrides={"opcua.security": "sign_encrypt"})
+
+
+def test_writable_takes_only_image_regions() -> None:
+    with pytest.raises(ConfigError, match=r"opcua\.writable"):
+        load_config(None, overrides={"opcua.writable": ["command"]})
+    config = load_config(None, overrides={"opcua.writable": ["sa_bits", "syvars"]})
+    assert config.opcua.writable == {"sa_bits", "syvars"}
+
+
+def test_a_user_is_a_pbkdf2_hash_that_the_server_checks() -> None:
+    digest = hashlib.pbkdf2_hmac("sha256", b"s3cret", b"salt", 1000).hex()
+    stored = f"pbkdf2_sha256$1000$salt${digest}"
+    config = load_config(None, overrides={"opcua.users": {"alice": stored}})
+    assert password_matches(config.opcua.users["alice"], "s3cret")
+    assert not password_matches(config.opcua.users["alice"], "guess")
+    with pytest.raises(ConfigError, match=r"opcua\.users\.bob"):
+        load_config(None, overrides={"opcua.users": {"bob": "plain-text"}})
+
+
+def test_map_lists_the_ua_nodes_beside_the_registers_when_opcua_is_on(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "press.toml"
+    config.write_text('[opcua]\nenabled = true\nwritable = ["sa_bits"]\n[symbols]\n'
+                      'door_closed = "SA10"\nspeed = "SYVAR3"\nstatus_byte = "SA1.BY"\n')
+    assert main(["map", "--config", str(config), "--format", "md"]) == 0
+    out = capsys.readouterr().out
+    assert "# OPC UA nodes" in out
+    assert ("| Objects/Machines/press/Monitoring/Process 1/ChannelState | "
+            "ns=urn:ncgate:ua;s=P1/ChannelState | Int32 | read |") in out
+    assert ("| Objects/Image/Symbols/door_closed | ns=urn:ncgate:image;s=door_closed | as SA10 "
+            "| read/write |") in out
+    assert "| Objects/Image/Symbols/speed | ns=urn:ncgate:image;s=speed | as SYVAR3 | read |" in out
+    assert "Symbols/status_byte" not in out  # a byte of SA is no node of its own
+    assert "| Objects/Image/SYVAR/SYVAR0 .. SYVAR255 |" in out
+    config.write_text("")
+    assert main(["map", "--config", str(config), "--format", "md"]) == 0
+    assert "OPC UA" not in capsys.readouterr().out
+
+
+async def test_a_port_in_use_stops_the_start_with_the_server_s_error() -> None:
+    from ncgate.gateway import Gateway
+    from ncgate.gateway.errors import GatewayError
+    from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+    async with Gateway(ncgate_test_config(**{"opcua.enabled": True,
+                                             "canopen.enabled": False})) as first:
+        port = int(first.opcua_endpoint.rsplit(":", 1)[1].strip("/"))
+        second = Gateway(ncgate_test_config(**{"opcua.enabled": True, "opcua.port": port,
+                                               "canopen.enabled": False}))
+        with pytest.raises(GatewayError, match=r"OPC UA server: .*(in use|Errno 98)"):
+            async with second:
+                pass
+
+
+def test_a_certificate_user_is_a_path_beside_the_config_and_other_tables_are_refused(
+        tmp_path: Path) -> None:
+    config = tmp_path / "cell.toml"
+    config.write_text('[opcua.users]\nbob = { certificate = "pki/bob.crt" }\n')
+    assert load_config(config).opcua.users == {"bob": tmp_path / "pki" / "bob.crt"}
+    config.write_text('[opcua.users]\nbob = { cert = "bob.crt" }\n')
+    with pytest.raises(ConfigError, match=r"opcua\.users\.bob"):
+        load_config(config)

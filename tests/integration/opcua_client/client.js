@@ -1,0 +1,165 @@
+// An independent OPC UA client for ncgate's tests: node-opcua, driven by pytest
+// (tests/integration/opcua/) through JSON lines.  Each line on stdin is a request
+// {"id": n, "op": ..., ...}; each answer is a line {"id": n, "ok": ...} or {"id": n, "error": ...}.
+// Subscriptions print their notifications as lines {"tag": ..., "value": ...} as they come,
+// in the order the server sent them.
+"use strict";
+const readline = require("readline");
+const {
+    OPCUAClient, MessageSecurityMode, SecurityPolicy, AttributeIds, DataType,
+    TimestampsToReturn, ClientMonitoredItem, constructEventFilter, makeBrowsePath,
+    UserTokenType, NodeClass, BrowseDirection,
+} = require("node-opcua-client");
+const {readCertificate} = require("node-opcua-crypto");
+const fs = require("fs");
+
+let client = null;
+let session = null;
+let subscription = null;
+let namespaces = [];
+
+function out(obj) {
+    process.stdout.write(JSON.stringify(obj) + "\n");
+}
+
+function plain(value) {
+    if (value === null || value === undefined) return null;
+    if (typeof value === "bigint") return Number(value);
+    if (Array.isArray(value) || ArrayBuffer.isView(value)) return Array.from(value, plain);
+    if (value.text !== undefined && value.locale !== undefined) return value.text;  // LocalizedText
+    if (value.namespace !== undefined && value.value !== undefined && value.identifierType !== undefined) {
+        return value.toString();  // NodeId
+    }
+    if (typeof value === "object" && value.name !== undefined && value.namespaceIndex !== undefined) {
+        return `${value.namespaceIndex}:${value.name}`;  // QualifiedName
+    }
+    return value;
+}
+
+// A node named by {"ns": uri, "id": number|string}, or a NodeId string.
+function nodeId(spec) {
+    if (typeof spec === "string") return spec;
+    const ns = namespaces.indexOf(spec.ns);
+    if (ns < 0) throw new Error(`namespace ${spec.ns} not on the server`);
+    return typeof spec.id === "number" ? `ns=${ns};i=${spec.id}` : `ns=${ns};s=${spec.id}`;
+}
+
+// A browse path of [uri, name] pairs from Objects.
+function browsePath(pairs) {
+    return "/" + pairs.map(([uri, name]) => {
+        const ns = namespaces.indexOf(uri);
+        if (ns < 0) throw new Error(`namespace ${uri} not on the server`);
+        return `${ns}:${name}`;
+    }).join("/");
+}
+
+const ops = {
+    async endpoints({url}) {
+        const c = OPCUAClient.create({endpointMustExist: false, connectionStrategy: {maxRetry: 0}});
+        await c.connect(url);
+        const endpoints = await c.getEndpoints();
+        await c.disconnect();
+        return endpoints.map(e => ({
+            url: e.endpointUrl, mode: MessageSecurityMode[e.securityMode],
+            policy: e.securityPolicyUri,
+            tokens: (e.userIdentityTokens || []).map(t => UserTokenType[t.tokenType]),
+        }));
+    },
+    async connect({url, user, password, mode, policy, certificate, key}) {
+        client = OPCUAClient.create({
+            endpointMustExist: false, connectionStrategy: {maxRetry: 0},
+            securityMode: MessageSecurityMode[mode || "None"],
+            securityPolicy: SecurityPolicy[policy || "None"],
+        });
+        await client.connect(url);
+        const identity = certificate
+            ? {type: UserTokenType.Certificate, certificateData: readCertificate(certificate),
+               privateKey: fs.readFileSync(key, "utf8")}  // PrivateKeyPEM
+            : user ? {type: UserTokenType.UserName, userName: user, password}
+                   : {type: UserTokenType.Anonymous};
+        session = await client.createSession(identity);
+        const ns = await session.read({nodeId: "ns=0;i=2255", attributeId: AttributeIds.Value});
+        namespaces = ns.value.value;
+        return namespaces;
+    },
+    async translate({path}) {
+        const result = await session.translateBrowsePath(makeBrowsePath("RootFolder", "/Objects" + browsePath(path)));
+        if (!result.statusCode.isGood()) throw new Error(`${result.statusCode.name}: ${JSON.stringify(path)}`);
+        return result.targets[0].targetId.toString();
+    },
+    async read({node, attribute}) {
+        const dv = await session.read({nodeId: nodeId(node), attributeId: AttributeIds[attribute || "Value"]});
+        if (!dv.statusCode.isGood()) throw new Error(dv.statusCode.name);
+        return plain(dv.value.value);
+    },
+    async browse({node}) {
+        const result = await session.browse({nodeId: nodeId(node), browseDirection: BrowseDirection.Forward,
+                                             includeSubtypes: true, resultMask: 63});
+        return result.references.map(r => ({
+            name: `${namespaces[r.browseName.namespaceIndex]}|${r.browseName.name}`,
+            node: r.nodeId.toString(), type: r.typeDefinition.toString(),
+            cls: NodeClass[r.nodeClass],
+        }));
+    },
+    async write({node, type, value}) {
+        const code = await session.write({nodeId: nodeId(node), attributeId: AttributeIds.Value,
+                                          value: {value: {dataType: DataType[type], value}}});
+        return code.name;
+    },
+    async subscribe({interval}) {
+        subscription = await session.createSubscription2({
+            requestedPublishingInterval: interval || 50, requestedLifetimeCount: 1000,
+            requestedMaxKeepAliveCount: 20, maxNotificationsPerPublish: 0,
+            publishingEnabled: true, priority: 1,
+        });
+        return subscription.publishingInterval;
+    },
+    async monitor({tag, node, queue}) {
+        const item = ClientMonitoredItem.create(subscription,
+            {nodeId: nodeId(node), attributeId: AttributeIds.Value},
+            {samplingInterval: 0, discardOldest: false, queueSize: queue || 1000},
+            TimestampsToReturn.Both);
+        item.on("changed", dv => out({tag, value: plain(dv.value.value)}));
+        await new Promise((resolve, reject) => {
+            item.once("initialized", resolve);
+            item.once("err", reject);
+        });
+        return tag;
+    },
+    async events({tag, node, fields}) {
+        const filter = constructEventFilter(fields.map(([uri, name]) => {
+            const ns = uri ? namespaces.indexOf(uri) : 0;
+            return ns ? `${ns}:${name}` : name;
+        }));
+        const item = ClientMonitoredItem.create(subscription,
+            {nodeId: nodeId(node), attributeId: AttributeIds.EventNotifier},
+            {samplingInterval: 0, discardOldest: false, queueSize: 1000, filter},
+            TimestampsToReturn.Both);
+        item.on("changed", values => out({tag, value: values.map(v => plain(v.value))}));
+        await new Promise((resolve, reject) => {
+            item.once("initialized", resolve);
+            item.once("err", reject);
+        });
+        return tag;
+    },
+    async close() {
+        if (session) await session.close();
+        if (client) await client.disconnect();
+        session = client = null;
+        return true;
+    },
+};
+
+const lines = readline.createInterface({input: process.stdin});
+let queue = Promise.resolve();
+lines.on("line", line => {
+    const request = JSON.parse(line);
+    queue = queue.then(async () => {
+        try {
+            out({id: request.id, ok: await ops[request.op](request)});
+        } catch (error) {
+            out({id: request.id, error: String(error && error.message || error)});
+        }
+    });
+});
+lines.on("close", () => queue.then(() => ops.close()).finally(() => process.exit(0)));
