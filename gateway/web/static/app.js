@@ -167,8 +167,11 @@ $("#break-form").addEventListener("submit", (e) => {
   e.preventDefault();
   post("/api/command", { command: "break", at: $("#break-at").value });
 });
-$("#feed-override").addEventListener("change", () =>
-  write("FEED_OVERRIDE", Number($("#feed-override").value)));
+$("#feed-override").addEventListener("change", () => {
+  // An emptied field is no request (Number("") is 0: it would stop the machine's feed).
+  const value = $("#feed-override").value.trim();
+  if (value !== "") write("FEED_OVERRIDE", Number(value));
+});
 function renderControls() {
   const c = status.controls;
   if (!c) return;

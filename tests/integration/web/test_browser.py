@@ -37,6 +37,7 @@ else:
     from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
     from selenium.webdriver.support.ui import WebDriverWait
 
 WAIT_S = 20
@@ -428,8 +429,11 @@ def test_the_commissioning_controls_of_the_page(browser: Any, web_port: int) -> 
               lambda d: "PROG92:8" in text(d, "#breakpoints"))
         browser.find_element(By.ID, "single-block").click()
         feed = browser.find_element(By.ID, "feed-override")
+        # Emptied, the field asks for nothing (it wrote 0: the machine's feed stopped); then
+        # its text is selected and typed over, the field keeping the focus (a clear() blurs
+        # it, and the page may write the status's value back in between).
         feed.clear()
-        feed.send_keys("50\n")
+        feed.send_keys(Keys.CONTROL + "a" + Keys.NULL + "50" + Keys.ENTER)
         browser.find_element(By.ID, "break-at").click()  # away from the field: a change
         status_url = f"http://127.0.0.1:{web_port}/api/status"
 
@@ -441,6 +445,8 @@ def test_the_commissioning_controls_of_the_page(browser: Any, web_port: int) -> 
               lambda d: all(p["single_block"] for p in status()["processes"]
                             if not p["external"])
               and status()["processes"][0]["feed_override"] == 50)
+        events = api(web_port, "GET", "/api/events?since=0")["events"]
+        assert {e["feed"] for e in events if e["event"] == "override"} == {50}, events
         click(browser, "#breakpoints .breakpoint")
         until(browser, "the breakpoint cleared",
               lambda d: status()["controls"]["breakpoints"] == [])
