@@ -4,7 +4,8 @@ Stdlib only; of the other packages it imports only the interpreter's leaf module
 (``ncgate.interpreter.settings``), whose choices (the SND policy) the config names.
 """
 
-from ncgate.config.loader import (
+from ncgate.config.reader import load_config
+from ncgate.config.schema import (
     CanopenConfig,
     Config,
     ConfigError,
@@ -25,7 +26,6 @@ from ncgate.config.loader import (
     WebTlsConfig,
     default_config_path,
     default_script_path,
-    load_config,
 )
 from ncgate.interpreter.settings import SndPolicy
 

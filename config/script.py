@@ -26,8 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from ncgate.config.loader import ConfigError, read_toml
 from ncgate.config.plant import FaultConfig, read_fault
+from ncgate.config.reader import read_toml
+from ncgate.config.schema import ConfigError
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ncgate.config import Config, StorageConfig, load_config
-from ncgate.config.loader import BUILT_IN
+from ncgate.config.schema import BUILT_IN
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.programs import CheckedFile, dialect_options, storage_of
 from ncgate.interpreter.diagnostics import Diagnostic

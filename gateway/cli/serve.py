@@ -17,7 +17,7 @@ from contextlib import suppress
 from typing import Any
 
 from ncgate.config import Config
-from ncgate.config.loader import DEFAULT_WEB_PORT
+from ncgate.config.schema import DEFAULT_WEB_PORT
 from ncgate.config.script import Script
 from ncgate.errors import InputRefused
 from ncgate.gateway.adapters import plugin

@@ -28,7 +28,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from ncgate.config.loader import OpcuaConfig
+from ncgate.config.schema import OpcuaConfig
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.errors import GatewayError
 from ncgate.gateway.opcua.model import (

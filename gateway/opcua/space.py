@@ -37,7 +37,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 
 from ncgate import __version__
-from ncgate.config.loader import OpcuaConfig, UaSecurity
+from ncgate.config.schema import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.model import SHOWN_VIEW, SND_LOG, EventView, ProcessView

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from ncgate.config import ConfigError, load_config
-from ncgate.config.loader import read_toml
+from ncgate.config.reader import read_toml
 
 Value = bool | int | float | str
 SWEEP_KEYS = ("programs", "examples", "config", "script", "until", "budget_s")

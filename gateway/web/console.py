@@ -39,7 +39,8 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from ncgate import commands
-from ncgate.config.loader import WebConfig, is_loopback
+from ncgate.config.checks import is_loopback
+from ncgate.config.schema import WebConfig
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import only_releases_hold
 from ncgate.gateway.errors import listen_error

@@ -125,15 +125,15 @@ def test_overrides_by_dotted_key_are_validated_too() -> None:
 def test_docs_config_md_is_generated_from_the_schema() -> None:
     from pathlib import Path
 
-    from ncgate.config.loader import config_markdown
+    from ncgate.config.schema import config_markdown
 
     root = Path(__file__).resolve().parents[3]
     assert (root / "docs" / "config.md").read_text() == config_markdown(), (
-        "docs/config.md is stale: regenerate it from ncgate.config.loader.config_markdown()")
+        "docs/config.md is stale: regenerate it from ncgate.config.schema.config_markdown()")
 
 
 def test_every_key_of_the_schema_is_read_and_unknown_ones_are_refused(tmp_path: Path) -> None:
-    from ncgate.config.loader import Config, keys
+    from ncgate.config.schema import Config, keys
 
     for dotted, _, _ in keys(Config):
         if "[]" in dotted or "MP0 .." in dotted:

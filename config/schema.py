@@ -1,13 +1,12 @@
-"""The configuration schema (spec 4.2) and its TOML loader.
+"""The configuration schema (spec 4.2): frozen dataclasses, one a TOML table.
 
-A config loads into frozen dataclasses, and the dataclasses are the schema: each key is a field
-made with :func:`setting`, which carries its bounds and its one-line doc.  The reader walks the
-fields, so a key is spelled once -- in its dataclass -- and the table of keys in
-``docs/config.md`` is generated from the same fields (a test keeps it in sync).
-
-Every value is validated on load; an unknown key or a bad value raises :class:`ConfigError`
-naming the file and the dotted key, e.g. ``gateway.toml: modbus.port: expected an integer
-1..65535, got 70000``.  Relative paths are resolved against the config file's folder.
+The dataclasses are the schema: each key is a field made with :func:`setting`, which carries
+its bounds and its one-line doc, or its own key reader (``parse=``: a function of the
+reader, the table, the dotted key and the keys read so far).  The reader
+(:mod:`ncgate.config.reader`) walks the fields, so a key is spelled once -- in its dataclass
+-- and the table of keys in ``docs/config.md`` is generated from the same fields
+(:func:`config_markdown`; a test keeps it in sync).  What spans keys is checked after
+(:mod:`ncgate.config.checks`).
 
 Stdlib only, and the interpreter's leaf module of settings (the SND policy is defined there).
 """
@@ -16,18 +15,14 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import difflib
 import enum
-import importlib.util
 import ipaddress
 import re
-import ssl
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from ncgate.config.plant import FaultConfig, PlantModelConfig, read_faults, read_models
 from ncgate.errors import NcgateError
@@ -42,6 +37,9 @@ from ncgate.interpreter.settings import (
     Handshake,
     SndPolicy,
 )
+
+if TYPE_CHECKING:
+    from ncgate.config.reader import _Reader
 
 MAX_PROCESSES = 16
 STORAGE_DEVICES = ("MP0", "MP1", "MP2", "MP3")
@@ -291,11 +289,16 @@ def _allow(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
     return tuple(allow)
 
 
+def _regions(r: _Reader, t: dict[str, Any], key: str, known: tuple[str, ...]) -> Any:
+    """A list of region names (``modbus.map.read_only``, ``opcua.writable``), as a set."""
+    raw = t.get(key.rsplit(".", 1)[1], [])
+    if not isinstance(raw, list) or any(x not in known for x in raw):
+        raise r.fail(key, f"expected a list of {', '.join(known)}, got {raw!r}")
+    return frozenset(raw)
+
+
 def _read_only_regions(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
-    read_only = t.get("read_only", [])
-    if not isinstance(read_only, list) or any(x not in MAP_REGIONS for x in read_only):
-        raise r.fail(key, f"expected a list of {', '.join(MAP_REGIONS)}, got {read_only!r}")
-    return frozenset(read_only)
+    return _regions(r, t, key, MAP_REGIONS)
 
 
 def _travel(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -947,10 +950,7 @@ def _opcua_security(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any
 
 
 def _opcua_writable(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
-    raw = t.get("writable", [])
-    if not isinstance(raw, list) or any(x not in OPCUA_REGIONS for x in raw):
-        raise r.fail(key, f"expected a list of {', '.join(OPCUA_REGIONS)}, got {raw!r}")
-    return frozenset(raw)
+    return _regions(r, t, key, OPCUA_REGIONS)
 
 
 def _opcua_users(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -1028,75 +1028,13 @@ def default_script_path() -> Path:
     return Path(str(resources.files("ncgate.config").joinpath("default_script.toml")))
 
 
-def load_config(
-    path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
-    origins: Mapping[str, str] | None = None, *, serving: bool = True,
-) -> Config:
-    """Load a config file (None: the built-in default), then apply dotted-key overrides.
-
-    ``origins`` maps an overridden dotted key to where it came from (``"--set"``,
-    ``"--port"``): an error in that key names it instead of the file.
-    ``serving=False``: the caller opens no server (``check``, ``sim``), so what only a
-    server needs is not checked (the console's bind beyond loopback without a token)."""
-    source = Path(path) if path is not None else default_config_path()
-    raw = read_toml(source)
-    file = str(source) if path is not None else BUILT_IN
-    given = dict(origins or {})
-    for dotted, value in (overrides or {}).items():
-        _set_dotted(raw, dotted, value, given.get(dotted, file))
-    reader = _Reader(file, source.parent, given)
-    config: Config = reader.section(Config, raw, "")
-    _check_config(reader, config, serving)
-    return dataclasses.replace(config, source=source if path is not None else None)
 
 
-def read_toml(source: Path) -> dict[str, Any]:
-    """A TOML file as a table; a missing or malformed file is a ConfigError naming it."""
-    try:
-        return tomllib.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{source}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{source}: is a folder, not a config file (give its TOML file, "
-                          f"e.g. {source / 'ncgate.toml'})") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{source}: not UTF-8 text ({exc.reason} at byte "
-                          f"{exc.start})") from None
-    except tomllib.TOMLDecodeError as exc:
-        twice = _given_twice(source, str(exc))
-        raise ConfigError(twice or f"{source}: {exc}") from exc
 
 
 _TOML_AT: Final = re.compile(r"^(?P<what>.*) \(at line (?P<line>\d+), column \d+\)$")
-_TOML_HEADER: Final = re.compile(r"^\s*\[(\[?)\s*([^\]]+?)\s*\]")
 
 
-def _given_twice(source: Path, message: str) -> str | None:
-    """tomllib's words for a key or table given twice ("Cannot overwrite a value (at line 3,
-    column 11)") with the dotted key they leave out: "ncgate.toml:3: nc.main is given twice"."""
-    found = _TOML_AT.match(message)
-    if found is None or not found["what"].startswith("Cannot "):
-        return None
-    what, line = found["what"], int(found["line"])
-    named = re.search(r"\((.*)\)", what)
-    if named is not None:  # Cannot declare ('nc',) twice; Cannot redefine namespace (...)
-        dotted = ".".join(re.findall(r"'([^']*)'", named[1]))
-        return (f"{source}:{line}: {dotted} is given twice: a TOML table or key is given once "
-                "(put its keys together)")
-    try:
-        lines = source.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError):
-        return None
-    if not 1 <= line <= len(lines):
-        return None
-    table = ""
-    for text in lines[:line - 1]:
-        header = _TOML_HEADER.match(text)
-        if header is not None:
-            table = header[2].replace('"', "").replace(" ", "")
-    key = lines[line - 1].split("=", 1)[0].strip().replace('"', "").replace(" ", "")
-    dotted = f"{table}.{key}" if table else key
-    return f"{source}:{line}: {dotted} is given twice: a TOML key is given once"
 
 
 def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
@@ -1125,50 +1063,10 @@ def keys(cls: type, prefix: str = "") -> list[tuple[str, Any, str]]:
     return out
 
 
-def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> None:
-    """Set ``dotted`` in the raw tables.  In an array of tables (``[[plant.model]]``,
-    ``[[nc.process]]``) an entry is named by its ``name`` or ``number`` key, or by its index
-    in brackets: ``plant.model.clamp.travel_ms``, ``nc.process.2.external``,
-    ``plant.model[0].travel_ms`` -- what a sweep varies of one model or process."""
-    parts = [p for part in dotted.split(".") for p in _indexed(part)]
-    *parents, last = parts
-    table: Any = raw
-    for i, name in enumerate(parents):
-        above = ".".join(parents[:i + 1]).replace(".[", "[")
-        if isinstance(table, list):  # an array of tables: the entry that name or index names
-            table = _entry_of(table, name, dotted, above, origin)
-            continue
-        table = table.setdefault(name, {})
-        if not isinstance(table, dict | list):
-            raise ConfigError(f"{origin}: {dotted}: {above} is a value, not a table")
-    if isinstance(table, list):
-        raise ConfigError(f"{origin}: {dotted}: {'.'.join(parents).replace('.[', '[')} is an "
-                          "array of tables: "
-                          "name one of its entries (by its name, number or [index])")
-    table[last] = value
 
 
-def _indexed(part: str) -> list[str]:
-    """``model[0]`` as ``model``, ``[0]``."""
-    found = re.fullmatch(r"(.+?)\[(\d+)\]", part)
-    return [found.group(1), f"[{found.group(2)}]"] if found else [part]
 
 
-def _entry_of(entries: list[Any], name: str, dotted: str, above: str,
-              origin: str) -> dict[str, Any]:
-    index = re.fullmatch(r"\[(\d+)\]", name)
-    if index is not None:
-        i = int(index.group(1))
-        if i < len(entries) and isinstance(entries[i], dict):
-            return entries[i]  # type: ignore[no-any-return]
-        raise ConfigError(f"{origin}: {dotted}: {above}: there are {len(entries)} entries")
-    for entry in entries:
-        if isinstance(entry, dict) and name in (str(entry.get("name")),
-                                                str(entry.get("number"))):
-            return entry
-    known = [str(e.get("name", e.get("number"))) for e in entries if isinstance(e, dict)]
-    raise ConfigError(f"{origin}: {dotted}: no entry {name!r} (entries: "
-                      f"{', '.join(known) or 'none'})")
 
 
 def _fields(cls: type) -> list[dataclasses.Field[Any]]:
@@ -1182,109 +1080,6 @@ def _section_type(f: dataclasses.Field[Any]) -> type | None:
     return _SECTIONS.get(str(f.type))
 
 
-class _Reader:
-    """Reads one table at a time, naming the dotted key of anything wrong."""
-
-    def __init__(self, file: str, base: Path, given: Mapping[str, str] | None = None) -> None:
-        self.file = file
-        self.base = base
-        self.given = given or {}  # overridden dotted key -> where it was given (--set)
-
-    def fail(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self._origin(key)}: {key}: {message}")
-
-    def base_of(self, key: str) -> Path:
-        """What a relative path of ``key`` is relative to: the config file's folder, or, for
-        a value given on the command line (``--set nc.storage.MP0=.``), the current folder,
-        as a shell user means it."""
-        return Path.cwd() if key in self.given else self.base
-
-    def _origin(self, key: str) -> str:
-        """The override that set ``key`` (or a table above it, or a key below it), else the
-        file."""
-        for dotted, origin in self.given.items():
-            if key == dotted or key.startswith((f"{dotted}.", f"{dotted}[")) or \
-                    dotted.startswith(f"{key}."):
-                return origin
-        if self.given and self.file == BUILT_IN:
-            # The built-in default is sound on its own: what went wrong came with the
-            # overrides (--web 0.0.0.0:8080 without a token fails on web.token).
-            return " ".join(sorted(set(self.given.values())))
-        return self.file
-
-    def section(self, cls: type, raw: Any, key: str,
-                hi: Mapping[str, int] | None = None) -> Any:
-        """A dataclass of the schema, read from its table (``hi``: bounds known only now)."""
-        known = {f.name for f in _fields(cls)} if cls is not StorageConfig else set(
-            StorageConfig.KEYS)
-        t = self._table(raw, key, known)
-        values: dict[str, Any] = {}
-        for f in _fields(cls):
-            dotted = f"{key}.{f.name}" if key else f.name
-            nested = _section_type(f)
-            meta = f.metadata
-            if meta.get("parse") is not None:
-                values[f.name] = meta["parse"](self, t, dotted, values)
-            elif nested is not None:
-                values[f.name] = self.section(nested, t.get(f.name), dotted)
-            else:
-                values[f.name] = self._value(f, t.get(f.name, f.default), dotted,
-                                             (hi or {}).get(f.name, meta.get("hi")))
-        return cls(**values)
-
-    def _table(self, raw: Any, key: str, known: set[str]) -> dict[str, Any]:
-        if raw is None:
-            return {}
-        if not isinstance(raw, dict):
-            raise self.fail(key, f"expected a table, got {raw!r}")
-        for name in raw:
-            if name not in known:
-                near = difflib.get_close_matches(name, sorted(known), n=1)
-                hint = f" (did you mean {near[0]}?)" if near else ""
-                raise self.fail(f"{key}.{name}" if key else name, f"unknown key{hint}")
-        return raw
-
-    def _value(self, f: dataclasses.Field[Any], value: Any, key: str, hi: Any) -> Any:
-        default, meta = f.default, f.metadata
-        if isinstance(default, bool):
-            if not isinstance(value, bool):
-                raise self.fail(key, f"expected true or false, got {value!r}")
-            return value
-        if isinstance(default, int):
-            return self.int_(value, key, meta["lo"], hi)
-        if isinstance(default, float):
-            return self.float_(value, key, meta["lo"], meta["positive"])
-        if isinstance(default, str):
-            return self.str_(value, key)
-        if isinstance(default, enum.Enum):
-            choices = type(default)
-            try:
-                return choices(value.value if isinstance(value, choices) else value)
-            except ValueError:
-                names = " or ".join(f'"{c.value}"' for c in choices)
-                raise self.fail(key, f"expected {names}, got {value!r}") from None
-        raise AssertionError(f"{key}: no reader for {f.type}")  # a schema without a parser
-
-    def int_(self, value: Any, key: str, lo: Any, hi: Any = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
-            hi is not None and value > hi
-        ):
-            bounds = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-            raise self.fail(key, f"expected an integer {bounds}, got {value!r}")
-        return value
-
-    def float_(self, value: Any, key: str, lo: float, positive: bool) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or value < lo or (
-            positive and value <= 0
-        ):
-            what = "a number > 0" if positive else f"a number >= {lo:g}"
-            raise self.fail(key, f"expected {what}, got {value!r}")
-        return float(value)
-
-    def str_(self, value: Any, key: str) -> str:
-        if not isinstance(value, str) or not value:
-            raise self.fail(key, f"expected a non-empty string, got {value!r}")
-        return value
 
 
 def _outside_image(text: str, plc: PlcConfig) -> bool:
@@ -1303,132 +1098,18 @@ def _outside_image(text: str, plc: PlcConfig) -> bool:
 # ---- checks across keys ----------------------------------------------------------------------
 
 
-def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
-    nc, plc, canopen = config.nc, config.plc, config.canopen
-    in_image = [(f"nc.ve.{name}.map", ve.map) for name, ve in nc.ve.items()]
-    in_image += [(f"nc.{key}", getattr(nc, key))
-                 for key in ("feed_hold_input", "cycle_start_inhibit_input") if getattr(nc, key)]
-    for key, text in in_image:
-        if _outside_image(text, plc):
-            raise r.fail(key, f"{text} is outside the image (plc.sa_bits, plc.k_bytes, "
-                         "plc.syvars)")
-    if nc.aux is not None:
-        _check_aux(r, nc.aux, nc.processes, plc)
-    if nc.tool_change_s > nc.limits.block_s:
-        raise r.fail("nc.tool_change_s", f"{nc.tool_change_s:g} s is longer than a block may "
-                     f"take (nc.limits.block_s = {nc.limits.block_s:g})")
-    if plc.sa_bits % 8:
-        raise r.fail("plc.sa_bits", f"expected a multiple of 8, got {plc.sa_bits}")
-    if canopen.enabled:
-        # The dictionary's shape (spec 3.3): 0x2000 is one ARRAY of at most 254 entries,
-        # 0x2100+j (128 K bytes each) must stay below 0x2200.
-        if plc.sa_bits > 254 * 8:
-            raise r.fail("plc.sa_bits", f"the CANopen object 0x2000 holds at most 254 SA bytes "
-                         f"(2032 bits), got {plc.sa_bits} bits; lower it or set "
-                         "canopen.enabled = false")
-        if plc.k_bytes > 128 * 256:
-            raise r.fail("plc.k_bytes", "the CANopen objects 0x2100..0x21FF hold at most 32768 "
-                         f"K bytes, got {plc.k_bytes}")
-    _check_tls(r, config.modbus.tls)
-    _check_web_tls(r, config.web.tls)
-    web = config.web
-    if serving and web.enabled and not is_loopback(web.host) and not web.token:
-        raise r.fail("web.token", f"the console listens on {web.host}, beyond this "
-                     "machine: set a token (or web.host = \"127.0.0.1\")")
-    if web.token is not None and len(web.token) < 8:
-        raise r.fail("web.token", "expected at least 8 characters")
-    if web.token is not None and web.token != web.token.strip():
-        # A browser or curl sends the token as typed: one pasted with a space never matches.
-        raise r.fail("web.token", "has spaces or line breaks around it; remove them")
     # The Modbus map's regions are checked against each other where Modbus is served
     # (ModbusMap), so that `check` and `sim` take a config whose map would not fit.
 
 
-def _check_aux(r: _Reader, aux: AuxConfig, processes: int, plc: PlcConfig) -> None:
-    """Every process's places are inside the image, and no strobe is an acknowledge."""
-    settings = aux.settings()
-    last = settings.place(processes, "H")
-    area, index, _ = last[0]
-    index += (settings.words - 1) * (2 if area == "SK" else 1)  # its low word
-    size = plc.syvars if area == "SYVAR" else plc.k_bytes - 1
-    if index >= size:
-        raise r.fail("nc.aux.value", f"{aux.value}: P{processes}'s H value would end at "
-                     f"{area}{index}{'.IN' if area == 'SK' else ''}, outside the image "
-                     f"({4 * settings.words * processes} words from it; plc.syvars, "
-                     "plc.k_bytes)")
-    for name, bit in (("strobe", last[1]), ("ack", last[2])):
-        if bit >= plc.sa_bits:
-            raise r.fail(f"nc.aux.{name}", f"{getattr(aux, name)}: P{processes}'s H bit would "
-                         f"be SA{bit}, outside the image ({4 * processes} bits from it; "
-                         "plc.sa_bits)")
-    strobes = range(settings.strobe, settings.strobe + 4 * processes)
-    acks = range(settings.ack, settings.ack + 4 * processes)
-    if set(strobes) & set(acks):
-        raise r.fail("nc.aux.ack", f"{aux.ack}..SA{acks[-1]} overlaps the strobes "
-                     f"{aux.strobe}..SA{strobes[-1]}")
 
 
-def is_loopback(host: str) -> bool:
-    """A loopback address, or ``localhost`` (any other name may resolve to anything)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False  # a host name: it may resolve to anything
 
 
-def _load_pair(r: _Reader, key: str, cert: Path | None, private: Path | None,
-               *more: Path | None) -> ssl.SSLContext:
-    """A server's certificate and key (and ``more`` files) exist and load as a pair: a
-    server context holding them, or the error naming ``key``.cert / .key."""
-    names = ("cert", "key", "ca")
-    for name, path in zip(names, (cert, private, *more), strict=False):
-        if path is not None and not path.is_file():
-            raise r.fail(f"{key}.{name}", f"no such file: {path}")
-    assert cert is not None and private is not None
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
-    try:
-        context.load_cert_chain(cert, private)
-    except (ssl.SSLError, ValueError) as exc:
-        raise r.fail(f"{key}.key", f"the certificate {cert.name} and key {private.name} do "
-                     f"not load as a pair: {exc}") from None
-    return context
 
 
-def _check_web_tls(r: _Reader, tls: WebTlsConfig) -> None:
-    """[web.tls]: both files or neither, and they load (the Modbus TLS loader's check)."""
-    if tls.cert is None and tls.key is None:
-        return
-    if tls.cert is None:
-        raise r.fail("web.tls.cert", "missing (web.tls.key is set: HTTPS needs cert and key)")
-    if tls.key is None:
-        raise r.fail("web.tls.key", "missing (HTTPS needs cert and key)")
-    _load_pair(r, "web.tls", tls.cert, tls.key)
 
 
-def _check_tls(r: _Reader, tls: ModbusTlsConfig) -> None:
-    """The TLS files exist and load (so that a bad one is named before anything starts)."""
-    if not tls.enabled:
-        for name in ("key", "ca"):
-            if getattr(tls, name) is not None:
-                raise r.fail("modbus.tls.cert", f"missing (modbus.tls.{name} is set: TLS "
-                             "needs cert, key and ca)")
-        if not tls.plain:
-            raise r.fail("modbus.tls.plain", "false needs TLS on (modbus.tls.cert, key, ca): "
-                         "Modbus would have no listener; set modbus.enabled = false instead")
-        return
-    for name in ("key", "ca"):
-        if getattr(tls, name) is None:
-            raise r.fail(f"modbus.tls.{name}", "missing (TLS needs cert, key and ca)")
-    context = _load_pair(r, "modbus.tls", tls.cert, tls.key, tls.ca)
-    try:
-        context.load_verify_locations(cafile=tls.ca)
-    except (ssl.SSLError, ValueError) as exc:
-        raise r.fail("modbus.tls.ca", f"not a PEM CA certificate: {exc}") from None
-    if importlib.util.find_spec("cryptography") is None:
-        raise r.fail("modbus.tls.cert", "Modbus/TCP Security reads the client's role from its "
-                     "certificate with the cryptography package: pip install 'ncgate[tls]'")
 
 
 _SECTIONS.update({cls.__name__: cls for cls in (
@@ -1441,7 +1122,7 @@ _SECTIONS["OpcuaConfig"] = OpcuaConfig
 def config_markdown() -> str:
     """docs/config.md: every key, its default and what it does, from the schema itself."""
     lines = ["# Configuration keys", "",
-             "Generated from `config/loader.py` (the dataclasses are the schema; "
+             "Generated from `config/schema.py` (the dataclasses are the schema; "
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
              "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
              "`[nc.limits]`, `[nc.aux]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
