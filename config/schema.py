@@ -1174,9 +1174,18 @@ host = "127.0.0.1"
 - The plant's Modbus faults ([plant.md](plant.md)) apply to RTU too: `exception` answers that
   code and stores nothing, `delay` answers late, `no_reply` silences the line until the
   fault table changes.
+- RTU over TCP keeps Modbus TCP's guards: `modbus.allow`, at most `modbus.max_clients`
+  connections (a newcomer past it is refused), a connection silent `modbus.idle_timeout_s`
+  closed, and a client that does not read its answers (or pipelines more than a backlog) is
+  not read from until it does. A serial master that stops reading its answers is not
+  buffered for either: past 64 KiB of unsent answers the line's requests are not read until
+  they have gone (`unsent` and `reading` in the port's status).
 - A serial port that cannot be opened at start stops `ncgate run` with the key to change
-  (`modbus.rtu.port: cannot open /dev/ttyUSB0: No such file or directory`); one that goes
+  (`ncgate run: [Errno 2] modbus.rtu.port: cannot open /dev/ttyUSB0: No such file or
+  directory`; one another program holds: `... another program has it open`); one that goes
   away while serving (a USB adapter pulled) is logged and looked for again every second.
+  With RTU on, `modbus.unit_ids` must hold a serial address (1..247), or
+  `modbus.rtu.unit_ids` name them.
 - Without a cable: a `socat` pty pair is a serial line (`socat pty,raw,echo=0,link=/tmp/gw
   pty,raw,echo=0,link=/tmp/plc`); in a pytest suite, the `ncgate_rtu_line` and `rtu_plc`
   fixtures ([testing.md](testing.md)) need nothing installed.

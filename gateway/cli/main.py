@@ -438,7 +438,7 @@ def _overrides(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, str]
     if args.port is not None:
         out["modbus.port"] = args.port
         origins["modbus.port"] = "--port"
-    if args.rtu:
+    if args.rtu is not None:
         out["modbus.rtu.port"] = args.rtu
         origins["modbus.rtu.port"] = "--rtu"
     if args.rtu_tcp is not None:

@@ -30,6 +30,8 @@ cable (``socat`` pty pairs, ``tests/integration/rtu/``).
 from __future__ import annotations
 
 import asyncio
+import errno
+import ipaddress
 import logging
 import os
 from collections.abc import Callable
@@ -58,6 +60,15 @@ BACKLOG_HIGH: Final = 16 * 1024
 BACKLOG_LOW: Final = 4 * 1024
 WRITE_HIGH_WATER: Final = 64 * 1024
 REOPEN_S: Final = 1.0  # a serial port that went away is looked for again this often
+# Answers a serial line's driver has not taken above which its requests are no longer read,
+# and below which reading resumes (a master that never reads cannot make us buffer for it).
+PENDING_HIGH: Final = 64 * 1024
+PENDING_LOW: Final = 16 * 1024
+READ_SIZE: Final = 512  # a serial line's read: two of the longest frames (19,200 bit/s: 0.27 s)
+# The most a serial line keeps unsent: the high-water mark, then the answers to the frames
+# read before reading stopped (at most a backlog of READ_SIZE and one more read, of
+# requests of 8 bytes whose answers are at most 256).
+PENDING_MOST: Final = PENDING_HIGH + 2 * READ_SIZE // 8 * 256
 COUNTERS: Final = ("frames", "answered", "crc_errors", "partial", "exceptions", "broadcasts",
                    "other_units", "silenced")
 
@@ -95,13 +106,15 @@ class RtuLink:
 
     def __init__(self, server: RtuServer, source: Source, write: Callable[[bytes], None],
                  silence: float, counters: Counters, *, reading: Callable[[bool], None]
-                 | None = None) -> None:
+                 | None = None, backlog: tuple[int, int] = (BACKLOG_HIGH, BACKLOG_LOW)
+                 ) -> None:
         self.server = server
         self.source = source
         self.write = write
         self.silence = silence
         self.counters = counters
         self.reading = reading
+        self.backlog_high, self.backlog_low = backlog
         self.framer = RtuFramer()
         self.loop = asyncio.get_running_loop()
         self.last_byte = self.loop.time()
@@ -169,7 +182,8 @@ class RtuLink:
             taken += 1
             self._serve(request)
         if self.reading is not None:
-            backlogged = framer.buffered > (BACKLOG_LOW if self.backlogged else BACKLOG_HIGH)
+            backlogged = framer.buffered > (self.backlog_low if self.backlogged
+                                            else self.backlog_high)
             if backlogged != self.backlogged:
                 self.backlogged = backlogged
                 self.reading(not backlogged)
@@ -186,6 +200,7 @@ class RtuLink:
             return
         if self.silent:
             counts["silenced"] += 1
+            server._faults.counts["silenced"] += 1  # (fault_counts, as TCP's say it)
             return
         table = server.fault_table
         fault = table.match(unit, pdu) if table is not None else None
@@ -196,6 +211,7 @@ class RtuLink:
             if fault.kind == "no_reply":
                 self.silent = True
                 counts["silenced"] += 1
+                server._faults.counts["silenced"] += 1
                 server.chatter.note(f"{self.source}: no answers any more (a no_reply fault)")
                 return
             timer = self.loop.call_later(fault.ms / 1000, self._release)
@@ -207,8 +223,9 @@ class RtuLink:
         unit, pdu, _ = request
         if unit == BROADCAST:
             if pdu[0] in WRITES:  # applied, never answered (2.1); a broadcast read is nothing
-                self.counters.counts["broadcasts"] += 1
-                self.server.handler.handle(self.server.any_unit, pdu, self.source)
+                answer = self.server.handler.handle(self.server.any_unit, pdu, self.source)
+                if not answer[0] & 0x80:  # refused (read-only, a bad value): not applied
+                    self.counters.counts["broadcasts"] += 1
             return
         self._answer(request, self.server.handler.handle(unit, pdu, self.source))
 
@@ -261,10 +278,13 @@ class SerialLine:
         self.silence = silence_s(rtu.baudrate, rtu.parity, rtu.stopbits)
         self.serial: Any = None
         self.link: RtuLink | None = None
-        self.pending = bytearray()
+        self.pending = bytearray()  # answers the driver has not taken yet
+        self.paused = False  # reading stopped: too many answers wait (PENDING_HIGH)
+        self.backlogged = False  # reading stopped: frames wait their turns
         self.error: str | None = None
         self.reopen: asyncio.TimerHandle | None = None
-        self.changed = asyncio.Event()  # set each time the port opens or goes away
+        # Set each time the port opens or goes away, and its reading stops or resumes.
+        self.changed = asyncio.Event()
 
     def open(self) -> None:
         """Open the device (ListenError naming modbus.rtu.port if it cannot be)."""
@@ -279,6 +299,9 @@ class SerialLine:
                                  exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
             number = getattr(exc, "errno", None)
+            if number in (errno.EAGAIN, errno.EWOULDBLOCK):  # pyserial's exclusive lock
+                raise ListenError(number, f"modbus.rtu.port: cannot open {self.device}: "
+                                  "another program has it open") from None
             if isinstance(number, int) and number:
                 raise ListenError(number, f"modbus.rtu.port: cannot open {self.device}: "
                                   f"{os.strerror(number)}") from None
@@ -288,7 +311,9 @@ class SerialLine:
         fd = port.fileno()
         loop = asyncio.get_running_loop()
         self.link = RtuLink(self.server, Source(SourceKind.MODBUS_RTU, self.device),
-                            self._write, self.silence, self.counters)
+                            self._write, self.silence, self.counters, reading=self._backlog,
+                            backlog=(READ_SIZE, READ_SIZE // 2))
+        self.backlogged = False
         loop.add_reader(fd, self._readable)
         self.changed.set()
 
@@ -298,7 +323,9 @@ class SerialLine:
 
     def _readable(self) -> None:
         try:
-            data = os.read(self.serial.fileno(), 4096)
+            # A few frames at a time (READ_SIZE): what one read brings is answered even
+            # while the line does not take the answers, so it bounds what may wait.
+            data = os.read(self.serial.fileno(), READ_SIZE)
         except BlockingIOError:
             return
         except OSError as exc:
@@ -313,19 +340,41 @@ class SerialLine:
     def _write(self, data: bytes) -> None:
         if self.serial is None:
             return
-        if self.pending:
-            self.pending += data
-            return
-        try:
-            sent = os.write(self.serial.fileno(), data)
-        except BlockingIOError:
-            sent = 0
-        except OSError as exc:
-            self._lost(exc.strerror or str(exc))
-            return
-        if sent < len(data):
-            self.pending += data[sent:]
+        if not self.pending:
+            try:
+                sent = os.write(self.serial.fileno(), data)
+            except BlockingIOError:
+                sent = 0
+            except OSError as exc:
+                self._lost(exc.strerror or str(exc))
+                return
+            if sent == len(data):
+                return
+            data = data[sent:]
             asyncio.get_running_loop().add_writer(self.serial.fileno(), self._writable)
+        self.pending += data
+        if len(self.pending) > PENDING_HIGH and not self.paused:
+            # The line does not take our answers (a master that stopped reading, a pty
+            # nobody reads): no more requests are read until they have gone, so what waits
+            # stays bounded; the master's requests wait in the driver meanwhile.
+            self.paused = True
+            self._reading()
+            self.changed.set()
+
+    def _backlog(self, on: bool) -> None:
+        """The link's frames wait their turns (more than READ_SIZE of them): read no more
+        until they are answered, so that what is read is what the answers may bound."""
+        self.backlogged = not on
+        self._reading()
+
+    def _reading(self) -> None:
+        if self.serial is None:
+            return
+        loop, fd = asyncio.get_running_loop(), self.serial.fileno()
+        if self.paused or self.backlogged:
+            loop.remove_reader(fd)
+        else:
+            loop.add_reader(fd, self._readable)
 
     def _writable(self) -> None:
         try:
@@ -336,8 +385,13 @@ class SerialLine:
             self._lost(exc.strerror or str(exc))
             return
         del self.pending[:sent]
+        loop = asyncio.get_running_loop()
+        if self.paused and len(self.pending) < PENDING_LOW:
+            self.paused = False
+            self._reading()
+            self.changed.set()
         if not self.pending:
-            asyncio.get_running_loop().remove_writer(self.serial.fileno())
+            loop.remove_writer(self.serial.fileno())
 
     def _lost(self, why: str) -> None:
         log.warning("modbus-rtu %s: the port went away (%s); looking for it again every "
@@ -367,6 +421,7 @@ class SerialLine:
             loop.remove_reader(fd)
             loop.remove_writer(fd)
             self.pending.clear()
+            self.paused = False
             self.serial.close()
             self.serial = None
 
@@ -383,51 +438,102 @@ class SerialLine:
             counts["crc_errors"] += self.link.framer.crc_errors
             counts["partial"] += self.link.framer.partial
         return {"port": self.device, "open": self.is_open, "error": self.error,
+                "unsent": len(self.pending), "reading": self.is_open and not self.paused,
                 "settings": f"{rtu.baudrate} {rtu.bytesize}{rtu.parity.value}{rtu.stopbits}",
                 **counts}
 
 
 class _TcpConnection(asyncio.Protocol):
-    """One RTU-over-TCP client: a link whose bytes come from and go to its socket."""
+    """One RTU-over-TCP client: a link whose bytes come from and go to its socket.  The
+    Modbus TCP server's guards hold here too: ``modbus.allow``, at most ``max_clients``
+    connections (a newcomer past it is refused: a serial device server keeps its one
+    connection, there is no idle one to make room), a connection silent ``idle_timeout_s``
+    is closed, and reading pauses while the client does not read its answers or a backlog
+    of frames waits."""
 
     def __init__(self, listener: RtuTcpListener) -> None:
         self.listener = listener
         self.transport: asyncio.Transport | None = None
         self.link: RtuLink | None = None
+        self.loop = asyncio.get_running_loop()
+        self.last_activity = self.loop.time()
+        self.timer: asyncio.TimerHandle | None = None
+        self.write_paused = False  # the client does not read its answers
+        self.backlogged = False  # frames wait their turn
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
         peer = transport.get_extra_info("peername") or ("?", 0)
-        listener = self.listener
+        listener, server = self.listener, self.listener.server
+        who = f"modbus-rtu {peer[0]}:{peer[1]}"
+        if not server.allowed(str(peer[0])):
+            server.refusals.note(f"{who} refused: not in the allow-list")
+            self.transport.abort()
+            return
+        if len(listener.connections) >= server.config.max_clients:
+            server.refusals.note(f"{who} refused: {len(listener.connections)} RTU-over-TCP "
+                                 "clients already (max_clients)")
+            self.transport.abort()
+            return
         self.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
-        self.link = RtuLink(listener.server, Source(SourceKind.MODBUS_RTU,
-                                                    f"{peer[0]}:{peer[1]}"),
+        self.link = RtuLink(server, Source(SourceKind.MODBUS_RTU, f"{peer[0]}:{peer[1]}"),
                             self.transport.write, listener.silence, listener.counters,
-                            reading=self._reading)
+                            reading=self._backlog)
         listener.connections.add(self)
-        listener.server.chatter.note(f"{self.link.source} connected (RTU over TCP)")
+        server.chatter.note(f"{self.link.source} connected (RTU over TCP)")
+        self._arm(server.config.idle_timeout_s)
 
-    def _reading(self, on: bool) -> None:
+    def _arm(self, delay: float) -> None:
+        self.timer = self.loop.call_later(delay, self._check_idle)
+
+    def _check_idle(self) -> None:
+        self.timer = None
+        if self.transport is None or self.transport.is_closing():
+            return
+        idle = self.listener.server.config.idle_timeout_s
+        left = self.last_activity + idle - self.loop.time()
+        if left <= 0:
+            self.listener.server.chatter.note(f"{self.link.source if self.link else '?'} "
+                                              f"closed: idle for {idle:g} s")
+            self.transport.abort()
+            return
+        self._arm(left)
+
+    def _backlog(self, on: bool) -> None:
+        self.backlogged = not on
+        self._reading()
+
+    def _reading(self) -> None:
         if self.transport is not None and not self.transport.is_closing():
-            if on:
-                self.transport.resume_reading()
-            else:
+            if self.write_paused or self.backlogged:
                 self.transport.pause_reading()
+            else:
+                self.transport.resume_reading()
 
-    def pause_writing(self) -> None:  # the client does not read its answers
-        self._reading(False)
+    def pause_writing(self) -> None:
+        self.write_paused = True
+        self._reading()
 
     def resume_writing(self) -> None:
-        self._reading(True)
+        self.write_paused = False
+        self._reading()
 
     def data_received(self, data: bytes) -> None:
+        self.last_activity = self.loop.time()
         assert self.link is not None
         self.link.received(data)
 
     def connection_lost(self, exc: Exception | None) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer = None
         listener = self.listener
+        if self not in listener.connections:
+            return  # refused at once: it never counted
         listener.connections.discard(self)
         if self.link is not None:
+            if self.link.framer.buffered:  # a frame begun when the client went away
+                self.link.framer.partial += 1
             listener.counters.add(self.link.framer)
             listener.server.chatter.note(f"{self.link.source} disconnected")
             self.link.close()
@@ -496,11 +602,14 @@ class RtuServer:
     def __init__(self, config: ModbusConfig, mmap: ModbusMap, backend: Backend) -> None:
         self.config = config
         rtu = config.rtu
-        units = rtu.unit_ids or tuple(u for u in config.unit_ids if 1 <= u <= 247) or (1,)
+        units = rtu.unit_ids or tuple(u for u in config.unit_ids if 1 <= u <= 247)
+        assert units, "the config's checks refuse an RTU with no serial address"
         self.unit_ids = frozenset(units)
         self.any_unit = min(units)  # what a broadcast is handled as
         self.handler = RequestHandler(mmap, backend, self.unit_ids, strict_unit_id=True)
         self.chatter = RateLimitedLog(log, level=logging.INFO, burst=10)
+        self.refusals = RateLimitedLog(log)
+        self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
         self._faults = FaultTable()
         self.fault_table: FaultTable | None = None
         self.serial = SerialLine(self) if rtu.port is not None else None
@@ -519,10 +628,22 @@ class RtuServer:
 
     async def close(self) -> None:
         self.chatter.flush()
+        self.refusals.flush()
         if self.serial is not None:
             self.serial.close()
         if self.tcp is not None:
             await self.tcp.close()
+
+    def allowed(self, host: str) -> bool:
+        """``modbus.allow``: an RTU-over-TCP client's address is checked as a Modbus TCP
+        client's is."""
+        if not self._allow:
+            return True
+        try:
+            address = ipaddress.ip_address(host)
+        except ValueError:
+            return False
+        return any(address in net for net in self._allow)
 
     def links(self) -> list[RtuLink]:
         out = [self.serial.link] if self.serial is not None and self.serial.link else []
