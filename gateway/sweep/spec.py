@@ -59,6 +59,10 @@ EXPLORE_RANGES: dict[str, list[Value]] = {
     "sim.input_delay_scale": [0.5, 2.0], "sim.input_jitter_ms": [0.0, 100.0],
     "sim.seed": [0, 1_000_000]}
 ID_LENGTH = 12  # hex digits of the sha-256: 48 bits, no collision in any sweep one runs
+# The most variants a spec may give (programs x scripts x grid x samples): counted before any
+# is made, so that a grid of 20 ** 8 combinations is a spec error, not a MemoryError.
+MAX_VARIANTS = 1_000_000
+BOM = b"\xef\xbb\xbf"
 
 
 class SpecError(ConfigError):
@@ -112,6 +116,7 @@ class Spec:
     fingerprint: str  # the spec and the files it names: a resumed sweep must match it
     seed: int | None = None
     files: list[Path] = field(default_factory=list)
+    draws: tuple[int, int] | None = None  # random draws made, and the distinct ones kept
 
 
 def render_value(value: Value) -> str:
@@ -152,7 +157,7 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
     """The spec's variants; with ``explore``, that many seeded samples of its [explore]
     ranges per program and script instead of its [grid] and [random]."""
     file = Path(path)
-    raw = read_toml(file)
+    raw = _read_spec(file)
     where = str(file)
 
     def fail(key: str, message: str) -> SpecError:
@@ -187,8 +192,11 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
         raise fail("sweep.programs", "no program to run (give programs or examples)")
     grid = _flat(_table(raw, "grid", fail))
     rand = _flat(_table(raw, "random", fail))
+    table = _flat(_table(raw, "explore", fail))
+    if "samples" in table:  # N is the command line's: --explore N
+        raise fail("explore.samples", "unknown key: the number of samples is --explore N's "
+                   "(expected seed and key = [low, high])")
     if explore is not None:
-        table = _flat(_table(raw, "explore", fail))
         ranges = {k: v for k, v in table.items() if k != "seed"} or EXPLORE_RANGES
         grid = {}
         rand = {"seed": table.get("seed", 0), "samples": explore, **ranges}
@@ -196,15 +204,23 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
 
         def fail(key: str, message: str) -> SpecError:
             return fail_(key.replace("random", "explore", 1), message)
-    combos, keys = _grid(grid, fail)
-    samples, seed, random_keys = _random(rand, fail, set(keys))
+    lists, keys = _grid(grid, fail)
+    draws, seed, random_keys = _random(rand, fail, set(keys))
+    _check_values(runs, grid, rand, where, "random" if explore is None else "explore")
+    count = len(runs) * math.prod(len(v) for v in lists) * max(1, draws)
+    if count > MAX_VARIANTS:
+        raise fail("sweep", f"{count:,} variants (programs x scripts x [grid] x samples): "
+                   f"more than the {MAX_VARIANTS:,} a sweep may run; split the spec")
+    samples = _draw(rand, seed, draws)
+    combos = [dict(zip(keys, c, strict=True)) for c in itertools.product(*lists)]
     keys += random_keys
     choices = [{**g, **r} for g in combos for r in samples] if samples else combos
-    _check_values(runs, grid, rand, where, "random" if explore is None else "explore")
     variants = []
     files: set[Path] = {file.resolve()}
     for run in runs:
         files.update(p.resolve() for p in run.files)
+    files.update(_inputs(runs))
+    for run in runs:
         for values in choices:
             sets = tuple((k, values[k]) for k in keys if k in values)
             identity = {"program": _rel(run.program, base), "config": _rel(run.config, base),
@@ -224,7 +240,47 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
     for f in sorted(files):
         digest.update(str(f).encode() + b"\0" + f.read_bytes() + b"\0")
     return Spec(file, sorted(variants, key=lambda v: v.id), keys, digest.hexdigest(), seed,
-                sorted(files))
+                sorted(files), (draws, len(samples)) if draws else None)
+
+
+def _read_spec(file: Path) -> dict[str, Any]:
+    """The spec's TOML; a UTF-8 byte-order mark (some Windows editors write one) is skipped."""
+    try:
+        with file.open("rb") as raw:
+            bom = raw.read(len(BOM)) == BOM
+    except OSError:
+        bom = False
+    if not bom:
+        return read_toml(file)
+    try:
+        return tomllib.loads(file.read_text(encoding="utf-8-sig"))
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"{file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{file}: {exc}") from None
+
+
+def _inputs(runs: Sequence[_Run]) -> set[Path]:
+    """What a variant's run can read besides its program, config and script: every program
+    file on the config's storage devices (a subprogram it calls, MP0..MP3), the PLC logic,
+    the plant logic and the symbols file.  A resumed sweep must find them unchanged."""
+    from ncgate.interpreter.storage import PROGRAM_SUFFIXES
+
+    out: set[Path] = set()
+    for config, storage in sorted({(r.config, r.storage) for r in runs}, key=str):
+        overrides = {} if storage is None else {"nc.storage.MP0": str(storage)}
+        loaded = load_config(config, overrides=overrides, serving=False)
+        for folder in loaded.nc.storage.devices.values():
+            try:
+                entries = list(Path(folder).iterdir())
+            except OSError:
+                continue
+            out.update(e.resolve() for e in entries
+                       if not e.name.startswith(".") and e.suffix.lower() in PROGRAM_SUFFIXES
+                       and e.is_file())
+        logic = (*loaded.plc.logic, *loaded.plant.logic, loaded.symbols_file)
+        out.update(Path(f).resolve() for f in logic if f is not None and Path(f).is_file())
+    return out
 
 
 # -- the parts of a spec -------------------------------------------------------------------
@@ -237,6 +293,11 @@ class _Run:
     config: Path | None
     script: Path | None
     files: tuple[Path, ...]
+
+    @property
+    def storage(self) -> Path | None:
+        """Without a config: the program's folder, as MP0 of the built-in config."""
+        return self.program.parent.resolve() if self.config is None else None
 
 
 def _table(raw: dict[str, Any], key: str, fail: Any) -> dict[str, Any]:
@@ -330,7 +391,9 @@ def _flat(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[dict[str, Value]], list[str]]:
+def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[list[Value]], list[str]]:
+    """Each swept key's values (checked), and the keys: their product is made only once the
+    count is known to be in bounds."""
     keys = []
     lists = []
     for key, values in grid.items():
@@ -343,14 +406,14 @@ def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[dict[str, Value]], list
             raise fail(f"grid.{key}", "a value is given twice")
         keys.append(key)
         lists.append(values)
-    combos = [dict(zip(keys, c, strict=True)) for c in itertools.product(*lists)]
-    return combos, keys
+    return lists, keys
 
 
 def _random(table: dict[str, Any], fail: Any,
-            taken: set[str]) -> tuple[list[dict[str, Value]], int | None, list[str]]:
+            taken: set[str]) -> tuple[int, int | None, list[str]]:
+    """The number of draws, the seed and the sampled keys (the ranges checked)."""
     if not table:
-        return [], None, []
+        return 0, None, []
     seed = table.get("seed", 0)
     samples = table.get("samples")
     if isinstance(seed, bool) or not isinstance(seed, int):
@@ -367,17 +430,28 @@ def _random(table: dict[str, Any], fail: Any,
                 or not all(isinstance(b, int | float) and not isinstance(b, bool)
                            for b in bounds) or not bounds[0] <= bounds[1]):
             raise fail(f"random.{key}", f"expected [low, high] with low <= high, got {bounds!r}")
+    return samples, seed, list(ranges)
+
+
+def _draw(table: dict[str, Any], seed: int | None, draws: int) -> list[dict[str, Value]]:
+    """``draws`` seeded samples of the ranges, a draw that repeats an earlier one left out
+    (the same run twice: nothing was given twice, the seed drew it again)."""
+    ranges = {k: v for k, v in table.items() if k not in ("seed", "samples")}
     rng = random.Random(seed)
     out = []
-    for _ in range(samples):
+    seen = set()
+    for _ in range(draws):
         sample: dict[str, Value] = {}
         for key, (low, high) in ranges.items():  # in the spec's order: the same draws
             if isinstance(low, int) and isinstance(high, int):
                 sample[key] = rng.randint(low, high)
             else:
                 sample[key] = round(rng.uniform(float(low), float(high)), 6)
-        out.append(sample)
-    return out, seed, list(ranges)
+        text = json.dumps(sample, sort_keys=True)
+        if text not in seen:
+            seen.add(text)
+            out.append(sample)
+    return out
 
 
 def _check_values(runs: Sequence[_Run], grid: dict[str, Any], rand: dict[str, Any],
