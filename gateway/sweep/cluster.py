@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 from ncgate.gateway.sweep.pool import Runner
 from ncgate.gateway.sweep.run import Result, _result, run_variant
@@ -37,18 +38,30 @@ def chunk_size(variants: int, threads: int) -> int:
     return max(1, min(MAX_CHUNK, math.ceil(variants / max(1, threads * CHUNKS_PER_THREAD))))
 
 
-def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | None,
-             runner: Runner = run_variant) -> Iterator[tuple[Variant, Result]]:
+def connect(scheduler: str) -> Any:
+    """A Dask client of the scheduler at ``scheduler``; one that cannot be reached (or no
+    Dask installed) is a SpecError, exit 2."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise SpecError("--scheduler needs Dask: pip install 'ncgate[dask]'") from None
+    try:
+        return Client(scheduler, timeout=30, set_as_default=False)
+    except (OSError, ValueError, TypeError) as exc:
+        raise SpecError(f"--scheduler {scheduler}: {exc}") from None
+
+
+def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | None,
+             runner: Runner = run_variant, client: Any = None) -> Iterator[tuple[Variant, Result]]:
+    """Each variant's result as its chunk comes back; ``client``: one already connected (the
+    caller closes it), else one of ``scheduler``'s, closed at the end."""
+    from distributed import as_completed
+
     if not variants:
         return
-    try:
-        client = Client(scheduler, timeout=30, set_as_default=False)
-    except OSError as exc:
-        raise SpecError(f"--scheduler {scheduler}: {exc}") from None
+    own = client is None
+    if own:
+        client = connect(scheduler)
     try:
         threads = sum(client.nthreads().values())
         size = chunk_size(len(variants), threads)
@@ -79,5 +92,6 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
                 future.release()
             yield from zip(chunk, results, strict=True)
     finally:
-        client.close()
+        if own:
+            client.close()
 

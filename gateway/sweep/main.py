@@ -4,7 +4,9 @@ print the summary."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -13,13 +15,27 @@ from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import TextIO, cast
 
 from ncgate.gateway.sweep.run import Result
 from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
-from ncgate.gateway.sweep.table import Parts, Row, csv_bytes, make_row, parquet_bytes, write_atomic
+from ncgate.gateway.sweep.table import (
+    Parts,
+    Row,
+    command_of,
+    csv_bytes,
+    make_row,
+    output_path,
+    parquet_bytes,
+    write_atomic,
+)
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT: the shell's status for a command Ctrl-C stopped
+MAX_TIMEOUT_S = 1_000_000.0  # --timeout's largest (11 days): the timers take no more
+# A Dask scheduler's address: scheme://host:port (a host name, IPv4, or [IPv6]).
+SCHEDULER = re.compile(r"(?P<scheme>tcp|tls|ucx|ws|wss)://(?P<host>\[[0-9A-Fa-f:.]+\]|"
+                       r"[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):(?P<port>\d{1,5})")
 FLUSH_ROWS = 64  # rows a part holds at most
 FLUSH_S = 2.0  # and a part is written at least this often while rows come
 SLOWEST = 5
@@ -37,11 +53,27 @@ class Options:
     progress: bool | None = None  # None: on a terminal, not in CI
 
 
-def execute(variants: Sequence[Variant], options: Options) -> Iterator[tuple[Variant, Result]]:
+def check_options(options: Options) -> None:
+    """The command line's values, refused (UsageError: exit 2) before anything is made."""
+    from ncgate.gateway.errors import UsageError
+
+    timeout = options.timeout_s
+    if timeout is not None and not (math.isfinite(timeout) and 0 <= timeout <= MAX_TIMEOUT_S):
+        raise UsageError(f"--timeout {timeout}: expected seconds > 0, at most "
+                         f"{MAX_TIMEOUT_S:.0f} (0: none)")
+    if options.scheduler is not None:
+        found = SCHEDULER.fullmatch(options.scheduler)
+        if found is None or not 1 <= int(found["port"]) <= 65535:
+            raise UsageError(f"--scheduler {options.scheduler}: expected a Dask scheduler's "
+                             "address, scheme://host:port (tcp://10.0.0.5:8786)")
+
+
+def execute(variants: Sequence[Variant], options: Options,
+            client: object = None) -> Iterator[tuple[Variant, Result]]:
     if options.scheduler:
         from ncgate.gateway.sweep.cluster import run_dask
 
-        yield from run_dask(variants, options.scheduler, options.timeout_s)
+        yield from run_dask(variants, options.scheduler, options.timeout_s, client=client)
     else:
         from ncgate.gateway.sweep.pool import default_workers, run_local
 
@@ -50,9 +82,25 @@ def execute(variants: Sequence[Variant], options: Options) -> Iterator[tuple[Var
 
 def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[int, list[Row]]:
     """Run what the parts lack, write the table; the exit status and the rows by id."""
+    check_options(options)
+    output = output_path(options.output, spec.files)
     if options.format == "parquet":
         parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
-    parts = Parts(options.output, spec)
+    client = None
+    if options.scheduler:  # reached (or said) before the parts are made
+        from ncgate.gateway.sweep.cluster import connect
+
+        client = connect(options.scheduler)
+    try:
+        return _run_sweep(spec, options, output, client, out)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
+               out: TextIO) -> tuple[int, list[Row]]:
+    parts = Parts(output, spec)
     done = parts.start(options.resume)
     rows: dict[str, Row] = dict(done)
     todo = [v for v in spec.variants if v.id not in rows]
@@ -69,7 +117,7 @@ def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[i
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _terminated)
     try:
-        for variant, result in execute(todo, options):
+        for variant, result in execute(todo, options, client):
             row = make_row(variant, result, spec.keys)
             rows[variant.id] = row
             pending.append(row)
@@ -83,10 +131,10 @@ def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[i
         parts.add(pending)
         if progress is not None:
             progress.close()
-        print(f"ncgate sweep: stopped ({exc or 'Ctrl-C'}): {len(rows)} of "
+        print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}): {len(rows)} of "
               f"{len(spec.variants)} variants done, kept in {parts.folder}; run again with "
               "--resume to go on", file=sys.stderr)
-        return EXIT_FAILED, []
+        return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
@@ -96,7 +144,7 @@ def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[i
     ordered = [rows[v.id] for v in spec.variants]  # spec.variants is sorted by id
     data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
             else csv_bytes(ordered, spec.keys))
-    write_atomic(options.output, data)
+    write_atomic(output, data)
     parts.finish()
     summary(ordered, spec.keys, out)
     print(f"wrote {options.output}", file=out)
@@ -157,11 +205,43 @@ class Progress:
 def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     from ncgate.gateway.sweep.spec import load_spec
 
+    check_options(options)
+    out = cast(TextIO, _Stdout())
     spec = load_spec(spec_path, explore)
-    status, rows = run_sweep(spec, options)
+    if spec.draws is not None and spec.draws[1] < spec.draws[0]:
+        where = "--explore" if explore is not None else "[random]"
+        print(f"{where}: the {spec.draws[0]} draws gave {spec.draws[1]} distinct samples (a "
+              f"repeated draw runs once): {len(spec.variants)} variants", file=out)
+    status, rows = run_sweep(spec, options, out)
     if explore is not None and rows:
-        findings(rows, spec, sys.stdout, options.timeout_s)
+        findings(rows, spec, out, options.timeout_s)
     return status
+
+
+class _Stdout:
+    """stdout that a closed reader (``ncgate sweep ... | head``) does not stop: what is left
+    to say goes nowhere, and the sweep goes on to write its table."""
+
+    def write(self, text: str) -> int:
+        try:
+            return sys.stdout.write(text)
+        except BrokenPipeError:
+            self._gone()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:
+            self._gone()
+
+    @staticmethod
+    def _gone() -> None:
+        # As the Python docs advise: the rest (and the interpreter's flush at exit) to
+        # /dev/null, not an "Exception ignored ... BrokenPipeError" at the end.
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
 
 
 def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
@@ -186,7 +266,8 @@ def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
         print(f"{verdict} in {len(found)} of {len(rows)} variants: {signature}", file=out)
         print(f"  first in {first['cycle_s']:.3f} s of simulated time: {first['id']}", file=out)
         smallest = reduce(variants[first["id"]], verdict, first["signature"], timeout_s)
-        print(f"  smallest reproducer: {smallest.command()}", file=out)
+        # As the row's own command: a run past its budget stops there (--until BUDGET).
+        print(f"  smallest reproducer: {command_of(smallest, first['signature'])}", file=out)
 
 
 def reduce(variant: Variant, verdict: str, signature: str,

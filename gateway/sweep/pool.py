@@ -37,9 +37,13 @@ def _serve(conn: Connection, timeout_s: float | None, runner: Runner) -> None:
     while True:
         try:
             variant = conn.recv()
-        except EOFError:
+        except (EOFError, OSError):  # the parent closed the pipe (done, or stopped)
             return
-        conn.send(runner(variant, timeout_s))
+        result = runner(variant, timeout_s)
+        try:
+            conn.send(result)
+        except OSError:  # the parent stopped (Ctrl-C) while this one ran: nobody to tell
+            return
 
 
 @dataclass
@@ -62,7 +66,8 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
     if not variants:
         return
     context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["ncgate.gateway.sweep.run", "ncgate.gateway.sim"])
+    context.set_forkserver_preload(["ncgate.gateway.sweep.worker_signals",
+                                    "ncgate.gateway.sweep.run", "ncgate.gateway.sim"])
     todo = deque(variants)
     deaths: dict[str, int] = {}
     pool: list[_Worker] = []

@@ -16,6 +16,7 @@ import io
 import json
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -38,18 +39,58 @@ def make_row(variant: Variant, result: Result, keys: Sequence[str]) -> Row:
     row: Row = {"id": variant.id, "program": variant.program, "script": variant.script or ""}
     row.update({k: values.get(k) for k in keys})
     row.update({k: result[k] for k in RESULT_FIELDS})
-    command = variant.command()
-    if result["signature"] == "timeout budget":  # sim alone would run on: it stops there
-        command += f" --until {render_value(variant.budget_s)}"
-    row["command"] = command
+    row["command"] = command_of(variant, result["signature"])
     return row
+
+
+def command_of(variant: Variant, signature: str) -> str:
+    """The ``ncgate sim`` command that runs ``variant`` again as its row says: past its
+    virtual-time budget, with ``--until BUDGET`` (sim alone would run on; it stops there)."""
+    command = variant.command()
+    if signature == "timeout budget":
+        command += f" --until {render_value(variant.budget_s)}"
+    return command
+
+
+def output_path(output: Path, inputs: Iterable[Path] = ()) -> Path:
+    """Where the table goes: ``output`` with its symbolic links followed (the table is written
+    through them, not over them).  A folder, FIFO or device, or one of the sweep's own inputs
+    (the spec, a program), is refused: UsageError, exit 2."""
+    from ncgate.gateway.errors import UsageError
+
+    target = output.resolve()
+    try:
+        mode = target.stat().st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise UsageError(f"-o {output}: {exc.strerror}") from None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise UsageError(f"-o {output}: not a regular file (the table replaces a file)")
+    if target in {Path(p).resolve() for p in inputs}:
+        raise UsageError(f"-o {output}: is one of the sweep's inputs (the spec or a file it "
+                         "names): give another output")
+    return target
+
+
+def _file_mode(path: Path) -> int:
+    """An existing file's permissions, else a new file's (0o666 less the umask), as a shell's
+    ``>`` gives: not mkstemp's 0o600."""
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except OSError:
+        mask = os.umask(0o022)
+        os.umask(mask)
+        return 0o666 & ~mask
 
 
 def write_atomic(path: Path, data: bytes) -> None:
     """The file whole or not at all: a temporary file beside it, fsynced, renamed over it."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    mode = _file_mode(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as out:
             out.write(data)
             out.flush()
@@ -127,7 +168,7 @@ class Parts:
         self.count = 0
 
     def manifest(self) -> dict[str, Any]:
-        return {"format": PARTS_FORMAT, "spec": str(self.spec.file),
+        return {"format": PARTS_FORMAT, "spec": str(self.spec.file.resolve()),
                 "fingerprint": self.spec.fingerprint, "variants": len(self.spec.variants)}
 
     def start(self, resume: bool) -> dict[str, Row]:
