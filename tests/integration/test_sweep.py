@@ -14,6 +14,7 @@ import random
 import re
 import shlex
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -278,6 +279,9 @@ def test_the_pool_survives_a_dying_and_a_stuck_worker(tmp_path: Path) -> None:
     ('[sweep]\nprograms = ["OK.nc"]\n[random]\nsamples = 3\n"nc.feed_override" = [50, 500]\n',
      "nc.feed_override"),
     ('[sweep]\nexamples = ["nope"]\n', "sweep.examples: no runnable example 'nope'"),
+    # N is --explore's: samples in [explore] would override it unsaid
+    ('[sweep]\nprograms = ["OK.nc"]\n[explore]\nsamples = 3\n"nc.feed_override" = [50, 150]\n',
+     "explore.samples: unknown key"),
 ])
 def test_a_bad_spec_is_exit_2_naming_the_file_and_the_key(tmp_path: Path, spec: str,
                                                           said: str) -> None:
@@ -655,3 +659,221 @@ def test_a_plant_models_key_is_swept_by_the_models_name(tmp_path: Path) -> None:
     again = ncgate(*shlex.split(rows["2500"]["command"])[1:], cwd=tmp_path)
     assert again.returncode == 1 and "FAIL" in again.stdout, again.stdout + again.stderr
     assert "--set plant.model.clamp.travel_ms=2500" in rows["2500"]["command"]
+
+
+# -- the hostile review's findings --------------------------------------------------------
+
+
+SUB_CELL = {
+    # P1 starts SUB in P2 and waits for its SND: SUB is read from the storage (MP0), not
+    # named by the spec.  The PLC and plant logic are read by every run too.
+    "MAIN.nc": "N1(EXE,2,SUB)\nN2(WAI,2)\nN3M30\n",
+    "SUB.nc": "N1G4X1\nN2(SND,1)\nN3M30\n",
+    "plc.st": "PROGRAM Main\nVAR\n  n : INT;\nEND_VAR\nn := n + 1;\nEND_PROGRAM\n",
+    "plant.st": "PROGRAM Plant\nVAR\n  m : INT;\nEND_VAR\nm := m + 1;\nEND_PROGRAM\n",
+    "ncgate.toml": '[nc]\nprocesses = 2\nlookahead = 0\nmain = "MAIN"\n[nc.storage]\nMP0 = "."\n'
+                   '[plc]\nlogic = "plc.st"\n[plant]\nlogic = "plant.st"\n',
+}
+
+
+@pytest.mark.parametrize("changed", ["SUB.nc", "plc.st", "plant.st"])
+def test_resume_refuses_a_changed_file_the_runs_read(monkeypatch: pytest.MonkeyPatch,
+                                                     tmp_path: Path, changed: str) -> None:
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    (tmp_path / "sub").mkdir()
+    for name, text in SUB_CELL.items():
+        (tmp_path / "sub" / name).write_text(text)
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["sub/MAIN.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100]\n')
+    monkeypatch.chdir(tmp_path)
+    # A sweep stopped before its first part: the parts folder holds its manifest.
+    Parts(Path("spec.csv"), load_spec("spec.toml")).start(resume=False)
+    same = ncgate("sweep", "spec.toml", "--resume", "--timeout", "30", cwd=tmp_path)
+    assert same.returncode == 0, same.stdout + same.stderr  # nothing changed: it goes on
+    table = (tmp_path / "spec.csv").read_bytes()
+    Parts(Path("spec.csv"), load_spec("spec.toml")).start(resume=False)
+    file = tmp_path / "sub" / changed
+    file.write_text(file.read_text().replace("G4X1", "G4X2").replace("+ 1", "+ 2"))
+    done = ncgate("sweep", "spec.toml", "--resume", cwd=tmp_path)
+    assert done.returncode == 2 and "changed since" in done.stderr, done.stdout + done.stderr
+    assert (tmp_path / "spec.csv").read_bytes() == table  # no row of the new version in it
+
+
+def test_resume_knows_the_spec_by_another_spelling_of_its_path(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "res.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    monkeypatch.chdir(tmp_path)
+    Parts(Path("res.csv"), load_spec("res.toml")).start(resume=False)  # `sweep res.toml`
+    done = ncgate("sweep", str(tmp_path / "res.toml"), "--resume", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert len(rows_of(tmp_path / "res.csv")) == 1
+
+
+def test_the_table_is_written_through_a_link_and_with_the_umasks_mode(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    (tmp_path / "results").mkdir()
+    (tmp_path / "link.csv").symlink_to("results/real.csv")
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o",
+                           "link.csv"], cwd=tmp_path, text=True, capture_output=True,
+                          timeout=120, preexec_fn=lambda: os.umask(0o027))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "link.csv").is_symlink()
+    assert len(rows_of(tmp_path / "results" / "real.csv")) == 1
+    assert (tmp_path / "results" / "real.csv").stat().st_mode & 0o777 == 0o640
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder", "spec", "program"])
+def test_an_output_that_is_not_a_table_file_is_refused(tmp_path: Path, kind: str) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    spec = '[sweep]\nprograms = ["OK.nc"]\n'
+    (tmp_path / "spec.toml").write_text(spec)
+    output = {"fifo": "out.csv", "folder": "out.csv", "spec": "spec.toml",
+              "program": "OK.nc"}[kind]
+    if kind == "fifo":
+        os.mkfifo(tmp_path / output)
+    elif kind == "folder":
+        (tmp_path / output).mkdir()
+    done = ncgate("sweep", "spec.toml", "-o", output, cwd=tmp_path, timeout=120)
+    assert done.returncode == 2, done.stderr
+    said = "not a regular file" if kind in ("fifo", "folder") else "one of the sweep's inputs"
+    assert said in done.stderr, done.stderr
+    assert (tmp_path / "spec.toml").read_text() == spec
+    assert (tmp_path / "OK.nc").read_text() == LOOPS["OK"]
+    assert not (tmp_path / f"{output}.parts").exists()
+    if kind == "fifo":
+        assert stat.S_ISFIFO((tmp_path / output).stat().st_mode)
+
+
+def test_random_draws_that_repeat_run_once(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "r.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[random]\nseed = 1\n'
+                                     'samples = 10\n"nc.lookahead" = [0, 3]\n')
+    done = ncgate("sweep", "r.toml", "--workers", "2", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    rows = rows_of(tmp_path / "r.csv")
+    assert sorted(r["nc.lookahead"] for r in rows) == ["0", "1", "2", "3"]
+    assert "the 10 draws gave 4 distinct samples" in done.stdout
+    (tmp_path / "e.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[explore]\n'
+                                     '"plc.scan_ms" = [1, 5]\n')
+    explored = ncgate("sweep", "e.toml", "--explore", "20", "--workers", "2", cwd=tmp_path)
+    assert explored.returncode == 0, explored.stderr
+    assert sorted(r["plc.scan_ms"] for r in rows_of(tmp_path / "e-explore.csv")) == \
+        ["1", "2", "3", "4", "5"]
+    # A program given twice is still the spec's error: the same run twice.
+    (tmp_path / "twice.toml").write_text('[sweep]\nprograms = ["OK.nc", "O*.nc"]\n')
+    twice = ncgate("sweep", "twice.toml", cwd=tmp_path)
+    assert twice.returncode == 2 and "two variants are the same run" in twice.stderr
+
+
+@pytest.mark.parametrize("timeout", ["inf", "nan", "1e300"])
+def test_a_timeout_that_is_no_number_of_seconds_is_refused(tmp_path: Path,
+                                                          timeout: str) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    done = ncgate("sweep", "spec.toml", "--timeout", timeout, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert f"--timeout {float(timeout)}: expected seconds > 0" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["OK.nc", "spec.toml"]
+
+
+def limited_memory() -> None:
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))  # a product would pass it
+
+
+@pytest.mark.parametrize("bad_key", [False, True])
+def test_a_huge_grid_is_counted_not_built(tmp_path: Path, bad_key: bool) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    keys = ["nc.lookahead", "nc.feed_override", "plc.scan_ms", "nc.block_time_ms",
+            "sim.input_jitter_ms", "sim.input_delay_scale", "sim.seed", "nc.runaway_blocks"]
+    if bad_key:
+        keys[-1] = "nc.bogus"
+    grid = "".join(f'"{k}" = {list(range(1, 21))}\n' for k in keys)
+    (tmp_path / "big.toml").write_text(f'[sweep]\nprograms = ["OK.nc"]\n[grid]\n{grid}')
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "big.toml"], cwd=tmp_path,
+                          text=True, capture_output=True, timeout=120,
+                          preexec_fn=limited_memory)
+    assert done.returncode == 2, done.stderr
+    assert "big.toml" in done.stderr
+    if bad_key:
+        assert "nc.bogus: unknown key" in done.stderr, done.stderr
+    else:
+        assert f"{20 ** 8:,} variants" in done.stderr and "1,000,000" in done.stderr
+
+
+def test_explores_reproducer_of_a_budget_timeout_has_its_until(tmp_path: Path) -> None:
+    (tmp_path / "LOOP.nc").write_text(LOOPS["LOOP"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["LOOP.nc"]\nbudget_s = 5\n'
+                                        '[explore]\n"nc.feed_override" = [50, 150]\n')
+    done = ncgate("sweep", "spec.toml", "--explore", "2", "--workers", "1", cwd=tmp_path)
+    assert done.returncode == 1, done.stderr
+    rows = rows_of(tmp_path / "spec-explore.csv")
+    assert {r["verdict"] for r in rows} == {"timeout"}
+    assert all(r["command"].endswith("--until 5.0") for r in rows)
+    found = re.search(r"^  smallest reproducer: (.*)$", done.stdout, re.M)
+    assert found and found[1].endswith("--until 5.0"), done.stdout
+    again = ncgate(*shlex.split(found[1])[1:], cwd=tmp_path, timeout=120)  # it ends
+    assert again.returncode in (0, 1) and "simulated 5.000 s" in again.stdout, again.stdout
+
+
+def test_ctrl_c_stops_the_sweep_quietly_with_130_and_keeps_its_rows(big_sweep: Path) -> None:
+    sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o",
+                              "ctrl-c.csv", "--workers", "2"], cwd=big_sweep, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             start_new_session=True)  # its own group, as a terminal's job
+    try:
+        wait_for(lambda: len(parts_of(big_sweep, "ctrl-c.csv")) >= 1 or sweep.poll() is not None,
+                 "the first part")
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        os.killpg(sweep.pid, signal.SIGINT)  # the terminal's Ctrl-C: to every process
+        _, err = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+        sweep.wait()
+    assert sweep.returncode == 130, err
+    assert "stopped (Ctrl-C)" in err and "Traceback" not in err, err
+    again = ncgate("sweep", "spec.toml", "-o", "ctrl-c.csv", "--resume", cwd=big_sweep)
+    assert again.returncode == 1 and "resuming: " in again.stdout, again.stderr
+    assert (big_sweep / "ctrl-c.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
+
+
+def test_a_closed_stdout_does_not_stop_the_sweep(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100]\n')
+    sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml"],
+                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert sweep.stdout is not None
+    sweep.stdout.close()  # `| head -0`: the reader is gone before the first line
+    _, err = sweep.communicate(timeout=120)
+    assert sweep.returncode == 0 and b"Broken pipe" not in err, err
+    assert len(rows_of(tmp_path / "spec.csv")) == 2
+
+
+@pytest.mark.parametrize("url", ["bogus", "tcp://", "tcp://10.0.0.5", "tcp://:8786",
+                                 "tcp://host:99999", "10.0.0.5:8786"])
+def test_a_scheduler_that_is_no_address_is_refused_at_once(tmp_path: Path, url: str) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
+    done = ncgate("sweep", "spec.toml", "--scheduler", url, cwd=tmp_path, timeout=20)
+    assert done.returncode == 2, done.stderr
+    assert f"--scheduler {url}: expected a Dask scheduler's address" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["OK.nc", "spec.toml"]
+
+
+def test_a_spec_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_bytes(b"\xef\xbb\xbf" + b'[sweep]\nprograms = ["OK.nc"]\n')
+    done = ncgate("sweep", "spec.toml", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert len(rows_of(tmp_path / "spec.csv")) == 1
