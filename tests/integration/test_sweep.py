@@ -144,7 +144,8 @@ def sim_verdict(out: str, status: int) -> tuple[str, str]:
         return "stall", cycle[0]
     if re.search(r"^\[[\d.]+\] (P\d+|PLC) alarm AL\d+", out, re.M):
         return "alarm", cycle[0]
-    if re.search(r"^\[[\d.]+\] P\d+ hazard ", out, re.M):
+    # "[t] P2 hazard PROG92.nc:10 N85: ..." or, with no block, "[t] P0 hazard: script ..."
+    if re.search(r"^\[[\d.]+\] P\d+ hazard[ :]", out, re.M):
         return "hazard", cycle[0]
     assert status == 0, out
     return "ok", cycle[0]
