@@ -31,6 +31,7 @@ same spec gives the same ids wherever it runs.  Errors name the spec file and th
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import itertools
@@ -472,6 +473,14 @@ def _check_values(runs: Sequence[_Run], grid: dict[str, Any], rand: dict[str, An
 
 
 def _rel(path: Path | None, base: Path) -> str | None:
+    """A path as a variant's id hashes it: relative to the spec's folder, or -- for a file of
+    an installed example -- to the examples' folder (``examples:scheme3/PROG91.nc``), so an
+    example's variant has the same id wherever the spec and ncgate are."""
     if path is None:
         return None
-    return Path(os.path.relpath(path.resolve(), base.resolve())).as_posix()
+    from ncgate.gateway.examples import examples_folder
+
+    resolved = path.resolve()
+    with contextlib.suppress(ValueError):
+        return f"examples:{resolved.relative_to(examples_folder().resolve()).as_posix()}"
+    return Path(os.path.relpath(resolved, base.resolve())).as_posix()

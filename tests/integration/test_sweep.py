@@ -878,3 +878,17 @@ def test_a_spec_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
     done = ncgate("sweep", "spec.toml", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert len(rows_of(tmp_path / "spec.csv")) == 1
+
+
+def test_an_examples_variant_has_the_same_id_wherever_the_spec_is(tmp_path: Path) -> None:
+    """docs/sweep.md: the same spec gives the same ids wherever it runs -- for an installed
+    example too, whose files lie wherever ncgate is (its id hashed their path relative to
+    the spec's folder, so a spec moved one folder down gave other ids)."""
+    deep = tmp_path / "a" / "b"
+    deep.mkdir(parents=True)
+    for folder in (tmp_path, deep):
+        (folder / "s.toml").write_text('[sweep]\nexamples = ["scheme3"]\n')
+        done = ncgate("sweep", "s.toml", "-q", cwd=folder)
+        assert done.returncode in (0, 1), done.stderr
+    ids = [[row["id"] for row in rows_of(folder / "s.csv")] for folder in (tmp_path, deep)]
+    assert ids[0] and ids[0] == ids[1]
