@@ -8,10 +8,11 @@ state folder: ``ncgate.config.state``).  They are the node's power-on values fro
 at start and after reset node / reset communication.  "load" written to 0x1011 removes the file: the
 defaults return with the next reset, as CiA 301 says.
 
-The file is written whole or not at all: a temporary file in the same folder, flushed and
-fsynced, then renamed over the old one (``os.replace`` is atomic), then the folder fsynced.
-A ``kill -9`` at any moment leaves the old file or the new one.  A file that cannot be read
-or does not fit the dictionary (a config changed since) is reported and ignored.
+The file is written whole or not at all (``ncgate.gateway.atomic``): a temporary file in
+the same folder, flushed and fsynced, then renamed over the old one (``os.replace`` is
+atomic), then the folder fsynced.  A ``kill -9`` at any moment leaves the old file or the new
+one.  A file that cannot be read or does not fit the dictionary (a config changed since) is
+reported and ignored.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import contextlib
 import json
 import logging
 import os
-import tempfile
 from pathlib import Path
+
+from ncgate.gateway.atomic import write_atomic
 
 log = logging.getLogger("ncgate.canopen")
 
@@ -45,25 +47,7 @@ def save(path: Path, parameters: Parameters) -> None:
                                           for sub, data in sorted(subs.items())}
                        for index, subs in sorted(parameters.items())},
     }
-    text = json.dumps(document, indent=1) + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as out:
-            out.write(text)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    with contextlib.suppress(OSError):  # the rename itself, durably (not on every system)
-        dirfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dirfd)
-        finally:
-            os.close(dirfd)
+    write_atomic(path, (json.dumps(document, indent=1) + "\n").encode("utf-8"))
 
 
 def load(path: Path) -> Parameters | None:

@@ -10,18 +10,17 @@ always a whole table.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
 import os
 import shutil
 import stat
-import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from ncgate.gateway import atomic
 from ncgate.gateway.sweep.run import RESULT_FIELDS, Result
 from ncgate.gateway.sweep.spec import Spec, SpecError, Variant, render_value
 
@@ -85,27 +84,8 @@ def _file_mode(path: Path) -> int:
 
 
 def write_atomic(path: Path, data: bytes) -> None:
-    """The file whole or not at all: a temporary file beside it, fsynced, renamed over it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mode = _file_mode(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, mode)
-        with os.fdopen(fd, "wb") as out:
-            out.write(data)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    with contextlib.suppress(OSError):  # the rename itself, on the disk
-        folder = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(folder)
-        finally:
-            os.close(folder)
+    """The file whole or not at all (ncgate.gateway.atomic), with a table's permissions."""
+    atomic.write_atomic(path, data, _file_mode(path))
 
 
 def csv_bytes(rows: Iterable[Row], keys: Sequence[str]) -> bytes:
