@@ -709,6 +709,26 @@ class _Connection(asyncio.Protocol):
         self._arm(max(next_check, 0.001))
 
 
+AllowList = list[ipaddress.IPv4Network | ipaddress.IPv6Network]
+
+
+def allow_list(config: ModbusConfig) -> AllowList:
+    """``modbus.allow`` as networks (checked by the config already)."""
+    return [ipaddress.ip_network(a, strict=False) for a in config.allow]
+
+
+def allowed(networks: AllowList, host: str) -> bool:
+    """Whether a client at ``host`` may connect: every host without an allow-list, else one
+    inside it (Modbus TCP and TLS, and RTU over TCP)."""
+    if not networks:
+        return True
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return any(address in net for net in networks)
+
+
 class ModbusServer:
     """The listening socket and its connections."""
 
@@ -725,7 +745,7 @@ class ModbusServer:
         self.all_closed = asyncio.Event()
         self.connections_changed = asyncio.Event()  # set when a connection comes or goes
         self._servers: list[asyncio.Server] = []
-        self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
+        self._allow = allow_list(config)
         # (host, port) of the plain Modbus/TCP listener and of the TLS one (None: off).
         self.address: tuple[str, int] | None = None
         self.tls_address: tuple[str, int] | None = None
@@ -775,13 +795,7 @@ class ModbusServer:
         return min(idle, key=lambda c: c.completed_at or c.connected_at) if idle else None
 
     def allowed(self, host: str) -> bool:
-        if not self._allow:
-            return True
-        try:
-            address = ipaddress.ip_address(host)
-        except ValueError:
-            return False
-        return any(address in net for net in self._allow)
+        return allowed(self._allow, host)
 
     async def wait_connections(self, at_most: int | None = None,
                                at_least: int | None = None) -> None:

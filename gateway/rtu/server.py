@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import asyncio
 import errno
-import ipaddress
 import logging
 import os
 from collections.abc import Callable
@@ -43,7 +42,7 @@ from ncgate.gateway.errors import ListenError, listen_error
 from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
 from ncgate.gateway.modbus.framer import Request, RtuFramer, exception_pdu
 from ncgate.gateway.modbus.map import ModbusMap
-from ncgate.gateway.modbus.server import WRITES, RequestHandler
+from ncgate.gateway.modbus.server import WRITES, RequestHandler, allow_list, allowed
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import Source, SourceKind
@@ -609,7 +608,7 @@ class RtuServer:
         self.handler = RequestHandler(mmap, backend, self.unit_ids, strict_unit_id=True)
         self.chatter = RateLimitedLog(log, level=logging.INFO, burst=10)
         self.refusals = RateLimitedLog(log)
-        self._allow = [ipaddress.ip_network(a, strict=False) for a in config.allow]
+        self._allow = allow_list(config)
         self._faults = FaultTable()
         self.fault_table: FaultTable | None = None
         self.serial = SerialLine(self) if rtu.port is not None else None
@@ -637,13 +636,7 @@ class RtuServer:
     def allowed(self, host: str) -> bool:
         """``modbus.allow``: an RTU-over-TCP client's address is checked as a Modbus TCP
         client's is."""
-        if not self._allow:
-            return True
-        try:
-            address = ipaddress.ip_address(host)
-        except ValueError:
-            return False
-        return any(address in net for net in self._allow)
+        return allowed(self._allow, host)
 
     def links(self) -> list[RtuLink]:
         out = [self.serial.link] if self.serial is not None and self.serial.link else []
