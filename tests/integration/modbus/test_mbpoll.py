@@ -6,14 +6,15 @@ that reason -- never in CI, where a missing mbpoll is a failure.
 
 from __future__ import annotations
 
-import asyncio
 import os
-import re
 import shutil
 
 import pytest
 
 from ncgate.gateway import Gateway
+
+from ..mbpoll import mbpoll as poll
+from ..mbpoll import tcp
 
 if shutil.which("mbpoll") is None:
     if os.environ.get("CI"):
@@ -21,21 +22,11 @@ if shutil.which("mbpoll") is None:
     pytestmark = pytest.mark.skip(reason="mbpoll not installed (apt-get install mbpoll); "
                                          "CI runs these")
 
-TABLE = {"coils": "0", "discrete": "1", "input": "3", "holding": "4"}
-
 
 async def mbpoll(gw: Gateway, table: str, address: int, count: int = 1,
                  write: list[int] | None = None, unit: int = 1) -> tuple[int, dict[int, int], str]:
-    host, port = gw.modbus_address
-    args = ["mbpoll", "-m", "tcp", "-p", str(port), "-a", str(unit), "-0", "-1", "-t",
-            TABLE[table], "-r", str(address)]
-    args += [host, *map(str, write)] if write else ["-c", str(count), host]
-    proc = await asyncio.create_subprocess_exec(*args, stdout=asyncio.subprocess.PIPE,
-                                                stderr=asyncio.subprocess.STDOUT)
-    out, _ = await proc.communicate()
-    text = out.decode()
-    values = {int(a): int(v) for a, v in re.findall(r"^\[(\d+)\]:\s+(-?\d+)", text, re.M)}
-    return proc.returncode or 0, values, text
+    """mbpoll once over Modbus TCP, on the gateway's port."""
+    return await poll(tcp(gw), table, address, count, write, unit)
 
 
 async def test_mbpoll_reads_info_and_status(ncgate_gateway: Gateway) -> None:

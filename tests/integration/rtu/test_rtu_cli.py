@@ -10,9 +10,9 @@ import signal
 import sys
 from pathlib import Path
 
+from ..mbpoll import mbpoll, rtu
 from ..test_cli_run import start_run, stop_run
 from .conftest import need
-from .test_rtu_mbpoll import mbpoll, rtu
 
 
 async def test_run_serves_rtu_on_the_serial_port_and_over_tcp(

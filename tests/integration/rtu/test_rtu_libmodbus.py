@@ -13,8 +13,9 @@ import pytest
 
 from ncgate.gateway import Gateway
 
+from ..mbpoll import mbpoll, tcp
 from .conftest import need
-from .test_rtu_mbpoll import RANGES, mbpoll, tcp
+from .test_rtu_mbpoll import RANGES
 
 SOURCE = Path(__file__).with_name("libmodbus_rtu_client.c")
 LETTER = {"coils": "c", "discrete": "d", "input": "i", "holding": "h"}

@@ -15,8 +15,8 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.gateway.web.status import fieldbus
 
+from ..mbpoll import mbpoll, rtu, tcp
 from .conftest import need
-from .test_rtu_mbpoll import mbpoll, rtu, tcp
 
 
 def relay(tmp_path: Path) -> subprocess.Popen[str]:

@@ -4,8 +4,6 @@ socat relays to the gateway's RTU-over-TCP port, as a serial device server would
 
 from __future__ import annotations
 
-import asyncio
-import re
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,39 +12,15 @@ import pytest
 
 from ncgate.gateway import Gateway
 
+from ..mbpoll import mbpoll, rtu, tcp
 from .conftest import need
 
-TABLE = {"coils": "0", "discrete": "1", "input": "3", "holding": "4"}
 # Every table, over the map's regions (docs/modbus map): coils (SA bits), discrete inputs
 # (process flags), input registers (info, status blocks, SND log, PLC status) and holding
 # registers (K bytes, SYVARs, SA bytes, the command word and mailbox, the overrides).
 RANGES = [("coils", 0, 64), ("discrete", 0, 64), ("input", 0, 8), ("input", 100, 80),
           ("input", 200, 98), ("input", 300, 14), ("holding", 0, 100), ("holding", 1000, 50),
           ("holding", 1500, 16), ("holding", 2000, 3), ("holding", 2010, 8)]
-
-
-def tcp(gw: Gateway) -> list[str]:
-    host, port = gw.modbus_address
-    return ["-m", "tcp", "-p", str(port), host]
-
-
-def rtu(device: str) -> list[str]:
-    return ["-m", "rtu", "-b", "19200", "-P", "even", device]
-
-
-async def mbpoll(where: list[str], table: str, address: int, count: int = 1,
-                 write: list[int] | None = None, unit: int = 1) -> tuple[int, dict[int, int],
-                                                                         str]:
-    """mbpoll once: ``where`` its mode options and then its device or host."""
-    *mode, target = where
-    cmd = ["mbpoll", *mode, "-a", str(unit), "-0", "-1", "-t", TABLE[table], "-r", str(address)]
-    cmd += [target, *map(str, write)] if write else ["-c", str(count), target]
-    proc = await asyncio.create_subprocess_exec(*cmd, stdout=asyncio.subprocess.PIPE,
-                                                stderr=asyncio.subprocess.STDOUT)
-    out, _ = await proc.communicate()
-    text = out.decode()
-    values = {int(a): int(v) for a, v in re.findall(r"^\[(\d+)\]:\s+(-?\d+)", text, re.M)}
-    return proc.returncode or 0, values, text
 
 
 @pytest.fixture(autouse=True)
