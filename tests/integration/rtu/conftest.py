@@ -49,19 +49,23 @@ def cell(tmp_path: Path) -> Path:
     return write_cell(tmp_path, CELL, PROGRAMS)
 
 
+def socat(*addresses: str) -> subprocess.Popen[str]:
+    """socat relaying ``addresses``, once it says both exist and it relays."""
+    proc = subprocess.Popen(["socat", "-d", "-d", *addresses], stderr=subprocess.PIPE,
+                            text=True)
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if "starting data transfer loop" in line:
+            return proc
+    pytest.fail(f"socat ended: {proc.wait()}")
+
+
 @pytest.fixture
 def socat_pair(tmp_path: Path) -> Iterator[tuple[str, str]]:
     """Two linked pseudo-terminals (``socat``): (the gateway's end, the master's end)."""
     need("socat", "socat")
     ends = str(tmp_path / "ttyGW"), str(tmp_path / "ttyPLC")
-    proc = subprocess.Popen(["socat", "-d", "-d", *(f"pty,raw,echo=0,link={e}" for e in ends)],
-                            stderr=subprocess.PIPE, text=True)
-    assert proc.stderr is not None
-    for line in proc.stderr:  # socat says when both ends exist and it relays
-        if "starting data transfer loop" in line:
-            break
-    else:
-        pytest.fail(f"socat ended: {proc.wait()}")
+    proc = socat(*(f"pty,raw,echo=0,link={e}" for e in ends))
     yield ends
     proc.terminate()
     proc.wait()

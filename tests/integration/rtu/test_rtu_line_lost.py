@@ -16,18 +16,11 @@ from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.gateway.web.status import fieldbus
 
 from ..mbpoll import mbpoll, rtu, tcp
-from .conftest import need
+from .conftest import need, socat
 
 
 def relay(tmp_path: Path) -> subprocess.Popen[str]:
-    ends = [str(tmp_path / "ttyGW"), str(tmp_path / "ttyPLC")]
-    proc = subprocess.Popen(["socat", "-d", "-d", *(f"pty,raw,echo=0,link={e}" for e in ends)],
-                            stderr=subprocess.PIPE, text=True)
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        if "starting data transfer loop" in line:
-            return proc
-    pytest.fail(f"socat ended: {proc.wait()}")
+    return socat(*(f"pty,raw,echo=0,link={tmp_path / end}" for end in ("ttyGW", "ttyPLC")))
 
 
 async def until(gw: Gateway, what: Callable[[], bool], timeout_s: float = 10.0) -> None:

@@ -4,7 +4,6 @@ socat relays to the gateway's RTU-over-TCP port, as a serial device server would
 
 from __future__ import annotations
 
-import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,7 +12,7 @@ import pytest
 from ncgate.gateway import Gateway
 
 from ..mbpoll import mbpoll, rtu, tcp
-from .conftest import need
+from .conftest import need, socat
 
 # Every table, over the map's regions (docs/modbus map): coils (SA bits), discrete inputs
 # (process flags), input registers (info, status blocks, SND log, PLC status) and holding
@@ -80,14 +79,7 @@ def rtu_tcp_pty(ncgate_gateway: Gateway, tmp_path: Path) -> Iterator[str]:
     server = ncgate_gateway.adapters["modbus_rtu"].tcp
     host, port = server.address
     device = str(tmp_path / "ttyNET")
-    proc = subprocess.Popen(["socat", "-d", "-d", f"pty,raw,echo=0,link={device}",
-                             f"tcp:{host}:{port}"], stderr=subprocess.PIPE, text=True)
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        if "starting data transfer loop" in line:
-            break
-    else:
-        pytest.fail(f"socat ended: {proc.wait()}")
+    proc = socat(f"pty,raw,echo=0,link={device}", f"tcp:{host}:{port}")
     yield device
     proc.terminate()
     proc.wait()
