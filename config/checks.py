@@ -36,7 +36,7 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
         _check_aux(r, nc.aux, nc.processes, plc)
     modbus = config.modbus
     if (modbus.rtu.port is not None or modbus.rtu_tcp.port is not None) and \
-            not modbus.rtu.unit_ids and not any(1 <= u <= 247 for u in modbus.unit_ids):
+            not modbus.rtu_unit_ids:
         raise r.fail("modbus.rtu.unit_ids", f"missing: modbus.unit_ids "
                      f"({list(modbus.unit_ids)}) has no serial address (1..247) for Modbus "
                      "RTU to answer as")

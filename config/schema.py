@@ -798,6 +798,12 @@ class ModbusConfig:
         "a TLS client's role comes from its certificate; any role reads, an unlisted one (or "
         "none) only reads", parse=_roles, factory=dict)
 
+    @property
+    def rtu_unit_ids(self) -> tuple[int, ...]:
+        """The addresses Modbus RTU answers: ``rtu.unit_ids``, or the serial addresses
+        (1..247) among ``unit_ids`` (the checks refuse RTU with none)."""
+        return self.rtu.unit_ids or tuple(u for u in self.unit_ids if 1 <= u <= 247)
+
 
 class MasterLost(enum.Enum):
     """``canopen.on_master_lost``: what the node does when the master's heartbeat stops."""

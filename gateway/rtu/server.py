@@ -601,7 +601,7 @@ class RtuServer:
     def __init__(self, config: ModbusConfig, mmap: ModbusMap, backend: Backend) -> None:
         self.config = config
         rtu = config.rtu
-        units = rtu.unit_ids or tuple(u for u in config.unit_ids if 1 <= u <= 247)
+        units = config.rtu_unit_ids
         assert units, "the config's checks refuse an RTU with no serial address"
         self.unit_ids = frozenset(units)
         self.any_unit = min(units)  # what a broadcast is handled as

@@ -159,7 +159,7 @@ class VirtualPLC:
         of ``modbus.rtu.port``'s line: ``ncgate_rtu_line.plc_end``), with the line settings
         of ``[modbus.rtu]`` and its first unit id."""
         rtu = config.modbus.rtu
-        units = rtu.unit_ids or tuple(u for u in config.modbus.unit_ids if 1 <= u <= 247)
+        units = config.modbus.rtu_unit_ids
         # A pty carries no parity bit: Linux's pty driver drops PARENB from what is set, and
         # pymodbus's serial transport, which sets the port up twice, then fails (EINVAL) on
         # the second -- so on a pty the client asks for none.  The gateway's side sets its
