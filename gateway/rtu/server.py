@@ -91,10 +91,19 @@ class Counters:
 
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(COUNTERS, 0))
 
-    def add(self, framer: RtuFramer) -> None:
-        """A framer's drops, when its link ends (a TCP connection closed)."""
-        self.counts["crc_errors"] += framer.crc_errors
-        self.counts["partial"] += framer.partial
+    def add(self, framer: RtuFramer, counts: dict[str, int] | None = None) -> None:
+        """A framer's drops, when its link ends (a TCP connection closed), into these counts
+        (or ``counts``)."""
+        counts = self.counts if counts is None else counts
+        counts["crc_errors"] += framer.crc_errors
+        counts["partial"] += framer.partial
+
+    def now(self, links: list[RtuLink]) -> dict[str, int]:
+        """The counts with what the links still serving have dropped so far."""
+        counts = dict(self.counts)
+        for link in links:
+            self.add(link.framer, counts)
+        return counts
 
 
 class RtuLink:
@@ -123,10 +132,6 @@ class RtuLink:
         self.silent = False  # a no_reply fault caught a request: nothing is answered
         self.backlogged = False
         self.closed = False
-
-    @property
-    def crc_errors(self) -> int:
-        return self.framer.crc_errors
 
     def received(self, data: bytes) -> None:
         self.last_byte = self.loop.time()
@@ -432,10 +437,7 @@ class SerialLine:
 
     def status(self) -> dict[str, Any]:
         rtu = self.server.config.rtu
-        counts = dict(self.counters.counts)
-        if self.link is not None:
-            counts["crc_errors"] += self.link.framer.crc_errors
-            counts["partial"] += self.link.framer.partial
+        counts = self.counters.now([self.link] if self.link is not None else [])
         return {"port": self.device, "open": self.is_open, "error": self.error,
                 "unsent": len(self.pending), "reading": self.is_open and not self.paused,
                 "settings": f"{rtu.baudrate} {rtu.bytesize}{rtu.parity.value}{rtu.stopbits}",
@@ -584,10 +586,7 @@ class RtuTcpListener:
         self._server = None
 
     def status(self) -> dict[str, Any]:
-        counts = dict(self.counters.counts)
-        for link in self.links():
-            counts["crc_errors"] += link.framer.crc_errors
-            counts["partial"] += link.framer.partial
+        counts = self.counters.now(self.links())
         return {"port": "tcp {}:{}".format(*self.address) if self.address else None,
                 "address": list(self.address) if self.address else None,
                 "clients": sorted(str(link.source.detail) for link in self.links()),
