@@ -613,19 +613,28 @@ def test_fb_members_and_a_trend_of_chosen_variables(browser: Any, web_port: int,
         browser.get(f"http://127.0.0.1:{web_port}/")
         until(browser, "a live stream", lambda d: text(d, "#conn") == "live")
         # A TON's members, one row each.
+        # The names read in one call in the page: the table is drawn again on each status
+        # message, and on a loaded machine a row read cell by cell was always replaced first.
         until(browser, "main.t.Q and main.t.ET",
-              lambda d: {row.find_elements(By.TAG_NAME, "td")[0].text
-                         for row in d.find_elements(By.CSS_SELECTOR, "#plc-vars tr")}
+              lambda d: set(d.execute_script(
+                  "return [...document.querySelectorAll('#plc-vars tr')]"
+                  ".map((r) => r.cells.length ? r.cells[0].textContent : '')"))
               >= {"main.n", "main.t.IN", "main.t.PT", "main.t.Q", "main.t.ET"})
         for name in ("main.n", "spindle_speed"):
             browser.find_element(By.ID, "trend-var").send_keys(name)
             browser.find_element(By.CSS_SELECTOR, "#trend-form button").click()
         api(web_port, "POST", "/api/write", {"var": "SYVAR3", "value": 250})
+        def chart(d: Any) -> dict[str, Any]:  # read at once: the chart is redrawn each tick
+            return dict(d.execute_script("""
+                const n = document.querySelector("#trend polyline[data-name='main.n']");
+                return {lines: document.querySelectorAll('#trend polyline').length,
+                        legend: document.querySelector('#trend-legend').textContent,
+                        points: n ? n.getAttribute('points').trim().split(/\\s+/).length : 0};
+                """))
+
         until(browser, "two lines, main.n rising, spindle_speed at 250",
-              lambda d: len(d.find_elements(By.CSS_SELECTOR, "#trend polyline")) == 2
-              and "spindle_speed = 250" in text(d, "#trend-legend")
-              and len(d.find_element(By.CSS_SELECTOR, "#trend polyline[data-name='main.n']")
-                      .get_attribute("points").split()) > 4)
+              lambda d: (c := chart(d))["lines"] == 2 and "spindle_speed = 250" in c["legend"]
+              and c["points"] > 4)
         # A time axis in machine seconds.
         ticks = browser.execute_script(  # read at once: the chart is redrawn on each tick
             "return [...document.querySelectorAll('#trend text.tick')].map((e) => e.textContent)")
