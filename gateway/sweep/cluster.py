@@ -8,7 +8,10 @@ the pool 15.5 s.)  A task returns its chunk's results; the client takes each chu
 whichever worker ran it, so nothing is counted twice.  A worker that dies (``kill -9``) loses
 its tasks to the scheduler, which runs them on another worker.  A chunk whose workers keep
 dying (Dask gives up after ``distributed.scheduler.allowed-failures``) runs again variant by
-variant, so that only the variant that kills its worker is a ``crash`` row.
+variant.  Dask counts a death against every task the worker held, so a variant whose task still
+fails may be innocent, beside the killer on its worker: each such runs once more at the end,
+alone (nothing else of the sweep's in flight), and only the variant that kills its worker then
+is a ``crash`` row.
 
 The workers need ncgate installed (the same version) and the spec's files at the same paths:
 a shared folder, or the same checkout on every machine.
@@ -74,24 +77,40 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
             chunks[future.key] = chunk
             futures.append(future)
         pending = as_completed(futures, loop=client.loop)
+        suspects: list[Variant] = []
         for future in pending:
             chunk = chunks.pop(future.key)
             try:
                 results: list[Result] = future.result()
-            except Exception as exc:
+            except Exception:
                 if len(chunk) > 1:  # find the one that kills its worker: one task each
                     for v in chunk:
                         single = client.submit(run_chunk, [v], timeout_s, runner, pure=False,
                                                key=f"ncgate-sweep-{v.id}-alone")
                         chunks[single.key] = [v]
                         pending.add(single)
-                    continue
-                results = [_result("crash", report=f"its Dask worker failed: "
-                                   f"{type(exc).__name__}: {str(exc)[:200]}")]
+                else:  # it, or a task beside it on a worker that died, killed its workers
+                    suspects.extend(chunk)
+                continue
             finally:
                 future.release()
             yield from zip(chunk, results, strict=True)
+        for v in suspects:  # alone on the cluster: a worker that dies now died of this one
+            yield v, _alone(client, v, timeout_s, runner)
     finally:
         if own:
             client.close()
 
+
+def _alone(client: Any, variant: Variant, timeout_s: float | None, runner: Runner) -> Result:
+    """``variant`` run with nothing else of the sweep's in flight, so that Dask's count of the
+    workers that died running a task is this variant's alone: its verdict is final."""
+    future = client.submit(run_chunk, [variant], timeout_s, runner, pure=False,
+                           key=f"ncgate-sweep-{variant.id}-isolated")
+    try:
+        return future.result()[0]  # type: ignore[no-any-return]
+    except Exception as exc:
+        return _result("crash", report=f"its Dask worker failed: "
+                       f"{type(exc).__name__}: {str(exc)[:200]}")
+    finally:
+        future.release()

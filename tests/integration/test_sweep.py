@@ -605,7 +605,8 @@ def test_a_variant_that_kills_its_dask_workers_is_a_crash_row_alone(cluster: obj
 
     from .sweep_runners import misbehaving
 
-    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "OK.nc", "FINE.nc")))
+    innocent = tuple(f"OK{i}.nc" for i in range(7))  # some beside DIE on a dying worker
+    spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", *innocent)))
     address = cluster.scheduler.address  # type: ignore[attr-defined]
     got = list(run_dask(spec.variants, address, 10.0, runner=misbehaving))
     assert sorted(v.id for v, _ in got) == sorted(v.id for v in spec.variants)
