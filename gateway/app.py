@@ -73,7 +73,7 @@ if TYPE_CHECKING:
     from ncgate.gateway.canopen.node import CanopenNode
     from ncgate.gateway.modbus.server import ModbusServer
     from ncgate.gateway.plant import Plant
-    from ncgate.gateway.web.console import WebConsole
+    from ncgate.gateway.web.port import ConsolePort
 
 
 class Gateway:
@@ -329,8 +329,8 @@ class Gateway:
         return endpoint
 
     @property
-    def web_console(self) -> WebConsole | None:
-        console: WebConsole | None = self.adapters.get("web")
+    def web_console(self) -> ConsolePort | None:
+        console: ConsolePort | None = self.adapters.get("web")
         return console
 
     @property

@@ -30,6 +30,7 @@ import io
 import logging
 import math
 import re
+import socket
 import time
 from collections.abc import Awaitable, Callable
 from importlib import resources
@@ -43,7 +44,6 @@ from ncgate.config.checks import is_loopback
 from ncgate.config.schema import WebConfig
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import only_releases_hold
-from ncgate.gateway.errors import listen_error
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.tls import server_context
@@ -137,10 +137,9 @@ class ApiError(Exception):
 class WebConsole:
     """The console of one gateway: ``await start()``, ``address``, ``await close()``."""
 
-    def __init__(self, gateway: Gateway, config: WebConfig, default_port: int = 0) -> None:
+    def __init__(self, gateway: Gateway, config: WebConfig) -> None:
         self.gw = gateway
         self.config = config
-        self.default_port = default_port
         self.address: tuple[str, int] | None = None
         self.streams = 0
         self._feed: EventFeed | None = None
@@ -151,7 +150,6 @@ class WebConsole:
         # fifty pages woken by one batch do not hold the fieldbus up for one long turn.
         self._turn_count = 0
         self._next_turn: asyncio.Future[None] | None = None
-        self._unsubscribe: Callable[[], None] | None = None
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, ...], float, dict[str, str]] | None = None
         self._last_record: Path | None = None  # the record GET /api/record serves
@@ -164,11 +162,9 @@ class WebConsole:
 
     # -- life -----------------------------------------------------------------------------
 
-    async def start(self) -> None:
-        """Listen.  The default port taken: the console stays off, ``address`` None (``run``
-        goes on without it); a port set in the config that is taken raises OSError naming
-        the key."""
-        loop = asyncio.get_running_loop()
+    async def start(self, sockets: list[socket.socket], feed: EventFeed) -> None:
+        """Serve on ``sockets`` (listening: ``ConsolePort`` bound them at the gateway's
+        start) the events of ``feed`` (subscribed to the trace since then)."""
         app = web.Application(middlewares=[self._guard], client_max_size=BODY_LIMIT)
         app.on_response_prepare.append(_secure)
         app.router.add_get("/", self._asset("index.html"))
@@ -192,49 +188,32 @@ class WebConsole:
         runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
                                handle_signals=False)
         await runner.setup()
-        port = self.config.port if self.config.port is not None else self.default_port
         tls = self.config.tls
         # [web.tls]: HTTPS only, with the loader the Modbus TLS port uses (the files were
         # checked when the config loaded).
         context = (server_context(tls.cert, tls.key) if tls.cert is not None
                    and tls.key is not None else None)
-        site = web.TCPSite(runner, self.config.host, port, reuse_address=True,
-                           ssl_context=context)
         try:
-            await site.start()
-        except OSError as exc:
+            for sock in sockets:
+                await web.SockSite(runner, sock, ssl_context=context).start()
+        except BaseException:
             await runner.cleanup()
-            if self.config.port is None and port:
-                log.warning("web console off: %s:%d is taken (%s); set web.port or --web "
-                            "HOST:PORT", self.config.host, port, exc.strerror)
-                return
-            raise listen_error(exc, "web.port", self.config.host, port) from None
+            raise
         self._runner = runner
-        host, bound = runner.addresses[0][:2]  # the port asked for may be 0
+        host, bound = runner.addresses[0][:2]
         self.address = (host, bound)
-        self._feed = EventFeed(loop)
-        self._unsubscribe = self.gw.runtime.trace.subscribe(self._feed.listen)
+        self._feed = feed
 
     async def close(self) -> None:
         if self._live is not None:
             self._live.close()
             self._live = None
-        if self._unsubscribe is not None:
-            self._unsubscribe()
-            self._unsubscribe = None
         if self._feed is not None:
             self._feed.close()  # every stream returns
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
         self.address = None
-
-    @property
-    def url(self) -> str:
-        assert self.address is not None
-        host, port = self.address
-        scheme = "https" if self.config.tls.enabled else "http"
-        return f"{scheme}://{f'[{host}]' if ':' in host else host}:{port}/"
 
     # -- who may do what ---------------------------------------------------------------------
 

@@ -1,6 +1,6 @@
 """The commissioning console as a gateway adapter (``ncgate.gateway.adapters``): served when
 the gateway is asked for it (``Gateway(console=True)``, ``ncgate run``) and ``[web]`` enables
-it; aiohttp is imported only then."""
+it; aiohttp is imported only when a client first connects (``port.py``)."""
 
 from __future__ import annotations
 
@@ -11,16 +11,16 @@ from ncgate.gateway.adapters import AdapterPlugin
 if TYPE_CHECKING:
     from ncgate.gateway.app import Gateway
     from ncgate.gateway.lifecycle import Adapter
-    from ncgate.gateway.web.console import WebConsole
+    from ncgate.gateway.web.port import ConsolePort
 
 
 def _factory(gw: Gateway) -> Adapter:
-    from ncgate.gateway.web.console import WebConsole  # aiohttp: only when served
+    from ncgate.gateway.web.port import ConsolePort
 
-    return WebConsole(gw, gw.config.web, gw.web_default_port)
+    return ConsolePort(gw, gw.config.web, gw.web_default_port)
 
 
-def describe(console: WebConsole) -> list[str]:
+def describe(console: ConsolePort) -> list[str]:
     if console.address is None:
         return []
     web = console.config

@@ -302,3 +302,45 @@ async def test_a_signal_during_the_start_up_check_stops_run_at_once_and_says_so(
     assert log.endswith(f"ncgate run: stopped before serving ({signal.Signals(sig).name})\n"), log
     assert "checked BIG.nc" not in log, log  # the check was cut short, not waited for
     assert "Traceback" not in log
+
+
+def web_stack_mapped(pid: int) -> bool:
+    """Whether aiohttp's compiled parts are in the process (its memory map: the one way to
+    see from outside what a process has imported)."""
+    return "/aiohttp/" in Path(f"/proc/{pid}/maps").read_text()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
+async def test_the_console_loads_at_its_first_connection_and_misses_nothing(
+        tmp_path: Path) -> None:
+    """The console's port listens from the start but aiohttp is loaded only when a client
+    connects (docs/decisions.md, "The console loads at its first connection"): connections
+    made at once all get their answer, and the events of before are in the page's feed."""
+    import aiohttp
+
+    config = tmp_path / "ncgate.toml"
+    config.write_text(f'[nc]\nautostart = true\ntime_scale = 100.0\n[nc.storage]\n'
+                      f'MP0 = "{EXAMPLES / "scheme3"}"\n[modbus]\nport = 0\n[web]\nport = 0\n'
+                      '[canopen]\nenabled = false\n')
+    proc, _port, lines = await start_run(config)
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):
+        while not (found := re.search(r"web console on (http://[\d.]+:\d+/)", "".join(lines))):
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(lines)
+            lines.append(line)
+    url = found.group(1)
+    try:
+        assert not web_stack_mapped(proc.pid)
+        async with aiohttp.ClientSession(url) as http:
+            pages = await asyncio.gather(*(http.get("/") for _ in range(8)),
+                                         http.get("/api/events?since=0"))
+            for page in pages[:-1]:
+                assert page.status == 200 and "<html" in (await page.text()).lower()
+            events = (await pages[-1].json())["events"]
+            assert any(e["event"] == "start" and e["proc"] == 1 for e in events), events
+        assert web_stack_mapped(proc.pid)  # (so the first check could have failed)
+    finally:
+        code, log = await stop_run(proc, lines)
+    assert code == 0, log
+    assert "Traceback" not in log, log
