@@ -40,11 +40,12 @@ async def test_a_forced_bit_holds_against_plc_logic_and_a_modbus_writer(tmp_path
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
-        await watch.until("main.n", 3)
+        await watch.until("main.n", test=lambda v: v >= 3)
         assert gw.read("SA20") == 1  # the logic wrote it
         gw.apply(Force(Var.parse("SA20"), 0))
         n = watch.read("main.n")
-        await watch.until("main.n", n + 5)  # five scans more, each writing SA20 := TRUE
+        # five scans more, each writing SA20 := TRUE
+        await watch.until("main.n", test=lambda v: v >= n + 5)
         assert gw.read("SA20") == 0
         client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
         assert await client.connect()
@@ -61,7 +62,7 @@ async def test_a_forced_bit_holds_against_plc_logic_and_a_modbus_writer(tmp_path
         assert caught.value.reason is Reason.BAD_VALUE
         gw.apply(Force(Var.parse("SA20"), None))  # released: the logic writes it again
         n = watch.read("main.n")
-        await watch.until("main.n", n + 2)
+        await watch.until("main.n", test=lambda v: v >= n + 2)
         assert gw.read("SA20") == 1
         trace = gw.trace
     forces = [(e["var"], e["value"]) for e in trace if e["event"] == "force"]
@@ -83,7 +84,7 @@ async def test_a_modbus_client_forces_through_the_force_table(tmp_path: Path) ->
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
-        await watch.until("main.n", 3)
+        await watch.until("main.n", test=lambda v: v >= 3)
         client = AsyncModbusTcpClient("127.0.0.1", port=gw.modbus_address[1])
         assert await client.connect()
         try:
@@ -97,7 +98,8 @@ async def test_a_modbus_client_forces_through_the_force_table(tmp_path: Path) ->
                 answer = await client.write_registers(FORCE, request, device_id=1)
                 assert not answer.isError()
             n = watch.read("main.n")
-            await watch.until("main.n", n + 5)  # the logic writes both every scan
+            # the logic writes both every scan
+            await watch.until("main.n", test=lambda v: v >= n + 5)
             assert gw.read("SA20") == 0 and gw.read("SYVAR5") == -2
             assert not (await client.write_coil(20, True, device_id=1)).isError()
             assert gw.read("SA20") == 0  # a Modbus writer is overridden too
@@ -123,14 +125,14 @@ async def test_a_modbus_client_forces_through_the_force_table(tmp_path: Path) ->
             assert not (await client.write_registers(FORCE, [2, FORCE_SA_BIT, 20, 0],
                                                      device_id=1)).isError()
             n = watch.read("main.n")
-            await watch.until("main.n", n + 2)
+            await watch.until("main.n", test=lambda v: v >= n + 2)
             assert gw.read("SA20") == 1
             assert (await table())[4:8] == [1, FORCE_SYVAR, 5, 0xFFFE]
             assert not (await client.write_registers(FORCE, [3, 0, 0, 0],
                                                      device_id=1)).isError()
             assert await table() == [0] * 11
             n = watch.read("main.n")
-            await watch.until("main.n", n + 2)
+            await watch.until("main.n", test=lambda v: v >= n + 2)
             assert gw.read("SYVAR5") > 0  # SYVAR[5] := n again
         finally:
             client.close()
@@ -190,7 +192,7 @@ async def test_a_forced_plc_variable_is_kept_at_the_start_and_end_of_every_scan(
     record = tmp_path / "session.jsonl"
     async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml"), record=record) as gw:
         watch = PlcWatch(gw)
-        await watch.until("main.n", 3)
+        await watch.until("main.n", test=lambda v: v >= 3)
         gw.apply(Force("main.n", 100))
         gw.apply(Force("main.on", True))
         gw.apply(Force("MAIN.SPEED", -2))
@@ -221,7 +223,7 @@ async def test_a_forced_plc_variable_is_kept_at_the_start_and_end_of_every_scan(
             assert caught.value.reason is reason, (var, value)
         assert sorted(gw.runtime.plc.forced) == ["MAIN.N", "MAIN.ON", "MAIN.SPEED"]
         gw.apply(Force("main.n", None))  # released: counting goes on from 100
-        await watch.until("main.n", 103)
+        await watch.until("main.n", test=lambda v: v >= 103)
         gw.apply(Force(None, None))
         await watch.next_scan()
         assert not gw.runtime.plc.forced
