@@ -260,3 +260,20 @@ async def test_a_session_with_a_ua_write_is_recorded_as_opcua_and_replays_withou
     assert len(writes) == 1 and writes[0]["who"].startswith("opcua 127.0.0.1:"), writes
     result = replay(record)
     assert result.divergence is None, result.divergence
+
+
+async def test_act_program_name_and_act_main_program_name_both_name_the_started_program(
+        gw: Gateway, ua_client: UaClient) -> None:
+    # Neither dialect calls subprograms (docs/language.md, docs/isg.md): the program a
+    # process runs is the one its start, cycle start or EXE loaded, so both nodes name it.
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    channel = [(CNC, "CncInterface"), (CNC, "CncChannelList"), (NCGATE, "Process 1")]
+    name = await ua_client.call("translate", path=[*channel, (CNC, "ActProgramName")])
+    main = await ua_client.call("translate", path=[*channel, (CNC, "ActMainProgramName")])
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("monitor", tag="main", node=main)
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")  # inside A, at its (WAI,SA10=1)
+    await ua_client.until("main", lambda seen: seen[-1:] == ["A"])
+    assert await ua_client.call("read", node=name) == "A"
+    assert await ua_client.call("read", node=main) == "A"
