@@ -26,7 +26,11 @@ from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
 from asyncua.common.structures104 import new_enum
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.uacrypto import load_certificate
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
@@ -111,6 +115,51 @@ class _Users(UserManager):
             return None  # asyncua answers BadUserAccessDenied
         return User(role=UserRole.User, name=username)
 
+
+
+TRUSTED_SUFFIXES = (".pem", ".der", ".crt", ".cer")
+
+
+class _Trusted(TrustStore):
+    """asyncua's trust store over ``opcua.trusted``: its verification (the certificate itself
+    or a CA that signed it, by cryptography's verifier), with files as well as folders.
+    asyncua 2.1 reads only folders, and in them only names with ``der`` or ``pem``: a folder's
+    ``*.crt`` would be left out without a word."""
+
+    async def _load_trust_location(self, location: Path) -> list[x509.Certificate]:
+        return [await load_certificate(content, "der" if content[:1] == b"0" else "pem")
+                for content in _trusted_files(location)]  # DER starts with a SEQUENCE, 0x30
+
+
+def _trusted_files(location: Path) -> list[bytes]:
+    """The certificates' bytes (read once, at the start, before the server serves)."""
+    files = ([location] if location.is_file() else
+             sorted(f for f in location.iterdir() if f.suffix.lower() in TRUSTED_SUFFIXES))
+    return [f.read_bytes().lstrip() for f in files]
+
+
+class _Validator(CertificateValidator):
+    """The check of a client's application certificate at CreateSession: in its validity,
+    its subject alternative name holding the client's application URI, and trusted.  A refusal
+    is one log line (asyncua's trust store logs a traceback of its own)."""
+
+    async def validate(self, cert: x509.Certificate,
+                       app_description: ua.ApplicationDescription) -> None:
+        try:
+            await super().validate(cert, app_description)
+        except ServiceError as refused:
+            log.warning("a client certificate refused (%s): %s, application %s",
+                        ua.StatusCode(refused.code).name,  # type: ignore[arg-type]
+                        cert.subject.rfc4514_string(),
+                        app_description.ApplicationUri)
+            raise
+
+
+async def trust_validator(trusted: tuple[Path, ...]) -> _Validator:
+    store = _Trusted(list(trusted), [])
+    await store.load()
+    return _Validator(CertificateValidatorOptions.BASIC_VALIDATION
+                      | CertificateValidatorOptions.TRUSTED, store)
 
 
 class Link:
@@ -215,6 +264,11 @@ class Space:
             await server.load_certificate(config.certificate.read_bytes(),
                                           "pem" if pem else "der")
             await server.load_private_key(config.private_key.read_bytes(), format="pem")
+        if config.trusted:
+            # Empty is any client certificate, which the config allows on loopback only
+            # (docs/decisions.md, "OPC UA: which client certificates are trusted").
+            server.set_certificate_validator(await trust_validator(config.trusted))
+            logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
         await self._build(server, layout)
         await server.start()

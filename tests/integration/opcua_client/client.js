@@ -65,11 +65,16 @@ const ops = {
             tokens: (e.userIdentityTokens || []).map(t => UserTokenType[t.tokenType]),
         }));
     },
-    async connect({url, user, password, mode, policy, certificate, key}) {
+    // certificate/key: an X.509 user identity; application: the client's own application
+    // certificate {certificate, key, uri} for the secure channel (else node-opcua's own).
+    async connect({url, user, password, mode, policy, certificate, key, application}) {
         client = OPCUAClient.create({
             endpointMustExist: false, connectionStrategy: {maxRetry: 0},
             securityMode: MessageSecurityMode[mode || "None"],
             securityPolicy: SecurityPolicy[policy || "None"],
+            ...(application ? {certificateFile: application.certificate,
+                               privateKeyFile: application.key,
+                               applicationUri: application.uri} : {}),
         });
         await client.connect(url);
         const identity = certificate
