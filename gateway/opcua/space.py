@@ -243,6 +243,8 @@ class Space:
         self._messages: EventGenerator | None = None
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
+        self.sessions: set[_Session] = set()  # the clients' activated sessions
+        self._clients = (0, 0)  # (sessions, subscriptions) as last told to the gateway
 
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
         """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
@@ -296,6 +298,17 @@ class Space:
         iserver = server.iserver
         return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
                         user=user, external=external)
+
+    def clients_changed(self) -> None:
+        """Tell the gateway how many sessions and subscriptions its clients hold now (the
+        console's fieldbus panel), when that changed."""
+        server = self._server
+        assert server is not None
+        clients = (len(self.sessions),
+                   len(server.iserver.subscription_service.subscriptions))
+        if clients != self._clients:
+            self._clients = clients
+            self.link.send(("clients", *clients))
 
     async def _apply(self, batch: list[tuple[str, Any]]) -> None:
         """One loop turn's changes, in the order they happened."""
@@ -573,9 +586,31 @@ class _Session(InternalSession):
         users = self.owner.users
         users.x509 = isinstance(params.UserIdentityToken, ua.X509IdentityToken)
         try:  # (synchronous: no other session activates meanwhile)
-            return super().activate_session(params, peer_certificate)
+            result = super().activate_session(params, peer_certificate)
         finally:
             users.x509 = False
+        self.owner.sessions.add(self)
+        self.owner.clients_changed()
+        return result
+
+    async def close_session(self, delete_subs: bool = True) -> None:
+        try:
+            await super().close_session(delete_subs)
+        finally:
+            self.owner.sessions.discard(self)
+            self.owner.clients_changed()
+
+    async def create_subscription(self, params: ua.CreateSubscriptionParameters,
+                                  callback: Any, request_callback: Any = None,
+                                  ) -> ua.CreateSubscriptionResult:
+        result = await super().create_subscription(params, callback, request_callback)
+        self.owner.clients_changed()
+        return result
+
+    async def delete_subscriptions(self, ids: list[int]) -> list[ua.StatusCode]:
+        result = await super().delete_subscriptions(ids)
+        self.owner.clients_changed()
+        return result
 
     def _who(self) -> str:
         user = self.user

@@ -196,7 +196,8 @@ async def test_a_write_of_a_writable_region_goes_through_the_door_traced_opcua(
             http.get(f"http://{host}:{port}/api/status") as r:
         status = (await r.json())["fieldbus"]["opcua"]
     assert status == {"endpoint": gw.opcua_endpoint, "security": "none",
-                      "writable": ["sa_bits"], "writes": 1, "refused": 1}
+                      "writable": ["sa_bits"], "sessions": 1, "subscriptions": 0,
+                      "writes": 1, "refused": 1}
 
 
 async def test_a_ua_client_satisfies_a_wai_by_writing_sa10_and_sees_the_process_resume(
