@@ -63,10 +63,24 @@ MACHINERY = "http://opcfoundation.org/UA/Machinery/"
 MACHINE_TOOL = "http://opcfoundation.org/UA/MachineTool/"
 CNC = "http://opcfoundation.org/UA/CNC"
 IMAGE = "urn:ncgate:image"  # the image, the PLC, the processes as ncgate names them
-NCGATE = "urn:ncgate:ua"  # ncgate's own nodes (the instances, the stand-in types)
-# The numeric ids OPC 40501-1's nodeset gives its types (what a client may look a type up by).
-MACHINE_TOOL_TYPE_ID = 13
-ALERT_TYPE_ID = 39
+NCGATE = "urn:ncgate:ua"  # ncgate's own nodes (the instances, the X/Y/Z positions)
+# The numeric ids the published nodesets give the companion types ncgate declares (what a
+# client may look a type up by).  tests/integration/opcua/test_nodesets.py checks each id,
+# browse name, supertype and enumeration against the OPC Foundation's nodeset XML.
+MACHINE_TOOL_TYPE_ID = 13  # OPC 40501-1 (MachineTool)
+ELEMENT_MONITORING_TYPE_ID = 23  # abstract: ChannelMonitoringType's supertype
+CHANNEL_MONITORING_TYPE_ID = 16
+ALERT_TYPE_ID = 39  # a subtype of AlarmConditionType
+ERROR_CODE_ID = 231  # AlertType's ErrorCode property
+CHANNEL_STATE_ID = 64  # DataType: Active 0, Interrupted 1, Reset 2
+CHANNEL_MODE_ID = 67  # DataType
+CHANNEL_MODES = ("Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle",
+                 "Remote", "Reference", "Other")
+CNC_COMPONENT_TYPE_ID = 1001  # OPC 40502 (CNC); abstract: CncChannelType's supertype
+CNC_CHANNEL_TYPE_ID = 1002
+CNC_MESSAGE_TYPE_ID = 1011  # an event type, a subtype of BaseEventType
+CNC_PROGRAM_STATUS_ID = 3002  # DataType CncChannelProgramStatus
+CNC_CHANNEL_STATUS_ID = 3003  # DataType CncChannelStatus (ActStatus): Active, Interrupted, Reset
 
 _VTYPE = {"SA": ua.VariantType.Boolean, "SK": ua.VariantType.Byte,
           "SYVAR": ua.VariantType.Int16}
@@ -351,7 +365,7 @@ class Space:
             k + "RapidOverride": float(v.rapid_override), k + "State": v.state,
             k + "ActStatus": v.channel_state, k + "ActProgramStatus": v.program_status,
             k + "ActProgramName": v.program, k + "ActMainProgramName": v.program,
-            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": v.line,
+            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": str(v.line),
             k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
             k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
             k + "N": v.n})
@@ -395,25 +409,37 @@ class Space:
         objects = server.nodes.objects
         base_object = server.get_node(ObjectIds.BaseObjectType)
         base_event = server.get_node(ObjectIds.BaseEventType)
+        alarm_condition = server.get_node(ObjectIds.AlarmConditionType)
 
-        # The types a dashboard looks for.  The whole DI/Machinery/IA/MachineTool/CNC
-        # nodesets are not loaded (docs/opcua.md says why): MachineToolType and AlertType
-        # have the ids of OPC 40501-1's nodeset, the rest are ncgate's stand-ins.
+        # The types a dashboard looks for, with the NodeIds, browse names and supertypes of
+        # the published nodesets.  The whole DI/Machinery/IA/MachineTool/CNC nodesets are not
+        # loaded (docs/opcua.md says why): only these types, without the declarations ncgate
+        # does not fill.
         machine_tool_type = await base_object.add_object_type(
             _id(MACHINE_TOOL_TYPE_ID, mt), ua.QualifiedName("MachineToolType", mt))
-        channel_type = await base_object.add_object_type(
-            _id("ChannelMonitoringType", own),
-            ua.QualifiedName("ChannelMonitoringType", mt))
-        cnc_channel_type = await base_object.add_object_type(
-            _id("CncChannelType", own), ua.QualifiedName("CncChannelType", cnc))
-        alert_type = await base_event.add_object_type(
+        element_monitoring = await base_object.add_object_type(
+            _id(ELEMENT_MONITORING_TYPE_ID, mt), ua.QualifiedName("ElementMonitoringType", mt))
+        channel_type = await element_monitoring.add_object_type(
+            _id(CHANNEL_MONITORING_TYPE_ID, mt), ua.QualifiedName("ChannelMonitoringType", mt))
+        cnc_component = await base_object.add_object_type(
+            _id(CNC_COMPONENT_TYPE_ID, cnc), ua.QualifiedName("CncComponentType", cnc))
+        cnc_channel_type = await cnc_component.add_object_type(
+            _id(CNC_CHANNEL_TYPE_ID, cnc), ua.QualifiedName("CncChannelType", cnc))
+        for abstract in (element_monitoring, cnc_component):
+            await abstract.write_attribute(AttributeIds.IsAbstract, ua.DataValue(
+                ua.Variant(True, ua.VariantType.Boolean)))
+        # AlertType is an AlarmConditionType in OPC 40501-1; ncgate raises each alarm as one
+        # event of it, and keeps no condition (no Acknowledge, no ConditionRefresh:
+        # docs/decisions.md).
+        alert_type = await alarm_condition.add_object_type(
             _id(ALERT_TYPE_ID, mt), ua.QualifiedName("AlertType", mt))
-        await alert_type.add_property(_id("AlertType.ErrorCode", own),
+        await alert_type.add_property(_id(ERROR_CODE_ID, mt),
                                       ua.QualifiedName("ErrorCode", mt), "",
                                       varianttype=ua.VariantType.String)
+        # A part program's message (DIS) is OPC 40502's CncMessageType: MachineTool's
+        # NotificationEventType is abstract, and no event may be of an abstract type.
         message_type = await base_event.add_object_type(
-            _id("NotificationEventType", own),
-            ua.QualifiedName("NotificationEventType", mt))
+            _id(CNC_MESSAGE_TYPE_ID, cnc), ua.QualifiedName("CncMessageType", cnc))
 
         cell = layout["cell"]
         machines = await objects.add_folder(_id("Machines", own),
@@ -421,8 +447,9 @@ class Space:
         machine = await machines.add_object(_id(f"Machines/{cell}", own),
                                             ua.QualifiedName(cell, own),
                                             objecttype=machine_tool_type.nodeid)
+        # MachineToolType's Identification is DI's browse name (OPC 40501-1's nodeset).
         ident = await machine.add_object(_id("Identification", own),
-                                         ua.QualifiedName("Identification", machinery))
+                                         ua.QualifiedName("Identification", di))
         for name, value in (("Manufacturer", ua.LocalizedText("ncgate (virtual)")),
                             ("Model", ua.LocalizedText(cell)),
                             ("SoftwareRevision", __version__),
@@ -454,14 +481,18 @@ class Space:
                                           ua.QualifiedName("Image", img))
         vendor_processes = await vendor.add_folder(_id("Processes", img),
                                                    ua.QualifiedName("Processes", img))
-        # The enumerations, as the specifications name their values (their numbers are
-        # model.py's); DataTypes of ncgate's ids, like the stand-in types above.
-        channel_state_t = (await new_enum(server, _id("ChannelState", own), ua.QualifiedName(
+        # The enumerations with the published ids and values (model.py maps the states).
+        channel_state_t = (await new_enum(server, _id(CHANNEL_STATE_ID, mt), ua.QualifiedName(
             "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
+        channel_mode_t = (await new_enum(server, _id(CHANNEL_MODE_ID, mt), ua.QualifiedName(
+            "ChannelMode", mt), list(CHANNEL_MODES))).nodeid
         program_status_t = (await new_enum(
-            server, _id("CncChannelProgramStatus", own),
+            server, _id(CNC_PROGRAM_STATUS_ID, cnc),
             ua.QualifiedName("CncChannelProgramStatus", cnc),
             ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
+        channel_status_t = (await new_enum(
+            server, _id(CNC_CHANNEL_STATUS_ID, cnc), ua.QualifiedName("CncChannelStatus", cnc),
+            ["Active", "Interrupted", "Reset"])).nodeid
         for number in layout["processes"]:
             k, name = f"P{number}.", f"Process {number}"
             mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
@@ -469,22 +500,23 @@ class Space:
                                               objecttype=channel_type.nodeid)
             await self._var(mon, k + "ChannelState", own, mt, "ChannelState", 2,
                             datatype=channel_state_t)
-            await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0)  # Automatic
+            await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0,  # Automatic
+                            datatype=channel_mode_t)
             await self._var(mon, k + "FeedOverride", own, mt, "FeedOverride", 100.0)
             await self._var(mon, k + "RapidOverride", own, mt, "RapidOverride", 100.0)
             ch = await channels.add_object(_id(f"CncChannelList/{name}", own),
                                            ua.QualifiedName(name, own),
                                            objecttype=cnc_channel_type.nodeid)
             await self._var(ch, k + "ActStatus", own, cnc, "ActStatus", 2,
-                            datatype=channel_state_t)
+                            datatype=channel_status_t)
             await self._var(ch, k + "ActProgramStatus", own, cnc, "ActProgramStatus", 0,
                             datatype=program_status_t)
             for var, initial in (("ActProgramName", ""), ("ActMainProgramName", ""),
-                                 ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", 0),
+                                 ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", "0"),
                                  ("ActFeedrate", 0.0), ("ActOverride", 100.0)):
                 await self._var(ch, k + var, own, cnc, var, initial)
-            for axis in "XYZ":
-                await self._var(ch, k + axis, own, cnc, axis, 0.0)
+            for axis in "XYZ":  # ncgate's names: 40502's PosTcpBcsX is a structure
+                await self._var(ch, k + axis, own, own, axis, 0.0)
             p = await vendor_processes.add_object(_id(name, img),
                                                   ua.QualifiedName(name, img))
             await self._var(p, k + "State", img, img, "State", "IDLE", node_key=f"{name}.State")

@@ -90,7 +90,7 @@ async def test_the_cell_is_found_under_machines_by_its_type_with_its_identificat
     machine_tool_type = f"ns={namespaces.index(MACHINE_TOOL)};i=13"
     found = [c for c in children if c["type"] == machine_tool_type]
     assert [c["name"] for c in found] == [f"{NCGATE}|ncgate"]
-    ident = [(MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINERY, "Identification")]
+    ident = [(MACHINERY, "Machines"), (NCGATE, "ncgate"), (DI, "Identification")]
     read = {}
     for name in ("Manufacturer", "Model", "SoftwareRevision", "ProductInstanceUri"):
         node = await ua_client.call("translate", path=[*ident, (DI, name)])
