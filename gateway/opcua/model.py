@@ -148,7 +148,7 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
     rows: list[tuple[str, ...]] = [
         (machine, f"ns=urn:ncgate:ua;s=Machines/{cell}", "MachineToolType", "read", "the cell"),
         (f"{machine}/Notification/Messages", "ns=urn:ncgate:ua;s=Messages", "events", "read",
-         "AlertType (alarms), CncMessageType (DIS)")]
+         "AlertType conditions (alarms), CncMessageType (DIS)")]
     for k in processes:
         p = f"Process {k}"
         for name, kind, what in (("ChannelState", "Int32", "0 Active, 1 Interrupted, 2 Reset"),

@@ -31,6 +31,7 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.uacrypto import load_certificate
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.server.event_generator import EventGenerator
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
@@ -52,7 +53,6 @@ from ncgate.inputs import Var
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
-    from asyncua.server.event_generator import EventGenerator
 
 log = logging.getLogger("ncgate.opcua")
 NICE = 10
@@ -176,6 +176,56 @@ async def trust_validator(trusted: tuple[Path, ...]) -> _Validator:
                       | CertificateValidatorOptions.TRUSTED, store)
 
 
+class _Condition:
+    """One AlertType condition (an ``AlarmConditionType``, OPC 10000-9 5.8): a process's
+    alarms, or the cell's (process 0: the fieldbus side's, AL150).  Active while the process
+    is in ALARM; the cell's stop nothing and are pending nowhere in ncgate, so theirs is
+    active until a client acknowledges it.  Retained while active or unacknowledged, which
+    is what ConditionRefresh sends again (asyncua keeps the retained events)."""
+
+    def __init__(self, process: int, node: ua.NodeId, generator: EventGenerator) -> None:
+        self.process = process
+        self.node = node  # the ConditionId
+        self.generator = generator  # its own: asyncua retains the event object itself
+        self.active = False
+        self.acked = True
+
+    async def report(self) -> None:
+        event: Any = self.generator.event
+        event.Retain = self.active or not self.acked
+        setattr(event, "ActiveState/Id", self.active)
+        event.ActiveState = ua.LocalizedText("Active" if self.active else "Inactive")
+        setattr(event, "AckedState/Id", self.acked)
+        event.AckedState = ua.LocalizedText("Acknowledged" if self.acked else "Unacknowledged")
+        await self.generator.trigger(message=event.Message.Text if event.Message else None)
+
+    async def raised(self, e: EventView) -> None:
+        event: Any = self.generator.event
+        event.Message = ua.LocalizedText(e.message)
+        event.Severity = e.severity
+        event.ErrorCode = e.code
+        event.ConditionName = e.code
+        self.active, self.acked = True, False
+        await self.report()
+
+    async def cleared(self) -> None:
+        if self.active:
+            self.active = False
+            await self.report()
+
+    async def acknowledge(self, event_id: bytes) -> int | None:
+        """A client's Acknowledge: why not (a status code), or None."""
+        if event_id != self.generator.event.EventId.Value:
+            return StatusCodes.BadEventIdUnknown  # not this condition's latest event
+        if self.acked:
+            return StatusCodes.BadConditionBranchAlreadyAcked
+        self.acked = True
+        if self.process == 0:
+            self.active = False  # the cell's: pending nowhere but here
+        await self.report()
+        return None
+
+
 class Link:
     """The gateway at the other end of the pipes: what this process sends it, and the
     answers to the writes it asked the gateway's loop to apply."""
@@ -253,7 +303,7 @@ class Space:
         self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
         self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
         self._values: dict[str, Any] = {}  # what each node shows now
-        self._alerts: EventGenerator | None = None
+        self._conditions: dict[int, _Condition] = {}  # by process (0: the cell)
         self._messages: EventGenerator | None = None
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
@@ -265,6 +315,8 @@ class Space:
         config = self.link.config
         self.users = _Users(config.users)
         server = self._server = Server(user_manager=self.users)
+        # ConditionRefresh (OPC 10000-9 5.5.7): asyncua sends its retained conditions again.
+        server.iserver.bind_condition_methods = True
         await server.init()
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
         server.set_server_name(f"ncgate {layout['cell']} (virtual)")
@@ -369,6 +421,9 @@ class Space:
             k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
             k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
             k + "N": v.n})
+        condition = self._conditions.get(v.number)
+        if condition is not None and v.state != "ALARM":  # a reset: the alarm is gone
+            await condition.cleared()
         if v.number == 1:  # the cell's ActiveProgram is its first process's
             await self._show({"ActiveProgram.Name": v.program,
                               "ActiveProgram.State": v.state})
@@ -386,16 +441,32 @@ class Space:
         await self._show(values)
 
     async def _raise(self, e: EventView) -> None:
-        generator = self._alerts if e.alarm else self._messages
+        if e.alarm:
+            condition = self._conditions.get(e.process)
+            if condition is not None:
+                await condition.raised(e)
+            return
+        generator = self._messages
         if generator is None:
             return
         event: Any = generator.event
         event.Message = ua.LocalizedText(e.message)
         event.Severity = e.severity
         event.SourceName = f"Process {e.process}" if e.process else "cell"
-        if e.alarm:
-            event.ErrorCode = e.code
         await generator.trigger(message=e.message)
+
+    async def _acknowledge(self, parent: ua.NodeId, event_id: ua.Variant,
+                           comment: ua.Variant) -> ua.StatusCode | list[Any]:
+        """AcknowledgeableConditionType's Acknowledge, called on a condition (OPC 10000-9
+        5.7.3): it changes the condition's AckedState only; the alarm stays in ncgate until
+        a reset, as on the console."""
+        condition = next((c for c in self._conditions.values() if c.node == parent), None)
+        if condition is None:
+            return ua.StatusCode(StatusCodes.BadNodeIdUnknown)  # type: ignore[arg-type]
+        refused = await condition.acknowledge(bytes(event_id.Value or b""))
+        if refused is not None:
+            return ua.StatusCode(refused)  # type: ignore[arg-type]
+        return []
 
     # -- the address space (before it serves) ----------------------------------------------
 
@@ -470,8 +541,8 @@ class Space:
                                                  ua.QualifiedName("Messages", mt))
         await messages.write_attribute(AttributeIds.EventNotifier, ua.DataValue(
             ua.Variant(1, ua.VariantType.Byte)))  # SubscribeToEvents
-        self._alerts = await server.get_event_generator(alert_type, messages.nodeid)
         self._messages = await server.get_event_generator(message_type, messages.nodeid)
+        await self._build_conditions(server, layout, alert_type, messages, own)
 
         cnc_interface = await objects.add_object(_id("CncInterface", own),
                                                  ua.QualifiedName("CncInterface", cnc))
@@ -534,6 +605,29 @@ class Space:
             await self._var(model, f"plant.{name}.Fault", img, img, "Fault", "",
                             node_key=f"Plant/{name}.Fault")
         await self._build_image(vendor, img, layout)
+
+    async def _build_conditions(self, server: Server, layout: dict[str, Any], alert_type: Node,
+                                messages: Node, own: int) -> None:
+        """An AlertType condition per process and one for the cell, under ``Messages``, and
+        Acknowledge bound (ConditionRefresh is asyncua's: ``bind_condition_methods``)."""
+        await messages.add_reference(alert_type.nodeid, ObjectIds.GeneratesEvent)
+        for number in (0, *layout["processes"]):
+            name = f"Process {number}" if number else "cell"
+            node = await messages.add_object(_id(f"Alarms/{name}", own),
+                                             ua.QualifiedName(f"Alarm {name}", own))
+            generator = EventGenerator(server.iserver.isession)
+            await generator.init(alert_type.nodeid, messages.nodeid, add_generates_event=False)
+            event: Any = generator.event
+            event.NodeId = node.nodeid  # the ConditionId
+            event.SourceName = name
+            event.ConditionName = ""
+            setattr(event, "EnabledState/Id", True)
+            event.EnabledState = ua.LocalizedText("Enabled")
+            event.ErrorCode = ""
+            self._conditions[number] = _Condition(number, node.nodeid, generator)
+        server.iserver.isession.add_method_callback(
+            _id(ObjectIds.AcknowledgeableConditionType_Acknowledge, 0),
+            self._acknowledge)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
                    initial: Any, node_key: str | None = None,

@@ -278,3 +278,80 @@ async def test_act_program_name_and_act_main_program_name_both_name_the_started_
     await ua_client.until("main", lambda seen: seen[-1:] == ["A"])
     assert await ua_client.call("read", node=name) == "A"
     assert await ua_client.call("read", node=main) == "A"
+
+
+REFRESH_START, REFRESH_END = "ns=0;i=2787", "ns=0;i=2788"  # RefreshStart/EndEventType
+CONDITION_FIELDS = [["", "EventId"], ["", "EventType"], ["", "ConditionId"], ["", "Retain"],
+                    ["", "ActiveState.Id"], ["", "AckedState.Id"], [MACHINE_TOOL, "ErrorCode"]]
+
+
+async def test_an_alarm_is_a_condition_a_client_acknowledges_and_condition_refresh_resends(
+        gw: Gateway, ua_client: UaClient) -> None:
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await ua_client.call("translate", path=[
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
+        (MACHINE_TOOL, "Messages")])
+    subscription = await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
+    # asyncua sends RefreshStart and RefreshEnd from the Server object only.
+    await ua_client.call("events", tag="server", node="i=2253", fields=[["", "EventType"]])
+
+    def conditions(seen: list[Any]) -> list[Any]:
+        return [e for e in seen if e[1].endswith(";i=39")]  # AlertType's
+
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")
+    gw.write("SA10", 1)
+    await gw.wait_state(1, "ALARM")
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 1)
+    event_id, _, condition, retain, active, acked, code = conditions(seen)[0]
+    assert (retain, active, acked, code) == (True, True, False, "AL111")
+
+    # Acknowledged: still active (the alarm stays until a reset), still retained.
+    acknowledge = "ns=0;i=9111"  # AcknowledgeableConditionType's Acknowledge
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", event_id], ["LocalizedText", "seen"]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 2)
+    acked_id, _, same, retain, active, acked, _ = conditions(seen)[1]
+    assert (same, retain, active, acked) == (condition, True, True, True)
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", acked_id], ["LocalizedText", "again"]]) == (
+        "BadConditionBranchAlreadyAcked")
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", event_id], ["LocalizedText", "stale"]]) == "BadEventIdUnknown"
+
+    # ConditionRefresh: the retained condition again (a new event of the same condition).
+    refresh = ("ns=0;i=2782", "ns=0;i=3875")  # ConditionType, its ConditionRefresh
+    assert await ua_client.call("call", object=refresh[0], method=refresh[1],
+                                args=[["UInt32", subscription]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 3)
+    assert conditions(seen)[2][2:6] == [condition, True, True, True]
+    brackets = await ua_client.until("server", lambda seen: [REFRESH_END] in seen)
+    assert brackets == [[REFRESH_START], [REFRESH_END]]
+
+    # A reset ends the alarm: inactive and acknowledged, so no longer retained.
+    gw.command(3, process=1)  # reset
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 4)
+    assert conditions(seen)[3][2:6] == [condition, False, False, True]
+
+
+async def test_the_cell_s_alarm_is_a_condition_active_until_a_client_acknowledges_it(
+        gw: Gateway, ua_client: UaClient) -> None:
+    # A fieldbus alarm (process 0) stops nothing and is pending nowhere in ncgate: only the
+    # acknowledge ends its condition.
+    from ncgate.inputs import FieldbusAlarm
+
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await ua_client.call("translate", path=[
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
+        (MACHINE_TOOL, "Messages")])
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
+    gw.apply(FieldbusAlarm(150, "node 5's heartbeat stopped"))
+    seen = await ua_client.until("alarms", lambda seen: len(seen) == 1)
+    event_id, _, condition, *states, code = seen[0]
+    assert (states, code) == ([True, True, False], "AL150")
+    assert await ua_client.call("call", object=condition, method="ns=0;i=9111", args=[
+        ["ByteString", event_id], ["LocalizedText", "replaced the cable"]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(seen) == 2)
+    assert seen[1][2:6] == [condition, False, False, True]

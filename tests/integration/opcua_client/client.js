@@ -177,7 +177,18 @@ const ops = {
             requestedMaxKeepAliveCount: 20, maxNotificationsPerPublish: 0,
             publishingEnabled: true, priority: 1,
         });
-        return subscription.publishingInterval;
+        return subscription.subscriptionId;
+    },
+    // A method call: its status code's name.  args: [[DataType name, value], ...]; a
+    // ByteString is an array of bytes, a LocalizedText its text.
+    async call({object, method, args}) {
+        const result = await session.call({
+            objectId: nodeId(object), methodId: nodeId(method),
+            inputArguments: (args || []).map(([type, value]) => ({
+                dataType: DataType[type],
+                value: type === "ByteString" ? Buffer.from(value)
+                     : type === "LocalizedText" ? {text: value} : value}))});
+        return result.statusCode.name;
     },
     async monitor({tag, node, queue}) {
         const item = ClientMonitoredItem.create(subscription,
