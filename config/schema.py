@@ -976,7 +976,7 @@ def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
                      '"sign_encrypt"')
     if not paths and security is not UaSecurity.NONE and not _loopback(host):
         # Beyond loopback, a server that accepts any client certificate lets anyone who can
-        # make one in: docs/decisions.md, "OPC UA: which client certificates are trusted".
+        # make one in: docs/decisions.md, OPC UA, "Which client certificates are trusted".
         raise r.fail(key, f"opcua.host = {host!r} serves beyond loopback: list the client "
                      "certificates (or folders of them) it trusts")
     return tuple(paths)

@@ -215,7 +215,8 @@ class _Condition:
 
     async def acknowledge(self, event_id: bytes) -> int | None:
         """A client's Acknowledge: why not (a status code), or None."""
-        if event_id != self.generator.event.EventId.Value:
+        latest = getattr(self.generator.event.EventId, "Value", None)  # None: never raised
+        if latest is None or event_id != latest:
             return StatusCodes.BadEventIdUnknown  # not this condition's latest event
         if self.acked:
             return StatusCodes.BadConditionBranchAlreadyAcked
@@ -334,7 +335,7 @@ class Space:
             await server.load_private_key(config.private_key.read_bytes(), format="pem")
         if config.trusted:
             # Empty is any client certificate, which the config allows on loopback only
-            # (docs/decisions.md, "OPC UA: which client certificates are trusted").
+            # (docs/decisions.md, OPC UA, "Which client certificates are trusted").
             server.set_certificate_validator(await trust_validator(config.trusted))
             logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
