@@ -945,14 +945,41 @@ def _opcua_security(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any
         names = " or ".join(f'"{c.value}"' for c in UaSecurity)
         raise r.fail(key, f"expected {names}, got {raw!r}") from None
     host = done["host"]
-    loopback = host in ("localhost", "::1") or host.startswith("127.")
-    if security is UaSecurity.NONE and not loopback:
+    if security is UaSecurity.NONE and not _loopback(host):
         # Anyone on the network could read the cell and write what `writable` lists.
         raise r.fail(key, f'"none" serves only loopback; opcua.host = {host!r} needs '
                      '"sign" or "sign_encrypt" (and a certificate)')
     if security is not UaSecurity.NONE and not ("certificate" in t and "private_key" in t):
         raise r.fail(key, f'"{security.value}" needs opcua.certificate and opcua.private_key')
     return security
+
+
+def _loopback(host: str) -> bool:
+    return host in ("localhost", "::1") or host.startswith("127.")
+
+
+def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
+    raw = t.get("trusted", [])
+    items = [raw] if isinstance(raw, str) else raw
+    if not isinstance(items, list) or not all(isinstance(x, str) for x in items):
+        raise r.fail(key, f"expected a certificate file or folder, or a list of them, got {raw!r}")
+    paths = []
+    for i, item in enumerate(items):
+        path = (r.base_of(key) / item).resolve()
+        if not path.exists():
+            raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
+                         f"no such file or folder: {path}")
+        paths.append(path)
+    security, host = done["security"], done["host"]
+    if paths and security is UaSecurity.NONE:
+        raise r.fail(key, 'client certificates are exchanged only with security "sign" or '
+                     '"sign_encrypt"')
+    if not paths and security is not UaSecurity.NONE and not _loopback(host):
+        # Beyond loopback, a server that accepts any client certificate lets anyone who can
+        # make one in: docs/decisions.md, OPC UA, "Which client certificates are trusted".
+        raise r.fail(key, f"opcua.host = {host!r} serves beyond loopback: list the client "
+                     "certificates (or folders of them) it trusts")
+    return tuple(paths)
 
 
 def _opcua_writable(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -1001,6 +1028,11 @@ class OpcuaConfig:
         "or { certificate = \"user.crt\" } (an X.509 identity, with sign or sign_encrypt); when "
         "any is set, writes need one of them (anonymous sessions only read)",
         parse=_opcua_users, factory=dict)
+    trusted: tuple[Path, ...] = setting(
+        (), "the client certificates a secure channel accepts: files (PEM or DER) or folders "
+        "of them (*.pem, *.der, *.crt, *.cer), beside the config; a client's own certificate "
+        "or its CA's. Empty: any client certificate on loopback, and refused at start with any "
+        "other host", parse=_opcua_trusted)
 
 
 @dataclass(frozen=True, slots=True)

@@ -66,7 +66,7 @@ class ProcessView(NamedTuple):
 
 class EventView(NamedTuple):
     """An alarm (an ``AlertType`` event) or a part program's message (DIS: a
-    ``NotificationEventType`` event)."""
+    ``CncMessageType`` event)."""
 
     alarm: bool
     process: int
@@ -148,7 +148,7 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
     rows: list[tuple[str, ...]] = [
         (machine, f"ns=urn:ncgate:ua;s=Machines/{cell}", "MachineToolType", "read", "the cell"),
         (f"{machine}/Notification/Messages", "ns=urn:ncgate:ua;s=Messages", "events", "read",
-         "AlertType (alarms), NotificationEventType (DIS)")]
+         "AlertType conditions (alarms), CncMessageType (DIS)")]
     for k in processes:
         p = f"Process {k}"
         for name, kind, what in (("ChannelState", "Int32", "0 Active, 1 Interrupted, 2 Reset"),
@@ -161,7 +161,7 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
                  "3 Interrupted, 4 Canceled"),
                 ("ActProgramName", "String", "the program"),
                 ("ActProgramBlock", "String[3]", "previous, current, next block"),
-                ("ActProgramLine", "Int32", "the source line"),
+                ("ActProgramLine", "String", "the source line"),
                 ("ActFeedrate", "Double", "mm/min"), ("X", "Double", "mm"),
                 ("Y", "Double", "mm"), ("Z", "Double", "mm")):
             rows.append((f"Objects/CncInterface/CncChannelList/{p}/{name}",

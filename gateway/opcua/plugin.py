@@ -20,7 +20,8 @@ def _factory(gw: Gateway) -> OpcuaServer:
 
 def status(server: OpcuaServer) -> dict[str, Any]:
     return {"endpoint": server.endpoint, "security": server.config.security.value,
-            "writable": sorted(server.config.writable), "writes": server.writes,
+            "writable": sorted(server.config.writable), "sessions": server.sessions,
+            "subscriptions": server.subscriptions, "writes": server.writes,
             "refused": server.refused}
 
 

@@ -75,6 +75,8 @@ class OpcuaServer:
         self.address: tuple[str, int] | None = None
         self.writes = 0
         self.refused = 0
+        self.sessions = 0  # the clients' sessions and subscriptions, as the process tells
+        self.subscriptions = 0
         self._loop: asyncio.AbstractEventLoop | None = None  # the gateway's
         self._process: asyncio.subprocess.Process | None = None
         self._reader: asyncio.Task[None] | None = None
@@ -121,7 +123,8 @@ class OpcuaServer:
             process.stdin.write(frame(message))
 
     async def _read(self) -> None:
-        """The process's frames: ready, an error at its start, a client's write."""
+        """The process's frames: ready, an error at its start, a client's write, the count of
+        its clients' sessions and subscriptions."""
         process, ready = self._process, self._ready
         assert process is not None and process.stdout is not None and ready is not None
         try:
@@ -132,6 +135,8 @@ class OpcuaServer:
                     ready.set_result(message[1])
                 elif kind == "error" and not ready.done():
                     ready.set_exception(GatewayError(f"OPC UA server: {message[1]}"))
+                elif kind == "clients":
+                    _, self.sessions, self.subscriptions = message
                 elif kind == "write":
                     _, number, key, value, who = message
                     try:

@@ -26,7 +26,12 @@ from typing import TYPE_CHECKING, Any
 
 from asyncua import ua
 from asyncua.common.structures104 import new_enum
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.uacrypto import load_certificate
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.server.event_generator import EventGenerator
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.server import Server
 from asyncua.server.user_managers import UserManager
@@ -48,7 +53,6 @@ from ncgate.inputs import Var
 
 if TYPE_CHECKING:
     from asyncua.common.node import Node
-    from asyncua.server.event_generator import EventGenerator
 
 log = logging.getLogger("ncgate.opcua")
 NICE = 10
@@ -59,10 +63,24 @@ MACHINERY = "http://opcfoundation.org/UA/Machinery/"
 MACHINE_TOOL = "http://opcfoundation.org/UA/MachineTool/"
 CNC = "http://opcfoundation.org/UA/CNC"
 IMAGE = "urn:ncgate:image"  # the image, the PLC, the processes as ncgate names them
-NCGATE = "urn:ncgate:ua"  # ncgate's own nodes (the instances, the stand-in types)
-# The numeric ids OPC 40501-1's nodeset gives its types (what a client may look a type up by).
-MACHINE_TOOL_TYPE_ID = 13
-ALERT_TYPE_ID = 39
+NCGATE = "urn:ncgate:ua"  # ncgate's own nodes (the instances, the X/Y/Z positions)
+# The numeric ids the published nodesets give the companion types ncgate declares (what a
+# client may look a type up by).  tests/integration/opcua/test_nodesets.py checks each id,
+# browse name, supertype and enumeration against the OPC Foundation's nodeset XML.
+MACHINE_TOOL_TYPE_ID = 13  # OPC 40501-1 (MachineTool)
+ELEMENT_MONITORING_TYPE_ID = 23  # abstract: ChannelMonitoringType's supertype
+CHANNEL_MONITORING_TYPE_ID = 16
+ALERT_TYPE_ID = 39  # a subtype of AlarmConditionType
+ERROR_CODE_ID = 231  # AlertType's ErrorCode property
+CHANNEL_STATE_ID = 64  # DataType: Active 0, Interrupted 1, Reset 2
+CHANNEL_MODE_ID = 67  # DataType
+CHANNEL_MODES = ("Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle",
+                 "Remote", "Reference", "Other")
+CNC_COMPONENT_TYPE_ID = 1001  # OPC 40502 (CNC); abstract: CncChannelType's supertype
+CNC_CHANNEL_TYPE_ID = 1002
+CNC_MESSAGE_TYPE_ID = 1011  # an event type, a subtype of BaseEventType
+CNC_PROGRAM_STATUS_ID = 3002  # DataType CncChannelProgramStatus
+CNC_CHANNEL_STATUS_ID = 3003  # DataType CncChannelStatus (ActStatus): Active, Interrupted, Reset
 
 _VTYPE = {"SA": ua.VariantType.Boolean, "SK": ua.VariantType.Byte,
           "SYVAR": ua.VariantType.Int16}
@@ -111,6 +129,102 @@ class _Users(UserManager):
             return None  # asyncua answers BadUserAccessDenied
         return User(role=UserRole.User, name=username)
 
+
+
+TRUSTED_SUFFIXES = (".pem", ".der", ".crt", ".cer")
+
+
+class _Trusted(TrustStore):
+    """asyncua's trust store over ``opcua.trusted``: its verification (the certificate itself
+    or a CA that signed it, by cryptography's verifier), with files as well as folders.
+    asyncua 2.1 reads only folders, and in them only names with ``der`` or ``pem``: a folder's
+    ``*.crt`` would be left out without a word."""
+
+    async def _load_trust_location(self, location: Path) -> list[x509.Certificate]:
+        return [await load_certificate(content, "der" if content[:1] == b"0" else "pem")
+                for content in _trusted_files(location)]  # DER starts with a SEQUENCE, 0x30
+
+
+def _trusted_files(location: Path) -> list[bytes]:
+    """The certificates' bytes (read once, at the start, before the server serves)."""
+    files = ([location] if location.is_file() else
+             sorted(f for f in location.iterdir() if f.suffix.lower() in TRUSTED_SUFFIXES))
+    return [f.read_bytes().lstrip() for f in files]
+
+
+class _Validator(CertificateValidator):
+    """The check of a client's application certificate at CreateSession: in its validity,
+    its subject alternative name holding the client's application URI, and trusted.  A refusal
+    is one log line (asyncua's trust store logs a traceback of its own)."""
+
+    async def validate(self, cert: x509.Certificate,
+                       app_description: ua.ApplicationDescription) -> None:
+        try:
+            await super().validate(cert, app_description)
+        except ServiceError as refused:
+            log.warning("a client certificate refused (%s): %s, application %s",
+                        ua.StatusCode(refused.code).name,  # type: ignore[arg-type]
+                        cert.subject.rfc4514_string(),
+                        app_description.ApplicationUri)
+            raise
+
+
+async def trust_validator(trusted: tuple[Path, ...]) -> _Validator:
+    store = _Trusted(list(trusted), [])
+    await store.load()
+    return _Validator(CertificateValidatorOptions.BASIC_VALIDATION
+                      | CertificateValidatorOptions.TRUSTED, store)
+
+
+class _Condition:
+    """One AlertType condition (an ``AlarmConditionType``, OPC 10000-9 5.8): a process's
+    alarms, or the cell's (process 0: the fieldbus side's, AL150).  Active while the process
+    is in ALARM; the cell's stop nothing and are pending nowhere in ncgate, so theirs is
+    active until a client acknowledges it.  Retained while active or unacknowledged, which
+    is what ConditionRefresh sends again (asyncua keeps the retained events)."""
+
+    def __init__(self, process: int, node: ua.NodeId, generator: EventGenerator) -> None:
+        self.process = process
+        self.node = node  # the ConditionId
+        self.generator = generator  # its own: asyncua retains the event object itself
+        self.active = False
+        self.acked = True
+
+    async def report(self) -> None:
+        event: Any = self.generator.event
+        event.Retain = self.active or not self.acked
+        setattr(event, "ActiveState/Id", self.active)
+        event.ActiveState = ua.LocalizedText("Active" if self.active else "Inactive")
+        setattr(event, "AckedState/Id", self.acked)
+        event.AckedState = ua.LocalizedText("Acknowledged" if self.acked else "Unacknowledged")
+        await self.generator.trigger(message=event.Message.Text if event.Message else None)
+
+    async def raised(self, e: EventView) -> None:
+        event: Any = self.generator.event
+        event.Message = ua.LocalizedText(e.message)
+        event.Severity = e.severity
+        event.ErrorCode = e.code
+        event.ConditionName = e.code
+        self.active, self.acked = True, False
+        await self.report()
+
+    async def cleared(self) -> None:
+        if self.active:
+            self.active = False
+            await self.report()
+
+    async def acknowledge(self, event_id: bytes) -> int | None:
+        """A client's Acknowledge: why not (a status code), or None."""
+        latest = getattr(self.generator.event.EventId, "Value", None)  # None: never raised
+        if latest is None or event_id != latest:
+            return StatusCodes.BadEventIdUnknown  # not this condition's latest event
+        if self.acked:
+            return StatusCodes.BadConditionBranchAlreadyAcked
+        self.acked = True
+        if self.process == 0:
+            self.active = False  # the cell's: pending nowhere but here
+        await self.report()
+        return None
 
 
 class Link:
@@ -190,16 +304,20 @@ class Space:
         self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
         self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
         self._values: dict[str, Any] = {}  # what each node shows now
-        self._alerts: EventGenerator | None = None
+        self._conditions: dict[int, _Condition] = {}  # by process (0: the cell)
         self._messages: EventGenerator | None = None
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
+        self.sessions: set[_Session] = set()  # the clients' activated sessions
+        self._clients = (0, 0)  # (sessions, subscriptions) as last told to the gateway
 
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
         """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
         config = self.link.config
         self.users = _Users(config.users)
         server = self._server = Server(user_manager=self.users)
+        # ConditionRefresh (OPC 10000-9 5.5.7): asyncua sends its retained conditions again.
+        server.iserver.bind_condition_methods = True
         await server.init()
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
         server.set_server_name(f"ncgate {layout['cell']} (virtual)")
@@ -215,6 +333,11 @@ class Space:
             await server.load_certificate(config.certificate.read_bytes(),
                                           "pem" if pem else "der")
             await server.load_private_key(config.private_key.read_bytes(), format="pem")
+        if config.trusted:
+            # Empty is any client certificate, which the config allows on loopback only
+            # (docs/decisions.md, OPC UA, "Which client certificates are trusted").
+            server.set_certificate_validator(await trust_validator(config.trusted))
+            logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
         await self._build(server, layout)
         await server.start()
@@ -242,6 +365,17 @@ class Space:
         iserver = server.iserver
         return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
                         user=user, external=external)
+
+    def clients_changed(self) -> None:
+        """Tell the gateway how many sessions and subscriptions its clients hold now (the
+        console's fieldbus panel), when that changed."""
+        server = self._server
+        assert server is not None
+        clients = (len(self.sessions),
+                   len(server.iserver.subscription_service.subscriptions))
+        if clients != self._clients:
+            self._clients = clients
+            self.link.send(("clients", *clients))
 
     async def _apply(self, batch: list[tuple[str, Any]]) -> None:
         """One loop turn's changes, in the order they happened."""
@@ -284,10 +418,13 @@ class Space:
             k + "RapidOverride": float(v.rapid_override), k + "State": v.state,
             k + "ActStatus": v.channel_state, k + "ActProgramStatus": v.program_status,
             k + "ActProgramName": v.program, k + "ActMainProgramName": v.program,
-            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": v.line,
+            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": str(v.line),
             k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
             k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
             k + "N": v.n})
+        condition = self._conditions.get(v.number)
+        if condition is not None and v.state != "ALARM":  # a reset: the alarm is gone
+            await condition.cleared()
         if v.number == 1:  # the cell's ActiveProgram is its first process's
             await self._show({"ActiveProgram.Name": v.program,
                               "ActiveProgram.State": v.state})
@@ -305,16 +442,32 @@ class Space:
         await self._show(values)
 
     async def _raise(self, e: EventView) -> None:
-        generator = self._alerts if e.alarm else self._messages
+        if e.alarm:
+            condition = self._conditions.get(e.process)
+            if condition is not None:
+                await condition.raised(e)
+            return
+        generator = self._messages
         if generator is None:
             return
         event: Any = generator.event
         event.Message = ua.LocalizedText(e.message)
         event.Severity = e.severity
         event.SourceName = f"Process {e.process}" if e.process else "cell"
-        if e.alarm:
-            event.ErrorCode = e.code
         await generator.trigger(message=e.message)
+
+    async def _acknowledge(self, parent: ua.NodeId, event_id: ua.Variant,
+                           comment: ua.Variant) -> ua.StatusCode | list[Any]:
+        """AcknowledgeableConditionType's Acknowledge, called on a condition (OPC 10000-9
+        5.7.3): it changes the condition's AckedState only; the alarm stays in ncgate until
+        a reset, as on the console."""
+        condition = next((c for c in self._conditions.values() if c.node == parent), None)
+        if condition is None:
+            return ua.StatusCode(StatusCodes.BadNodeIdUnknown)  # type: ignore[arg-type]
+        refused = await condition.acknowledge(bytes(event_id.Value or b""))
+        if refused is not None:
+            return ua.StatusCode(refused)  # type: ignore[arg-type]
+        return []
 
     # -- the address space (before it serves) ----------------------------------------------
 
@@ -328,25 +481,37 @@ class Space:
         objects = server.nodes.objects
         base_object = server.get_node(ObjectIds.BaseObjectType)
         base_event = server.get_node(ObjectIds.BaseEventType)
+        alarm_condition = server.get_node(ObjectIds.AlarmConditionType)
 
-        # The types a dashboard looks for.  The whole DI/Machinery/IA/MachineTool/CNC
-        # nodesets are not loaded (docs/opcua.md says why): MachineToolType and AlertType
-        # have the ids of OPC 40501-1's nodeset, the rest are ncgate's stand-ins.
+        # The types a dashboard looks for, with the NodeIds, browse names and supertypes of
+        # the published nodesets.  The whole DI/Machinery/IA/MachineTool/CNC nodesets are not
+        # loaded (docs/opcua.md says why): only these types, without the declarations ncgate
+        # does not fill.
         machine_tool_type = await base_object.add_object_type(
             _id(MACHINE_TOOL_TYPE_ID, mt), ua.QualifiedName("MachineToolType", mt))
-        channel_type = await base_object.add_object_type(
-            _id("ChannelMonitoringType", own),
-            ua.QualifiedName("ChannelMonitoringType", mt))
-        cnc_channel_type = await base_object.add_object_type(
-            _id("CncChannelType", own), ua.QualifiedName("CncChannelType", cnc))
-        alert_type = await base_event.add_object_type(
+        element_monitoring = await base_object.add_object_type(
+            _id(ELEMENT_MONITORING_TYPE_ID, mt), ua.QualifiedName("ElementMonitoringType", mt))
+        channel_type = await element_monitoring.add_object_type(
+            _id(CHANNEL_MONITORING_TYPE_ID, mt), ua.QualifiedName("ChannelMonitoringType", mt))
+        cnc_component = await base_object.add_object_type(
+            _id(CNC_COMPONENT_TYPE_ID, cnc), ua.QualifiedName("CncComponentType", cnc))
+        cnc_channel_type = await cnc_component.add_object_type(
+            _id(CNC_CHANNEL_TYPE_ID, cnc), ua.QualifiedName("CncChannelType", cnc))
+        for abstract in (element_monitoring, cnc_component):
+            await abstract.write_attribute(AttributeIds.IsAbstract, ua.DataValue(
+                ua.Variant(True, ua.VariantType.Boolean)))
+        # AlertType is an AlarmConditionType in OPC 40501-1; ncgate raises each alarm as one
+        # event of it, and keeps no condition (no Acknowledge, no ConditionRefresh:
+        # docs/decisions.md).
+        alert_type = await alarm_condition.add_object_type(
             _id(ALERT_TYPE_ID, mt), ua.QualifiedName("AlertType", mt))
-        await alert_type.add_property(_id("AlertType.ErrorCode", own),
+        await alert_type.add_property(_id(ERROR_CODE_ID, mt),
                                       ua.QualifiedName("ErrorCode", mt), "",
                                       varianttype=ua.VariantType.String)
+        # A part program's message (DIS) is OPC 40502's CncMessageType: MachineTool's
+        # NotificationEventType is abstract, and no event may be of an abstract type.
         message_type = await base_event.add_object_type(
-            _id("NotificationEventType", own),
-            ua.QualifiedName("NotificationEventType", mt))
+            _id(CNC_MESSAGE_TYPE_ID, cnc), ua.QualifiedName("CncMessageType", cnc))
 
         cell = layout["cell"]
         machines = await objects.add_folder(_id("Machines", own),
@@ -354,8 +519,9 @@ class Space:
         machine = await machines.add_object(_id(f"Machines/{cell}", own),
                                             ua.QualifiedName(cell, own),
                                             objecttype=machine_tool_type.nodeid)
+        # MachineToolType's Identification is DI's browse name (OPC 40501-1's nodeset).
         ident = await machine.add_object(_id("Identification", own),
-                                         ua.QualifiedName("Identification", machinery))
+                                         ua.QualifiedName("Identification", di))
         for name, value in (("Manufacturer", ua.LocalizedText("ncgate (virtual)")),
                             ("Model", ua.LocalizedText(cell)),
                             ("SoftwareRevision", __version__),
@@ -376,8 +542,8 @@ class Space:
                                                  ua.QualifiedName("Messages", mt))
         await messages.write_attribute(AttributeIds.EventNotifier, ua.DataValue(
             ua.Variant(1, ua.VariantType.Byte)))  # SubscribeToEvents
-        self._alerts = await server.get_event_generator(alert_type, messages.nodeid)
         self._messages = await server.get_event_generator(message_type, messages.nodeid)
+        await self._build_conditions(server, layout, alert_type, messages, own)
 
         cnc_interface = await objects.add_object(_id("CncInterface", own),
                                                  ua.QualifiedName("CncInterface", cnc))
@@ -387,14 +553,18 @@ class Space:
                                           ua.QualifiedName("Image", img))
         vendor_processes = await vendor.add_folder(_id("Processes", img),
                                                    ua.QualifiedName("Processes", img))
-        # The enumerations, as the specifications name their values (their numbers are
-        # model.py's); DataTypes of ncgate's ids, like the stand-in types above.
-        channel_state_t = (await new_enum(server, _id("ChannelState", own), ua.QualifiedName(
+        # The enumerations with the published ids and values (model.py maps the states).
+        channel_state_t = (await new_enum(server, _id(CHANNEL_STATE_ID, mt), ua.QualifiedName(
             "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
+        channel_mode_t = (await new_enum(server, _id(CHANNEL_MODE_ID, mt), ua.QualifiedName(
+            "ChannelMode", mt), list(CHANNEL_MODES))).nodeid
         program_status_t = (await new_enum(
-            server, _id("CncChannelProgramStatus", own),
+            server, _id(CNC_PROGRAM_STATUS_ID, cnc),
             ua.QualifiedName("CncChannelProgramStatus", cnc),
             ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
+        channel_status_t = (await new_enum(
+            server, _id(CNC_CHANNEL_STATUS_ID, cnc), ua.QualifiedName("CncChannelStatus", cnc),
+            ["Active", "Interrupted", "Reset"])).nodeid
         for number in layout["processes"]:
             k, name = f"P{number}.", f"Process {number}"
             mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
@@ -402,22 +572,23 @@ class Space:
                                               objecttype=channel_type.nodeid)
             await self._var(mon, k + "ChannelState", own, mt, "ChannelState", 2,
                             datatype=channel_state_t)
-            await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0)  # Automatic
+            await self._var(mon, k + "ChannelMode", own, mt, "ChannelMode", 0,  # Automatic
+                            datatype=channel_mode_t)
             await self._var(mon, k + "FeedOverride", own, mt, "FeedOverride", 100.0)
             await self._var(mon, k + "RapidOverride", own, mt, "RapidOverride", 100.0)
             ch = await channels.add_object(_id(f"CncChannelList/{name}", own),
                                            ua.QualifiedName(name, own),
                                            objecttype=cnc_channel_type.nodeid)
             await self._var(ch, k + "ActStatus", own, cnc, "ActStatus", 2,
-                            datatype=channel_state_t)
+                            datatype=channel_status_t)
             await self._var(ch, k + "ActProgramStatus", own, cnc, "ActProgramStatus", 0,
                             datatype=program_status_t)
             for var, initial in (("ActProgramName", ""), ("ActMainProgramName", ""),
-                                 ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", 0),
+                                 ("ActProgramBlock", ["", "", ""]), ("ActProgramLine", "0"),
                                  ("ActFeedrate", 0.0), ("ActOverride", 100.0)):
                 await self._var(ch, k + var, own, cnc, var, initial)
-            for axis in "XYZ":
-                await self._var(ch, k + axis, own, cnc, axis, 0.0)
+            for axis in "XYZ":  # ncgate's names: 40502's PosTcpBcsX is a structure
+                await self._var(ch, k + axis, own, own, axis, 0.0)
             p = await vendor_processes.add_object(_id(name, img),
                                                   ua.QualifiedName(name, img))
             await self._var(p, k + "State", img, img, "State", "IDLE", node_key=f"{name}.State")
@@ -435,6 +606,29 @@ class Space:
             await self._var(model, f"plant.{name}.Fault", img, img, "Fault", "",
                             node_key=f"Plant/{name}.Fault")
         await self._build_image(vendor, img, layout)
+
+    async def _build_conditions(self, server: Server, layout: dict[str, Any], alert_type: Node,
+                                messages: Node, own: int) -> None:
+        """An AlertType condition per process and one for the cell, under ``Messages``, and
+        Acknowledge bound (ConditionRefresh is asyncua's: ``bind_condition_methods``)."""
+        await messages.add_reference(alert_type.nodeid, ObjectIds.GeneratesEvent)
+        for number in (0, *layout["processes"]):
+            name = f"Process {number}" if number else "cell"
+            node = await messages.add_object(_id(f"Alarms/{name}", own),
+                                             ua.QualifiedName(f"Alarm {name}", own))
+            generator = EventGenerator(server.iserver.isession)
+            await generator.init(alert_type.nodeid, messages.nodeid, add_generates_event=False)
+            event: Any = generator.event
+            event.NodeId = node.nodeid  # the ConditionId
+            event.SourceName = name
+            event.ConditionName = ""
+            setattr(event, "EnabledState/Id", True)
+            event.EnabledState = ua.LocalizedText("Enabled")
+            event.ErrorCode = ""
+            self._conditions[number] = _Condition(number, node.nodeid, generator)
+        server.iserver.isession.add_method_callback(
+            _id(ObjectIds.AcknowledgeableConditionType_Acknowledge, 0),
+            self._acknowledge)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
                    initial: Any, node_key: str | None = None,
@@ -519,9 +713,31 @@ class _Session(InternalSession):
         users = self.owner.users
         users.x509 = isinstance(params.UserIdentityToken, ua.X509IdentityToken)
         try:  # (synchronous: no other session activates meanwhile)
-            return super().activate_session(params, peer_certificate)
+            result = super().activate_session(params, peer_certificate)
         finally:
             users.x509 = False
+        self.owner.sessions.add(self)
+        self.owner.clients_changed()
+        return result
+
+    async def close_session(self, delete_subs: bool = True) -> None:
+        try:
+            await super().close_session(delete_subs)
+        finally:
+            self.owner.sessions.discard(self)
+            self.owner.clients_changed()
+
+    async def create_subscription(self, params: ua.CreateSubscriptionParameters,
+                                  callback: Any, request_callback: Any = None,
+                                  ) -> ua.CreateSubscriptionResult:
+        result = await super().create_subscription(params, callback, request_callback)
+        self.owner.clients_changed()
+        return result
+
+    async def delete_subscriptions(self, ids: list[int]) -> list[ua.StatusCode]:
+        result = await super().delete_subscriptions(ids)
+        self.owner.clients_changed()
+        return result
 
     def _who(self) -> str:
         user = self.user

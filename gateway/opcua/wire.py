@@ -6,7 +6,7 @@ it).
 Gateway -> server: ``("start", OpcuaConfig, layout)``, ``("batch", [(kind, item), ...])``,
 ``("result", n, Reason | None | "error")``, ``("stop",)``.
 Server -> gateway: ``("ready", port)``, ``("error", text)``,
-``("write", n, key, value, who)``.
+``("write", n, key, value, who)``, ``("clients", sessions, subscriptions)``.
 """
 
 from __future__ import annotations

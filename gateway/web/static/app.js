@@ -621,6 +621,13 @@ function renderFieldbus() {
                   c.heartbeat_ms + " ms" + (c.masters_lost.length ? ", master lost: node " +
                   c.masters_lost.join(", ") : "")));
   } else box.append(el("p", null, "CANopen off"));
+  const u = status.fieldbus.opcua;
+  if (u) {  // its endpoint, its clients, what they wrote (docs/opcua.md)
+    box.append(el("p", null, "OPC UA " + u.endpoint + " (security " + u.security + ", " +
+                  (u.writable.length ? "writes " + u.writable.join(", ") : "read-only") + "): " +
+                  u.sessions + " sessions, " + u.subscriptions + " subscriptions, " +
+                  u.writes + " writes, " + u.refused + " refused"));
+  } else box.append(el("p", null, "OPC UA off"));
 }
 function describe(ev) {
   const skip = new Set(["seq", "t", "event", "proc", "prog", "line", "n"]);

@@ -90,7 +90,7 @@ async def test_the_cell_is_found_under_machines_by_its_type_with_its_identificat
     machine_tool_type = f"ns={namespaces.index(MACHINE_TOOL)};i=13"
     found = [c for c in children if c["type"] == machine_tool_type]
     assert [c["name"] for c in found] == [f"{NCGATE}|ncgate"]
-    ident = [(MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINERY, "Identification")]
+    ident = [(MACHINERY, "Machines"), (NCGATE, "ncgate"), (DI, "Identification")]
     read = {}
     for name in ("Manufacturer", "Model", "SoftwareRevision", "ProductInstanceUri"):
         node = await ua_client.call("translate", path=[*ident, (DI, name)])
@@ -196,7 +196,8 @@ async def test_a_write_of_a_writable_region_goes_through_the_door_traced_opcua(
             http.get(f"http://{host}:{port}/api/status") as r:
         status = (await r.json())["fieldbus"]["opcua"]
     assert status == {"endpoint": gw.opcua_endpoint, "security": "none",
-                      "writable": ["sa_bits"], "writes": 1, "refused": 1}
+                      "writable": ["sa_bits"], "sessions": 1, "subscriptions": 0,
+                      "writes": 1, "refused": 1}
 
 
 async def test_a_ua_client_satisfies_a_wai_by_writing_sa10_and_sees_the_process_resume(
@@ -260,3 +261,97 @@ async def test_a_session_with_a_ua_write_is_recorded_as_opcua_and_replays_withou
     assert len(writes) == 1 and writes[0]["who"].startswith("opcua 127.0.0.1:"), writes
     result = replay(record)
     assert result.divergence is None, result.divergence
+
+
+async def test_act_program_name_and_act_main_program_name_both_name_the_started_program(
+        gw: Gateway, ua_client: UaClient) -> None:
+    # Neither dialect calls subprograms (docs/language.md, docs/isg.md): the program a
+    # process runs is the one its start, cycle start or EXE loaded, so both nodes name it.
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    channel = [(CNC, "CncInterface"), (CNC, "CncChannelList"), (NCGATE, "Process 1")]
+    name = await ua_client.call("translate", path=[*channel, (CNC, "ActProgramName")])
+    main = await ua_client.call("translate", path=[*channel, (CNC, "ActMainProgramName")])
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("monitor", tag="main", node=main)
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")  # inside A, at its (WAI,SA10=1)
+    await ua_client.until("main", lambda seen: seen[-1:] == ["A"])
+    assert await ua_client.call("read", node=name) == "A"
+    assert await ua_client.call("read", node=main) == "A"
+
+
+REFRESH_START, REFRESH_END = "ns=0;i=2787", "ns=0;i=2788"  # RefreshStart/EndEventType
+CONDITION_FIELDS = [["", "EventId"], ["", "EventType"], ["", "ConditionId"], ["", "Retain"],
+                    ["", "ActiveState.Id"], ["", "AckedState.Id"], [MACHINE_TOOL, "ErrorCode"]]
+
+
+async def test_an_alarm_is_a_condition_a_client_acknowledges_and_condition_refresh_resends(
+        gw: Gateway, ua_client: UaClient) -> None:
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await ua_client.call("translate", path=[
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
+        (MACHINE_TOOL, "Messages")])
+    subscription = await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
+    # asyncua sends RefreshStart and RefreshEnd from the Server object only.
+    await ua_client.call("events", tag="server", node="i=2253", fields=[["", "EventType"]])
+
+    def conditions(seen: list[Any]) -> list[Any]:
+        return [e for e in seen if e[1].endswith(";i=39")]  # AlertType's
+
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")
+    gw.write("SA10", 1)
+    await gw.wait_state(1, "ALARM")
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 1)
+    event_id, _, condition, retain, active, acked, code = conditions(seen)[0]
+    assert (retain, active, acked, code) == (True, True, False, "AL111")
+
+    # Acknowledged: still active (the alarm stays until a reset), still retained.
+    acknowledge = "ns=0;i=9111"  # AcknowledgeableConditionType's Acknowledge
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", event_id], ["LocalizedText", "seen"]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 2)
+    acked_id, _, same, retain, active, acked, _ = conditions(seen)[1]
+    assert (same, retain, active, acked) == (condition, True, True, True)
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", acked_id], ["LocalizedText", "again"]]) == (
+        "BadConditionBranchAlreadyAcked")
+    assert await ua_client.call("call", object=condition, method=acknowledge, args=[
+        ["ByteString", event_id], ["LocalizedText", "stale"]]) == "BadEventIdUnknown"
+
+    # ConditionRefresh: the retained condition again (a new event of the same condition).
+    refresh = ("ns=0;i=2782", "ns=0;i=3875")  # ConditionType, its ConditionRefresh
+    assert await ua_client.call("call", object=refresh[0], method=refresh[1],
+                                args=[["UInt32", subscription]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 3)
+    assert conditions(seen)[2][2:6] == [condition, True, True, True]
+    brackets = await ua_client.until("server", lambda seen: [REFRESH_END] in seen)
+    assert brackets == [[REFRESH_START], [REFRESH_END]]
+
+    # A reset ends the alarm: inactive and acknowledged, so no longer retained.
+    gw.command(3, process=1)  # reset
+    seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 4)
+    assert conditions(seen)[3][2:6] == [condition, False, False, True]
+
+
+async def test_the_cell_s_alarm_is_a_condition_active_until_a_client_acknowledges_it(
+        gw: Gateway, ua_client: UaClient) -> None:
+    # A fieldbus alarm (process 0) stops nothing and is pending nowhere in ncgate: only the
+    # acknowledge ends its condition.
+    from ncgate.inputs import FieldbusAlarm
+
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await ua_client.call("translate", path=[
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
+        (MACHINE_TOOL, "Messages")])
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
+    gw.apply(FieldbusAlarm(150, "node 5's heartbeat stopped"))
+    seen = await ua_client.until("alarms", lambda seen: len(seen) == 1)
+    event_id, _, condition, *states, code = seen[0]
+    assert (states, code) == ([True, True, False], "AL150")
+    assert await ua_client.call("call", object=condition, method="ns=0;i=9111", args=[
+        ["ByteString", event_id], ["LocalizedText", "replaced the cable"]]) == "Good"
+    seen = await ua_client.until("alarms", lambda seen: len(seen) == 2)
+    assert seen[1][2:6] == [condition, False, False, True]

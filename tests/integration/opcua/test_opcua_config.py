@@ -92,3 +92,26 @@ def test_a_certificate_user_is_a_path_beside_the_config_and_other_tables_are_ref
     config.write_text('[opcua.users]\nbob = { cert = "bob.crt" }\n')
     with pytest.raises(ConfigError, match=r"opcua\.users\.bob"):
         load_config(config)
+
+
+def test_trusted_takes_files_and_folders_beside_the_config_and_is_needed_beyond_loopback(
+        tmp_path: Path) -> None:
+    (tmp_path / "pki").mkdir()
+    (tmp_path / "ua.crt").write_text("")
+    config = tmp_path / "cell.toml"
+    secure = ('[opcua]\nsecurity = "sign"\ncertificate = "ua.crt"\nprivate_key = "ua.crt"\n')
+    config.write_text(secure + 'trusted = ["pki", "ua.crt"]\n')
+    assert load_config(config).opcua.trusted == (tmp_path / "pki", tmp_path / "ua.crt")
+    config.write_text(secure + 'trusted = ["pki", "gone.pem"]\n')
+    with pytest.raises(ConfigError, match=r"opcua\.trusted\[1\]: no such file"):
+        load_config(config)
+    # Beyond loopback, an empty list would let in any client that makes a certificate.
+    config.write_text(secure + 'host = "0.0.0.0"\n')
+    with pytest.raises(ConfigError, match=r"opcua\.trusted: .*0\.0\.0\.0"):
+        load_config(config)
+    config.write_text(secure + 'host = "0.0.0.0"\ntrusted = "pki"\n')
+    assert load_config(config).opcua.trusted == (tmp_path / "pki",)
+    # Without security no client certificate is exchanged: a list would be a false comfort.
+    config.write_text('[opcua]\ntrusted = ["pki"]\n')
+    with pytest.raises(ConfigError, match=r"opcua\.trusted: .*sign"):
+        load_config(config)

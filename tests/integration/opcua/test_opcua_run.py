@@ -50,7 +50,7 @@ async def test_run_opcua_serves_the_cell_and_stops_cleanly_on_sigterm(
     proc, port, lines = await start_run(tmp_path)
     await ua_client.call("connect", url=f"opc.tcp://127.0.0.1:{port}/")
     node = await ua_client.call("translate", path=[
-        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINERY, "Identification"),
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (DI, "Identification"),
         (DI, "Manufacturer")])
     assert await ua_client.call("read", node=node) == "ncgate (virtual)"
     await ua_client.call("close")

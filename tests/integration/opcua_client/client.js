@@ -65,11 +65,16 @@ const ops = {
             tokens: (e.userIdentityTokens || []).map(t => UserTokenType[t.tokenType]),
         }));
     },
-    async connect({url, user, password, mode, policy, certificate, key}) {
+    // certificate/key: an X.509 user identity; application: the client's own application
+    // certificate {certificate, key, uri} for the secure channel (else node-opcua's own).
+    async connect({url, user, password, mode, policy, certificate, key, application}) {
         client = OPCUAClient.create({
             endpointMustExist: false, connectionStrategy: {maxRetry: 0},
             securityMode: MessageSecurityMode[mode || "None"],
             securityPolicy: SecurityPolicy[policy || "None"],
+            ...(application ? {certificateFile: application.certificate,
+                               privateKeyFile: application.key,
+                               applicationUri: application.uri} : {}),
         });
         await client.connect(url);
         const identity = certificate
@@ -101,6 +106,66 @@ const ops = {
             cls: NodeClass[r.nodeClass],
         }));
     },
+    // Every node reached from `from` by forward hierarchical references (HasComponent,
+    // HasProperty, Organizes, HasSubtype, ...): the start nodes' children, and below them
+    // only nodes outside namespace 0 and outside the namespaces `skip` names.  Variables
+    // carry their DataType and ValueRank, enumerations (DataTypes) their values' names.
+    async walk({from, skip}) {
+        const skipped = new Set(["http://opcfoundation.org/UA/", ...(skip || [])]);
+        const found = [];
+        const seen = new Set();
+        let level = from.map(nodeId);
+        while (level.length) {
+            const results = await session.browse(level.map(n => ({
+                nodeId: n, browseDirection: BrowseDirection.Forward, includeSubtypes: true,
+                referenceTypeId: "i=33", resultMask: 63})));  // HierarchicalReferences
+            const next = [];
+            results.forEach((result, i) => {
+                for (const r of result.references || []) {
+                    const target = r.nodeId.toString();
+                    found.push({
+                        parent: level[i], node: target, ref: r.referenceTypeId.toString(),
+                        name: `${namespaces[r.browseName.namespaceIndex]}|${r.browseName.name}`,
+                        cls: NodeClass[r.nodeClass], type: r.typeDefinition.toString(),
+                        ns: namespaces[r.nodeId.namespace],
+                    });
+                    if (!seen.has(target) && !skipped.has(namespaces[r.nodeId.namespace])) {
+                        seen.add(target);
+                        next.push(target);
+                    }
+                }
+            });
+            level = next;
+        }
+        const variables = found.filter(f => f.cls === "Variable");
+        for (let i = 0; i < variables.length; i += 500) {
+            const chunk = variables.slice(i, i + 500);
+            const reads = chunk.flatMap(v => [
+                {nodeId: v.node, attributeId: AttributeIds.DataType},
+                {nodeId: v.node, attributeId: AttributeIds.ValueRank}]);
+            const values = await session.read(reads);
+            chunk.forEach((v, j) => {
+                v.datatype = values[2 * j].value.value.toString();
+                v.rank = values[2 * j + 1].value.value;
+            });
+        }
+        // An enumeration's names by value (its DataTypeDefinition's fields).
+        for (const d of found.filter(f => f.cls === "DataType")) {
+            const dv = await session.read({nodeId: d.node,
+                                           attributeId: AttributeIds.DataTypeDefinition});
+            const fields = dv.value.value && dv.value.value.fields;
+            if (fields && fields.length && fields[0].value !== undefined) {
+                const names = [];
+                for (const f of fields) {  // an Int64: node-opcua's [high, low]
+                    const v = Array.isArray(f.value) ? f.value[0] * 2 ** 32 + f.value[1]
+                                                     : Number(f.value);
+                    names[v] = f.name;
+                }
+                d.enum = Array.from(names, n => n === undefined ? "?" : n);
+            }
+        }
+        return found;
+    },
     async write({node, type, value}) {
         const code = await session.write({nodeId: nodeId(node), attributeId: AttributeIds.Value,
                                           value: {value: {dataType: DataType[type], value}}});
@@ -112,7 +177,18 @@ const ops = {
             requestedMaxKeepAliveCount: 20, maxNotificationsPerPublish: 0,
             publishingEnabled: true, priority: 1,
         });
-        return subscription.publishingInterval;
+        return subscription.subscriptionId;
+    },
+    // A method call: its status code's name.  args: [[DataType name, value], ...]; a
+    // ByteString is an array of bytes, a LocalizedText its text.
+    async call({object, method, args}) {
+        const result = await session.call({
+            objectId: nodeId(object), methodId: nodeId(method),
+            inputArguments: (args || []).map(([type, value]) => ({
+                dataType: DataType[type],
+                value: type === "ByteString" ? Buffer.from(value)
+                     : type === "LocalizedText" ? {text: value} : value}))});
+        return result.statusCode.name;
     },
     async monitor({tag, node, queue}) {
         const item = ClientMonitoredItem.create(subscription,
