@@ -304,6 +304,7 @@ class Space:
         self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
         self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
         self._values: dict[str, Any] = {}  # what each node shows now
+        self._last_image: tuple[bytes, tuple[int, ...]] = (b"", ())  # SK, SYVAR shown
         self._conditions: dict[int, _Condition] = {}  # by process (0: the cell)
         self._messages: EventGenerator | None = None
         self.image_ns = 0
@@ -437,8 +438,14 @@ class Space:
             self._values[f"SA.{i}"] = byte
             for bit in range(8):
                 values[f"SA{8 * i + bit}"] = bool(byte >> bit & 1)
-        values.update((f"SK{i}", byte) for i, byte in enumerate(k))
-        values.update((f"SYVAR{i}", word) for i, word in enumerate(syvar))
+        # Only what differs from the last image is looked at: a scan changes a few of the
+        # 768 bytes and words, and an image comes every loop turn that wrote one.
+        last_k, last_syvar = self._last_image
+        self._last_image = (k, syvar)
+        values.update((f"SK{i}", byte) for i, (byte, was) in
+                      enumerate(itertools.zip_longest(k, last_k)) if byte != was)
+        values.update((f"SYVAR{i}", word) for i, (word, was) in
+                      enumerate(itertools.zip_longest(syvar, last_syvar)) if word != was)
         await self._show(values)
 
     async def _raise(self, e: EventView) -> None:
