@@ -303,7 +303,9 @@ class ViewPublisher:
         self._loop = asyncio.get_running_loop()
         self._expiring = False
         self._listeners = backend.engine.state_listeners
-        self._listeners.append(self._changed)
+        # First of them: a listener that reads the view (the CANopen node building a TPDO
+        # on a state change) must find it stale, whenever it subscribed.
+        self._listeners.insert(0, self._changed)
 
     def _changed(self, process: Process | None, old: ProcessState) -> None:
         self._changes += 1

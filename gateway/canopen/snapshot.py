@@ -20,7 +20,7 @@ Imports the dictionary's layout only; nothing of canopen, the engine or the imag
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ncgate.gateway.canopen.dictionary import (
@@ -75,7 +75,7 @@ def getter(index: int, subindex: int) -> Callable[[Snapshot], int]:
     raise ValueError(f"0x{index:04X}:{subindex} is not a mappable value")
 
 
-def plc_record(registers: list[int]) -> tuple[int, ...]:
+def plc_record(registers: Sequence[int]) -> tuple[int, ...]:
     """0x2700 sub 1..6 from the PLC status block (``ncgate.gateway.plc.plc_registers``):
     the state, four 32-bit counters (high word first), the fault line."""
     return (registers[0], *(registers[2 * s - 3] << 16 | registers[2 * s - 2]
