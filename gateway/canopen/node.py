@@ -8,7 +8,9 @@ image reads use an immutable snapshot that the loop publishes after every write,
 the write's values are stored (so never half a request), which keeps SDO reads of the image
 prompt however busy the loop is.  A SYNC's TPDOs are built on that thread from the same
 snapshot, which holds the processes' status, the last SND and the PLC status too, published
-from the node's state and trace listeners (``snapshot``).
+from the node's state and trace listeners (``snapshot``).  The loop takes those from the
+cell's view (:attr:`ncgate.gateway.Gateway.view`, ``gateway/view.py``: the one encoding of a
+process's status record), never from the engine itself.
 
 The rooms:
 
