@@ -373,13 +373,19 @@ class Gateway:
     def view(self) -> CellView:
         """The cell as the adapters read it (:mod:`ncgate.gateway.view`), on the loop: built
         when the cell changed since the last one was, and only once something reads it."""
+        return self.views.current()
+
+    @property
+    def views(self) -> ViewPublisher:
+        """What builds :attr:`view` (on the loop), and gives one process's view or the last
+        SND alone to a reader inside the engine's turn; made when first asked for."""
         views = self._views
         if views is None:
             driver = self._driver
             if driver is None:
                 raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
             views = self._views = ViewPublisher(self, lambda: driver.turns)
-        return views.current()
+        return views
 
     def status(self, process: int) -> ProcessStatus:
         return self.engine.status(process)

@@ -27,7 +27,7 @@ from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 if TYPE_CHECKING:
     from ncgate.gateway.plant import Plant
-    from ncgate.gateway.view import CellView
+    from ncgate.gateway.view import CellView, ViewPublisher
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
@@ -137,6 +137,9 @@ class Backend(Protocol):
 
     @property
     def view(self) -> CellView: ...
+
+    @property
+    def views(self) -> ViewPublisher: ...  # one process's view, the last SND, on the loop
 
     @property
     def image(self) -> IOImage: ...

@@ -98,7 +98,6 @@ from ncgate.gateway.canopen.snapshot import Snapshot, getter, plc_record
 from ncgate.gateway.door import SEARCH_WORDS, search_inputs
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.ratelimit import RateLimitedLog
-from ncgate.gateway.view import CellView
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import (
     Command,
@@ -392,8 +391,10 @@ class CanopenNode:
         if index < COMMAND:
             return lambda: self._image_value(index, subindex)
         if STATUS_BASE <= index < LAST_SND:
-            k, j = index - STATUS_BASE, subindex - 1
-            return lambda: self.backend.view.processes[k].record[j]
+            views, k, j = self.backend.views, index - STATUS_BASE + 1, subindex - 1
+            if j == 0:  # the state alone: TPDO1's, built inside every state change
+                return lambda: views.state(k)
+            return lambda: views.process(k).record[j]
         return lambda: self._read(index, subindex)
 
     @property
@@ -413,12 +414,13 @@ class CanopenNode:
             for k in heard:
                 if 1 <= k <= len(status):
                     status[k - 1] = self._status_record(k)
-            cell = self.backend.view
-            self._view = replace(view, status=tuple(status), last_snd=_last_snd(cell),
-                                 plc=plc_record(cell.plc_registers))
+            self._view = replace(view, status=tuple(status),
+                                 last_snd=_last_snd(self.backend.views.last_snd()),
+                                 plc=plc_record(self.backend.views.plc_registers()))
         elif 0 in heard:  # (the records stay noted, for the end of the loop's callback)
             heard.discard(0)
-            self._view = replace(self._view, last_snd=_last_snd(self.backend.view))
+            self._view = replace(self._view,
+                                 last_snd=_last_snd(self.backend.views.last_snd()))
         return self._view
 
     def sample(self) -> Snapshot:
@@ -428,7 +430,7 @@ class CanopenNode:
         self._heard = set()
         cell = self.backend.view
         self._view = replace(self._view, status=tuple(
-            p.canopen_record for p in cell.processes), last_snd=_last_snd(cell),
+            p.canopen_record for p in cell.processes), last_snd=_last_snd(cell.last_snd),
             plc=plc_record(cell.plc_registers))
         return self._view
 
@@ -683,7 +685,7 @@ class CanopenNode:
 
     def _status_record(self, k: int) -> tuple[int, ...]:
         """0x2500+k-1 sub 1..8, as process k is now (loop): the cell view's record."""
-        return self.backend.view.processes[k - 1].canopen_record
+        return self.backend.views.process(k).canopen_record
 
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.view.processes)
@@ -697,16 +699,16 @@ class CanopenNode:
         the cell's view."""
         if index < COMMAND:
             return self._image_value(index, subindex)
-        cell = self.backend.view
+        views = self.backend.views  # (the part asked for: a TPDO's frame is built per event)
         if STATUS_BASE <= index < LAST_SND:
-            return cell.processes[index - STATUS_BASE].record[subindex - 1]
+            return views.process(index - STATUS_BASE + 1).record[subindex - 1]
         if index == LAST_SND:
-            return _last_snd(cell)[subindex - 1]
+            return _last_snd(views.last_snd())[subindex - 1]
         if index in OVERRIDE_TOP:
-            p = cell.processes[subindex - 1]
+            p = views.process(subindex)
             return p.feed_override if index == FEED_OVERRIDE else p.rapid_override
         if index == PLC_STATUS:
-            return plc_record(cell.plc_registers)[subindex - 1]
+            return plc_record(self.backend.views.plc_registers())[subindex - 1]
         raise SdoAbortedError(ABORT_READ_WRITEONLY)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
@@ -1039,7 +1041,7 @@ def _check_server_cob_id(current: int, cob: int, node_id: int) -> None:
         raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
-def _last_snd(cell: CellView) -> tuple[int, int, int, int]:
-    """0x2600 sub 1..4: the event number, sender, target, block N."""
-    sender, target, n, number = cell.last_snd
+def _last_snd(last: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    """0x2600 sub 1..4 (the event number, sender, target, block N) of the view's last SND."""
+    sender, target, n, number = last
     return number & 0xFFFFFFFF, sender, target, n & 0xFFFF
