@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from ncgate.config.script import load_script
 from ncgate.gateway import Gateway, load_config
 from ncgate.gateway import view as cell_view
+from ncgate.gateway.sim import run_sim
 from ncgate.inputs import Source, SourceKind
 from ncgate.interpreter.engine import Process, ProcessState
 
@@ -33,6 +35,15 @@ def _counting(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
     monkeypatch.setattr(cell_view, "build", counted)
     return builds
+
+
+def test_a_sim_builds_no_view(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # ncgate sim's speed is a measured target: the view is the gateway's, built on demand.
+    builds = _counting(monkeypatch)
+    monkeypatch.setattr(cell_view, "_process", lambda *args: builds.append(1))
+    config = load_config(_cell(tmp_path, "N1(DLY,0.5)\nN2(WAI,SK7=3)\nN3M30\n"))
+    result = run_sim(config, "A", load_script(None), until=2.0)
+    assert result.outcome in ("stall", "until") and builds == []
 
 
 async def test_a_gateway_no_adapter_reads_builds_no_view(
