@@ -128,8 +128,25 @@ class PlcView(NamedTuple):
     fault: str | None
 
 
+class CellStatus(NamedTuple):
+    """What the cell shows beside its processes, as of one moment of the loop: the
+    :class:`CellView` without ``processes`` (a reader of the PLC status block builds no
+    process's view)."""
+
+    t: float
+    last_snd: tuple[int, int, int, int]
+    snd_seq: int
+    snd_log: tuple[tuple[int, int, int, int, int], ...]
+    events: int
+    plc: PlcView | None
+    plc_registers: tuple[int, ...]
+    forced: tuple[tuple[tuple[str, int, str], int], ...]
+    lag_s: float
+
+
 class CellView(NamedTuple):
-    """The cell as of one moment of the loop (a NamedTuple, as :class:`ProcessView`)."""
+    """The cell as of one moment of the loop (a NamedTuple, as :class:`ProcessView`): its
+    :class:`CellStatus` with the processes after ``t``."""
 
     t: float  # machine time
     processes: tuple[ProcessView, ...]  # process k at [k - 1]
@@ -170,23 +187,30 @@ def int32(value: float) -> int:
     return round(min(max(value, -0x8000_0000), 0x7FFF_FFFF))
 
 
-def build(backend: Backend, processes: tuple[ProcessView, ...] | None = None) -> CellView:
-    """The view of the cell as it is now (on the loop); ``processes``: theirs, built already
-    (:meth:`ViewPublisher.process`)."""
-    engine = backend.engine
+def build(backend: Backend, processes: tuple[ProcessView, ...] | None = None,
+          cell: CellStatus | None = None) -> CellView:
+    """The view of the cell as it is now (on the loop); ``processes`` and ``cell``: built
+    already (:meth:`ViewPublisher.process`, :meth:`ViewPublisher.status`)."""
     if processes is None:
-        processes = tuple(_process(backend, p) for p in engine.processes.values())
+        processes = tuple(_process(backend, p) for p in backend.engine.processes.values())
+    if cell is None:
+        cell = cell_status(backend)
+    return CellView(cell.t, processes, *cell[1:])
+
+
+def cell_status(backend: Backend) -> CellStatus:
+    """The cell's status beside its processes, as it is now (on the loop)."""
+    engine = backend.engine
     status = backend.plc_status
     plc = None if status is None else PlcView(
         status.state.name, status.scans, status.last_scan_us, status.max_scan_us,
         status.overruns, status.last_lateness_us, status.max_lateness_us,
         str(status.fault) if status.fault is not None else None)
     forced = backend.image.forced
-    return CellView(
-        t=engine.now, processes=processes, last_snd=engine.last_snd or (0, 0, 0, 0),
-        snd_seq=engine.snd_seq, snd_log=tuple(engine.snd_log), events=engine.trace.counter,
-        plc=plc, plc_registers=tuple(plc_registers(status)),
-        forced=tuple(sorted(forced.items())) if forced else (), lag_s=backend.lag_s)
+    return CellStatus(
+        engine.now, engine.last_snd or (0, 0, 0, 0), engine.snd_seq, tuple(engine.snd_log),
+        engine.trace.counter, plc, tuple(plc_registers(status)),
+        tuple(sorted(forced.items())) if forced else (), backend.lag_s)
 
 
 def _signature(p: Process) -> tuple[object, ...] | None:
@@ -195,8 +219,9 @@ def _signature(p: Process) -> tuple[object, ...] | None:
     (its position follows the clock), while a feed hold is on (the interlock input says why)
     and in a wait whose why-record reads something live (a condition's value and writer, a
     dialect's own wording)."""
-    if p.int_move is not None or p.int_remaining is not None or p.held:
-        return None
+    item = p.int_move
+    if (item is not None and item.move is not None and p.int_remaining is None) or p.held:
+        return None  # (a dwell or a paused move stands where it is)
     for wait in (p.int_wait, p.dec_wait):
         if wait is not None and (wait.kind is WaitKind.COND or wait.probe is not None
                                  or callable(wait.text)):
@@ -204,7 +229,8 @@ def _signature(p: Process) -> tuple[object, ...] | None:
     stats = p.stats
     return (p.state, p.where, p.alarm, stats.blocks, stats.snd_sent, stats.snd_received,
             p.int_wait, p.dec_wait, p.stopped, p.single_block, p.feed_override,
-            p.rapid_override, p.loaded, p.modal.feed_mm_min, p.motion_active)
+            p.rapid_override, p.loaded, p.modal.feed_mm_min, p.motion_active, item,
+            p.int_remaining)
 
 
 def _process(backend: Backend, p: Process) -> ProcessView:
@@ -291,6 +317,7 @@ class ViewPublisher:
         self._changes = 0
         self._key: tuple[int, int, int] | None = None
         self._view: CellView | None = None  # the whole view at _key, once built
+        self._status: CellStatus | None = None  # the cell's status at _key, once built
         self._processes: dict[int, ProcessView] = {}  # those built at _key
         # Each process's last view and what it was built from (its signature).
         self._kept: dict[int, tuple[tuple[object, ...], ProcessView]] = {}
@@ -318,6 +345,7 @@ class ViewPublisher:
         if key != self._key:
             self._key = key
             self._view = None
+            self._status = None
             self._processes = {}
 
     def current(self) -> CellView:
@@ -325,8 +353,16 @@ class ViewPublisher:
         view = self._view
         if view is None:
             view = self._view = build(self._backend, tuple(
-                self.process(k) for k in self._engine.processes))
+                self.process(k) for k in self._engine.processes), self.status())
         return view
+
+    def status(self) -> CellStatus:
+        """The cell's status beside its processes as of now (what :meth:`current` shows)."""
+        self._fresh()
+        cell = self._status
+        if cell is None:
+            cell = self._status = cell_status(self._backend)
+        return cell
 
     def process(self, k: int) -> ProcessView:
         """Process ``k``'s view as of now (what :meth:`current` would show of it)."""

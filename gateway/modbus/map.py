@@ -26,7 +26,7 @@ from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
 from ncgate.gateway.plc import PLC_REGISTERS
 from ncgate.gateway.view import FLAGS as PROCESS_FLAGS
-from ncgate.gateway.view import RECORD, CellView, status_registers
+from ncgate.gateway.view import RECORD, CellStatus, ViewPublisher, status_registers
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import (
     FEED_OVERRIDE_MAX,
@@ -266,11 +266,11 @@ class ModbusMap:
         if region.kind is Kind.SA_BITS:
             sa = backend.image.sa
             return [bool(sa[i >> 3] >> (i & 7) & 1) for i in range(address, address + count)]
-        processes = backend.view.processes
+        views = backend.views
         out = []
         for a in range(address, address + count):
             k, bit = divmod(a, self.FLAGS_STRIDE)
-            out.append(bit < len(PROCESS_FLAGS) and processes[k].flags[bit])
+            out.append(bit < len(PROCESS_FLAGS) and views.process(k + 1).flags[bit])
         return out
 
     def read_registers(self, backend: Backend, table: Table, address: int,
@@ -304,28 +304,30 @@ class ModbusMap:
             return [0] * count
         if kind is Kind.SEARCH:
             return [self.search_n]
-        # The rest is the cell's status: its view, built once for however many reads.
-        view = backend.view
+        # The rest is the cell's status: the parts of its view a region shows, each built
+        # once for however many reads (a poller of the PLC block builds no process's view).
+        views = backend.views
         if kind is Kind.FORCE_LIST:
-            return force_list_registers(view.forced)[first:first + count]
+            return force_list_registers(views.status().forced)[first:first + count]
         if kind is Kind.INFO:
-            return _info(view)[first:first + count]
+            return _info(views.status(), self.config.nc.processes)[first:first + count]
         if kind is Kind.SND_LOG:
-            return snd_log_registers(view)[first:first + count]
+            return snd_log_registers(views.status())[first:first + count]
         if kind is Kind.PLC_STATUS:
-            return list(view.plc_registers[first:first + count])
+            return list(views.status().plc_registers[first:first + count])
         if kind is Kind.OVERRIDES:
-            values = [v for p in view.processes for v in (p.feed_override, p.rapid_override)]
+            values = [v for k in range(1, self.config.nc.processes + 1)
+                      for v in (views.process(k).feed_override, views.process(k).rapid_override)]
             return values[first:first + count]
-        return self._status_registers(view, address, count)
+        return self._status_registers(views, address, count)
 
-    def _status_registers(self, view: CellView, address: int, count: int) -> list[int]:
+    def _status_registers(self, views: ViewPublisher, address: int, count: int) -> list[int]:
         cache: dict[int, list[int]] = {}
         out = []
         for a in range(address, address + count):
             k, offset = divmod(a - self.STATUS_BASE, self.STATUS_STRIDE)
             if k not in cache:
-                cache[k] = process_registers(view, k + 1)
+                cache[k] = process_registers(views, k + 1)
             out.append(cache[k][offset] if offset < len(PROCESS_REGISTERS) else 0)
         return out
 
@@ -542,11 +544,11 @@ class ModbusMap:
         return "\n".join(lines) + "\n"
 
 
-def _info(view: CellView) -> list[int]:
-    counter = view.events
-    sender, target, n, number = view.last_snd
-    return [MAP_VERSION, len(view.processes), counter >> 16 & 0xFFFF, counter & 0xFFFF,
-            sender, target, n & 0xFFFF, number & 0xFFFF, min(round(view.lag_s * 1000), 0xFFFF)]
+def _info(cell: CellStatus, processes: int) -> list[int]:
+    counter = cell.events
+    sender, target, n, number = cell.last_snd
+    return [MAP_VERSION, processes, counter >> 16 & 0xFFFF, counter & 0xFFFF,
+            sender, target, n & 0xFFFF, number & 0xFFFF, min(round(cell.lag_s * 1000), 0xFFFF)]
 
 
 def force_list_registers(forced: Sequence[tuple[tuple[str, int, str], int]]) -> list[int]:
@@ -559,18 +561,18 @@ def force_list_registers(forced: Sequence[tuple[tuple[str, int, str], int]]) -> 
     return regs
 
 
-def snd_log_registers(view: CellView) -> list[int]:
+def snd_log_registers(cell: CellStatus) -> list[int]:
     """The SND log window: the newest sequence number (u32), then the entries newest first."""
-    seq = view.snd_seq
+    seq = cell.snd_seq
     regs = [seq >> 16 & 0xFFFF, seq & 0xFFFF]
-    for number, sender, target, n, ident in reversed(view.snd_log):
+    for number, sender, target, n, ident in reversed(cell.snd_log):
         regs += [number >> 16 & 0xFFFF, number & 0xFFFF, sender, target, n & 0xFFFF,
                  ident & 0xFFFF]
     regs += [0] * (ModbusMap.LOG_SIZE - len(regs))
     return regs
 
 
-def process_registers(view: CellView, k: int) -> list[int]:
+def process_registers(views: ViewPublisher, k: int) -> list[int]:
     """Process k's status block (the view's one encoding of it)."""
-    return status_registers(view.processes[k - 1])
+    return status_registers(views.process(k))
 
