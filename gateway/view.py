@@ -4,7 +4,9 @@ a process's status that the Modbus map, the CANopen node and the console share.
 The loop owns the engine and the image (ARCHITECTURE.md, "The runtime").  An adapter reads
 the cell through :attr:`ncgate.gateway.Gateway.view`, which the loop builds when someone asks
 for it and something changed since the last one (:class:`ViewPublisher`): once however many
-requests read it, and never in ``ncgate sim`` or a gateway nobody reads.  What a view holds
+requests read it, and never in ``ncgate sim`` or a gateway nobody reads.  A reader that shows
+a part takes that part (:attr:`ncgate.gateway.Gateway.views`: one process's view, the cell's
+status beside the processes), each kept at the same moment as the whole.  What a view holds
 never changes, so a view may be handed to another thread (the CANopen node publishes from one
 to python-can's receive thread) and kept as long as it is wanted.
 
@@ -159,10 +161,6 @@ class CellView(NamedTuple):
     plc_registers: tuple[int, ...]  # the PLC status block (gateway.plc.PLC_REGISTERS)
     forced: tuple[tuple[tuple[str, int, str], int], ...]  # ((area, index, view), value), sorted
     lag_s: float  # machine seconds behind the clock
-
-    @property
-    def moving(self) -> bool:
-        return any(p.moving for p in self.processes)
 
 
 def status_registers(p: ProcessView) -> list[int]:
