@@ -375,10 +375,10 @@ class ModbusMap:
         """Feed and rapid of each process the write covers, checked whole first (nothing of
         a bad write is applied), then one Override input per process."""
         per_process: dict[int, dict[str, int]] = {}
-        processes = backend.engine.processes
+        views = backend.views
         for i, value in enumerate(values):
             k, which = divmod(offset + i, 2)
-            if processes[k + 1].external:
+            if views.process(k + 1).external:
                 raise ModbusError(ILLEGAL_VALUE, f"process {k + 1} is external: it has no "
                                   "motion to override")
             name, top = (("feed", FEED_OVERRIDE_MAX) if which == 0 else
