@@ -428,10 +428,10 @@ class CanopenNode:
         line, the PLC status) as they are now, with the rest of the processes' status (on
         the loop)."""
         self._heard = set()
-        cell = self.backend.view
+        views = self.backend.views  # (the parts it maps: after every SYNC that sent them)
         self._view = replace(self._view, status=tuple(
-            p.canopen_record for p in cell.processes), last_snd=_last_snd(cell.last_snd),
-            plc=plc_record(cell.plc_registers))
+            views.process(k).canopen_record for k in range(1, self.config.nc.processes + 1)),
+            last_snd=_last_snd(views.last_snd()), plc=plc_record(views.plc_registers()))
         return self._view
 
     def _hear(self, *processes: int) -> None:
