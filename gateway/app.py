@@ -44,6 +44,7 @@ from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.record import SessionRecorder
 from ncgate.gateway.tracefile import TraceFile
+from ncgate.gateway.view import CellView, ViewPublisher
 from ncgate.gateway.wallclock import WallClockDriver
 from ncgate.gateway.wiring import Runtime, build_runtime, start_plant
 from ncgate.inputs import (
@@ -126,6 +127,7 @@ class Gateway:
         self._load_waits: set[asyncio.Future[None]] = set()  # programs being read
         self._refusals = RateLimitedLog(logging.getLogger("ncgate"))
         self.door: Door  # set on entry: the one way in (:meth:`apply`)
+        self._views: ViewPublisher | None = None  # once an adapter reads the view
 
     async def __aenter__(self) -> Gateway:
         loop = asyncio.get_running_loop()
@@ -229,6 +231,9 @@ class Gateway:
     def _stop_clock(self) -> None:
         if self._driver is not None:
             self._driver.close()
+        if self._views is not None:
+            self._views.close()
+            self._views = None
 
     def _stop_plc(self, plc: tuple[PlcRuntime, ScanDriver]) -> None:
         runtime, scans = plc
@@ -363,6 +368,24 @@ class Gateway:
     def trace(self) -> list[EventDict]:
         """The latest events of spec 4.4 (at most ``trace.ring`` of them), as dicts."""
         return self.runtime.trace.events
+
+    @property
+    def view(self) -> CellView:
+        """The cell as the adapters read it (:mod:`ncgate.gateway.view`), on the loop: built
+        when the cell changed since the last one was, and only once something reads it."""
+        return self.views.current()
+
+    @property
+    def views(self) -> ViewPublisher:
+        """What builds :attr:`view` (on the loop), and gives one process's view or the last
+        SND alone to a reader inside the engine's turn; made when first asked for."""
+        views = self._views
+        if views is None:
+            driver = self._driver
+            if driver is None:
+                raise GatewayError("the gateway is not running (use 'async with Gateway(...)')")
+            views = self._views = ViewPublisher(self, lambda: driver.turns)
+        return views
 
     def status(self, process: int) -> ProcessStatus:
         return self.engine.status(process)

@@ -43,6 +43,9 @@ class WallClockDriver:
         self._timer_at: float | None = None
         self._soon: asyncio.Handle | None = None
         self.changed = asyncio.Event()
+        # Turns of the engine run so far (each settle and each advance): what it shows may
+        # have changed since a view of it was built (gateway/view.py).
+        self.turns = 0
         self._turn = min(TURN_BLOCKS, engine.settings.slice_blocks)
         # How far (machine seconds) the engine is behind the clock: work that was due is not
         # done yet because the loop had no time for it (a write storm).  Shown in the status
@@ -72,6 +75,7 @@ class WallClockDriver:
     def settle(self) -> None:
         """Run (a slice of) what an outside input made runnable, now; the rest soon."""
         self.engine.run_until_blocked(self._turn)
+        self.turns += 1
         self.kick()
 
     def kick(self) -> None:
@@ -98,6 +102,7 @@ class WallClockDriver:
             self._note_lag(now - self.engine.now)
         elif self.lag_s:
             self.lag_s = 0.0
+        self.turns += 1
         self._arm()
 
     def _note_lag(self, lag: float) -> None:

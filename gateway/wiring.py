@@ -27,6 +27,7 @@ from ncgate.plc.scan import PlcRuntime, PlcStatus
 
 if TYPE_CHECKING:
     from ncgate.gateway.plant import Plant
+    from ncgate.gateway.view import CellView, ViewPublisher
 
 
 def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
@@ -130,8 +131,15 @@ def _image_var(text: str) -> Var:
 
 
 class Backend(Protocol):
-    """What the fieldbus adapters act on (the Gateway): the image and processes, read on the
-    loop, and the one way in (:meth:`ncgate.gateway.Gateway.apply`)."""
+    """What the fieldbus adapters act on (the Gateway): the cell's view (the processes' status
+    and why-records, the SND log, the PLC status, the forces: :mod:`ncgate.gateway.view`),
+    the image, read on the loop, and the one way in (:meth:`ncgate.gateway.Gateway.apply`)."""
+
+    @property
+    def view(self) -> CellView: ...
+
+    @property
+    def views(self) -> ViewPublisher: ...  # one process's view, the last SND, on the loop
 
     @property
     def image(self) -> IOImage: ...

@@ -8,7 +8,9 @@ image reads use an immutable snapshot that the loop publishes after every write,
 the write's values are stored (so never half a request), which keeps SDO reads of the image
 prompt however busy the loop is.  A SYNC's TPDOs are built on that thread from the same
 snapshot, which holds the processes' status, the last SND and the PLC status too, published
-from the node's state and trace listeners (``snapshot``).
+from the node's state and trace listeners (``snapshot``).  The loop takes those from the
+cell's view (:attr:`ncgate.gateway.Gateway.view`, ``gateway/view.py``: the one encoding of a
+process's status record), never from the engine itself.
 
 The rooms:
 
@@ -95,7 +97,6 @@ from ncgate.gateway.canopen.sdo import Deferred, Device, SdoService
 from ncgate.gateway.canopen.snapshot import Snapshot, getter, plc_record
 from ncgate.gateway.door import SEARCH_WORDS, search_inputs
 from ncgate.gateway.errors import listen_error
-from ncgate.gateway.plc import plc_registers
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import (
@@ -112,7 +113,7 @@ from ncgate.inputs import (
     command_word,
 )
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import Engine, Process, ProcessState
+from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 
@@ -385,13 +386,15 @@ class CanopenNode:
 
     def getter(self, index: int, subindex: int) -> Callable[[], int]:
         """A mapped object's value as it is now, for a frame the loop builds of an
-        event-driven TPDO (on the loop only: a SYNC's TPDOs use :attr:`view`)."""
-        engine = self.backend.engine
+        event-driven TPDO (on the loop only: a SYNC's TPDOs use :attr:`view`): the image's
+        from the snapshot, the rest from the cell's view."""
         if index < COMMAND:
             return lambda: self._image_value(index, subindex)
-        if STATUS_BASE <= index < LAST_SND and subindex == 1:
-            k = index - STATUS_BASE + 1
-            return lambda: int(engine.processes[k].state)
+        if STATUS_BASE <= index < LAST_SND:
+            views, k, j = self.backend.views, index - STATUS_BASE + 1, subindex - 1
+            if j == 0:  # the state alone: TPDO1's, built inside every state change
+                return lambda: views.state(k)
+            return lambda: views.process(k).record[j]
         return lambda: self._read(index, subindex)
 
     @property
@@ -412,10 +415,12 @@ class CanopenNode:
                 if 1 <= k <= len(status):
                     status[k - 1] = self._status_record(k)
             self._view = replace(view, status=tuple(status),
-                                 last_snd=_last_snd(self.backend.engine), plc=self._plc_record())
+                                 last_snd=_last_snd(self.backend.views.last_snd()),
+                                 plc=plc_record(self.backend.views.plc_registers()))
         elif 0 in heard:  # (the records stay noted, for the end of the loop's callback)
             heard.discard(0)
-            self._view = replace(self._view, last_snd=_last_snd(self.backend.engine))
+            self._view = replace(self._view,
+                                 last_snd=_last_snd(self.backend.views.last_snd()))
         return self._view
 
     def sample(self) -> Snapshot:
@@ -423,10 +428,10 @@ class CanopenNode:
         line, the PLC status) as they are now, with the rest of the processes' status (on
         the loop)."""
         self._heard = set()
-        engine = self.backend.engine
+        views = self.backend.views  # (the parts it maps: after every SYNC that sent them)
         self._view = replace(self._view, status=tuple(
-            self._status_record(k) for k in range(1, self.config.nc.processes + 1)),
-            last_snd=_last_snd(engine), plc=self._plc_record())
+            views.process(k).canopen_record for k in range(1, self.config.nc.processes + 1)),
+            last_snd=_last_snd(views.last_snd()), plc=plc_record(views.plc_registers()))
         return self._view
 
     def _hear(self, *processes: int) -> None:
@@ -679,37 +684,31 @@ class CanopenNode:
         return getter(index, subindex)(self._view)
 
     def _status_record(self, k: int) -> tuple[int, ...]:
-        """0x2500+k-1 sub 1..8, as process k is now (loop)."""
-        s = self.backend.engine.status(k)
-        return (int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF, int(s.wait_kind),
-                s.wait_target, s.alarm_code & 0xFFFF, s.snd_sent & 0xFFFFFFFF,
-                s.snd_received & 0xFFFFFFFF)
-
-    def _plc_record(self) -> tuple[int, ...]:
-        """0x2700 sub 1..6, as the PLC is now (loop)."""
-        return plc_record(plc_registers(self.backend.plc_status))
+        """0x2500+k-1 sub 1..8, as process k is now (loop): the cell view's record."""
+        return self.backend.views.process(k).canopen_record
 
     def _error_register(self) -> int:
-        alarms = any(p.alarm is not None for p in self.backend.engine.processes.values())
+        alarms = any(p.alarm is not None for p in self.backend.view.processes)
         lost = (REGISTER_GENERIC | REGISTER_COMMUNICATION
                 if self._master_lost or self._rpdo_lost or self._rpdo_length
                 or self._sync_errors else 0)
         return int(alarms) | lost | (REGISTER_GENERIC if self._fault_emcy is not None else 0)
 
     def _read(self, index: int, subindex: int) -> int:
-        """Any manufacturer object, on the loop."""
-        engine = self.backend.engine
+        """Any manufacturer object, on the loop: the image from the snapshot, the rest from
+        the cell's view."""
         if index < COMMAND:
             return self._image_value(index, subindex)
+        views = self.backend.views  # (the part asked for: a TPDO's frame is built per event)
         if STATUS_BASE <= index < LAST_SND:
-            return self._status_record(index - STATUS_BASE + 1)[subindex - 1]
+            return views.process(index - STATUS_BASE + 1).record[subindex - 1]
         if index == LAST_SND:
-            return list(_last_snd(engine))[subindex - 1]
+            return _last_snd(views.last_snd())[subindex - 1]
         if index in OVERRIDE_TOP:
-            p = engine.processes[subindex]
+            p = views.process(subindex)
             return p.feed_override if index == FEED_OVERRIDE else p.rapid_override
         if index == PLC_STATUS:
-            return self._plc_record()[subindex - 1]
+            return plc_record(self.backend.views.plc_registers())[subindex - 1]
         raise SdoAbortedError(ABORT_READ_WRITEONLY)  # 0x2400: write-only
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
@@ -1042,6 +1041,7 @@ def _check_server_cob_id(current: int, cob: int, node_id: int) -> None:
         raise SdoAbortedError(ABORT_INVALID_VALUE)
 
 
-def _last_snd(engine: Engine) -> tuple[int, int, int, int]:
-    sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
+def _last_snd(last: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    """0x2600 sub 1..4 (the event number, sender, target, block N) of the view's last SND."""
+    sender, target, n, number = last
     return number & 0xFFFFFFFF, sender, target, n & 0xFFFF

@@ -6,11 +6,12 @@ once, without waiting for the loop.  So the node publishes a :class:`Snapshot`, 
 swapped whole in one assignment; the receive thread reads only that.
 
 - The image: inside every write, once all of its values are stored.
-- A process's status record (state, wait, alarm, SND counts) and the last SND: noted by the
-  node's state and trace listeners, and published once the loop's callback in which they
-  changed is over (the engine's turn, the write), or sooner, before the loop builds a
-  synchronous TPDO's frame from them; only while a TPDO is synchronous, since nothing else
-  reads them off the loop (all of them are published when one becomes so).
+- A process's status record (state, wait, alarm, SND counts: the first eight of the cell
+  view's record) and the last SND: noted by the node's state and trace listeners, and
+  published once the loop's callback in which they changed is over (the engine's turn, the
+  write), or sooner, before the loop builds a synchronous TPDO's frame from them; only while
+  a TPDO is synchronous, since nothing else reads them off the loop (all of them are
+  published when one becomes so).
 - Sampled, as they change with every block and every scan without an event: a process's
   block N and source line (with its record), and the PLC status; the loop samples them again
   after each SYNC that sent them, so a SYNC sends them as of the SYNC before at the oldest.
@@ -20,7 +21,7 @@ Imports the dictionary's layout only; nothing of canopen, the engine or the imag
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ncgate.gateway.canopen.dictionary import (
@@ -75,7 +76,7 @@ def getter(index: int, subindex: int) -> Callable[[Snapshot], int]:
     raise ValueError(f"0x{index:04X}:{subindex} is not a mappable value")
 
 
-def plc_record(registers: list[int]) -> tuple[int, ...]:
+def plc_record(registers: Sequence[int]) -> tuple[int, ...]:
     """0x2700 sub 1..6 from the PLC status block (``ncgate.gateway.plc.plc_registers``):
     the state, four 32-bit counters (high word first), the fault line."""
     return (registers[0], *(registers[2 * s - 3] << 16 | registers[2 * s - 2]

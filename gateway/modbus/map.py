@@ -24,7 +24,9 @@ from ncgate.config import Config, ConfigError
 from ncgate.gateway.door import search_inputs
 from ncgate.gateway.errors import ModbusError
 from ncgate.gateway.modbus.codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE, command_word
-from ncgate.gateway.plc import PLC_REGISTERS, plc_registers
+from ncgate.gateway.plc import PLC_REGISTERS
+from ncgate.gateway.view import FLAGS as PROCESS_FLAGS
+from ncgate.gateway.view import RECORD, CellStatus, ViewPublisher, status_registers
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import (
     FEED_OVERRIDE_MAX,
@@ -37,7 +39,6 @@ from ncgate.inputs import (
     Var,
     Writes,
 )
-from ncgate.interpreter.engine import Engine, ProcessState, WaitKind
 from ncgate.interpreter.engine.sync import SND_LOG
 
 MAP_VERSION = 1
@@ -104,12 +105,9 @@ REGION_NAMES = {Kind.SA_BITS: "sa_bits", Kind.K_BYTES: "k_bytes", Kind.SYVARS: "
                 Kind.SA_BYTES: "sa_bytes", Kind.COMMAND: "command", Kind.MAILBOX: "mailbox",
                 Kind.OVERRIDES: "overrides", Kind.SEARCH: "command",
                 Kind.FORCE_REQUEST: "force", Kind.FORCE_LIST: "force"}
-PROCESS_FLAGS = ("program loaded", "running", "waiting", "alarm", "motion active", "hold")
-PROCESS_REGISTERS = ("state code", "block N", "source line", "wait kind", "wait target",
-                     "alarm code", "SNDs sent (hi)", "SNDs sent (lo)", "SNDs received (hi)",
-                     "SNDs received (lo)", "blocks executed (hi)", "blocks executed (lo)",
-                     "X µm (hi)", "X µm (lo)", "Y µm (hi)", "Y µm (lo)", "Z µm (hi)",
-                     "Z µm (lo)")
+# The status block: the view's record, a 32-bit entry as two registers, high word first.
+PROCESS_REGISTERS = tuple(name for entry, bits in RECORD for name in (
+    (f"{entry} (hi)", f"{entry} (lo)") if bits == 32 else (entry,)))
 # The config key that places each movable region (modbus.map.*), in the order a clash is
 # reported; "info" (input 0..8) does not move.
 _LAYOUT_KEYS = {Kind.K_BYTES: "k_bytes", Kind.SYVARS: "syvars", Kind.SA_BYTES: "sa_bytes",
@@ -124,8 +122,6 @@ FORCE_KINDS = {1: ("SA", "bit"), 2: ("SA", "BY"), 3: ("SA", "IN"), 4: ("SK", "BY
                5: ("SK", "IN"), 6: ("SYVAR", "IN")}
 _FORCE_KIND_OF = {place: kind for kind, place in FORCE_KINDS.items()}
 FORCE_LISTED = 32  # the forces the table shows (the count at +4 says how many there are)
-_WAITING = {ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
-            ProcessState.WAIT_EXE}
 
 
 class ModbusMap:
@@ -270,11 +266,11 @@ class ModbusMap:
         if region.kind is Kind.SA_BITS:
             sa = backend.image.sa
             return [bool(sa[i >> 3] >> (i & 7) & 1) for i in range(address, address + count)]
-        engine = backend.engine
+        views = backend.views
         out = []
         for a in range(address, address + count):
             k, bit = divmod(a, self.FLAGS_STRIDE)
-            out.append(bit < len(PROCESS_FLAGS) and _flag(engine, k + 1, bit))
+            out.append(bit < len(PROCESS_FLAGS) and views.process(k + 1).flags[bit])
         return out
 
     def read_registers(self, backend: Backend, table: Table, address: int,
@@ -306,38 +302,32 @@ class ModbusMap:
             return [v & 0xFFFF for v in image.syvar[first:first + count]]
         if kind in (Kind.COMMAND, Kind.MAILBOX, Kind.FORCE_REQUEST):
             return [0] * count
-        if kind is Kind.FORCE_LIST:
-            return force_list_registers(image.forced)[first:first + count]
         if kind is Kind.SEARCH:
             return [self.search_n]
+        # The rest is the cell's status: the parts of its view a region shows, each built
+        # once for however many reads (a poller of the PLC block builds no process's view).
+        views = backend.views
+        if kind is Kind.FORCE_LIST:
+            return force_list_registers(views.status().forced)[first:first + count]
         if kind is Kind.INFO:
-            return self._info(backend)[first:first + count]
+            return _info(views.status(), self.config.nc.processes)[first:first + count]
         if kind is Kind.SND_LOG:
-            return snd_log_registers(backend.engine)[first:first + count]
+            return snd_log_registers(views.status())[first:first + count]
         if kind is Kind.PLC_STATUS:
-            return plc_registers(backend.plc_status)[first:first + count]
+            return list(views.status().plc_registers[first:first + count])
         if kind is Kind.OVERRIDES:
-            processes = backend.engine.processes
-            values = [v for k in range(1, len(processes) + 1)
-                      for v in (processes[k].feed_override, processes[k].rapid_override)]
+            values = [v for k in range(1, self.config.nc.processes + 1)
+                      for v in (views.process(k).feed_override, views.process(k).rapid_override)]
             return values[first:first + count]
-        return self._status_registers(backend.engine, address, count)
+        return self._status_registers(views, address, count)
 
-    def _info(self, backend: Backend) -> list[int]:
-        engine = backend.engine
-        counter = engine.trace.counter
-        sender, target, n, number = engine.last_snd or (0, 0, 0, 0)
-        return [MAP_VERSION, len(engine.processes), counter >> 16 & 0xFFFF, counter & 0xFFFF,
-                sender, target, n & 0xFFFF, number & 0xFFFF,
-                min(round(backend.lag_s * 1000), 0xFFFF)]
-
-    def _status_registers(self, engine: Engine, address: int, count: int) -> list[int]:
+    def _status_registers(self, views: ViewPublisher, address: int, count: int) -> list[int]:
         cache: dict[int, list[int]] = {}
         out = []
         for a in range(address, address + count):
             k, offset = divmod(a - self.STATUS_BASE, self.STATUS_STRIDE)
             if k not in cache:
-                cache[k] = process_registers(engine, k + 1)
+                cache[k] = process_registers(views, k + 1)
             out.append(cache[k][offset] if offset < len(PROCESS_REGISTERS) else 0)
         return out
 
@@ -385,10 +375,10 @@ class ModbusMap:
         """Feed and rapid of each process the write covers, checked whole first (nothing of
         a bad write is applied), then one Override input per process."""
         per_process: dict[int, dict[str, int]] = {}
-        processes = backend.engine.processes
+        views = backend.views
         for i, value in enumerate(values):
             k, which = divmod(offset + i, 2)
-            if processes[k + 1].external:
+            if views.process(k + 1).external:
                 raise ModbusError(ILLEGAL_VALUE, f"process {k + 1} is external: it has no "
                                   "motion to override")
             name, top = (("feed", FEED_OVERRIDE_MAX) if which == 0 else
@@ -554,53 +544,35 @@ class ModbusMap:
         return "\n".join(lines) + "\n"
 
 
-def _flag(engine: Engine, k: int, bit: int) -> bool:
-    p = engine.processes[k]
-    state = p.state
-    return (p.loaded is not None, state in (ProcessState.RUNNING, ProcessState.DWELL),
-            state in _WAITING, state is ProcessState.ALARM,
-            p.motion_active, p.held)[bit]
+def _info(cell: CellStatus, processes: int) -> list[int]:
+    counter = cell.events
+    sender, target, n, number = cell.last_snd
+    return [MAP_VERSION, processes, counter >> 16 & 0xFFFF, counter & 0xFFFF,
+            sender, target, n & 0xFFFF, number & 0xFFFF, min(round(cell.lag_s * 1000), 0xFFFF)]
 
 
-def force_list_registers(forced: dict[tuple[str, int, str], int]) -> list[int]:
-    """The force list's registers: the count, then the first forces in name order."""
+def force_list_registers(forced: Sequence[tuple[tuple[str, int, str], int]]) -> list[int]:
+    """The force list's registers: the count, then the first forces (``forced`` is in name
+    order, as the view keeps it)."""
     regs = [min(len(forced), 0xFFFF)]
-    for (area, index, view), value in sorted(forced.items())[:FORCE_LISTED]:
+    for (area, index, view), value in forced[:FORCE_LISTED]:
         regs += [_FORCE_KIND_OF[(area, view)], index, value & 0xFFFF]
     regs += [0] * (1 + 3 * FORCE_LISTED - len(regs))
     return regs
 
 
-def snd_log_registers(engine: Engine) -> list[int]:
+def snd_log_registers(cell: CellStatus) -> list[int]:
     """The SND log window: the newest sequence number (u32), then the entries newest first."""
-    seq = engine.snd_seq
+    seq = cell.snd_seq
     regs = [seq >> 16 & 0xFFFF, seq & 0xFFFF]
-    for number, sender, target, n, ident in reversed(engine.snd_log):
+    for number, sender, target, n, ident in reversed(cell.snd_log):
         regs += [number >> 16 & 0xFFFF, number & 0xFFFF, sender, target, n & 0xFFFF,
                  ident & 0xFFFF]
     regs += [0] * (ModbusMap.LOG_SIZE - len(regs))
     return regs
 
 
-def process_registers(engine: Engine, k: int) -> list[int]:
-    s = engine.status(k)
-    wait = s.wait
-    regs = [int(s.state), (s.n or 0) & 0xFFFF, s.line & 0xFFFF,
-            int(wait.kind if wait else WaitKind.NONE), wait.target if wait else 0,
-            s.alarm_code & 0xFFFF]
-    for value in (s.snd_sent, s.snd_received, s.blocks):
-        regs += [value >> 16 & 0xFFFF, value & 0xFFFF]
-    for mm in s.position[:3]:
-        um = _int32(mm * 1000) & 0xFFFFFFFF
-        regs += [um >> 16, um & 0xFFFF]
-    return regs
-
-
-def _int32(value: float) -> int:
-    """A value as an int32 register pair holds it: rounded, and saturated at the register's
-    bounds rather than wrapped (a position past +-2,147 m reads as the bound, never as a
-    position of the other sign, and an infinite one does not fail the read)."""
-    if value != value:  # NaN: no position to show
-        return 0
-    return round(min(max(value, -0x8000_0000), 0x7FFF_FFFF))
+def process_registers(views: ViewPublisher, k: int) -> list[int]:
+    """Process k's status block (the view's one encoding of it)."""
+    return status_registers(views.process(k))
 

@@ -371,7 +371,7 @@ class WebConsole:
             raise ApiError(409, f"a record is being written already ({gw.recorder.path})")
         # The replay starts every process from its program's start: a record begun while
         # one runs would hold the rest of a run without its start (docs/decisions.md).
-        busy = [p.number for p in gw.engine.processes.values()
+        busy = [p.number for p in gw.view.processes
                 if not p.external and p.state is not ProcessState.IDLE]
         if busy:
             raise ApiError(409, f"process {busy[0]} runs a program: start a record while "

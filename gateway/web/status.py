@@ -1,8 +1,11 @@
 """What the console shows, as JSON-ready dicts: the processes with their why-records, the PLC
 and its variables, the image with its last writers, the fieldbus peers (``GET /api/status``).
 
-Built from the :class:`~ncgate.gateway.app.Gateway` on the loop, on demand; no web library
-here (the HTTP side is :mod:`ncgate.gateway.web.console`).
+Built on the loop, on demand, from the cell's view (:attr:`ncgate.gateway.Gateway.view`: the
+processes, the PLC status, the forces, the SND counts), and from the
+:class:`~ncgate.gateway.app.Gateway` for what only the console shows (the image and its
+writers, the PLC's variables, the commissioning controls, the plant, the adapters); no web
+library here (the HTTP side is :mod:`ncgate.gateway.web.console`).
 """
 
 from __future__ import annotations
@@ -14,9 +17,8 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ncgate import __version__
+from ncgate.gateway.view import PlcView, ProcessView
 from ncgate.inputs import var_name
-from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.settings import AXES
 from ncgate.plc.image import Change
 from ncgate.plc.st.logic import ProgramVar
@@ -31,6 +33,7 @@ WATCH_LIMIT = 200  # ST variables the status shows (the first ones, in declarati
 def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
     """The whole status (``image=False``: without the image, for a light poll)."""
     engine = gw.engine
+    view = gw.view
     out: dict[str, Any] = {
         "version": __version__,
         "session": gw.session,
@@ -39,28 +42,28 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "config": str(gw.config.source) if gw.config.source else "built-in default",
         "main": gw.config.nc.main,
         "dialect": gw.config.nc.dialect.value,
-        "held": any(p.held for p in engine.processes.values()),
+        "held": any(p.held for p in view.processes),
         # Why the cell stands, in the page's words (a breakpoint is no feed hold): the first
         # process's that stands, or None.
-        "standing": next((why for p in engine.processes.values()
-                          if (why := standing(gw, p)) is not None), None),
-        "lag_s": round(gw.lag_s, 6),  # behind the clock (machine s): 0 while on time
+        "standing": next((p.standing for p in view.processes if p.standing is not None),
+                         None),
+        "lag_s": round(view.lag_s, 6),  # behind the clock (machine s): 0 while on time
         # The commissioning controls in force.
         "controls": {"breakpoints": [b.text for b in engine.breakpoints],
                      "optional_stop": engine.optional_stop, "block_skip": engine.block_skip,
-                     "forced": len(gw.image.forced)},
-        "processes": [process(gw, number) for number in engine.processes],
+                     "forced": len(view.forced)},
+        "processes": [process_view(p) for p in view.processes],
         # The force list (the F marks of the image grid) and the I/O names of [symbols]
         # by the variable they name (the grid's names).
-        "forced": {var_name(*key): value for key, value in sorted(gw.image.forced.items())},
+        "forced": {var_name(*key): value for key, value in view.forced},
         "symbols": symbols(gw),
         # Each I/O name's comment of [symbols] (or the CSV I/O list), by its variable.
         "symbol_comments": symbol_comments(gw),
         "record": str(gw.recorder.path) if gw.recorder is not None else None,
-        "plc": plc(gw),
+        "plc": plc(gw, view.plc),
         "plant": gw.runtime.plant.status() if gw.runtime.plant is not None else None,
         "fieldbus": fieldbus(gw),
-        "counters": {"events": gw.runtime.trace.seq, "sync_events": gw.runtime.trace.counter},
+        "counters": {"events": gw.runtime.trace.seq, "sync_events": view.events},
         "web": {"read_only": gw.config.web.read_only,
                 "token": gw.config.web.token is not None},
     }
@@ -69,57 +72,37 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
     return out
 
 
-# A stop after a block, by its cause (Process.stopped), as the page says it.
-_STOPPED = {"break": "breakpoint", "single_block": "single block", "step": "step",
-            "M00": "M00 (program stop)", "M01": "M01 (optional stop)"}
-
-
-def standing(gw: Gateway, p: Process) -> str | None:
-    """Why process ``p`` stands until a cycle start: a breakpoint, single block, a step,
-    M00/M01, the PLC's interlock input (``nc.feed_hold_input``) or a feed hold; None when it
-    does not stand for any of them."""
-    if p.stopped is not None:
-        return _STOPPED.get(p.stopped, p.stopped)
-    if not p.held:
-        return None
-    image = gw.image
-    for what, var in gw.runtime.interlocks:
-        if what == "feed hold" and image.read(*var.address):
-            return f"interlock {var}"
-    return "feed hold"
-
-
 def process(gw: Gateway, number: int) -> dict[str, Any]:
-    engine = gw.engine
-    s = engine.status(number)
-    p = engine.processes[number]
-    block = ""
-    if p.loaded is not None and 1 <= s.line <= len(p.loaded.program.lines):
-        block = p.loaded.program.lines[s.line - 1].strip()
+    """Process ``number``'s lane, as the cell's view shows it now."""
+    return process_view(gw.view.processes[number - 1])
+
+
+def process_view(p: ProcessView) -> dict[str, Any]:
+    """A process's lane: its status and why it waits, stands or is in alarm."""
     wait = None
-    if s.wait is not None and s.state is not ProcessState.IDLE:
-        w = s.wait
-        value, writer = w.probe() if w.probe is not None else (w.value, w.writer)
+    w = p.wait
+    if w is not None:
         wait = {"kind": w.kind.name, "code": w.code, "target": w.target, "cond": w.cond,
-                "value": value, "writer": writer, "since": round(w.since, 6),
-                "reason": w.reason(), "where": {"prog": w.where[0], "line": w.where[1],
-                                                "n": w.where[2]}}
+                "value": w.value, "writer": w.writer, "since": round(w.since, 6),
+                "reason": w.reason, "where": {"prog": w.where[0], "line": w.where[1],
+                                              "n": w.where[2]}}
     alarm = None
-    if s.alarm_message is not None:
-        alarm = {"code": AlarmCode(s.alarm_code).label, "message": s.alarm_message,
-                 "where": ({"prog": s.alarm_where[0], "line": s.alarm_where[1],
-                            "n": s.alarm_where[2]} if s.alarm_where is not None else None)}
-    return {"number": number, "state": s.state.name, "external": s.external,
-            "program": s.program, "line": s.line, "n": s.n, "block": block,
-            "held": s.held, "standing": standing(gw, p), "blocks": s.blocks,
-            "snd_sent": s.snd_sent,
+    a = p.alarm
+    if a is not None:
+        alarm = {"code": a.label, "message": a.message,
+                 "where": ({"prog": a.where[0], "line": a.where[1], "n": a.where[2]}
+                           if a.where is not None else None)}
+    return {"number": p.number, "state": p.state.name, "external": p.external,
+            "program": p.program, "line": p.line, "n": p.n, "block": p.block,
+            "held": p.held, "standing": p.standing, "blocks": p.blocks,
+            "snd_sent": p.snd_sent,
             "single_block": p.single_block, "feed_override": p.feed_override,
             "rapid_override": p.rapid_override,
             # Where the axes are (the interpolator's position, mm) and the modal feed.
             "position": {axis: round(value, 4) for axis, value in zip(
-                AXES[:3], s.position[:3], strict=False)},
-            "feed": p.modal.feed_mm_min, "moving": s.motion_active,
-            "snd_received": s.snd_received, "wait": wait, "alarm": alarm}
+                AXES[:3], p.position, strict=False)},
+            "feed": p.feed, "moving": p.moving,
+            "snd_received": p.snd_received, "wait": wait, "alarm": alarm}
 
 
 def symbols(gw: Gateway) -> dict[str, str]:
@@ -134,9 +117,8 @@ def symbol_comments(gw: Gateway) -> dict[str, str]:
     return {str(runtime.var(name)): comment for name, comment in comments.items() if comment}
 
 
-def plc(gw: Gateway) -> dict[str, Any] | None:
+def plc(gw: Gateway, status: PlcView | None) -> dict[str, Any] | None:
     """The PLC logic's state and a watch of its programs' variables (None: no logic)."""
-    status = gw.plc_status
     if status is None:
         return None
     runtime = gw.plc
@@ -153,11 +135,10 @@ def plc(gw: Gateway) -> dict[str, Any] | None:
             variables.append({"path": f"{name}.{var.display}", "type": str(var.type),
                               "value": plain(value, var.type, runtime.logic.fb_vars),
                               "retain": var.retain})
-    return {"state": status.state.name, "scans": status.scans,
+    return {"state": status.state, "scans": status.scans,
             "last_scan_us": status.last_scan_us, "max_scan_us": status.max_scan_us,
             "overruns": status.overruns, "last_lateness_us": status.last_lateness_us,
-            "max_lateness_us": status.max_lateness_us,
-            "fault": str(status.fault) if status.fault is not None else None,
+            "max_lateness_us": status.max_lateness_us, "fault": status.fault,
             "variables": variables}
 
 

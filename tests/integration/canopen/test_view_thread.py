@@ -1,0 +1,62 @@
+"""The cell's view and the node's two threads (ARCHITECTURE.md, "Who reads what, on which
+thread"): the loop builds the view and publishes what the node maps into its snapshot; the
+receive thread answers SYNCs and SDO reads from the snapshot or hands them to the loop, and
+never builds a view itself."""
+
+from __future__ import annotations
+
+import struct
+import threading
+from typing import Any
+
+import pytest
+
+from ncgate.gateway import Gateway
+from ncgate.gateway.view import ViewPublisher
+
+from .conftest import Master
+
+TPDO3 = 0x390
+
+
+def map_entry(index: int, sub: int, bits: int) -> int:
+    return index << 16 | sub << 8 | bits
+
+
+async def test_the_receive_thread_never_builds_a_view(
+        gw: Gateway, master: Master, monkeypatch: pytest.MonkeyPatch) -> None:
+    loop_thread = threading.get_ident()
+    calls: list[tuple[str, bool]] = []  # (what, on the loop's thread)
+    for name in ("current", "process", "status", "state", "last_snd", "plc_registers"):
+        real = getattr(ViewPublisher, name)
+
+        def recorded(self: ViewPublisher, *args: Any, _real: Any = real,
+                     _name: str = name) -> Any:
+            calls.append((_name, threading.get_ident() == loop_thread))
+            return _real(self, *args)
+
+        monkeypatch.setattr(ViewPublisher, name, recorded)
+    # TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state; TPDO1
+    # (the states, on change) as it is by default.
+    for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
+                                 map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
+                                 map_entry(0x2700, 1, 8)), start=1):
+        await master.download(0x1A02, sub, entry.to_bytes(4, "little"))
+    await master.download(0x1A02, 0, b"\x05")
+    await master.download(0x1802, 2, b"\x01")
+    await master.download(0x1802, 1, (0x40000390).to_bytes(4, "little"))
+    master.listen(TPDO3)
+    master.nmt(0x01)
+    await master.barrier()
+    gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2
+    await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+    await gw.wait_state(2, "WAIT_COND", timeout_s=5)
+    await master.barrier()
+    for _ in range(5):
+        master.sync()
+        frame = await master.next(TPDO3)
+    assert frame[:5] == struct.pack("<BHH", 3, 2, 2)  # WAIT_COND at N2, line 2
+    assert await master.upload(0x2500, 6) == b"\x00\x00"  # an SDO read of the status: no alarm
+    assert calls, "the node read nothing of the view"
+    off_loop = [name for name, on_loop in calls if not on_loop]
+    assert off_loop == []

@@ -1,0 +1,99 @@
+"""The cell's view on a running gateway (gateway/view.py): built only when something reads it,
+once however many reads, again after any change -- a write, a turn of the engine, a state
+change inside a turn -- and never when nothing changed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ncgate.config.script import load_script
+from ncgate.gateway import Gateway, load_config
+from ncgate.gateway import view as cell_view
+from ncgate.gateway.sim import run_sim
+from ncgate.inputs import Source, SourceKind
+from ncgate.interpreter.engine import Process, ProcessState
+
+TEST_PLC = Source(SourceKind.API, "test PLC")
+NOTHING_SERVED = {"modbus.enabled": False, "canopen.enabled": False}
+
+
+def _cell(tmp_path: Path, program: str) -> Path:
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n')
+    (tmp_path / "A.nc").write_text(program)
+    return tmp_path / "ncgate.toml"
+
+
+def _counting(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    builds: list[int] = []
+    real = cell_view.build
+
+    def counted(*args: object) -> cell_view.CellView:
+        builds.append(1)
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(cell_view, "build", counted)
+    return builds
+
+
+def test_a_sim_builds_no_view(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # ncgate sim's speed is a measured target: the view is the gateway's, built on demand.
+    builds = _counting(monkeypatch)
+    monkeypatch.setattr(cell_view, "_process", lambda *args: builds.append(1))
+    config = load_config(_cell(tmp_path, "N1(DLY,0.5)\nN2(WAI,SK7=3)\nN3M30\n"))
+    result = run_sim(config, "A", load_script(None), until=2.0)
+    assert result.outcome in ("stall", "until") and builds == []
+
+
+async def test_a_gateway_no_adapter_reads_builds_no_view(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    builds = _counting(monkeypatch)
+    config = load_config(_cell(tmp_path, "N1(WAI,SK7=3)\nN2M30\n"), overrides=NOTHING_SERVED)
+    async with Gateway(config) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        gw.write("SK7", 3, source=TEST_PLC)
+        await gw.wait_idle(timeout_s=5)
+    assert builds == []
+
+
+async def test_a_view_is_built_once_for_many_reads_and_again_after_a_write(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    builds = _counting(monkeypatch)
+    config = load_config(_cell(tmp_path, "N1(WAI,SK7=3)\nN2M30\n"), overrides=NOTHING_SERVED)
+    async with Gateway(config) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        first = gw.view
+        assert all(gw.view is first for _ in range(100))
+        assert len(builds) == 1
+        assert first.processes[0].state is ProcessState.WAIT_COND
+        assert first.processes[0].wait is not None and first.processes[0].wait.value == 0
+        gw.write("SK7", 3, source=TEST_PLC)  # wakes the wait and ends the program, inside
+        after = gw.view
+        assert after is not first and after.processes[0].state is ProcessState.IDLE
+        assert first.processes[0].state is ProcessState.WAIT_COND  # a view never changes
+
+
+async def test_a_state_listener_reads_the_state_it_hears_of(tmp_path: Path) -> None:
+    # A reader inside the engine's turn (a TPDO built on a state change) sees the change,
+    # though the turn has not ended: an event recorded or a state change is a change of the
+    # view (this fails when the view waits for the turn's end).
+    config = load_config(_cell(tmp_path, "N1(WAI,SK7=3)\nN2(WAI,SK7=4)\nN3M30\n"),
+                         overrides=NOTHING_SERVED)
+    seen: list[tuple[ProcessState, ProcessState]] = []
+    async with Gateway(config) as gw:
+
+        def heard(process: Process | None, old: ProcessState) -> None:
+            if process is not None:
+                seen.append((process.state, gw.view.processes[process.number - 1].state))
+
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        gw.view  # noqa: B018 -- a view built before the changes below
+        gw.engine.state_listeners.append(heard)
+        gw.write("SK7", 3, source=TEST_PLC)
+        gw.write("SK7", 4, source=TEST_PLC)
+        await gw.wait_idle(timeout_s=5)
+    assert seen and all(state is shown for state, shown in seen)
