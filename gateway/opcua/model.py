@@ -89,20 +89,21 @@ MESSAGE_SEVERITY = 300  # "medium low": information for the operator
 
 
 def process_view(gw: Gateway, number: int) -> ProcessView:
-    engine = gw.engine
-    s = engine.status(number)
-    p = engine.processes[number]
-    lines: Sequence[str] = p.loaded.program.lines if p.loaded is not None else ()
-    i = s.line - 1
+    """Process ``number`` as its nodes show it: the cell's read model (``gw.views``), and the
+    program's text around its block."""
+    v = gw.views.process(number)
+    loaded = gw.engine.processes[number].loaded
+    lines: Sequence[str] = loaded.program.lines if loaded is not None else ()
+    i = v.line - 1
 
     def text(j: int) -> str:
         return lines[j].strip() if 0 <= j < len(lines) else ""
 
-    position = tuple(round(v, 4) for v in s.position[:3]) + (0.0,) * (3 - len(s.position[:3]))
-    return ProcessView(number, s.state.name, channel_state(s.state),
-                       program_status(s.state, p.stopped is not None), s.program or "",
-                       s.line, s.n if s.n is not None else -1, (text(i - 1), text(i), text(i + 1)),
-                       float(p.modal.feed_mm_min or 0.0), p.feed_override, p.rapid_override,
+    position = tuple(round(x, 4) for x in v.position[:3]) + (0.0,) * (3 - len(v.position[:3]))
+    return ProcessView(number, v.state.name, channel_state(v.state),
+                       program_status(v.state, v.stopped is not None), v.program or "",
+                       v.line, v.n if v.n is not None else -1, (text(i - 1), text(i), text(i + 1)),
+                       float(v.feed or 0.0), v.feed_override, v.rapid_override,
                        position)  # type: ignore[arg-type]
 
 
