@@ -186,17 +186,37 @@ class EngineNc:
         self.engine = engine
         self.door = door
         self.kind = kind
+        self._image = door.runtime.image
+        # Per process: for M, S, T and H, the key of the value last output, the strobe's
+        # byte and its bit's mask.
+        self._aux_places: dict[int, tuple[tuple[tuple[int, str], int, int], ...]] = {}
 
     def snapshot(self) -> list[NcSnapshot]:
+        """Each process's status and its auxiliary functions, as the scan reads them (every
+        scan: the strobes are read from the image's bytes at places worked out once)."""
         out: list[NcSnapshot] = []
         aux = self.engine.aux
+        sa = self._image.sa
         for p in self.engine.processes.values():
             state = p.state
-            n = p.where[2]
-            out.append((int(state), n or 0, p.where[1], state in WAITING_STATES,
-                        p.alarm is not None, p.alarm[0] if p.alarm else 0,
-                        state is ProcessState.IDLE, p.held,
-                        *(aux.snapshot(p.number) if aux is not None else _NO_AUX)))
+            _, line, n = p.where
+            alarm = p.alarm
+            if aux is None:
+                out.append((int(state), n or 0, line, state in WAITING_STATES,
+                            alarm is not None, alarm[0] if alarm else 0,
+                            state is ProcessState.IDLE, p.held, *_NO_AUX))
+                continue
+            places = self._aux_places.get(p.number)
+            if places is None:
+                places = self._aux_places[p.number] = tuple(
+                    (key, strobe >> 3, 1 << (strobe & 7))
+                    for key, strobe in aux.snapshot_places(p.number))
+            last = aux.last
+            (m, mb, mm), (s, sb, sm), (t, tb, tm), (h, hb, hm) = places
+            out.append((int(state), n or 0, line, state in WAITING_STATES, alarm is not None,
+                        alarm[0] if alarm else 0, state is ProcessState.IDLE, p.held,
+                        last.get(m, 0), sa[mb] & mm != 0, last.get(s, 0), sa[sb] & sm != 0,
+                        last.get(t, 0), sa[tb] & tm != 0, last.get(h, 0), sa[hb] & hm != 0))
         return out
 
     def events(self) -> int:
