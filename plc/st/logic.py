@@ -7,14 +7,16 @@ between) and kept for small logic, so a suite of scenarios does not compile it a
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
+import operator
 import time
 import types as pytypes
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st import stdlib
@@ -23,6 +25,7 @@ from ncgate.plc.st.runtime import HELPERS, TOD_MS, to_real
 from ncgate.plc.st.types import (
     CHARS,
     REALS,
+    AnyLength,
     ArrayOf,
     EnumOf,
     FbOf,
@@ -188,6 +191,63 @@ class Logic:
     def new_program(self, key: str) -> Any:
         return self.namespace[f"P_{key}"]()
 
+    # -- the state a scan leaves, as one value (the scan's test for a scan that changed nothing)
+
+    def program_state(self, key: str) -> StateOf | None:
+        """A function giving the whole state of an instance of PROGRAM ``key`` -- its
+        variables, its FB instances' inner state (a TON's start), its arrays and structures
+        -- as one value that compares equal only when the two states are the same; None
+        when a member is of no type it knows."""
+        return self._object_state(self.namespace[f"P_{key}"], self.programs[key])
+
+    def globals_state(self) -> StateOf | None:
+        """:meth:`program_state` of the VAR_GLOBALs (the module's ``_G``)."""
+        return self._object_state(self.namespace["_Globals"], self.globals)
+
+    def _state_of(self, t: Type) -> StateOf | Literal[False] | None:
+        """The state of a value of type ``t``: None when the value is its own (a number,
+        a string, a BOOL: immutable), False when it cannot be told."""
+        if isinstance(t, ArrayOf | AnyLength):
+            each = self._state_of(t.element)
+            if each is False:
+                return False
+            if isinstance(t, AnyLength):  # the caller's array, or None before a call
+                return lambda v: None if v is None else tuple(
+                    v if each is None else map(each, v))
+            return tuple if each is None else lambda v: tuple(map(each, v))
+        if isinstance(t, StructOf):
+            return self._object_state(self.namespace[f"S_{t.name}"],
+                                      self.struct_fields[t.name]) or False
+        if isinstance(t, FbOf):
+            if t.std:
+                return _std_state(self.namespace[f"_STD_{t.name}"]) or False
+            return self._object_state(self.namespace[f"FB_{t.name}"],
+                                      self.fb_vars[t.name]) or False
+        if t in REALS:
+            return _real_state
+        return None
+
+    def _object_state(self, cls: Any, table: dict[str, ProgramVar]) -> StateOf | None:
+        """A generated class's instance (a PROGRAM, an FB, a structure): by its slots."""
+        fresh = cls()
+        plain: list[str] = []
+        deep: list[tuple[Callable[[Any], Any], StateOf]] = []
+        for slot in cls.__slots__:
+            var = table.get(slot[2:]) if slot.startswith("v_") else None
+            if var is None:  # (an ARRAY[*]'s lower bound): a scalar, or unknown
+                if not isinstance(getattr(fresh, slot), bool | int | str):
+                    return None
+                plain.append(slot)
+                continue
+            state = self._state_of(var.type)
+            if state is False:
+                return None
+            if state is None:
+                plain.append(slot)
+            else:
+                deep.append((operator.attrgetter(slot), state))
+        return _joined(plain, deep)
+
     def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
         """The ST statement of the innermost generated frame in a traceback."""
         line = None
@@ -248,6 +308,46 @@ def _moved(code: pytypes.CodeType, lines: int) -> pytypes.CodeType:
     consts = tuple(_moved(c, lines) if isinstance(c, pytypes.CodeType) else c
                    for c in code.co_consts)
     return code.replace(co_firstlineno=code.co_firstlineno + lines, co_consts=consts)
+
+
+# A value's state: comparable, and equal only for the same state.
+StateOf = Callable[[Any], Any]
+
+
+def _real_state(value: float) -> tuple[float, float]:
+    """A REAL's state: -0.0 and 0.0 compare equal, yet 1.0 / x tells them apart."""
+    return value, math.copysign(1.0, value)
+
+
+def _joined(plain: list[str], deep: list[tuple[Callable[[Any], Any], StateOf]]) -> StateOf:
+    """The state of an object: its immutable members as they are, the others' states."""
+    if not plain:
+        get_plain: Callable[[Any], Any] = lambda o: ()  # noqa: E731
+    else:
+        get_plain = operator.attrgetter(*plain)
+    if not deep:
+        return get_plain
+    return lambda o: (get_plain(o), [state(get(o)) for get, state in deep])
+
+
+@functools.cache
+def _std_state(cls: type) -> StateOf | None:
+    """The state of a standard FB's instance (a dataclass: TON, CTU with its R_TRIG, ...)."""
+    fresh = cls()
+    plain: list[str] = []
+    deep: list[tuple[Callable[[Any], Any], StateOf]] = []
+    for f in dataclasses.fields(cls):
+        value = getattr(fresh, f.name)
+        if dataclasses.is_dataclass(value):
+            state = _std_state(value.__class__)
+            if state is None:
+                return None
+            deep.append((operator.attrgetter(f.name), state))
+        elif value is None or isinstance(value, bool | int | str):
+            plain.append(f.name)
+        else:
+            return None
+    return _joined(plain, deep)
 
 
 def _dump_std(fb: Any) -> dict[str, Any]:

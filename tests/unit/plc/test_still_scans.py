@@ -1,0 +1,59 @@
+"""A scan that changed nothing is skipped while what it reads stands still (plc/scan.py:
+the programs' state, the image, the NC's status): nothing the logic does may tell."""
+
+from __future__ import annotations
+
+import math
+
+from .st_harness import IDLE, Plc, program
+
+
+def test_a_scan_that_changed_nothing_is_still_until_an_input_changes() -> None:
+    plc = Plc(program("SA[1] := SA[0];")).scan(3)
+    assert plc.runtime.still  # (the first scan changed nothing either: SA1 was 0)
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    plc.scan()
+    assert plc.image.read("SA", 1, "bit") == 1
+    assert plc.runtime.status.scans == 4  # a skipped scan counts as a scan
+
+
+def test_a_running_on_delay_is_no_still_scan_and_rises_on_time() -> None:
+    plc = Plc(program("t(IN := SA[0], PT := T#50ms); SA[1] := t.Q;", "t : TON;"))
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    rose = []
+    for _ in range(8):  # every 10 ms from 0: IN rose at 0, Q at 50 ms
+        plc.scan()
+        rose.append(plc.image.read("SA", 1, "bit"))
+    assert rose == [0, 0, 0, 0, 0, 1, 1, 1]
+    assert plc["main.t.ET"] == 50 and plc.runtime.still  # elapsed: it stands still now
+
+
+def test_a_counter_counts_every_scan() -> None:
+    plc = Plc(program("n := n + 1;", "n : DINT;")).scan(5)
+    assert plc["main.n"] == 5 and not plc.runtime.still
+
+
+def test_a_variable_set_between_scans_is_seen_by_the_next_scan() -> None:
+    plc = Plc(program("SA[1] := x;", "x : BOOL;")).scan(3)
+    assert plc.runtime.still
+    plc.runtime.programs["MAIN"].v_X = True  # as a debugger would: the state is read again
+    plc.scan()
+    assert plc.image.read("SA", 1, "bit") == 1
+
+
+def test_the_ncs_status_is_an_input_of_a_still_scan() -> None:
+    plc = Plc(program("SA[2] := NOT NC.P[1].IDLE;")).scan(3)
+    assert plc.runtime.still and plc.image.read("SA", 2, "bit") == 0
+    plc.nc.processes[0] = (1, 10, 2, False, False, 0, False, False)  # P1 runs
+    plc.scan()
+    assert plc.image.read("SA", 2, "bit") == 1
+    plc.nc.processes[0] = IDLE
+    plc.scan()
+    assert plc.image.read("SA", 2, "bit") == 0
+
+
+def test_a_real_that_turned_to_minus_zero_is_a_change() -> None:
+    # 0.0 * -1.0 is -0.0, and -0.0 * -1.0 is 0.0: equal as numbers, yet each scan changes r
+    plc = Plc(program("r := r * -1.0;", "r : LREAL;"))
+    signs = [math.copysign(1.0, plc.scan()["main.r"]) for _ in range(4)]
+    assert signs == [-1.0, 1.0, -1.0, 1.0] and not plc.runtime.still
