@@ -460,6 +460,7 @@ class ScanDriver:
         self.k = 0
         self._leapt = 0  # still scans leapt over, counted when the next one runs
         self._leapt_from = 0.0  # the time the leap was taken
+        self._reach = 16  # scans the next leap with nothing ahead passes (doubling)
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
 
     def _scan(self) -> None:
@@ -503,21 +504,23 @@ class ScanDriver:
         until another timer fires, nothing can change -- in ``sim`` every input is a timer
         (a script's entry, the plant, the NC's motion) -- so each scan before then would
         be skipped as still.  The first scan armed is the first due at or after that timer
-        (or, with none left and the cell stalled, the one the stall rule stops at), at the
-        very time the scans one after the other would have given it (each is armed from the
-        time the one before ran, and ``now + (t - now)`` need not be ``t``), so the trace
-        is the same to the bit.  The scans leapt over are counted."""
+        (or, with none left and the cell stalled, the one the stall rule stops at; with none
+        left and no stall to come, nothing changes any more, and the scans go on until the
+        run's end -- ``--until``, a scenario's horizon -- leapt over in steps that double),
+        at the very time the scans one after the other would have given it (each is armed
+        from the time the one before ran, and ``now + (t - now)`` need not be ``t``), so the
+        trace is the same to the bit.  The scans leapt over are counted."""
         engine, period = self.engine, self.period
         later = engine.next_timer()
         stalls = later is None and engine.stalled
+        reach = LEAP_SCANS
         if later is None and not stalls:
-            self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
-            return
+            reach, self._reach = self._reach, min(LEAP_SCANS, 2 * self._reach)
         start = now = engine.now
         k = self.k
-        for _ in range(LEAP_SCANS):
+        for _ in range(reach):
             due = now + max(0.0, self.t0 + k * period - now)  # the time call_at would give
-            if (due >= later) if later is not None else (
+            if (due >= later) if later is not None else stalls and (
                     due - engine.last_change >= self.stall_s):
                 break  # scan k may see something new (or the stall rule stops at it)
             now = due
