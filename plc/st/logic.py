@@ -11,7 +11,6 @@ import dataclasses
 import functools
 import hashlib
 import math
-import operator
 import time
 import types as pytypes
 from collections.abc import Callable, Sequence
@@ -215,38 +214,62 @@ class Logic:
                 return lambda v: None if v is None else tuple(
                     v if each is None else map(each, v))
             return tuple if each is None else lambda v: tuple(map(each, v))
-        if isinstance(t, StructOf):
-            return self._object_state(self.namespace[f"S_{t.name}"],
-                                      self.struct_fields[t.name]) or False
-        if isinstance(t, FbOf):
-            if t.std:
-                return _std_state(self.namespace[f"_STD_{t.name}"]) or False
-            return self._object_state(self.namespace[f"FB_{t.name}"],
-                                      self.fb_vars[t.name]) or False
+        if isinstance(t, StructOf | FbOf):
+            parts: list[str] = []
+            helpers: dict[str, StateOf] = {}
+            if not self._members(t, "o", parts, helpers):
+                return False
+            return _state_function(parts, helpers)
         if t in REALS:
             return _real_state
         return None
 
     def _object_state(self, cls: Any, table: dict[str, ProgramVar]) -> StateOf | None:
-        """A generated class's instance (a PROGRAM, an FB, a structure): by its slots."""
+        """A generated class's instance (a PROGRAM, the VAR_GLOBALs): by its slots."""
+        parts: list[str] = []
+        helpers: dict[str, StateOf] = {}
+        if not self._slots(cls, table, "o", parts, helpers):
+            return None
+        return _state_function(parts, helpers)
+
+    def _slots(self, cls: Any, table: dict[str, ProgramVar], holder: str, parts: list[str],
+               helpers: dict[str, StateOf]) -> bool:
+        """The state of each member of ``holder`` (code: a generated class's instance) as
+        code into ``parts`` -- a structure's or an FB's members are read in place, as
+        their holder's -- and the functions that code calls (an array's, a REAL's) into
+        ``helpers``; False when one cannot be told."""
         fresh = cls()
-        plain: list[str] = []
-        deep: list[tuple[Callable[[Any], Any], StateOf]] = []
         for slot in cls.__slots__:
+            path = f"{holder}.{slot}"
             var = table.get(slot[2:]) if slot.startswith("v_") else None
             if var is None:  # (an ARRAY[*]'s lower bound): a scalar, or unknown
                 if not isinstance(getattr(fresh, slot), bool | int | str):
-                    return None
-                plain.append(slot)
-                continue
-            state = self._state_of(var.type)
-            if state is False:
-                return None
-            if state is None:
-                plain.append(slot)
+                    return False
+                parts.append(path)
+            elif isinstance(var.type, StructOf | FbOf):
+                if not self._members(var.type, path, parts, helpers):
+                    return False
             else:
-                deep.append((operator.attrgetter(slot), state))
-        return _joined(plain, deep)
+                state = self._state_of(var.type)
+                if state is False:
+                    return False
+                if state is None:
+                    parts.append(path)
+                else:
+                    name = f"_s{len(helpers)}"
+                    helpers[name] = state
+                    parts.append(f"{name}({path})")
+        return True
+
+    def _members(self, t: StructOf | FbOf, holder: str, parts: list[str],
+                 helpers: dict[str, StateOf]) -> bool:
+        if isinstance(t, StructOf):
+            return self._slots(self.namespace[f"S_{t.name}"], self.struct_fields[t.name],
+                               holder, parts, helpers)
+        if not t.std:
+            return self._slots(self.namespace[f"FB_{t.name}"], self.fb_vars[t.name], holder,
+                               parts, helpers)
+        return _std_members(self.namespace[f"_STD_{t.name}"], holder, parts)
 
     def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
         """The ST statement of the innermost generated frame in a traceback."""
@@ -319,35 +342,34 @@ def _real_state(value: float) -> tuple[float, float]:
     return value, math.copysign(1.0, value)
 
 
-def _joined(plain: list[str], deep: list[tuple[Callable[[Any], Any], StateOf]]) -> StateOf:
-    """The state of an object: its immutable members as they are, the others' states."""
-    if not plain:
-        get_plain: Callable[[Any], Any] = lambda o: ()  # noqa: E731
-    else:
-        get_plain = operator.attrgetter(*plain)
-    if not deep:
-        return get_plain
-    return lambda o: (get_plain(o), [state(get(o)) for get, state in deep])
+def _state_function(parts: list[str], helpers: dict[str, StateOf]) -> StateOf:
+    """``state(o)``: the tuple of ``parts`` (code on ``o``), compiled once for the same code
+    -- straight-line attribute reads, 5x faster than an attrgetter of the dotted paths."""
+    namespace: dict[str, Any] = dict(helpers)
+    exec(_state_code("def state(o):\n    return (" + "".join(f"{part}, " for part in parts)
+                     + ")\n"), namespace)
+    state: StateOf = namespace["state"]
+    return state
 
 
-@functools.cache
-def _std_state(cls: type) -> StateOf | None:
-    """The state of a standard FB's instance (a dataclass: TON, CTU with its R_TRIG, ...)."""
+@functools.lru_cache(maxsize=COMPILED_KEPT * 4)
+def _state_code(source: str) -> pytypes.CodeType:
+    return compile(source, "<ncgate-st state>", "exec")
+
+
+def _std_members(cls: Any, holder: str, parts: list[str]) -> bool:
+    """A standard FB's members (a dataclass: TON, CTU with its R_TRIG, ...), read in place."""
     fresh = cls()
-    plain: list[str] = []
-    deep: list[tuple[Callable[[Any], Any], StateOf]] = []
     for f in dataclasses.fields(cls):
         value = getattr(fresh, f.name)
         if dataclasses.is_dataclass(value):
-            state = _std_state(value.__class__)
-            if state is None:
-                return None
-            deep.append((operator.attrgetter(f.name), state))
+            if not _std_members(value.__class__, f"{holder}.{f.name}", parts):
+                return False
         elif value is None or isinstance(value, bool | int | str):
-            plain.append(f.name)
+            parts.append(f"{holder}.{f.name}")
         else:
-            return None
-    return _joined(plain, deep)
+            return False
+    return True
 
 
 def _dump_std(fb: Any) -> dict[str, Any]:

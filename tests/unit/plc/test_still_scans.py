@@ -4,6 +4,10 @@ the programs' state, the image, the NC's status): nothing the logic does may tel
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
+
+import pytest
 
 from .st_harness import IDLE, Plc, program
 
@@ -57,3 +61,76 @@ def test_a_real_that_turned_to_minus_zero_is_a_change() -> None:
     plc = Plc(program("r := r * -1.0;", "r : LREAL;"))
     signs = [math.copysign(1.0, plc.scan()["main.r"]) for _ in range(4)]
     assert signs == [-1.0, 1.0, -1.0, 1.0] and not plc.runtime.still
+
+
+DEEP = """
+TYPE Slot : STRUCT flag : BOOL; name : STRING[8]; END_STRUCT; END_TYPE
+VAR_GLOBAL g : INT; END_VAR
+FUNCTION_BLOCK Station
+VAR_OUTPUT q : BOOL; END_VAR
+VAR t : TON; tray : ARRAY[1..2] OF Slot; END_VAR
+t(); (* IN stays FALSE: PT is kept as set *)
+q := t.PT > T#5ms OR tray[2].flag;
+END_FUNCTION_BLOCK
+PROGRAM main
+VAR slots : ARRAY[1..3] OF Slot; st : Station; r : ARRAY[1..2] OF LREAL;
+  timers : ARRAY[1..2] OF TON;
+  s : STRING; END_VAR
+st();
+timers[2](IN := FALSE);
+SA[1] := slots[2].flag;
+SA[2] := st.q;
+SA[3] := r[2] > 0.5;
+SA[4] := s = 'x';
+SA[5] := g = 3;
+SA[6] := timers[2].PT > T#5ms;
+SA[7] := slots[3].name = 'y';
+END_PROGRAM
+"""
+
+
+def _set_slot_flag(main: Any, g: Any) -> None:
+    main.v_SLOTS[1].v_FLAG = True
+
+
+def _set_fb_timer(main: Any, g: Any) -> None:
+    main.v_ST.v_T.PT = 10
+
+
+def _set_fb_array(main: Any, g: Any) -> None:
+    main.v_ST.v_TRAY[1].v_FLAG = True
+
+
+def _set_real(main: Any, g: Any) -> None:
+    main.v_R[1] = 1.0
+
+
+def _set_string(main: Any, g: Any) -> None:
+    main.v_S = "x"
+
+
+def _set_global(main: Any, g: Any) -> None:
+    g.v_G = 3
+
+
+def _set_timer_in_array(main: Any, g: Any) -> None:
+    main.v_TIMERS[1].PT = 10
+
+
+def _set_string_in_struct(main: Any, g: Any) -> None:
+    main.v_SLOTS[2].v_NAME = "y"
+
+
+@pytest.mark.parametrize(("setter", "bit"), [
+    (_set_slot_flag, 1), (_set_fb_timer, 2), (_set_fb_array, 2), (_set_real, 3),
+    (_set_string, 4), (_set_global, 5), (_set_timer_in_array, 6), (_set_string_in_struct, 7)])
+def test_every_member_is_part_of_the_state(setter: Callable[[Any, Any], None],
+                                           bit: int) -> None:
+    """Each kind of member (a structure in an array, an FB's TON and array, a REAL, a
+    STRING, a global, a TON in an array) set between scans is seen: none is left out of
+    the state a still scan compares."""
+    plc = Plc(DEEP).scan(3)
+    assert plc.runtime.still and plc.image.read("SA", bit, "bit") == 0
+    setter(plc.runtime.programs["MAIN"], plc.runtime.logic.namespace["_G"])
+    plc.scan()
+    assert plc.image.read("SA", bit, "bit") == 1
