@@ -174,6 +174,9 @@ def program_order(logic: Logic, config: Config, section: str = "plc") -> list[st
 
 
 _NO_AUX = (0, False) * 4  # NC.P[k].M, MSTROBE, S, ... without [nc.aux]
+# A state's code, whether it is a wait, whether it is IDLE (the snapshot's, every scan).
+_STATE_FIELDS = {state: (int(state), state in WAITING_STATES, state is ProcessState.IDLE)
+                 for state in ProcessState}
 
 
 class EngineNc:
@@ -198,13 +201,12 @@ class EngineNc:
         aux = self.engine.aux
         sa = self._image.sa
         for p in self.engine.processes.values():
-            state = p.state
+            code, waiting, idle = _STATE_FIELDS[p.state]
             _, line, n = p.where
             alarm = p.alarm
             if aux is None:
-                out.append((int(state), n or 0, line, state in WAITING_STATES,
-                            alarm is not None, alarm[0] if alarm else 0,
-                            state is ProcessState.IDLE, p.held, *_NO_AUX))
+                out.append((code, n or 0, line, waiting, alarm is not None,
+                            alarm[0] if alarm else 0, idle, p.held, *_NO_AUX))
                 continue
             places = self._aux_places.get(p.number)
             if places is None:
@@ -213,8 +215,8 @@ class EngineNc:
                     for key, strobe in aux.snapshot_places(p.number))
             last = aux.last
             (m, mb, mm), (s, sb, sm), (t, tb, tm), (h, hb, hm) = places
-            out.append((int(state), n or 0, line, state in WAITING_STATES, alarm is not None,
-                        alarm[0] if alarm else 0, state is ProcessState.IDLE, p.held,
+            out.append((code, n or 0, line, waiting, alarm is not None,
+                        alarm[0] if alarm else 0, idle, p.held,
                         last.get(m, 0), sa[mb] & mm != 0, last.get(s, 0), sa[sb] & sm != 0,
                         last.get(t, 0), sa[tb] & tm != 0, last.get(h, 0), sa[hb] & hm != 0))
         return out

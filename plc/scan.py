@@ -22,6 +22,7 @@ clock).  Stdlib only; the NC is reached through :class:`NcPort`.
 from __future__ import annotations
 
 import enum
+import functools
 import logging
 import math
 import sqlite3
@@ -223,12 +224,16 @@ class PlcRuntime:
             return
         ns = self._ns
         pairs = [(state, program) for state, program in programs if state is not None]
+        if len(pairs) == 1 and not logic.globals:  # the common case, read in one call
+            only, program = pairs[0]
+            self._state_of = functools.partial(only, program)
+        else:
 
-        def read() -> Any:
-            return globals_state(ns["_G"]), [state(program) for state, program in pairs]
+            def read() -> Any:
+                return globals_state(ns["_G"]), [state(program) for state, program in pairs]
 
-        self._state_of = read
-        self._state = read()
+            self._state_of = read
+        self._state = self._state_of()
 
     def _changed_state(self) -> None:
         """Something other than a scan changed the programs' state (a force)."""
