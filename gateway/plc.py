@@ -490,16 +490,17 @@ class ScanDriver:
                 missed = int(late // period)
                 status.overruns += missed
                 self.k += missed
-        if self.closed and engine.stalled and engine.next_timer() is None and (
+        later = engine.next_timer() if self.closed else None
+        if self.closed and later is None and engine.stalled and (
                 engine.now - engine.last_change >= self.stall_s):
             self._timer = None  # nothing but the scan is left: let the run end as a stall
             return
         if self.leap and self.runtime.still and not self.runtime.scan_listeners:
-            self._leap()
+            self._leap(later)
             return
         self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
 
-    def _leap(self) -> None:
+    def _leap(self, later: float | None) -> None:
         """Arm the first scan that may see something new, past the still ones before it.
 
         The last scan changed nothing and read what it reads now (``PlcRuntime.still``):
@@ -511,9 +512,9 @@ class ScanDriver:
         run's end -- ``--until``, a scenario's horizon -- leapt over in steps that double),
         at the very time the scans one after the other would have given it (each is armed
         from the time the one before ran, and ``now + (t - now)`` need not be ``t``), so the
-        trace is the same to the bit.  The scans leapt over are counted."""
+        trace is the same to the bit.  The scans leapt over are counted.  ``later``: when
+        the next other timer is due (None: there is none)."""
         engine, period = self.engine, self.period
-        later = engine.next_timer()
         stalls = later is None and engine.stalled
         reach = LEAP_SCANS
         if later is None and not stalls:
