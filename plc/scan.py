@@ -109,6 +109,10 @@ class PlcPathError(PlcError, KeyError):
 
 
 GUARD_CHUNK = 1024  # loop iterations between two looks at the limit and the watchdog
+# At most this many scans between two reads of a state that moved at every read (PlcRuntime's
+# still scans): logic that never stands still pays a read a 16th of its scans (bench/plc.py's
+# typed cell: 8 us a read, 38 us a scan).
+STILL_PAUSE_MAX = 16
 
 
 class WatchdogExpired(IterationGuard):
@@ -179,6 +183,8 @@ class PlcRuntime:
         self._still = False
         self._still_generation = -1
         self._still_nc: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None = None
+        self._pause = 0  # scans before the state is read again (its last reads all moved)
+        self._misses = 0  # reads in a row that found the state moved
         self.start()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -219,6 +225,7 @@ class PlcRuntime:
         globals_state = logic.globals_state()
         programs = [(logic.program_state(key), self.programs[key]) for key in self.order]
         self._still = False
+        self._pause = self._misses = 0
         if globals_state is None or any(state is None for state, _ in programs):
             self._state_of = self._state = None  # (a member of a type it cannot read)
             return
@@ -238,6 +245,30 @@ class PlcRuntime:
     def _changed_state(self) -> None:
         """Something other than a scan changed the programs' state (a force)."""
         self._still = False
+        self._state = None
+
+    def _judge(self, quiet: bool, generation: int,
+               nc_read: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None) -> None:
+        """Whether the scan just run was still: ``quiet`` (it wrote nothing, gave the NC
+        nothing, nothing is forced), and the programs' state is as it began.  The state is
+        read only after a quiet scan; logic whose state moves on every scan (a counter, a
+        running timer) is read less and less often (every 2nd, 4th, .. STILL_PAUSE_MAX-th
+        scan), so that it pays a read now and then, not every scan."""
+        assert self._state_of is not None
+        self._still = False
+        if not quiet or self._pause:
+            self._pause = max(0, self._pause - 1)
+            self._state = None  # (unknown: the next quiet scan reads it, the one after tells)
+            return
+        state = self._state_of()
+        if self._state is not None:
+            if state == self._state:
+                self._still, self._misses = True, 0
+                self._still_generation, self._still_nc = generation, nc_read
+            else:
+                self._pause = min(STILL_PAUSE_MAX, 1 << self._misses)
+                self._misses += 1
+        self._state = state
 
     def _bind(self, ns: dict[str, Any]) -> None:
         """The generated module's globals: the scan's copy of the image, the NC's outputs
@@ -374,13 +405,8 @@ class PlcRuntime:
         if self._retained:
             self._save_retained()
         if self._state_of is not None:
-            state = self._state_of()
-            self._still = (not changes and not acts and not self.forced
-                           and (self.retain is None or not self._retained)
-                           and state == self._state)
-            self._state = state
-            self._still_generation = generation
-            self._still_nc = nc_read
+            self._judge(not changes and not acts and not self.forced
+                        and (self.retain is None or not self._retained), generation, nc_read)
         status.scans += 1
         self._timed(started)
         for listener in self.scan_listeners:

@@ -9,6 +9,8 @@ from typing import Any
 
 import pytest
 
+from ncgate.plc.scan import STILL_PAUSE_MAX
+
 from .st_harness import IDLE, Plc, program
 
 
@@ -35,6 +37,18 @@ def test_a_running_on_delay_is_no_still_scan_and_rises_on_time() -> None:
 def test_a_counter_counts_every_scan() -> None:
     plc = Plc(program("n := n + 1;", "n : DINT;")).scan(5)
     assert plc["main.n"] == 5 and not plc.runtime.still
+
+
+def test_logic_that_moved_for_long_is_seen_still_soon_after_it_stops() -> None:
+    """Its state is read less often while it moves (plc/scan.py: STILL_PAUSE_MAX), never so
+    seldom that a still stretch goes unseen for long."""
+    plc = Plc(program("IF SA[0] THEN n := n + 1; END_IF;", "n : DINT;"))
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    plc.scan(200)
+    assert not plc.runtime.still
+    plc.image.write([("SA", 0, "bit", 0)], "test")
+    plc.scan(STILL_PAUSE_MAX + 2)
+    assert plc.runtime.still and plc["main.n"] == 200
 
 
 def test_a_variable_set_between_scans_is_seen_by_the_next_scan() -> None:
