@@ -174,6 +174,9 @@ def program_order(logic: Logic, config: Config, section: str = "plc") -> list[st
 
 
 _NO_AUX = (0, False) * 4  # NC.P[k].M, MSTROBE, S, ... without [nc.aux]
+# A state's code, whether it is a wait, whether it is IDLE (the snapshot's, every scan).
+_STATE_FIELDS = {state: (int(state), state in WAITING_STATES, state is ProcessState.IDLE)
+                 for state in ProcessState}
 
 
 class EngineNc:
@@ -186,17 +189,36 @@ class EngineNc:
         self.engine = engine
         self.door = door
         self.kind = kind
+        self._image = door.runtime.image
+        # Per process: for M, S, T and H, the key of the value last output, the strobe's
+        # byte and its bit's mask.
+        self._aux_places: dict[int, tuple[tuple[tuple[int, str], int, int], ...]] = {}
 
     def snapshot(self) -> list[NcSnapshot]:
+        """Each process's status and its auxiliary functions, as the scan reads them (every
+        scan: the strobes are read from the image's bytes at places worked out once)."""
         out: list[NcSnapshot] = []
         aux = self.engine.aux
+        sa = self._image.sa
         for p in self.engine.processes.values():
-            state = p.state
-            n = p.where[2]
-            out.append((int(state), n or 0, p.where[1], state in WAITING_STATES,
-                        p.alarm is not None, p.alarm[0] if p.alarm else 0,
-                        state is ProcessState.IDLE, p.held,
-                        *(aux.snapshot(p.number) if aux is not None else _NO_AUX)))
+            code, waiting, idle = _STATE_FIELDS[p.state]
+            _, line, n = p.where
+            alarm = p.alarm
+            if aux is None:
+                out.append((code, n or 0, line, waiting, alarm is not None,
+                            alarm[0] if alarm else 0, idle, p.held, *_NO_AUX))
+                continue
+            places = self._aux_places.get(p.number)
+            if places is None:
+                places = self._aux_places[p.number] = tuple(
+                    (key, strobe >> 3, 1 << (strobe & 7))
+                    for key, strobe in aux.snapshot_places(p.number))
+            last = aux.last
+            (m, mb, mm), (s, sb, sm), (t, tb, tm), (h, hb, hm) = places
+            out.append((code, n or 0, line, waiting, alarm is not None,
+                        alarm[0] if alarm else 0, idle, p.held,
+                        last.get(m, 0), sa[mb] & mm != 0, last.get(s, 0), sa[sb] & sm != 0,
+                        last.get(t, 0), sa[tb] & tm != 0, last.get(h, 0), sa[hb] & hm != 0))
         return out
 
     def events(self) -> int:
@@ -415,23 +437,32 @@ class LogicWatcher:
                     self.loop.call_soon_threadsafe(self.reload)
 
 
+# The most still scans one leap passes over (the next leap goes on from there).
+LEAP_SCANS = 1 << 16
+
+
 class ScanDriver:
     """Runs the scan every ``scan_ms`` as an engine timer."""
 
     def __init__(self, engine: Engine, runtime: PlcRuntime, scan_ms: int, *,
                  wall: Callable[[], float] | None = None, closed: bool = False,
-                 stall_s: float = 60.0, scale: float = 1.0) -> None:
+                 stall_s: float = 60.0, scale: float = 1.0, leap: bool = False) -> None:
         """``wall``: machine time now by the wall clock (``run``); ``scale``: the time scale
-        that turns the scans' lateness back into wall-clock time."""
+        that turns the scans' lateness back into wall-clock time; ``leap``: every input
+        comes from an engine timer (``sim``: see :meth:`_leap`)."""
         self.engine = engine
         self.scale = scale
         self.runtime = runtime
         self.period = scan_ms / 1000.0
         self.wall = wall
         self.closed = closed
+        self.leap = leap and closed and wall is None
         self.stall_s = stall_s
         self.t0 = engine.now
         self.k = 0
+        self._leapt = 0  # still scans leapt over, counted when the next one runs
+        self._leapt_from = 0.0  # the time the leap was taken
+        self._reach = 16  # scans the next leap with nothing ahead passes (doubling)
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
 
     def _scan(self) -> None:
@@ -448,6 +479,9 @@ class ScanDriver:
             status.last_lateness_us = lateness
             status.max_lateness_us = max(status.max_lateness_us, lateness)
         due = self.t0 + self.k * period
+        if self._leapt:
+            status.scans += self._leapt
+            self._leapt = 0
         self.runtime.scan(round(due * 1000))
         self.k += 1
         if self.wall is not None:
@@ -456,11 +490,68 @@ class ScanDriver:
                 missed = int(late // period)
                 status.overruns += missed
                 self.k += missed
-        if self.closed and engine.stalled and engine.next_timer() is None and (
+        later = engine.next_timer() if self.closed else None
+        if self.closed and later is None and engine.stalled and (
                 engine.now - engine.last_change >= self.stall_s):
             self._timer = None  # nothing but the scan is left: let the run end as a stall
             return
+        if self.leap and self.runtime.still and not self.runtime.scan_listeners:
+            self._leap(later)
+            return
         self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
+
+    def _leap(self, later: float | None) -> None:
+        """Arm the first scan that may see something new, past the still ones before it.
+
+        The last scan changed nothing and read what it reads now (``PlcRuntime.still``):
+        until another timer fires, nothing can change -- in ``sim`` every input is a timer
+        (a script's entry, the plant, the NC's motion) -- so each scan before then would
+        be skipped as still.  The first scan armed is the first due at or after that timer
+        (or, with none left and the cell stalled, the one the stall rule stops at; with none
+        left and no stall to come, nothing changes any more, and the scans go on until the
+        run's end -- ``--until``, a scenario's horizon -- leapt over in steps that double),
+        at the very time the scans one after the other would have given it (each is armed
+        from the time the one before ran, and ``now + (t - now)`` need not be ``t``), so the
+        trace is the same to the bit.  The scans leapt over are counted.  ``later``: when
+        the next other timer is due (None: there is none)."""
+        engine, period = self.engine, self.period
+        stalls = later is None and engine.stalled
+        reach = LEAP_SCANS
+        if later is None and not stalls:
+            reach, self._reach = self._reach, min(LEAP_SCANS, 2 * self._reach)
+        start = now = engine.now
+        k = self.k
+        for _ in range(reach):
+            due = now + max(0.0, self.t0 + k * period - now)  # the time call_at would give
+            if (due >= later) if later is not None else stalls and (
+                    due - engine.last_change >= self.stall_s):
+                break  # scan k may see something new (or the stall rule stops at it)
+            now = due
+            k += 1
+        else:
+            due = now + max(0.0, self.t0 + k * period - now)
+        # The one timer the leap arms, from the time now: at the time worked out, or the
+        # scans go on one at a time.
+        if k > self.k and start + max(0.0, due - start) == due:
+            self._leapt, self._leapt_from = k - self.k, start
+            self.k = k
+            self._timer = engine.call_at(due, self._scan)
+        else:
+            self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
+
+    def settle(self) -> None:
+        """The run ended before the scan a leap armed: count the still scans leapt over
+        that the clock has passed (each ran, as far as anyone can tell)."""
+        if not self._leapt:
+            return
+        engine, status = self.engine, self.runtime.status
+        t = self._leapt_from
+        for k in range(self.k - self._leapt, self.k):
+            t += max(0.0, self.t0 + k * self.period - t)
+            if t > engine.now:
+                break
+            status.scans += 1
+        self._leapt = 0
 
     def close(self) -> None:
         if self._timer is not None:
@@ -471,12 +562,15 @@ class ScanDriver:
 
 def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
               wall: Callable[[], float] | None = None, cold: bool = False,
-              sources: Sources | None = None) -> tuple[PlcRuntime, ScanDriver] | None:
+              sources: Sources | None = None, leap: bool = False
+              ) -> tuple[PlcRuntime, ScanDriver] | None:
     """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
 
     RETAIN values are kept in ``plc.retain_file`` in ``run`` only: a simulation (``closed``)
     starts from the initial values every time, so that it stays deterministic.
-    ``sources``: the files' content to load instead of the files (a replay's, recorded)."""
+    ``sources``: the files' content to load instead of the files (a replay's, recorded).
+    ``leap``: every input comes from an engine timer (``sim``): still scans are leapt over
+    (:meth:`ScanDriver._leap`)."""
     plc = config.plc
     if not plc.logic:
         return None
@@ -503,15 +597,14 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
     logic_runtime.on_overridden = lambda path, value: engine.note_forced(path, value, "plc")
     door.reload_plc = OnlineChange(config, runtime, logic_runtime, sources)
     driver = ScanDriver(engine, logic_runtime, plc.scan_ms, wall=wall, closed=closed,
-                        scale=config.nc.time_scale,
-                        stall_s=config.nc.stall_s)
+                        scale=config.nc.time_scale, stall_s=config.nc.stall_s, leap=leap)
     log.info("PLC logic: %s, scan %d ms, programs %s", ", ".join(p.name for p in plc.logic),
              plc.scan_ms, ", ".join(order))
     return logic_runtime, driver
 
 
 def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: bool,
-                      wall: Callable[[], float] | None = None
+                      wall: Callable[[], float] | None = None, leap: bool = False
                       ) -> tuple[PlcRuntime, ScanDriver] | None:
     """The plant's own logic (``[plant] logic``): a second ST task on the engine's clock,
     every ``plant.scan_ms``, its image writes attributed to ``plant`` and its NC outputs to
@@ -528,7 +621,7 @@ def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: b
                                watchdog_ms=0 if closed else config.plc.watchdog_ms,
                                writer="plant")
     driver = ScanDriver(engine, logic_runtime, plant.scan_ms, wall=wall, closed=closed,
-                        scale=config.nc.time_scale, stall_s=config.nc.stall_s)
+                        scale=config.nc.time_scale, stall_s=config.nc.stall_s, leap=leap)
     if runtime.plant is not None:
         runtime.plant.logic = logic_runtime  # (its status in the plant's)
     log.info("plant logic: %s, scan %d ms, programs %s",

@@ -75,6 +75,14 @@ class Expectations:
         self.t0 = 0.0
         self._undo: list[object] = []
         self._timers: list[Timer] = []
+        # The variables' watches by each byte they occupy (a SYVAR is its own): a write
+        # looks at the watches of the bytes it touched, not at every watch.
+        self._by_byte: dict[tuple[str, int], list[_Watch]] = {}
+        for w in self.watches:
+            if w.kind == "var" and w.var is not None:
+                area, first, last = _bytes(*w.var.address)
+                for byte in range(first, last + 1):
+                    self._by_byte.setdefault((area, byte), []).append(w)
 
     def _fail(self, expect: Expect, message: str) -> ScenarioError:
         return ScenarioError(f"{self.script.file}: {expect.key}.cond: {message}")
@@ -169,13 +177,19 @@ class Expectations:
             w.changes.append((self.runtime.engine.now, holds))
 
     def _on_write(self, changes: Sequence[Change], writer: str) -> None:
-        touched = [_bytes(c.area, c.index, c.view) for c in changes]
+        by_byte = self._by_byte
+        hit: set[int] = set()  # (a write of other bytes: their value and writer are as were)
+        for c in changes:
+            area, first, last = _bytes(c.area, c.index, c.view)
+            for byte in range(first, last + 1):
+                for w in by_byte.get((area, byte), ()):
+                    hit.add(id(w))
+        if not hit:
+            return
         for w in self.watches:
-            if w.kind != "var" or w.var is None:
+            if id(w) not in hit:
                 continue
-            area, first, last = _bytes(*w.var.address)
-            if not any(a == area and f <= last and first <= t for a, f, t in touched):
-                continue  # a write of other bytes: its value and writer are as they were
+            assert w.var is not None
             holds = self._var_holds(w)
             who = self._writer(w)
             value = self.runtime.image.read(*w.var.address)

@@ -338,8 +338,12 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     runtime.trace.subscribe(count_plc_alarm)
     expectations.start()
     player.arm()
-    start_plc(config, runtime, door, closed=True)
-    start_plant_logic(config, runtime, door, closed=True)
+    # Every input of a sim is an engine timer, so still scans may be leapt over -- but not
+    # under before_time, which hears each time the clock moves to (a budget acts there).
+    leap = before_time is None
+    drivers = [started[1] for started in (
+        start_plc(config, runtime, door, closed=True, leap=leap),
+        start_plant_logic(config, runtime, door, closed=True, leap=leap)) if started]
 
     def active() -> bool:
         """Something may still start a program: the PLC logic's scan, a scripted input."""
@@ -360,7 +364,11 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     try:
         if signals:  # installed inside the try: a SIGTERM from now on is always reported
             previous = signal.signal(signal.SIGTERM, _terminated)
-        outcome = _run_to_end(engine, until, active, before_time)
+        try:
+            outcome = _run_to_end(engine, until, active, before_time)
+        finally:
+            for driver in drivers:
+                driver.settle()
     except KeyboardInterrupt as exc:  # what happened so far is still reported and written
         engine.finish_stats()
         by = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"

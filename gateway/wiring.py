@@ -4,6 +4,7 @@ conversions between the config's and the interpreter's names for things."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -125,7 +126,8 @@ def start_plant(runtime: Runtime, apply: Callable[[Input], None], *, closed: boo
     return plant
 
 
-def _image_var(text: str) -> Var:
+@functools.lru_cache(maxsize=4096)  # (a Var is frozen: each sim of a sweep or a scenario
+def _image_var(text: str) -> Var:    # suite reads the same config's symbols again)
     """An image variable as the config names it (``K12`` is the K packet's byte: SK12)."""
     return Var.parse("S" + text if text.upper().startswith("K") else text)
 

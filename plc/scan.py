@@ -22,6 +22,7 @@ clock).  Stdlib only; the NC is reached through :class:`NcPort`.
 from __future__ import annotations
 
 import enum
+import functools
 import logging
 import math
 import sqlite3
@@ -108,6 +109,10 @@ class PlcPathError(PlcError, KeyError):
 
 
 GUARD_CHUNK = 1024  # loop iterations between two looks at the limit and the watchdog
+# At most this many scans between two reads of a state that moved at every read (PlcRuntime's
+# still scans): logic that never stands still pays a read a 16th of its scans (bench/plc.py's
+# typed cell: 8 us a read, 38 us a scan).
+STILL_PAUSE_MAX = 16
 
 
 class WatchdogExpired(IterationGuard):
@@ -170,6 +175,16 @@ class PlcRuntime:
         self.forced: dict[str, tuple[str, Any]] = {}
         self._forced_types: dict[str, Any] = {}  # each force's type when it was set
         self.on_overridden: Callable[[str, Any], None] | None = None
+        # A still scan (see scan): the programs' state as the last scan left it (None: not
+        # known), whether that scan changed nothing, and what it read (the image's
+        # generation when it began, the NC's status).
+        self._state_of: Callable[[], Any] | None = None
+        self._state: Any = None
+        self._still = False
+        self._still_generation = -1
+        self._still_nc: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None = None
+        self._pause = 0  # scans before the state is read again (its last reads all moved)
+        self._misses = 0  # reads in a row that found the state moved
         self.start()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -191,6 +206,7 @@ class PlcRuntime:
         self._sends.clear()
         if self.retain is not None:
             self._apply_retained(self.retain.load())
+        self._read_state()
         self.status.state = PlcState.RUNNING
         self.status.fault = None
 
@@ -202,6 +218,57 @@ class PlcRuntime:
 
     def stop(self) -> None:
         self.status.state = PlcState.STOPPED
+
+    def _read_state(self) -> None:
+        """How the programs' state is read (after a start, a reload), and read it now."""
+        logic = self.logic
+        globals_state = logic.globals_state()
+        programs = [(logic.program_state(key), self.programs[key]) for key in self.order]
+        self._still = False
+        self._pause = self._misses = 0
+        if globals_state is None or any(state is None for state, _ in programs):
+            self._state_of = self._state = None  # (a member of a type it cannot read)
+            return
+        ns = self._ns
+        pairs = [(state, program) for state, program in programs if state is not None]
+        if len(pairs) == 1 and not logic.globals:  # the common case, read in one call
+            only, program = pairs[0]
+            self._state_of = functools.partial(only, program)
+        else:
+
+            def read() -> Any:
+                return globals_state(ns["_G"]), [state(program) for state, program in pairs]
+
+            self._state_of = read
+        self._state = self._state_of()
+
+    def _changed_state(self) -> None:
+        """Something other than a scan changed the programs' state (a force)."""
+        self._still = False
+        self._state = None
+
+    def _judge(self, quiet: bool, generation: int,
+               nc_read: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None) -> None:
+        """Whether the scan just run was still: ``quiet`` (it wrote nothing, gave the NC
+        nothing, nothing is forced), and the programs' state is as it began.  The state is
+        read only after a quiet scan; logic whose state moves on every scan (a counter, a
+        running timer) is read less and less often (every 2nd, 4th, .. STILL_PAUSE_MAX-th
+        scan), so that it pays a read now and then, not every scan."""
+        assert self._state_of is not None
+        self._still = False
+        if not quiet or self._pause:
+            self._pause = max(0, self._pause - 1)
+            self._state = None  # (unknown: the next quiet scan reads it, the one after tells)
+            return
+        state = self._state_of()
+        if self._state is not None:
+            if state == self._state:
+                self._still, self._misses = True, 0
+                self._still_generation, self._still_nc = generation, nc_read
+            else:
+                self._pause = min(STILL_PAUSE_MAX, 1 << self._misses)
+                self._misses += 1
+        self._state = state
 
     def _bind(self, ns: dict[str, Any]) -> None:
         """The generated module's globals: the scan's copy of the image, the NC's outputs
@@ -259,6 +326,7 @@ class PlcRuntime:
         self._runs = [programs[key] for key in self.order]
         self._retained = _retained_of(logic)
         self._saved = None  # the store is rewritten at the next scan: what is gone goes
+        self._read_state()
         if self.status.state is PlcState.FAULT:
             self.status.state = PlcState.RUNNING
             self.status.fault = None
@@ -272,17 +340,35 @@ class PlcRuntime:
             return
         started = self.clock_ns()
         image, ns = self.image, self._ns
+        generation = image.generation
+        nc_read = None
+        if self.logic.reads_nc:
+            nc = self.nc
+            nc_read = (nc.snapshot(), nc.events() & 0xFFFFFFFF, nc.last_snd())
+        if self._still and generation == self._still_generation and (
+                nc_read == self._still_nc) and self._state_of is not None and (
+                self._state_of() == self._state):
+            # The last scan changed nothing -- not the programs' state (their variables,
+            # their timers' and edges' memory), not the image, not the NC -- and what it read
+            # and the state are the same now: this one would do exactly the same nothing.
+            # Its time cannot matter (the logic reads the time only through TON, TOF and TP,
+            # and one that stood still over a scan with the same inputs stands still for
+            # good).  The state is read again, not trusted: a test or a debugger may set a
+            # variable between scans.
+            status.scans += 1
+            self._timed(started)
+            for listener in self.scan_listeners:
+                listener()
+            return
+        self._still = False
         # The programs work on a copy.  Nothing writes the image while they run (the scan
         # is one call on the loop), so the image itself stays the scan's inputs to diff
         # against.
         self._sa[:] = image.sa
         self._k[:] = image.k
         self._sy[:] = image.syvar
-        if self.logic.reads_nc:
-            nc = self.nc
-            ns["_NCS"] = nc.snapshot()
-            ns["_NCE"] = nc.events() & 0xFFFFFFFF
-            ns["_NCL"] = nc.last_snd()
+        if nc_read is not None:
+            ns["_NCS"], ns["_NCE"], ns["_NCL"] = nc_read
         ns["_NOW"] = now_ms
         # Loop iterations are handed out GUARD_CHUNK at a time: between chunks the guard
         # looks at the iteration limit and the watchdog's clock.
@@ -311,11 +397,16 @@ class PlcRuntime:
         if self.forced:
             self._apply_forces(True)
         changes = self._changes(image.sa, image.k, image.syvar)
+        acts = self._acts()
         if changes:
             image.write(changes, self.writer)
-        self._act()
+        if acts:
+            self._act()
         if self._retained:
             self._save_retained()
+        if self._state_of is not None:
+            self._judge(not changes and not acts and not self.forced
+                        and (self.retain is None or not self._retained), generation, nc_read)
         status.scans += 1
         self._timed(started)
         for listener in self.scan_listeners:
@@ -351,9 +442,22 @@ class PlcRuntime:
         return out
 
     @property
+    def still(self) -> bool:
+        """The last scan changed nothing (the programs' state, the image, the NC) and the
+        next one, if what it reads is the same, will be skipped as the same nothing."""
+        return self._still
+
+    @property
     def hold_level(self) -> bool:
         """NC.HOLD_LEVEL as the last scan left it: while TRUE the NC refuses a cycle start."""
         return bool(self._last_outputs[_HOLD_LEVEL]) and self.status.state is PlcState.RUNNING
+
+    def _acts(self) -> bool:
+        """Whether :meth:`_act` has something to do: an NC output changed, a send."""
+        return bool(self._sends) or self._outputs != self._last_outputs or (
+            self._process_outputs != self._last_process_outputs) or (
+            self._overrides[0] != self._last_overrides[0]) or (
+            self._process_overrides != self._last_process_overrides)
 
     def _act(self) -> None:
         outputs, last = self._outputs, self._last_outputs
@@ -554,6 +658,7 @@ class PlcRuntime:
         self.forced[key] = (path, stored)
         self._forced_types[key] = t
         self._assign(parent, attr, stored)
+        self._changed_state()
 
     def unforce(self, path: str | None = None) -> None:
         """Release one forced variable (None: every one); its value stays."""

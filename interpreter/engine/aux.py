@@ -241,19 +241,16 @@ class AuxInterface:
         return (f"waits for the PLC to acknowledge it ({ack}=1, now {slot.level}; "
                 f"{shown}){stale}")
 
-    def snapshot(self, process: int) -> tuple[int, bool, int, bool, int, bool, int, bool]:
-        """The value last output and whether its strobe is up, for M, S, T and H (the PLC
-        reads it every scan: each letter's key and strobe are looked up once)."""
+    def snapshot_places(self, process: int) -> tuple[tuple[tuple[int, str], int], ...]:
+        """For M, S, T and H of ``process``: the key of :attr:`last` (the value last output)
+        and the strobe's SA bit -- what the PLC's snapshot of the NC reads every scan, looked
+        up once."""
         places = self._snapshot_places.get(process)
         if places is None:
             places = self._snapshot_places[process] = tuple(
                 ((process, letter), self.slots[(process, letter)].strobe)
                 for letter in AUX_LETTERS)
-        read, last = self.image.read, self.last
-        (m, ms), (s, ss), (t, ts), (h, hs) = places
-        return (last.get(m, 0), bool(read("SA", ms, "bit")), last.get(s, 0),
-                bool(read("SA", ss, "bit")), last.get(t, 0), bool(read("SA", ts, "bit")),
-                last.get(h, 0), bool(read("SA", hs, "bit")))
+        return places
 
     # ---- the acknowledge's edges -------------------------------------------------------
 

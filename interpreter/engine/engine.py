@@ -454,9 +454,13 @@ class Engine:
         the rest runnable: the wall-clock driver serves the fieldbus between such runs."""
         if self._running:
             return
+        runnable = self._runnable
+        if not runnable:  # the common case on a timer (a scan, a plant tick): as below
+            self._unfinished = False
+            self._epoch += 1
+            return
         self._running = True
         try:
-            runnable = self._runnable
             stop_at = None if blocks is None else self._decoded + blocks
             self._unfinished = False
             while runnable:
@@ -525,7 +529,10 @@ class Engine:
 
     @property
     def all_idle(self) -> bool:
-        return all(p.loaded is None and p.alarm is None for p in self.processes.values())
+        for p in self.processes.values():  # (a loop: asked at every step of the clock)
+            if p.loaded is not None or p.alarm is not None:
+                return False
+        return True
 
     @property
     def has_unfinished(self) -> bool:

@@ -1,0 +1,150 @@
+"""A scan that changed nothing is skipped while what it reads stands still (plc/scan.py:
+the programs' state, the image, the NC's status): nothing the logic does may tell."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from ncgate.plc.scan import STILL_PAUSE_MAX
+
+from .st_harness import IDLE, Plc, program
+
+
+def test_a_scan_that_changed_nothing_is_still_until_an_input_changes() -> None:
+    plc = Plc(program("SA[1] := SA[0];")).scan(3)
+    assert plc.runtime.still  # (the first scan changed nothing either: SA1 was 0)
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    plc.scan()
+    assert plc.image.read("SA", 1, "bit") == 1
+    assert plc.runtime.status.scans == 4  # a skipped scan counts as a scan
+
+
+def test_a_running_on_delay_is_no_still_scan_and_rises_on_time() -> None:
+    plc = Plc(program("t(IN := SA[0], PT := T#50ms); SA[1] := t.Q;", "t : TON;"))
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    rose = []
+    for _ in range(8):  # every 10 ms from 0: IN rose at 0, Q at 50 ms
+        plc.scan()
+        rose.append(plc.image.read("SA", 1, "bit"))
+    assert rose == [0, 0, 0, 0, 0, 1, 1, 1]
+    assert plc["main.t.ET"] == 50 and plc.runtime.still  # elapsed: it stands still now
+
+
+def test_a_counter_counts_every_scan() -> None:
+    plc = Plc(program("n := n + 1;", "n : DINT;")).scan(5)
+    assert plc["main.n"] == 5 and not plc.runtime.still
+
+
+def test_logic_that_moved_for_long_is_seen_still_soon_after_it_stops() -> None:
+    """Its state is read less often while it moves (plc/scan.py: STILL_PAUSE_MAX), never so
+    seldom that a still stretch goes unseen for long."""
+    plc = Plc(program("IF SA[0] THEN n := n + 1; END_IF;", "n : DINT;"))
+    plc.image.write([("SA", 0, "bit", 1)], "test")
+    plc.scan(200)
+    assert not plc.runtime.still
+    plc.image.write([("SA", 0, "bit", 0)], "test")
+    plc.scan(STILL_PAUSE_MAX + 2)
+    assert plc.runtime.still and plc["main.n"] == 200
+
+
+def test_a_variable_set_between_scans_is_seen_by_the_next_scan() -> None:
+    plc = Plc(program("SA[1] := x;", "x : BOOL;")).scan(3)
+    assert plc.runtime.still
+    plc.runtime.programs["MAIN"].v_X = True  # as a debugger would: the state is read again
+    plc.scan()
+    assert plc.image.read("SA", 1, "bit") == 1
+
+
+def test_the_ncs_status_is_an_input_of_a_still_scan() -> None:
+    plc = Plc(program("SA[2] := NOT NC.P[1].IDLE;")).scan(3)
+    assert plc.runtime.still and plc.image.read("SA", 2, "bit") == 0
+    plc.nc.processes[0] = (1, 10, 2, False, False, 0, False, False)  # P1 runs
+    plc.scan()
+    assert plc.image.read("SA", 2, "bit") == 1
+    plc.nc.processes[0] = IDLE
+    plc.scan()
+    assert plc.image.read("SA", 2, "bit") == 0
+
+
+def test_a_real_that_turned_to_minus_zero_is_a_change() -> None:
+    # 0.0 * -1.0 is -0.0, and -0.0 * -1.0 is 0.0: equal as numbers, yet each scan changes r
+    plc = Plc(program("r := r * -1.0;", "r : LREAL;"))
+    signs = [math.copysign(1.0, plc.scan()["main.r"]) for _ in range(4)]
+    assert signs == [-1.0, 1.0, -1.0, 1.0] and not plc.runtime.still
+
+
+DEEP = """
+TYPE Slot : STRUCT flag : BOOL; name : STRING[8]; END_STRUCT; END_TYPE
+VAR_GLOBAL g : INT; END_VAR
+FUNCTION_BLOCK Station
+VAR_OUTPUT q : BOOL; END_VAR
+VAR t : TON; tray : ARRAY[1..2] OF Slot; END_VAR
+t(); (* IN stays FALSE: PT is kept as set *)
+q := t.PT > T#5ms OR tray[2].flag;
+END_FUNCTION_BLOCK
+PROGRAM main
+VAR slots : ARRAY[1..3] OF Slot; st : Station; r : ARRAY[1..2] OF LREAL;
+  timers : ARRAY[1..2] OF TON;
+  s : STRING; END_VAR
+st();
+timers[2](IN := FALSE);
+SA[1] := slots[2].flag;
+SA[2] := st.q;
+SA[3] := r[2] > 0.5;
+SA[4] := s = 'x';
+SA[5] := g = 3;
+SA[6] := timers[2].PT > T#5ms;
+SA[7] := slots[3].name = 'y';
+END_PROGRAM
+"""
+
+
+def _set_slot_flag(main: Any, g: Any) -> None:
+    main.v_SLOTS[1].v_FLAG = True
+
+
+def _set_fb_timer(main: Any, g: Any) -> None:
+    main.v_ST.v_T.PT = 10
+
+
+def _set_fb_array(main: Any, g: Any) -> None:
+    main.v_ST.v_TRAY[1].v_FLAG = True
+
+
+def _set_real(main: Any, g: Any) -> None:
+    main.v_R[1] = 1.0
+
+
+def _set_string(main: Any, g: Any) -> None:
+    main.v_S = "x"
+
+
+def _set_global(main: Any, g: Any) -> None:
+    g.v_G = 3
+
+
+def _set_timer_in_array(main: Any, g: Any) -> None:
+    main.v_TIMERS[1].PT = 10
+
+
+def _set_string_in_struct(main: Any, g: Any) -> None:
+    main.v_SLOTS[2].v_NAME = "y"
+
+
+@pytest.mark.parametrize(("setter", "bit"), [
+    (_set_slot_flag, 1), (_set_fb_timer, 2), (_set_fb_array, 2), (_set_real, 3),
+    (_set_string, 4), (_set_global, 5), (_set_timer_in_array, 6), (_set_string_in_struct, 7)])
+def test_every_member_is_part_of_the_state(setter: Callable[[Any, Any], None],
+                                           bit: int) -> None:
+    """Each kind of member (a structure in an array, an FB's TON and array, a REAL, a
+    STRING, a global, a TON in an array) set between scans is seen: none is left out of
+    the state a still scan compares."""
+    plc = Plc(DEEP).scan(3)
+    assert plc.runtime.still and plc.image.read("SA", bit, "bit") == 0
+    setter(plc.runtime.programs["MAIN"], plc.runtime.logic.namespace["_G"])
+    plc.scan()
+    assert plc.image.read("SA", bit, "bit") == 1
