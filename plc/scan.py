@@ -45,6 +45,7 @@ from ncgate.plc.st.runtime import (
     PlcFault,
     to_real,
 )
+from ncgate.plc.st.stdlib import RUNNING
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
@@ -351,16 +352,23 @@ class PlcRuntime:
             # The last scan changed nothing -- not the programs' state (their variables,
             # their timers' and edges' memory), not the image, not the NC -- and what it read
             # and the state are the same now: this one would do exactly the same nothing.
-            # Its time cannot matter (the logic reads the time only through TON, TOF and TP,
-            # and one that stood still over a scan with the same inputs stands still for
-            # good).  The state is read again, not trusted: a test or a debugger may set a
-            # variable between scans.
+            # Its time cannot matter: the logic reads the time only through TON, TOF and TP,
+            # and the last scan made no call of one that was running (stdlib.RUNNING) -- one
+            # that stood still with the same inputs stands still for good.  The state is
+            # read again, not trusted: a test or a debugger may set a variable between
+            # scans (and a scan that did not start from the state the last one left is
+            # never judged still: below).
             status.scans += 1
             self._timed(started)
             for listener in self.scan_listeners:
                 listener()
             return
         self._still = False
+        if self._state is not None and self._state_of is not None and (
+                self._state_of() != self._state):
+            # Set between scans (a debugger, a test): this scan does not start from the
+            # state the last one left, so its end says nothing of whether it was still.
+            self._state = None
         # The programs work on a copy.  Nothing writes the image while they run (the scan
         # is one call on the loop), so the image itself stays the scan's inputs to diff
         # against.
@@ -379,6 +387,7 @@ class PlcRuntime:
         self._sends.clear()
         if self.forced:
             self._apply_forces(False)
+        timers = next(RUNNING)
         try:
             for program in self._runs:
                 program()
@@ -406,7 +415,8 @@ class PlcRuntime:
             self._save_retained()
         if self._state_of is not None:
             self._judge(not changes and not acts and not self.forced
-                        and (self.retain is None or not self._retained), generation, nc_read)
+                        and (self.retain is None or not self._retained)
+                        and next(RUNNING) == timers + 1, generation, nc_read)
         status.scans += 1
         self._timed(started)
         for listener in self.scan_listeners:

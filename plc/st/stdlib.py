@@ -16,6 +16,7 @@ practice differ, ncgate follows the practice of CODESYS/TwinCAT and says so:
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 # ---- elementary integer types: (bits, signed) ----------------------------------------------
@@ -47,6 +48,14 @@ def limits(type_name: str) -> tuple[int, int]:
 
 # ---- timers --------------------------------------------------------------------------------
 
+# A timer call whose outputs depended on the time (it runs: its elapsed time is below PT)
+# takes a number here.  A scan's end state can hide such a call -- a TON called twice with a
+# long and a short PT ends every scan saturated by the short one, while the first call's Q
+# waits for the time -- so the scan (plc/scan.py) asks whether any call took one, and such a
+# scan is never judged still.  (``next`` on a count is atomic: several runtimes in threads
+# only make each other's scans less often still, never wrongly.)
+RUNNING = itertools.count()
+
 @dataclass
 class _Timer:
     """The interface IEC gives TON, TOF and TP: IN and PT in, Q and ET out (ms)."""
@@ -71,6 +80,8 @@ class TON(_Timer):
             self._start = now_ms
         self.ET = min(now_ms - self._start, self.PT)
         self.Q = self.ET >= self.PT
+        if not self.Q:
+            next(RUNNING)
 
 
 @dataclass
@@ -90,6 +101,8 @@ class TOF(_Timer):
         self.ET = min(now_ms - self._start, self.PT)
         if self.ET >= self.PT:
             self.Q, self._start = False, None
+        else:
+            next(RUNNING)
 
 
 @dataclass
@@ -105,6 +118,8 @@ class TP(_Timer):
             self.ET = min(now_ms - self._start, self.PT)
             if self.ET >= self.PT:
                 self.Q = False
+            else:
+                next(RUNNING)
         if not self.Q and not self.IN:
             self.ET = 0
 

@@ -148,3 +148,28 @@ def test_every_member_is_part_of_the_state(setter: Callable[[Any, Any], None],
     setter(plc.runtime.programs["MAIN"], plc.runtime.logic.namespace["_G"])
     plc.scan()
     assert plc.image.read("SA", bit, "bit") == 1
+
+
+def test_a_timer_called_twice_in_a_scan_is_not_still_while_its_first_call_runs() -> None:
+    """The end of each scan is the same once the short PT has passed (the second call leaves
+    ET saturated), but the first call's Q waits for the long PT: such scans are not still
+    (stdlib.RUNNING), found by a hostile review."""
+    plc = Plc(program("t(IN := TRUE, PT := T#50ms); SA[1] := t.Q;"
+                      "t(IN := TRUE, PT := T#20ms); SA[2] := t.Q;", "t : TON;"))
+    rose = []
+    for _ in range(8):  # every 10 ms from 0
+        plc.scan()
+        rose.append((plc.image.read("SA", 1, "bit"), plc.image.read("SA", 2, "bit")))
+    assert rose == [(0, 0), (0, 0), (0, 1), (0, 1), (0, 1), (1, 1), (1, 1), (1, 1)]
+    assert plc.runtime.still  # both calls saturated: it stands still now
+
+
+def test_a_variable_set_between_scans_and_undone_by_the_next_is_no_still_scan() -> None:
+    """A write between scans that the next scan undoes leaves the state as the scan before
+    ended it: that scan did something all the same (found by a hostile review)."""
+    plc = Plc(program("IF n > 0 THEN n := n - 1; IF n = 0 THEN SA[1] := TRUE; END_IF; END_IF;",
+                      "n : INT := 10;")).scan(3)
+    assert plc["main.n"] == 7
+    plc.runtime.programs["MAIN"].v_N = 8  # as a debugger would
+    plc.scan(12)
+    assert plc["main.n"] == 0 and plc.image.read("SA", 1, "bit") == 1
