@@ -58,6 +58,18 @@ async def test_a_callback_the_loop_ran_before_its_handoff_returned_is_not_left_p
 TPDO3 = 0x390
 
 
+async def map_status_on_sync(master: Master) -> None:
+    """TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state."""
+    for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
+                                 map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
+                                 map_entry(0x2700, 1, 8)), start=1):
+        await master.download(0x1A02, sub, entry.to_bytes(4, "little"))
+    await master.download(0x1A02, 0, b"\x05")
+    await master.download(0x1802, 2, b"\x01")
+    await master.download(0x1802, 1, (0x40000390).to_bytes(4, "little"))
+    master.listen(TPDO3)
+
+
 def map_entry(index: int, sub: int, bits: int) -> int:
     return index << 16 | sub << 8 | bits
 
@@ -96,15 +108,7 @@ async def test_a_sync_answers_from_the_loops_snapshot_while_the_loop_is_blocked(
     gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2 (before any TPDO is
     await gw.wait_state(1, "WAIT_COND", timeout_s=5)  # synchronous: nothing kept the
     await gw.wait_state(2, "WAIT_COND", timeout_s=5)  # status in the snapshot meanwhile)
-    # TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state.
-    for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
-                                 map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
-                                 map_entry(0x2700, 1, 8)), start=1):
-        await master.download(0x1A02, sub, entry.to_bytes(4, "little"))
-    await master.download(0x1A02, 0, b"\x05")
-    await master.download(0x1802, 2, b"\x01")
-    await master.download(0x1802, 1, (0x40000390).to_bytes(4, "little"))
-    master.listen(TPDO3)
+    await map_status_on_sync(master)
     master.nmt(0x01)
     await master.barrier()
 

@@ -15,12 +15,7 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.view import ViewPublisher
 
 from .conftest import Master
-
-TPDO3 = 0x390
-
-
-def map_entry(index: int, sub: int, bits: int) -> int:
-    return index << 16 | sub << 8 | bits
+from .test_threads import TPDO3, map_status_on_sync
 
 
 async def test_the_receive_thread_never_builds_a_view(
@@ -36,16 +31,8 @@ async def test_the_receive_thread_never_builds_a_view(
             return _real(self, *args)
 
         monkeypatch.setattr(ViewPublisher, name, recorded)
-    # TPDO3 on every SYNC: P1's state, N and line, P2's wait kind, the PLC's state; TPDO1
-    # (the states, on change) as it is by default.
-    for sub, entry in enumerate((map_entry(0x2500, 1, 8), map_entry(0x2500, 2, 16),
-                                 map_entry(0x2500, 3, 16), map_entry(0x2501, 4, 8),
-                                 map_entry(0x2700, 1, 8)), start=1):
-        await master.download(0x1A02, sub, entry.to_bytes(4, "little"))
-    await master.download(0x1A02, 0, b"\x05")
-    await master.download(0x1802, 2, b"\x01")
-    await master.download(0x1802, 1, (0x40000390).to_bytes(4, "little"))
-    master.listen(TPDO3)
+    # TPDO3 on every SYNC (test_threads); TPDO1 (the states, on change) as it is by default.
+    await map_status_on_sync(master)
     master.nmt(0x01)
     await master.barrier()
     gw.command(1)  # MAIN: EXE 2 SIDE, then waits for SA10 at N2
