@@ -109,6 +109,16 @@ def run(*cmd: str) -> int:
         signal.signal(signal.SIGINT, previous)
 
 
+def workers(args: list[str]) -> list[str]:
+    """Two pytest-xdist workers unless the arguments choose: most of the suite waits (on a
+    gateway's process, a socket, a browser), so two workers on two cores halve it -- 540 ->
+    310 s quiet, 632 s at load 6 against 591-614 s in one process at load 4
+    (docs/decisions.md, "The suite's time")."""
+    chosen = "no:xdist" in args or any(
+        a in ("-n", "--numprocesses") or a.startswith(("-n", "--numprocesses=")) for a in args)
+    return [] if chosen else ["-n", "2"]
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] not in {"run", "test", "lint", "bench", "setup"}:
         print(__doc__)
@@ -121,9 +131,10 @@ def main(argv: list[str]) -> int:
         return run(str(BIN / "ncgate"), "run", *rest)
     if what == "test":
         if not rest:
-            print("dev.py: the whole suite, about 7 minutes on two quiet cores (python3 dev.py "
-                  "test -x tests/unit for a quick look)", flush=True)
-        return run(str(PY), "-m", "pytest", *rest)
+            print("dev.py: the whole suite on two workers, about 5 minutes on two quiet cores "
+                  "(python3 dev.py test -x tests/unit for a quick look; -n 0: one process)",
+                  flush=True)
+        return run(str(PY), "-m", "pytest", *workers(rest), *rest)
     if what == "lint":
         os.environ["MYPYPATH"] = str(typecheck_tree())
         return run(str(PY), "-m", "ruff", "check", ".") or run(str(PY), "-m", "mypy", "-p",
