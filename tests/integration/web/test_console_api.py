@@ -291,7 +291,8 @@ async def test_a_taken_default_port_leaves_the_console_off_a_configured_one_is_a
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        config = ncgate_test_config()  # web.port unset, as run has it (the kit sets 0)
+        # web.port unset, as run has it (the kit sets 0); ten times the machine's pace
+        config = ncgate_test_config(**{"nc.time_scale": 10.0})
         config = dataclasses.replace(config, web=dataclasses.replace(config.web, port=None))
         async with Gateway(config, console=True, web_default_port=port) as gw:
             assert gw.web_console is None
@@ -840,3 +841,26 @@ async def test_the_status_says_why_a_process_stands(tmp_path: Path) -> None:
         assert await shown() == ("feed hold", "feed hold")
         gw.write("SA100", 1)
         assert await shown() == ("interlock SA100", "interlock SA100")
+
+
+async def test_what_the_console_loads_at_its_first_connection_is_out_of_full_collections(
+        ) -> None:
+    """aiohttp, imported when the first client connects, goes to the collector's permanent
+    generation, as everything loaded at start: a full collection walking it held the loop
+    9-10 ms (docs/decisions.md, "The console loads at its first connection")."""
+    import gc
+
+    async with await console() as gw:
+        port = gw.web_console
+        assert port is not None and port.console is None  # not loaded before a client came
+        frozen = gc.get_freeze_count()
+        host, number = gw.web_address
+        try:
+            async with aiohttp.ClientSession(f"http://{host}:{number}") as http, \
+                    http.get("/api/status") as r:
+                assert r.status == 200
+            assert port.console is not None
+            assert gc.get_freeze_count() > frozen
+        finally:
+            gc.unfreeze()  # (this test process's own heap goes back to the collector)
+
