@@ -385,6 +385,18 @@ class ViewPublisher:
         self._processes[k] = view
         return view
 
+    def record(self, k: int) -> tuple[int, ...]:
+        """Process ``k``'s status record as of now (:attr:`ProcessView.record`), from its
+        view when one was built since the last change, else encoded alone: the CANopen node
+        publishes the records of the processes it heard change after every engine turn,
+        and building their whole views there put a quarter more on the quiet storm's CPU
+        (bench/storm.py: 31-33 -> 40-43 %)."""
+        self._fresh()
+        view = self._processes.get(k)
+        if view is not None:
+            return view.record
+        return encode(self._engine.status(k), self._engine.processes[k].loaded is not None)[0]
+
     def state(self, k: int) -> int:
         """Process ``k``'s state code as of now (its record's first entry), without building
         its view: a TPDO of the states is built inside every state change, and building

@@ -98,6 +98,7 @@ from ncgate.gateway.canopen.snapshot import Snapshot, getter, plc_record
 from ncgate.gateway.door import SEARCH_WORDS, search_inputs
 from ncgate.gateway.errors import listen_error
 from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.gateway.view import CANOPEN_RECORD
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import (
     Command,
@@ -685,7 +686,7 @@ class CanopenNode:
 
     def _status_record(self, k: int) -> tuple[int, ...]:
         """0x2500+k-1 sub 1..8, as process k is now (loop): the cell view's record."""
-        return self.backend.views.process(k).canopen_record
+        return self.backend.views.record(k)[:CANOPEN_RECORD]
 
     def _error_register(self) -> int:
         alarms = any(p.alarm is not None for p in self.backend.view.processes)
