@@ -364,10 +364,11 @@ class PlcRuntime:
                 listener()
             return
         self._still = False
-        if self._state is not None and self._state_of is not None and (
+        if self._state is not None and not self._pause and self._state_of is not None and (
                 self._state_of() != self._state):
             # Set between scans (a debugger, a test): this scan does not start from the
             # state the last one left, so its end says nothing of whether it was still.
+            # (Read only when _judge will compare: while paused it forgets the state.)
             self._state = None
         # The programs work on a copy.  Nothing writes the image while they run (the scan
         # is one call on the loop), so the image itself stays the scan's inputs to diff

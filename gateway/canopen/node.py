@@ -431,7 +431,7 @@ class CanopenNode:
         self._heard = set()
         views = self.backend.views  # (the parts it maps: after every SYNC that sent them)
         self._view = replace(self._view, status=tuple(
-            views.process(k).canopen_record for k in range(1, self.config.nc.processes + 1)),
+            self._status_record(k) for k in range(1, self.config.nc.processes + 1)),
             last_snd=_last_snd(views.last_snd()), plc=plc_record(views.plc_registers()))
         return self._view
 

@@ -304,7 +304,7 @@ class Space:
         self._nodes: dict[str, ua.NodeId] = {}  # a value's key -> its node
         self._symbol_nodes: dict[str, list[ua.NodeId]] = {}  # a variable -> its I/O names'
         self._values: dict[str, Any] = {}  # what each node shows now
-        self._last_image: tuple[bytes, tuple[int, ...]] = (b"", ())  # SK, SYVAR shown
+        self._last_image: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())  # shown
         self._conditions: dict[int, _Condition] = {}  # by process (0: the cell)
         self._messages: EventGenerator | None = None
         self.image_ns = 0
@@ -431,17 +431,16 @@ class Space:
                               "ActiveProgram.State": v.state})
 
     async def _show_image(self, sa: bytes, k: bytes, syvar: tuple[int, ...]) -> None:
+        # Only what differs from the last image is looked at: a scan changes a few of its
+        # bytes and words, and an image comes every loop turn that wrote one.  (An SA byte
+        # unchanged is 8 bits skipped whole.)
+        last_sa, last_k, last_syvar = self._last_image
+        self._last_image = (sa, k, syvar)
         values: dict[str, Any] = {}
-        for i, byte in enumerate(sa):
-            if self._values.get(f"SA.{i}") == byte:
-                continue  # 8 bits unchanged: skipped whole
-            self._values[f"SA.{i}"] = byte
-            for bit in range(8):
-                values[f"SA{8 * i + bit}"] = bool(byte >> bit & 1)
-        # Only what differs from the last image is looked at: a scan changes a few of the
-        # 768 bytes and words, and an image comes every loop turn that wrote one.
-        last_k, last_syvar = self._last_image
-        self._last_image = (k, syvar)
+        for i, (byte, was) in enumerate(itertools.zip_longest(sa, last_sa)):
+            if byte != was:
+                for bit in range(8):
+                    values[f"SA{8 * i + bit}"] = bool(byte >> bit & 1)
         values.update((f"SK{i}", byte) for i, (byte, was) in
                       enumerate(itertools.zip_longest(k, last_k)) if byte != was)
         values.update((f"SYVAR{i}", word) for i, (word, was) in
