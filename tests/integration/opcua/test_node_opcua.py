@@ -141,12 +141,18 @@ async def test_channel_state_equals_api_status_and_a_subscription_hears_every_st
     assert program_seen == [0, 1, 2, 1, 4]  # Stopped, Running, Waiting, Running, Canceled
 
 
+
+async def messages_node(ua_client: UaClient) -> str:
+    """The cell's Notification/Messages, where its alarms and messages are events."""
+    node: str = await ua_client.call("translate", path=[
+        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
+        (MACHINE_TOOL, "Messages")])
+    return node
+
 async def test_an_alarm_is_an_alert_event_with_its_error_code_and_a_message_a_notification(
         gw: Gateway, ua_client: UaClient) -> None:
     await ua_client.call("connect", url=gw.opcua_endpoint)
-    messages = await ua_client.call("translate", path=[
-        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
-        (MACHINE_TOOL, "Messages")])
+    messages = await messages_node(ua_client)
     await ua_client.call("subscribe", interval=20)
     await ua_client.call("events", tag="events", node=messages, fields=[
         ["", "EventType"], ["", "Message"], ["", "Severity"], [MACHINE_TOOL, "ErrorCode"]])
@@ -288,9 +294,7 @@ CONDITION_FIELDS = [["", "EventId"], ["", "EventType"], ["", "ConditionId"], [""
 async def test_an_alarm_is_a_condition_a_client_acknowledges_and_condition_refresh_resends(
         gw: Gateway, ua_client: UaClient) -> None:
     await ua_client.call("connect", url=gw.opcua_endpoint)
-    messages = await ua_client.call("translate", path=[
-        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
-        (MACHINE_TOOL, "Messages")])
+    messages = await messages_node(ua_client)
     subscription = await ua_client.call("subscribe", interval=20)
     await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
     # asyncua sends RefreshStart and RefreshEnd from the Server object only.
@@ -342,9 +346,7 @@ async def test_the_cell_s_alarm_is_a_condition_active_until_a_client_acknowledge
     from ncgate.inputs import FieldbusAlarm
 
     await ua_client.call("connect", url=gw.opcua_endpoint)
-    messages = await ua_client.call("translate", path=[
-        (MACHINERY, "Machines"), (NCGATE, "ncgate"), (MACHINE_TOOL, "Notification"),
-        (MACHINE_TOOL, "Messages")])
+    messages = await messages_node(ua_client)
     await ua_client.call("subscribe", interval=20)
     await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
     gw.apply(FieldbusAlarm(150, "node 5's heartbeat stopped"))
