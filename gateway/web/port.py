@@ -95,14 +95,15 @@ class ConsolePort:
             self._waking = loop.create_task(self._wake())
 
     async def _wake(self) -> None:
-        module = await asyncio.to_thread(importlib.import_module, "ncgate.gateway.web.console")
-        console: WebConsole = module.WebConsole(self.gw, self.config)
         assert self._feed is not None
         try:
+            module = await asyncio.to_thread(importlib.import_module,
+                                             "ncgate.gateway.web.console")
+            console: WebConsole = module.WebConsole(self.gw, self.config)
             await console.start(self._sockets, self._feed)
-        except Exception:
+        except Exception:  # (aiohttp broken on disk under a long-running gateway, say)
             log.exception("web console: could not start; it is off")
-            self._close_sockets()
+            self._close_sockets()  # its clients are refused, not left waiting
             return
         self.console = console
         # What the import left alive (aiohttp's modules, about 100k objects) goes to the

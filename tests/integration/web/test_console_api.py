@@ -864,3 +864,34 @@ async def test_what_the_console_loads_at_its_first_connection_is_out_of_full_col
         finally:
             gc.unfreeze()  # (this test process's own heap goes back to the collector)
 
+
+
+async def test_a_console_that_cannot_load_at_its_first_connection_says_so_and_refuses(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """aiohttp broken on disk under a running gateway (found by a hostile try): the first
+    client's connection made the console load, the import failed outside the error path,
+    and every later client waited in the listen backlog for ever, with nothing logged."""
+    import importlib
+
+    import ncgate.gateway.web.port as port_module
+
+    real = importlib.import_module
+
+    def broken(name: str, *args: Any) -> Any:
+        if name == "ncgate.gateway.web.console":
+            raise ImportError("aiohttp: simulated")
+        return real(name, *args)
+
+    monkeypatch.setattr(port_module.importlib, "import_module", broken)
+    async with await console() as gw:
+        port = gw.web_console
+        assert port is not None
+        host, number = gw.web_address
+        _, writer = await asyncio.open_connection(host, number)
+        writer.close()
+        while port._waking is None:  # noqa: ASYNC110 - the loop's reader runs the knock
+            await asyncio.sleep(0.01)
+        await port._waking
+        assert "web console: could not start; it is off" in caplog.text
+        with pytest.raises(OSError):  # refused now, not queued
+            await asyncio.open_connection(host, number)
