@@ -50,9 +50,10 @@ log = logging.getLogger("ncgate")
 # stretched (x2 each time, up to MAX_STRETCH scans), never the switch points.
 BUDGET = 0.2
 MAX_STRETCH = 64
-# And one tick holds the loop this long at most (a poller waits no longer behind it); the
-# models it did not get to are written first at the next tick.
-TICK_S = 0.0003
+# And one tick holds the loop this long at most, and no longer than the engine's turn has
+# left (a poller waits no longer behind it); the models it did not get to are written first
+# at the next tick.
+TICK_S = 0.0001
 # Outputs that carry a number, not a bit: they need a word (a SYVAR, an SK/SA .IN word).
 _NUMBER_OUTPUTS = frozenset({("cylinder", "position"), ("motor", "speed"), ("lag", "actual")})
 
@@ -276,14 +277,17 @@ class Plant:
         self._tick = None
         started = time.perf_counter()
         models = list(self._sampling)
-        if not self.closed and self._next_in_turn:
+        if not self.closed and self._next_in_turn and models:
             # On the wall clock a tick holds the loop TICK_S at most: the models it did not
-            # get to come first at the next one (round robin), so none is left behind.
+            # get to come first at the next one (round robin), so none is left behind.  (The
+            # models it was due to start with may all have come to rest since: none left.)
             start = self._next_in_turn % len(models)
             models = models[start:] + models[:start]
         self._next_in_turn = 0
+        over = None if self.closed else self.runtime.engine.turn_over
         for done, model in enumerate(models):
-            if not self.closed and done and time.perf_counter() - started > TICK_S:
+            if over is not None and done and (time.perf_counter() - started > TICK_S
+                                              or over()):
                 self._next_in_turn = list(self._sampling).index(model)
                 break
             if model.free_running and self._idle():

@@ -358,6 +358,34 @@ def test_on_the_wall_clock_a_tick_over_its_budget_stretches_the_sampling_not_the
     assert plant.status()["stretch"] == MAX_STRETCH // 2
 
 
+
+def test_on_the_wall_clock_a_tick_due_to_go_on_round_robin_after_every_model_came_to_rest(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A tick that ran out of time leaves where the next one starts; if every model it did
+    not get to comes to rest before then, the next tick has nothing to write (it raised
+    ZeroDivisionError on the wall-clock driver's turn, seen under load with 100 models)."""
+    from ncgate.gateway.door import Door
+    from ncgate.gateway.plant import plant as plant_module
+    from ncgate.gateway.wiring import build_runtime, start_plant
+
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\n[plant]\nscan_ms = 1\n' + CYLINDER
+        + CYLINDER.replace('"clamp"', '"door"').replace("SA20", "SA21").replace(
+            "SA30", "SA32").replace("SA31", "SA33").replace("SYVAR10", "SYVAR11"))
+    runtime = build_runtime(load_config(tmp_path / "ncgate.toml"), closed=False)
+    plant = start_plant(runtime, Door(runtime).apply_on_time, closed=False)
+    runtime.image.write([("SA", 20, "bit", 1), ("SA", 21, "bit", 1)], "test")  # both move
+    runtime.engine.advance_to(0.0001, 100)
+    assert len(plant._sampling) == 2
+    monkeypatch.setattr(plant_module, "TICK_S", -1.0)  # out of time after the first model
+    runtime.engine.turn_over = lambda: False
+    runtime.engine.advance_to(0.001, 100)  # the tick at 1 ms writes one, leaves the other
+    assert plant._next_in_turn == 1
+    plant._sampling.clear()  # both came to rest before the next tick
+    runtime.engine.advance_to(0.002, 100)  # the tick at 2 ms: nothing to write, no error
+    assert plant._next_in_turn == 0
+
+
 PLANT_ST = """PROGRAM tank
 VAR level : INT; END_VAR
 (* the pump fills the tank 10 units a scan while SA20 is on; it drains 2 a scan *)

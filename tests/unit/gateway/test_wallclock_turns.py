@@ -1,0 +1,103 @@
+"""The engine on the wall clock gives the loop's sockets their turn between its own turns.
+
+A turn that runs out of time (``TURN_S``) goes on after what the sockets have ready: a
+request that arrived while a turn ran is answered after that turn, not after the next one
+too (docs/decisions.md, "A turn of the engine yields to the sockets").  Counted in turns,
+not timed: each turn here runs one timer (``TURN_S`` = 0), and the first timer is what sends
+the request.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+from collections.abc import Callable
+
+import pytest
+
+from ncgate.gateway import wallclock
+from ncgate.gateway.wallclock import WallClockDriver
+
+from ...helpers import make_sim
+
+TIMERS = 20
+
+
+def _loop_factory(kind: str) -> Callable[[], asyncio.AbstractEventLoop]:
+    if kind == "uvloop":
+        uvloop = pytest.importorskip("uvloop")
+        return uvloop.new_event_loop  # type: ignore[no-any-return]
+    return asyncio.new_event_loop
+
+
+@pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
+def test_a_request_that_arrives_during_a_turn_waits_for_that_turn_only(
+        kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(wallclock, "TURN_S", 0.0)  # every turn is over after one timer
+    engine = make_sim({"A": "N1M30\n"}).engine
+    server, client = socket.socketpair()
+    server.setblocking(False)
+    fired: list[int] = []
+    heard: list[int] = []  # how many timers had fired when the socket was read
+
+    def timer(i: int) -> None:
+        fired.append(i)
+        if i == 0:
+            client.send(b"request")  # arrives during the first turn
+
+    for i in range(TIMERS):
+        engine.call_at(0.0, lambda i=i: timer(i))
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+
+        def readable() -> None:
+            server.recv(64)
+            heard.append(len(fired))
+            loop.remove_reader(server)
+
+        loop.add_reader(server, readable)
+        driver = WallClockDriver(engine, 1.0, loop)
+        try:
+            driver.kick()
+            while len(fired) < TIMERS:
+                driver.changed.clear()
+                await driver.changed.wait()
+        finally:
+            driver.close()
+
+    try:
+        with asyncio.Runner(loop_factory=_loop_factory(kind)) as runner:
+            runner.run(main())
+    finally:
+        server.close()
+        client.close()
+    assert fired == list(range(TIMERS))  # all of them, in order, each once
+    assert heard == [1]  # read right after the turn it arrived in (asyncio gave 2 with call_soon)
+
+
+def test_a_timer_that_raises_leaves_the_clock_running_for_the_next(
+        caplog: pytest.LogCaptureFixture) -> None:
+    engine = make_sim({"A": "N1M30\n"}).engine
+    fired: list[str] = []
+
+    def broken() -> None:
+        raise ZeroDivisionError("a bug in a timer's callback")
+
+    engine.call_at(0.0, broken)
+    engine.call_at(0.002, lambda: fired.append("next"))
+
+    async def main() -> None:
+        driver = WallClockDriver(engine, 1.0, asyncio.get_running_loop())
+        try:
+            driver.kick()
+            async with asyncio.timeout(10):  # hangs for ever if nothing re-arms the clock
+                while not fired:
+                    driver.changed.clear()
+                    await driver.changed.wait()
+        finally:
+            driver.close()
+
+    asyncio.run(main())
+    assert fired == ["next"]
+    assert "a bug in a timer's callback" in caplog.text  # the loop logged it
