@@ -6,9 +6,11 @@ the cell through :attr:`ncgate.gateway.Gateway.view`, which the loop builds when
 for it and something changed since the last one (:class:`ViewPublisher`): once however many
 requests read it, and never in ``ncgate sim`` or a gateway nobody reads.  A reader that shows
 a part takes that part (:attr:`ncgate.gateway.Gateway.views`: one process's view, the cell's
-status beside the processes), each kept at the same moment as the whole.  What a view holds
-never changes, so a view may be handed to another thread (the CANopen node publishes from one
-to python-can's receive thread) and kept as long as it is wanted.
+status beside the processes, the image, the plant), each kept at the same moment as the
+whole.  What a view holds never changes, so a view may be handed to another thread (the
+CANopen node publishes from one to python-can's receive thread) and kept as long as it is
+wanted: the image is a :class:`~ncgate.plc.image.FrozenImage` (copied when read, or before
+the next write while something holds it), the plant a :class:`PlantView`.
 
 The encoding, once (spec 2.1, 3.2 and 3.3; README.md's Modbus map, the CANopen dictionary of
 ``ncgate map``):
@@ -21,6 +23,8 @@ The encoding, once (spec 2.1, 3.2 and 3.3; README.md's Modbus map, the CANopen d
 - :attr:`ProcessView.flags`: program loaded, running, waiting, alarm, motion active, hold.
 - :attr:`ProcessView.wait` and :attr:`ProcessView.standing`: why it waits or stands, as the
   console says it.
+- :func:`plant_status`: the plant (:class:`PlantView`) as the console's ``/api/status``,
+  ``Plant.status()`` and the OPC UA plant nodes show it.
 
 Imports the engine's and the PLC's types; nothing of a fieldbus or a web library.
 """
@@ -28,15 +32,19 @@ Imports the engine's and the PLC's types; nothing of a fieldbus or a web library
 from __future__ import annotations
 
 import asyncio
+import weakref
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ncgate.gateway.plc import plc_registers
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Process, ProcessState, ProcessStatus, WaitKind
 from ncgate.interpreter.engine.states import Where
+from ncgate.plc.image import FrozenImage
 
 if TYPE_CHECKING:
+    from ncgate.gateway.plant import Plant
+    from ncgate.gateway.plant.models import Model
     from ncgate.gateway.wiring import Backend
 
 # The process flags (Modbus discrete inputs 16(k-1)+0..5), in their order.
@@ -130,6 +138,50 @@ class PlcView(NamedTuple):
     fault: str | None
 
 
+class ModelView(NamedTuple):
+    """One plant model (docs/plant.md) as of the view: what it is doing and since when, in
+    words (``detail``: its why-record, ``Model.describe``), the faults on it, the variables
+    it reads and writes (key -> variable)."""
+
+    name: str
+    kind: str
+    state: str
+    since: float
+    detail: str
+    fault: str | None  # the kinds of the faults on it, comma-separated
+    reads: tuple[tuple[str, str], ...]
+    writes: tuple[tuple[str, str], ...]
+
+
+class FaultView(NamedTuple):
+    """A fault in force (``ActiveFault``): its parameters as it was given them."""
+
+    target: str
+    kind: str
+    params: tuple[tuple[str, Any], ...]
+    by: str
+    since: float
+
+
+class PlantLogicView(NamedTuple):
+    """The plant's own ST logic ([plant] logic)."""
+
+    state: str
+    scans: int
+    max_scan_us: int
+    fault: str | None
+
+
+class PlantView(NamedTuple):
+    """The plant as of the view (what ``Plant.status()`` encodes: :func:`plant_status`)."""
+
+    models: tuple[ModelView, ...]
+    faults: tuple[FaultView, ...]
+    scan_ms: int
+    stretch: int  # the tick's period in scans (run: stretched by the budget)
+    logic: PlantLogicView | None
+
+
 class CellStatus(NamedTuple):
     """What the cell shows beside its processes, as of one moment of the loop: the
     :class:`CellView` without ``processes`` (a reader of the PLC status block builds no
@@ -148,7 +200,7 @@ class CellStatus(NamedTuple):
 
 class CellView(NamedTuple):
     """The cell as of one moment of the loop (a NamedTuple, as :class:`ProcessView`): its
-    :class:`CellStatus` with the processes after ``t``."""
+    :class:`CellStatus` with the processes after ``t``, and the image and the plant."""
 
     t: float  # machine time
     processes: tuple[ProcessView, ...]  # process k at [k - 1]
@@ -161,6 +213,10 @@ class CellView(NamedTuple):
     plc_registers: tuple[int, ...]  # the PLC status block (gateway.plc.PLC_REGISTERS)
     forced: tuple[tuple[tuple[str, int, str], int], ...]  # ((area, index, view), value), sorted
     lag_s: float  # machine seconds behind the clock
+    # The image's values and last writers, taken when read (or before the next write while
+    # this view is held); never copied for a view whose image nobody reads.
+    image: FrozenImage
+    plant: PlantView | None  # None: no plant
 
 
 def status_registers(p: ProcessView) -> list[int]:
@@ -186,14 +242,70 @@ def int32(value: float) -> int:
 
 
 def build(backend: Backend, processes: tuple[ProcessView, ...] | None = None,
-          cell: CellStatus | None = None) -> CellView:
-    """The view of the cell as it is now (on the loop); ``processes`` and ``cell``: built
-    already (:meth:`ViewPublisher.process`, :meth:`ViewPublisher.status`)."""
+          cell: CellStatus | None = None, plant: PlantView | None = None) -> CellView:
+    """The view of the cell as it is now (on the loop); ``processes``, ``cell`` and
+    ``plant``: built already (:meth:`ViewPublisher.process`, :meth:`ViewPublisher.status`,
+    :meth:`ViewPublisher.plant`)."""
     if processes is None:
         processes = tuple(_process(backend, p) for p in backend.engine.processes.values())
     if cell is None:
         cell = cell_status(backend)
-    return CellView(cell.t, processes, *cell[1:])
+    if plant is None and backend.runtime.plant is not None:
+        plant = plant_view(backend.runtime.plant)
+    return CellView(cell.t, processes, *cell[1:], backend.image.frozen(), plant)
+
+
+# What each plant model reads and writes, as the view shows it (fixed when the plant is
+# built: made once, not with every view -- it was two thirds of a model's 2.7 us).
+_MODEL_IO: weakref.WeakKeyDictionary[Model, tuple[tuple[tuple[str, str], ...],
+                                                  tuple[tuple[str, str], ...]]]
+_MODEL_IO = weakref.WeakKeyDictionary()
+
+
+def plant_view(plant: Plant) -> PlantView:
+    """The plant as it is now (on the loop)."""
+    now = plant.runtime.engine.now
+    faults = plant.faults
+    on: dict[str, list[str]] = {}  # model -> the kinds of the faults on it
+    for f in faults:
+        on.setdefault(f.target.split(".")[0], []).append(f.kind)
+    models = []
+    for name, model in plant.models.items():
+        io = _MODEL_IO.get(model)
+        if io is None:
+            variables = plant.variables[name]
+            io = _MODEL_IO[model] = (
+                tuple((k, str(v)) for k, v in variables.items() if k in model.inputs),
+                tuple((k, str(v)) for k, v in variables.items() if k in model.outputs_keys))
+        kinds = on.get(name)
+        models.append(ModelView(name, model.kind, model.state, model.since,
+                                model.describe(now), ", ".join(kinds) if kinds else None,
+                                *io))
+    logic = None
+    if plant.logic is not None:
+        st = plant.logic.status
+        logic = PlantLogicView(st.state.name, st.scans, st.max_scan_us,
+                               None if st.fault is None else str(st.fault))
+    return PlantView(
+        tuple(models), tuple(FaultView(f.target, f.kind, tuple(f.params.items()), f.who,
+                                       f.since) for f in faults),
+        plant.runtime.config.plant.scan_ms, plant.stretch, logic)
+
+
+def plant_status(view: PlantView) -> dict[str, Any]:
+    """The plant as JSON has it: the console's and ``/api/status``'s ``plant``, and
+    ``Plant.status()`` -- each model, the faults in force, the tick and the plant's logic."""
+    logic = view.logic
+    return {
+        "models": [{"name": m.name, "kind": m.kind, "state": m.state,
+                    "since": round(m.since, 6), "detail": m.detail, "fault": m.fault,
+                    "reads": dict(m.reads), "writes": dict(m.writes)} for m in view.models],
+        "faults": [{"target": f.target, "kind": f.kind, "params": dict(f.params), "by": f.by,
+                    "since": round(f.since, 6)} for f in view.faults],
+        "scan_ms": view.scan_ms, "stretch": view.stretch,
+        "logic": None if logic is None else {
+            "state": logic.state, "scans": logic.scans, "max_scan_us": logic.max_scan_us,
+            "fault": logic.fault}}
 
 
 def cell_status(backend: Backend) -> CellStatus:
@@ -305,7 +417,12 @@ class ViewPublisher:
     node's event-driven TPDOs, built inside each state change and each SND) takes just that
     (:meth:`process`, :meth:`last_snd`): the whole view after every event cost the SND ->
     TPDO2 path 63 us at p50 (bench/canopen_node.py).  A process's view is kept while its
-    signature (:func:`_signature`) is the same."""
+    signature (:func:`_signature`) is the same.
+
+    The image is the image's own frozen one (:meth:`~ncgate.plc.image.IOImage.frozen`: the
+    same object until the next write, copied only when read, or before that write while a
+    view holding it is held elsewhere); before a write the publisher drops the view it keeps,
+    whose moment is over, so that a view nobody holds is never copied."""
 
     def __init__(self, backend: Backend, turns: Callable[[], int]) -> None:
         self._backend = backend
@@ -316,6 +433,7 @@ class ViewPublisher:
         self._key: tuple[int, int, int] | None = None
         self._view: CellView | None = None  # the whole view at _key, once built
         self._status: CellStatus | None = None  # the cell's status at _key, once built
+        self._plant: tuple[PlantView | None] | None = None  # the plant's view at _key, once
         self._processes: dict[int, ProcessView] = {}  # those built at _key
         # Each process's last view and what it was built from (its signature).
         self._kept: dict[int, tuple[tuple[object, ...], ProcessView]] = {}
@@ -325,6 +443,12 @@ class ViewPublisher:
         # First of them: a listener that reads the view (the CANopen node building a TPDO
         # on a state change) must find it stale, whenever it subscribed.
         self._listeners.insert(0, self._changed)
+        self._unfreeze = backend.image.before_freeze(self._drop)
+
+    def _drop(self) -> None:
+        """The image is about to be written: what is kept is of the moment before."""
+        self._key = None
+        self._view = None
 
     def _changed(self, process: Process | None, old: ProcessState) -> None:
         self._changes += 1
@@ -336,6 +460,8 @@ class ViewPublisher:
     def close(self) -> None:
         if self._changed in self._listeners:
             self._listeners.remove(self._changed)
+        self._unfreeze()
+        self._unfreeze = lambda: None
 
     def _fresh(self) -> None:
         """Forget what was built before the cell changed."""
@@ -344,6 +470,7 @@ class ViewPublisher:
             self._key = key
             self._view = None
             self._status = None
+            self._plant = None
             self._processes = {}
 
     def current(self) -> CellView:
@@ -351,7 +478,7 @@ class ViewPublisher:
         view = self._view
         if view is None:
             view = self._view = build(self._backend, tuple(
-                self.process(k) for k in self._engine.processes), self.status())
+                self.process(k) for k in self._engine.processes), self.status(), self.plant())
         return view
 
     def status(self) -> CellStatus:
@@ -361,6 +488,19 @@ class ViewPublisher:
         if cell is None:
             cell = self._status = cell_status(self._backend)
         return cell
+
+    def plant(self) -> PlantView | None:
+        """The plant's view as of now (:attr:`CellView.plant`; None: no plant)."""
+        self._fresh()
+        kept = self._plant
+        if kept is None:
+            plant = self._backend.runtime.plant
+            kept = self._plant = (None if plant is None else plant_view(plant),)
+        return kept[0]
+
+    def image(self) -> FrozenImage:
+        """The image as of now (:attr:`CellView.image`): taken when read."""
+        return self._backend.image.frozen()
 
     def process(self, k: int) -> ProcessView:
         """Process ``k``'s view as of now (what :meth:`current` would show of it)."""

@@ -134,8 +134,9 @@ def _image_var(text: str) -> Var:    # suite reads the same config's symbols aga
 
 class Backend(Protocol):
     """What the fieldbus adapters act on (the Gateway): the cell's view (the processes' status
-    and why-records, the SND log, the PLC status, the forces: :mod:`ncgate.gateway.view`),
-    the image, read on the loop, and the one way in (:meth:`ncgate.gateway.Gateway.apply`)."""
+    and why-records, the SND log, the PLC status, the forces, the image, the plant:
+    :mod:`ncgate.gateway.view`), the live image, read on the loop, and the one way in
+    (:meth:`ncgate.gateway.Gateway.apply`)."""
 
     @property
     def view(self) -> CellView: ...

@@ -6,12 +6,17 @@ every value of a request is validated, then stored, and only then are waits woke
 indexed by the storage they look at (a bit, a byte, a SYVAR), so a write evaluates only the
 waits on what it changed and its cost does not grow with the number of waits elsewhere.
 
-The image lives on one thread (the asyncio loop in the gateway); it does no locking.  Stdlib
-only: the interpreter reaches it through its own protocol, the gateway wires them together.
+The image lives on one thread (the asyncio loop in the gateway); it does no locking, but for
+its :class:`FrozenImage`: the image as of one write, immutable, taken lazily (copied when it is
+first read, or just before the image's next write if something still holds it then), which
+any thread may read.  Stdlib only: the interpreter reaches it through its own protocol, the
+gateway wires them together.
 """
 
 from __future__ import annotations
 
+import threading
+import weakref
 from collections.abc import Callable, Iterable, Sequence
 from typing import Final, NamedTuple
 
@@ -105,10 +110,54 @@ class IOImage:
         self.held: dict[tuple[str, int, str], int] = {}
         self.generation = 0  # +1 on every write that changed something
         self._write_number = 0
+        # The frozen image of the image as it is (frozen()), not taken yet; and who drops
+        # what it holds of one before a write (what is dropped is not copied).
+        self._frozen: weakref.ref[FrozenImage] | None = None
+        self._before_freeze: list[Callable[[], None]] = []
+        self._freeze_lock = threading.Lock()
 
     @property
     def sa_bits(self) -> int:
         return len(self.sa) * 8
+
+    @property
+    def writes(self) -> int:
+        """The write counter: +1 on every write, changed or not (a writer is stored even
+        when the value is not); a :class:`FrozenImage`'s ``version``."""
+        return self._write_number
+
+    # -- the image as of now, immutable ----------------------------------------------------
+
+    def frozen(self) -> FrozenImage:
+        """The image as it is now (values and last writers), never to change: nothing is
+        copied until it is read, or until the image is about to be written while something
+        still holds it (copy on write).  The same object until the next write."""
+        ref = self._frozen
+        found = ref() if ref is not None else None
+        if found is None:
+            found = FrozenImage(self)
+            self._frozen = weakref.ref(found)
+        return found
+
+    def before_freeze(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call ``callback()`` before a write while a frozen image of the image as it is
+        exists and is not taken: a holder that would drop it after the write (its moment is
+        over) drops it then, and it is copied only if something else still holds it.
+        Returns the unsubscribe."""
+        self._before_freeze.append(callback)
+        return lambda: self._before_freeze.remove(callback)
+
+    def _freeze(self) -> None:
+        """Before the image changes: the frozen image of it as it is, if still held, takes
+        its copy now."""
+        ref, self._frozen = self._frozen, None
+        if ref is None or ref() is None:
+            return  # (dropped: nothing to copy, nobody to tell)
+        for callback in list(self._before_freeze):
+            callback()
+        found = ref()  # still held by someone after the callbacks dropped theirs
+        if found is not None:
+            found._take_all()
 
     # -- reading --------------------------------------------------------------------------
 
@@ -161,6 +210,8 @@ class IOImage:
                 self.check(area, index, view, value)
         if self.forced or self.held:
             items = self._apply_forces(items, writer)
+        if self._frozen is not None:
+            self._freeze()
         done: list[Change] = []
         written: list[Change] = []
         touched: set[_Key] = set()
@@ -394,24 +445,100 @@ class IOImage:
         """Who last wrote each variable written so far: ``{"SA": {bit: writer}, "SK": {byte:
         writer}, "SYVAR": {n: writer}}`` (a byte write to the SA packet counts for its
         bits); the console shows it beside each value."""
-        sa: dict[int, tuple[int, str]] = {}
-        out: dict[str, dict[int, str]] = {"SA": {}, "SK": {}, "SYVAR": {}}
-        for (area, index), stamp in self._writers.items():
-            if area == "SAb":
-                bits = [index]
-            elif area == "SA":
-                bits = list(range(index * 8, index * 8 + 8))
-            else:
-                out[area][index] = stamp[1]
-                continue
-            for bit in bits:
-                if bit not in sa or sa[bit] < stamp:
-                    sa[bit] = stamp
-        out["SA"] = {bit: stamp[1] for bit, stamp in sorted(sa.items())}
-        return out
+        return _writers(self._writers)
 
     def snapshot(self) -> tuple[bytes, bytes, tuple[int, ...]]:
         return bytes(self.sa), bytes(self.k), tuple(self.syvar)
+
+
+class FrozenImage:
+    """The image as of one write (``version``: :attr:`IOImage.writes` then), immutable: its
+    values (:attr:`sa`, :attr:`k`, :attr:`syvar`) and its last writers (:meth:`writers`).
+
+    Taken lazily (:meth:`IOImage.frozen`): the values and the writers are each copied from
+    the image when first read, and whatever is not taken yet is taken just before the image's
+    next write if the frozen image is still held then; one dropped unread costs no copy.  Any
+    thread may read it: a copy from another thread holds the image's lock, which the loop
+    takes before it writes to a frozen image's image, so it never sees half a write."""
+
+    __slots__ = ("__weakref__", "_areas", "_image", "_lock", "_stamps", "sa_bits", "version")
+
+    def __init__(self, image: IOImage) -> None:
+        self._image: IOImage | None = image
+        self._lock = image._freeze_lock
+        self.version = image._write_number
+        self.sa_bits = image.sa_bits
+        self._areas: tuple[bytes, bytes, tuple[int, ...]] | None = None
+        self._stamps: dict[_Key, tuple[int, str]] | None = None
+
+    def _take_areas(self) -> tuple[bytes, bytes, tuple[int, ...]]:
+        with self._lock:
+            if self._areas is None:
+                image = self._image
+                assert image is not None
+                self._areas = (bytes(image.sa), bytes(image.k), tuple(image.syvar))
+                if self._stamps is not None:
+                    self._image = None  # (all taken: the live image is not needed)
+            return self._areas
+
+    def _take_stamps(self) -> dict[_Key, tuple[int, str]]:
+        with self._lock:
+            if self._stamps is None:
+                image = self._image
+                assert image is not None
+                self._stamps = dict(image._writers)
+                if self._areas is not None:
+                    self._image = None
+            return self._stamps
+
+    def _take_all(self) -> None:
+        if self._areas is None:
+            self._take_areas()
+        if self._stamps is None:
+            self._take_stamps()
+
+    @property
+    def sa(self) -> bytes:
+        """The SA packet, bit 0 of byte 0 first."""
+        areas = self._areas
+        return (areas if areas is not None else self._take_areas())[0]
+
+    @property
+    def k(self) -> bytes:
+        areas = self._areas
+        return (areas if areas is not None else self._take_areas())[1]
+
+    @property
+    def syvar(self) -> tuple[int, ...]:
+        areas = self._areas
+        return (areas if areas is not None else self._take_areas())[2]
+
+    def writers(self) -> dict[str, dict[int, str]]:
+        """Who last wrote each variable (:meth:`IOImage.writers`), as of this image."""
+        stamps = self._stamps
+        return _writers(stamps if stamps is not None else self._take_stamps())
+
+    def __repr__(self) -> str:
+        return f"<FrozenImage version {self.version}>"
+
+
+def _writers(stamps: dict[_Key, tuple[int, str]]) -> dict[str, dict[int, str]]:
+    """:meth:`IOImage.writers` of these stamps (key -> (write number, writer))."""
+    sa: dict[int, tuple[int, str]] = {}
+    out: dict[str, dict[int, str]] = {"SA": {}, "SK": {}, "SYVAR": {}}
+    for (area, index), stamp in stamps.items():
+        if area == "SAb":
+            bits = [index]
+        elif area == "SA":
+            bits = list(range(index * 8, index * 8 + 8))
+        else:
+            out[area][index] = stamp[1]
+            continue
+        for bit in bits:
+            if bit not in sa or sa[bit] < stamp:
+                sa[bit] = stamp
+    out["SA"] = {bit: stamp[1] for bit, stamp in sorted(sa.items())}
+    return out
 
 
 def value_range(area: str, view: str) -> tuple[int, int]:

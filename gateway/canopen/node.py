@@ -689,7 +689,8 @@ class CanopenNode:
         return self.backend.views.record(k)[:CANOPEN_RECORD]
 
     def _error_register(self) -> int:
-        alarms = any(p.alarm is not None for p in self.backend.view.processes)
+        views = self.backend.views  # (the processes' parts: not the image, not the plant)
+        alarms = any(views.process(k).alarm is not None for k in self.backend.engine.processes)
         lost = (REGISTER_GENERIC | REGISTER_COMMUNICATION
                 if self._master_lost or self._rpdo_lost or self._rpdo_length
                 or self._sync_errors else 0)

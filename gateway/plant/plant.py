@@ -80,10 +80,6 @@ class ActiveFault:
             return "value"
         return self.kind
 
-    def as_dict(self) -> dict[str, Any]:
-        return {"target": self.target, "kind": self.kind, "params": self.params,
-                "by": self.who, "since": round(self.since, 6)}
-
 
 class Plant:
     """The models of ``[[plant.model]]`` and the faults in force, on one runtime."""
@@ -544,27 +540,11 @@ class Plant:
         return drives[0].describe(self.runtime.engine.now)
 
     def status(self) -> dict[str, Any]:
-        """The console's and ``/api/status``'s ``plant``: each model and the faults."""
-        now = self.runtime.engine.now
-        models = []
-        for name, model in self.models.items():
-            faults = [f.kind for f in self.faults if f.target.split(".")[0] == name]
-            models.append({
-                "name": name, "kind": model.kind, "state": model.state,
-                "since": round(model.since, 6), "detail": model.describe(now),
-                "fault": ", ".join(faults) or None,
-                "reads": {k: str(v) for k, v in self.variables[name].items()
-                          if k in model.inputs},
-                "writes": {k: str(v) for k, v in self.variables[name].items()
-                           if k in model.outputs_keys}})
-        logic = None
-        if self.logic is not None:
-            st = self.logic.status
-            logic = {"state": st.state.name, "scans": st.scans, "max_scan_us": st.max_scan_us,
-                     "fault": None if st.fault is None else str(st.fault)}
-        return {"models": models, "faults": [f.as_dict() for f in self.faults],
-                "scan_ms": self.runtime.config.plant.scan_ms, "stretch": self.stretch,
-                "logic": logic}
+        """The console's and ``/api/status``'s ``plant``: each model and the faults (the
+        encoding of the cell's read model, ``gateway/view.py``, of the plant as it is now)."""
+        from ncgate.gateway.view import plant_status, plant_view
+
+        return plant_status(plant_view(self))
 
     def fault_of(self, name: str) -> list[ActiveFault]:
         return [f for f in self.faults if f.target.split(".")[0] == name]

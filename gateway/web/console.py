@@ -47,6 +47,7 @@ from ncgate.gateway.door import only_releases_hold
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.tls import server_context
+from ncgate.gateway.view import plant_status
 from ncgate.gateway.web.feed import EventFeed
 from ncgate.gateway.web.status import LiveStatus, status
 from ncgate.inputs import (
@@ -516,11 +517,10 @@ class WebConsole:
 
     async def _forced(self, request: web.Request) -> web.StreamResponse:
         """The force list: each forced variable and its value."""
-        forced = self.gw.image.forced
         plc = self.gw.runtime.plc
         return web.json_response({"forced": [
             {"var": var_name(area, index, view), "value": value}
-            for (area, index, view), value in sorted(forced.items())] + [
+            for (area, index, view), value in self.gw.views.status().forced] + [
             {"var": path, "value": value}
             for path, value in (plc.forced.values() if plc is not None else ())]})
 
@@ -570,8 +570,8 @@ class WebConsole:
         except InputRefused as exc:
             raise ApiError(HTTP_STATUS[exc.reason], str(exc)) from None
         log.info("web %s: %s", request.remote, item)
-        return web.json_response(self.gw.runtime.plant.status()["faults"]
-                                 if self.gw.runtime.plant is not None else [])
+        plant = self.gw.views.plant()
+        return web.json_response(plant_status(plant)["faults"] if plant is not None else [])
 
     async def _unforce_all(self, request: web.Request) -> web.StreamResponse:
         self.gw.apply(Force(None, None, _source(request)))

@@ -2,10 +2,10 @@
 and its variables, the image with its last writers, the fieldbus peers (``GET /api/status``).
 
 Built on the loop, on demand, from the cell's view (:attr:`ncgate.gateway.Gateway.view`: the
-processes, the PLC status, the forces, the SND counts), and from the
-:class:`~ncgate.gateway.app.Gateway` for what only the console shows (the image and its
-writers, the PLC's variables, the commissioning controls, the plant, the adapters); no web
-library here (the HTTP side is :mod:`ncgate.gateway.web.console`).
+processes, the PLC status, the forces, the SND counts, the image and its writers, the plant),
+and from the :class:`~ncgate.gateway.app.Gateway` for what only the console shows (the PLC's
+variables, the commissioning controls, the adapters); no web library here (the HTTP side is
+:mod:`ncgate.gateway.web.console`).
 """
 
 from __future__ import annotations
@@ -13,14 +13,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ncgate import __version__
-from ncgate.gateway.view import PlcView, ProcessView
+from ncgate.gateway.view import PlcView, ProcessView, plant_status
 from ncgate.inputs import var_name
 from ncgate.interpreter.settings import AXES
-from ncgate.plc.image import Change
+from ncgate.plc.image import FrozenImage
 from ncgate.plc.st.logic import ProgramVar
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, Type
 
@@ -61,14 +60,14 @@ def status(gw: Gateway, image: bool = True) -> dict[str, Any]:
         "symbol_comments": symbol_comments(gw),
         "record": str(gw.recorder.path) if gw.recorder is not None else None,
         "plc": plc(gw, view.plc),
-        "plant": gw.runtime.plant.status() if gw.runtime.plant is not None else None,
+        "plant": plant_status(view.plant) if view.plant is not None else None,
         "fieldbus": fieldbus(gw),
         "counters": {"events": gw.runtime.trace.seq, "sync_events": view.events},
         "web": {"read_only": gw.config.web.read_only,
                 "token": gw.config.web.token is not None},
     }
     if image:
-        out["image"] = image_status(gw)
+        out["image"] = image_status(view.image)
     return out
 
 
@@ -186,9 +185,9 @@ def fieldbus(gw: Gateway) -> dict[str, Any]:
     return out
 
 
-def image_status(gw: Gateway) -> dict[str, Any]:
-    """The SA packet as bits, the K bytes, the SYVARs, and who last wrote each."""
-    image = gw.image
+def image_status(image: FrozenImage) -> dict[str, Any]:
+    """The SA packet as bits, the K bytes, the SYVARs, and who last wrote each (of the
+    cell's view: :attr:`ncgate.gateway.view.CellView.image`)."""
     writers = image.writers()
     return {
         "sa": "".join(str((image.sa[i >> 3] >> (i & 7)) & 1) for i in range(image.sa_bits)),
@@ -213,38 +212,34 @@ class LiveStatus:
     again and the image's only where the image changed -- a part that did not change is the
     same string as before, which a stream compares by identity.  (Building the whole status
     with its image 8 times a second took about 460 us each time in bench/storm.py's cell.)
-    The image's values are compared with the last ones (a copy of 1 KB); its writers are
-    built again only after a write (an image listener sets a flag)."""
+    The image is the view's (:attr:`ncgate.gateway.view.CellView.image`): nothing of it is
+    read while its version (the image's write counter) is the last one; after a write its
+    values are compared with the last ones (a copy of 1 KB) and its writers built again."""
 
     def __init__(self, gw: Gateway) -> None:
         self.gw = gw
         self._image: dict[str, str] = {}
         self._seen: dict[str, bytes | tuple[int, ...]] = {}
-        self._writers_stale = True
-        self._unsubscribe: Callable[[], None] = gw.image.subscribe(self._written)
-
-    def _written(self, changes: Sequence[Change], writer: str) -> None:
-        self._writers_stale = True  # on the path of every write: a flag, nothing more
+        self._version: int | None = None  # the image's version the parts are of
 
     def close(self) -> None:
-        self._unsubscribe()
+        pass  # (nothing subscribed: the view's image says its version)
 
     def parts(self) -> dict[str, str]:
         whole = status(self.gw, image=False)
         out = {name: _dumps(value) for name, value in whole.items()}
-        image = self.gw.image
+        image = self.gw.view.image  # (the view status() read: nothing ran in between)
         cached = self._image
-        for name, now in (("sa", bytes(image.sa)), ("k", bytes(image.k)),
-                          ("syvar", tuple(image.syvar))):
-            if self._seen.get(name) != now or name not in cached:
-                self._seen[name] = now
-                if name == "sa":
-                    bits = "".join(_BITS[byte] for byte in now)[:image.sa_bits]
-                    cached[name] = f'"{bits}"'
-                else:
-                    cached[name] = _dumps(list(now))
-        if self._writers_stale or "writers" not in cached:
-            self._writers_stale = False
+        if image.version != self._version:
+            self._version = image.version
+            for name, now in (("sa", image.sa), ("k", image.k), ("syvar", image.syvar)):
+                if self._seen.get(name) != now or name not in cached:
+                    self._seen[name] = now
+                    if name == "sa":
+                        bits = "".join(_BITS[byte] for byte in now)[:image.sa_bits]
+                        cached[name] = f'"{bits}"'
+                    else:
+                        cached[name] = _dumps(list(now))
             cached["writers"] = _dumps({area: {str(k): v for k, v in table.items()}
                                         for area, table in image.writers().items()})
         out.update({f"image.{name}": text for name, text in cached.items()})

@@ -97,3 +97,81 @@ async def test_a_state_listener_reads_the_state_it_hears_of(tmp_path: Path) -> N
         gw.write("SK7", 4, source=TEST_PLC)
         await gw.wait_idle(timeout_s=5)
     assert seen and all(state is shown for state, shown in seen)
+
+
+PLANT = """
+[plant]
+scan_ms = 10
+[[plant.model]]
+name = "clamp"
+kind = "cylinder"
+extend = "SA20"
+extended = "SA30"
+retracted = "SA31"
+travel_ms = 300
+"""
+
+
+def _plant_cell(tmp_path: Path, program: str) -> Path:
+    path = _cell(tmp_path, program)
+    path.write_text(path.read_text() + PLANT)
+    return path
+
+
+async def test_a_view_keeps_the_image_and_the_plant_of_its_moment(tmp_path: Path) -> None:
+    # The image and the plant are the view's, as of its moment: a write, a model moving and
+    # a fault after it change the next view, never this one -- whether its image was read
+    # before the writes or not (taken then, or copied before the first write).
+    config = load_config(_plant_cell(tmp_path, "N1(WAI,SK7=3)\nN2M30\n"),
+                         overrides=NOTHING_SERVED)
+    async with Gateway(config) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        read, unread = gw.view, None
+        assert read.image.k[7] == 0 and read.image.sa[31 >> 3] >> (31 & 7) & 1  # retracted
+        gw.write("SK6", 1, source=TEST_PLC)
+        unread = gw.view
+        assert unread is not read
+        gw.write("SK7", 3, source=TEST_PLC)
+        gw.write("SA20", 1, source=TEST_PLC)  # the clamp extends
+        gw.fault("clamp", "slow", factor=2.0)
+        await gw.wait_idle(timeout_s=5)
+        now = gw.view
+        assert now.plant is not None and now.plant.models[0].state in ("extends", "extended")
+        assert now.plant.faults[0].kind == "slow" and now.plant.models[0].fault == "slow"
+        assert (now.image.k[7], now.image.sa[20 >> 3] >> (20 & 7) & 1) == (3, 1)
+        assert now.image.writers()["SK"] == {6: str(TEST_PLC), 7: str(TEST_PLC)}
+        for view in (read, unread):
+            assert view.plant is not None and view.plant.models[0].state == "retracted"
+            assert view.plant.faults == () and view.plant.models[0].fault is None
+            assert view.image.k[7] == 0 and view.image.sa[20 >> 3] >> (20 & 7) & 1 == 0
+        assert (read.image.k[6], unread.image.k[6]) == (0, 1)
+        assert 6 not in read.image.writers()["SK"]
+        assert unread.image.writers()["SK"] == {6: str(TEST_PLC)}
+
+
+async def test_a_view_whose_image_nobody_reads_copies_none(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A reader of the whole view after every write (the CANopen node's error register, a
+    # status without its image) takes no copy of the image: the view kept is dropped before
+    # the write.  One held across a write is copied, once.
+    from ncgate.plc.image import FrozenImage
+
+    copies: list[str] = []
+    for name in ("_take_areas", "_take_stamps"):
+        real = getattr(FrozenImage, name)
+        monkeypatch.setattr(FrozenImage, name, lambda self, _real=real, _name=name: (
+            copies.append(_name), _real(self))[1])
+    config = load_config(_cell(tmp_path, "N1(WAI,SK7=3)\nN2M30\n"), overrides=NOTHING_SERVED)
+    async with Gateway(config) as gw:
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND", timeout_s=5)
+        for value in range(10):
+            assert gw.view.processes[0].state is ProcessState.WAIT_COND
+            gw.write("SYVAR1", value, source=TEST_PLC)
+        assert copies == []
+        held = gw.view
+        gw.write("SYVAR1", 99, source=TEST_PLC)
+        gw.write("SYVAR1", 100, source=TEST_PLC)
+        assert sorted(copies) == ["_take_areas", "_take_stamps"]
+        assert held.image.syvar[1] == 9 and gw.view.image.syvar[1] == 100

@@ -47,3 +47,25 @@ async def test_the_receive_thread_never_builds_a_view(
     assert calls, "the node read nothing of the view"
     off_loop = [name for name, on_loop in calls if not on_loop]
     assert off_loop == []
+
+
+async def test_the_error_register_takes_the_processes_not_the_whole_view(
+        gw: Gateway, master: Master, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The whole view holds the plant too (a model's view costs about 0.8 us): the register,
+    # read inside the alarm's and the reset's events for their EMCYs, takes the processes'.
+    wholes: list[int] = []
+    real = ViewPublisher.current
+
+    def counted(self: ViewPublisher) -> Any:
+        wholes.append(1)
+        return real(self)
+
+    monkeypatch.setattr(ViewPublisher, "current", counted)
+    await gw.start("BAD", process=3)  # AL101 in P3
+    code, register, _ = struct.unpack("<HB5s", await master.next(0x90))
+    assert (code, register) == (0x6200, 1)
+    gw.command(3)  # reset
+    code, register, _ = struct.unpack("<HB5s", await master.next(0x90))
+    assert (code, register) == (0, 0)
+    assert await master.upload(0x1001, 0) == b"\x00"
+    assert wholes == []

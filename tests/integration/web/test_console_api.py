@@ -728,6 +728,40 @@ async def test_the_streams_status_built_from_changes_equals_the_whole_status() -
         live.close()
 
 
+async def test_the_status_shows_the_image_and_the_plant_of_the_cells_view(
+        tmp_path: Path) -> None:
+    """The console reads the image and the plant from the cell's read model (gateway/view.py),
+    as every adapter does: /api/status's ``plant`` and ``image`` are the view's, encoded by
+    the one encoding, and so is /api/fault's answer."""
+    from ncgate.gateway.view import plant_status
+    from ncgate.gateway.web.status import image_status
+
+    (tmp_path / "A.nc").write_text("N1(WAI,SA10=1)\nN2M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[plant]\nscan_ms = 10\n'
+        '[[plant.model]]\nname = "clamp"\nkind = "cylinder"\nextend = "SA20"\n'
+        'extended = "SA30"\nretracted = "SA31"\ntravel_ms = 300\n')
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **{"web.port": 0})
+    async with Gateway(config, console=True) as gw:
+        host, port = gw.web_address
+        await gw.start()
+        await gw.wait_state(1, "WAIT_COND")
+        gw.write("SYVAR3", -7)
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            status, faults = await post(http, "/api/fault", {"target": "clamp",
+                                                            "kind": "never"})
+            assert status == 200
+            async with http.get("/api/status") as r:
+                shown = await r.json()
+        view = gw.view  # the cell stands still: the view the answers were made of
+        assert view.plant is not None and view.plant.faults[0].kind == "never"
+        assert faults == plant_status(view.plant)["faults"]
+        assert shown["plant"] == plant_status(view.plant) == gw.plant.status()
+        assert shown["plant"]["models"][0]["state"] == "retracted"
+        assert shown["image"] == image_status(view.image)
+        assert shown["image"]["syvar"][3] == -7
+
+
 async def test_an_idle_cells_page_hears_of_a_record_started(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The built-in cell without PLC logic stands still: no event, no write, no clock.  A

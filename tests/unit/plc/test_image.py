@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ncgate.plc.image import ImageAddressError, ImageValueError, IOImage
+from ncgate.plc.image import FrozenImage, ImageAddressError, ImageValueError, IOImage
 
 
 def test_views_of_sa_and_k() -> None:
@@ -116,3 +116,109 @@ def test_unchanged_value_wakes_nothing_but_is_heard_and_records_the_writer() -> 
     assert image.write([("SK", 1, "BY", 0)], "plc") == []
     assert heard == [(0, 0)] and image.last_writer("SK", 1, "BY") == "plc"
     assert image.generation == 0
+
+
+# -- the frozen image (the cell view's image: gateway/view.py) ------------------------------
+
+
+def test_a_frozen_image_keeps_its_moment_after_writes() -> None:
+    image = IOImage(sa_bits=16, k_bytes=4, syvars=4)
+    image.write([("SA", 3, "bit", 1), ("SK", 1, "BY", 7), ("SYVAR", 2, "IN", -5)], "plc")
+    frozen = image.frozen()  # nothing read of it before the writes below
+    image.write([("SA", 3, "bit", 0), ("SK", 1, "BY", 9), ("SYVAR", 2, "IN", 4)], "modbus")
+    image.write([("SYVAR", 0, "IN", 1)], "P1 N10")
+    assert frozen.sa == bytes([0b1000, 0]) and frozen.k == bytes([0, 7, 0, 0])
+    assert frozen.syvar == (0, 0, -5, 0)
+    assert frozen.writers() == {"SA": {3: "plc"}, "SK": {1: "plc"}, "SYVAR": {2: "plc"}}
+    now = image.frozen()
+    assert now.syvar == (1, 0, 4, 0) and now.writers()["SYVAR"] == {0: "P1 N10", 2: "modbus"}
+    assert now.writers() == image.writers()
+    assert (frozen.version, now.version) == (1, 3) == (1, image.writes)
+
+
+def test_a_frozen_image_is_one_object_until_the_next_write() -> None:
+    image = IOImage()
+    frozen = image.frozen()
+    assert image.frozen() is frozen
+    image.write([("SYVAR", 1, "IN", 0)], "plc")  # no value changes; its writer does
+    assert image.frozen() is not frozen and frozen.writers()["SYVAR"] == {}
+
+
+def test_a_frozen_image_is_copied_only_when_read_or_held_across_a_write(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    copies: list[str] = []
+    for name in ("_take_areas", "_take_stamps"):
+        real = getattr(FrozenImage, name)
+        monkeypatch.setattr(FrozenImage, name, lambda self, _real=real, _name=name: (
+            copies.append(_name), _real(self))[1])
+    image = IOImage()
+    for value in range(5):
+        image.frozen()  # dropped unread: never copied
+        image.write([("SYVAR", 1, "IN", value)], "plc")
+    assert copies == []
+    held = image.frozen()
+    assert held.syvar[1] == 4 and copies == ["_take_areas"]  # read: its values, not writers
+    image.write([("SYVAR", 1, "IN", 9)], "plc")
+    assert copies == ["_take_areas", "_take_stamps"]  # held across the write: the rest
+    assert held.writers()["SYVAR"] == {1: "plc"} and held.syvar[1] == 4
+    image.write([("SYVAR", 1, "IN", 10)], "plc")
+    assert len(copies) == 2  # taken whole: nothing to copy again
+
+
+def test_a_holder_that_drops_its_frozen_image_before_a_write_costs_no_copy(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    copies: list[int] = []
+    real = FrozenImage._take_all
+    monkeypatch.setattr(FrozenImage, "_take_all", lambda self: (copies.append(1), real(self)))
+    image = IOImage()
+    kept: list[FrozenImage] = []
+    told: list[int] = []
+
+    def drop() -> None:
+        told.append(1)
+        kept.clear()
+
+    unsubscribe = image.before_freeze(drop)
+    kept.append(image.frozen())
+    image.write([("SYVAR", 1, "IN", 1)], "plc")
+    assert told == [1] and copies == []
+    image.write([("SYVAR", 1, "IN", 2)], "plc")  # no frozen image: nobody told
+    assert told == [1]
+    unsubscribe()
+    kept.append(image.frozen())
+    image.write([("SYVAR", 1, "IN", 3)], "plc")
+    assert told == [1] and copies == [1] and kept[0].syvar[1] == 2
+
+
+def test_a_frozen_image_read_on_another_thread_is_of_its_moment() -> None:
+    # The loop writes SYVAR1 and SYVAR2 together, always equal to the write's number, and
+    # hands a frozen image to another thread now and then, writing on; the thread reads each
+    # when it gets to it (mostly some writes later, some while the loop writes) and finds
+    # the pair as it was when the image was frozen.
+    import queue
+    import sys
+    import threading
+
+    image = IOImage(syvars=4)
+    handed: queue.SimpleQueue[FrozenImage | None] = queue.SimpleQueue()
+    values: list[tuple[int, tuple[int, ...]]] = []
+
+    def reader() -> None:
+        while (frozen := handed.get()) is not None:
+            values.append((frozen.version, frozen.syvar))
+
+    thread = threading.Thread(target=reader)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # the threads take turns as often as they can
+    thread.start()
+    try:
+        for value in range(1, 20000):
+            image.write([("SYVAR", 1, "IN", value), ("SYVAR", 2, "IN", value)], "plc")
+            if value % 7 == 0:
+                handed.put(image.frozen())
+    finally:
+        handed.put(None)
+        thread.join()
+        sys.setswitchinterval(interval)
+    assert len(values) == 19999 // 7
+    assert all(syvar[1] == syvar[2] == version for version, syvar in values)
