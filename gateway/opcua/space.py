@@ -48,7 +48,17 @@ from ncgate import __version__
 from ncgate.config.schema import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
-from ncgate.gateway.opcua.model import SHOWN_VIEW, SND_LOG, EventView, ProcessView
+from ncgate.gateway.opcua.model import (
+    CHANNEL_MODE,
+    CHANNEL_STATE,
+    CNC_CHANNEL_STATUS,
+    CNC_PROGRAM_STATUS,
+    SHOWN_VIEW,
+    SND_LOG,
+    Enumeration,
+    EventView,
+    ProcessView,
+)
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.tls import expiry_warning
@@ -77,13 +87,17 @@ ALERT_TYPE_ID = 39  # a subtype of AlarmConditionType
 ERROR_CODE_ID = 231  # AlertType's ErrorCode property
 CHANNEL_STATE_ID = 64  # DataType: Active 0, Interrupted 1, Reset 2
 CHANNEL_MODE_ID = 67  # DataType
-CHANNEL_MODES = ("Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle",
-                 "Remote", "Reference", "Other")
 CNC_COMPONENT_TYPE_ID = 1001  # OPC 40502 (CNC); abstract: CncChannelType's supertype
 CNC_CHANNEL_TYPE_ID = 1002
 CNC_MESSAGE_TYPE_ID = 1011  # an event type, a subtype of BaseEventType
 CNC_PROGRAM_STATUS_ID = 3002  # DataType CncChannelProgramStatus
 CNC_CHANNEL_STATUS_ID = 3003  # DataType CncChannelStatus (ActStatus): Active, Interrupted, Reset
+# Each enumeration's EnumValues property (model.py has the names): (namespace, DataType's id,
+# the property's id), as the published nodesets declare them.
+_ENUMERATIONS = {CHANNEL_STATE: (MACHINE_TOOL, CHANNEL_STATE_ID, 266),
+                 CHANNEL_MODE: (MACHINE_TOOL, CHANNEL_MODE_ID, 288),
+                 CNC_PROGRAM_STATUS: (CNC, CNC_PROGRAM_STATUS_ID, 6225),
+                 CNC_CHANNEL_STATUS: (CNC, CNC_CHANNEL_STATUS_ID, 6223)}
 
 _VTYPE = {"SA": ua.VariantType.Boolean, "SK": ua.VariantType.Byte,
           "SYVAR": ua.VariantType.Int16}
@@ -640,17 +654,10 @@ class Space:
         vendor_processes = await vendor.add_folder(_id("Processes", img),
                                                    ua.QualifiedName("Processes", img))
         # The enumerations with the published ids and values (model.py maps the states).
-        channel_state_t = (await new_enum(server, _id(CHANNEL_STATE_ID, mt), ua.QualifiedName(
-            "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
-        channel_mode_t = (await new_enum(server, _id(CHANNEL_MODE_ID, mt), ua.QualifiedName(
-            "ChannelMode", mt), list(CHANNEL_MODES))).nodeid
-        program_status_t = (await new_enum(
-            server, _id(CNC_PROGRAM_STATUS_ID, cnc),
-            ua.QualifiedName("CncChannelProgramStatus", cnc),
-            ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
-        channel_status_t = (await new_enum(
-            server, _id(CNC_CHANNEL_STATUS_ID, cnc), ua.QualifiedName("CncChannelStatus", cnc),
-            ["Active", "Interrupted", "Reset"])).nodeid
+        channel_state_t = await _enumeration(server, CHANNEL_STATE)
+        channel_mode_t = await _enumeration(server, CHANNEL_MODE)
+        program_status_t = await _enumeration(server, CNC_PROGRAM_STATUS)
+        channel_status_t = await _enumeration(server, CNC_CHANNEL_STATUS)
         for number in layout["processes"]:
             k, name = f"P{number}.", f"Process {number}"
             mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
@@ -731,6 +738,8 @@ class Space:
         node_id = _id(node_key or key.replace(".", "/"), ns)
         node = await parent.add_variable(node_id, ua.QualifiedName(name, browse_ns),
                                          _variant(key, initial), datatype=datatype)
+        if isinstance(initial, list):  # ActProgramBlock's 3 blocks; the SND log, any length
+            await _one_dimension(node, len(initial))
         self._nodes[key] = node.nodeid
         self._values[key] = initial
         return node
@@ -773,6 +782,32 @@ class Space:
 
 
 _UNSET = object()
+
+
+async def _enumeration(server: Server, enumeration: Enumeration) -> ua.NodeId:
+    """An enumeration DataType as its nodeset declares it: the DataTypeDefinition (what an
+    OPC UA 1.04 client reads) and the EnumValues property (what older clients read, and the
+    published nodesets carry), with the published NodeIds."""
+    uri, type_id, values_id = _ENUMERATIONS[enumeration]
+    ns = await server.get_namespace_index(uri)
+    datatype = await new_enum(server, _id(type_id, ns), ua.QualifiedName(enumeration.name, ns),
+                              list(enumeration.names))
+    values = [ua.EnumValueType(Value=i, DisplayName=ua.LocalizedText(name))
+              for i, name in enumerate(enumeration.names)]
+    prop = await datatype.add_property(_id(values_id, ns), ua.QualifiedName("EnumValues", 0),
+                                       values, varianttype=ua.VariantType.ExtensionObject,
+                                       datatype=_id(ObjectIds.EnumValueType, 0))
+    await _one_dimension(prop, len(values))
+    return datatype.nodeid
+
+
+async def _one_dimension(node: Node, length: int) -> None:
+    """An array variable's ValueRank 1 and ArrayDimensions (0: any length), as the nodesets
+    declare theirs (asyncua gives a list's variable ValueRank 0, one or more dimensions)."""
+    await node.write_attribute(AttributeIds.ValueRank, ua.DataValue(ua.Variant(
+        ua.ValueRank.OneDimension, ua.VariantType.Int32)))
+    await node.write_attribute(AttributeIds.ArrayDimensions, ua.DataValue(ua.Variant(
+        [length], ua.VariantType.UInt32)))
 
 
 def _at(event: Any, notifier: ua.NodeId) -> Any:

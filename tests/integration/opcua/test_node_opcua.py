@@ -430,3 +430,46 @@ async def test_condition_refresh_sends_the_retained_alarm_to_the_server_object_s
     await ua_client.until("server", lambda seen: len(seen) >= 6)
     assert len(ua_client.notes["messages"]) == 6  # the second went to the Server's item only
     assert ua_client.notes["live"] == [alarm]  # nor to the other subscription
+
+
+async def test_the_map_names_each_variable_s_data_type_as_the_server_declares_it(
+        gw: Gateway, ua_client: UaClient) -> None:
+    """``ncgate map``'s UA rows against the running server: a variable of an enumeration is
+    typed by the enumeration (its name in the map), whose EnumValues name the values for a
+    generic client; any other variable by the DataType the map names."""
+    from ncgate.gateway.opcua.model import (
+        CHANNEL_MODE,
+        CHANNEL_STATE,
+        CNC_CHANNEL_STATUS,
+        CNC_PROGRAM_STATUS,
+        node_rows,
+    )
+
+    enumerations = {e.name: e for e in (CHANNEL_STATE, CHANNEL_MODE, CNC_CHANNEL_STATUS,
+                                        CNC_PROGRAM_STATUS)}
+    namespaces = await ua_client.call("connect", url=gw.opcua_endpoint)
+    rows = node_rows("ncgate", [1, 2], {"sa_bits": 8, "k_bytes": 8, "syvars": 8},
+                     frozenset(), {})
+    seen = set()
+    for path, node_id, kind, _, _ in rows:
+        if kind in ("MachineToolType", "events") or " .. " in path:
+            continue  # objects, and the image's ranges
+        uri, ident = node_id.removeprefix("ns=").split(";s=")
+        node = {"ns": uri, "id": ident}
+        datatype = await ua_client.call("read", node=node, attribute="DataType")
+        ns, name = (await ua_client.call("read", node=datatype, attribute="BrowseName")
+                    ).split(":", 1)
+        rank = await ua_client.call("read", node=node, attribute="ValueRank")
+        if kind.endswith(" (enumeration)"):
+            enumeration = enumerations[kind.removesuffix(" (enumeration)")]
+            assert (namespaces[int(ns)] in (MACHINE_TOOL, CNC), name, rank) == (
+                True, enumeration.name, -1), path
+            props = await ua_client.call("browse", node=datatype, ref="ns=0;i=46")
+            (values,) = [p["node"] for p in props if p["name"].endswith("|EnumValues")]
+            shown = await ua_client.call("read", node=values)
+            assert [v["displayName"]["text"] for v in shown] == list(enumeration.names), path
+            seen.add(enumeration.name)
+        else:
+            assert (ns, name, rank) == ("0", kind.removesuffix("[3]"),
+                                        1 if kind.endswith("]") else -1), path
+    assert seen == set(enumerations)  # each enumeration's variables are in the map
