@@ -171,7 +171,9 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
     rows: list[tuple[str, ...]] = [
         (machine, f"ns=urn:ncgate:ua;s=Machines/{cell}", "MachineToolType", "read", "the cell"),
         (f"{machine}/Notification/Messages", "ns=urn:ncgate:ua;s=Messages", "events", "read",
-         "AlertType conditions (alarms), CncMessageType (DIS)")]
+         "AlertType conditions (alarms), CncMessageType (DIS)"),
+        ("Objects/Server", "ns=0;i=2253", "events", "read",
+         "the same events as Messages (HasNotifier: Server, the cell, Notification, Messages)")]
     for k in processes:
         p = f"Process {k}"
         for name, kind, what in (
