@@ -28,6 +28,28 @@ if TYPE_CHECKING:
 ACTIVE, INTERRUPTED, RESET = 0, 1, 2  # ChannelState (OPC 40501-1)
 STOPPED, RUNNING, WAITING, PROGRAM_INTERRUPTED, CANCELED = 0, 1, 2, 3, 4  # 40502
 
+
+class Enumeration(NamedTuple):
+    """A companion specification's enumeration DataType: its browse name and its values'
+    names by value 0, 1, ... (tests/integration/opcua/test_nodesets.py holds them to the
+    published nodesets).  A variable of it is typed by it and holds an Int32."""
+
+    name: str
+    names: tuple[str, ...]
+
+    def values(self) -> str:
+        """``0 Active, 1 Interrupted, 2 Reset``."""
+        return ", ".join(f"{i} {name}" for i, name in enumerate(self.names))
+
+
+CHANNEL_STATE = Enumeration("ChannelState", ("Active", "Interrupted", "Reset"))  # 40501-1
+CHANNEL_MODE = Enumeration("ChannelMode", (
+    "Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle", "Remote",
+    "Reference", "Other"))  # 40501-1; ncgate's channels are always Automatic
+CNC_CHANNEL_STATUS = Enumeration("CncChannelStatus", CHANNEL_STATE.names)  # 40502 ActStatus
+CNC_PROGRAM_STATUS = Enumeration("CncChannelProgramStatus", (
+    "Stopped", "Running", "Waiting", "Interrupted", "Canceled"))  # 40502 ActProgramStatus
+
 _CHANNEL_STATE = {ProcessState.IDLE: RESET, ProcessState.HOLD: INTERRUPTED,
                   ProcessState.STEP: INTERRUPTED, ProcessState.ALARM: INTERRUPTED}
 _PROGRAM_STATUS = {ProcessState.IDLE: STOPPED, ProcessState.RUNNING: RUNNING,
@@ -149,22 +171,27 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
     rows: list[tuple[str, ...]] = [
         (machine, f"ns=urn:ncgate:ua;s=Machines/{cell}", "MachineToolType", "read", "the cell"),
         (f"{machine}/Notification/Messages", "ns=urn:ncgate:ua;s=Messages", "events", "read",
-         "AlertType conditions (alarms), CncMessageType (DIS)")]
+         "AlertType conditions (alarms), CncMessageType (DIS)"),
+        ("Objects/Server", "ns=0;i=2253", "events", "read",
+         "the same events as Messages (HasNotifier: Server, the cell, Notification, Messages)")]
     for k in processes:
         p = f"Process {k}"
-        for name, kind, what in (("ChannelState", "Int32", "0 Active, 1 Interrupted, 2 Reset"),
-                                 ("FeedOverride", "Double", "percent"),
-                                 ("RapidOverride", "Double", "percent")):
+        for name, kind, what in (
+                ("ChannelState", _typed(CHANNEL_STATE), CHANNEL_STATE.values()),
+                ("ChannelMode", _typed(CHANNEL_MODE), "0 Automatic (always)"),
+                ("FeedOverride", "Double", "percent"),
+                ("RapidOverride", "Double", "percent")):
             rows.append((f"{machine}/Monitoring/{p}/{name}", f"ns=urn:ncgate:ua;s=P{k}/{name}",
                          kind, "read", what))
         for name, kind, what in (
-                ("ActProgramStatus", "Int32", "0 Stopped, 1 Running, 2 Waiting, "
-                 "3 Interrupted, 4 Canceled"),
+                ("ActStatus", _typed(CNC_CHANNEL_STATUS), CNC_CHANNEL_STATUS.values()),
+                ("ActProgramStatus", _typed(CNC_PROGRAM_STATUS), CNC_PROGRAM_STATUS.values()),
                 ("ActProgramName", "String", "the program"),
+                ("ActMainProgramName", "String", "the program"),
                 ("ActProgramBlock", "String[3]", "previous, current, next block"),
                 ("ActProgramLine", "String", "the source line"),
-                ("ActFeedrate", "Double", "mm/min"), ("X", "Double", "mm"),
-                ("Y", "Double", "mm"), ("Z", "Double", "mm")):
+                ("ActFeedrate", "Double", "mm/min"), ("ActOverride", "Double", "percent"),
+                ("X", "Double", "mm"), ("Y", "Double", "mm"), ("Z", "Double", "mm")):
             rows.append((f"Objects/CncInterface/CncChannelList/{p}/{name}",
                          f"ns=urn:ncgate:ua;s=P{k}/{name}", kind, "read", what))
         rows.append((f"Objects/Image/Processes/{p}/State", f"ns=urn:ncgate:image;s={p}.State",
@@ -181,3 +208,8 @@ def node_rows(cell: str, processes: list[int], sizes: dict[str, int],
         rows.append((f"Objects/Image/Symbols/{name}", f"ns=urn:ncgate:image;s={name}",
                      f"as {var}", rw[var.area], f"the I/O name of {var}"))
     return rows
+
+
+def _typed(enumeration: Enumeration) -> str:
+    """The map's type of a variable of an enumeration: its DataType is the enumeration."""
+    return f"{enumeration.name} (enumeration)"

@@ -13,6 +13,7 @@ image; it reads what the loop sends it, and ends when its stdin does.
 from __future__ import annotations
 
 import asyncio
+import copy
 import hashlib
 import hmac
 import itertools
@@ -20,7 +21,9 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Mapping
+import uuid
+from collections.abc import Awaitable, Callable, Mapping
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,7 +48,17 @@ from ncgate import __version__
 from ncgate.config.schema import OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
-from ncgate.gateway.opcua.model import SHOWN_VIEW, SND_LOG, EventView, ProcessView
+from ncgate.gateway.opcua.model import (
+    CHANNEL_MODE,
+    CHANNEL_STATE,
+    CNC_CHANNEL_STATUS,
+    CNC_PROGRAM_STATUS,
+    SHOWN_VIEW,
+    SND_LOG,
+    Enumeration,
+    EventView,
+    ProcessView,
+)
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.tls import expiry_warning
@@ -74,13 +87,17 @@ ALERT_TYPE_ID = 39  # a subtype of AlarmConditionType
 ERROR_CODE_ID = 231  # AlertType's ErrorCode property
 CHANNEL_STATE_ID = 64  # DataType: Active 0, Interrupted 1, Reset 2
 CHANNEL_MODE_ID = 67  # DataType
-CHANNEL_MODES = ("Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle",
-                 "Remote", "Reference", "Other")
 CNC_COMPONENT_TYPE_ID = 1001  # OPC 40502 (CNC); abstract: CncChannelType's supertype
 CNC_CHANNEL_TYPE_ID = 1002
 CNC_MESSAGE_TYPE_ID = 1011  # an event type, a subtype of BaseEventType
 CNC_PROGRAM_STATUS_ID = 3002  # DataType CncChannelProgramStatus
 CNC_CHANNEL_STATUS_ID = 3003  # DataType CncChannelStatus (ActStatus): Active, Interrupted, Reset
+# Each enumeration's EnumValues property (model.py has the names): (namespace, DataType's id,
+# the property's id), as the published nodesets declare them.
+_ENUMERATIONS = {CHANNEL_STATE: (MACHINE_TOOL, CHANNEL_STATE_ID, 266),
+                 CHANNEL_MODE: (MACHINE_TOOL, CHANNEL_MODE_ID, 288),
+                 CNC_PROGRAM_STATUS: (CNC, CNC_PROGRAM_STATUS_ID, 6225),
+                 CNC_CHANNEL_STATUS: (CNC, CNC_CHANNEL_STATUS_ID, 6223)}
 
 _VTYPE = {"SA": ua.VariantType.Boolean, "SK": ua.VariantType.Byte,
           "SYVAR": ua.VariantType.Int16}
@@ -180,13 +197,15 @@ class _Condition:
     """One AlertType condition (an ``AlarmConditionType``, OPC 10000-9 5.8): a process's
     alarms, or the cell's (process 0: the fieldbus side's, AL150).  Active while the process
     is in ALARM; the cell's stop nothing and are pending nowhere in ncgate, so theirs is
-    active until a client acknowledges it.  Retained while active or unacknowledged, which
-    is what ConditionRefresh sends again (asyncua keeps the retained events)."""
+    active until a client acknowledges it.  Retained while active or unacknowledged: its
+    latest event is what ConditionRefresh sends again (``Space._refresh``)."""
 
-    def __init__(self, process: int, node: ua.NodeId, generator: EventGenerator) -> None:
+    def __init__(self, process: int, node: ua.NodeId, generator: EventGenerator,
+                 climb: Callable[[Any], Awaitable[None]]) -> None:
         self.process = process
         self.node = node  # the ConditionId
-        self.generator = generator  # its own: asyncua retains the event object itself
+        self.generator = generator  # its own: its event object is this condition's latest
+        self.climb = climb  # the event to the notifiers above Messages (Space._climb)
         self.active = False
         self.acked = True
 
@@ -198,6 +217,13 @@ class _Condition:
         setattr(event, "AckedState/Id", self.acked)
         event.AckedState = ua.LocalizedText("Acknowledged" if self.acked else "Unacknowledged")
         await self.generator.trigger(message=event.Message.Text if event.Message else None)
+        await self.climb(event)
+
+    @property
+    def retained(self) -> bool:
+        """What ConditionRefresh sends again: raised once, and active or unacknowledged."""
+        return (getattr(self.generator.event.EventId, "Value", None) is not None
+                and (self.active or not self.acked))
 
     async def raised(self, e: EventView) -> None:
         event: Any = self.generator.event
@@ -307,6 +333,9 @@ class Space:
         self._last_image: tuple[bytes, bytes, tuple[int, ...]] = (b"", b"", ())  # shown
         self._conditions: dict[int, _Condition] = {}  # by process (0: the cell)
         self._messages: EventGenerator | None = None
+        # The notifier hierarchy (HasNotifier): each notifier's parent, up to Server.
+        self._above: dict[ua.NodeId, ua.NodeId] = {}
+        self._refresh_events: tuple[Any, Any] | None = None  # RefreshStart, RefreshEnd
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
         self.sessions: set[_Session] = set()  # the clients' activated sessions
@@ -317,9 +346,7 @@ class Space:
         config = self.link.config
         self.users = _Users(config.users)
         server = self._server = Server(user_manager=self.users)
-        # ConditionRefresh (OPC 10000-9 5.5.7): asyncua sends its retained conditions again.
-        server.iserver.bind_condition_methods = True
-        await server.init()
+        await server.init()  # (ConditionRefresh is ncgate's own: _build_conditions)
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
         server.set_server_name(f"ncgate {layout['cell']} (virtual)")
         await server.set_application_uri(f"urn:ncgate:{layout['cell']}")
@@ -461,6 +488,69 @@ class Space:
         event.Severity = e.severity
         event.SourceName = f"Process {e.process}" if e.process else "cell"
         await generator.trigger(message=e.message)
+        await self._climb(event)
+
+    # -- events up the notifier hierarchy ---------------------------------------------------
+    #
+    # asyncua 2.1 delivers an event only to the monitored items at its emitting node
+    # (FreeOpcUa/opcua-asyncio#105), and its ConditionRefresh only to those and the Server's
+    # brackets.  OPC 10000-3 7.17 has a notifier report the events of the notifiers below it
+    # (HasNotifier), the Server object at the top: a SCADA alarm list subscribes there.
+
+    def _chain(self, notifier: ua.NodeId) -> list[ua.NodeId]:
+        """``notifier`` and each notifier above it, up to the Server object."""
+        chain = [notifier]
+        while chain[-1] in self._above:
+            chain.append(self._above[chain[-1]])
+        return chain
+
+    async def _climb(self, event: Any) -> None:
+        """An event asyncua has just delivered at its emitting node, to the monitored items of
+        every notifier above it: the same event (its EventId), not another."""
+        server = self._server
+        assert server is not None
+        subscriptions = server.iserver.subscription_service.subscriptions
+        for notifier in self._chain(event.emitting_node)[1:]:
+            seen = _at(event, notifier)
+            for subscription in list(subscriptions.values()):
+                await subscription.monitored_item_srv.trigger_event(seen)
+
+    async def _refresh(self, parent: ua.NodeId, subscription_id: ua.Variant,
+                       monitored_item: ua.Variant | None = None) -> ua.StatusCode | list[Any]:
+        """ConditionType's ConditionRefresh and ConditionRefresh2 (OPC 10000-9 5.5.7, 5.5.8):
+        a RefreshStart event to every event item of the subscription (or to the one item), each
+        retained condition to the items whose notifier it reaches, and a RefreshEnd."""
+        server = self._server
+        assert server is not None and self._refresh_events is not None
+        subscription = server.iserver.subscription_service.subscriptions.get(
+            subscription_id.Value)
+        if subscription is None:
+            return ua.StatusCode(StatusCodes.BadSubscriptionIdInvalid)  # type: ignore[arg-type]
+        items = subscription.monitored_item_srv
+        # (The event items by notifier: asyncua 2.1 keeps them in _monitored_events only.)
+        watched = [(mid, notifier) for notifier, mids in items._monitored_events.items()
+                   for mid in mids]
+        if monitored_item is not None:
+            watched = [w for w in watched if w[0] == monitored_item.Value]
+            if not watched:
+                invalid = StatusCodes.BadMonitoredItemIdInvalid
+                return ua.StatusCode(invalid)  # type: ignore[arg-type]
+        if not watched:
+            return ua.StatusCode(StatusCodes.BadNothingToDo)  # type: ignore[arg-type]
+        start, end = (_stamped(e) for e in self._refresh_events)
+        for mid, notifier in watched:
+            await items.trigger_event(_at(start, notifier), mid)
+        for condition in self._conditions.values():
+            if not condition.retained:
+                continue
+            event = condition.generator.event
+            reached = self._chain(event.emitting_node)
+            for mid, notifier in watched:
+                if notifier in reached:
+                    await items.trigger_event(_at(event, notifier), mid)
+        for mid, notifier in watched:
+            await items.trigger_event(_at(end, notifier), mid)
+        return []
 
     async def _acknowledge(self, parent: ua.NodeId, event_id: ua.Variant,
                            comment: ua.Variant) -> ua.StatusCode | list[Any]:
@@ -506,9 +596,8 @@ class Space:
         for abstract in (element_monitoring, cnc_component):
             await abstract.write_attribute(AttributeIds.IsAbstract, ua.DataValue(
                 ua.Variant(True, ua.VariantType.Boolean)))
-        # AlertType is an AlarmConditionType in OPC 40501-1; ncgate raises each alarm as one
-        # event of it, and keeps no condition (no Acknowledge, no ConditionRefresh:
-        # docs/decisions.md).
+        # AlertType is an AlarmConditionType in OPC 40501-1: a condition per process
+        # (_build_conditions, docs/decisions.md).
         alert_type = await alarm_condition.add_object_type(
             _id(ALERT_TYPE_ID, mt), ua.QualifiedName("AlertType", mt))
         await alert_type.add_property(_id(ERROR_CODE_ID, mt),
@@ -546,8 +635,13 @@ class Space:
                                                 ua.QualifiedName("Notification", mt))
         messages = await notification.add_object(_id("Messages", own),
                                                  ua.QualifiedName("Messages", mt))
-        await messages.write_attribute(AttributeIds.EventNotifier, ua.DataValue(
-            ua.Variant(1, ua.VariantType.Byte)))  # SubscribeToEvents
+        # The notifier hierarchy, browsable (OPC 10000-3 7.17): Server -> the cell ->
+        # Notification -> Messages; Messages's events reach each notifier above it (_climb).
+        for above, below in ((server.nodes.server, machine), (machine, notification),
+                             (notification, messages)):
+            await above.add_reference(below.nodeid, ObjectIds.HasNotifier)
+            await below.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
+            self._above[below.nodeid] = above.nodeid
         self._messages = await server.get_event_generator(message_type, messages.nodeid)
         await self._build_conditions(server, layout, alert_type, messages, own)
 
@@ -560,17 +654,10 @@ class Space:
         vendor_processes = await vendor.add_folder(_id("Processes", img),
                                                    ua.QualifiedName("Processes", img))
         # The enumerations with the published ids and values (model.py maps the states).
-        channel_state_t = (await new_enum(server, _id(CHANNEL_STATE_ID, mt), ua.QualifiedName(
-            "ChannelState", mt), ["Active", "Interrupted", "Reset"])).nodeid
-        channel_mode_t = (await new_enum(server, _id(CHANNEL_MODE_ID, mt), ua.QualifiedName(
-            "ChannelMode", mt), list(CHANNEL_MODES))).nodeid
-        program_status_t = (await new_enum(
-            server, _id(CNC_PROGRAM_STATUS_ID, cnc),
-            ua.QualifiedName("CncChannelProgramStatus", cnc),
-            ["Stopped", "Running", "Waiting", "Interrupted", "Canceled"])).nodeid
-        channel_status_t = (await new_enum(
-            server, _id(CNC_CHANNEL_STATUS_ID, cnc), ua.QualifiedName("CncChannelStatus", cnc),
-            ["Active", "Interrupted", "Reset"])).nodeid
+        channel_state_t = await _enumeration(server, CHANNEL_STATE)
+        channel_mode_t = await _enumeration(server, CHANNEL_MODE)
+        program_status_t = await _enumeration(server, CNC_PROGRAM_STATUS)
+        channel_status_t = await _enumeration(server, CNC_CHANNEL_STATUS)
         for number in layout["processes"]:
             k, name = f"P{number}.", f"Process {number}"
             mon = await monitoring.add_object(_id(f"Monitoring/{name}", own),
@@ -616,7 +703,7 @@ class Space:
     async def _build_conditions(self, server: Server, layout: dict[str, Any], alert_type: Node,
                                 messages: Node, own: int) -> None:
         """An AlertType condition per process and one for the cell, under ``Messages``, and
-        Acknowledge bound (ConditionRefresh is asyncua's: ``bind_condition_methods``)."""
+        Acknowledge, ConditionRefresh and ConditionRefresh2 bound."""
         await messages.add_reference(alert_type.nodeid, ObjectIds.GeneratesEvent)
         for number in (0, *layout["processes"]):
             name = f"Process {number}" if number else "cell"
@@ -631,10 +718,19 @@ class Space:
             setattr(event, "EnabledState/Id", True)
             event.EnabledState = ua.LocalizedText("Enabled")
             event.ErrorCode = ""
-            self._conditions[number] = _Condition(number, node.nodeid, generator)
-        server.iserver.isession.add_method_callback(
-            _id(ObjectIds.AcknowledgeableConditionType_Acknowledge, 0),
-            self._acknowledge)
+            self._conditions[number] = _Condition(number, node.nodeid, generator, self._climb)
+        isession = server.iserver.isession
+        isession.add_method_callback(
+            _id(ObjectIds.AcknowledgeableConditionType_Acknowledge, 0), self._acknowledge)
+        brackets = []
+        for etype in (ObjectIds.RefreshStartEventType, ObjectIds.RefreshEndEventType):
+            generator = EventGenerator(isession)  # its event only: _refresh sends it
+            await generator.init(etype, add_generates_event=False)  # from the Server object
+            brackets.append(generator.event)
+        self._refresh_events = (brackets[0], brackets[1])
+        for method in (ObjectIds.ConditionType_ConditionRefresh,
+                       ObjectIds.ConditionType_ConditionRefresh2):
+            isession.add_method_callback(_id(method, 0), self._refresh)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
                    initial: Any, node_key: str | None = None,
@@ -642,6 +738,8 @@ class Space:
         node_id = _id(node_key or key.replace(".", "/"), ns)
         node = await parent.add_variable(node_id, ua.QualifiedName(name, browse_ns),
                                          _variant(key, initial), datatype=datatype)
+        if isinstance(initial, list):  # ActProgramBlock's 3 blocks; the SND log, any length
+            await _one_dimension(node, len(initial))
         self._nodes[key] = node.nodeid
         self._values[key] = initial
         return node
@@ -684,6 +782,52 @@ class Space:
 
 
 _UNSET = object()
+
+
+async def _enumeration(server: Server, enumeration: Enumeration) -> ua.NodeId:
+    """An enumeration DataType as its nodeset declares it: the DataTypeDefinition (what an
+    OPC UA 1.04 client reads) and the EnumValues property (what older clients read, and the
+    published nodesets carry), with the published NodeIds."""
+    uri, type_id, values_id = _ENUMERATIONS[enumeration]
+    ns = await server.get_namespace_index(uri)
+    datatype = await new_enum(server, _id(type_id, ns), ua.QualifiedName(enumeration.name, ns),
+                              list(enumeration.names))
+    values = [ua.EnumValueType(Value=i, DisplayName=ua.LocalizedText(name))
+              for i, name in enumerate(enumeration.names)]
+    prop = await datatype.add_property(_id(values_id, ns), ua.QualifiedName("EnumValues", 0),
+                                       values, varianttype=ua.VariantType.ExtensionObject,
+                                       datatype=_id(ObjectIds.EnumValueType, 0))
+    await _one_dimension(prop, len(values))
+    return datatype.nodeid
+
+
+async def _one_dimension(node: Node, length: int) -> None:
+    """An array variable's ValueRank 1 and ArrayDimensions (0: any length), as the nodesets
+    declare theirs (asyncua gives a list's variable ValueRank 0, one or more dimensions)."""
+    await node.write_attribute(AttributeIds.ValueRank, ua.DataValue(ua.Variant(
+        ua.ValueRank.OneDimension, ua.VariantType.Int32)))
+    await node.write_attribute(AttributeIds.ArrayDimensions, ua.DataValue(ua.Variant(
+        [length], ua.VariantType.UInt32)))
+
+
+def _at(event: Any, notifier: ua.NodeId) -> Any:
+    """``event`` as the notifier ``notifier`` reports it: the same fields (its EventId), for
+    the monitored items there (asyncua routes an event by its ``emitting_node``)."""
+    if event.emitting_node == notifier:
+        return event
+    seen = copy.copy(event)
+    seen.emitting_node = notifier
+    return seen
+
+
+def _stamped(event: Any) -> Any:
+    """A new occurrence of ``event`` (a refresh bracket): a new EventId and time, as
+    asyncua's ``EventGenerator.trigger`` gives one."""
+    now = datetime.now(UTC)
+    stamped = copy.copy(event)
+    stamped.EventId = ua.Variant(uuid.uuid4().hex.encode(), ua.VariantType.ByteString)
+    stamped.Time = stamped.ReceiveTime = now
+    return stamped
 
 
 

@@ -297,8 +297,7 @@ async def test_an_alarm_is_a_condition_a_client_acknowledges_and_condition_refre
     messages = await messages_node(ua_client)
     subscription = await ua_client.call("subscribe", interval=20)
     await ua_client.call("events", tag="alarms", node=messages, fields=CONDITION_FIELDS)
-    # asyncua sends RefreshStart and RefreshEnd from the Server object only.
-    await ua_client.call("events", tag="server", node="i=2253", fields=[["", "EventType"]])
+    await ua_client.call("events", tag="server", node=SERVER, fields=[["", "EventType"]])
 
     def conditions(seen: list[Any]) -> list[Any]:
         return [e for e in seen if e[1].endswith(";i=39")]  # AlertType's
@@ -330,8 +329,8 @@ async def test_an_alarm_is_a_condition_a_client_acknowledges_and_condition_refre
                                 args=[["UInt32", subscription]]) == "Good"
     seen = await ua_client.until("alarms", lambda seen: len(conditions(seen)) == 3)
     assert conditions(seen)[2][2:6] == [condition, True, True, True]
-    brackets = await ua_client.until("server", lambda seen: [REFRESH_END] in seen)
-    assert brackets == [[REFRESH_START], [REFRESH_END]]
+    at_server = await ua_client.until("server", lambda seen: [REFRESH_END] in seen)
+    assert at_server[-3:] == [[REFRESH_START], [conditions(seen)[2][1]], [REFRESH_END]]
 
     # A reset ends the alarm: inactive and acknowledged, so no longer retained.
     gw.command(3, process=1)  # reset
@@ -357,3 +356,123 @@ async def test_the_cell_s_alarm_is_a_condition_active_until_a_client_acknowledge
         ["ByteString", event_id], ["LocalizedText", "replaced the cable"]]) == "Good"
     seen = await ua_client.until("alarms", lambda seen: len(seen) == 2)
     assert seen[1][2:6] == [condition, False, False, True]
+
+
+SERVER = "ns=0;i=2253"  # the Server object, where an alarm list subscribes
+HAS_NOTIFIER = "ns=0;i=48"
+EVENT_FIELDS = [["", "EventId"], ["", "EventType"], ["", "Message"], ["", "SourceName"],
+                [MACHINE_TOOL, "ErrorCode"]]
+
+
+async def test_the_server_object_reports_the_alarm_and_the_message_as_the_events_of_messages(
+        gw: Gateway, ua_client: UaClient) -> None:
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await messages_node(ua_client)
+    # The notifier hierarchy (OPC 10000-3 7.17) browses from the Server object to Messages.
+    chain, node = [], SERVER
+    while node != messages and len(chain) < 4:
+        below = await ua_client.call("browse", node=node, ref=HAS_NOTIFIER)
+        assert [b["ref"] for b in below] == [HAS_NOTIFIER], (node, below)
+        chain.append(below[0]["name"])
+        node = below[0]["node"]
+    assert chain == [f"{NCGATE}|ncgate", f"{MACHINE_TOOL}|Notification",
+                     f"{MACHINE_TOOL}|Messages"]
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="messages", node=messages, fields=EVENT_FIELDS)
+    await ua_client.call("events", tag="server", node=SERVER, fields=EVENT_FIELDS)
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")
+    gw.write("SA10", 1)
+    await gw.wait_state(1, "ALARM")
+    at_server = await ua_client.until(
+        "server", lambda seen: any(e[1].endswith(";i=39") for e in seen))
+    at_messages = await ua_client.until("messages", lambda seen: len(seen) >= 2)
+    # The same two events, one each: their EventIds and fields as Messages reported them.
+    assert at_server == at_messages
+    (_, _, message, _, _), (_, alert_type, alarm, source, code) = at_server
+    assert message == "close the door"
+    assert alert_type.endswith(";i=39") and code == "AL111" and source == "Process 1"
+    assert alarm.startswith("P1 A.nc:4 N40: AL111 "), alarm
+
+
+async def test_condition_refresh_sends_the_retained_alarm_to_the_server_object_s_items_too(
+        gw: Gateway, ua_client: UaClient) -> None:
+    await ua_client.call("connect", url=gw.opcua_endpoint)
+    messages = await messages_node(ua_client)
+    await gw.start()
+    await gw.wait_state(1, "WAIT_COND")
+    await ua_client.call("subscribe", interval=20)
+    await ua_client.call("events", tag="live", node=messages, fields=EVENT_FIELDS)
+    gw.write("SA10", 1)
+    await gw.wait_state(1, "ALARM")
+    (alarm,) = await ua_client.until("live", lambda seen: len(seen) == 1)
+    # A client that subscribes after the alarm asks for the retained conditions.
+    subscription = await ua_client.call("subscribe", interval=20)
+    items = {tag: await ua_client.call("events", tag=tag, node=node, fields=EVENT_FIELDS)
+             for tag, node in (("server", SERVER), ("messages", messages))}
+    assert await ua_client.call("call", object="ns=0;i=2782", method="ns=0;i=3875",
+                                args=[["UInt32", subscription]]) == "Good"
+    refreshed = {tag: await ua_client.until(tag, lambda seen: len(seen) >= 3) for tag in items}
+    for tag, seen in refreshed.items():  # each notifier item: start, the alarm, end
+        assert [e[1] for e in seen] == [REFRESH_START, alarm[1], REFRESH_END], tag
+        assert seen[1] == alarm, tag  # the condition's latest event, as it was sent
+    # One RefreshStart and one RefreshEnd, a copy for each item (OPC 10000-9 5.5.7).
+    assert refreshed["server"][0][0] == refreshed["messages"][0][0]
+    assert refreshed["server"][2][0] == refreshed["messages"][2][0]
+    # ConditionRefresh2: the one item (Messages's), then the other.
+    refresh2 = "ns=0;i=12912"
+    assert await ua_client.call("call", object="ns=0;i=2782", method=refresh2, args=[
+        ["UInt32", subscription], ["UInt32", items["messages"]]]) == "Good"
+    again = await ua_client.until("messages", lambda seen: len(seen) >= 6)
+    assert [e[1] for e in again[3:]] == [REFRESH_START, alarm[1], REFRESH_END]
+    assert await ua_client.call("call", object="ns=0;i=2782", method=refresh2, args=[
+        ["UInt32", subscription], ["UInt32", items["server"]]]) == "Good"
+    await ua_client.until("server", lambda seen: len(seen) >= 6)
+    assert len(ua_client.notes["messages"]) == 6  # the second went to the Server's item only
+    assert ua_client.notes["live"] == [alarm]  # nor to the other subscription
+
+
+async def test_the_map_names_each_variable_s_data_type_as_the_server_declares_it(
+        gw: Gateway, ua_client: UaClient) -> None:
+    """``ncgate map``'s UA rows against the running server: a variable of an enumeration is
+    typed by the enumeration (its name in the map), whose EnumValues name the values for a
+    generic client; any other variable by the DataType the map names."""
+    from ncgate.gateway.opcua.model import (
+        CHANNEL_MODE,
+        CHANNEL_STATE,
+        CNC_CHANNEL_STATUS,
+        CNC_PROGRAM_STATUS,
+        node_rows,
+    )
+
+    enumerations = {e.name: e for e in (CHANNEL_STATE, CHANNEL_MODE, CNC_CHANNEL_STATUS,
+                                        CNC_PROGRAM_STATUS)}
+    namespaces = await ua_client.call("connect", url=gw.opcua_endpoint)
+    rows = node_rows("ncgate", [1, 2], {"sa_bits": 8, "k_bytes": 8, "syvars": 8},
+                     frozenset(), {})
+    seen = set()
+    for path, node_id, kind, _, _ in rows:
+        if kind == "MachineToolType" or " .. " in path:
+            continue  # the machine object, and the image's ranges
+        uri, _, ident = node_id.removeprefix("ns=").partition(";s=")
+        node = {"ns": uri, "id": ident} if ident else node_id
+        if kind == "events":  # a notifier a client subscribes to: SubscribeToEvents
+            assert await ua_client.call("read", node=node, attribute="EventNotifier") & 1, path
+            continue
+        datatype = await ua_client.call("read", node=node, attribute="DataType")
+        ns, name = (await ua_client.call("read", node=datatype, attribute="BrowseName")
+                    ).split(":", 1)
+        rank = await ua_client.call("read", node=node, attribute="ValueRank")
+        if kind.endswith(" (enumeration)"):
+            enumeration = enumerations[kind.removesuffix(" (enumeration)")]
+            assert (namespaces[int(ns)] in (MACHINE_TOOL, CNC), name, rank) == (
+                True, enumeration.name, -1), path
+            props = await ua_client.call("browse", node=datatype, ref="ns=0;i=46")
+            (values,) = [p["node"] for p in props if p["name"].endswith("|EnumValues")]
+            shown = await ua_client.call("read", node=values)
+            assert [v["displayName"]["text"] for v in shown] == list(enumeration.names), path
+            seen.add(enumeration.name)
+        else:
+            assert (ns, name, rank) == ("0", kind.removesuffix("[3]"),
+                                        1 if kind.endswith("]") else -1), path
+    assert seen == set(enumerations)  # each enumeration's variables are in the map

@@ -8,7 +8,8 @@ The rules (docs/opcua.md, "What is not the full companion model"):
 
 - a type (ObjectType, VariableType, DataType) with a standard BrowseName has the published
   NodeId, the published supertype, and an enumeration the published values;
-- a child of a standard type (an instance declaration) has the published NodeId;
+- a child of a standard type (an instance declaration, or an enumeration's EnumValues) has
+  the published NodeId;
 - a child of an instance of a standard type, with a standard BrowseName, is one the type (or
   a supertype) declares, and a variable has the declared DataType;
 - any other node with a standard BrowseName has a name the nodeset defines.
@@ -184,7 +185,8 @@ def problems(walked: list[dict[str, Any]], namespaces: list[str]) -> list[str]:
             continue
         parent_record = by_node.get(parent)
         parent_cls = parent_record["cls"] if parent_record else "Object"
-        if parent_cls in _TYPE_CLASSES and parent[0] in FILES and standard:
+        # (A base name, too: an enumeration's EnumValues.)
+        if parent_cls in _TYPE_CLASSES and parent[0] in FILES and (standard or name[0] == UA):
             declared = _declared(parent, name)
             if declared is None or declared.node != node:
                 out.append(f"{where}: declared by the type as "

@@ -58,7 +58,13 @@ def test_map_lists_the_ua_nodes_beside_the_registers_when_opcua_is_on(
     out = capsys.readouterr().out
     assert "# OPC UA nodes" in out
     assert ("| Objects/Machines/press/Monitoring/Process 1/ChannelState | "
-            "ns=urn:ncgate:ua;s=P1/ChannelState | Int32 | read |") in out
+            "ns=urn:ncgate:ua;s=P1/ChannelState | ChannelState (enumeration) | read | "
+            "0 Active, 1 Interrupted, 2 Reset |") in out
+    assert ("| Objects/CncInterface/CncChannelList/Process 1/ActProgramStatus | "
+            "ns=urn:ncgate:ua;s=P1/ActProgramStatus | CncChannelProgramStatus (enumeration) "
+            "| read | 0 Stopped, 1 Running, 2 Waiting, 3 Interrupted, 4 Canceled |") in out
+    assert "| Int32 |" not in out  # the enumerations' variables are typed by them
+    assert "| Objects/Server | ns=0;i=2253 | events | read |" in out  # alarm lists look there
     assert ("| Objects/Image/Symbols/door_closed | ns=urn:ncgate:image;s=door_closed | as SA10 "
             "| read/write |") in out
     assert "| Objects/Image/Symbols/speed | ns=urn:ncgate:image;s=speed | as SYVAR3 | read |" in out

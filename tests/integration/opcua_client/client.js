@@ -97,13 +97,15 @@ const ops = {
         if (!dv.statusCode.isGood()) throw new Error(dv.statusCode.name);
         return plain(dv.value.value);
     },
-    async browse({node}) {
+    // ref: only the references of that type (a NodeId string) and its subtypes.
+    async browse({node, ref}) {
         const result = await session.browse({nodeId: nodeId(node), browseDirection: BrowseDirection.Forward,
-                                             includeSubtypes: true, resultMask: 63});
+                                             includeSubtypes: true, resultMask: 63,
+                                             ...(ref ? {referenceTypeId: ref} : {})});
         return result.references.map(r => ({
             name: `${namespaces[r.browseName.namespaceIndex]}|${r.browseName.name}`,
             node: r.nodeId.toString(), type: r.typeDefinition.toString(),
-            cls: NodeClass[r.nodeClass],
+            cls: NodeClass[r.nodeClass], ref: r.referenceTypeId.toString(),
         }));
     },
     // Every node reached from `from` by forward hierarchical references (HasComponent,
@@ -216,7 +218,7 @@ const ops = {
             item.once("initialized", resolve);
             item.once("err", reject);
         });
-        return tag;
+        return item.monitoredItemId;  // (ConditionRefresh2 names it)
     },
     async close() {
         if (session) await session.close();
