@@ -54,3 +54,34 @@ def test_the_readme_modbus_map_block_names_every_key() -> None:
                 if b.startswith("[modbus.map]")]
     shown = tomllib.loads(block)["modbus"]["map"]
     assert list(shown) == [f.name for f in dataclasses.fields(ModbusMapConfig)]
+
+
+def _curl_posts() -> list[tuple[str, str]]:
+    """Each documented curl command that posts a body: a line of a fenced block, or an
+    inline code span (which may be folded over lines)."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "examples").glob("*/README.md"))]
+    found = []
+    for page in pages:
+        text = page.read_text()
+        blocks = re.findall(r"```[^\n]*\n(.*?)```", text, re.S)
+        commands = [line for block in blocks for line in block.splitlines()]
+        rest = re.sub(r"```[^\n]*\n.*?```", "", text, flags=re.S)
+        commands += [" ".join(span.split()) for span in re.findall(r"`([^`]+)`", rest)]
+        for command in commands:
+            command = command.strip()
+            if command.startswith("curl ") and "/api/" in command and (
+                    " -d " in command or "--data" in command):
+                found.append((page.relative_to(ROOT).as_posix(), command))
+    return found
+
+
+def test_every_curl_in_the_docs_that_posts_a_body_sends_it_as_json() -> None:
+    """The console's API takes JSON only (415 otherwise: a plain form cannot post to it,
+    docs/console.md); curl's -d alone sends a form, so a documented command without the
+    header fails for whoever copies it."""
+    posts = _curl_posts()
+    assert len(posts) >= 4  # README's fault, docs/plant.md's two, docs/console.md's two
+    wrong = [f"{page}: {command}" for page, command in posts
+             if "Content-Type: application/json" not in command]
+    assert not wrong, "\n".join(wrong)
