@@ -55,6 +55,9 @@ RECORD = (("state code", 16), ("block N", 16), ("source line", 16), ("wait kind"
           ("wait target", 16), ("alarm code", 16), ("SNDs sent", 32), ("SNDs received", 32),
           ("blocks executed", 32), ("X µm", 32), ("Y µm", 32), ("Z µm", 32))
 CANOPEN_RECORD = 8  # 0x2500+k-1 sub 1..8: the record's first eight
+# On the wall clock a model's stroke moves on between the engine's moments: while one moves,
+# the plant's view is built again when read this long (machine time) after the last.
+PLANT_FRESH_S = 0.01
 
 _RUNNING = frozenset((ProcessState.RUNNING, ProcessState.DWELL))
 _WAITING = frozenset((ProcessState.WAIT_PROC, ProcessState.WAIT_COND, ProcessState.WAIT_SND,
@@ -262,9 +265,12 @@ _MODEL_IO: weakref.WeakKeyDictionary[Model, tuple[tuple[tuple[str, str], ...],
 _MODEL_IO = weakref.WeakKeyDictionary()
 
 
-def plant_view(plant: Plant) -> PlantView:
-    """The plant as it is now (on the loop)."""
-    now = plant.runtime.engine.now
+def plant_view(plant: Plant, now: float | None = None) -> PlantView:
+    """The plant as it is at ``now`` (on the loop; None: now, the driver's clock's on the
+    wall clock, which a stroke's progress follows between the engine's moments)."""
+    if now is None:
+        engine = plant.runtime.engine
+        now = engine.now if engine.clock is None else engine.clock()
     faults = plant.faults
     on: dict[str, list[str]] = {}  # model -> the kinds of the faults on it
     for f in faults:
@@ -434,6 +440,7 @@ class ViewPublisher:
         self._view: CellView | None = None  # the whole view at _key, once built
         self._status: CellStatus | None = None  # the cell's status at _key, once built
         self._plant: tuple[PlantView | None] | None = None  # the plant's view at _key, once
+        self._plant_at = 0.0  # the time it shows
         self._processes: dict[int, ProcessView] = {}  # those built at _key
         # Each process's last view and what it was built from (its signature).
         self._kept: dict[int, tuple[tuple[object, ...], ProcessView]] = {}
@@ -476,9 +483,10 @@ class ViewPublisher:
     def current(self) -> CellView:
         self._fresh()
         view = self._view
-        if view is None:
+        plant = self.plant()
+        if view is None or view.plant is not plant:
             view = self._view = build(self._backend, tuple(
-                self.process(k) for k in self._engine.processes), self.status(), self.plant())
+                self.process(k) for k in self._engine.processes), self.status(), plant)
         return view
 
     def status(self) -> CellStatus:
@@ -493,9 +501,15 @@ class ViewPublisher:
         """The plant's view as of now (:attr:`CellView.plant`; None: no plant)."""
         self._fresh()
         kept = self._plant
+        plant = self._backend.runtime.plant
+        clock = self._engine.clock
+        now = self._engine.now if clock is None else clock()
+        if kept is not None and plant is not None and clock is not None and (
+                now - self._plant_at >= PLANT_FRESH_S and plant.moving):
+            kept = None  # a stroke went on since, with no event of the engine's to say so
         if kept is None:
-            plant = self._backend.runtime.plant
-            kept = self._plant = (None if plant is None else plant_view(plant),)
+            self._plant_at = now
+            kept = self._plant = (None if plant is None else plant_view(plant, now),)
         return kept[0]
 
     def image(self) -> FrozenImage:

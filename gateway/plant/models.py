@@ -99,7 +99,8 @@ class Model:
         progress = self.progress_at(now)
         if progress is not None:
             done, total = progress
-            text += f", {max(0.0, done) * 1000:.0f} of {total * 1000:.0f} ms"
+            done = min(max(0.0, done), total)  # (the wall clock may be past its end)
+            text += f", {done * 1000:.0f} of {total * 1000:.0f} ms"
         if self.never:
             text += " (fault: never)"
         elif self.factor != 1.0:

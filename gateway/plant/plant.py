@@ -537,7 +537,8 @@ class Plant:
         drives = self._drives.get(address)
         if drives is None:
             return None
-        return drives[0].describe(self.runtime.engine.now)
+        engine = self.runtime.engine  # (on the wall clock, the time of the read)
+        return drives[0].describe(engine.now if engine.clock is None else engine.clock())
 
     def status(self) -> dict[str, Any]:
         """The console's and ``/api/status``'s ``plant``: each model and the faults (the

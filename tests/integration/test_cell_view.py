@@ -4,6 +4,7 @@ change inside a turn -- and never when nothing changed."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
@@ -175,3 +176,34 @@ async def test_a_view_whose_image_nobody_reads_copies_none(
         gw.write("SYVAR1", 100, source=TEST_PLC)
         assert sorted(copies) == ["_take_areas", "_take_stamps"]
         assert held.image.syvar[1] == 9 and gw.view.image.syvar[1] == 100
+
+
+async def test_on_the_wall_clock_a_strokes_progress_moves_on_between_its_events(
+        tmp_path: Path) -> None:
+    """A cylinder without a position output has no event between its stroke's start and
+    end: the view of it (the console's Plant panel, /api/status) showed "extends, 0 of
+    600000 ms" until the end, as the new user found with a 3 s stroke.  Now it is read at
+    the time of the read."""
+    path = _plant_cell(tmp_path, "N1(WAI,SK7=3)\nN2M30\n")
+    path.write_text(path.read_text().replace("travel_ms = 300", "travel_ms = 600000"))
+    async with Gateway(load_config(path, overrides=NOTHING_SERVED)) as gw:
+        gw.write("SA20", 1, source=TEST_PLC)  # a ten-minute stroke begins
+        seen: list[str] = []
+        async with asyncio.timeout(30):  # the old code: the same progress for ten minutes
+            while True:
+                model = gw.view.plant.models[0]  # type: ignore[union-attr]
+                if model.state == "extends":
+                    seen.append(model.detail)
+                    if seen[0] != seen[-1]:
+                        break
+                await asyncio.sleep(0.01)  # (a stroke has no event to wait on: that is the
+                # point; the timeout above is what fails, not a time asserted)
+        assert model.detail.startswith("clamp extends, ") and model.detail.endswith(
+            " of 600000 ms"), seen[-3:]
+        assert gw.runtime.plant is not None
+        first = gw.runtime.plant.status()["models"][0]["detail"]
+        async with asyncio.timeout(30):  # Plant.status() (OPC UA's) reads it likewise
+            while True:
+                if gw.runtime.plant.status()["models"][0]["detail"] != first:
+                    break
+                await asyncio.sleep(0.01)
