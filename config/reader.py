@@ -46,7 +46,9 @@ def load_config(
     file = str(source) if path is not None else BUILT_IN
     given = dict(origins or {})
     for dotted, value in (overrides or {}).items():
-        _set_dotted(raw, dotted, value, given.get(dotted, file))
+        where = _set_dotted(raw, dotted, value, given.get(dotted, file))
+        if dotted in given:  # an error in it names the option, under the key the reader
+            given.setdefault(where, given[dotted])  # knows it by (plant.model[0]...)
     reader = _Reader(file, source.parent, given)
     config: Config = reader.section(Config, raw, "")
     _check_config(reader, config, serving)
@@ -101,19 +103,24 @@ def _given_twice(source: Path, message: str) -> str | None:
     return f"{source}:{line}: {dotted} is given twice: a TOML key is given once"
 
 
-def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> None:
+def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> str:
     """Set ``dotted`` in the raw tables.  In an array of tables (``[[plant.model]]``,
     ``[[nc.process]]``) an entry is named by its ``name`` or ``number`` key, or by its index
     in brackets: ``plant.model.clamp.travel_ms``, ``nc.process.2.external``,
-    ``plant.model[0].travel_ms`` -- what a sweep varies of one model or process."""
+    ``plant.model[0].travel_ms`` -- what a sweep varies of one model or process.  Returns the
+    key as the reader names it (each entry by its index: ``plant.model[0].travel_ms``)."""
     parts = [p for part in dotted.split(".") for p in _indexed(part)]
     *parents, last = parts
     table: Any = raw
+    canonical: list[str] = []
     for i, name in enumerate(parents):
         above = ".".join(parents[:i + 1]).replace(".[", "[")
         if isinstance(table, list):  # an array of tables: the entry that name or index names
-            table = _entry_of(table, name, dotted, above, origin)
+            entries = table
+            table = _entry_of(entries, name, dotted, above, origin)
+            canonical.append(f"[{next(j for j, e in enumerate(entries) if e is table)}]")
             continue
+        canonical.append(name)
         table = table.setdefault(name, {})
         if not isinstance(table, dict | list):
             raise ConfigError(f"{origin}: {dotted}: {above} is a value, not a table")
@@ -122,6 +129,7 @@ def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> No
                           "array of tables: "
                           "name one of its entries (by its name, number or [index])")
     table[last] = value
+    return ".".join([*canonical, last]).replace(".[", "[")
 
 
 def _indexed(part: str) -> list[str]:

@@ -122,6 +122,25 @@ def test_overrides_by_dotted_key_are_validated_too() -> None:
         load_config(None, overrides={"modbus.port": -1}, origins={"modbus.port": "--port"})
 
 
+
+@pytest.mark.parametrize("dotted", ["plant.model.clamp.travel_ms", "plant.model[1].travel_ms",
+                                    "plant.model.clamp.travle_ms"])
+def test_an_override_of_an_entry_of_an_array_of_tables_names_the_option(
+        tmp_path: Path, dotted: str) -> None:
+    """An entry named by its name (or index) is read as plant.model[i]: its error names the
+    option that set it, not the file (a new user's --set and a sweep's [grid] were blamed
+    on the config file)."""
+    (tmp_path / "ncgate.toml").write_text(
+        '[[plant.model]]\nname = "door"\nkind = "delay"\ninput = "SA1"\noutput = "SA2"\n'
+        '[[plant.model]]\nname = "clamp"\nkind = "cylinder"\nextend = "SA3"\n'
+        'travel_ms = 300\n')
+    with pytest.raises(ConfigError) as caught:
+        load_config(tmp_path / "ncgate.toml", overrides={dotted: -5},
+                    origins={dotted: "--set"})
+    key = dotted.replace(".clamp.", "[1].")
+    assert str(caught.value).startswith(f"--set: {key}: "), str(caught.value)
+
+
 def test_docs_config_md_is_generated_from_the_schema() -> None:
     from pathlib import Path
 
