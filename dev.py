@@ -99,14 +99,20 @@ def run(*cmd: str) -> int:
     """Run a command in the foreground; Ctrl-C is the child's to handle (as in a shell).
 
     SIGINT is ignored here only after the child has started, so the child keeps Python's
-    default handler (pytest stops cleanly, `ncgate run` shuts down and exits 0).
+    default handler (pytest stops cleanly, `ncgate run` shuts down and exits 0); a
+    terminal's Ctrl-C reaches both.  SIGTERM, which a service manager or `kill` sends to
+    this process alone, is passed on to the child, whose exit ends this one: the child is
+    never left behind holding its ports.
     """
     child = subprocess.Popen(cmd, cwd=ROOT)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous_term = signal.signal(signal.SIGTERM,
+                                  lambda signum, frame: child.send_signal(signum))
     try:
         return child.wait()
     finally:
         signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGTERM, previous_term)
 
 
 def workers(args: list[str]) -> list[str]:

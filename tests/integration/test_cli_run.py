@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
+import os
 import re
 import signal
 import sys
@@ -14,7 +16,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from ncgate.gateway.cli.main import main
 
-from ..conftest import EXAMPLES
+from ..conftest import EXAMPLES, ROOT
 
 PROGRAMS = Path(__file__).resolve().parents[2] / "config" / "programs"
 
@@ -344,3 +346,47 @@ async def test_the_console_loads_at_its_first_connection_and_misses_nothing(
         code, log = await stop_run(proc, lines)
     assert code == 0, log
     assert "Traceback" not in log, log
+
+
+def _children(pid: int) -> list[str]:
+    return Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
+    except FileNotFoundError:
+        return False
+
+
+async def test_sigterm_to_dev_py_run_stops_the_gateway_it_started(tmp_path: Path) -> None:
+    """The README's `python3 dev.py run` under a service manager or `kill`: SIGTERM reaches
+    dev.py alone, which passes it on; the gateway stopped and its port is free (a new user
+    found it orphaned, still listening)."""
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[modbus]\nport = 0\n[web]\nenabled = false\n')
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, str(ROOT / "dev.py"), "run", "--config", str(config), "--allow-missing",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    async with asyncio.timeout(60):  # (dev.py checks the venv first)
+        while not re.search(r"Modbus TCP on [\d.]+:(\d+)", lines[-1] if lines else ""):
+            line = (await proc.stdout.readline()).decode()
+            assert line, "dev.py run ended early:\n" + "".join(lines)
+            lines.append(line)
+    children = _children(proc.pid)
+    assert len(children) == 1, children
+    gateway = int(children[0])
+    proc.send_signal(signal.SIGTERM)
+    try:
+        async with asyncio.timeout(20):
+            rest = (await proc.stdout.read()).decode()
+            code = await proc.wait()
+    finally:  # (an orphan holds the pipe open: the read above never ends)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(gateway, signal.SIGKILL)
+    log = "".join(lines) + rest
+    assert code == 0, log  # the gateway's own clean exit, passed on
+    assert "stopped" in log
+    assert not _alive(gateway), "the gateway outlived dev.py"
