@@ -105,6 +105,13 @@ def describe(event: Event) -> str | None:
         return f"P{proc} steps{at}"
     if isinstance(event, ev.Hold):
         return f"P{proc} feed hold {'on' if event.on else 'off'}{at}"
+    if isinstance(event, ev.Fault):
+        params = ", ".join(f"{k} {v}" for k, v in event.params.items())
+        return (f"fault {event.fault_kind} on {event.target}{f' ({params})' if params else ''}"
+                f" (by {event.who})")
+    if isinstance(event, ev.FaultClear):
+        by = event.who if event.who.startswith("for_s") else f"by {event.who}"
+        return f"fault {event.fault_kind} on {event.target} cleared ({by})"
     return None
 
 

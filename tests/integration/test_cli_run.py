@@ -390,3 +390,27 @@ async def test_sigterm_to_dev_py_run_stops_the_gateway_it_started(tmp_path: Path
     assert code == 0, log  # the gateway's own clean exit, passed on
     assert "stopped" in log
     assert not _alive(gateway), "the gateway outlived dev.py"
+
+
+async def test_run_logs_a_scripts_fault_and_its_end_by_for_s(tmp_path: Path) -> None:
+    """A fault is an input like any: the log says which, on what and from whom -- a script's
+    too, and its clear by for_s (a new user found only the console's, as a Python repr)."""
+    (tmp_path / "O1.nc").write_text("N1 (DLY,0.3)\nN2 M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "O1"\nautostart = true\n[nc.storage]\nMP0 = "."\n'
+                      '[modbus]\nport = 0\n[web]\nenabled = false\n'
+                      '[[plant.model]]\nname = "clamp"\nkind = "cylinder"\nextend = "SA20"\n'
+                      'extended = "SA30"\ntravel_ms = 100\n')
+    script = tmp_path / "s.toml"
+    script.write_text('[[fault]]\ntarget = "modbus"\nkind = "exception"\ncode = 6\nat = 0.0\n'
+                      'for_s = 0.2\n[[fault]]\ntarget = "clamp"\nkind = "never"\nat = 0.1\n'
+                      '[[expect]]\nname = "ends"\ncond = "P1 IDLE"\nby = 1.0\n')
+    proc, _port, lines = await start_run(config, "--script", str(script))
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):  # it ends by itself at the window's end
+        log = "".join(lines) + (await proc.stdout.read()).decode()
+        assert await proc.wait() == 0, log
+    assert "fault exception on modbus (code 6) (by script fault[0])" in log, log
+    assert "fault exception on modbus cleared (for_s 0.2)" in log, log
+    assert "fault never on clamp (by script fault[1])" in log, log
+    assert "Fault(" not in log
