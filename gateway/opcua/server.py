@@ -24,13 +24,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ncgate.config.schema import OpcuaConfig
 from ncgate.errors import InputRefused, Reason
-from ncgate.gateway.errors import GatewayError
+from ncgate.gateway.errors import GatewayError, listen_error
 from ncgate.gateway.opcua.model import (
     ALARM_SEVERITY,
     MESSAGE_SEVERITY,
@@ -135,6 +136,11 @@ class OpcuaServer:
                     ready.set_result(message[1])
                 elif kind == "error" and not ready.done():
                     ready.set_exception(GatewayError(f"OPC UA server: {message[1]}"))
+                elif kind == "listen_error" and not ready.done():
+                    _, number, reason = message
+                    why = OSError(number, os.strerror(number) if number else reason)
+                    ready.set_exception(listen_error(why, "opcua.port", self.config.host,
+                                                     self.config.port))
                 elif kind == "clients":
                     _, self.sessions, self.subscriptions = message
                 elif kind == "write":

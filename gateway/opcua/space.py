@@ -13,6 +13,7 @@ image; it reads what the loop sends it, and ends when its stdin does.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import copy
 import hashlib
 import hmac
@@ -368,7 +369,18 @@ class Space:
             logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
         await self._build(server, layout)
-        await server.start()
+        starting = logging.getLogger("asyncua.server.server")
+        level = starting.level
+        starting.setLevel(logging.CRITICAL)  # (it logs a bind's failure with a traceback)
+        try:
+            await server.start()
+        except OSError as exc:  # the port: said to the gateway, which names opcua.port
+            self.link.send(("listen_error", exc.errno, exc.strerror or str(exc)))
+            with contextlib.suppress(Exception):  # what init started, so that it ends
+                await server.stop()
+            return
+        finally:
+            starting.setLevel(level)
         try:
             self.link.send(("ready", int(server.bserver.port or 0)))  # type: ignore[union-attr]
             while True:
