@@ -23,6 +23,7 @@ from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
 
 if TYPE_CHECKING:
+    from ncgate.gateway.cli.check import FileReport
     from ncgate.gateway.programs import CheckedFile
 
 EXIT_OK = 0
@@ -240,6 +241,8 @@ def _check(args: argparse.Namespace) -> int:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
     reports = check_files(files, config, args.process, dialect)
+    if config is not None and not args.files:
+        reports += _check_plant(config)
     errors = warnings = 0
     for report in reports:
         for diagnostic in report.diagnostics:
@@ -255,6 +258,23 @@ def _check(args: argparse.Namespace) -> int:
         _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in reports
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     return EXIT_FAILED if errors else EXIT_OK
+
+
+def _check_plant(config: Config) -> list[FileReport]:
+    """What `run` and `sim` refuse of the config's plant before a cell starts: its models'
+    variables (one driven by two models, a number on a bit: a ConfigError, exit 2), and its
+    own logic, checked alone (a task of its own: it shares no name with the PLC's)."""
+    from ncgate.gateway.cli.check import check_logic
+    from ncgate.gateway.plant import Plant
+    from ncgate.gateway.wiring import build_runtime
+
+    if config.plant.model:
+        Plant(build_runtime(config, closed=True), lambda item: None, closed=True)
+    logic = list(config.plant.logic)
+    if not logic:
+        return []
+    found = check_logic(logic, config)
+    return [found[path] for path in logic]
 
 
 def _sim(args: argparse.Namespace) -> int:

@@ -280,6 +280,28 @@ def test_check_and_sim_say_when_mp0_does_not_exist(
     assert f"nc.storage.MP0: no such folder: {tmp_path / 'gone'}" in capsys.readouterr().err
 
 
+
+@pytest.mark.parametrize(("extra", "code", "said"), [
+    ('[plant]\nlogic = "plant.st"\n', 1, "plant.st:3:6: error ST010: unknown variable y"),
+    ('[[plant.model]]\nname = "a"\nkind = "delay"\ninput = "SA1"\noutput = "SA40"\n'
+     '[[plant.model]]\nname = "b"\nkind = "delay"\ninput = "SA2"\noutput = "SA40"\n', 2,
+     "ncgate.toml: plant.model[1].output: SA40 is driven by a.output already"),
+])
+def test_check_of_a_config_refuses_what_run_and_sim_refuse_of_its_plant(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: str, code: int,
+        said: str) -> None:
+    """A new user's `check --config` said 0 errors where `run` then refused the plant's
+    logic (ST010) or two models driving one input."""
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n{extra}',
+               {"A": "N1M30\n"})
+    (tmp_path / "plant.st").write_text("PROGRAM Plant\nVAR x : INT; END_VAR\nx := y + 1;\n"
+                                       "END_PROGRAM\n")
+    assert main(["check", "--config", str(tmp_path / "ncgate.toml")]) == code
+    out, err = capsys.readouterr()
+    assert said in out + err
+    assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2  # as sim refuses it
+
+
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
 
 
