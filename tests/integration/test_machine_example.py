@@ -72,6 +72,41 @@ def test_a_bad_case_without_its_fault_fails_its_expectations(tmp_path: Path) -> 
     assert {"clamp alarm", "cell holds", "spindle never starts", "no part counted"} <= failed
 
 
+
+def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
+        tmp_path: Path) -> None:
+    """A latched alarm holds the cell until alarm_reset (SA48) rises with its cause gone; a
+    reset while the clamp is still jammed latches it again (a new user found no way to clear
+    one but a restart of the gateway: restart_plc leaves a running PLC alone)."""
+    script = tmp_path / "reset.toml"
+    script.write_text(
+        '[[fault]]\ntarget = "clamp"\nkind = "never"\nfor_s = 2.0\n'  # freed at 2 s
+        '[[write]]\nat = 1.5\nset = "alarm_reset=1"\n'  # the cause is still there
+        '[[write]]\nat = 1.6\nset = "alarm_reset=0"\n'
+        '[[write]]\nat = 3.0\nset = "alarm_reset=1"\n'  # closed at 2.3 s: gone
+        '[[expect]]\nname = "latched"\ncond = "clamp_alarm=1"\nwithin = [1.0, 1.1]\n'
+        '[[expect]]\nname = "a reset with the cause there"\ncond = "clamp_alarm=1"\n'
+        'within = [1.55, 2.9]\n'
+        '[[expect]]\nname = "cleared by the reset"\ncond = "clamp_alarm=0"\n'
+        'within = [3.0, 3.02]\n'
+        '[[expect]]\nname = "the cell no longer held by the PLC"\ncond = "any_alarm=0"\n'
+        'within = [3.0, 3.02]\n')
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--example", "machine", "--script", str(script), "--until", "4",
+                  "--trace", str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert len(verdict_lines(done.stdout)) == 4
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    edges: list[tuple[float, int]] = []
+    for e in events:
+        if e["event"] == "write" and e["var"] == "SA50" and (
+                not edges or edges[-1][1] != e["value"]):
+            edges.append((e["t"], e["value"]))
+    # latched once, never let go by the first reset, let go by the second
+    assert [v for _, v in edges if v == 1] == [1] and edges[-1][1] == 0, edges
+    assert 1.0 < next(t for t, v in edges if v == 1) < 1.1
+    assert 3.0 <= edges[-1][0] < 3.02
+
 def test_the_readme_names_every_scenario() -> None:
     readme = (FOLDER / "README.md").read_text(encoding="utf-8")
     assert readme.splitlines()[0].startswith("# machine: ")
