@@ -147,6 +147,7 @@ class VirtualPLC:
                  client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None) -> None:
         self.map = ModbusMap(config)
         self.config = config
+        self._symbols = {name.upper(): text for name, text in config.symbols.items()}
         self.unit = unit if unit is not None else config.modbus.unit_ids[0]
         self.poll_s = poll_s
         self.client = client or AsyncModbusTcpClient(host, port=port, retries=0)
@@ -211,9 +212,18 @@ class VirtualPLC:
 
     # -- the image --------------------------------------------------------------------------
 
+    def _named(self, var: str) -> str:
+        """``var`` as the image names it: an I/O name of ``[symbols]`` (any case) is the
+        variable it stands for (``clamp_valve`` -> ``SA20``; a K byte is the SK packet's)."""
+        text = self._symbols.get(var.strip().upper())
+        if text is None:
+            return var
+        return "S" + text if text.upper().startswith("K") else text
+
     async def set(self, var: str, value: int) -> None:
-        """Write SA10 (a coil), SA1.BY, SK250, SK2.IN, SYVAR1 … as the PLC."""
-        (area, index, view), number = parse_assignment(f"{var}={value}")
+        """Write SA10 (a coil), SA1.BY, SK250, SK2.IN, SYVAR1, or an I/O name of
+        ``[symbols]`` … as the PLC."""
+        (area, index, view), number = parse_assignment(f"{self._named(var)}={value}")
         m = self.map
         if area == "SA" and view == "bit":
             r = await self.client.write_coil(index, bool(number), device_id=self.unit)
@@ -229,7 +239,7 @@ class VirtualPLC:
                 await self._write(base + index, [word & 0xFF, word >> 8])
 
     async def get(self, var: str) -> int:
-        (area, index, view), _ = parse_assignment(f"{var}=0")
+        (area, index, view), _ = parse_assignment(f"{self._named(var)}=0")
         m = self.map
         if area == "SA" and view == "bit":
             r = await self.client.read_coils(index, count=1, device_id=self.unit)

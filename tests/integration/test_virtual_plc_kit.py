@@ -164,3 +164,21 @@ async def test_a_kit_wait_ends_by_its_deadline_though_the_client_drops_a_cancell
     # Why, as the gateway reports each process: nothing is loaded, so every one is IDLE.
     assert [line.split()[:2] for line in message.splitlines()[1:]] == [
         [f"P{k}", "IDLE"] for k in range(1, ncgate_gateway.config.nc.processes + 1)]
+
+
+async def test_the_kit_sets_and_gets_by_the_configs_io_names() -> None:
+    """`virtual_plc.set("clamp_valve", 1)` as the machine example's I/O list names it (a new
+    user got "C needs a value"): the name is the variable [symbols] gives it, any case."""
+    config = ncgate_test_config(**{"symbols.clamp_valve": "SA20", "symbols.speed": "SYVAR7",
+                                   "symbols.mode": "K12"})
+    async with Gateway(config) as gw:
+        host, port = gw.modbus_address
+        async with VirtualPLC(host, port, gw.config) as plc:
+            await plc.set("clamp_valve", 1)
+            await plc.set("Speed", 1234)
+            await plc.set("MODE", 7)
+            assert (gw.image.read("SA", 20, "bit"), gw.image.read("SYVAR", 7, "IN"),
+                    gw.image.read("SK", 12, "BY")) == (1, 1234, 7)
+            assert [await plc.get(n) for n in ("clamp_valve", "speed", "mode")] == [1, 1234, 7]
+            with pytest.raises(ValueError):
+                await plc.set("no_such_name", 1)
