@@ -205,6 +205,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ProgramError, LogicError) as exc:  # diagnostics, each with its source line
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # `ncgate map | head`: the reader has what it wanted
+        null = os.open(os.devnull, os.O_WRONLY)  # (and the interpreter's last flush goes
+        os.dup2(null, sys.stdout.fileno())         # nowhere, not into a second error)
+        os.close(null)
+        return EXIT_OK
     except (NcgateError, OSError) as exc:  # ours, or the system's (a path, a port): said
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -5,6 +5,7 @@ run; the wording of errors; the built-in cell's first run."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -328,3 +329,21 @@ def test_the_hazard_example_shows_one_hazard_on_purpose(
     assert snds == [(0.0, 3), (1.0, 4)]  # the plain N3 at decode time, the # N4 in motion
     assert main(["sim", "--example", "hazard", "--set", "nc.lookahead=0"]) == 0
     assert " hazard " not in capsys.readouterr().out
+
+
+def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
+    """`ncgate map | head -3`: the reader goes after a few lines; map said "[Errno 32] Broken
+    pipe" (a new user's find).  The pipe is made smaller than the map, so that map is still
+    writing when the reader closes."""
+    import fcntl
+
+    read_end, write_end = os.pipe()
+    fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 4096)  # (Linux) the map is 17 KB
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "map"], stdout=write_end,
+                            stderr=subprocess.PIPE, text=True)
+    os.close(write_end)
+    head = os.read(read_end, 64)
+    os.close(read_end)
+    _, err = proc.communicate(timeout=60)
+    assert head.startswith(b"# Modbus map")
+    assert proc.returncode == 0 and err == "", err
