@@ -64,21 +64,27 @@ class FileReport:
         return len(self.diagnostics) - self.errors
 
 
+_CHECKED_SUFFIXES = (*PROGRAM_SUFFIXES[1:], *LOGIC_SUFFIXES)
+
+
 def expand(arguments: Sequence[str]) -> list[Path]:
-    """Files, directories (their programs) and globs, in a stable order."""
+    """Files, directories (their programs) and globs, in a stable order.  A file named
+    is checked whatever its name; a directory or a glob gives its programs and logic (.nc,
+    .txt, .st, .xml), not a README or a config beside them."""
     out: list[Path] = []
     for arg in arguments:
-        matches = sorted(glob.glob(arg, recursive=True)) if glob.has_magic(arg) else [arg]
+        magic = glob.has_magic(arg)
+        matches = sorted(glob.glob(arg, recursive=True)) if magic else [arg]
         if not matches:
             raise UsageError(f"no file matches {arg}")
         for match in matches:
             path = Path(match)
             if path.is_dir():
                 out.extend(sorted(p for p in path.iterdir() if p.is_file()
-                                  and p.suffix.lower() in (*PROGRAM_SUFFIXES[1:],
-                                                           *LOGIC_SUFFIXES)))
+                                  and p.suffix.lower() in _CHECKED_SUFFIXES))
             elif path.is_file():
-                out.append(path)
+                if not magic or path.suffix.lower() in _CHECKED_SUFFIXES:
+                    out.append(path)
             else:
                 raise UsageError(f"no such file: {arg}")
     return out

@@ -347,3 +347,15 @@ def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
     _, err = proc.communicate(timeout=60)
     assert head.startswith(b"# Modbus map")
     assert proc.returncode == 0 and err == "", err
+
+
+def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`ncgate check 'examples/*'` read README.md and __init__.py as part programs (47
+    errors, a new user's find); a glob gives what a folder gives, a file named is checked."""
+    write_cell(tmp_path, '[nc]\nmain = "A"\n', {"A": "N1M30\n"})
+    (tmp_path / "README.md").write_text("# A cell\n\nIt ends at once.\n")
+    (tmp_path / "__init__.py").write_text("")
+    assert main(["check", str(tmp_path / "*")]) == 0
+    assert "1 file(s) checked: 0 error(s)" in capsys.readouterr().err
+    assert main(["check", str(tmp_path / "README.md")]) == 1  # named: read as asked
