@@ -118,6 +118,21 @@ def _ticks(end_t: float) -> list[float]:
     return [i * step for i in range(int(end_t / step) + 1)]
 
 
+# A write's mark by who wrote it: the PLC logic, the plant's models and logic, anyone else
+# (a fieldbus client, the API, a script, the console).
+WRITERS = {"plc": ("#3f51b5", "PLC"), "plant": ("#8d6e63", "plant"),
+           "other": ("#c2185b", "outside")}
+
+
+def _writer(event: EventDict) -> str:
+    who = str(event.get("who", ""))
+    if who == "plc" or who.startswith("plc "):
+        return "plc"
+    if who == "plant" or who.startswith("plant "):
+        return "plant"
+    return "other"
+
+
 def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                 external: Iterable[int] = (), width: int = 1000) -> None:
     lanes, end_t = state_intervals(events, processes)
@@ -128,9 +143,12 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
     # The legend's entries, laid out in rows that fit the width (it was one row that ran
     # past the picture's right edge and was cut).
     drawn = {state for lane in lanes.values() for _, _, state, _ in lane}
+    writers = {_writer(e) for e in events if e["event"] == "write" and e["proc"] == 0}
     entries = [(COLOURS[state], LABELS[state]) for state in COLOURS
                if state != "HOLD" or "HOLD" in drawn] + [
-        ("#222", "\u2192 SND"), ("#00796b", "\u2192 #SIGNAL"), ("#3f51b5", "\u25bc PLC write")]
+        ("#222", "\u2192 SND"), ("#00796b", "\u2192 #SIGNAL")] + [
+        (colour, f"\u25bc {label} write") for kind, (colour, label) in WRITERS.items()
+        if kind in writers or (kind == "plc" and not writers)]
     legend: list[tuple[float, int, str, str]] = []  # x, row, colour, label
     lx, row = float(LEFT), 0
     for colour, label in entries:
@@ -235,8 +253,9 @@ def write_gantt(events: Sequence[EventDict], processes: int, out: TextIO,
                              f'font-size="10" fill="{colour}">{escape(str(e["code"]))}</text>')
         elif e["event"] == "write" and e["proc"] == 0:
             cx = x(e["t"])
+            fill = WRITERS[_writer(e)][0]
             parts.append(f'<path d="M{cx - 5:.1f},{plc_y + 8} L{cx + 5:.1f},{plc_y + 8} '
-                         f'L{cx:.1f},{plc_y + 20} z" fill="#3f51b5"><title>'
+                         f'L{cx:.1f},{plc_y + 20} z" fill="{fill}"><title>'
                          f'{escape(str(e["who"]))}: {escape(str(e["var"]))}={e["value"]} at '
                          f'{e["t"]:.3f} s</title></path>')
             # A label where it has room: writes close in time had their labels drawn over
