@@ -359,3 +359,14 @@ def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(
     assert main(["check", str(tmp_path / "*")]) == 0
     assert "1 file(s) checked: 0 error(s)" in capsys.readouterr().err
     assert main(["check", str(tmp_path / "README.md")]) == 1  # named: read as asked
+
+
+@pytest.mark.parametrize("command", ["check", "sim", "map"])
+def test_an_unknown_option_is_said_by_its_commands_usage(
+        capsys: pytest.CaptureFixture[str], command: str) -> None:
+    """`ncgate check --set x=y` printed the top level's usage (a new user's find): the
+    command's own usage and name say what it takes."""
+    assert main([command, "--bogus"]) == 2
+    err = capsys.readouterr().err
+    assert f"usage: ncgate {command} " in err
+    assert f"ncgate {command}: error: unrecognized arguments: --bogus" in err
