@@ -122,6 +122,11 @@ FORCE_KINDS = {1: ("SA", "bit"), 2: ("SA", "BY"), 3: ("SA", "IN"), 4: ("SK", "BY
                5: ("SK", "IN"), 6: ("SYVAR", "IN")}
 _FORCE_KIND_OF = {place: kind for kind, place in FORCE_KINDS.items()}
 FORCE_LISTED = 32  # the forces the table shows (the count at +4 says how many there are)
+# The register regions whose values are the image's, or always 0: what they read changes only
+# with the image's generation (ModbusMap.read).  The search N and the status regions (the
+# view's) are not among them.
+_IMAGE_ALONE = frozenset({Kind.K_BYTES, Kind.SA_BYTES, Kind.SYVARS, Kind.COMMAND, Kind.MAILBOX,
+                          Kind.FORCE_REQUEST})
 
 
 class ModbusMap:
@@ -202,8 +207,10 @@ class ModbusMap:
                    "record", f"PLC status at {self.PLC_BASE}+0..{len(PLC_REGISTERS) - 1}: "
                    + ", ".join(PLC_REGISTERS)),
         ]
-        # (table, address, count) -> its segments: a bounded cache of the ranges clients read.
-        self._pieces: dict[tuple[Table, int, int], list[tuple[Region, int, int]]] = {}
+        # (table, address, count) -> its segments and whether they read the image alone (read):
+        # a bounded cache of the ranges clients read.
+        self._pieces: dict[tuple[Table, int, int],
+                           tuple[list[tuple[Region, int, int]], bool]] = {}
         self._check_layout()
 
     def _check_layout(self) -> None:
@@ -275,19 +282,30 @@ class ModbusMap:
 
     def read_registers(self, backend: Backend, table: Table, address: int,
                        count: int) -> list[int]:
+        return self.read(backend, table, address, count)[0]
+
+    def read(self, backend: Backend, table: Table, address: int,
+             count: int) -> tuple[list[int], bool]:
+        """The registers of a range, and whether they read the image alone (K bytes, SA
+        bytes, SYVARs and the registers that read 0): then they stay the same while the
+        image's generation does (``IOImage.generation``, +1 on every write that changed a
+        value, whoever wrote it), and the server may answer the same read with the same
+        bytes until it moves."""
         key = (table, address, count)
         pieces = self._pieces.get(key)
         if pieces is None:  # pollers read the same ranges again and again: remember them
-            pieces = self.segments(table, address, count)
+            segments = self.segments(table, address, count)
+            pieces = (segments, all(r.kind in _IMAGE_ALONE for r, _, _ in segments))
             if len(self._pieces) >= 4096:
                 self._pieces.clear()
             self._pieces[key] = pieces
-        if len(pieces) == 1:
-            return self._read_region(backend, *pieces[0])
+        segments, steady = pieces
+        if len(segments) == 1:
+            return self._read_region(backend, *segments[0]), steady
         out: list[int] = []
-        for piece in pieces:
+        for piece in segments:
             out += self._read_region(backend, *piece)
-        return out
+        return out, steady
 
     def _read_region(self, backend: Backend, region: Region, address: int,
                      count: int) -> list[int]:
