@@ -51,6 +51,10 @@ class Table(enum.Enum):
     HOLDING = "holding registers"
     INPUT = "input registers"
 
+    # A member is its one instance: hashed by identity, in C (Enum's own hashes the name in
+    # Python, on the path of every register read: ModbusMap.read's cache key).
+    __hash__ = object.__hash__
+
     @property
     def prefix(self) -> int:
         """The leading digit of the 1-based numbers people type into HMIs."""
@@ -133,6 +137,7 @@ class ModbusMap:
     """The map in force for a config."""
 
     STATUS_STRIDE, FLAGS_STRIDE = 20, 16
+    STATUS_PADDING = (0,) * (STATUS_STRIDE - len(PROCESS_REGISTERS))  # +18..19 read 0
     LOG_ENTRY = 6  # registers of one SND log entry
     LOG_SIZE = 2 + SND_LOG * LOG_ENTRY
 
@@ -340,14 +345,16 @@ class ModbusMap:
         return self._status_registers(views, address, count)
 
     def _status_registers(self, views: ViewPublisher, address: int, count: int) -> list[int]:
-        cache: dict[int, list[int]] = {}
-        out = []
-        for a in range(address, address + count):
-            k, offset = divmod(a - self.STATUS_BASE, self.STATUS_STRIDE)
-            if k not in cache:
-                cache[k] = process_registers(views, k + 1)
-            out.append(cache[k][offset] if offset < len(PROCESS_REGISTERS) else 0)
-        return out
+        """The status blocks of the processes the range covers, whole, then cut."""
+        stride = self.STATUS_STRIDE
+        first = address - self.STATUS_BASE
+        k, offset = divmod(first, stride)
+        out: list[int] = []
+        while len(out) < offset + count:
+            k += 1
+            out += process_registers(views, k)
+            out += self.STATUS_PADDING
+        return out[offset:offset + count]
 
     # -- writing ------------------------------------------------------------------------------
 
