@@ -21,8 +21,9 @@ module owns the layer where those are decided:
 
 and uses pymodbus where it serves: its request classes decode a PDU that passed validation,
 its response classes encode the answers -- except for register reads (FC3/FC4, what pollers
-send), whose answers are packed straight from the map (bench/modbus.py).  The map itself
-lives in ``ncgate.gateway.modbus.map``.
+send), whose answers are packed straight from the map, and those of the image alone kept
+until the image changes (RequestHandler.kept; bench/modbus.py).  The map itself lives in
+``ncgate.gateway.modbus.map``.
 """
 
 from __future__ import annotations
