@@ -2,9 +2,12 @@
 
 1. read-holding-registers requests/s with 1, 4 and 16 connections through the gateway (on
    asyncio's loop, and on uvloop when it is installed), a libmodbus server in C built here
-   (bench/c, needs libmodbus-dev) and a bare pymodbus ModbusTcpServer, each in its own
+   (bench/c, needs libmodbus-dev), a bare pymodbus ModbusTcpServer and a bare asyncio
+   Protocol that answers a packed constant on uvloop (the floor of any Python server on that
+   loop: with one connection a server is as fast as its loop's round trip), each in its own
    process, driven alternately by the same C load client (bench/c/load_client.c: one thread,
-   one request in flight per connection); ratios to libmodbus (target: >= 0.8x with 16);
+   one request in flight per connection); ratios to libmodbus (target: >= 0.8x with 16
+   connections, >= 1.0x with 1);
 2. latency from a client's FC5 / FC6 write to the waiting process resuming, measured inside
    the gateway (from the request's arrival to the resume) and end to end by the client (the
    write's answer leaves after the wake), p50 / p99 over >= 2,000 samples (target p99 <= 1 ms);
@@ -35,6 +38,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 SECONDS = 2.0
 ROUNDS = 3
@@ -63,6 +67,27 @@ async def serve_pymodbus() -> None:
     print(port, flush=True)
     await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
     await server.shutdown()
+
+
+class _Constant(asyncio.Protocol):
+    """The least a Python server does for a poller: unpack the header, answer a constant."""
+
+    HEADER = struct.Struct(">HHHB")
+    ANSWER = bytes.fromhex("03 14") + bytes(20)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.Transport, transport)
+
+    def data_received(self, data: bytes) -> None:
+        tid, _, _, unit = self.HEADER.unpack_from(data)
+        self.transport.write(self.HEADER.pack(tid, 0, len(self.ANSWER) + 1, unit) + self.ANSWER)
+
+
+async def serve_bare() -> None:
+    server = await asyncio.get_running_loop().create_server(_Constant, "127.0.0.1", 0)
+    print(server.sockets[0].getsockname()[1], flush=True)
+    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+    server.close()
 
 
 def start(kind: str) -> tuple[subprocess.Popen[str], int]:
@@ -121,6 +146,7 @@ def throughput() -> None:
         kinds = ["gateway", "libmodbus", "pymodbus"]
         if importlib.util.find_spec("uvloop") is not None:
             kinds.insert(1, "gateway-uvloop")
+            kinds.append("bare-uvloop")
         servers = {kind: start_c(c_server) if kind == "libmodbus" else start(kind)
                    for kind in kinds}
         try:
@@ -139,8 +165,8 @@ def throughput() -> None:
         finally:
             for proc, _ in servers.values():
                 stop(proc)
-    print("   target: gateway >= 0.8x libmodbus with 16 connections (the same C load client "
-          "drives every server)")
+    print("   target: gateway >= 0.8x libmodbus with 16 connections, >= 1.0x with 1 (the same C "
+          "load client drives every server; bare-uvloop: a Protocol answering a constant)")
 
 # -- 2. write -> wake latency ---------------------------------------------------------------
 
@@ -400,6 +426,10 @@ if __name__ == "__main__":
             import uvloop
 
             uvloop.run(serve_gateway())
+        elif sys.argv[2] == "bare-uvloop":
+            import uvloop
+
+            uvloop.run(serve_bare())
         else:
             asyncio.run(serve_gateway() if sys.argv[2] == "gateway" else serve_pymodbus())
     elif sys.argv[1:] == ["throughput"]:

@@ -217,16 +217,23 @@ class IOImage:
         touched: set[_Key] = set()
         self._write_number += 1
         stamp = (self._write_number, writer)
-        for area, index, view, value in items:
-            old = self.read(area, index, view)
-            keys = self._store(area, index, view, value, old)
-            for key in self._keys(area, index, view):
-                self._writers[key] = stamp
-            change = _new(Change, (area, index, view, value, old))
-            written.append(change)
-            if keys:
-                touched.update(keys)
-                done.append(change)
+        try:
+            for area, index, view, value in items:
+                old = self.read(area, index, view)
+                keys = self._store(area, index, view, value, old)
+                for key in self._keys(area, index, view):
+                    self._writers[key] = stamp
+                change = _new(Change, (area, index, view, value, old))
+                written.append(change)
+                if keys:
+                    touched.update(keys)
+                    done.append(change)
+        except BaseException:
+            # A value the caller said was checked and was not: those before it are stored.
+            # Whoever keeps what it read at a generation (the Modbus server's answers, the
+            # PLC's still scans) must read again.
+            self.generation += 1
+            raise
         if done:
             self.generation += 1
         # Listeners (the trace) hear of the write before any wait it satisfies is woken,

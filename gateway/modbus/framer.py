@@ -144,6 +144,14 @@ _unpack_mbap: Final = _MBAP.unpack_from
 _pack_mbap: Final = _MBAP.pack
 MBAP_LENGTH_MIN: Final = 2  # the unit id and a function code
 MBAP_LENGTH_MAX: Final = 254  # the unit id and a PDU of 253 bytes (application protocol 4.1)
+_pack_tail: Final = struct.Struct(">HHB").pack
+
+
+def mbap_tail(unit: int, pdu: bytes) -> bytes:
+    """A Modbus TCP frame of ``pdu`` after its transaction id: protocol id 0, length, unit id,
+    the PDU.  A whole request's bytes after its first two are its tail; an answer is the
+    request's transaction id followed by the answer's tail."""
+    return _pack_tail(0, len(pdu) + 1, unit) + pdu
 
 
 class MbapFramer:

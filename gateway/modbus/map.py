@@ -51,6 +51,10 @@ class Table(enum.Enum):
     HOLDING = "holding registers"
     INPUT = "input registers"
 
+    # A member is its one instance: hashed by identity, in C (Enum's own hashes the name in
+    # Python, on the path of every register read: ModbusMap.read's cache key).
+    __hash__ = object.__hash__
+
     @property
     def prefix(self) -> int:
         """The leading digit of the 1-based numbers people type into HMIs."""
@@ -122,12 +126,18 @@ FORCE_KINDS = {1: ("SA", "bit"), 2: ("SA", "BY"), 3: ("SA", "IN"), 4: ("SK", "BY
                5: ("SK", "IN"), 6: ("SYVAR", "IN")}
 _FORCE_KIND_OF = {place: kind for kind, place in FORCE_KINDS.items()}
 FORCE_LISTED = 32  # the forces the table shows (the count at +4 says how many there are)
+# The register regions whose values are the image's, or always 0: what they read changes only
+# with the image's generation (ModbusMap.read).  The search N and the status regions (the
+# view's) are not among them.
+_IMAGE_ALONE = frozenset({Kind.K_BYTES, Kind.SA_BYTES, Kind.SYVARS, Kind.COMMAND, Kind.MAILBOX,
+                          Kind.FORCE_REQUEST})
 
 
 class ModbusMap:
     """The map in force for a config."""
 
     STATUS_STRIDE, FLAGS_STRIDE = 20, 16
+    STATUS_PADDING = (0,) * (STATUS_STRIDE - len(PROCESS_REGISTERS))  # +18..19 read 0
     LOG_ENTRY = 6  # registers of one SND log entry
     LOG_SIZE = 2 + SND_LOG * LOG_ENTRY
 
@@ -202,8 +212,10 @@ class ModbusMap:
                    "record", f"PLC status at {self.PLC_BASE}+0..{len(PLC_REGISTERS) - 1}: "
                    + ", ".join(PLC_REGISTERS)),
         ]
-        # (table, address, count) -> its segments: a bounded cache of the ranges clients read.
-        self._pieces: dict[tuple[Table, int, int], list[tuple[Region, int, int]]] = {}
+        # (table, address, count) -> its segments and whether they read the image alone (read):
+        # a bounded cache of the ranges clients read.
+        self._pieces: dict[tuple[Table, int, int],
+                           tuple[list[tuple[Region, int, int]], bool]] = {}
         self._check_layout()
 
     def _check_layout(self) -> None:
@@ -275,19 +287,30 @@ class ModbusMap:
 
     def read_registers(self, backend: Backend, table: Table, address: int,
                        count: int) -> list[int]:
+        return self.read(backend, table, address, count)[0]
+
+    def read(self, backend: Backend, table: Table, address: int,
+             count: int) -> tuple[list[int], bool]:
+        """The registers of a range, and whether they read the image alone (K bytes, SA
+        bytes, SYVARs and the registers that read 0): then they stay the same while the
+        image's generation does (``IOImage.generation``, +1 on every write that changed a
+        value, whoever wrote it), and the server may answer the same read with the same
+        bytes until it moves."""
         key = (table, address, count)
         pieces = self._pieces.get(key)
         if pieces is None:  # pollers read the same ranges again and again: remember them
-            pieces = self.segments(table, address, count)
+            segments = self.segments(table, address, count)
+            pieces = (segments, all(r.kind in _IMAGE_ALONE for r, _, _ in segments))
             if len(self._pieces) >= 4096:
                 self._pieces.clear()
             self._pieces[key] = pieces
-        if len(pieces) == 1:
-            return self._read_region(backend, *pieces[0])
+        segments, steady = pieces
+        if len(segments) == 1:
+            return self._read_region(backend, *segments[0]), steady
         out: list[int] = []
-        for piece in pieces:
+        for piece in segments:
             out += self._read_region(backend, *piece)
-        return out
+        return out, steady
 
     def _read_region(self, backend: Backend, region: Region, address: int,
                      count: int) -> list[int]:
@@ -322,14 +345,16 @@ class ModbusMap:
         return self._status_registers(views, address, count)
 
     def _status_registers(self, views: ViewPublisher, address: int, count: int) -> list[int]:
-        cache: dict[int, list[int]] = {}
-        out = []
-        for a in range(address, address + count):
-            k, offset = divmod(a - self.STATUS_BASE, self.STATUS_STRIDE)
-            if k not in cache:
-                cache[k] = process_registers(views, k + 1)
-            out.append(cache[k][offset] if offset < len(PROCESS_REGISTERS) else 0)
-        return out
+        """The status blocks of the processes the range covers, whole, then cut."""
+        stride = self.STATUS_STRIDE
+        first = address - self.STATUS_BASE
+        k, offset = divmod(first, stride)
+        out: list[int] = []
+        while len(out) < offset + count:
+            k += 1
+            out += process_registers(views, k)
+            out += self.STATUS_PADDING
+        return out[offset:offset + count]
 
     # -- writing ------------------------------------------------------------------------------
 

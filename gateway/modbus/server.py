@@ -21,8 +21,9 @@ module owns the layer where those are decided:
 
 and uses pymodbus where it serves: its request classes decode a PDU that passed validation,
 its response classes encode the answers -- except for register reads (FC3/FC4, what pollers
-send), whose answers are packed straight from the map (bench/modbus.py).  The map itself
-lives in ``ncgate.gateway.modbus.map``.
+send), whose answers are packed straight from the map, and those of the image alone kept
+until the image changes (RequestHandler.kept; bench/modbus.py).  The map itself lives in
+``ncgate.gateway.modbus.map``.
 """
 
 from __future__ import annotations
@@ -68,11 +69,11 @@ from ncgate.gateway.modbus.codes import (
 from ncgate.gateway.modbus.codes import FunctionCode as FC
 from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
 from ncgate.gateway.modbus.framer import (
-    Framer,
     FramingError,
     MbapFramer,
     Request,
     exception_pdu,
+    mbap_tail,
 )
 from ncgate.gateway.modbus.map import ModbusMap, Table
 from ncgate.gateway.modbus.security import TlsSession
@@ -114,6 +115,9 @@ _REGISTERS: Final = [struct.Struct(f">BB{n}H") for n in range(126)]
 # Function code -> (fixed PDU length or None, max quantity); spec 3.2.
 _READ_LIMITS: Final[dict[int, int]] = {FC.READ_COILS: 2000, FC.READ_DISCRETE_INPUTS: 2000,
                         FC.READ_HOLDING_REGISTERS: 125, FC.READ_INPUT_REGISTERS: 125}
+# The register reads (the pollers' hot path in RequestHandler.handle) and their tables.
+_READ_TABLES: Final = {int(FC.READ_HOLDING_REGISTERS): Table.HOLDING,
+                       int(FC.READ_INPUT_REGISTERS): Table.INPUT}
 SERVED: Final = frozenset(FC)
 WRITES: Final = frozenset({FC.WRITE_SINGLE_COIL, FC.WRITE_SINGLE_REGISTER,
                            FC.WRITE_MULTIPLE_COILS, FC.WRITE_MULTIPLE_REGISTERS,
@@ -182,6 +186,18 @@ class RequestHandler:
         self.unit_ids = unit_ids | {NO_SUB_UNIT} | (set() if strict_unit_id else {0})
         self.decoder = DecodePDU(is_server=True)
         self.served = 0
+        # The answers of the register reads that read the image alone (ModbusMap.read), in
+        # two forms: ``kept`` by the request's MBAP header after its transaction id and its
+        # PDU (framer.mbap_tail), the answer's, to follow the request's transaction id (the
+        # pollers' direct path, _Connection.data_received, takes one with the request's
+        # bytes); ``kept_pdus`` the answer PDU by the request PDU (handle(), for the others:
+        # pipelined requests, TLS, RTU).  All of them were read at the image's generation
+        # ``kept_at``: once it moves (any write that changed a value, whoever wrote it), they
+        # are forgotten, and the next read reads the image.
+        self.image = backend.image
+        self.kept: dict[bytes, bytes] = {}
+        self.kept_pdus: dict[bytes, bytes] = {}
+        self.kept_at = self.image.generation
         # Device identification (FC43/14): the identity CANopen's 0x1018 gives too.
         texts = {0x00: identity.VENDOR_NAME, 0x01: identity.product_code_text(),
                  0x02: identity.revision_text(), 0x04: identity.PRODUCT_NAME,
@@ -198,22 +214,29 @@ class RequestHandler:
         self.served += 1
         if unit not in self.unit_ids:
             return exception_pdu(fc, TARGET_NO_RESPONSE)
-        if fc in (FC.READ_HOLDING_REGISTERS, FC.READ_INPUT_REGISTERS) and len(pdu) == 5:
+        table = _READ_TABLES.get(fc)
+        if table is not None and len(pdu) == 5:
             # The pollers' hot path: validate's rules for a read (the quantity from the same
             # _READ_LIMITS, then the address), no pymodbus objects, the answer packed at once.
             # Ahead of validate, it is worth 4 % of poller throughput (bench/modbus.py).
+            if self.kept_at == self.image.generation:
+                kept = self.kept_pdus.get(pdu)
+                if kept is not None:
+                    return kept
             address, count = _ADDRESS_COUNT.unpack_from(pdu, 1)
             if not 1 <= count <= _READ_LIMITS[fc]:
                 return exception_pdu(fc, ILLEGAL_VALUE)
-            table = Table.HOLDING if fc == FC.READ_HOLDING_REGISTERS else Table.INPUT
             try:
-                regs = self.map.read_registers(self.backend, table, address, count)
-                return cast(bytes, _REGISTERS[count].pack(fc, 2 * count, *regs))
+                regs, steady = self.map.read(self.backend, table, address, count)
+                answer: bytes = _REGISTERS[count].pack(fc, 2 * count, *regs)
             except ModbusError as exc:
                 return exception_pdu(fc, exc.code)
             except Exception:  # a bug of ours (a value that does not pack): 04, not a close
                 log.exception("modbus: read %s from %s failed", pdu.hex(), source)
                 return exception_pdu(fc, DEVICE_FAILURE)
+            if steady:
+                self._keep(unit, pdu, answer)
+            return answer
         try:
             if len(pdu) == 5 and writable is None and (fc == FC.WRITE_SINGLE_COIL
                                                        or fc == FC.WRITE_SINGLE_REGISTER):
@@ -236,6 +259,17 @@ class RequestHandler:
         except Exception:  # a bug of ours must not take the connection down
             log.exception("modbus: request %s from %s failed", pdu.hex(), source)
             return exception_pdu(fc, DEVICE_FAILURE)
+
+    def _keep(self, unit: int, pdu: bytes, answer: bytes) -> None:
+        """Keep the answer of a read of the image alone, read just now (``kept``)."""
+        kept = self.kept
+        generation = self.image.generation
+        if generation != self.kept_at or len(kept) >= 4096:  # (a bound, as the map's)
+            kept.clear()
+            self.kept_pdus.clear()
+            self.kept_at = generation
+        kept[mbap_tail(unit, pdu)] = mbap_tail(unit, answer)
+        self.kept_pdus[pdu] = answer
 
     def _write_single(self, fc: int, pdu: bytes, source: Source) -> bytes:
         """FC5 and FC6 of plain Modbus/TCP, the writers' hot path: validate's rules for them
@@ -354,8 +388,9 @@ class _Connection(asyncio.Protocol):
         # role may write (None: no roles apply, as on plain Modbus/TCP).
         self.tls = TlsSession(tls) if tls is not None else None
         self.writable: frozenset[str] | None = None
+        self.handler = server.handler
         self.handle = server.handler.handle
-        self.framer: Framer = MbapFramer()
+        self.framer = MbapFramer()
         self.transport: asyncio.Transport | None = None
         self.source = Source(SourceKind.MODBUS_TLS if tls is not None else SourceKind.MODBUS)
         self.who = str(self.source)  # for the log: the source, and the address if it has none
@@ -505,6 +540,18 @@ class _Connection(asyncio.Protocol):
             # buffer's bookkeeping of _process: worth 10 % of poller throughput (measured with
             # bench/modbus.py, 16 connections).  Any other case goes through _process.
             framer = self.framer
+            handler = self.handler
+            if handler.kept_at == handler.image.generation and not framer.buffer:
+                # A read of the image alone that was answered since the image last changed:
+                # the same answer, with this request's transaction id (RequestHandler.kept).
+                tail = handler.kept.get(data[2:])
+                if tail is not None:
+                    handler.served += 1
+                    assert self.transport is not None
+                    self.transport.write(data[:2] + tail)
+                    self.partial_since = None
+                    self.completed_at = now
+                    return
             request = framer.whole(data)
             if request is not None:
                 unit, pdu, _ = request

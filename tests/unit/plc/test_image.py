@@ -118,6 +118,16 @@ def test_unchanged_value_wakes_nothing_but_is_heard_and_records_the_writer() -> 
     assert image.generation == 0
 
 
+def test_a_write_that_fails_part_way_moves_the_generation() -> None:
+    # A change "checked" by a caller that was not: the first value is stored before the
+    # second fails.  Whoever keeps what it read at a generation (the Modbus server's answers
+    # to reads of the image) must see the image moved.
+    image = IOImage()
+    with pytest.raises(ValueError):
+        image.write([("SK", 1, "BY", 5), ("SK", 2, "BY", 300)], "t", checked=True)
+    assert image.k[1] == 5 and image.generation == 1
+
+
 # -- the frozen image (the cell view's image: gateway/view.py) ------------------------------
 
 
