@@ -72,8 +72,9 @@ from ncgate.inputs import (
     Write,
     Writes,
 )
+from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import run_virtual
+from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict
 
@@ -469,6 +470,22 @@ def _changed(recorded: dict[str, str], now: Callable[[str], str | None]) -> list
     return out
 
 
+def run_through(engine: Engine, until: float) -> None:
+    """Let the virtual clock run to ``until`` as ``run``'s wall clock does: every timer due
+    by then fires in time order -- the PLC logic's scans, the plant's moves and ticks, the
+    processes' motion -- whether or not a process has a program, and the clock then stands
+    at ``until``.
+
+    (``run_virtual`` stops as soon as every process is idle: the clock would leap over an idle
+    gap, the scans and the plant due in it then ran late, all at once, at the next input's
+    time, and the logic's timers saw the leap.)"""
+    with gc_paused():
+        engine.run_until_blocked()
+        while (t := engine.next_timer()) is not None and t <= until:
+            engine.advance_to(t)
+        engine.set_time(until)
+
+
 def replay(path: str | Path, config: str | Path | None = None,
            tolerance_ms: float = 10.0) -> ReplayResult:
     """Re-run a recorded session on the virtual clock and compare it with the recording.
@@ -517,8 +534,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     warnings = _changed({str(k): str(v) for k, v in files.items()},
                         lambda f: _sha256(Path(f)))
     warnings += _changed(recording.programs, program_now)
-    start_plc(cfg, runtime, door, closed=True,
-              sources=recording.logic[0] if recording.logic else None)
+    plc = start_plc(cfg, runtime, door, closed=True,
+                    sources=recording.logic[0] if recording.logic else None)
     if recording.logic and isinstance(door.reload_plc, OnlineChange):
         door.reload_plc.recorded = list(recording.logic[1:])  # the session's reloads
     # The plant as run started it: its models, and the config's faults (neither recorded).
@@ -526,15 +543,18 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
     start_plant(runtime, door.apply_on_time, closed=False)
-    start_plant_logic(cfg, runtime, door, closed=True)
+    plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
+    # The session's scans never stopped (run's do not stop at a stall, which the replay's
+    # inputs, not timers, may end): neither do the replay's.
+    for started in (plc, plant_logic):
+        if started is not None:
+            started[1].stall_s = math.inf
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order
         t = recorded.t
-        run_virtual(engine, t)
-        if engine.now < t:
-            engine.set_time(t)
+        run_through(engine, t)
         try:
             door.apply(recorded.input)
         except InputRefused as exc:
@@ -548,7 +568,7 @@ def replay(path: str | Path, config: str | Path | None = None,
         engine.run_until_blocked()
     # A cut record's last event may have come up to the tolerance earlier on the session's
     # wall clock than on the replay's: run that far, what lies past the cut is not compared.
-    run_virtual(engine, end + (tolerance_ms / 1000.0 if recording.stop is None else 0.0))
+    run_through(engine, end + (tolerance_ms / 1000.0 if recording.stop is None else 0.0))
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
                                    tolerance_ms / 1000.0, cut=recording.stop is None)

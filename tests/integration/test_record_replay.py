@@ -4,6 +4,7 @@ diverges at the block that changed."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import shutil
 from importlib import resources
@@ -19,6 +20,9 @@ from ncgate.gateway.testing import replay
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind, Var, Writes
+from ncgate.interpreter.engine import events as ev
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 @pytest.fixture
@@ -84,6 +88,58 @@ async def test_a_recorded_session_replays_and_matches(cell: Path, tmp_path: Path
     assert f"the replay matches: {result.compared} events" in out
 
     replay(record)  # the kit's helper: a field session as a regression test
+
+
+async def test_the_machine_started_after_an_idle_gap_replays_and_matches(
+        tmp_path: Path) -> None:
+    """The machine example (PLC logic with TON timers, six plant models) stands idle, then a
+    PLC's cycle start over Modbus machines one part.  The replay scans the PLC logic and runs
+    the plant through the idle gap on their grids, as the session did: no alarm of a TON that
+    saw the clock leap at the start, every event in time (the coolant's pressure, sampled on
+    the plant's grid and read on the PLC's, decides when N70 resumes)."""
+    folder = tmp_path / "machine"
+    shutil.copytree(EXAMPLES / "machine", folder, ignore=shutil.ignore_patterns("scenarios"))
+    record = tmp_path / "session.jsonl"
+    # Scans of 50 ms at 5x are 10 ms of the wall clock: a loop that comes a whole period late
+    # skips one (an overrun, which a replay cannot know of), which 10 ms scans of 2 ms would
+    # meet on a busy machine.
+    overrides = {"modbus.port": 0, "nc.time_scale": 5.0, "plc.scan_ms": 50}
+    cfg = ncgate_test_config(folder / "ncgate.toml", **overrides)
+    ended = asyncio.Event()
+
+    def on_event(event: ev.Event) -> None:
+        if isinstance(event, ev.End) and event.proc == 1:
+            ended.set()
+
+    async with Gateway(cfg, record=record, overrides=overrides, listeners=[on_event]) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        # The cell stands idle for 2 s of machine time (beyond the TONs' 1 s and 2 s): the
+        # engine's own timer says when, on the session's clock.
+        gap = asyncio.Event()
+        gw.engine.call_at(gw.engine.now + 2.0, gap.set)
+        await asyncio.wait_for(gap.wait(), timeout=30)
+        await plc.command(1)  # cycle start (holding register 2000)
+        await asyncio.wait_for(ended.wait(), timeout=60)
+        counted = asyncio.Event()  # the PLC counts the part at its next scan
+        if gw.image.wait("SYVAR", 20, "IN", lambda v: v == 1, counted.set) is None:
+            counted.set()
+        await asyncio.wait_for(counted.wait(), timeout=30)
+        assert gw.image.read("SA", 49, "bit") == 0  # any_alarm: the session was a good part
+    recording = read_record(record)
+    start = next(i for i in recording.inputs if isinstance(i.input, Command))
+    assert start.t >= 2.0  # after the gap
+    assert [e["how"] for e in recording.events if e["event"] == "end"] == ["M30"]
+    assert not [e for e in recording.events if e["event"] == "alarm"]
+
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.warnings == []
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
+    assert result.compared > 20
+    image = result.runtime.image
+    assert image.read("SA", 49, "bit") == 0 and image.read("SYVAR", 20, "IN") == 1
+    assert not [e for e in result.events if e["event"] == "alarm"]
 
 
 async def test_a_changed_program_diverges_at_the_changed_block(
