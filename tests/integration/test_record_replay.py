@@ -16,7 +16,7 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.cli.main import main
 from ncgate.gateway.record import COMPARED, read_record
 from ncgate.gateway.record import replay as run_replay
-from ncgate.gateway.testing import replay
+from ncgate.gateway.testing import replay, wait_event
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind, Var, Writes
@@ -140,6 +140,33 @@ async def test_the_machine_started_after_an_idle_gap_replays_and_matches(
     image = result.runtime.image
     assert image.read("SA", 49, "bit") == 0 and image.read("SYVAR", 20, "IN") == 1
     assert not [e for e in result.events if e["event"] == "alarm"]
+
+
+async def test_the_plc_scans_on_in_a_replay_past_a_stall(tmp_path: Path) -> None:
+    """The program waits for an operator's bit longer than nc.stall_s: run reports the stall
+    and its PLC scans on, and so does the replay's, which then sees the bit and answers."""
+    (tmp_path / "MAIN.nc").write_text("N10(WAI,SA10=1)\nN20(WAI,SA31=1)\nN30M30\n")
+    (tmp_path / "plc.st").write_text("PROGRAM p\nSA[31] := SA[10];\nEND_PROGRAM\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "MAIN"\ntime_scale = 10.0\nstall_s = 1.0\n'
+                      '[nc.storage]\nMP0 = "."\n[plc]\nlogic = "plc.st"\n')
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    cfg = ncgate_test_config(config, **overrides)
+    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        stalled = asyncio.ensure_future(wait_event(gw, "stall", timeout_s=30))
+        await plc.command(1)
+        await stalled
+        await plc.set("SA10", 1)
+        await gw.wait_idle(timeout_s=30)
+    recording = read_record(record)
+    assert [e["event"] for e in recording.events if e["event"] in ("stall", "end")] == [
+        "stall", "end"]
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
 
 
 async def test_a_changed_program_diverges_at_the_changed_block(
