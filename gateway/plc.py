@@ -470,6 +470,11 @@ class ScanDriver:
         self._leapt = 0  # still scans leapt over, counted when the next one runs
         self._leapt_from = 0.0  # the time the leap was taken
         self._reach = 16  # scans the next leap with nothing ahead passes (doubling)
+        # The scans not run (the first's index -> how many): ``run`` tells ``on_skip`` of
+        # each (the session's record keeps them), a replay skips the same ones (``skips``):
+        # those due while the fieldbus started (index 0) and the overruns.
+        self.on_skip: Callable[[int, int], None] | None = None
+        self.skips: dict[int, int] = {}
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
 
     def _scan(self) -> None:
@@ -484,6 +489,8 @@ class ScanDriver:
                 # now, not from now itself, so that they stay on the grid a replay of the
                 # session scans on (``sim --replay``, which cannot know how late that was).
                 self.k = max(0, math.floor((now - self.t0) / period + 1e-9))
+                if self.k and self.on_skip is not None:
+                    self.on_skip(0, self.k)
                 lateness = 0
             else:
                 # On the wall clock, as the scan's own time is: machine time / time scale.
@@ -491,6 +498,8 @@ class ScanDriver:
                                         / self.scale))
             status.last_lateness_us = lateness
             status.max_lateness_us = max(status.max_lateness_us, lateness)
+        elif self.skips and self.k == 0:
+            self.k = self.skips.pop(0, 0)
         due = self.t0 + self.k * period
         if self._leapt:
             status.scans += self._leapt
@@ -502,7 +511,13 @@ class ScanDriver:
             if late >= period:  # the loop came a whole period late or more: skip, count
                 missed = int(late // period)
                 status.overruns += missed
+                if self.on_skip is not None:
+                    self.on_skip(self.k, missed)
                 self.k += missed
+        elif self.skips and self.k in self.skips:  # a replay: an overrun of the session's
+            missed = self.skips.pop(self.k)
+            status.overruns += missed
+            self.k += missed
         later = engine.next_timer() if self.closed else None
         if self.closed and later is None and engine.stalled and (
                 engine.now - engine.last_change >= self.stall_s):

@@ -21,6 +21,10 @@ The record is JSON Lines, in the order things happened:
   alarm number, ``message``).  The PLC logic's inputs are not recorded: the replay runs the
   same logic;
 - every trace event of spec 4.4, as in a trace file (the lines with ``"seq"``);
+- ``{"skipped": "plc" | "plant", "k", "n", "t"}``: scans ``k`` .. ``k + n - 1`` of the PLC
+  logic (or of the plant's) that the session did not run -- those due while the fieldbus
+  started (``k`` 0), and each overrun, the loop a whole period late -- which the replay skips
+  too;
 - on a clean stop, ``{"stop": t}``.
 
 An input's line is written before the events it causes, and lines are written whole
@@ -95,6 +99,7 @@ EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display"
                     "remove", "override", "break", "force", "forced", "fault",
                     "fault_clear"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
+SCANNED = ("plc", "plant")  # the logic whose skipped scans a record keeps
 
 
 def program_files(config: Config) -> list[Path]:
@@ -328,6 +333,12 @@ class SessionRecorder:
         and those of every online change (``OnlineChange.record_to``), for the replay."""
         self._file.append(json.dumps({"plc_logic": sources, "t": round(t, 6)}) + "\n")
 
+    def skipped(self, who: str, k: int, n: int, t: float) -> None:
+        """Scans ``k`` .. ``k + n - 1`` of ``who`` (``plc``, ``plant``: its logic) were not
+        run (``ScanDriver.on_skip``): the replay skips them too."""
+        self._file.append(json.dumps({"skipped": who, "k": k, "n": n, "t": round(t, 6)})
+                          + "\n")
+
     def flush(self) -> None:
         """Write what is pending now (a download of the record as far as it is)."""
         self._file.flush()
@@ -354,6 +365,8 @@ class Recording:
     events: list[EventDict] = field(default_factory=list)
     programs: dict[str, str] = field(default_factory=dict)  # path -> sha256, as last read
     logic: list[dict[str, str]] = field(default_factory=list)  # the PLC logic's sources
+    # The scans the session did not run, per logic ("plc", "plant"): first index -> how many.
+    skipped: dict[str, dict[int, int]] = field(default_factory=dict)
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -417,11 +430,22 @@ def read_record(path: str | Path) -> Recording:
             elif "program" in item:
                 recording.programs[_field(item, "program", str, "a path")] = _field(
                     item, "sha256", str, "a sha256")
+            elif "skipped" in item:
+                who = _field(item, "skipped", str, '"plc" or "plant"')
+                if who not in SCANNED:
+                    raise ValueError(f'"skipped": expected "plc" or "plant", got '
+                                     f"{json.dumps(who)}")
+                first = _field(item, "k", int, "a scan's index")
+                count = _field(item, "n", int, "a number of scans")
+                _time(item, "t")
+                if first < 0 or count < 1:
+                    raise ValueError(f'"k", "n": scans {first} and {count} on are no scans')
+                recording.skipped.setdefault(who, {})[first] = count
             elif "stop" in item:
                 recording.stop = _time(item, "stop")
             else:
-                raise ValueError("neither an input, an event, a program, the PLC logic nor "
-                                 "the stop")
+                raise ValueError("neither an input, an event, a program, the PLC logic, "
+                                 "skipped scans nor the stop")
         except ValueError as exc:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
@@ -545,10 +569,12 @@ def replay(path: str | Path, config: str | Path | None = None,
     start_plant(runtime, door.apply_on_time, closed=False)
     plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
     # The session's scans never stopped (run's do not stop at a stall, which the replay's
-    # inputs, not timers, may end): neither do the replay's.
-    for started in (plc, plant_logic):
+    # inputs, not timers, may end): neither do the replay's.  Those it did not run (an
+    # overrun: the loop came a whole period late) the replay does not run either.
+    for who, started in zip(SCANNED, (plc, plant_logic), strict=True):
         if started is not None:
             started[1].stall_s = math.inf
+            started[1].skips = dict(recording.skipped.get(who, {}))
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None

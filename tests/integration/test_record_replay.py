@@ -5,8 +5,11 @@ diverges at the block that changed."""
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import shutil
+import time
+import types
 from importlib import resources
 from pathlib import Path
 
@@ -100,10 +103,7 @@ async def test_the_machine_started_after_an_idle_gap_replays_and_matches(
     folder = tmp_path / "machine"
     shutil.copytree(EXAMPLES / "machine", folder, ignore=shutil.ignore_patterns("scenarios"))
     record = tmp_path / "session.jsonl"
-    # Scans of 50 ms at 5x are 10 ms of the wall clock: a loop that comes a whole period late
-    # skips one (an overrun, which a replay cannot know of), which 10 ms scans of 2 ms would
-    # meet on a busy machine.
-    overrides = {"modbus.port": 0, "nc.time_scale": 5.0, "plc.scan_ms": 50}
+    overrides = {"modbus.port": 0, "nc.time_scale": 5.0}  # the new user's session
     cfg = ncgate_test_config(folder / "ncgate.toml", **overrides)
     ended = asyncio.Event()
 
@@ -167,6 +167,64 @@ async def test_the_plc_scans_on_in_a_replay_past_a_stall(tmp_path: Path) -> None
     assert result.divergence is None, result.divergence
     assert result.compared == sum(1 for e in recording.events
                                   if e["proc"] and e["event"] in COMPARED)
+
+
+async def test_the_scans_a_session_skipped_are_skipped_in_its_replay(tmp_path: Path) -> None:
+    """The loop of run comes 100 ms late: the scans due meanwhile are skipped (overruns), and
+    the PLC logic, which counts its scans, answers that much later.  The record says which
+    scans were skipped; the replay skips the same ones and matches."""
+    (tmp_path / "MAIN.nc").write_text("N10(WAI,SYVAR5=40)\nN20M30\n")
+    (tmp_path / "plc.st").write_text(
+        "PROGRAM p\nVAR n : INT; END_VAR\n"
+        "IF NOT NC.P[1].IDLE THEN n := n + 1; SYVAR[5] := n; END_IF\nEND_PROGRAM\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "MAIN"\n[nc.storage]\nMP0 = "."\n'
+                      '[plc]\nlogic = "plc.st"\nscan_ms = 10\n')
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    cfg = ncgate_test_config(config, **overrides)
+    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.command(1)
+        await gw.wait_state(1, "WAIT_COND")  # N10: the logic counts its scans
+        # The loop held for ten scans' time: not a wait, the overruns themselves.
+        time.sleep(0.1)  # noqa: ASYNC251
+        await gw.wait_idle(timeout_s=30)
+        overruns = gw.runtime.plc.status.overruns if gw.runtime.plc else 0
+    assert overruns >= 5
+    recording = read_record(record)
+    # Every overrun (k > 0), and the scans due while the fieldbus started (k = 0), if any.
+    assert sum(n for k, n in recording.skipped["plc"].items() if k) == overruns
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
+    replayed = result.runtime.plc
+    assert replayed is not None and replayed.status.overruns == overruns
+
+
+def test_a_replays_plant_tick_does_not_stretch_with_the_replaying_machines_load(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plant's tick budget is run's, on the wall clock: a replay on a busy machine (here
+    every tick seems to take a second) writes a ramping spindle's speed every plant.scan_ms,
+    as a replay on an idle one does -- a stretched tick moved the replay's events."""
+    from ncgate.gateway.plant import plant as plant_module
+
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nprocesses = 1\n[[plant.model]]\nname = "spindle"\n'
+                      'kind = "motor"\nrun = "SA21"\nspeed = "SYVAR11"\nat_speed = "SA46"\n'
+                      'standstill = "SA47"\nrated_rpm = 6000\nramp_rpm_s = 12000\n')
+    record = tmp_path / "session.jsonl"
+    header = {"ncgate_record": 2, "config": str(config), "overrides": {}, "files": {}}
+    start = {"input": "write", **GOOD, "t": 0.1, "changes": [["SA", 21, "bit", 1]]}
+    record.write_text("".join(json.dumps(x) + "\n" for x in (header, start, {"stop": 1.0})))
+    seconds = itertools.count()
+    monkeypatch.setattr(plant_module, "time",
+                        types.SimpleNamespace(perf_counter=lambda: float(next(seconds))))
+    result = run_replay(record)
+    assert result.runtime.plant is not None and result.runtime.plant.stretched == 0
+    speeds = [e["t"] for e in result.events if e["event"] == "write" and e["var"] == "SYVAR11"]
+    assert len(speeds) >= 50  # 0.5 s of ramp, every 10 ms
 
 
 async def test_a_changed_program_diverges_at_the_changed_block(
@@ -276,6 +334,9 @@ MALFORMED = [
      '"process": expected a process number, or null for the cell'),
     ({"input": "alarm", **GOOD, "code": 99999, "message": "x"}, "no alarm"),
     ({"input": "command", **GOOD, "t": 0.1, "command": "reset"}, "in time order"),
+    ({"skipped": "hmi", "k": 3, "n": 1, "t": 0.5}, '"skipped": expected "plc" or "plant"'),
+    ({"skipped": "plc", "k": 3, "n": 0, "t": 0.5}, "are no scans"),
+    ({"skipped": "plc", "k": 3, "t": 0.5}, '"n" is missing'),
 ]
 
 
