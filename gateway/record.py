@@ -439,7 +439,8 @@ def read_record(path: str | Path) -> Recording:
                 count = _field(item, "n", int, "a number of scans")
                 _time(item, "t")
                 if first < 0 or count < 1:
-                    raise ValueError(f'"k", "n": scans {first} and {count} on are no scans')
+                    raise ValueError(f'"k" {first}, "n" {count}: not a run of scans (k >= 0, '
+                                     "n >= 1)")
                 recording.skipped.setdefault(who, {})[first] = count
             elif "stop" in item:
                 recording.stop = _time(item, "stop")

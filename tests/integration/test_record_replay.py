@@ -335,7 +335,7 @@ MALFORMED = [
     ({"input": "alarm", **GOOD, "code": 99999, "message": "x"}, "no alarm"),
     ({"input": "command", **GOOD, "t": 0.1, "command": "reset"}, "in time order"),
     ({"skipped": "hmi", "k": 3, "n": 1, "t": 0.5}, '"skipped": expected "plc" or "plant"'),
-    ({"skipped": "plc", "k": 3, "n": 0, "t": 0.5}, "are no scans"),
+    ({"skipped": "plc", "k": 3, "n": 0, "t": 0.5}, "not a run of scans"),
     ({"skipped": "plc", "k": 3, "t": 0.5}, '"n" is missing'),
 ]
 
