@@ -194,6 +194,7 @@ class Gateway:
                         cold=self._cold)
         if plc is not None:
             self._plc = plc
+            plc[1].on_skip = self._skipped("plc")
             stack.callback(self._stop_plc, plc)
             if self.recorder is not None and isinstance(self.door.reload_plc, OnlineChange):
                 self.door.reload_plc.record_to(self.recorder.logic)  # (run --record)
@@ -208,11 +209,20 @@ class Gateway:
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
                                         wall=driver.now)
         if plant_logic is not None:
+            plant_logic[1].on_skip = self._skipped("plant")
             stack.callback(plant_logic[1].close)
         ScriptPlayer(runtime, Script("<config>", ()), self.door, plant_faults(self.config)).arm()
         self._driver.settle()
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
+
+    def _skipped(self, who: str) -> Callable[[int, int], None]:
+        """The scans ``who``'s logic did not run, into the record being written (if any): a
+        replay skips them too."""
+        def note(k: int, n: int) -> None:
+            if self.recorder is not None:
+                self.recorder.skipped(who, k, n, self.engine.now)
+        return note
 
     def _fieldbus_faults(self, faults: list[Any]) -> None:
         """The plant's fieldbus faults in force, to each adapter that takes them."""

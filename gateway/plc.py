@@ -20,6 +20,7 @@ import contextlib
 import functools
 import gc
 import logging
+import math
 import sqlite3
 import threading
 from collections.abc import Callable
@@ -182,7 +183,13 @@ _STATE_FIELDS = {state: (int(state), state in WAITING_STATES, state is ProcessSt
 class EngineNc:
     """The scan's view of the engine (:class:`ncgate.plc.scan.NcPort`): it reads the engine,
     and acts on it through the door, attributed ``plc FILE:LINE`` (where the logic set the
-    output)."""
+    output).
+
+    It acts from inside the scan, an engine timer: at the scan's own time
+    (:meth:`Door.apply_on_time`), as the plant's models do.  On the wall clock, bringing the
+    engine to now first would stamp an output (an M06's acknowledge, a cycle start) with the
+    time the loop got round to the scan, and fire the timers due meanwhile in the middle of
+    it: ``run`` and a replay of its session (``sim --replay``) would disagree."""
 
     def __init__(self, engine: Engine, door: Door, kind: SourceKind = SourceKind.PLC) -> None:
         """``kind``: the source its inputs carry (``plant`` for the plant's logic)."""
@@ -229,13 +236,13 @@ class EngineNc:
         return (last[0], last[1], self.engine.snd_seq) if last else (0, 0, 0)
 
     def command(self, word: int, where: str, process: int | None = None) -> None:
-        self.door.apply(Command(CommandKind(word), process, Source(self.kind, where)))
+        self.door.apply_on_time(Command(CommandKind(word), process, Source(self.kind, where)))
 
     def override(self, feed: int, where: str, process: int | None = None) -> None:
-        self.door.apply(Override(feed, None, process, Source(self.kind, where)))
+        self.door.apply_on_time(Override(feed, None, process, Source(self.kind, where)))
 
     def send(self, sender: int, target: int, where: str) -> None:
-        self.door.apply(Snd(sender, target, Source(self.kind, where)))
+        self.door.apply_on_time(Snd(sender, target, Source(self.kind, where)))
 
     def aux_ack(self, process: int, letter: str, value: bool, where: str) -> None:
         """NC.P[k].MACK ..: a write of the acknowledge's SA bit, through the door."""
@@ -244,12 +251,12 @@ class EngineNc:
             raise InputRefused(Reason.NOT_CONFIGURED, "no auxiliary function is output: the "
                                "config has no [nc.aux]")
         ack = aux.settings.place(process, letter)[2]
-        self.door.apply(Write(Var("SA", ack, "bit"), int(value),
+        self.door.apply_on_time(Write(Var("SA", ack, "bit"), int(value),
                               Source(self.kind, where)))
 
     def fault(self, message: str) -> None:
         what = "plant logic" if self.kind is SourceKind.PLANT else "PLC"
-        self.door.apply(FieldbusAlarm(AlarmCode.PLC_FAULT, f"{what} fault: {message}",
+        self.door.apply_on_time(FieldbusAlarm(AlarmCode.PLC_FAULT, f"{what} fault: {message}",
                                       Source(self.kind)))
 
     def hazard(self, message: str) -> None:
@@ -463,6 +470,11 @@ class ScanDriver:
         self._leapt = 0  # still scans leapt over, counted when the next one runs
         self._leapt_from = 0.0  # the time the leap was taken
         self._reach = 16  # scans the next leap with nothing ahead passes (doubling)
+        # The scans not run (the first's index -> how many): ``run`` tells ``on_skip`` of
+        # each (the session's record keeps them), a replay skips the same ones (``skips``):
+        # those due while the fieldbus started (index 0) and the overruns.
+        self.on_skip: Callable[[int, int], None] | None = None
+        self.skips: dict[int, int] = {}
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
 
     def _scan(self) -> None:
@@ -472,12 +484,22 @@ class ScanDriver:
             now = self.wall()
             if self.k == 0:
                 # The first scan is on time whenever the gateway got round to it (starting
-                # the fieldbus may take a while): the scans count from here.
-                self.t0 = max(self.t0, now)
-            # On the wall clock, as the scan's own time is: machine time / time scale.
-            lateness = max(0, round((now - (self.t0 + self.k * period)) * 1e6 / self.scale))
+                # the fieldbus may take a while): the scans count from here -- from the point
+                # of their grid (t0 + k * period, t0 the time the PLC started) at or before
+                # now, not from now itself, so that they stay on the grid a replay of the
+                # session scans on (``sim --replay``, which cannot know how late that was).
+                self.k = max(0, math.floor((now - self.t0) / period + 1e-9))
+                if self.k and self.on_skip is not None:
+                    self.on_skip(0, self.k)
+                lateness = 0
+            else:
+                # On the wall clock, as the scan's own time is: machine time / time scale.
+                lateness = max(0, round((now - (self.t0 + self.k * period)) * 1e6
+                                        / self.scale))
             status.last_lateness_us = lateness
             status.max_lateness_us = max(status.max_lateness_us, lateness)
+        elif self.skips and self.k == 0:
+            self.k = self.skips.pop(0, 0)
         due = self.t0 + self.k * period
         if self._leapt:
             status.scans += self._leapt
@@ -489,7 +511,13 @@ class ScanDriver:
             if late >= period:  # the loop came a whole period late or more: skip, count
                 missed = int(late // period)
                 status.overruns += missed
+                if self.on_skip is not None:
+                    self.on_skip(self.k, missed)
                 self.k += missed
+        elif self.skips and self.k in self.skips:  # a replay: an overrun of the session's
+            missed = self.skips.pop(self.k)
+            status.overruns += missed
+            self.k += missed
         later = engine.next_timer() if self.closed else None
         if self.closed and later is None and engine.stalled and (
                 engine.now - engine.last_change >= self.stall_s):

@@ -21,6 +21,10 @@ The record is JSON Lines, in the order things happened:
   alarm number, ``message``).  The PLC logic's inputs are not recorded: the replay runs the
   same logic;
 - every trace event of spec 4.4, as in a trace file (the lines with ``"seq"``);
+- ``{"skipped": "plc" | "plant", "k", "n", "t"}``: scans ``k`` .. ``k + n - 1`` of the PLC
+  logic (or of the plant's) that the session did not run -- those due while the fieldbus
+  started (``k`` 0), and each overrun, the loop a whole period late -- which the replay skips
+  too;
 - on a clean stop, ``{"stop": t}``.
 
 An input's line is written before the events it causes, and lines are written whole
@@ -72,8 +76,9 @@ from ncgate.inputs import (
     Write,
     Writes,
 )
+from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import run_virtual
+from ncgate.interpreter.engine import Engine
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict
 
@@ -94,6 +99,7 @@ EVENTS = frozenset({*COMPARED, "write", "deadlock", "stall", "hazard", "display"
                     "remove", "override", "break", "force", "forced", "fault",
                     "fault_clear"})
 UNBOUNDED = 1 << 62  # a record is never rotated: it must stay whole
+SCANNED = ("plc", "plant")  # the logic whose skipped scans a record keeps
 
 
 def program_files(config: Config) -> list[Path]:
@@ -327,6 +333,12 @@ class SessionRecorder:
         and those of every online change (``OnlineChange.record_to``), for the replay."""
         self._file.append(json.dumps({"plc_logic": sources, "t": round(t, 6)}) + "\n")
 
+    def skipped(self, who: str, k: int, n: int, t: float) -> None:
+        """Scans ``k`` .. ``k + n - 1`` of ``who`` (``plc``, ``plant``: its logic) were not
+        run (``ScanDriver.on_skip``): the replay skips them too."""
+        self._file.append(json.dumps({"skipped": who, "k": k, "n": n, "t": round(t, 6)})
+                          + "\n")
+
     def flush(self) -> None:
         """Write what is pending now (a download of the record as far as it is)."""
         self._file.flush()
@@ -353,6 +365,8 @@ class Recording:
     events: list[EventDict] = field(default_factory=list)
     programs: dict[str, str] = field(default_factory=dict)  # path -> sha256, as last read
     logic: list[dict[str, str]] = field(default_factory=list)  # the PLC logic's sources
+    # The scans the session did not run, per logic ("plc", "plant"): first index -> how many.
+    skipped: dict[str, dict[int, int]] = field(default_factory=dict)
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -416,11 +430,23 @@ def read_record(path: str | Path) -> Recording:
             elif "program" in item:
                 recording.programs[_field(item, "program", str, "a path")] = _field(
                     item, "sha256", str, "a sha256")
+            elif "skipped" in item:
+                who = _field(item, "skipped", str, '"plc" or "plant"')
+                if who not in SCANNED:
+                    raise ValueError(f'"skipped": expected "plc" or "plant", got '
+                                     f"{json.dumps(who)}")
+                first = _field(item, "k", int, "a scan's index")
+                count = _field(item, "n", int, "a number of scans")
+                _time(item, "t")
+                if first < 0 or count < 1:
+                    raise ValueError(f'"k" {first}, "n" {count}: not a run of scans (k >= 0, '
+                                     "n >= 1)")
+                recording.skipped.setdefault(who, {})[first] = count
             elif "stop" in item:
                 recording.stop = _time(item, "stop")
             else:
-                raise ValueError("neither an input, an event, a program, the PLC logic nor "
-                                 "the stop")
+                raise ValueError("neither an input, an event, a program, the PLC logic, "
+                                 "skipped scans nor the stop")
         except ValueError as exc:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
@@ -467,6 +493,22 @@ def _changed(recorded: dict[str, str], now: Callable[[str], str | None]) -> list
         elif found != digest:
             out.append(f"{file}: changed since the recording")
     return out
+
+
+def run_through(engine: Engine, until: float) -> None:
+    """Let the virtual clock run to ``until`` as ``run``'s wall clock does: every timer due
+    by then fires in time order -- the PLC logic's scans, the plant's moves and ticks, the
+    processes' motion -- whether or not a process has a program, and the clock then stands
+    at ``until``.
+
+    (``run_virtual`` stops as soon as every process is idle: the clock would leap over an idle
+    gap, the scans and the plant due in it then ran late, all at once, at the next input's
+    time, and the logic's timers saw the leap.)"""
+    with gc_paused():
+        engine.run_until_blocked()
+        while (t := engine.next_timer()) is not None and t <= until:
+            engine.advance_to(t)
+        engine.set_time(until)
 
 
 def replay(path: str | Path, config: str | Path | None = None,
@@ -517,8 +559,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     warnings = _changed({str(k): str(v) for k, v in files.items()},
                         lambda f: _sha256(Path(f)))
     warnings += _changed(recording.programs, program_now)
-    start_plc(cfg, runtime, door, closed=True,
-              sources=recording.logic[0] if recording.logic else None)
+    plc = start_plc(cfg, runtime, door, closed=True,
+                    sources=recording.logic[0] if recording.logic else None)
     if recording.logic and isinstance(door.reload_plc, OnlineChange):
         door.reload_plc.recorded = list(recording.logic[1:])  # the session's reloads
     # The plant as run started it: its models, and the config's faults (neither recorded).
@@ -526,15 +568,20 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
     start_plant(runtime, door.apply_on_time, closed=False)
-    start_plant_logic(cfg, runtime, door, closed=True)
+    plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
+    # The session's scans never stopped (run's do not stop at a stall, which the replay's
+    # inputs, not timers, may end): neither do the replay's.  Those it did not run (an
+    # overrun: the loop came a whole period late) the replay does not run either.
+    for who, started in zip(SCANNED, (plc, plant_logic), strict=True):
+        if started is not None:
+            started[1].stall_s = math.inf
+            started[1].skips = dict(recording.skipped.get(who, {}))
     ScriptPlayer(runtime, Script("<config>", ()), door, plant_faults(cfg)).arm()
     end = recording.end
     refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order
         t = recorded.t
-        run_virtual(engine, t)
-        if engine.now < t:
-            engine.set_time(t)
+        run_through(engine, t)
         try:
             door.apply(recorded.input)
         except InputRefused as exc:
@@ -548,7 +595,7 @@ def replay(path: str | Path, config: str | Path | None = None,
         engine.run_until_blocked()
     # A cut record's last event may have come up to the tolerance earlier on the session's
     # wall clock than on the replay's: run that far, what lies past the cut is not compared.
-    run_virtual(engine, end + (tolerance_ms / 1000.0 if recording.stop is None else 0.0))
+    run_through(engine, end + (tolerance_ms / 1000.0 if recording.stop is None else 0.0))
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
                                    tolerance_ms / 1000.0, cut=recording.stop is None)

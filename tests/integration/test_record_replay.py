@@ -4,8 +4,12 @@ diverges at the block that changed."""
 
 from __future__ import annotations
 
+import asyncio
+import itertools
 import json
 import shutil
+import time
+import types
 from importlib import resources
 from pathlib import Path
 
@@ -15,10 +19,13 @@ from ncgate.gateway import Gateway
 from ncgate.gateway.cli.main import main
 from ncgate.gateway.record import COMPARED, read_record
 from ncgate.gateway.record import replay as run_replay
-from ncgate.gateway.testing import replay
+from ncgate.gateway.testing import replay, wait_event
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 from ncgate.inputs import Command, CommandKind, Var, Writes
+from ncgate.interpreter.engine import events as ev
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 @pytest.fixture
@@ -84,6 +91,140 @@ async def test_a_recorded_session_replays_and_matches(cell: Path, tmp_path: Path
     assert f"the replay matches: {result.compared} events" in out
 
     replay(record)  # the kit's helper: a field session as a regression test
+
+
+async def test_the_machine_started_after_an_idle_gap_replays_and_matches(
+        tmp_path: Path) -> None:
+    """The machine example (PLC logic with TON timers, six plant models) stands idle, then a
+    PLC's cycle start over Modbus machines one part.  The replay scans the PLC logic and runs
+    the plant through the idle gap on their grids, as the session did: no alarm of a TON that
+    saw the clock leap at the start, every event in time (the coolant's pressure, sampled on
+    the plant's grid and read on the PLC's, decides when N70 resumes)."""
+    folder = tmp_path / "machine"
+    shutil.copytree(EXAMPLES / "machine", folder, ignore=shutil.ignore_patterns("scenarios"))
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0, "nc.time_scale": 5.0}  # the new user's session
+    cfg = ncgate_test_config(folder / "ncgate.toml", **overrides)
+    ended = asyncio.Event()
+
+    def on_event(event: ev.Event) -> None:
+        if isinstance(event, ev.End) and event.proc == 1:
+            ended.set()
+
+    async with Gateway(cfg, record=record, overrides=overrides, listeners=[on_event]) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        # The cell stands idle for 2 s of machine time (beyond the TONs' 1 s and 2 s): the
+        # engine's own timer says when, on the session's clock.
+        gap = asyncio.Event()
+        gw.engine.call_at(gw.engine.now + 2.0, gap.set)
+        await asyncio.wait_for(gap.wait(), timeout=30)
+        await plc.command(1)  # cycle start (holding register 2000)
+        await asyncio.wait_for(ended.wait(), timeout=60)
+        counted = asyncio.Event()  # the PLC counts the part at its next scan
+        if gw.image.wait("SYVAR", 20, "IN", lambda v: v == 1, counted.set) is None:
+            counted.set()
+        await asyncio.wait_for(counted.wait(), timeout=30)
+        assert gw.image.read("SA", 49, "bit") == 0  # any_alarm: the session was a good part
+    recording = read_record(record)
+    start = next(i for i in recording.inputs if isinstance(i.input, Command))
+    assert start.t >= 2.0  # after the gap
+    assert [e["how"] for e in recording.events if e["event"] == "end"] == ["M30"]
+    assert not [e for e in recording.events if e["event"] == "alarm"]
+
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.warnings == []
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
+    assert result.compared > 20
+    image = result.runtime.image
+    assert image.read("SA", 49, "bit") == 0 and image.read("SYVAR", 20, "IN") == 1
+    assert not [e for e in result.events if e["event"] == "alarm"]
+
+
+async def test_the_plc_scans_on_in_a_replay_past_a_stall(tmp_path: Path) -> None:
+    """The program waits for an operator's bit longer than nc.stall_s: run reports the stall
+    and its PLC scans on, and so does the replay's, which then sees the bit and answers."""
+    (tmp_path / "MAIN.nc").write_text("N10(WAI,SA10=1)\nN20(WAI,SA31=1)\nN30M30\n")
+    (tmp_path / "plc.st").write_text("PROGRAM p\nSA[31] := SA[10];\nEND_PROGRAM\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "MAIN"\ntime_scale = 10.0\nstall_s = 1.0\n'
+                      '[nc.storage]\nMP0 = "."\n[plc]\nlogic = "plc.st"\n')
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    cfg = ncgate_test_config(config, **overrides)
+    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        stalled = asyncio.ensure_future(wait_event(gw, "stall", timeout_s=30))
+        await plc.command(1)
+        await stalled
+        await plc.set("SA10", 1)
+        await gw.wait_idle(timeout_s=30)
+    recording = read_record(record)
+    assert [e["event"] for e in recording.events if e["event"] in ("stall", "end")] == [
+        "stall", "end"]
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
+
+
+async def test_the_scans_a_session_skipped_are_skipped_in_its_replay(tmp_path: Path) -> None:
+    """The loop of run comes 100 ms late: the scans due meanwhile are skipped (overruns), and
+    the PLC logic, which counts its scans, answers that much later.  The record says which
+    scans were skipped; the replay skips the same ones and matches."""
+    (tmp_path / "MAIN.nc").write_text("N10(WAI,SYVAR5=40)\nN20M30\n")
+    (tmp_path / "plc.st").write_text(
+        "PROGRAM p\nVAR n : INT; END_VAR\n"
+        "IF NOT NC.P[1].IDLE THEN n := n + 1; SYVAR[5] := n; END_IF\nEND_PROGRAM\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nmain = "MAIN"\n[nc.storage]\nMP0 = "."\n'
+                      '[plc]\nlogic = "plc.st"\nscan_ms = 10\n')
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    cfg = ncgate_test_config(config, **overrides)
+    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.command(1)
+        await gw.wait_state(1, "WAIT_COND")  # N10: the logic counts its scans
+        # The loop held for ten scans' time: not a wait, the overruns themselves.
+        time.sleep(0.1)  # noqa: ASYNC251
+        await gw.wait_idle(timeout_s=30)
+        overruns = gw.runtime.plc.status.overruns if gw.runtime.plc else 0
+    assert overruns >= 5
+    recording = read_record(record)
+    # Every overrun (k > 0), and the scans due while the fieldbus started (k = 0), if any.
+    assert sum(n for k, n in recording.skipped["plc"].items() if k) == overruns
+    result = run_replay(record)
+    assert result.divergence is None, result.divergence
+    assert result.compared == sum(1 for e in recording.events
+                                  if e["proc"] and e["event"] in COMPARED)
+    replayed = result.runtime.plc
+    assert replayed is not None and replayed.status.overruns == overruns
+
+
+def test_a_replays_plant_tick_does_not_stretch_with_the_replaying_machines_load(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plant's tick budget is run's, on the wall clock: a replay on a busy machine (here
+    every tick seems to take a second) writes a ramping spindle's speed every plant.scan_ms,
+    as a replay on an idle one does -- a stretched tick moved the replay's events."""
+    from ncgate.gateway.plant import plant as plant_module
+
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nprocesses = 1\n[[plant.model]]\nname = "spindle"\n'
+                      'kind = "motor"\nrun = "SA21"\nspeed = "SYVAR11"\nat_speed = "SA46"\n'
+                      'standstill = "SA47"\nrated_rpm = 6000\nramp_rpm_s = 12000\n')
+    record = tmp_path / "session.jsonl"
+    header = {"ncgate_record": 2, "config": str(config), "overrides": {}, "files": {}}
+    start = {"input": "write", **GOOD, "t": 0.1, "changes": [["SA", 21, "bit", 1]]}
+    record.write_text("".join(json.dumps(x) + "\n" for x in (header, start, {"stop": 1.0})))
+    seconds = itertools.count()
+    monkeypatch.setattr(plant_module, "time",
+                        types.SimpleNamespace(perf_counter=lambda: float(next(seconds))))
+    result = run_replay(record)
+    assert result.runtime.plant is not None and result.runtime.plant.stretched == 0
+    speeds = [e["t"] for e in result.events if e["event"] == "write" and e["var"] == "SYVAR11"]
+    assert len(speeds) >= 50  # 0.5 s of ramp, every 10 ms
 
 
 async def test_a_changed_program_diverges_at_the_changed_block(
@@ -193,6 +334,9 @@ MALFORMED = [
      '"process": expected a process number, or null for the cell'),
     ({"input": "alarm", **GOOD, "code": 99999, "message": "x"}, "no alarm"),
     ({"input": "command", **GOOD, "t": 0.1, "command": "reset"}, "in time order"),
+    ({"skipped": "hmi", "k": 3, "n": 1, "t": 0.5}, '"skipped": expected "plc" or "plant"'),
+    ({"skipped": "plc", "k": 3, "n": 0, "t": 0.5}, "not a run of scans"),
+    ({"skipped": "plc", "k": 3, "t": 0.5}, '"n" is missing'),
 ]
 
 
