@@ -12,6 +12,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from ..conftest import EXAMPLES
 
 FOLDER = EXAMPLES / "machine"
@@ -70,6 +72,36 @@ def test_a_bad_case_without_its_fault_fails_its_expectations(tmp_path: Path) -> 
     failed = {line.split(":")[0].removeprefix("FAIL ")
               for line in verdict_lines(done.stdout) if line.startswith("FAIL ")}
     assert {"clamp alarm", "cell holds", "spindle never starts", "no part counted"} <= failed
+
+
+@pytest.mark.parametrize("case", ["slow clamp", "fault only"])
+def test_a_cell_the_plc_holds_ends_as_a_stall_naming_the_hold(tmp_path: Path,
+                                                               case: str) -> None:
+    """The field's report: a clamp slower than the PLC's 1 s (or one that never closes, a
+    script with the fault and no expectation) has the PLC hold the cell for ever through
+    NC.HOLD_LEVEL, and `sim` ran at 100 % CPU until killed (the timeout guards that).  It
+    ends nc.stall_s (60 s) after the last change, a stall naming the held process, by whom
+    and since when; the hold counts as waiting, not running."""
+    if case == "slow clamp":
+        args = ["--set", "plant.model.clamp.travel_ms=1200"]
+        last_change, where = 1.2, "P1 PART.nc:5 N30 held since 1.010 s"
+    else:
+        script = tmp_path / "never.toml"
+        script.write_text('[[fault]]\ntarget = "clamp"\nkind = "never"\n')
+        args = ["--script", str(script)]
+        last_change, where = 1.01, ("P1 PART.nc:4 N20 (WAI,SA30=1) waits for clamped (SA30=1) "
+                                    "(now 0); held since 1.010 s")
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sim", "--config",
+                           str(FOLDER / "ncgate.toml"), *args], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=90, check=False)
+    assert done.returncode == 1, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == (f"[{last_change + 60:.3f}] stall: every process is blocked and "
+                        "nothing can change")
+    assert lines[1].strip() == (f"{where} (feed hold by plc plc.st:41): a cycle start goes on")
+    p1 = next(line.split() for line in lines if line.startswith("P1 "))
+    assert (p1[3], p1[4], p1[-1]) == ("0.000", f"{last_change + 60:.3f}", "HOLD")
+    assert lines[-1] == f"simulated {last_change + 60:.3f} s: stall"
 
 
 def test_the_readme_names_every_scenario() -> None:
