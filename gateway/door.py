@@ -304,7 +304,7 @@ class Door:
         if kind is CommandKind.CYCLE_START:
             engine.cycle_start(by=str(item.source), process=process)
         elif kind is CommandKind.FEED_HOLD:
-            engine.hold(True, process)
+            engine.hold(True, process, by=f"feed hold by {item.source}")
         elif kind is CommandKind.STEP:
             engine.step(process)
         elif kind is CommandKind.SINGLE_BLOCK_ON or kind is CommandKind.SINGLE_BLOCK_OFF:
@@ -425,7 +425,7 @@ class Door:
         assert var is not None
         level = self.runtime.image.read(var.area, var.index, var.view)
         if level and not self._hold_level:
-            self.runtime.engine.hold(True)
+            self.runtime.engine.hold(True, by=f"feed hold input {var}")
         self._hold_level = level
 
     def _interlocks(self, kind: CommandKind) -> None:

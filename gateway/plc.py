@@ -8,9 +8,10 @@ in ``run`` (the wall-clock driver fires engine timers on the asyncio loop).  Sca
 loop comes late past a whole period the missed scans are skipped and counted as overruns.
 
 ``nc.stall_s`` with PLC logic (spec 2.3): the scan is not pending work.  In ``sim`` the scan
-stops rescheduling itself once every process with a program has waited ``stall_s`` with no
-change (no state change, no image write) and no other timer is pending, and the run ends as
-a stall; in ``run`` the wall-clock driver reports the stall on the same rule.
+stops rescheduling itself once every process with a program has waited (or stood held: a
+closed simulation has no operator, ``Engine.stalled``) ``stall_s`` with no change (no state
+change, no image write) and no other timer is pending, and the run ends as a stall; in
+``run`` the wall-clock driver reports the stall on the same rule (waits only).
 """
 
 from __future__ import annotations

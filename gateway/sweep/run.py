@@ -32,7 +32,10 @@ RESULT_FIELDS = ("verdict", "cycle_s", "alarms", "hazards", "running_s", "waitin
                  "signature", "report")
 
 
-_NOW = re.compile(r"\s*\(now [^)]*\)$")  # a stall's blocked reason: the value when it stalled
+# What of a stall's blocked reason differs from variant to variant of the same failure: the
+# value when it stalled ("(now 0)", before a hold's note too) and when a hold came ("since
+# 1.010 s").  The signature leaves them out.
+_NOW = re.compile(r"\s*\(now [^)]*\)(?=; held |$)| since \d+(?:\.\d+)? s\b")
 
 
 class WallTimeout(BaseException):

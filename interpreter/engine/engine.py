@@ -78,6 +78,11 @@ _STOPS = {"single_block": "single block", "step": "a step", "M00": "M00", "M01":
 _new = tuple.__new__  # a NamedTuple without its generated __new__ (the SND/WAI hot path)
 
 
+def _held(p: Process) -> str:
+    """"held since 1.010 s (feed hold by plc plc.st:41)": who holds ``p``, since when."""
+    return f"held since {p.held_since:.3f} s ({p.held_by or 'a feed hold'})"
+
+
 class Engine:
     """Processes, their synchronisation, the motion queues and the timer heap."""
 
@@ -341,7 +346,7 @@ class Engine:
                 if not p.step_once:
                     p.stop_why = "break"
                 p.step_once = True
-        self.hold(True)
+        self.hold(True, by=f"breakpoint {bp.text}")
 
     def program_stop(self, p: Process, optional: bool = False) -> None:
         """M00 (``optional``: M01, only while the optional-stop switch is on): the process
@@ -385,9 +390,9 @@ class Engine:
     def _any_held(self, process: int | None) -> bool:
         return any(p.held for p in self._targets(process))
 
-    def hold(self, on: bool = True, process: int | None = None) -> None:
+    def hold(self, on: bool = True, process: int | None = None, by: str | None = None) -> None:
         """Feed hold (of the cell, or of one process): motion stops where it is;
-        ``hold(False)`` resumes it."""
+        ``hold(False)`` resumes it.  ``by``: who holds (a stall report names it)."""
         targets = self._targets(process)
         for p in targets:
             if p.external or p.held == on:
@@ -396,6 +401,7 @@ class Engine:
                          p.where if p.loaded is not None else None, on)
             if on:
                 p.held = True
+                p.held_by, p.held_since = by, self.now
                 if p.int_timer is not None:
                     p.int_timer.cancel()
                     p.int_timer = None
@@ -554,10 +560,11 @@ class Engine:
                 note = wait.note() if wait.note is not None else None
                 reason = f"{wait.code} {wait.reason()}" + (f"; {note}" if note else "")
                 reason += self._alarmed_partners(wait)
+                if p.held:  # a wait under a hold: once it ends, the hold still stands
+                    reason += f"; {_held(p)}: a cycle start goes on"
                 out.append(Blocked(p.number, *wait.where, reason))
             elif p.held:
-                out.append(Blocked(p.number, *p.where, "held (a feed hold or a breakpoint's "
-                                   "stop): a cycle start goes on"))
+                out.append(Blocked(p.number, *p.where, f"{_held(p)}: a cycle start goes on"))
             elif p.dec_block is DecoderHold.STEP:
                 why = _STOPS.get(p.stopped or "", "single block")
                 out.append(Blocked(p.number, *p.where, f"stopped after a block ({why}): "
@@ -590,15 +597,27 @@ class Engine:
 
     @property
     def stalled(self) -> bool:
-        """Some process has a program, and every such process waits (none runs, dwells or is
-        held): only something outside can change that."""
+        """Some process has a program, and none of them can go on by itself: only something
+        outside can change that.  On the gateway (``run``, a replay) every such process
+        waits -- none runs, dwells, moves or is held: a hold is the operator's, who may end
+        it.  In a closed simulation (``settings.closed``: ``sim``) there is no operator, so
+        a process held (a feed hold, a breakpoint's stop), stopped after a block, or whose
+        move stands at a 0 % override stands as a wait does: only the simulation's own
+        inputs (the PLC logic, the script, the plant) could move it, and the stall rule
+        (``nc.stall_s``) judges them as it judges a wait's."""
         if self._runnable:
             return False
+        closed = self.settings.closed
         busy = False
         for p in self.processes.values():
             if p.loaded is None or p.alarm is not None:
                 continue
-            if p.state not in WAITING_STATES or p.motion_active:
+            if p.state in WAITING_STATES and not p.motion_active:
+                busy = True
+                continue
+            if not closed or p.int_timer is not None or p.dec_timer is not None:
+                return False  # (a timer of its own: a move, a dwell, a block's time)
+            if not (p.held or p.state is ProcessState.STEP or p.int_remaining is not None):
                 return False
             busy = True
         return busy
@@ -756,7 +775,7 @@ class Engine:
         if spent > 0:
             if p.state in RUNNING_STATES:
                 p.stats.running_s += spent
-            elif p.state in WAITING_STATES:
+            elif p.state in WAITING_STATES or p.state is ProcessState.HOLD:
                 p.stats.waiting_s += spent
         p.state_since = self.now
 

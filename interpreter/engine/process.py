@@ -70,6 +70,10 @@ class Process:
         self.state_since = 0.0
         self.alarm: tuple[int, str, Where | None] | None = None
         self.held = False
+        # Who gave the feed hold in force (a command's source, "breakpoint N40", the feed
+        # hold input) and since when: what a stall report says of a held process.
+        self.held_by: str | None = None
+        self.held_since = 0.0
         self.single_block = False  # stop after each block (a mode: kept over programs)
         # The overrides in percent (the operator's switches: kept over programs and resets).
         self.feed_override = 100

@@ -79,8 +79,9 @@ STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                         WaitKind.EXE: ProcessState.WAIT_EXE,
                         WaitKind.FLUSH: ProcessState.WAIT_COND,
                         WaitKind.AUX: ProcessState.WAIT_COND}
-RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.HOLD,
-                                   ProcessState.STEP})
+# The summary's buckets: "running s" and "waiting s".  A feed hold is time spent waiting
+# (for a cycle start), not running, whatever the process did when the hold came.
+RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.STEP})
 WAITING_STATES: Final = frozenset(STATE_OF_WAIT.values())
 
 

@@ -12,6 +12,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from ..conftest import EXAMPLES
 
 FOLDER = EXAMPLES / "machine"
@@ -106,6 +108,37 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
     assert [v for _, v in edges if v == 1] == [1] and edges[-1][1] == 0, edges
     assert 1.0 < next(t for t, v in edges if v == 1) < 1.1
     assert 3.0 <= edges[-1][0] < 3.02
+
+
+@pytest.mark.parametrize("case", ["slow clamp", "fault only"])
+def test_a_cell_the_plc_holds_ends_as_a_stall_naming_the_hold(tmp_path: Path,
+                                                               case: str) -> None:
+    """The field's report: a clamp slower than the PLC's 1 s (or one that never closes, a
+    script with the fault and no expectation) has the PLC hold the cell for ever through
+    NC.HOLD_LEVEL, and `sim` ran at 100 % CPU until killed (the timeout guards that).  It
+    ends nc.stall_s (60 s) after the last change, a stall naming the held process, by whom
+    and since when; the hold counts as waiting, not running."""
+    if case == "slow clamp":
+        args = ["--set", "plant.model.clamp.travel_ms=1200"]
+        last_change, where = 1.2, "P1 PART.nc:5 N30 held since 1.010 s"
+    else:
+        script = tmp_path / "never.toml"
+        script.write_text('[[fault]]\ntarget = "clamp"\nkind = "never"\n')
+        args = ["--script", str(script)]
+        last_change, where = 1.01, ("P1 PART.nc:4 N20 (WAI,SA30=1) waits for clamped (SA30=1) "
+                                    "(now 0); held since 1.010 s")
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sim", "--config",
+                           str(FOLDER / "ncgate.toml"), *args], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=90, check=False)
+    assert done.returncode == 1, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == (f"[{last_change + 60:.3f}] stall: every process is blocked and "
+                        "nothing can change")
+    assert lines[1].strip() == (f"{where} (feed hold by plc plc.st:41): a cycle start goes on")
+    p1 = next(line.split() for line in lines if line.startswith("P1 "))
+    assert (p1[3], p1[4], p1[-1]) == ("0.000", f"{last_change + 60:.3f}", "HOLD")
+    assert lines[-1] == f"simulated {last_change + 60:.3f} s: stall"
+
 
 def test_the_readme_names_every_scenario() -> None:
     readme = (FOLDER / "README.md").read_text(encoding="utf-8")

@@ -157,6 +157,34 @@ def test_a_wait_the_logic_may_release_is_a_stall_only_after_stall_s(
         assert resume["writer"] == "plc" and 3.0 <= resume["t"] <= 3.01 + 1e-9
 
 
+
+def test_a_process_the_logic_holds_for_ever_is_a_stall_after_stall_s(tmp_path: Path) -> None:
+    """The PLC's NC.HOLD_LEVEL holds P1 in a move and never lets go: `sim` ran for ever (the
+    scan never stood still long enough for a stall, since a hold did not count as one), its
+    summary counting the hold as running.  Now it is a stall stall_s after the last change,
+    naming who holds P1 and since when.  (--until far away: the old code ran up to it.)"""
+    (tmp_path / "MAIN.nc").write_text("N10G1X100F600\nN20M30\n")  # a 10 s move
+    (tmp_path / "plc.st").write_text("PROGRAM p VAR t : TON; END_VAR\n"
+                                     "t(IN := TRUE, PT := T#500ms);\n"
+                                     "NC.HOLD_LEVEL := t.Q;\nEND_PROGRAM\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "MAIN"\nstall_s = 5\n'
+                                          '[plc]\nlogic = "plc.st"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "MAIN", Script(None, ()),
+                     until=100_000.0)
+    assert result.outcome == "stall" and result.exit_status == 1
+    hold = next(e for e in result.events if e["event"] == "hold")
+    assert hold["on"] and 0.5 <= hold["t"] <= 0.51 + 1e-9
+    stall = next(e for e in result.events if e["event"] == "stall")
+    assert stall["t"] == pytest.approx(hold["t"] + 5.0, abs=0.01 + 1e-9)
+    [blocked] = stall["blocked"]
+    assert (blocked["proc"], blocked["n"]) == (1, hold["n"])  # where its decoder stands
+    assert blocked["reason"] == (f"held since {hold['t']:.3f} s (feed hold by plc plc.st:3): "
+                                 "a cycle start goes on")
+    stats = result.runtime.engine.processes[1].stats
+    assert stats.running_s == pytest.approx(hold["t"])  # the move, until the hold
+    assert stats.waiting_s == pytest.approx(stall["t"] - hold["t"])  # held: not running
+
+
 RETAINED = """PROGRAM keep
 VAR edge : R_TRIG; END_VAR
 VAR RETAIN count : INT; spin : DINT; END_VAR

@@ -663,6 +663,32 @@ def test_a_plant_models_key_is_swept_by_the_models_name(tmp_path: Path) -> None:
     assert "--set plant.model.clamp.travel_ms=2500" in rows["2500"]["command"]
 
 
+def test_a_cell_the_plc_holds_is_one_stall_signature_and_the_hold_is_not_running(
+        tmp_path: Path) -> None:
+    """The PLC holds P1 in a move for ever (NC.HOLD_LEVEL after 500 ms): each variant ends as
+    a stall (`sim` ran for ever), the hold's time (0.504 s on a 7 ms scan, 0.500 s on a 10 ms
+    one) stays out of the signature, so the two are one failure; running_s is the move until
+    the hold, the hold is waiting_s."""
+    (tmp_path / "MAIN.nc").write_text("N10G1X100F600\nN20M30\n")
+    (tmp_path / "plc.st").write_text("PROGRAM p VAR t : TON; END_VAR\n"
+                                     "t(IN := TRUE, PT := T#500ms);\n"
+                                     "NC.HOLD_LEVEL := t.Q;\nEND_PROGRAM\n")
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "MAIN"\nstall_s = 5\n'
+                                          '[plc]\nlogic = "plc.st"\n')
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["MAIN.nc"]\n'
+                                        '[grid]\n"plc.scan_ms" = [7, 10]\n')
+    done = ncgate("sweep", "spec.toml", "-q", "--timeout", "60", cwd=tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    rows = {r["plc.scan_ms"]: r for r in rows_of(tmp_path / "spec.csv")}
+    assert [rows[k]["verdict"] for k in ("7", "10")] == ["stall", "stall"]
+    assert rows["7"]["signature"] == rows["10"]["signature"] == (
+        "stall P1 MAIN.nc:2 held (feed hold by plc plc.st:3): a cycle start goes on")
+    assert (rows["7"]["running_s"], rows["10"]["running_s"]) == ("P1=0.504", "P1=0.500")
+    for row in rows.values():
+        held = float(row["cycle_s"]) - float(row["running_s"].removeprefix("P1="))
+        assert float(row["waiting_s"].removeprefix("P1=")) == pytest.approx(held)
+
+
 # -- the hostile review's findings --------------------------------------------------------
 
 
