@@ -550,7 +550,9 @@ class NcConfig:
                                 positive=True)
     wait_timeout_s: float = setting(0.0, "a wait longer than this is an alarm (0: off)", lo=0)
     stall_s: float = setting(60.0, "run: report a stall when every process with a program has "
-                             "been blocked this long with the image unchanged", lo=0,
+                             "been blocked this long with the image unchanged; sim with "
+                             "PLC logic: end the run as a stall then (a held process counts "
+                             "as blocked in sim)", lo=0,
                              positive=True)
     runaway_blocks: int = setting(100_000, "a process that decodes this many blocks without "
                                   "time passing is a runaway: alarm AL144 (0: no limit)",
