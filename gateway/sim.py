@@ -377,8 +377,11 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
-    if horizon is not None and engine.now < horizon:
-        engine.set_time(horizon)  # nothing can change any more: the windows close as stood
+    # Nothing can change any more: the windows close as they stood -- up to the scenario's
+    # end, or --until's when it comes first (a run stopped there saw no further).
+    end = horizon if horizon is None or until is None else min(horizon, until)
+    if end is not None and engine.now < end:
+        engine.set_time(end)
     engine.finish_stats()
     process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():
