@@ -201,12 +201,19 @@ class ScriptPlayer:
                 return True
         return False
 
-    def arm(self) -> None:
+    def arm(self, at_once: bool = False) -> None:
+        """Arm every entry on the clock.  ``at_once``: an entry already due (its ``at`` not
+        past the engine's now) is applied here and now, in the file's order, not on the
+        clock's next turn (``run --script``: a fault at the scenario's 0 is in force before
+        a fieldbus client's first request is served)."""
         engine = self.runtime.engine
         self._unfired = list(self.entries)
         for entry in self.entries:
             if entry.at is not None:
                 self.due += 1
+                if at_once and entry.at <= engine.now:
+                    self._fire(entry)
+                    continue
                 engine.call_at(entry.at, functools.partial(self._fire, entry))
                 continue
             trigger = self._parse_when(entry)
