@@ -245,7 +245,8 @@ class Expectations:
         # A window the run ended inside is judged on what was seen of it: a moment it held
         # passes, but the moment it would have held after the end is not there to be seen.
         closed = end + EPS >= b
-        short = f"not reached: the run ended at {end:.3f} s, before the window {window} closed"
+        short = (f"not reached: the run ended at {end:.3f} s, before the window {window} "
+                 + ("opened" if end + EPS < a else "closed"))
         if w.kind in ("alarm", "no alarm"):
             inside = [(t, text) for t, text in w.alarms if a - EPS <= t <= min(b, end) + EPS]
             if w.kind == "alarm":
@@ -275,8 +276,7 @@ class Expectations:
                                f"to {end:.3f} s)")
             return self._v(e, True, f"{cond} held from 0.000 to {end:.3f} s")
         if end + EPS < a:
-            return self._v(e, False, f"not reached: the run ended at {end:.3f} s, before the "
-                           f"window {window} opened")
+            return self._v(e, False, short)
         holds_at_a = changes[0][1]
         for t, holds in changes:
             if t <= a + EPS:
