@@ -7,6 +7,13 @@ not from a sample: ``within = [a, b]`` passes when the condition holds at some m
 window, ``by = T`` is ``within = [0, T]``, ``always`` when it never stops holding.  The same
 file is judged the same way by ``ncgate sim`` (virtual clock) and ``ncgate run --script`` (the
 wall clock, with real clients connected).
+
+Times are the scenario's: seconds since :meth:`Expectations.start` (``sim``: machine time 0;
+``run --script``: the moment the scenario starts the main program).  A window the run did not
+reach the end of is judged only on what was seen of it: a moment it held passes, but it never
+passes for want of a moment not seen -- ``no alarm`` in it, or the condition's first moment
+after the run's end: that is ``FAIL ...: not reached``.  So is an ``always`` over a run that
+ended before the scenario's end (its last window or timed entry).
 """
 
 from __future__ import annotations
@@ -120,10 +127,12 @@ class Expectations:
             raise self._fail(expect, str(exc)) from None
         return _Watch(expect, "var", var=var, test=comparison(op, value))
 
-    def start(self) -> None:
-        """Watch from now on: each condition as it is now, then every change."""
+    def start(self, t0: float | None = None) -> None:
+        """Watch from now on: each condition as it is now, then every change.  ``t0``: the
+        machine time that is the scenario's 0 (default: now)."""
         runtime = self.runtime
-        now = self.t0 = runtime.engine.now
+        self.t0 = runtime.engine.now if t0 is None else t0
+        now = 0.0  # (the scenario's time)
         for w in self.watches:
             if w.kind == "var":
                 w.holds = self._var_holds(w)
@@ -146,7 +155,8 @@ class Expectations:
                 def note(w: _Watch = w, address: tuple[str, int, str] = address) -> None:
                     w.note = plant.explain(address)
 
-                self._timers.append(runtime.engine.call_at(w.expect.within[1], note))
+                self._timers.append(runtime.engine.call_at(self.t0 + w.expect.within[1],
+                                                           note))
         if any(w.kind == "state" for w in self.watches):
             runtime.engine.state_listeners.append(self._on_state)
         if any(w.kind in ("alarm", "no alarm") for w in self.watches):
@@ -171,10 +181,15 @@ class Expectations:
         assert w.var is not None
         return self.runtime.image.last_writer(*w.var.address)
 
+    @property
+    def now(self) -> float:
+        """The scenario's time: seconds since :meth:`start`."""
+        return self.runtime.engine.now - self.t0
+
     def _note(self, w: _Watch, holds: bool) -> None:
         if holds != w.holds:
             w.holds = holds
-            w.changes.append((self.runtime.engine.now, holds))
+            w.changes.append((self.now, holds))
 
     def _on_write(self, changes: Sequence[Change], writer: str) -> None:
         by_byte = self._by_byte
@@ -193,7 +208,7 @@ class Expectations:
             holds = self._var_holds(w)
             who = self._writer(w)
             value = self.runtime.image.read(*w.var.address)
-            now = self.runtime.engine.now
+            now = self.now
             if holds != w.holds or who != w.written[1] or value != w.history[-1][1]:
                 w.written = (now, who)
                 w.history.append((now, value, who))
@@ -202,7 +217,7 @@ class Expectations:
     def _on_state(self, process: Process, old: ProcessState) -> None:
         for w in self.watches:
             if w.kind == "state" and w.process == process.number:
-                w.history.append((self.runtime.engine.now, process.state.name, None))
+                w.history.append((self.now, process.state.name, None))
                 self._note(w, process.state is w.state)
 
     def _on_event(self, event: Event) -> None:
@@ -211,47 +226,79 @@ class Expectations:
         for w in self.watches:
             if w.kind in ("alarm", "no alarm") and (w.code is None or int(event.code) == w.code):
                 who = f"P{event.proc}" if event.proc else "PLC"
-                w.alarms.append((event.t, f"{who} alarm AL{int(event.code)}: {event.message}"))
+                w.alarms.append((event.t - self.t0,
+                                 f"{who} alarm AL{int(event.code)}: {event.message}"))
 
     # -- verdicts ----------------------------------------------------------------------------
 
-    def verdicts(self) -> list[Verdict]:
-        end = self.runtime.engine.now
+    def verdicts(self, end: float | None = None) -> list[Verdict]:
+        """The verdicts of the run so far, or up to ``end`` (the scenario's time; what
+        changed after it is not seen)."""
+        end = self.now if end is None else end
         return [self._verdict(w, end) for w in self.watches]
 
     def _verdict(self, w: _Watch, end: float) -> Verdict:
         e = w.expect
-        a, b = e.within if e.within is not None else (self.t0, end)
-        a, b = max(a, self.t0), b
+        a, b = e.within if e.within is not None else (0.0, end)
         cond = e.cond
+        window = f"[{a:g}, {b:g}] s"
+        # A window the run ended inside is judged on what was seen of it: a moment it held
+        # passes, but the moment it would have held after the end is not there to be seen.
+        closed = end + EPS >= b
+        short = (f"not reached: the run ended at {end:.3f} s, before the window {window} "
+                 + ("opened" if end + EPS < a else "closed"))
         if w.kind in ("alarm", "no alarm"):
-            inside = [(t, text) for t, text in w.alarms if a - 1e-9 <= t <= b + 1e-9]
+            inside = [(t, text) for t, text in w.alarms if a - EPS <= t <= min(b, end) + EPS]
             if w.kind == "alarm":
                 if inside:
                     return self._v(e, True, f"{inside[0][1]} at {inside[0][0]:.3f} s")
-                return self._v(e, False, f"no {cond} in {self._window(e, a, b)}"
-                               + self._short(end, b))
+                if not closed:
+                    return self._v(e, False, f"{short} (no {cond} until then)")
+                return self._v(e, False, f"no {cond} in {self._window(e, a, b)}")
             if inside:
                 t, text = inside[0]
                 return self._v(e, False, f"{text} at {t:.3f} s")
-            return self._v(e, True, f"no alarm{' AL' + str(w.code) if w.code else ''} in "
-                           f"{self._window(e, a, b)}")
-        holds_at_a = w.changes[0][1]
-        for t, holds in w.changes:
-            if t <= a + 1e-9:
-                holds_at_a = holds
+            code = " AL" + str(w.code) if w.code else ""
+            if not closed:
+                return self._v(e, False, f"{short} (no alarm{code} until then)")
+            if e.always and not self._whole(end):
+                return self._v(e, False, self._unfinished(end) + f" (no alarm{code} until "
+                               "then)")
+            return self._v(e, True, f"no alarm{code} in {self._window(e, a, b)}")
+        changes = [(t, holds) for t, holds in w.changes if t <= end + EPS]
         if e.always:
-            broken = [t for t, holds in w.changes if not holds]
-            if not broken:
-                return self._v(e, True, f"{cond} held from {self.t0:.3f} to {end:.3f} s")
-            return self._v(e, False, f"{cond} stopped holding at {broken[0]:.3f} s"
-                           + self._now(w, broken[0]))
+            broken = [t for t, holds in changes if not holds]
+            if broken:
+                return self._v(e, False, f"{cond} stopped holding at {broken[0]:.3f} s"
+                               + self._now(w, broken[0]))
+            if not self._whole(end):
+                return self._v(e, False, self._unfinished(end) + f" ({cond} held from 0.000 "
+                               f"to {end:.3f} s)")
+            return self._v(e, True, f"{cond} held from 0.000 to {end:.3f} s")
+        if end + EPS < a:
+            return self._v(e, False, short)
+        holds_at_a = changes[0][1]
+        for t, holds in changes:
+            if t <= a + EPS:
+                holds_at_a = holds
         if holds_at_a:
             return self._v(e, True, f"{cond} at {a:.3f} s")
-        became = [t for t, holds in w.changes if holds and a - 1e-9 <= t <= b + 1e-9]
+        became = [t for t, holds in changes if holds and a - EPS <= t <= b + EPS]
         if became:
             return self._v(e, True, f"{cond} at {became[0]:.3f} s")
-        return self._v(e, False, self._still(w, min(b, end)) + self._short(end, b))
+        if not closed:
+            return self._v(e, False, f"{short}; {self._still(w, end)}")
+        return self._v(e, False, self._still(w, b))
+
+    def _whole(self, end: float) -> bool:
+        """Whether the run reached the scenario's end (its last window, its last timed
+        entry): an ``always`` is judged over all of it."""
+        horizon = self.horizon
+        return horizon is None or end + EPS >= horizon
+
+    def _unfinished(self, end: float) -> str:
+        return (f"not reached: the run ended at {end:.3f} s, before the scenario's end at "
+                f"{self.horizon:.3f} s")
 
     @staticmethod
     def _at(w: _Watch, t: float) -> tuple[float, int | str, str | None]:
@@ -268,8 +315,7 @@ class Expectations:
         if w.kind == "var" and w.var is not None:
             by = f" (set by {who} at {when:.3f} s)" if who else " (never written)"
             note = w.note
-            if note is None and self.runtime.plant is not None and (
-                    t + 1e-9 >= self.runtime.engine.now):
+            if note is None and self.runtime.plant is not None and t + EPS >= self.now:
                 note = self.runtime.plant.explain(w.var.address)  # (what it does now)
             return f"{w.var} still {value} at {t:.3f} s{by}" + (f"; {note}" if note else "")
         wanted = w.state.name if w.state is not None else "?"
@@ -286,16 +332,15 @@ class Expectations:
     def _window(e: Expect, a: float, b: float) -> str:
         return f"{a:.3f}..{b:.3f} s"
 
-    @staticmethod
-    def _short(end: float, b: float) -> str:
-        return f" (the run ended at {end:.3f} s)" if end + 1e-9 < b else ""
-
     def _v(self, e: Expect, ok: bool, detail: str) -> Verdict:
         return Verdict(e.name, ok, detail, self.script.file)
 
     @property
     def horizon(self) -> float | None:
         return self.script.horizon
+
+
+EPS = 1e-9  # (seconds: two times this close are one moment)
 
 
 def _bytes(area: str, index: int, view: str) -> tuple[str, int, int]:

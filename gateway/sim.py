@@ -201,12 +201,19 @@ class ScriptPlayer:
                 return True
         return False
 
-    def arm(self) -> None:
+    def arm(self, at_once: bool = False) -> None:
+        """Arm every entry on the clock.  ``at_once``: an entry already due (its ``at`` not
+        past the engine's now) is applied here and now, in the file's order, not on the
+        clock's next turn (``run --script``: a fault at the scenario's 0 is in force before
+        a fieldbus client's first request is served)."""
         engine = self.runtime.engine
         self._unfired = list(self.entries)
         for entry in self.entries:
             if entry.at is not None:
                 self.due += 1
+                if at_once and entry.at <= engine.now:
+                    self._fire(entry)
+                    continue
                 engine.call_at(entry.at, functools.partial(self._fire, entry))
                 continue
             trigger = self._parse_when(entry)
@@ -377,8 +384,11 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
-    if horizon is not None and engine.now < horizon:
-        engine.set_time(horizon)  # nothing can change any more: the windows close as stood
+    # Nothing can change any more: the windows close as they stood -- up to the scenario's
+    # end, or --until's when it comes first (a run stopped there saw no further).
+    end = horizon if horizon is None or until is None else min(horizon, until)
+    if end is not None and engine.now < end:
+        engine.set_time(end)
     engine.finish_stats()
     process_alarms = any(p.stats.alarms for p in engine.processes.values())
     if outcome == "blocked" and engine.blocked():

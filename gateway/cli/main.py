@@ -139,8 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
                      "--replay'")
     run.add_argument("--script", metavar="S.toml", help="play a scenario on the wall clock "
                      "while real clients are connected: its writes and faults at their times, "
-                     "its [[expect]] judged as in sim (PASS/FAIL lines); it stops at its last "
-                     "window's end, exit 1 when an expectation failed (docs/plant.md)")
+                     "its [[expect]] judged as in sim (PASS/FAIL lines); it starts the main "
+                     "program itself (nc.autostart off), and that moment is its t = 0; it stops "
+                     "at its last window's end, exit 1 when an expectation failed (docs/script.md)")
     run.add_argument("--trace", metavar="T.jsonl", help="write every event as JSON Lines, "
                      "rotated at trace.max_mb (default: none; memory keeps trace.ring events)")
     run.add_argument("--loop", choices=("auto", "asyncio", "uvloop"), default="auto",
@@ -300,6 +301,9 @@ def _sim(args: argparse.Namespace) -> int:
         return _replay(args)
     if args.until is not None and args.until < 0:
         raise UsageError("--until: expected a time >= 0")
+    if args.junit:  # before the suite runs, not after it
+        _check_output_folder("--junit", args.junit)
+    shown: dict[str, str] = {}  # a scenario's name in the report and the JUnit XML
     if args.example:
         if args.config:
             raise UsageError("--example goes without --config")
@@ -308,7 +312,9 @@ def _sim(args: argparse.Namespace) -> int:
             raise UsageError(f"the {example.name} example has no program to run: "
                              f"ncgate check --example {example.name}")
         args.config = str(example.config)
-        args.script = args.script or ([str(s) for s in example.scripts])
+        if not args.script:
+            args.script = [str(s) for s in example.scripts]
+            shown = {str(s): _relative(s, example.folder, example.name) for s in example.scripts}
         args.main = args.main or [example.main]
     overrides = _set_overrides(args.set)
     origins = dict.fromkeys(overrides, "--set")
@@ -331,8 +337,9 @@ def _sim(args: argparse.Namespace) -> int:
     status = EXIT_OK
     verdicts = []
     for script in scripts:  # each an independent scenario, on a runtime of its own
+        name = shown.get(script.file) or _relative(Path(script.file), Path.cwd())
         if len(scripts) > 1:
-            print(f"== {script.file}")
+            print(f"== {name}")
         try:
             result = run_sim(config, mains, script, args.until, signals=True,
                              single_block=args.single_block, breaks=args.breaks,
@@ -344,7 +351,7 @@ def _sim(args: argparse.Namespace) -> int:
                                      if (path := storage.find(name)) is not None])
             return EXIT_USAGE
         report(result, sys.stdout)
-        verdicts.append((script.file, result.verdicts))
+        verdicts.append((name, result.verdicts))
         status = max(status, result.exit_status)
     if args.junit:
         from ncgate.gateway.scenario import write_junit
@@ -364,6 +371,25 @@ def _sim(args: argparse.Namespace) -> int:
             write_gantt(result.events, result.runtime.config.nc.processes, out,
                         external=result.runtime.config.nc.external)
     return result.exit_status
+
+
+def _check_output_folder(option: str, file: str) -> None:
+    """An output file's folder exists and can be written, before the work that fills it."""
+    folder = Path(file).parent
+    if not folder.is_dir():
+        raise UsageError(f"{option} {file}: no folder {str(folder)!r} to write it in")
+    if not os.access(folder, os.W_OK):
+        raise UsageError(f"{option} {file}: the folder {str(folder)!r} cannot be written")
+
+
+def _relative(path: Path, base: Path, prefix: str = "") -> str:
+    """``path`` as a name for people and CI: relative to ``base`` when inside it (with
+    ``prefix/`` before it), else as given."""
+    try:
+        inside = path.resolve().relative_to(base.resolve()).as_posix()
+    except ValueError:
+        return str(path)
+    return f"{prefix}/{inside}" if prefix else inside
 
 
 def _programs_here(mains: list[str], overrides: dict[str, Any]) -> tuple[str, list[str]] | None:
@@ -555,6 +581,11 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
     logging.getLogger("ncgate").setLevel(
         logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO)
     overrides, origins = _overrides(args)
+    if args.script:
+        # The scenario starts the main program itself, at its t = 0, as sim does: an
+        # autostart before it would make its times the gateway's start-up's (docs/script.md).
+        overrides["nc.autostart"] = False
+        origins["nc.autostart"] = "--script"
     config = load_config(args.config, overrides=overrides, origins=origins)
     checked: tuple[CheckedFile, ...] = ()  # --allow-missing: nothing
     if not args.allow_missing:

@@ -19,13 +19,13 @@ from typing import Any
 from ncgate.config import Config
 from ncgate.config.schema import DEFAULT_WEB_PORT
 from ncgate.config.script import Script
-from ncgate.errors import InputRefused
+from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.adapters import plugin
 from ncgate.gateway.app import Gateway
 from ncgate.gateway.plc import LogicWatcher
 from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
-from ncgate.inputs import Command, CommandKind, Source, SourceKind
+from ncgate.inputs import Command, CommandKind, Source, SourceKind, Start
 from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
@@ -200,7 +200,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if gw.recorder is not None:
                 log.info("recording the session to %s", gw.recorder.path)
             watcher = _watch(gw, config, loop) if watch else None
-            scenario = _play(gw, script, stop) if script is not None else None
+            scenario = await _play(gw, script, stop) if script is not None else None
             try:
                 await stop.wait()
             finally:
@@ -217,32 +217,84 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
 
 
 class _Scenario:
-    """A script played by ``run --script``: its player, its expectations, its end."""
+    """A script played by ``run --script``: its player, its expectations, its end.
+
+    The scenario starts the main program itself, as ``sim`` does, and that moment is its
+    t = 0: its entries' ``at``, its faults and its windows count from the program's start,
+    not from the gateway's (whose start-up takes a moment, seconds under load).  ``run
+    --script`` turns ``nc.autostart`` off for it (the CLI does)."""
 
     def __init__(self, gw: Gateway, script: Script, stop: asyncio.Event) -> None:
         from ncgate.gateway.scenario import Expectations
+
+        self.gw = gw
+        self.script = script
+        self.stop = stop
+        self.expectations = Expectations(gw.runtime, script)
+        self.horizon = script.horizon if script.expects else None
+        self.reached = False
+        self._end: Any = None
+
+    async def start(self) -> None:
+        import dataclasses
+
         from ncgate.gateway.sim import ScriptPlayer
 
-        self.script = script
-        self.expectations = Expectations(gw.runtime, script)
-        self.expectations.start()
-        ScriptPlayer(gw.runtime, script, gw.door).arm()
-        horizon = script.horizon if script.expects else None
-        self._end = None
-        if horizon is not None:
-            self._end = gw.runtime.engine.call_at(horizon, stop.set)
-            log.info("scenario %s: %d expectations, ends at %.3f s of machine time",
-                     script.file, len(script.expects), horizon)
+        gw, script = self.gw, self.script
+        runtime, engine = gw.runtime, gw.runtime.engine
+        main = runtime.config.nc.main
+        if not main:
+            raise InputRefused(Reason.NOT_CONFIGURED, f"run --script {script.file}: the "
+                               "scenario starts the main program, and nc.main names none")
+        starts = runtime.store.channels(main) or (1,)  # an ISG file: each section's channel
+        source = Source(SourceKind.SCRIPT, "start")
+        started: list[float] = []
+
+        def on_start(event: Event) -> None:
+            if isinstance(event, ev.Start) and not started:
+                started.append(event.t)
+
+        undo = runtime.trace.subscribe(on_start)
+        try:
+            for number in starts:  # (read at start-up: each acts at once)
+                await gw.apply_async(Start(main, number, source))
+        finally:
+            undo()
+        t0 = started[0] if started else engine.now
+        # Watched from the start on: what the program did at once is the state at t = 0.
+        self.expectations.start(t0)
+        entries = tuple(e if e.at is None else dataclasses.replace(e, at=t0 + e.at)
+                        for e in script.entries)
+        # Its inputs at its 0 (a fault from the start) in force before a client is heard.
+        ScriptPlayer(runtime, dataclasses.replace(script, entries=entries), gw.door).arm(
+            at_once=True)
+        gw._settle()  # (what they made runnable, at once, as after any input)
+        where = f"P{starts[0]} {main}" if len(starts) == 1 else f"{main} in " + ", ".join(
+            f"P{n}" for n in starts)
+        log.info("scenario %s: %d expectations; %s started at %.3f s of machine time, the "
+                 "scenario's t = 0", script.file, len(script.expects), where, t0)
+        if self.horizon is not None:
+            self._end = engine.call_at(t0 + self.horizon, self._ended)
+            log.info("scenario %s: ends at its t = %.3f s", script.file, self.horizon)
+
+    def _ended(self) -> None:
+        self.reached = True
+        self.stop.set()
 
     def finish(self) -> int:
         if self._end is not None:
             self._end.cancel()
         self.expectations.stop()
-        verdicts = self.expectations.verdicts()
+        # Judged up to the scenario's end when the run got there (the loop may take a moment
+        # more to stop), else up to where it was stopped.
+        end = self.horizon if self.reached else None
+        verdicts = self.expectations.verdicts(end)
         for v in verdicts:
             print(v.line(), flush=True)
         return 0 if all(v.ok for v in verdicts) else 1
 
 
-def _play(gw: Gateway, script: Script, stop: asyncio.Event) -> _Scenario:
-    return _Scenario(gw, script, stop)
+async def _play(gw: Gateway, script: Script, stop: asyncio.Event) -> _Scenario:
+    scenario = _Scenario(gw, script, stop)
+    await scenario.start()
+    return scenario

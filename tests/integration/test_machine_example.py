@@ -230,3 +230,129 @@ async def test_a_bad_case_runs_on_the_wall_clock_with_an_external_plc(tmp_path: 
     assert code == 0, log
     assert len(verdicts) == 4 and all(v.startswith("PASS ") for v in verdicts), log
     assert "clamp_alarm=1 at" in log
+
+
+def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
+        tmp_path: Path) -> None:
+    """--until 3 holds for each scenario of the suite: each stops at 3 s (not at its last
+    window, 10.5 s), a window it saw a moment of the condition in passes, and one it did not
+    see the end of fails as not reached -- never judged at a time past the end."""
+    done = ncgate("sim", "--example", "machine", "--until", "3", cwd=tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    out = done.stdout
+    simulated = [line for line in out.splitlines() if line.startswith("simulated ")]
+    assert len(simulated) == len(SCENARIOS), out
+    assert all(line == "simulated 3.000 s: stopped at --until" for line in simulated), out
+    assert "PASS clamp alarm: clamp_alarm=1 at 1.010 s" in out  # its window [1.0, 1.1]: seen
+    assert ("FAIL coolant not ready: not reached: the run ended at 3.000 s, before the window "
+            "[4.27, 4.3] s opened") in out
+    assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
+            "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
+    assert "6 scenarios: 6 of 42 expectations passed" in out
+
+
+UNREACHED = """
+[[expect]]
+name = "clamped early"
+cond = "clamped=1"
+by = 20.0
+[[expect]]
+name = "cycle ends"
+cond = "P1 IDLE"
+by = 20.0
+[[expect]]
+name = "late window alarm"
+cond = "any_alarm=0"
+within = [20.0, 60.0]
+[[expect]]
+name = "quiet"
+cond = "no alarm"
+always = true
+"""
+
+
+def test_a_window_past_until_fails_as_not_reached(tmp_path: Path) -> None:
+    script = tmp_path / "s.toml"
+    script.write_text(UNREACHED)
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script", str(script),
+                  "--until", "5", cwd=tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    lines = verdict_lines(done.stdout)
+    assert lines[0] == "PASS clamped early: clamped=1 at 0.300 s"  # a moment of it was seen
+    assert lines[1].startswith("FAIL cycle ends: not reached: the run ended at 5.000 s, before "
+                               "the window [0, 20] s closed; P1 RUNNING, not IDLE, at 5.000 s")
+    assert lines[2] == ("FAIL late window alarm: not reached: the run ended at 5.000 s, before "
+                        "the window [20, 60] s opened")
+    assert lines[3] == ("FAIL quiet: not reached: the run ended at 5.000 s, before the "
+                        "scenario's end at 60.000 s (no alarm until then)")
+
+
+def test_junit_into_a_missing_folder_is_refused_before_the_suite_runs(tmp_path: Path) -> None:
+    done = ncgate("sim", "--example", "machine", "--junit", str(tmp_path / "no" / "v.xml"),
+                  cwd=tmp_path)
+    assert done.returncode == 2
+    assert not verdict_lines(done.stdout)  # nothing ran
+    assert f"--junit {tmp_path / 'no' / 'v.xml'}: no folder" in done.stderr
+
+
+def test_junit_names_the_scenarios_by_their_place_in_the_example(tmp_path: Path) -> None:
+    junit = tmp_path / "v.xml"
+    done = ncgate("sim", "--example", "machine", "--junit", "v.xml", cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    names = [s.get("name") for s in ET.parse(junit).getroot()]
+    assert names == [f"machine/scenarios/{p.name}" for p in SCENARIOS]
+    assert {c.get("classname") for s in ET.parse(junit).getroot() for c in s} == set(names)
+    assert f"== machine/scenarios/{SCENARIOS[0].name}" in done.stdout
+
+
+async def test_run_script_plays_a_shipped_scenario_with_the_st_logic(tmp_path: Path) -> None:
+    """ncgate run --script good.toml as shipped (the ST logic as the PLC, no client): the
+    scenario starts PART itself and its windows count from that start, so it passes on the
+    wall clock as in sim."""
+    import asyncio
+
+    from .test_cli_run import start_run
+
+    proc, _port, lines = await start_run(
+        FOLDER / "ncgate.toml", "--port", "0", "--no-web", "--set", "canopen.enabled=false",
+        "--script", str(FOLDER / "scenarios" / "good.toml"))
+    assert proc.stdout is not None
+    async with asyncio.timeout(60):  # it ends by itself at its last window's end
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines) + rest
+    verdicts = verdict_lines(log)
+    assert len(verdicts) == len(expects_of(FOLDER / "scenarios" / "good.toml")), log
+    assert all(v.startswith("PASS ") for v in verdicts), log
+    assert code == 0, log
+
+
+async def test_run_script_stopped_early_fails_what_it_did_not_reach(tmp_path: Path) -> None:
+    """A SIGINT before the windows close: what was seen passes, the rest is not reached."""
+    import asyncio
+    import signal
+
+    from .test_cli_run import start_run
+
+    script = tmp_path / "s.toml"
+    script.write_text(UNREACHED)
+    proc, _port, lines = await start_run(
+        FOLDER / "ncgate.toml", "--port", "0", "--no-web", "--set", "canopen.enabled=false",
+        "--script", str(script))
+    assert proc.stdout is not None
+    async with asyncio.timeout(60):
+        while "P1 resumes at PART.nc:3 N10" not in lines[-1]:  # door locked: the cycle goes on
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(lines)
+            lines.append(line)
+        proc.send_signal(signal.SIGINT)
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    log = "".join(lines) + rest
+    verdicts = verdict_lines(log)
+    assert code == 1, log
+    assert verdicts[0].startswith("PASS clamped early: clamped=1 at "), log
+    assert verdicts[1].startswith("FAIL cycle ends: not reached: the run ended at "), log
+    assert "before the window [0, 20] s closed; P1 " in verdicts[1]
+    assert verdicts[2].startswith("FAIL late window alarm: not reached:"), log
+    assert verdicts[3].startswith("FAIL quiet: not reached:"), log

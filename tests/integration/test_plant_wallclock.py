@@ -102,6 +102,12 @@ async def _scenario(tmp_path: Path, script: str) -> tuple[int, str]:
     path = tmp_path / "scenario.toml"
     path.write_text(script)
     proc, port, lines = await start_run(_cell(tmp_path), "--script", str(path))
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):  # the scenario starts O1: its t = 0, its faults in force
+        while "the scenario's t = 0" not in lines[-1]:
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(lines)
+            lines.append(line)
     client = AsyncModbusTcpClient("127.0.0.1", port=port, retries=0)
     try:
         assert await client.connect()
