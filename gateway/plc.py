@@ -546,7 +546,8 @@ class ScanDriver:
         engine, period = self.engine, self.period
         stalls = later is None and engine.stalled
         reach = LEAP_SCANS
-        if later is None and not stalls:
+        if later is None:  # (a stall to come too: the run may end long before it -- a
+            # scenario's horizon -- and a leap to it passed its scans one by one for nothing)
             reach, self._reach = self._reach, min(LEAP_SCANS, 2 * self._reach)
         start = now = engine.now
         k = self.k
