@@ -297,12 +297,14 @@ def _sim(args: argparse.Namespace) -> int:
     from ncgate.gateway.sim import report, run_sim, write_trace
     from ncgate.gateway.timeline import write_gantt
 
+    for option, file in (("--junit", args.junit), ("--trace", args.trace),
+                         ("--gantt", args.gantt)):
+        if file:  # before the run (or the suite, or the replay), not after it
+            _check_output_folder(option, file)
     if args.replay:
         return _replay(args)
     if args.until is not None and args.until < 0:
         raise UsageError("--until: expected a time >= 0")
-    if args.junit:  # before the suite runs, not after it
-        _check_output_folder("--junit", args.junit)
     shown: dict[str, str] = {}  # a scenario's name in the report and the JUnit XML
     if args.example:
         if args.config:

@@ -287,12 +287,18 @@ def test_a_window_past_until_fails_as_not_reached(tmp_path: Path) -> None:
                         "scenario's end at 60.000 s (no alarm until then)")
 
 
-def test_junit_into_a_missing_folder_is_refused_before_the_suite_runs(tmp_path: Path) -> None:
-    done = ncgate("sim", "--example", "machine", "--junit", str(tmp_path / "no" / "v.xml"),
-                  cwd=tmp_path)
+@pytest.mark.parametrize("option", ["--junit", "--trace", "--gantt"])
+def test_an_output_into_a_missing_folder_is_refused_before_the_suite_runs(
+        tmp_path: Path, option: str) -> None:
+    """(--trace and --gantt ran the whole run, then failed with a bare [Errno 2]: a new
+    user's find.)"""
+    script = ["--script", str(FOLDER / "scenarios" / "good.toml")] if option != "--junit" \
+        else []
+    done = ncgate("sim", "--example", "machine", *script, option,
+                  str(tmp_path / "no" / "v.xml"), cwd=tmp_path)
     assert done.returncode == 2
     assert not verdict_lines(done.stdout)  # nothing ran
-    assert f"--junit {tmp_path / 'no' / 'v.xml'}: no folder" in done.stderr
+    assert f"{option} {tmp_path / 'no' / 'v.xml'}: no folder" in done.stderr
 
 
 def test_junit_names_the_scenarios_by_their_place_in_the_example(tmp_path: Path) -> None:
