@@ -18,7 +18,9 @@ ended before the scenario's end (its last window or timed entry).
 
 from __future__ import annotations
 
+import difflib
 import html
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TextIO
@@ -124,8 +126,23 @@ class Expectations:
             var = Var(area, index, view)
             self.runtime.image.read(area, index, view)
         except (ValueError, PlcError, InputRefused) as exc:
-            raise self._fail(expect, str(exc)) from None
+            raise self._fail(expect, self._unknown_name(text) or str(exc)) from None
         return _Watch(expect, "var", var=var, test=comparison(op, value))
+
+    def _unknown_name(self, text: str) -> str | None:
+        """What to say of a condition whose left side is a word that names nothing: that it
+        is no I/O name of ``[symbols]``, and the closest that is."""
+        name = re.split(r"[=#<>]", text, maxsplit=1)[0].strip()
+        if not re.fullmatch(r"[A-Za-z_]\w*", name) or re.fullmatch(
+                r"(?i)(SA|SK|SYVAR|K)\d+", name):
+            return None
+        names = {n.upper(): n for n in self.runtime.config.symbols}
+        if name.upper() in names:
+            return None
+        close = difflib.get_close_matches(name.upper(), list(names), n=1, cutoff=0.6)
+        hint = f" (did you mean {names[close[0]]}?)" if close else ""
+        return (f"{name!r} is neither an image variable (SA30, SK4, SYVAR10) nor an I/O name "
+                f"of [symbols]{hint}")
 
     def start(self, t0: float | None = None) -> None:
         """Watch from now on: each condition as it is now, then every change.  ``t0``: the

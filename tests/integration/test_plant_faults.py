@@ -459,3 +459,16 @@ async def test_the_api_refuses_what_no_fault_is_and_a_clear_of_nothing_known(
             async with http.post("/api/fault", json={"clear": "clamp"}) as answer:
                 assert answer.status == 200  # a known target with no fault: nothing to clear
         assert gw.plant.faults == []
+
+
+def test_a_condition_on_a_name_that_names_nothing_says_so_and_the_closest(
+        cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`cond = "clampd=1"` said "unexpected 'clampd'; expected SYVAR, a number, ..." with no
+    word of I/O names (a new user's find)."""
+    (cell.parent / "s.toml").write_text('[[expect]]\nname = "a"\ncond = "clamp_closd=1"\n'
+                                        'by = 1\n')
+    assert main(["sim", "--config", str(cell), "--script", str(cell.parent / "s.toml"),
+                 "O1"]) == 2
+    assert ("s.toml: expect[0].cond: 'clamp_closd' is neither an image variable (SA30, SK4, "
+            "SYVAR10) nor an I/O name of [symbols] (did you mean clamp_closed?)"
+            in capsys.readouterr().err)
