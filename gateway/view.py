@@ -269,8 +269,7 @@ def plant_view(plant: Plant, now: float | None = None) -> PlantView:
     """The plant as it is at ``now`` (on the loop; None: now, the driver's clock's on the
     wall clock, which a stroke's progress follows between the engine's moments)."""
     if now is None:
-        engine = plant.runtime.engine
-        now = engine.now if engine.clock is None else engine.clock()
+        now = plant.runtime.engine.read_time()
     faults = plant.faults
     on: dict[str, list[str]] = {}  # model -> the kinds of the faults on it
     for f in faults:
@@ -502,9 +501,8 @@ class ViewPublisher:
         self._fresh()
         kept = self._plant
         plant = self._backend.runtime.plant
-        clock = self._engine.clock
-        now = self._engine.now if clock is None else clock()
-        if kept is not None and plant is not None and clock is not None and (
+        now = self._engine.read_time()
+        if kept is not None and plant is not None and self._engine.clock is not None and (
                 now - self._plant_at >= PLANT_FRESH_S and plant.moving):
             kept = None  # a stroke went on since, with no event of the engine's to say so
         if kept is None:

@@ -537,8 +537,7 @@ class Plant:
         drives = self._drives.get(address)
         if drives is None:
             return None
-        engine = self.runtime.engine  # (on the wall clock, the time of the read)
-        return drives[0].describe(engine.now if engine.clock is None else engine.clock())
+        return drives[0].describe(self.runtime.engine.read_time())  # (the read's time)
 
     def status(self) -> dict[str, Any]:
         """The console's and ``/api/status``'s ``plant``: each model and the faults (the

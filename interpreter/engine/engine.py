@@ -797,6 +797,11 @@ class Engine:
                 for listener in list(self.state_listeners):
                     listener(p, old)
 
+    def read_time(self) -> float:
+        """The time a status read shows: the driver's clock's now (``clock``; never before
+        the engine's own time), or the engine's time on the virtual clock."""
+        return self.now if self.clock is None else max(self.now, self.clock())
+
     def _position(self, p: Process) -> tuple[float, ...]:
         item = p.int_move
         if item is not None and item.move is not None:
@@ -804,7 +809,7 @@ class Engine:
             if p.int_remaining is not None:
                 done = 1.0 - (p.int_remaining / item.duration if item.duration else 0.0)
             elif item.duration > 0:
-                now = self.now if self.clock is None else max(self.now, self.clock())
+                now = self.read_time()
                 nominal = p.int_done + (now - p.int_started) * p.int_rate
                 done = min(1.0, max(0.0, nominal / item.duration))
             else:
