@@ -18,7 +18,6 @@ ended before the scenario's end (its last window or timed entry).
 
 from __future__ import annotations
 
-import difflib
 import html
 import re
 from collections.abc import Sequence
@@ -30,6 +29,7 @@ from ncgate.config.script import Expect, Script
 from ncgate.errors import InputRefused
 from ncgate.gateway.wiring import Runtime, parse_condition
 from ncgate.inputs import Var
+from ncgate.interpreter.diagnostics import did_you_mean
 from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.engine import events as ev
@@ -136,11 +136,11 @@ class Expectations:
         if not re.fullmatch(r"[A-Za-z_]\w*", name) or re.fullmatch(
                 r"(?i)(SA|SK|SYVAR|K)\d+", name):
             return None
-        names = {n.upper(): n for n in self.runtime.config.symbols}
-        if name.upper() in names:
+        names = list(self.runtime.config.symbols)
+        if name.upper() in {n.upper() for n in names}:
             return None
-        close = difflib.get_close_matches(name.upper(), list(names), n=1, cutoff=0.6)
-        hint = f" (did you mean {names[close[0]]}?)" if close else ""
+        close = did_you_mean(name, names)
+        hint = f" (did you mean {close}?)" if close else ""
         return (f"{name!r} is neither an image variable (SA30, SK4, SYVAR10) nor an I/O name "
                 f"of [symbols]{hint}")
 
