@@ -37,7 +37,7 @@ def runtime_settings(config: Config, closed: bool) -> RuntimeSettings:
     nc = config.nc
     names = {f.name for f in dataclasses.fields(RuntimeSettings)} & set(dir(nc))
     dialect = dialect_of(nc.dialect)
-    symbols = tuple((_image_var(text).address, name) for name, text in config.symbols.items())
+    symbols = tuple((image_var(text).address, name) for name, text in config.symbols.items())
     return RuntimeSettings(**{name: getattr(nc, name) for name in names}, closed=closed,
                            buffered=dialect.buffered, names=symbols)
 
@@ -107,10 +107,10 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
             engine.note_forced(variable_name(area, index, view), value, writer)
 
     image.on_overridden = on_overridden
-    interlocks = tuple((what, _image_var(text)) for what, text in (
+    interlocks = tuple((what, image_var(text)) for what, text in (
         ("feed hold", config.nc.feed_hold_input),
         ("cycle start inhibit", config.nc.cycle_start_inhibit_input)) if text)
-    symbols = {name.upper(): _image_var(text) for name, text in config.symbols.items()}
+    symbols = {name.upper(): image_var(text) for name, text in config.symbols.items()}
     return Runtime(config, image, store, engine, trace, interlocks=interlocks, symbols=symbols)
 
 
@@ -127,7 +127,7 @@ def start_plant(runtime: Runtime, apply: Callable[[Input], None], *, closed: boo
 
 
 @functools.lru_cache(maxsize=4096)  # (a Var is frozen: each sim of a sweep or a scenario
-def _image_var(text: str) -> Var:    # suite reads the same config's symbols again)
+def image_var(text: str) -> Var:    # suite reads the same config's symbols again)
     """An image variable as the config names it (``K12`` is the K packet's byte: SK12)."""
     return Var.parse("S" + text if text.upper().startswith("K") else text)
 

@@ -38,7 +38,7 @@ from pymodbus.exceptions import ModbusException
 from ncgate.config import Config
 from ncgate.gateway.errors import VirtualPLCError
 from ncgate.gateway.modbus.map import ModbusMap
-from ncgate.gateway.wiring import parse_assignment
+from ncgate.gateway.wiring import image_var, parse_assignment
 from ncgate.interpreter.engine import ProcessState, WaitKind
 from ncgate.plc.scan import PlcState
 
@@ -147,7 +147,8 @@ class VirtualPLC:
                  client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None) -> None:
         self.map = ModbusMap(config)
         self.config = config
-        self._symbols = {name.upper(): text for name, text in config.symbols.items()}
+        self._symbols = {name.upper(): str(image_var(text))
+                         for name, text in config.symbols.items()}
         self.unit = unit if unit is not None else config.modbus.unit_ids[0]
         self.poll_s = poll_s
         self.client = client or AsyncModbusTcpClient(host, port=port, retries=0)
@@ -215,10 +216,7 @@ class VirtualPLC:
     def _named(self, var: str) -> str:
         """``var`` as the image names it: an I/O name of ``[symbols]`` (any case) is the
         variable it stands for (``clamp_valve`` -> ``SA20``; a K byte is the SK packet's)."""
-        text = self._symbols.get(var.strip().upper())
-        if text is None:
-            return var
-        return "S" + text if text.upper().startswith("K") else text
+        return self._symbols.get(var.strip().upper(), var)
 
     async def set(self, var: str, value: int) -> None:
         """Write SA10 (a coil), SA1.BY, SK250, SK2.IN, SYVAR1, or an I/O name of
