@@ -172,6 +172,15 @@ class _Reader:
         as a shell user means it."""
         return Path.cwd() if key in self.given else self.base
 
+    def path(self, key: str, text: str, where: str | None = None) -> Path:
+        """``text``, a file or folder name of ``key``, as an absolute path (relative to
+        :meth:`base_of`); one that cannot be resolved (a symbolic link that loops) is a
+        ConfigError naming ``where`` (an entry of the key's list) or the key."""
+        try:
+            return (self.base_of(key) / text).resolve()
+        except (RuntimeError, OSError) as exc:  # (3.11: a loop is a RuntimeError)
+            raise self.fail(where or key, f"cannot follow {text!r}: {exc}") from None
+
     def _origin(self, key: str) -> str:
         """The override that set ``key`` (or a table above it, or a key below it), else the
         file."""

@@ -81,7 +81,7 @@ def _storage_devices(r: _Reader, t: dict[str, Any], key: str, done: dict[str, An
     for name in STORAGE_DEVICES:
         if name in t:
             folder = r.str_(t[name], f"{base}.{name}")
-            devices[name] = (r.base_of(f"{base}.{name}") / folder).resolve()
+            devices[name] = r.path(f"{base}.{name}", folder)
     return devices or {"MP0": r.base.resolve()}
 
 
@@ -135,7 +135,7 @@ _SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 def _symbols_file(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     if "symbols_file" not in t:
         return None
-    path = (r.base_of(key) / r.str_(t["symbols_file"], key)).resolve()
+    path = r.path(key, r.str_(t["symbols_file"], key))
     if not path.is_file():
         raise r.fail(key, f"no such file: {path}")
     return path
@@ -320,7 +320,7 @@ def _optional_path(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
     name = key.rsplit(".", 1)[1]
     if name not in t:
         return None
-    return (r.base_of(key) / r.str_(t[name], key)).resolve()
+    return r.path(key, r.str_(t[name], key))
 
 
 def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -330,7 +330,7 @@ def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
         raise r.fail(key, f"expected a file name or a list of them, got {raw!r}")
     paths = []
     for i, item in enumerate(items):
-        path = (r.base_of(key) / item).resolve()
+        path = r.path(key, item, key if isinstance(raw, str) else f"{key}[{i}]")
         if not path.is_file():
             raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
                          f"no such file: {path}")
@@ -967,7 +967,7 @@ def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
         raise r.fail(key, f"expected a certificate file or folder, or a list of them, got {raw!r}")
     paths = []
     for i, item in enumerate(items):
-        path = (r.base_of(key) / item).resolve()
+        path = r.path(key, item, key if isinstance(raw, str) else f"{key}[{i}]")
         if not path.exists():
             raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
                          f"no such file or folder: {path}")
@@ -996,8 +996,8 @@ def _opcua_users(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) 
     for name, given in raw.items():
         if isinstance(given, dict) and set(given) == {"certificate"}:
             # A certificate user: the client presents this certificate as its identity.
-            users[name] = (r.base_of(key) / r.str_(given["certificate"],
-                                                   f"{key}.{name}.certificate")).resolve()
+            users[name] = r.path(key, r.str_(given["certificate"],
+                                             f"{key}.{name}.certificate"))
             continue
         parts = given.split("$") if isinstance(given, str) else []
         if len(parts) != 4 or parts[0] != "pbkdf2_sha256" or not parts[1].isdigit():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -139,6 +140,19 @@ def test_an_override_of_an_entry_of_an_array_of_tables_names_the_option(
                     origins={dotted: "--set"})
     key = dotted.replace(".clamp.", "[1].")
     assert str(caught.value).startswith(f"--set: {key}: "), str(caught.value)
+
+
+
+@pytest.mark.parametrize("logic", ['"loop.st"', '["loop.st"]'])
+def test_a_symbolic_link_that_loops_is_a_config_error_naming_the_key(
+        tmp_path: Path, logic: str) -> None:
+    """(A hostile try: Path.resolve's RuntimeError came out as a bug of ncgate, exit 70.)"""
+    (tmp_path / "loop.st").symlink_to("loop.st")
+    (tmp_path / "ncgate.toml").write_text(f"[plc]\nlogic = {logic}\n")
+    key = "plc.logic" if logic.startswith('"') else "plc.logic[0]"
+    with pytest.raises(ConfigError, match=rf"ncgate.toml: {re.escape(key)}: cannot follow "
+                                          "'loop.st'"):
+        load_config(tmp_path / "ncgate.toml")
 
 
 def test_docs_config_md_is_generated_from_the_schema() -> None:
