@@ -378,6 +378,10 @@ def _sim(args: argparse.Namespace) -> int:
 def _check_output_folder(option: str, file: str) -> None:
     """An output file's folder exists and can be written, before the work that fills it."""
     folder = Path(file).parent
+    if Path(file).is_dir():
+        raise UsageError(f"{option} {file}: is a folder: name a file in it")
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"{option} {file}: {str(folder)!r} is a file, not a folder")
     if not folder.is_dir():
         raise UsageError(f"{option} {file}: no folder {str(folder)!r} to write it in")
     if not os.access(folder, os.W_OK):

@@ -301,6 +301,20 @@ def test_an_output_into_a_missing_folder_is_refused_before_the_suite_runs(
     assert f"{option} {tmp_path / 'no' / 'v.xml'}: no folder" in done.stderr
 
 
+@pytest.mark.parametrize(("target", "said"), [
+    ("out", "is a folder: name a file in it"),
+    ("afile/v.xml", "'afile' is a file, not a folder")])
+def test_an_output_onto_a_folder_or_under_a_file_is_refused_before_the_run(
+        tmp_path: Path, target: str, said: str) -> None:
+    """(A hostile try: --trace onto a folder ran the whole run, then '[Errno 21] Is a
+    directory'; under a file it said 'no folder'.)"""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "afile").write_text("")
+    done = ncgate("sim", "--example", "machine", "--trace", target, cwd=tmp_path)
+    assert done.returncode == 2
+    assert not verdict_lines(done.stdout)  # nothing ran
+    assert f"--trace {target}: {said}" in done.stderr
+
 def test_junit_names_the_scenarios_by_their_place_in_the_example(tmp_path: Path) -> None:
     junit = tmp_path / "v.xml"
     done = ncgate("sim", "--example", "machine", "--junit", "v.xml", cwd=tmp_path)
