@@ -1,8 +1,9 @@
 """The engine on the wall clock (``ncgate run``, the ``Gateway`` API).
 
-An engine timer becomes one ``call_at`` on the asyncio loop; a write from outside wakes its
-waits at once and schedules a run with ``call_soon`` -- event-driven, no polling between a
-write and the wake.  ``nc.time_scale`` makes simulated time pass faster than the wall clock.
+An engine timer becomes one loop timer (a delay from the driver's own monotonic clock); a
+write from outside wakes its waits at once and schedules a run with ``call_soon`` --
+event-driven, no polling between a write and the wake.  ``nc.time_scale`` makes simulated
+time pass faster than the wall clock.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections.abc import Callable
 
 from ncgate.interpreter.engine import Engine
 
@@ -39,7 +41,11 @@ class WallClockDriver:
         self._stall_timer: asyncio.TimerHandle | None = None
         self._stall_reported_at: float | None = None
         self._stall_due_at: float | None = None
-        self.t0 = loop.time()
+        # The driver's own clock: the monotonic clock, not the loop's.  uvloop's loop.time()
+        # counts whole milliseconds (libuv's uv_now), so every input stamped from it, the PLC
+        # scan's lateness and each status read's "now" were whole milliseconds (times the
+        # time scale) apart.  Loop timers are armed as delays from it (_at).
+        self.t0 = time.monotonic()
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at: float | None = None
         self._soon: asyncio.Handle | None = None
@@ -60,12 +66,12 @@ class WallClockDriver:
 
     def now(self) -> float:
         """Simulated seconds since the driver started."""
-        return (self.loop.time() - self.t0) * self.scale
+        return (time.monotonic() - self.t0) * self.scale
 
     def catch_up(self) -> None:
         """Fire what is due up to now (a slice of it: the rest on the next turns), so that an
         input from outside acts after everything that was due before it."""
-        now = (self.loop.time() - self.t0) * self.scale  # now(), inlined: every input
+        now = (time.monotonic() - self.t0) * self.scale  # now(), inlined: every input
         engine = self.engine
         due = engine.next_timer()
         if (due is None or due > now) and not engine.has_unfinished:
@@ -142,7 +148,7 @@ class WallClockDriver:
         if self._timer is not None:
             self._timer.cancel()
         self._timer_at = t
-        self._timer = self.loop.call_at(self.t0 + t / self.scale, self._run, t)
+        self._timer = self._at(t, self._run, t)
 
     def _arm_stall(self) -> None:
         """nc.stall_s: when every process with a program has been blocked, and nothing has
@@ -159,7 +165,16 @@ class WallClockDriver:
             self._stall_timer = None
         self._stall_due_at = due
         if due is not None:
-            self._stall_timer = self.loop.call_at(self.t0 + due / self.scale, self._stall_due)
+            self._stall_timer = self._at(due, self._stall_due)
+
+    def _at(self, t: float, callback: Callable[..., object], *args: object
+            ) -> asyncio.TimerHandle:
+        """A loop timer for machine time ``t``: a delay on the loop's clock, which need not
+        be ours (uvloop's is in whole milliseconds and rounds the delay, so the timer may
+        come up to half a millisecond early: ``_run`` never lets time run back past what was
+        due)."""
+        delay = self.t0 + t / self.scale - time.monotonic()
+        return self.loop.call_later(max(0.0, delay), callback, *args)
 
     def _stall_due(self) -> None:
         self._stall_timer = None

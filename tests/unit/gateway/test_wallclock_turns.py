@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import time
 from collections.abc import Callable
 
 import pytest
@@ -101,3 +102,30 @@ def test_a_timer_that_raises_leaves_the_clock_running_for_the_next(
     asyncio.run(main())
     assert fired == ["next"]
     assert "a bug in a timer's callback" in caplog.text  # the loop logged it
+
+
+@pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
+def test_the_clock_reads_finer_than_a_millisecond(kind: str) -> None:
+    """uvloop's loop.time() counts whole milliseconds: the driver's clock is its own, so an
+    input (``catch_up``) and a status read (``now``) a tenth of a millisecond apart are a
+    tenth of a millisecond apart, and a scan's lateness is in microseconds."""
+    engine = make_sim({"A": "N1M30\n"}).engine
+    seen: list[tuple[float, float]] = []
+
+    async def main() -> None:
+        driver = WallClockDriver(engine, 1.0, asyncio.get_running_loop())
+        try:
+            for _ in range(30):  # 30 readings 0.1 ms apart: 3 ms, a whole ms many times over
+                mark = time.monotonic()
+                while time.monotonic() - mark < 0.0001:
+                    pass
+                driver.catch_up()  # an input: the engine at the clock's now
+                seen.append((driver.now(), engine.now))
+        finally:
+            driver.close()
+
+    with asyncio.Runner(loop_factory=_loop_factory(kind)) as runner:
+        runner.run(main())
+    for (now_before, input_before), (now, input_at) in zip(seen, seen[1:], strict=False):
+        assert now > now_before, seen  # the old driver on uvloop: equal within each ms
+        assert input_at > input_before, seen
