@@ -76,9 +76,8 @@ from ncgate.inputs import (
     Write,
     Writes,
 )
-from ncgate.interpreter.batch import gc_paused
 from ncgate.interpreter.codes import AlarmCode
-from ncgate.interpreter.engine import Engine
+from ncgate.interpreter.engine import run_through
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict
 
@@ -493,22 +492,6 @@ def _changed(recorded: dict[str, str], now: Callable[[str], str | None]) -> list
         elif found != digest:
             out.append(f"{file}: changed since the recording")
     return out
-
-
-def run_through(engine: Engine, until: float) -> None:
-    """Let the virtual clock run to ``until`` as ``run``'s wall clock does: every timer due
-    by then fires in time order -- the PLC logic's scans, the plant's moves and ticks, the
-    processes' motion -- whether or not a process has a program, and the clock then stands
-    at ``until``.
-
-    (``run_virtual`` stops as soon as every process is idle: the clock would leap over an idle
-    gap, the scans and the plant due in it then ran late, all at once, at the next input's
-    time, and the logic's timers saw the leap.)"""
-    with gc_paused():
-        engine.run_until_blocked()
-        while (t := engine.next_timer()) is not None and t <= until:
-            engine.advance_to(t)
-        engine.set_time(until)
 
 
 def replay(path: str | Path, config: str | Path | None = None,

@@ -5,11 +5,11 @@ Must not import ``ncgate.plc``, ``ncgate.gateway``, ``ncgate.config`` or a front
 (``ncgate.interpreter.nc110``): those come in through :mod:`.ports`.
 """
 
-from ncgate.interpreter.engine.clock import run_virtual
+from ncgate.interpreter.engine.clock import run_through, run_virtual
 from ncgate.interpreter.engine.engine import Engine
 from ncgate.interpreter.engine.process import Process
 from ncgate.interpreter.engine.states import ProcessState, ProcessStatus, WaitKind, WaitRecord
 from ncgate.interpreter.engine.trace import Trace
 
 __all__ = ["Engine", "Process", "ProcessState", "ProcessStatus", "Trace", "WaitKind",
-           "WaitRecord", "run_virtual"]
+           "WaitRecord", "run_through", "run_virtual"]

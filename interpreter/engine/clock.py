@@ -39,3 +39,19 @@ def _run_virtual(engine: Engine, until: float | None,
         if before_time is not None:
             before_time(t)
         engine.advance_to(t)
+
+
+def run_through(engine: Engine, until: float) -> None:
+    """Let the virtual clock run to ``until`` as ``run``'s wall clock does (a replay of a
+    session): every timer due by then fires in time order -- the PLC logic's scans, the
+    plant's moves and ticks, the processes' motion -- whether or not a process has a
+    program, and the clock then stands at ``until``.
+
+    (``run_virtual`` stops as soon as every process is idle: the clock would leap over an idle
+    gap, the scans and the plant due in it then ran late, all at once, at the next input's
+    time, and the logic's timers saw the leap.)"""
+    with gc_paused():
+        engine.run_until_blocked()
+        while (t := engine.next_timer()) is not None and t <= until:
+            engine.advance_to(t)
+        engine.set_time(until)
