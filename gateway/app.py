@@ -420,8 +420,10 @@ class Gateway:
 
     # -- acting as the operator and as a PLC -----------------------------------------------
 
-    def _settle(self) -> None:
-        """Run what an outside input made runnable, at the input's time."""
+    def settle(self) -> None:
+        """Run what an outside input made runnable, at the input's time: :meth:`apply` does
+        it after each input; a caller that applies inputs through :attr:`door` itself (the
+        scenario's inputs at its t = 0, ``run --script``) calls it after them."""
         assert self._driver is not None
         self._driver.settle()
 
@@ -453,7 +455,7 @@ class Gateway:
             return
         starts = self._program_of(item) if type(item) is Start or type(item) is Command else None
         self.door.apply(item)
-        self._settle()
+        self.settle()
         self._read_ahead(starts)
 
     def _loaded(self, task: asyncio.Task[None]) -> None:
@@ -473,7 +475,7 @@ class Gateway:
             await self._load(*load)  # and reads ahead of its EXEs
         starts = self._program_of(item) if load is None else None
         self.door.apply(item)
-        self._settle()
+        self.settle()
         self._read_ahead(starts)
 
     def _program_of(self, item: Input) -> tuple[str, int] | None:
@@ -547,7 +549,7 @@ class Gateway:
             self.door.apply(item)
         except InputRefused as exc:
             self._refusals.note(f"{item.source}: {type(item).__name__.lower()} refused: {exc}")
-        self._settle()
+        self.settle()
 
     # -- online change of the PLC logic --------------------------------------------------------
 
@@ -606,7 +608,7 @@ class Gateway:
             self._reload_next = None  # the files are read from now on: a later ask waits
             await self._in_thread("ncgate reload_plc", online.prepare)
             self.door.apply(item)
-            self._settle()
+            self.settle()
         return online.last
 
     async def start(self, name: str | None = None, process: int = 1,

@@ -268,7 +268,7 @@ class _Scenario:
         # Its inputs at its 0 (a fault from the start) in force before a client is heard.
         ScriptPlayer(runtime, dataclasses.replace(script, entries=entries), gw.door).arm(
             at_once=True)
-        gw._settle()  # (what they made runnable, at once, as after any input)
+        gw.settle()  # (what they made runnable, at once, as after any input)
         where = f"P{starts[0]} {main}" if len(starts) == 1 else f"{main} in " + ", ".join(
             f"P{n}" for n in starts)
         log.info("scenario %s: %d expectations; %s started at %.3f s of machine time, the "
