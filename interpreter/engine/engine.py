@@ -775,7 +775,8 @@ class Engine:
         if spent > 0:
             if p.state in RUNNING_STATES:
                 p.stats.running_s += spent
-            elif p.state in WAITING_STATES or p.state is ProcessState.HOLD:
+            elif p.state in WAITING_STATES or p.state is ProcessState.HOLD or (
+                    p.state is ProcessState.STEP):
                 p.stats.waiting_s += spent
         p.state_since = self.now
 

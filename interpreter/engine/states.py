@@ -80,8 +80,10 @@ STATE_OF_WAIT: Final = {WaitKind.PROC: ProcessState.WAIT_PROC,
                         WaitKind.FLUSH: ProcessState.WAIT_COND,
                         WaitKind.AUX: ProcessState.WAIT_COND}
 # The summary's buckets: "running s" and "waiting s".  A feed hold is time spent waiting
-# (for a cycle start), not running, whatever the process did when the hold came.
-RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL, ProcessState.STEP})
+# (for a cycle start), not running, whatever the process did when the hold came; so is a
+# stop after a block (STEP: single block, M00/M01, a breakpoint), until a cycle start or a
+# step -- an operator's minute at an M00 is no minute of running.
+RUNNING_STATES: Final = frozenset({ProcessState.RUNNING, ProcessState.DWELL})
 WAITING_STATES: Final = frozenset(STATE_OF_WAIT.values())
 
 

@@ -141,3 +141,21 @@ def test_stops_steps_and_holds_are_in_the_trace() -> None:
     engine.cycle_start()
     sim.run()
     assert [(e["cause"], e["n"]) for e in sim.events("stop")][2:] == [("single_block", 40)]
+
+
+def test_a_stop_after_a_block_is_waiting_time_not_running_time() -> None:
+    """An M00 stop waits for the operator's cycle start: the summary's "waiting s" (as a feed
+    hold's time is), not "running s"."""
+    sim = make_sim({"A": "N10E1=1\nN20M00\nN30E1=2\nN40M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    sim.run()
+    assert engine.status(1).state is ProcessState.STEP
+    stopped_at = engine.now
+    engine.advance_to(stopped_at + 30.0)  # the operator comes back after 30 s
+    engine.set_time(stopped_at + 30.0)
+    engine.cycle_start()
+    assert sim.run() == "idle"
+    stats = engine.processes[1].stats
+    assert stats.waiting_s == 30.0
+    assert stats.running_s == stopped_at  # what ran before the stop, and nothing after it
