@@ -186,10 +186,16 @@ def _sync_codes(path: Path) -> int:
         return 0
 
 
-def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
+def check_logic(files: Sequence[Path], config: Config,
+                section: str | None = None) -> dict[Path, FileReport]:
     """Structured Text files, checked together (one may use another's function blocks)
-    against the config's image sizes and processes, as ``[plc] logic`` loads them."""
-    from ncgate.gateway.plc import logic_context
+    against the config's image sizes and processes, as ``[plc] logic`` loads them.
+
+    ``section`` ("plc" or "plant"): the files are that section's ``logic``, and with no error
+    in them the PROGRAMs it runs are chosen as ``sim`` and ``run`` choose them
+    (:func:`ncgate.gateway.plc.program_order`): files with no PROGRAM, or a
+    ``section.programs`` entry that names none, is the ConfigError they refuse with."""
+    from ncgate.gateway.plc import logic_context, program_order
 
     found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
     parsed: list[SourceFile] = []
@@ -206,6 +212,10 @@ def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]
         except LogicError as exc:
             for d in exc.diagnostics:
                 found.setdefault(d.span.file, []).append(d)
+        else:
+            if section is not None and not any(d.is_error for said in found.values()
+                                               for d in said):
+                program_order(logic, config, section)
     return {path: FileReport(path, tuple(found[str(path)])) for path in files}
 
 

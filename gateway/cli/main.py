@@ -241,22 +241,22 @@ def _check(args: argparse.Namespace) -> int:
         args.files = [str(example.folder)]
     # check opens no server: what only a server needs (the console's bind) is not its concern
     config = load_config(args.config, serving=False) if args.config else None
+    cell = None  # with no FILE: the cell's programs, and its [plc] and [plant] logic
     if args.files:
         files = expand(args.files)
     else:
-        default = config or load_config(None, serving=False)
-        _require_default_device(default)
-        files = storage_files(default) + list(default.plc.logic)
-    if not files:
+        cell = config or load_config(None, serving=False)
+        _require_default_device(cell)
+        files = storage_files(cell)
+    if not files and (cell is None or not (cell.plc.logic or cell.plant.logic)):
         raise UsageError("no program to check")
     if args.process is not None:
         count = (config or load_config(None, serving=False)).nc.processes
         if not 1 <= args.process <= count:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
-    reports = check_files(files, config, args.process, dialect)
-    if config is not None and not args.files:
-        reports += _check_plant(config)
+    programs = check_files(files, config, args.process, dialect) if files else []
+    reports = programs + (_check_config_logic(cell) if cell is not None else [])
     errors = warnings = 0
     for report in reports:
         for diagnostic in report.diagnostics:
@@ -269,26 +269,33 @@ def _check(args: argparse.Namespace) -> int:
     if errors and dialect is None:
         from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
 
-        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in reports
+        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in programs
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     return EXIT_FAILED if errors else EXIT_OK
 
 
-def _check_plant(config: Config) -> list[FileReport]:
-    """What `run` and `sim` refuse of the config's plant before a cell starts: its models'
-    variables (one driven by two models, a number on a bit: a ConfigError, exit 2), and its
-    own logic, checked alone (a task of its own: it shares no name with the PLC's)."""
+def _check_config_logic(config: Config) -> list[FileReport]:
+    """What `run` and `sim` refuse of the config's PLC and plant before a cell starts, in
+    their order: the PLC's logic and the PROGRAMs it runs, the plant's models' variables (one
+    driven by two models, a number on a bit), and the plant's own logic, checked alone (a task
+    of its own: it shares no name with the PLC's).  A refusal of the config itself is its
+    ConfigError (exit 2), as `sim` says it."""
     from ncgate.gateway.cli.check import check_logic
     from ncgate.gateway.plant import Plant
     from ncgate.gateway.wiring import build_runtime
 
+    reports = []
+    plc = list(config.plc.logic)
+    if plc:
+        found = check_logic(plc, config, "plc")
+        reports += [found[path] for path in plc]
     if config.plant.model:
         Plant(build_runtime(config, closed=True), lambda item: None, closed=True)
-    logic = list(config.plant.logic)
-    if not logic:
-        return []
-    found = check_logic(logic, config)
-    return [found[path] for path in logic]
+    plant = list(config.plant.logic)
+    if plant:
+        found = check_logic(plant, config, "plant")
+        reports += [found[path] for path in plant]
+    return reports
 
 
 def _sim(args: argparse.Namespace) -> int:

@@ -303,6 +303,32 @@ def test_check_of_a_config_refuses_what_run_and_sim_refuse_of_its_plant(
     assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2  # as sim refuses it
 
 
+@pytest.mark.parametrize("section", ["plc", "plant"])
+@pytest.mark.parametrize(("logic", "programs", "said"), [
+    ("lib.st", "", "{section}.logic: the files hold no PROGRAM to run"),
+    ("main.st", 'programs = ["nosuch"]\n',
+     "{section}.programs[0]: no PROGRAM nosuch in {section}.logic (PROGRAMs: Main)"),
+])
+def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], section: str, logic: str,
+        programs: str, said: str) -> None:
+    """`check --config` said 0 errors of logic that holds no PROGRAM, or of a `programs`
+    entry naming none, which sim and run refuse: check now chooses the PROGRAMs as they do."""
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                         f'[{section}]\nlogic = "{logic}"\n{programs}', {"A": "N1M30\n"})
+    (tmp_path / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
+                                     "END_FUNCTION_BLOCK\n")
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    config = str(tmp_path / "ncgate.toml")
+    message = f"{config}: {said.format(section=section)}"
+    for command in ("sim", "check"):
+        assert main([command, "--config", config]) == 2
+        assert message in capsys.readouterr().err, command
+    assert main(["check", "--config", config, str(tmp_path / logic)]) == 0  # a file, named:
+    # its own check, as a library's may hold no PROGRAM
+
+
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
 
 
