@@ -329,6 +329,36 @@ def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
     # its own check, as a library's may hold no PROGRAM
 
 
+@pytest.mark.parametrize(("extra", "said"), [
+    ('[plc]\nlogic = "sub"\n', "plc.logic: is a folder, not a file: {tmp}/sub"),
+    ('[plant]\nlogic = ["main.st", "sub"]\n', "plant.logic[1]: is a folder, not a file: "
+     "{tmp}/sub"),
+    ('[plc]\nlogic = "/dev/null"\n', "plc.logic: is not a regular file: /dev/null"),
+    ('[plc]\nlogic = ""\n', "plc.logic: empty: give a file name"),
+    ('[plc]\nlogic = ["main.st", ""]\n', "plc.logic[1]: empty: give a file name"),
+    ('[plc]\nlogic = "gone.st"\n', "plc.logic: no such file: {tmp}/gone.st"),
+    ('[plc]\nlogic = ["main.st", "./main.st"]\n',
+     "plc.logic[1]: {tmp}/main.st is listed twice (also plc.logic[0]): list each file once"),
+    ('[web.tls]\ncert = "/dev/null"\nkey = "main.st"\n',
+     "web.tls.cert: is not a regular file: /dev/null"),
+])
+def test_a_config_file_name_that_is_no_file_says_what_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: str, said: str) -> None:
+    """A folder, /dev/null or "" given as plc.logic all said "no such file" (of the config's
+    own folder, for ""); a file listed twice was ST032 "Main is already defined at" its own
+    line, in check, and sim ran it once."""
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n{extra}',
+               {"A": "N1M30\n"})
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    config = str(tmp_path / "ncgate.toml")
+    for command in ("check", "sim"):
+        assert main([command, "--config", config]) == 2
+        err = capsys.readouterr().err
+        assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
+
+
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
 
 
