@@ -243,7 +243,9 @@ def _check(args: argparse.Namespace) -> int:
     config = load_config(args.config, serving=False) if args.config else None
     cell = None  # with no FILE: the cell's programs, and its [plc] and [plant] logic
     if args.files:
-        files = expand(args.files)
+        files, again = expand(args.files)
+        for path in again if not args.quiet else ():
+            print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
     else:
         cell = config or load_config(None, serving=False)
         _require_default_device(cell)

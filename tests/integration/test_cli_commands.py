@@ -359,6 +359,29 @@ def test_a_config_file_name_that_is_no_file_says_what_it_is(
         assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
 
 
+def test_check_checks_a_file_given_twice_once_and_says_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`ncgate check plc.st plc.st` said ST032 "Main is already defined at plc.st:1:1" of
+    plc.st:1:1 (twice, 2 errors); a program given by name and by its folder was counted and
+    said twice."""
+    write_cell(tmp_path, '[nc]\nmain = "A"\n', {"A": "N1G1X10F600\nN2(WAI,SA1=)\nN3M30\n"})
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    st = str(tmp_path / "main.st")
+    assert main(["check", st, str(tmp_path / "." / "main.st")]) == 0
+    assert capsys.readouterr().err == (f"ncgate check: {st} is given twice: checked once\n"
+                                       "1 file(s) checked: 0 error(s), 0 warning(s)\n")
+    assert main(["check", str(tmp_path / "A.nc"), str(tmp_path)]) == 1
+    out, err = capsys.readouterr()
+    assert out.count("A.nc:2:") == 1, out
+    assert "2 file(s) checked: 1 error(s)" in err  # A.nc and main.st
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                                          'MP1 = "."\n')  # two devices, one folder
+    assert main(["check", "--config", str(tmp_path / "ncgate.toml")]) == 1
+    out, err = capsys.readouterr()
+    assert out.count("A.nc:2:") == 1 and "1 file(s) checked: 1 error(s)" in err, out + err
+
+
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
 
 
