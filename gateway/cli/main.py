@@ -215,9 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:  # `ncgate map | head`: the reader has what it wanted
-        null = os.open(os.devnull, os.O_WRONLY)  # (and the interpreter's last flush goes
-        os.dup2(null, sys.stdout.fileno())         # nowhere, not into a second error)
-        os.close(null)
+        _stdout_gone()
         return EXIT_OK
     except (NcgateError, OSError) as exc:  # ours, or the system's (a path, a port): said
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
@@ -229,6 +227,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BUG
     parser.error(f"unknown command {args.command}")
     return EXIT_USAGE  # not reached: parser.error exits
+
+
+def _stdout_gone() -> None:
+    """After the reader of standard output went (``| head``): what is left of the output goes
+    nowhere, so that the interpreter's last flush makes no second error."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -259,12 +265,18 @@ def _check(args: argparse.Namespace) -> int:
     dialect = Dialect(args.dialect) if args.dialect else None
     programs = check_files(files, config, args.process, dialect) if files else []
     reports = programs + (_check_config_logic(cell) if cell is not None else [])
-    errors = warnings = 0
-    for report in reports:
-        for diagnostic in report.diagnostics:
-            print(diagnostic.render())
-        errors += report.errors
-        warnings += report.warnings
+    errors = sum(r.errors for r in reports)
+    warnings = sum(r.warnings for r in reports)
+    try:
+        for report in reports:
+            for diagnostic in report.diagnostics:
+                print(diagnostic.render())
+        sys.stdout.flush()  # (a pipe's buffer: its error here, not at the interpreter's exit)
+    except BrokenPipeError:
+        # `ncgate check | head -1`: the reader has what it wanted, and the status is still
+        # what was found (main's exit 0 is map's: it only prints); the summary still goes
+        # to stderr.
+        _stdout_gone()
     if not args.quiet:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)

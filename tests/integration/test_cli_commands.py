@@ -428,6 +428,28 @@ def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
     assert proc.returncode == 0 and err == "", err
 
 
+@pytest.mark.parametrize(("program", "status"), [("N{n}(WAI,SA1=)\n", 1), ("N{n}G999\n", 0)])
+def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_found(
+        tmp_path: Path, program: str, status: int) -> None:
+    """`ncgate check | head -1` exited 0 whatever it found (main's BrokenPipe answer, right
+    for map, which only prints).  The pipe is made smaller than the diagnostics, so that
+    check is still writing when the reader closes; 0 when the diagnostics are warnings."""
+    import fcntl
+
+    (tmp_path / "A.nc").write_text("".join(program.format(n=n) for n in range(1, 301)) + "M30\n")
+    read_end, write_end = os.pipe()
+    fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 4096)  # (Linux) the diagnostics are ~30 KB
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "check", str(tmp_path / "A.nc")],
+                            stdout=write_end, stderr=subprocess.PIPE, text=True)
+    os.close(write_end)
+    head = os.read(read_end, 1024)
+    os.close(read_end)
+    _, err = proc.communicate(timeout=60)
+    assert head.startswith(f"{tmp_path / 'A.nc'}:1:".encode()), head
+    assert proc.returncode == status, err
+    assert err.splitlines()[-1].startswith("1 file(s) checked: ") and "Traceback" not in err, err
+
+
 def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`ncgate check 'examples/*'` read README.md and __init__.py as part programs (47
