@@ -13,6 +13,7 @@ import dataclasses
 import difflib
 import enum
 import re
+import stat
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -180,6 +181,28 @@ class _Reader:
             return (self.base_of(key) / text).resolve()
         except (RuntimeError, OSError) as exc:  # (3.11: a loop is a RuntimeError)
             raise self.fail(where or key, f"cannot follow {text!r}: {exc}") from None
+
+    def existing_file(self, key: str, text: str, where: str | None = None) -> Path:
+        """``text``, the name of a file that ``key`` reads, as an absolute path (:meth:`path`)
+        to a regular file; what it is instead is a ConfigError naming ``where`` or the key."""
+        if not text:  # (would be the config's own folder)
+            raise self.fail(where or key, "empty: give a file name")
+        return self.regular(where or key, self.path(key, text, where))
+
+    def regular(self, key: str, path: Path) -> Path:
+        """``path`` when it is a regular file; else a ConfigError that says what it is: no
+        such file, a folder, or not a regular file (``/dev/null``, a pipe)."""
+        try:
+            mode = path.stat().st_mode
+        except (FileNotFoundError, NotADirectoryError):  # (NotADirectory: under a file)
+            raise self.fail(key, f"no such file: {path}") from None
+        except OSError as exc:
+            raise self.fail(key, f"cannot read {path}: {exc.strerror}") from None
+        if stat.S_ISDIR(mode):
+            raise self.fail(key, f"is a folder, not a file: {path}")
+        if not stat.S_ISREG(mode):
+            raise self.fail(key, f"is not a regular file: {path}")
+        return path
 
     def _origin(self, key: str) -> str:
         """The override that set ``key`` (or a table above it, or a key below it), else the

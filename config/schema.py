@@ -135,10 +135,7 @@ _SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 def _symbols_file(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     if "symbols_file" not in t:
         return None
-    path = r.path(key, r.str_(t["symbols_file"], key))
-    if not path.is_file():
-        raise r.fail(key, f"no such file: {path}")
-    return path
+    return r.existing_file(key, r.str_(t["symbols_file"], key))
 
 
 def _io_list(r: _Reader, path: Path, key: str) -> list[tuple[str, str, Any]]:
@@ -328,12 +325,13 @@ def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any
     items = [raw] if isinstance(raw, str) else raw
     if not isinstance(items, list) or not all(isinstance(x, str) for x in items):
         raise r.fail(key, f"expected a file name or a list of them, got {raw!r}")
-    paths = []
+    paths: list[Path] = []
     for i, item in enumerate(items):
-        path = r.path(key, item, key if isinstance(raw, str) else f"{key}[{i}]")
-        if not path.is_file():
-            raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
-                         f"no such file: {path}")
+        where = key if isinstance(raw, str) else f"{key}[{i}]"
+        path = r.existing_file(key, item, where)
+        if path in paths:  # (resolved: the same file by another name, or through a link)
+            raise r.fail(where, f"{path} is listed twice (also {key}[{paths.index(path)}]): "
+                         "list each file once")
         paths.append(path)
     return tuple(paths)
 

@@ -67,10 +67,11 @@ class FileReport:
 _CHECKED_SUFFIXES = (*PROGRAM_SUFFIXES[1:], *LOGIC_SUFFIXES)
 
 
-def expand(arguments: Sequence[str]) -> list[Path]:
-    """Files, directories (their programs) and globs, in a stable order.  A file named
-    is checked whatever its name; a directory or a glob gives its programs and logic (.nc,
-    .txt, .st, .xml), not a README or a config beside them."""
+def expand(arguments: Sequence[str]) -> tuple[list[Path], list[Path]]:
+    """Files, directories (their programs) and globs, in a stable order, each file once; and
+    the files given again (by another argument, another name or a link), which are not
+    checked twice.  A file named is checked whatever its name; a directory or a glob gives
+    its programs and logic (.nc, .txt, .st, .xml), not a README or a config beside them."""
     out: list[Path] = []
     for arg in arguments:
         magic = glob.has_magic(arg)
@@ -87,7 +88,21 @@ def expand(arguments: Sequence[str]) -> list[Path]:
                     out.append(path)
             else:
                 raise UsageError(f"no such file: {arg}")
-    return out
+    return _once(out)
+
+
+def _once(paths: Sequence[Path]) -> tuple[list[Path], list[Path]]:
+    """``paths`` without a file met before, and those dropped.  A file is one file whatever
+    it is called: an ST file checked beside itself would be ST032 at its own line, "defined
+    where it is defined", and a program's diagnostics would be said and counted twice."""
+    seen: set[Path] = set()
+    once: list[Path] = []
+    again: list[Path] = []
+    for path in paths:
+        real = path.resolve()
+        (again if real in seen else once).append(path)
+        seen.add(real)
+    return once, again
 
 
 def config_for(path: Path, explicit: Config | None) -> Config:
@@ -186,10 +201,16 @@ def _sync_codes(path: Path) -> int:
         return 0
 
 
-def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]:
+def check_logic(files: Sequence[Path], config: Config,
+                section: str | None = None) -> dict[Path, FileReport]:
     """Structured Text files, checked together (one may use another's function blocks)
-    against the config's image sizes and processes, as ``[plc] logic`` loads them."""
-    from ncgate.gateway.plc import logic_context
+    against the config's image sizes and processes, as ``[plc] logic`` loads them.
+
+    ``section`` ("plc" or "plant"): the files are that section's ``logic``, and with no error
+    in them the PROGRAMs it runs are chosen as ``sim`` and ``run`` choose them
+    (:func:`ncgate.gateway.plc.program_order`): files with no PROGRAM, or a
+    ``section.programs`` entry that names none, is the ConfigError they refuse with."""
+    from ncgate.gateway.plc import logic_context, program_order
 
     found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
     parsed: list[SourceFile] = []
@@ -206,6 +227,10 @@ def check_logic(files: Sequence[Path], config: Config) -> dict[Path, FileReport]
         except LogicError as exc:
             for d in exc.diagnostics:
                 found.setdefault(d.span.file, []).append(d)
+        else:
+            if section is not None and not any(d.is_error for said in found.values()
+                                               for d in said):
+                program_order(logic, config, section)
     return {path: FileReport(path, tuple(found[str(path)])) for path in files}
 
 
@@ -256,10 +281,11 @@ def start_problems(config: Config) -> StartCheck:
 
 
 def storage_files(config: Config) -> list[Path]:
-    """Every program on every configured device (what ``ncgate check`` with no file checks)."""
+    """Every program on every configured device (what ``ncgate check`` with no file checks),
+    each once: two devices may be one folder."""
     out: list[Path] = []
     for folder in config.nc.storage.devices.values():
         if folder.is_dir():
             out.extend(sorted(p for p in folder.iterdir() if p.is_file()
                               and p.suffix.lower() in PROGRAM_SUFFIXES[1:]))
-    return out
+    return _once(out)[0]

@@ -215,9 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:  # `ncgate map | head`: the reader has what it wanted
-        null = os.open(os.devnull, os.O_WRONLY)  # (and the interpreter's last flush goes
-        os.dup2(null, sys.stdout.fileno())         # nowhere, not into a second error)
-        os.close(null)
+        _stdout_gone()
         return EXIT_OK
     except (NcgateError, OSError) as exc:  # ours, or the system's (a path, a port): said
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
@@ -231,6 +229,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return EXIT_USAGE  # not reached: parser.error exits
 
 
+def _stdout_gone() -> None:
+    """After the reader of standard output went (``| head``): what is left of the output goes
+    nowhere, so that the interpreter's last flush makes no second error."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
+
+
 def _check(args: argparse.Namespace) -> int:
     from ncgate.gateway.cli.check import check_files, expand, storage_files
 
@@ -241,54 +247,69 @@ def _check(args: argparse.Namespace) -> int:
         args.files = [str(example.folder)]
     # check opens no server: what only a server needs (the console's bind) is not its concern
     config = load_config(args.config, serving=False) if args.config else None
+    cell = None  # with no FILE: the cell's programs, and its [plc] and [plant] logic
     if args.files:
-        files = expand(args.files)
+        files, again = expand(args.files)
+        for path in again if not args.quiet else ():
+            print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
     else:
-        default = config or load_config(None, serving=False)
-        _require_default_device(default)
-        files = storage_files(default) + list(default.plc.logic)
-    if not files:
+        cell = config or load_config(None, serving=False)
+        _require_default_device(cell)
+        files = storage_files(cell)
+    if not files and (cell is None or not (cell.plc.logic or cell.plant.logic)):
         raise UsageError("no program to check")
     if args.process is not None:
         count = (config or load_config(None, serving=False)).nc.processes
         if not 1 <= args.process <= count:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
-    reports = check_files(files, config, args.process, dialect)
-    if config is not None and not args.files:
-        reports += _check_plant(config)
-    errors = warnings = 0
-    for report in reports:
-        for diagnostic in report.diagnostics:
-            print(diagnostic.render())
-        errors += report.errors
-        warnings += report.warnings
+    programs = check_files(files, config, args.process, dialect) if files else []
+    reports = programs + (_check_config_logic(cell) if cell is not None else [])
+    errors = sum(r.errors for r in reports)
+    warnings = sum(r.warnings for r in reports)
+    try:
+        for report in reports:
+            for diagnostic in report.diagnostics:
+                print(diagnostic.render())
+        sys.stdout.flush()  # (a pipe's buffer: its error here, not at the interpreter's exit)
+    except BrokenPipeError:
+        # `ncgate check | head -1`: the reader has what it wanted, and the status is still
+        # what was found (main's exit 0 is map's: it only prints); the summary still goes
+        # to stderr.
+        _stdout_gone()
     if not args.quiet:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
     if errors and dialect is None:
         from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
 
-        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in reports
+        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in programs
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     return EXIT_FAILED if errors else EXIT_OK
 
 
-def _check_plant(config: Config) -> list[FileReport]:
-    """What `run` and `sim` refuse of the config's plant before a cell starts: its models'
-    variables (one driven by two models, a number on a bit: a ConfigError, exit 2), and its
-    own logic, checked alone (a task of its own: it shares no name with the PLC's)."""
+def _check_config_logic(config: Config) -> list[FileReport]:
+    """What `run` and `sim` refuse of the config's PLC and plant before a cell starts, in
+    their order: the PLC's logic and the PROGRAMs it runs, the plant's models' variables (one
+    driven by two models, a number on a bit), and the plant's own logic, checked alone (a task
+    of its own: it shares no name with the PLC's).  A refusal of the config itself is its
+    ConfigError (exit 2), as `sim` says it."""
     from ncgate.gateway.cli.check import check_logic
     from ncgate.gateway.plant import Plant
     from ncgate.gateway.wiring import build_runtime
 
+    reports = []
+    plc = list(config.plc.logic)
+    if plc:
+        found = check_logic(plc, config, "plc")
+        reports += [found[path] for path in plc]
     if config.plant.model:
         Plant(build_runtime(config, closed=True), lambda item: None, closed=True)
-    logic = list(config.plant.logic)
-    if not logic:
-        return []
-    found = check_logic(logic, config)
-    return [found[path] for path in logic]
+    plant = list(config.plant.logic)
+    if plant:
+        found = check_logic(plant, config, "plant")
+        reports += [found[path] for path in plant]
+    return reports
 
 
 def _sim(args: argparse.Namespace) -> int:

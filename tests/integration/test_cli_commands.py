@@ -303,6 +303,85 @@ def test_check_of_a_config_refuses_what_run_and_sim_refuse_of_its_plant(
     assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2  # as sim refuses it
 
 
+@pytest.mark.parametrize("section", ["plc", "plant"])
+@pytest.mark.parametrize(("logic", "programs", "said"), [
+    ("lib.st", "", "{section}.logic: the files hold no PROGRAM to run"),
+    ("main.st", 'programs = ["nosuch"]\n',
+     "{section}.programs[0]: no PROGRAM nosuch in {section}.logic (PROGRAMs: Main)"),
+])
+def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], section: str, logic: str,
+        programs: str, said: str) -> None:
+    """`check --config` said 0 errors of logic that holds no PROGRAM, or of a `programs`
+    entry naming none, which sim and run refuse: check now chooses the PROGRAMs as they do."""
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                         f'[{section}]\nlogic = "{logic}"\n{programs}', {"A": "N1M30\n"})
+    (tmp_path / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
+                                     "END_FUNCTION_BLOCK\n")
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    config = str(tmp_path / "ncgate.toml")
+    message = f"{config}: {said.format(section=section)}"
+    for command in ("sim", "check"):
+        assert main([command, "--config", config]) == 2
+        assert message in capsys.readouterr().err, command
+    assert main(["check", "--config", config, str(tmp_path / logic)]) == 0  # a file, named:
+    # its own check, as a library's may hold no PROGRAM
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    ('[plc]\nlogic = "sub"\n', "plc.logic: is a folder, not a file: {tmp}/sub"),
+    ('[plant]\nlogic = ["main.st", "sub"]\n', "plant.logic[1]: is a folder, not a file: "
+     "{tmp}/sub"),
+    ('[plc]\nlogic = "/dev/null"\n', "plc.logic: is not a regular file: /dev/null"),
+    ('[plc]\nlogic = ""\n', "plc.logic: empty: give a file name"),
+    ('[plc]\nlogic = ["main.st", ""]\n', "plc.logic[1]: empty: give a file name"),
+    ('[plc]\nlogic = "gone.st"\n', "plc.logic: no such file: {tmp}/gone.st"),
+    ('[plc]\nlogic = ["main.st", "./main.st"]\n',
+     "plc.logic[1]: {tmp}/main.st is listed twice (also plc.logic[0]): list each file once"),
+    ('[web.tls]\ncert = "/dev/null"\nkey = "main.st"\n',
+     "web.tls.cert: is not a regular file: /dev/null"),
+])
+def test_a_config_file_name_that_is_no_file_says_what_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: str, said: str) -> None:
+    """A folder, /dev/null or "" given as plc.logic all said "no such file" (of the config's
+    own folder, for ""); a file listed twice was ST032 "Main is already defined at" its own
+    line, in check, and sim ran it once."""
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n{extra}',
+               {"A": "N1M30\n"})
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    config = str(tmp_path / "ncgate.toml")
+    for command in ("check", "sim"):
+        assert main([command, "--config", config]) == 2
+        err = capsys.readouterr().err
+        assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
+
+
+def test_check_checks_a_file_given_twice_once_and_says_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`ncgate check plc.st plc.st` said ST032 "Main is already defined at plc.st:1:1" of
+    plc.st:1:1 (twice, 2 errors); a program given by name and by its folder was counted and
+    said twice."""
+    write_cell(tmp_path, '[nc]\nmain = "A"\n', {"A": "N1G1X10F600\nN2(WAI,SA1=)\nN3M30\n"})
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    st = str(tmp_path / "main.st")
+    assert main(["check", st, str(tmp_path / "." / "main.st")]) == 0
+    assert capsys.readouterr().err == (f"ncgate check: {st} is given twice: checked once\n"
+                                       "1 file(s) checked: 0 error(s), 0 warning(s)\n")
+    assert main(["check", str(tmp_path / "A.nc"), str(tmp_path)]) == 1
+    out, err = capsys.readouterr()
+    assert out.count("A.nc:2:") == 1, out
+    assert "2 file(s) checked: 1 error(s)" in err  # A.nc and main.st
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                                          'MP1 = "."\n')  # two devices, one folder
+    assert main(["check", "--config", str(tmp_path / "ncgate.toml")]) == 1
+    out, err = capsys.readouterr()
+    assert out.count("A.nc:2:") == 1 and "1 file(s) checked: 1 error(s)" in err, out + err
+
+
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
 
 
@@ -347,6 +426,28 @@ def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
     _, err = proc.communicate(timeout=60)
     assert head.startswith(b"# Modbus map")
     assert proc.returncode == 0 and err == "", err
+
+
+@pytest.mark.parametrize(("program", "status"), [("N{n}(WAI,SA1=)\n", 1), ("N{n}G999\n", 0)])
+def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_found(
+        tmp_path: Path, program: str, status: int) -> None:
+    """`ncgate check | head -1` exited 0 whatever it found (main's BrokenPipe answer, right
+    for map, which only prints).  The pipe is made smaller than the diagnostics, so that
+    check is still writing when the reader closes; 0 when the diagnostics are warnings."""
+    import fcntl
+
+    (tmp_path / "A.nc").write_text("".join(program.format(n=n) for n in range(1, 301)) + "M30\n")
+    read_end, write_end = os.pipe()
+    fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 4096)  # (Linux) the diagnostics are ~30 KB
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "check", str(tmp_path / "A.nc")],
+                            stdout=write_end, stderr=subprocess.PIPE, text=True)
+    os.close(write_end)
+    head = os.read(read_end, 1024)
+    os.close(read_end)
+    _, err = proc.communicate(timeout=60)
+    assert head.startswith(f"{tmp_path / 'A.nc'}:1:".encode()), head
+    assert proc.returncode == status, err
+    assert err.splitlines()[-1].startswith("1 file(s) checked: ") and "Traceback" not in err, err
 
 
 def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(
