@@ -29,6 +29,17 @@ def verdict_lines(out: str) -> list[str]:
     return [line for line in out.splitlines() if line.startswith(("PASS ", "FAIL "))]
 
 
+def bit_edges(trace: Path, var: str) -> list[tuple[float, int]]:
+    """Each change of ``var`` in a trace file, as (time, value)."""
+    edges: list[tuple[float, int]] = []
+    for line in trace.read_text().splitlines():
+        e = json.loads(line)
+        if e["event"] == "write" and e["var"] == var and (
+                not edges or edges[-1][1] != e["value"]):
+            edges.append((e["t"], e["value"]))
+    return edges
+
+
 def expects_of(path: Path) -> list[dict[str, Any]]:
     with path.open("rb") as f:
         expects: list[dict[str, Any]] = tomllib.load(f).get("expect", [])
@@ -98,16 +109,26 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
                   "--trace", str(trace), cwd=tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     assert len(verdict_lines(done.stdout)) == 4
-    events = [json.loads(line) for line in trace.read_text().splitlines()]
-    edges: list[tuple[float, int]] = []
-    for e in events:
-        if e["event"] == "write" and e["var"] == "SA50" and (
-                not edges or edges[-1][1] != e["value"]):
-            edges.append((e["t"], e["value"]))
+    edges = bit_edges(trace, "SA50")
     # latched once, never let go by the first reset, let go by the second
     assert [v for _, v in edges if v == 1] == [1] and edges[-1][1] == 0, edges
     assert 1.0 < next(t for t, v in edges if v == 1) < 1.1
     assert 3.0 <= edges[-1][0] < 3.02
+
+
+def test_a_reset_with_the_spindle_still_slow_leaves_its_alarm_not_one_scan_cleared(
+        tmp_path: Path) -> None:
+    """spindle_reset_while_slow.toml's windows see moments; the trace sees every scan: the
+    reset at 3.5 s with M03 in force neither drops spindle_alarm (SA52) for a scan nor starts
+    the spindle (SA21); the one after the NC reset (4.2 s) clears it.  (The rule before
+    cleared it at 3.5 s and started the spindle into the same fault.)"""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "spindle_reset_while_slow.toml"),
+                  "--trace", str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert bit_edges(trace, "SA52") == [(3.24, 1), (4.2, 0)]
+    assert bit_edges(trace, "SA21")[-1] == (3.24, 0)  # spindle_run: off with the alarm
 
 
 @pytest.mark.parametrize("case", ["slow clamp", "fault only"])
@@ -248,7 +269,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "6 scenarios: 6 of 42 expectations passed" in out
+    assert "7 scenarios: 6 of 48 expectations passed" in out
 
 
 UNREACHED = """
