@@ -116,19 +116,25 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
     assert 3.0 <= edges[-1][0] < 3.02
 
 
-def test_a_reset_with_the_spindle_still_slow_leaves_its_alarm_not_one_scan_cleared(
-        tmp_path: Path) -> None:
-    """spindle_reset_while_slow.toml's windows see moments; the trace sees every scan: the
-    reset at 3.5 s with M03 in force neither drops spindle_alarm (SA52) for a scan nor starts
-    the spindle (SA21); the one after the NC reset (4.2 s) clears it.  (The rule before
-    cleared it at 3.5 s and started the spindle into the same fault.)"""
+@pytest.mark.parametrize(("scenario", "alarm", "alarm_edges", "output"), [
+    ("spindle_reset_while_slow", "SA52", [(3.24, 1), (4.2, 0)], "SA21"),
+    ("io_device_silent", "SA54", [(4.02, 1)], "SA25")])
+def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleared(
+        tmp_path: Path, scenario: str, alarm: str, alarm_edges: list[tuple[float, int]],
+        output: str) -> None:
+    """The scenarios' windows see moments; the trace sees every scan.  A reset while the
+    program still asks for what the device did not do (the spindle's run-up at 3.5 s, M03 in
+    force; the tool change at 6.5 s, after the NC's AL145 dropped its strobe) neither drops
+    the alarm for a scan nor starts the device again; after the NC reset (4.0 s) a reset
+    clears the spindle's.  (The rule before cleared both, and started the spindle into the
+    same fault.)"""
     trace = tmp_path / "t.jsonl"
     done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "spindle_reset_while_slow.toml"),
-                  "--trace", str(trace), cwd=tmp_path)
+                  str(FOLDER / "scenarios" / f"{scenario}.toml"), "--trace", str(trace),
+                  cwd=tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
-    assert bit_edges(trace, "SA52") == [(3.24, 1), (4.2, 0)]
-    assert bit_edges(trace, "SA21")[-1] == (3.24, 0)  # spindle_run: off with the alarm
+    assert bit_edges(trace, alarm) == alarm_edges
+    assert bit_edges(trace, output)[-1] == (alarm_edges[0][0], 0)  # off with the alarm
 
 
 @pytest.mark.parametrize("case", ["slow clamp", "fault only"])
@@ -269,7 +275,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "7 scenarios: 6 of 48 expectations passed" in out
+    assert "7 scenarios: 6 of 49 expectations passed" in out
 
 
 UNREACHED = """
