@@ -15,4 +15,4 @@ N120M09              ; coolant off
 N130(WAI,SA32=0)
 N140M05              ; spindle off
 N150(WAI,SA34=1)     ; spindle_halted: at standstill
-N160M30
+N160SYVAR21=1M30     ; part_done: the part is finished (the PLC counts it as P1 ends)

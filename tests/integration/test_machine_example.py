@@ -53,13 +53,16 @@ def test_the_suite_passes_and_its_junit_file_lists_every_scenario(tmp_path: Path
     lines = verdict_lines(done.stdout)
     assert lines and all(line.startswith("PASS ") for line in lines), done.stdout
     assert len(lines) == sum(len(expects_of(p)) for p in SCENARIOS)
-    # a good case and at least five bad ones, each with a fault and an expectation
+    # a good case and at least five bad ones, each with an expectation and a fault (or,
+    # program_reset_and_restarted, an operator's abort: an NC reset mid-program)
     assert len(SCENARIOS) >= 6 and (FOLDER / "scenarios" / "good.toml") in SCENARIOS
     for path in SCENARIOS:
         with path.open("rb") as f:
             table = tomllib.load(f)
         assert table.get("expect"), path.name
-        assert bool(table.get("fault")) == (path.name != "good.toml"), path.name
+        assert bool(table.get("fault") or path.name == "program_reset_and_restarted.toml") \
+            == (path.name != "good.toml"), path.name
+    assert sum(bool(tomllib.loads(p.read_text()).get("fault")) for p in SCENARIOS) >= 5
     suites = {Path(s.get("name", "")).name: s for s in ET.parse(junit).getroot()}
     assert set(suites) == {p.name for p in SCENARIOS}
     for path in SCENARIOS:
@@ -137,6 +140,24 @@ def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleare
     assert done.returncode == 0, done.stdout + done.stderr
     assert bit_edges(trace, alarm) == alarm_edges
     assert bit_edges(trace, output)[-1] == (alarm_edges[0][0], 0)  # off with the alarm
+
+
+def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_is_no_part(
+        tmp_path: Path) -> None:
+    """program_reset_and_restarted: NC.P[1].M still reads 3 after the NC reset (2.4 s).  The
+    restarted program's spindle waits for its own M03, after the tool change (the standing
+    M03 started it as the part was clamped, 2.8 s: the changer never started, AL145 at
+    7.8 s), and the aborted program counts no part (it counted one at 2.4 s)."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "program_reset_and_restarted.toml"), "--until",
+                  "8", "--trace", str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert bit_edges(trace, "SA21") == [(2.23, 1), (2.4, 0), (4.03, 1)]  # spindle_run
+    assert bit_edges(trace, "SA25") == [(1.01, 1), (2.22, 0), (2.81, 1), (4.02, 0)]  # changer
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert not [e for e in events if e["event"] == "alarm"]
+    assert bit_edges(trace, "SYVAR20") == []  # parts
 
 
 @pytest.mark.parametrize("case", ["slow clamp", "fault only"])
@@ -277,7 +298,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "7 scenarios: 6 of 50 expectations passed" in out
+    assert "8 scenarios: 8 of 56 expectations passed" in out
 
 
 UNREACHED = """
