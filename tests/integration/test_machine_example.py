@@ -142,6 +142,29 @@ def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleare
     assert bit_edges(trace, output)[-1] == (alarm_edges[0][0], 0)  # off with the alarm
 
 
+def overrides(trace: Path) -> list[tuple[float, int]]:
+    """Each change of P1's feed override in a trace file, as (time, percent)."""
+    return [(e["t"], e["feed"]) for e in map(json.loads, trace.read_text().splitlines())
+            if e["event"] == "override"]
+
+
+def test_a_reset_after_a_mended_fault_starts_nothing_until_a_cycle_start(
+        tmp_path: Path) -> None:
+    """coolant_wire_mended: the reset at 4.0 s clears the alarm with M03 and M08 in force
+    and P1 held; the spindle and the pump start at the cycle start (4.3 s), not in between
+    (they did at 4.0 s: a reset started the machine), and the feed stands at 0 % from the
+    alarm until both are back (the cut resumed at once, the spindle at rest)."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_mended.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert bit_edges(trace, "SA21") == [(2.23, 1), (3.47, 0), (4.3, 1)]  # spindle_run
+    assert bit_edges(trace, "SYVAR13") == [(2.72, 600), (3.47, 0), (4.3, 600)]  # the pump
+    # the cut waits for the spindle (at speed 4.78 s) and the pressure (4.83 s)
+    assert [o for o in overrides(trace) if o[0] > 3.4] == [(3.47, 0), (4.83, 100)]
+
+
 def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_is_no_part(
         tmp_path: Path) -> None:
     """program_reset_and_restarted: NC.P[1].M still reads 3 after the NC reset (2.4 s).  The
@@ -298,7 +321,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "8 scenarios: 8 of 56 expectations passed" in out
+    assert "9 scenarios: 8 of 64 expectations passed" in out
 
 
 UNREACHED = """
