@@ -39,10 +39,12 @@ from ncgate.gateway.opcua.model import (
     PlantView,
     PlcView,
     ProcessView,
+    StateView,
     plant_views,
     plc_view,
     process_view,
     snd_text,
+    state_view,
 )
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.inputs import Source, SourceKind, Write
@@ -89,6 +91,7 @@ class OpcuaServer:
         self._image_dirty = False
         self._sampler: asyncio.TimerHandle | None = None
         self._last: dict[int, ProcessView] = {}
+        self._last_state: dict[int, StateView] = {}
         self._last_plc: PlcView | None = None
         self._last_plant: tuple[PlantView, ...] = ()
 
@@ -173,7 +176,11 @@ class OpcuaServer:
                 "symbols": symbols, "comments": dict(gw.config.symbols.comments)}
 
     def _on_state(self, process: Process, old: ProcessState) -> None:
-        self._send_process(process.number)
+        # Every change, in order (a sampler would miss a short state); its state only.
+        view = state_view(process)
+        if self._last_state.get(process.number) != view:
+            self._last_state[process.number] = view
+            self._push(("state", view))
 
     def _send_process(self, number: int) -> None:
         view = process_view(self.gw, number)

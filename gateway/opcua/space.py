@@ -59,6 +59,7 @@ from ncgate.gateway.opcua.model import (
     Enumeration,
     EventView,
     ProcessView,
+    StateView,
 )
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
@@ -420,7 +421,9 @@ class Space:
     async def _apply(self, batch: list[tuple[str, Any]]) -> None:
         """One loop turn's changes, in the order they happened."""
         for kind, item in batch:
-            if kind == "process":
+            if kind == "state":
+                await self._show_state(item)
+            elif kind == "process":
                 await self._show_process(item)
             elif kind == "image":
                 await self._show_image(*item)
@@ -451,23 +454,29 @@ class Space:
             for alias in self._symbol_nodes.get(key, ()):
                 await server.write_attribute_value(alias, shown)
 
-    async def _show_process(self, v: ProcessView) -> None:
+    async def _show_state(self, v: StateView | ProcessView) -> None:
         k = f"P{v.number}."
         await self._show({
-            k + "ChannelState": v.channel_state, k + "FeedOverride": float(v.feed_override),
-            k + "RapidOverride": float(v.rapid_override), k + "State": v.state,
+            k + "ChannelState": v.channel_state, k + "State": v.state,
             k + "ActStatus": v.channel_state, k + "ActProgramStatus": v.program_status,
-            k + "ActProgramName": v.program, k + "ActMainProgramName": v.program,
-            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": str(v.line),
-            k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
-            k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
-            k + "N": v.n})
+            k + "ActProgramName": v.program, k + "ActMainProgramName": v.program})
         condition = self._conditions.get(v.number)
         if condition is not None and v.state != "ALARM":  # a reset: the alarm is gone
             await condition.cleared()
         if v.number == 1:  # the cell's ActiveProgram is its first process's
             await self._show({"ActiveProgram.Name": v.program,
                               "ActiveProgram.State": v.state})
+
+    async def _show_process(self, v: ProcessView) -> None:
+        await self._show_state(v)
+        k = f"P{v.number}."
+        await self._show({
+            k + "FeedOverride": float(v.feed_override),
+            k + "RapidOverride": float(v.rapid_override),
+            k + "ActProgramBlock": list(v.blocks), k + "ActProgramLine": str(v.line),
+            k + "ActFeedrate": v.feed, k + "ActOverride": float(v.feed_override),
+            k + "X": v.position[0], k + "Y": v.position[1], k + "Z": v.position[2],
+            k + "N": v.n})
 
     async def _show_image(self, sa: bytes, k: bytes, syvar: tuple[int, ...]) -> None:
         # Only what differs from the last image is looked at: a scan changes a few of its
