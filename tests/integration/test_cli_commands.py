@@ -450,6 +450,59 @@ def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_fo
     assert err.splitlines()[-1].startswith("1 file(s) checked: ") and "Traceback" not in err, err
 
 
+def _output_of(buffered: bool) -> dict[str, str]:
+    """The environment of a command whose standard output is a pipe: block-buffered as a
+    shell gives it, or written through at each write (PYTHONUNBUFFERED, as in CI)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    return env if buffered else {**env, "PYTHONUNBUFFERED": "1"}
+
+
+@pytest.mark.parametrize("buffered", [True, False], ids=["buffered", "unbuffered"])
+@pytest.mark.parametrize(("cond", "status"), [("SA10=1", 1), ("SA10=0", 0)])
+def test_sim_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_found(
+        tmp_path: Path, cond: str, status: int, buffered: bool) -> None:
+    """`ncgate sim | head -1` exited 0 whatever the scenarios found: the reader's going was a
+    BrokenPipeError out of the report, answered by main as map's, and the JUnit file was not
+    written.  Each scenario's expectation FAILs (SA10 is never set) or passes; the pipe is
+    made smaller than the report, so that sim is still writing when the reader closes."""
+    import fcntl
+    import xml.etree.ElementTree as ET
+
+    (tmp_path / "A.nc").write_text("G1X10F600\nM30\n")
+    scripts = []
+    for i in range(24):  # ~0.8 KB of report each
+        (tmp_path / f"s{i}.toml").write_text(
+            f'[[expect]]\nname = "SA10"\ncond = "{cond}"\nwithin = [0.0, 0.5]\n')
+        scripts += ["--script", f"s{i}.toml"]
+    read_end, write_end = os.pipe()
+    fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 4096)  # (Linux)
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "sim", "A.nc", *scripts,
+                             "--junit", "v.xml"], cwd=tmp_path, stdout=write_end,
+                            stderr=subprocess.PIPE, text=True, env=_output_of(buffered))
+    os.close(write_end)
+    head = os.read(read_end, 1024)
+    os.close(read_end)
+    _, err = proc.communicate(timeout=120)
+    assert head.startswith(b"== s0.toml"), head
+    assert proc.returncode == status and err == "", err
+    junit = ET.parse(tmp_path / "v.xml").getroot()
+    assert (junit.get("tests"), junit.get("failures")) == ("24", str(24 * status))
+
+
+@pytest.mark.parametrize("fmt", ["md", "csv"])
+def test_map_into_a_reader_gone_before_it_starts_exits_0_quietly(fmt: str) -> None:
+    """`ncgate map --format csv | head -0`: the 3 KB waited in a block-buffered stdout for
+    the interpreter's last flush, which met the closed pipe: "Exception ignored ...
+    BrokenPipeError", exit 120.  map only prints: 0."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    proc = subprocess.run([sys.executable, "-m", "ncgate", "map", "--format", fmt],
+                          stdout=write_end, stderr=subprocess.PIPE, text=True,
+                          env=_output_of(buffered=True), timeout=60)
+    os.close(write_end)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
 def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`ncgate check 'examples/*'` read README.md and __init__.py as part programs (47
