@@ -359,6 +359,52 @@ def test_a_config_file_name_that_is_no_file_says_what_it_is(
         assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
 
 
+SECURE_UA = '[opcua]\nsecurity = "sign"\ncertificate = "A.nc"\nprivate_key = "A.nc"\n'
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    ('[nc.storage]\nMP0 = "A.nc"\n', "nc.storage.MP0: is a file, not a folder: {tmp}/A.nc"),
+    ('[nc.storage]\nMP0 = "."\nMP1 = "A.nc"\n',
+     "nc.storage.MP1: is a file, not a folder: {tmp}/A.nc"),
+    ('[nc.storage]\nMP0 = "/dev/null"\n', "nc.storage.MP0: is not a folder: /dev/null"),
+    ('[nc.storage]\nMP0 = ""\n', "nc.storage.MP0: empty: give a folder"),
+    (SECURE_UA + 'trusted = "/dev/null"\n',
+     "opcua.trusted: is neither a regular file nor a folder: /dev/null"),
+    (SECURE_UA + 'trusted = ["sub", ""]\n',
+     "opcua.trusted[1]: empty: give a certificate file or a folder of them"),
+    ('[plc]\nretain_file = ""\n', "plc.retain_file: empty: give a file name"),
+    ('[trace]\nfile = ""\n', "trace.file: empty: give a file name"),
+    ('[modbus.tls]\ncert = "A.nc"\nkey = "A.nc"\nca = ""\n', "modbus.tls.ca: empty: give a "
+     "file name"),
+    ('symbols_file = ""\n', "symbols_file: empty: give a file name"),
+])
+def test_a_config_folder_or_optional_file_name_that_is_none_says_what_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: str, said: str) -> None:
+    """A file as a storage folder said "no such folder" (and as MP1, nothing: check and sim
+    went on); "" as opcua.trusted trusted the config's own folder, and /dev/null passed (the
+    server would fail at start reading it as a folder); "" as an optional file said "expected
+    a non-empty string", where plc.logic says "empty: give a file name"."""
+    write_cell(tmp_path, f'{extra}[nc]\nmain = "A"\n', {"A": "N1M30\n"})
+    (tmp_path / "sub").mkdir()
+    config = str(tmp_path / "ncgate.toml")
+    for command in ("check", "sim"):
+        assert main([command, "--config", config]) == 2
+        err = capsys.readouterr().err
+        assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
+
+
+def test_a_storage_folder_set_on_the_command_line_that_is_none_names_the_option(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--set nc.storage.MP0=A.nc` said "<built-in default>: ... no such folder"."""
+    (tmp_path / "A.nc").write_text("N1M30\n")
+    monkeypatch.chdir(tmp_path)
+    for value, said in (("A.nc", f"is a file, not a folder: {tmp_path.resolve()}/A.nc"),
+                        ("", "empty: give a folder")):
+        assert main(["sim", "A.nc", "--set", f"nc.storage.MP0={value}"]) == 2
+        assert capsys.readouterr().err == f"ncgate sim: --set: nc.storage.MP0: {said}\n"
+
+
 def test_check_checks_a_file_given_twice_once_and_says_so(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`ncgate check plc.st plc.st` said ST032 "Main is already defined at plc.st:1:1" of
