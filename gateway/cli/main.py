@@ -827,8 +827,8 @@ def _examples() -> int:
 def entry_point() -> None:
     status = main()
     # The last of standard output, here: a reader gone by the interpreter's own last flush
-    # (`ncgate map --format csv | head -1`, whose 3 KB sit in the buffer until then) made it
-    # "Exception ignored ... BrokenPipeError" and exit 120, whatever the command's status.
+    # (`ncgate map --format csv | head -0`: its 3 KB sit in a pipe's buffer until then) made
+    # it "Exception ignored ... BrokenPipeError" and exit 120, whatever the command's status.
     flush_stdout()
     if sys.argv[1:2] == ["run"]:
         # The gateway has stopped: every connection is closed and every file written.
