@@ -182,6 +182,14 @@ class _Reader:
         except (RuntimeError, OSError) as exc:  # (3.11: a loop is a RuntimeError)
             raise self.fail(where or key, f"cannot follow {text!r}: {exc}") from None
 
+    def path_name(self, value: Any, key: str, what: str = "a file name") -> str:
+        """``value``, given for ``key`` as the name of a file or folder: a string, and not
+        empty -- "" would be the config's own folder, which no file key means, and which a
+        folder key names as "." (docs/decisions.md)."""
+        if value == "":
+            raise self.fail(key, f"empty: give {what}")
+        return self.str_(value, key)
+
     def existing_file(self, key: str, text: str, where: str | None = None) -> Path:
         """``text``, the name of a file that ``key`` reads, as an absolute path (:meth:`path`)
         to a regular file; what it is instead is a ConfigError naming ``where`` or the key."""
@@ -202,6 +210,36 @@ class _Reader:
             raise self.fail(key, f"is a folder, not a file: {path}")
         if not stat.S_ISREG(mode):
             raise self.fail(key, f"is not a regular file: {path}")
+        return path
+
+    def folder(self, key: str, value: Any) -> Path:
+        """``value``, the name of a folder of ``key``, as an absolute path (:meth:`path`);
+        what is there instead of a folder is a ConfigError that says what it is: a file, or
+        another kind (``/dev/null``).  A folder that does not exist is the caller's to judge
+        (``run --allow-missing`` starts without a storage folder: its programs arrive later);
+        a file there is a mistake, whenever the folder comes."""
+        path = self.path(key, self.path_name(value, key, "a folder"))
+        try:
+            mode = path.stat().st_mode
+        except OSError:  # nothing there (or nothing to see): the caller's
+            return path
+        if stat.S_ISREG(mode):
+            raise self.fail(key, f"is a file, not a folder: {path}")
+        if not stat.S_ISDIR(mode):
+            raise self.fail(key, f"is not a folder: {path}")
+        return path
+
+    def file_or_folder(self, key: str, path: Path) -> Path:
+        """``path`` when it is a regular file or a folder; else a ConfigError that says what
+        it is: nothing, or another kind (``/dev/null``, a pipe)."""
+        try:
+            mode = path.stat().st_mode
+        except (FileNotFoundError, NotADirectoryError):
+            raise self.fail(key, f"no such file or folder: {path}") from None
+        except OSError as exc:
+            raise self.fail(key, f"cannot read {path}: {exc.strerror}") from None
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            raise self.fail(key, f"is neither a regular file nor a folder: {path}")
         return path
 
     def _origin(self, key: str) -> str:

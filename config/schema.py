@@ -80,8 +80,7 @@ def _storage_devices(r: _Reader, t: dict[str, Any], key: str, done: dict[str, An
     devices: dict[str, Path] = {}
     for name in STORAGE_DEVICES:
         if name in t:
-            folder = r.str_(t[name], f"{base}.{name}")
-            devices[name] = r.path(f"{base}.{name}", folder)
+            devices[name] = r.folder(f"{base}.{name}", t[name])
     return devices or {"MP0": r.base.resolve()}
 
 
@@ -135,7 +134,7 @@ _SYMBOL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 def _symbols_file(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     if "symbols_file" not in t:
         return None
-    return r.existing_file(key, r.str_(t["symbols_file"], key))
+    return r.existing_file(key, r.path_name(t["symbols_file"], key))
 
 
 def _io_list(r: _Reader, path: Path, key: str) -> list[tuple[str, str, Any]]:
@@ -317,7 +316,7 @@ def _optional_path(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
     name = key.rsplit(".", 1)[1]
     if name not in t:
         return None
-    return r.path(key, r.str_(t[name], key))
+    return r.path(key, r.path_name(t[name], key))
 
 
 def _logic(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
@@ -965,11 +964,11 @@ def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
         raise r.fail(key, f"expected a certificate file or folder, or a list of them, got {raw!r}")
     paths = []
     for i, item in enumerate(items):
-        path = r.path(key, item, key if isinstance(raw, str) else f"{key}[{i}]")
-        if not path.exists():
-            raise r.fail(key if isinstance(raw, str) else f"{key}[{i}]",
-                         f"no such file or folder: {path}")
-        paths.append(path)
+        where = key if isinstance(raw, str) else f"{key}[{i}]"
+        # (asyncua reads a file as one certificate and a folder's *.pem, *.der, *.crt, *.cer:
+        # gateway/opcua/space.py; "" would be the config's folder, /dev/null neither)
+        text = r.path_name(item, where, "a certificate file or a folder of them")
+        paths.append(r.file_or_folder(where, r.path(key, text, where)))
     security, host = done["security"], done["host"]
     if paths and security is UaSecurity.NONE:
         raise r.fail(key, 'client certificates are exchanged only with security "sign" or '
@@ -994,8 +993,8 @@ def _opcua_users(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) 
     for name, given in raw.items():
         if isinstance(given, dict) and set(given) == {"certificate"}:
             # A certificate user: the client presents this certificate as its identity.
-            users[name] = r.path(key, r.str_(given["certificate"],
-                                             f"{key}.{name}.certificate"))
+            users[name] = r.path(key, r.path_name(given["certificate"],
+                                                  f"{key}.{name}.certificate"))
             continue
         parts = given.split("$") if isinstance(given, str) else []
         if len(parts) != 4 or parts[0] != "pbkdf2_sha256" or not parts[1].isdigit():

@@ -18,6 +18,7 @@ from ncgate.errors import NcgateError
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.gateway.lifecycle import tune_interpreter
+from ncgate.gateway.stdout import flush_stdout, stdout, stdout_gone
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
@@ -214,8 +215,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ProgramError, LogicError) as exc:  # diagnostics, each with its source line
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
-    except BrokenPipeError:  # `ncgate map | head`: the reader has what it wanted
-        _stdout_gone()
+    except BrokenPipeError:
+        # `ncgate map | head`: the reader has what it wanted, and map only prints.  A command
+        # whose status says what it found (sim, sweep) writes through stdout(), and check
+        # catches its own: they never get here.
+        stdout_gone()
         return EXIT_OK
     except (NcgateError, OSError) as exc:  # ours, or the system's (a path, a port): said
         print(f"ncgate {args.command}: {exc}", file=sys.stderr)
@@ -227,14 +231,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BUG
     parser.error(f"unknown command {args.command}")
     return EXIT_USAGE  # not reached: parser.error exits
-
-
-def _stdout_gone() -> None:
-    """After the reader of standard output went (``| head``): what is left of the output goes
-    nowhere, so that the interpreter's last flush makes no second error."""
-    null = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(null, sys.stdout.fileno())
-    os.close(null)
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -276,7 +272,7 @@ def _check(args: argparse.Namespace) -> int:
         # `ncgate check | head -1`: the reader has what it wanted, and the status is still
         # what was found (main's exit 0 is map's: it only prints); the summary still goes
         # to stderr.
-        _stdout_gone()
+        stdout_gone()
     if not args.quiet:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=sys.stderr)
@@ -359,10 +355,13 @@ def _sim(args: argparse.Namespace) -> int:
         raise UsageError("--trace and --gantt take one scenario: give one --script")
     status = EXIT_OK
     verdicts = []
+    # `sim | head -1`: a reader that goes early stops neither the scenarios nor the files
+    # written after them, and the status is still what the simulation found.
+    output = stdout()
     for script in scripts:  # each an independent scenario, on a runtime of its own
         name = shown.get(script.file) or _relative(Path(script.file), Path.cwd())
         if len(scripts) > 1:
-            print(f"== {name}")
+            print(f"== {name}", file=output)
         try:
             result = run_sim(config, mains, script, args.until, signals=True,
                              single_block=args.single_block, breaks=args.breaks,
@@ -373,7 +372,7 @@ def _sim(args: argparse.Namespace) -> int:
             _suggest_dialect("sim", [(path, config) for name in mains
                                      if (path := storage.find(name)) is not None])
             return EXIT_USAGE
-        report(result, sys.stdout)
+        report(result, output)
         verdicts.append((name, result.verdicts))
         status = max(status, result.exit_status)
     if args.junit:
@@ -384,7 +383,9 @@ def _sim(args: argparse.Namespace) -> int:
     if len(scripts) > 1:
         failed = sum(1 for _, items in verdicts for v in items if not v.ok)
         total = sum(len(items) for _, items in verdicts)
-        print(f"{len(scripts)} scenarios: {total - failed} of {total} expectations passed")
+        print(f"{len(scripts)} scenarios: {total - failed} of {total} expectations passed",
+              file=output)
+        output.flush()
         return status
     if args.trace:
         with open(args.trace, "w", encoding="utf-8") as out:
@@ -393,6 +394,7 @@ def _sim(args: argparse.Namespace) -> int:
         with open(args.gantt, "w", encoding="utf-8") as out:
             write_gantt(result.events, result.runtime.config.nc.processes, out,
                         external=result.runtime.config.nc.external)
+    output.flush()
     return result.exit_status
 
 
@@ -462,14 +464,18 @@ def _replay(args: argparse.Namespace) -> int:
         with open(args.gantt, "w", encoding="utf-8") as out:
             write_gantt(result.events, config.processes, out, external=config.external)
     recording = result.recording
+    output = stdout()  # (`sim --replay R | head -1`: the status is still the replay's)
     print(f"replayed {args.replay}: {len(recording.inputs)} inputs over "
           f"{recording.end:.3f} s of machine time"
-          + ("" if recording.stop is not None else " (the session did not stop cleanly)"))
+          + ("" if recording.stop is not None else " (the session did not stop cleanly)"),
+          file=output)
     if result.divergence is not None:
-        print(result.divergence)
+        print(result.divergence, file=output)
+        output.flush()
         return EXIT_FAILED
     print(f"the replay matches: {result.compared} events of the processes, in the same order, "
-          f"within {args.tolerance_ms:g} ms")
+          f"within {args.tolerance_ms:g} ms", file=output)
+    output.flush()
     return EXIT_OK
 
 
@@ -820,13 +826,16 @@ def _examples() -> int:
 
 def entry_point() -> None:
     status = main()
+    # The last of standard output, here: a reader gone by the interpreter's own last flush
+    # (`ncgate map --format csv | head -0`: its 3 KB sit in a pipe's buffer until then) made
+    # it "Exception ignored ... BrokenPipeError" and exit 120, whatever the command's status.
+    flush_stdout()
     if sys.argv[1:2] == ["run"]:
         # The gateway has stopped: every connection is closed and every file written.
         # What is left is the interpreter freeing the heap object by object (seconds for a
         # 10 MB program) and waiting for a program still being read: a SIGTERM must end the
         # process within a second, so it ends here.
         logging.shutdown()
-        sys.stdout.flush()
         sys.stderr.flush()
         os._exit(status)
     sys.exit(status)

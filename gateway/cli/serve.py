@@ -25,6 +25,7 @@ from ncgate.gateway.app import Gateway
 from ncgate.gateway.plc import LogicWatcher
 from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.gateway.stdout import stdout
 from ncgate.inputs import Command, CommandKind, Source, SourceKind, Start
 from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
@@ -289,8 +290,9 @@ class _Scenario:
         # more to stop), else up to where it was stopped.
         end = self.horizon if self.reached else None
         verdicts = self.expectations.verdicts(end)
+        out = stdout()  # (`run --script S | head -1`: the status is still the verdicts')
         for v in verdicts:
-            print(v.line(), flush=True)
+            print(v.line(), file=out, flush=True)
         return 0 if all(v.ok for v in verdicts) else 1
 
 

@@ -15,8 +15,9 @@ from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO, cast
+from typing import TextIO
 
+from ncgate.gateway.stdout import stdout
 from ncgate.gateway.sweep.run import Result
 from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
 from ncgate.gateway.sweep.table import (
@@ -206,7 +207,9 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     from ncgate.gateway.sweep.spec import load_spec
 
     check_options(options)
-    out = cast(TextIO, _Stdout())
+    # `ncgate sweep ... | head`: a reader that goes early stops neither the sweep nor its
+    # table, and the status is still the rows' (the flush at the end: it was exit 120).
+    out = stdout()
     spec = load_spec(spec_path, explore)
     if spec.draws is not None and spec.draws[1] < spec.draws[0]:
         where = "--explore" if explore is not None else "[random]"
@@ -215,33 +218,8 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     status, rows = run_sweep(spec, options, out)
     if explore is not None and rows:
         findings(rows, spec, out, options.timeout_s)
+    out.flush()
     return status
-
-
-class _Stdout:
-    """stdout that a closed reader (``ncgate sweep ... | head``) does not stop: what is left
-    to say goes nowhere, and the sweep goes on to write its table."""
-
-    def write(self, text: str) -> int:
-        try:
-            return sys.stdout.write(text)
-        except BrokenPipeError:
-            self._gone()
-            return len(text)
-
-    def flush(self) -> None:
-        try:
-            sys.stdout.flush()
-        except BrokenPipeError:
-            self._gone()
-
-    @staticmethod
-    def _gone() -> None:
-        # As the Python docs advise: the rest (and the interpreter's flush at exit) to
-        # /dev/null, not an "Exception ignored ... BrokenPipeError" at the end.
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, sys.stdout.fileno())
-        os.close(null)
 
 
 def findings(rows: Sequence[Row], spec: Spec, out: TextIO,

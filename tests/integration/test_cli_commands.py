@@ -359,6 +359,52 @@ def test_a_config_file_name_that_is_no_file_says_what_it_is(
         assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
 
 
+SECURE_UA = '[opcua]\nsecurity = "sign"\ncertificate = "A.nc"\nprivate_key = "A.nc"\n'
+
+
+@pytest.mark.parametrize(("extra", "said"), [
+    ('[nc.storage]\nMP0 = "A.nc"\n', "nc.storage.MP0: is a file, not a folder: {tmp}/A.nc"),
+    ('[nc.storage]\nMP0 = "."\nMP1 = "A.nc"\n',
+     "nc.storage.MP1: is a file, not a folder: {tmp}/A.nc"),
+    ('[nc.storage]\nMP0 = "/dev/null"\n', "nc.storage.MP0: is not a folder: /dev/null"),
+    ('[nc.storage]\nMP0 = ""\n', "nc.storage.MP0: empty: give a folder"),
+    (SECURE_UA + 'trusted = "/dev/null"\n',
+     "opcua.trusted: is neither a regular file nor a folder: /dev/null"),
+    (SECURE_UA + 'trusted = ["sub", ""]\n',
+     "opcua.trusted[1]: empty: give a certificate file or a folder of them"),
+    ('[plc]\nretain_file = ""\n', "plc.retain_file: empty: give a file name"),
+    ('[trace]\nfile = ""\n', "trace.file: empty: give a file name"),
+    ('[modbus.tls]\ncert = "A.nc"\nkey = "A.nc"\nca = ""\n', "modbus.tls.ca: empty: give a "
+     "file name"),
+    ('symbols_file = ""\n', "symbols_file: empty: give a file name"),
+])
+def test_a_config_folder_or_optional_file_name_that_is_none_says_what_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: str, said: str) -> None:
+    """A file as a storage folder said "no such folder" (and as MP1, nothing: check and sim
+    went on); "" as opcua.trusted trusted the config's own folder, and /dev/null passed (the
+    server would fail at start reading it as a folder); "" as an optional file said "expected
+    a non-empty string", where plc.logic says "empty: give a file name"."""
+    write_cell(tmp_path, f'{extra}[nc]\nmain = "A"\n', {"A": "N1M30\n"})
+    (tmp_path / "sub").mkdir()
+    config = str(tmp_path / "ncgate.toml")
+    for command in ("check", "sim"):
+        assert main([command, "--config", config]) == 2
+        err = capsys.readouterr().err
+        assert f"ncgate {command}: {config}: {said.format(tmp=tmp_path.resolve())}\n" == err
+
+
+def test_a_storage_folder_set_on_the_command_line_that_is_none_names_the_option(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--set nc.storage.MP0=A.nc` said "<built-in default>: ... no such folder"."""
+    (tmp_path / "A.nc").write_text("N1M30\n")
+    monkeypatch.chdir(tmp_path)
+    for value, said in (("A.nc", f"is a file, not a folder: {tmp_path.resolve()}/A.nc"),
+                        ("", "empty: give a folder")):
+        assert main(["sim", "A.nc", "--set", f"nc.storage.MP0={value}"]) == 2
+        assert capsys.readouterr().err == f"ncgate sim: --set: nc.storage.MP0: {said}\n"
+
+
 def test_check_checks_a_file_given_twice_once_and_says_so(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`ncgate check plc.st plc.st` said ST032 "Main is already defined at plc.st:1:1" of
@@ -448,6 +494,59 @@ def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_fo
     assert head.startswith(f"{tmp_path / 'A.nc'}:1:".encode()), head
     assert proc.returncode == status, err
     assert err.splitlines()[-1].startswith("1 file(s) checked: ") and "Traceback" not in err, err
+
+
+def _output_of(buffered: bool) -> dict[str, str]:
+    """The environment of a command whose standard output is a pipe: block-buffered as a
+    shell gives it, or written through at each write (PYTHONUNBUFFERED, as in CI)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    return env if buffered else {**env, "PYTHONUNBUFFERED": "1"}
+
+
+@pytest.mark.parametrize("buffered", [True, False], ids=["buffered", "unbuffered"])
+@pytest.mark.parametrize(("cond", "status"), [("SA10=1", 1), ("SA10=0", 0)])
+def test_sim_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_found(
+        tmp_path: Path, cond: str, status: int, buffered: bool) -> None:
+    """`ncgate sim | head -1` exited 0 whatever the scenarios found: the reader's going was a
+    BrokenPipeError out of the report, answered by main as map's, and the JUnit file was not
+    written.  Each scenario's expectation FAILs (SA10 is never set) or passes; the pipe is
+    made smaller than the report, so that sim is still writing when the reader closes."""
+    import fcntl
+    import xml.etree.ElementTree as ET
+
+    (tmp_path / "A.nc").write_text("G1X10F600\nM30\n")
+    scripts = []
+    for i in range(24):  # ~0.8 KB of report each
+        (tmp_path / f"s{i}.toml").write_text(
+            f'[[expect]]\nname = "SA10"\ncond = "{cond}"\nwithin = [0.0, 0.5]\n')
+        scripts += ["--script", f"s{i}.toml"]
+    read_end, write_end = os.pipe()
+    fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 4096)  # (Linux)
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "sim", "A.nc", *scripts,
+                             "--junit", "v.xml"], cwd=tmp_path, stdout=write_end,
+                            stderr=subprocess.PIPE, text=True, env=_output_of(buffered))
+    os.close(write_end)
+    head = os.read(read_end, 1024)
+    os.close(read_end)
+    _, err = proc.communicate(timeout=120)
+    assert head.startswith(b"== s0.toml"), head
+    assert proc.returncode == status and err == "", err
+    junit = ET.parse(tmp_path / "v.xml").getroot()
+    assert (junit.get("tests"), junit.get("failures")) == ("24", str(24 * status))
+
+
+@pytest.mark.parametrize("fmt", ["md", "csv"])
+def test_map_into_a_reader_gone_before_it_starts_exits_0_quietly(fmt: str) -> None:
+    """`ncgate map --format csv | head -0`: the 3 KB waited in a block-buffered stdout for
+    the interpreter's last flush, which met the closed pipe: "Exception ignored ...
+    BrokenPipeError", exit 120.  map only prints: 0."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    proc = subprocess.run([sys.executable, "-m", "ncgate", "map", "--format", fmt],
+                          stdout=write_end, stderr=subprocess.PIPE, text=True,
+                          env=_output_of(buffered=True), timeout=60)
+    os.close(write_end)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
 def test_check_of_a_glob_takes_the_programs_not_the_readme_beside_them(

@@ -8,6 +8,7 @@ import json
 import os
 import re
 import signal
+import subprocess
 import sys
 from pathlib import Path
 
@@ -414,3 +415,25 @@ async def test_run_logs_a_scripts_fault_and_its_end_by_for_s(tmp_path: Path) -> 
     assert "fault exception on modbus cleared (for_s 0.2)" in log, log
     assert "fault never on clamp (by script fault[1])" in log, log
     assert "Fault(" not in log
+
+
+def test_run_script_into_a_reader_gone_early_exits_with_its_verdicts_status(
+        tmp_path: Path) -> None:
+    """`ncgate run --script S | head -1` exited 0 with every expectation failed: the verdict
+    lines after the first were a BrokenPipeError, answered by main as map's.  Here the reader
+    is gone before the first line."""
+    (tmp_path / "O1.nc").write_text("N10 G1X10F6000\nN20 M30\n")
+    config = tmp_path / "ncgate.toml"
+    config.write_text('[nc]\nprocesses = 1\nmain = "O1"\n[nc.storage]\nMP0 = "."\n'
+                      '[modbus]\nport = 0\n[canopen]\nenabled = false\n[web]\n'
+                      'enabled = false\n')
+    script = tmp_path / "s.toml"
+    script.write_text("".join(f'[[expect]]\nname = "SA10 set {i}"\ncond = "SA10=1"\n'
+                              'within = [0.0, 0.3]\n' for i in range(3)))
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    done = subprocess.run([sys.executable, "-m", "ncgate", "run", "--config", str(config),
+                           "--script", str(script), "-q"], stdout=write_end,
+                          stderr=subprocess.PIPE, text=True, timeout=60)
+    os.close(write_end)
+    assert done.returncode == 1 and done.stderr == "", done.stderr

@@ -1,0 +1,53 @@
+"""Standard output whose reader may go early (``ncgate sim | head -1``, ``ncgate map | head``,
+``ncgate sweep ... | head``): the one answer of the command line and the sweep to a closed
+pipe.  What is left to say goes to /dev/null, as the Python docs advise (signal module, "Note
+on SIGPIPE"), so that neither a later write nor the interpreter's last flush fails again --
+that flush, failing, says "Exception ignored ... BrokenPipeError" and makes the exit status
+120, whatever the command found.  The command goes on to its end (a sweep's table, sim's
+JUnit file) and exits with its own status.
+
+Imports the standard library only: the CLI and the sweep both use it."""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import TextIO, cast
+
+
+def stdout_gone() -> None:
+    """After the reader of standard output went: the rest of the output goes nowhere."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
+
+
+def flush_stdout() -> None:
+    """Flush standard output, here rather than at the interpreter's exit: a reader that went
+    meanwhile is :func:`stdout_gone`, not exit status 120."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        stdout_gone()
+
+
+class _Stdout:
+    """sys.stdout (looked up at each write: pytest's capsys swaps it) that a closed reader
+    does not stop."""
+
+    def write(self, text: str) -> int:
+        try:
+            return sys.stdout.write(text)
+        except BrokenPipeError:
+            stdout_gone()
+            return len(text)
+
+    def flush(self) -> None:
+        flush_stdout()
+
+
+def stdout() -> TextIO:
+    """Standard output for a command whose exit status says what it found (sim, sweep): a
+    reader that goes early stops none of it (see the module's docstring).  Flush it before
+    the command returns, so that a reader gone by then is not the interpreter's to meet."""
+    return cast(TextIO, _Stdout())
