@@ -17,9 +17,28 @@ from typing import TextIO, cast
 
 def stdout_gone() -> None:
     """After the reader of standard output went: the rest of the output goes nowhere."""
+    _gone(sys.stdout)
+
+
+def stderr_gone() -> None:
+    """After the reader of standard error went (``ncgate check ... 2>&1 | head -1``): the rest
+    of what the command says goes nowhere, and its exit status is still what it found."""
+    _gone(sys.stderr)
+
+
+def _gone(stream: TextIO) -> None:
     null = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(null, sys.stdout.fileno())
+    os.dup2(null, stream.fileno())
     os.close(null)
+
+
+def closed_streams() -> None:
+    """Standard output or error closed before the command started (``ncgate check >&-``):
+    Python gives None for it, and what the command says there goes nowhere instead."""
+    if sys.stdout is None:
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (the process's, to its end)
+    if sys.stderr is None:
+        sys.stderr = open(os.devnull, "w")  # noqa: SIM115
 
 
 def flush_stdout() -> None:

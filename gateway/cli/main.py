@@ -18,7 +18,13 @@ from ncgate.errors import NcgateError
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.gateway.lifecycle import tune_interpreter
-from ncgate.gateway.stdout import flush_stdout, stdout, stdout_gone
+from ncgate.gateway.stdout import (
+    closed_streams,
+    flush_stdout,
+    stderr_gone,
+    stdout,
+    stdout_gone,
+)
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
@@ -246,8 +252,11 @@ def _check(args: argparse.Namespace) -> int:
     cell = None  # with no FILE: the cell's programs, and its [plc] and [plant] logic
     if args.files:
         files, again = expand(args.files)
-        for path in again if not args.quiet else ():
-            print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
+        try:
+            for path in again if not args.quiet else ():
+                print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
+        except BrokenPipeError:  # (2>&1 | head -0: what it finds is still its status)
+            stderr_gone()
     else:
         cell = config or load_config(None, serving=False)
         _require_default_device(cell)
@@ -273,14 +282,19 @@ def _check(args: argparse.Namespace) -> int:
         # what was found (main's exit 0 is map's: it only prints); the summary still goes
         # to stderr.
         stdout_gone()
-    if not args.quiet:
-        print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
-              file=sys.stderr)
-    if errors and dialect is None:
-        from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
+    try:
+        if not args.quiet:
+            print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
+                  file=sys.stderr)
+        if errors and dialect is None:
+            from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
 
-        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in programs
-                                   if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
+            _suggest_dialect("check", [
+                (r.path, config_for(r.path, config)) for r in programs
+                if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
+        sys.stderr.flush()
+    except BrokenPipeError:  # `ncgate check ... 2>&1 | head -1`: stderr was that pipe too
+        stderr_gone()
     return EXIT_FAILED if errors else EXIT_OK
 
 
@@ -825,6 +839,7 @@ def _examples() -> int:
 
 
 def entry_point() -> None:
+    closed_streams()  # (`ncgate check >&-`: its status, not a traceback)
     status = main()
     # The last of standard output, here: a reader gone by the interpreter's own last flush
     # (`ncgate map --format csv | head -0`: its 3 KB sit in a pipe's buffer until then) made

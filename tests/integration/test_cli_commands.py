@@ -496,6 +496,35 @@ def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_fo
     assert err.splitlines()[-1].startswith("1 file(s) checked: ") and "Traceback" not in err, err
 
 
+@pytest.mark.parametrize(("program", "status"), [("N1(WAI,SA1=)\nM30\n", 1), ("N1G999\nM30\n", 0)])
+def test_check_with_both_streams_into_a_reader_gone_keeps_the_status_it_found(
+        tmp_path: Path, program: str, status: int) -> None:
+    """`ncgate check ... 2>&1 | head -0` (or `| true`): the summary on stderr met the closed
+    pipe, and main's BrokenPipe answer (map's) made it exit 0 -- a CI step with pipefail went
+    green with errors (a hostile try)."""
+    (tmp_path / "A.nc").write_text(program)
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before check writes a line
+    proc = subprocess.run([sys.executable, "-m", "ncgate", "check", str(tmp_path / "A.nc")],
+                          stdout=write_end, stderr=write_end, timeout=60)
+    os.close(write_end)
+    assert proc.returncode == status
+
+
+@pytest.mark.parametrize("command", [["check", "A.nc"], ["sim", "A.nc"]])
+def test_a_command_with_its_standard_output_closed_says_its_status_not_a_traceback(
+        tmp_path: Path, command: list[str]) -> None:
+    """`ncgate check A.nc >&-`: Python's sys.stdout is None, and check's flush of it was
+    'this is a bug in ncgate' (exit 70); sim's too.  What it would print goes nowhere."""
+    (tmp_path / "A.nc").write_text("N1(WAI,SA1=)\nM30\n" if command[0] == "check"
+                                   else "N1(DLY,0.1)\nM30\n")
+    proc = subprocess.run(["sh", "-c", 'exec "$@" >&-', "sh", sys.executable, "-m", "ncgate",
+                           *command], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=60)
+    assert "Traceback" not in proc.stderr and "a bug in ncgate" not in proc.stderr, proc.stderr
+    assert proc.returncode == (1 if command[0] == "check" else 0), proc.stderr
+
+
 def _output_of(buffered: bool) -> dict[str, str]:
     """The environment of a command whose standard output is a pipe: block-buffered as a
     shell gives it, or written through at each write (PYTHONUNBUFFERED, as in CI)."""
