@@ -341,6 +341,11 @@ def _programs(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> 
         raise r.fail(key, f"expected a list of PROGRAM names, got {raw!r}")
     if raw and not done.get("logic"):
         raise r.fail(key, f"names programs, but {key.rsplit('.', 1)[0]}.logic names no file")
+    seen = [name.upper() for name in raw]  # (ST's names know no case)
+    for i, name in enumerate(seen):
+        if name in seen[:i]:
+            raise r.fail(f"{key}[{i}]", f"{raw[i]} is listed twice (also {key}"
+                         f"[{seen.index(name)}]): a PROGRAM runs once a scan")
     return tuple(raw)
 
 

@@ -74,6 +74,10 @@ def expand(arguments: Sequence[str]) -> tuple[list[Path], list[Path]]:
     its programs and logic (.nc, .txt, .st, .xml), not a README or a config beside them."""
     out: list[Path] = []
     for arg in arguments:
+        if not arg:  # (Path("") is the current folder: `check "$UNSET"` checked that)
+            raise UsageError("an empty argument: give a file, a folder or a glob")
+        if arg.endswith("/") and not Path(arg).is_dir():  # (Path drops the slash)
+            raise UsageError(f"not a folder: {arg}")
         magic = glob.has_magic(arg)
         matches = sorted(glob.glob(arg, recursive=True)) if magic else [arg]
         if not matches:
@@ -95,13 +99,14 @@ def _once(paths: Sequence[Path]) -> tuple[list[Path], list[Path]]:
     """``paths`` without a file met before, and those dropped.  A file is one file whatever
     it is called: an ST file checked beside itself would be ST032 at its own line, "defined
     where it is defined", and a program's diagnostics would be said and counted twice."""
-    seen: set[Path] = set()
+    seen: set[tuple[int, int]] = set()
     once: list[Path] = []
     again: list[Path] = []
     for path in paths:
-        real = path.resolve()
-        (again if real in seen else once).append(path)
-        seen.add(real)
+        found = path.stat()  # (the file itself, whatever its name: a link, a hard link)
+        key = (found.st_dev, found.st_ino)
+        (again if key in seen else once).append(path)
+        seen.add(key)
     return once, again
 
 

@@ -247,9 +247,10 @@ def _check(args: argparse.Namespace) -> int:
             raise UsageError("--example goes without --config and FILE")
         example = find_example(args.example)
         args.files = [str(example.folder)]
+        args.config = str(example.config) if example.config.is_file() else None
     # check opens no server: what only a server needs (the console's bind) is not its concern
     config = load_config(args.config, serving=False) if args.config else None
-    cell = None  # with no FILE: the cell's programs, and its [plc] and [plant] logic
+    cell = None  # the cell whose [plc] and [plant] logic is checked as sim and run load it
     if args.files:
         files, again = expand(args.files)
         try:
@@ -257,6 +258,13 @@ def _check(args: argparse.Namespace) -> int:
                 print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
         except BrokenPipeError:  # (2>&1 | head -0: what it finds is still its status)
             stderr_gone()
+        if config is not None:
+            # --config (or --example): its own logic is checked as the cell loads it (its
+            # PROGRAMs chosen), also when named; another ST file named is checked alone (a
+            # library's may hold no PROGRAM).
+            cell = config
+            logic = {path.resolve() for path in (*config.plc.logic, *config.plant.logic)}
+            files = [path for path in files if path.resolve() not in logic]
     else:
         cell = config or load_config(None, serving=False)
         _require_default_device(cell)

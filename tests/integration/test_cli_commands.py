@@ -308,6 +308,9 @@ def test_check_of_a_config_refuses_what_run_and_sim_refuse_of_its_plant(
     ("lib.st", "", "{section}.logic: the files hold no PROGRAM to run"),
     ("main.st", 'programs = ["nosuch"]\n',
      "{section}.programs[0]: no PROGRAM nosuch in {section}.logic (PROGRAMs: Main)"),
+    ("main.st", 'programs = ["Main", "main"]\n',  # (it ran twice a scan)
+     "{section}.programs[1]: main is listed twice (also {section}.programs[0]): a PROGRAM "
+     "runs once a scan"),
 ])
 def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], section: str, logic: str,
@@ -325,8 +328,16 @@ def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
     for command in ("sim", "check"):
         assert main([command, "--config", config]) == 2
         assert message in capsys.readouterr().err, command
-    assert main(["check", "--config", config, str(tmp_path / logic)]) == 0  # a file, named:
-    # its own check, as a library's may hold no PROGRAM
+    # The config's own logic, named as a file beside --config, is still the cell's (a hostile
+    # try: `check --config C noprog.st` said 0 errors); another ST file named is checked
+    # alone, as a library's may hold no PROGRAM.
+    assert main(["check", "--config", config, str(tmp_path / logic)]) == 2
+    assert message in capsys.readouterr().err
+    (tmp_path / "other.st").write_text((tmp_path / "lib.st").read_text().replace("Lib", "Other"))
+    fine = tmp_path / "fine.toml"
+    fine.write_text(f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[{section}]\n'
+                    'logic = "main.st"\n')
+    assert main(["check", "--config", str(fine), str(tmp_path / "other.st")]) == 0
 
 
 @pytest.mark.parametrize(("extra", "said"), [
@@ -426,6 +437,24 @@ def test_check_checks_a_file_given_twice_once_and_says_so(
     assert main(["check", "--config", str(tmp_path / "ncgate.toml")]) == 1
     out, err = capsys.readouterr()
     assert out.count("A.nc:2:") == 1 and "1 file(s) checked: 1 error(s)" in err, out + err
+
+
+def test_check_takes_a_hard_link_for_the_file_and_refuses_an_empty_or_slashed_argument(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A hostile try: a hard link was checked beside its file (ST032 "already defined" at its
+    own line); `check ""` checked the current folder (`check "$UNSET"` passed); `check
+    plc.st/` took the file."""
+    st = tmp_path / "main.st"
+    st.write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\nEND_PROGRAM\n")
+    os.link(st, tmp_path / "hard.st")
+    assert main(["check", str(st), str(tmp_path / "hard.st")]) == 0
+    assert capsys.readouterr().err == (f"ncgate check: {tmp_path / 'hard.st'} is given twice: "
+                                       "checked once\n1 file(s) checked: 0 error(s), "
+                                       "0 warning(s)\n")
+    for arg, said in (("", "an empty argument: give a file, a folder or a glob"),
+                      (f"{st}/", f"not a folder: {st}/")):
+        assert main(["check", arg]) == 2
+        assert capsys.readouterr().err == f"ncgate check: {said}\n"
 
 
 # -- item 15: the built-in cell runs its own programs without a hazard --------------------------
