@@ -165,6 +165,22 @@ def test_a_reset_after_a_mended_fault_starts_nothing_until_a_cycle_start(
     assert [o for o in overrides(trace) if o[0] > 3.4] == [(3.47, 0), (4.83, 100)]
 
 
+def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
+    """coolant_wire_break_idle: the wire breaks (0.5 s) with P1 idle, the door and the clamp
+    open.  The PLC never turns a valve or the lock on (the rule before closed the clamp and
+    the door, and locked it: an alarm drove the door shut on the operator's hand).  The
+    scenario's windows see moments; the trace sees every scan."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert bit_edges(trace, "SA53") == [(0.5, 1)]  # coolant_alarm
+    # clamp_valve, door_valve, door_lock: never written, the plant's switches never move
+    assert [bit_edges(trace, var) for var in ("SA20", "SA22", "SA23")] == [[], [], []]
+    assert bit_edges(trace, "SA42")[-1] == (0.0, 1)  # door_open
+
+
 def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_is_no_part(
         tmp_path: Path) -> None:
     """program_reset_and_restarted: NC.P[1].M still reads 3 after the NC reset (2.4 s).  The
@@ -321,7 +337,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "9 scenarios: 8 of 64 expectations passed" in out
+    assert "10 scenarios: 12 of 68 expectations passed" in out
 
 
 UNREACHED = """
