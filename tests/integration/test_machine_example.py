@@ -181,6 +181,33 @@ def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
     assert bit_edges(trace, "SA42")[-1] == (0.0, 1)  # door_open
 
 
+def test_after_an_alarm_with_the_cell_idle_one_cycle_start_starts_the_program(
+        tmp_path: Path) -> None:
+    """coolant_wire_mended_idle: the PLC's alarm (0.5 s, P1 idle) holds no idle program, so
+    the one cycle start after the reset (1.2 s) starts PART.  (NC.HOLD_LEVEL := any_alarm held
+    the idle P1, and that cycle start only released the hold: nothing started, no word of it
+    but a hold event.)  A cycle start while the alarm stands is refused, by the config's
+    inhibit input, not taken into a hold."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_mended_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert not [e for e in events if e["event"] == "hold"]
+    assert [(e["t"], e["by"]) for e in events if e["event"] == "start"] == [
+        (0.0, "script"), (1.2, "script command[1]")]
+    trace = tmp_path / "refused.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert [(e["t"], e["message"]) for e in events if e["event"] == "hazard"] == [
+        (1.0, "script command[1]: cycle_start: cycle start inhibit input SA49 is set")]
+    assert [e["t"] for e in events if e["event"] == "start"] == [0.0]
+
+
 def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_is_no_part(
         tmp_path: Path) -> None:
     """program_reset_and_restarted: NC.P[1].M still reads 3 after the NC reset (2.4 s).  The
@@ -337,7 +364,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "10 scenarios: 12 of 68 expectations passed" in out
+    assert "11 scenarios: 19 of 75 expectations passed" in out
 
 
 UNREACHED = """
