@@ -122,17 +122,19 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
 @pytest.mark.parametrize(("scenario", "alarm", "alarm_edges", "output"), [
     ("spindle_reset_while_slow", "SA52", [(3.24, 1), (4.2, 0)], "SA21"),
     ("io_device_silent", "SA54", [(4.02, 1)], "SA25"),
-    ("door_switch_chatters", "SA51", [(4.27, 1)], "SA21")])
+    ("door_switch_chatters", "SA51", [(4.27, 1)], "SA21"),
+    ("coolant_pressure_low", "SA55", [(4.47, 1)], "SYVAR13")])
 def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleared(
         tmp_path: Path, scenario: str, alarm: str, alarm_edges: list[tuple[float, int]],
         output: str) -> None:
     """The scenarios' windows see moments; the trace sees every scan.  A reset while the
     program still asks for what the device did not do (the spindle's run-up at 3.5 s, M03 in
-    force; the tool change at 6.5 s, after the NC's AL145 dropped its strobe), or while the
-    door switch chatters (5.525 s, reading closed), neither drops the alarm for a scan nor
-    starts the device again; after the NC reset (4.0 s) a reset clears the spindle's.  (The
-    rule before cleared all three, and started the spindle: into the same fault, or for the
-    40 ms until the switch read open.)"""
+    force; the line pressure at 4.6 s, M08 in force; the tool change at 6.5 s, after the NC's
+    AL145 dropped its strobe), or while the door switch chatters (5.525 s, reading closed),
+    neither drops the alarm for a scan nor starts the device again; after the NC reset
+    (4.0 s) a reset clears the spindle's.  (The rule before cleared the first three, and
+    started the spindle: into the same fault, or for the 40 ms until the switch read open;
+    the pressure had no alarm.)"""
     trace = tmp_path / "t.jsonl"
     done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
                   str(FOLDER / "scenarios" / f"{scenario}.toml"), "--trace", str(trace),
@@ -364,7 +366,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "11 scenarios: 19 of 75 expectations passed" in out
+    assert "12 scenarios: 19 of 80 expectations passed" in out
 
 
 UNREACHED = """
