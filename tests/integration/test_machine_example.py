@@ -122,17 +122,19 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
 @pytest.mark.parametrize(("scenario", "alarm", "alarm_edges", "output"), [
     ("spindle_reset_while_slow", "SA52", [(3.24, 1), (4.2, 0)], "SA21"),
     ("io_device_silent", "SA54", [(4.02, 1)], "SA25"),
-    ("door_switch_chatters", "SA51", [(4.27, 1)], "SA21")])
+    ("door_switch_chatters", "SA51", [(4.27, 1)], "SA21"),
+    ("coolant_pressure_low", "SA55", [(4.47, 1)], "SYVAR13")])
 def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleared(
         tmp_path: Path, scenario: str, alarm: str, alarm_edges: list[tuple[float, int]],
         output: str) -> None:
     """The scenarios' windows see moments; the trace sees every scan.  A reset while the
     program still asks for what the device did not do (the spindle's run-up at 3.5 s, M03 in
-    force; the tool change at 6.5 s, after the NC's AL145 dropped its strobe), or while the
-    door switch chatters (5.525 s, reading closed), neither drops the alarm for a scan nor
-    starts the device again; after the NC reset (4.0 s) a reset clears the spindle's.  (The
-    rule before cleared all three, and started the spindle: into the same fault, or for the
-    40 ms until the switch read open.)"""
+    force; the line pressure at 4.6 s, M08 in force; the tool change at 6.5 s, after the NC's
+    AL145 dropped its strobe), or while the door switch chatters (5.525 s, reading closed),
+    neither drops the alarm for a scan nor starts the device again; after the NC reset
+    (4.0 s) a reset clears the spindle's.  (The rule before cleared the first three, and
+    started the spindle: into the same fault, or for the 40 ms until the switch read open;
+    the pressure had no alarm.)"""
     trace = tmp_path / "t.jsonl"
     done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
                   str(FOLDER / "scenarios" / f"{scenario}.toml"), "--trace", str(trace),
@@ -163,6 +165,49 @@ def test_a_reset_after_a_mended_fault_starts_nothing_until_a_cycle_start(
     assert bit_edges(trace, "SYVAR13") == [(2.72, 600), (3.47, 0), (4.3, 600)]  # the pump
     # the cut waits for the spindle (at speed 4.78 s) and the pressure (4.83 s)
     assert [o for o in overrides(trace) if o[0] > 3.4] == [(3.47, 0), (4.83, 100)]
+
+
+def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
+    """coolant_wire_break_idle: the wire breaks (0.5 s) with P1 idle, the door and the clamp
+    open.  The PLC never turns a valve or the lock on (the rule before closed the clamp and
+    the door, and locked it: an alarm drove the door shut on the operator's hand).  The
+    scenario's windows see moments; the trace sees every scan."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert bit_edges(trace, "SA53") == [(0.5, 1)]  # coolant_alarm
+    # clamp_valve, door_valve, door_lock: never written, the plant's switches never move
+    assert [bit_edges(trace, var) for var in ("SA20", "SA22", "SA23")] == [[], [], []]
+    assert bit_edges(trace, "SA42")[-1] == (0.0, 1)  # door_open
+
+
+def test_after_an_alarm_with_the_cell_idle_one_cycle_start_starts_the_program(
+        tmp_path: Path) -> None:
+    """coolant_wire_mended_idle: the PLC's alarm (0.5 s, P1 idle) holds no idle program, so
+    the one cycle start after the reset (1.2 s) starts PART.  (NC.HOLD_LEVEL := any_alarm held
+    the idle P1, and that cycle start only released the hold: nothing started, no word of it
+    but a hold event.)  A cycle start while the alarm stands is refused, by the config's
+    inhibit input, not taken into a hold."""
+    trace = tmp_path / "t.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_mended_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert not [e for e in events if e["event"] == "hold"]
+    assert [(e["t"], e["by"]) for e in events if e["event"] == "start"] == [
+        (0.0, "script"), (1.2, "script command[1]")]
+    trace = tmp_path / "refused.jsonl"
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert [(e["t"], e["message"]) for e in events if e["event"] == "hazard"] == [
+        (1.0, "script command[1]: cycle_start: cycle start inhibit input SA49 is set")]
+    assert [e["t"] for e in events if e["event"] == "start"] == [0.0]
 
 
 def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_is_no_part(
@@ -321,7 +366,7 @@ def test_until_before_the_scenarios_end_judges_no_moment_it_did_not_simulate(
             "[4.27, 4.3] s opened") in out
     assert ("FAIL no part counted: not reached: the run ended at 3.000 s, before the "
             "scenario's end at 10.500 s (parts=0 held from 0.000 to 3.000 s)") in out
-    assert "9 scenarios: 8 of 64 expectations passed" in out
+    assert "12 scenarios: 19 of 80 expectations passed" in out
 
 
 UNREACHED = """
