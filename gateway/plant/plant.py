@@ -328,6 +328,26 @@ class Plant:
         except InputRefused as exc:
             self.runtime.engine.note_hazard(0, f"plant {model.name}: {exc}")
 
+    def _restore(self, model: Model) -> None:
+        """After a hold was released: write what ``model`` drives that the image does not show
+        (the held value stays until written).  Only that: every output written again put a
+        write of each model's every output, unchanged, in the trace at each clear."""
+        variables = self.variables[model.name]
+        written = self._written[model.name]
+        read = self.runtime.image.read
+        now = self.runtime.engine.now
+        changes = []
+        for key, value in model.outputs(now).items():
+            var = variables.get(key)
+            if var is not None and read(*var.address) != value:
+                changes.append((var, value))
+                written[key] = value
+        if changes:
+            try:
+                self._apply(Writes(tuple(changes), self._sources[model.name]))
+            except InputRefused as exc:
+                self.runtime.engine.note_hazard(0, f"plant {model.name}: {exc}")
+
     # -- faults ----------------------------------------------------------------------------------
 
     def check(self, item: Fault) -> ActiveFault:
@@ -472,7 +492,7 @@ class Plant:
                 image.unhold(*var.address)
             if notify:  # what the models drive is theirs again
                 for model in self.models.values():
-                    self._write(model, force=True)
+                    self._restore(model)
         elif fault.model is not None and notify:
             self._behave(fault.model)
         if notify:

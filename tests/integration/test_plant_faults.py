@@ -103,6 +103,18 @@ def test_stuck_holds_what_every_reader_sees_for_for_s_then_the_model_drives_agai
     assert (clear["t"], clear["who"]) == (0.3, "for_s 0.2")
 
 
+def test_a_clear_writes_again_only_what_the_image_no_longer_shows_of_the_models(
+        cell: Path) -> None:
+    """A value fault's clear gave every model's every output a write, unchanged, in the
+    trace (the clamp's SA30 and SA31 and the pressure's SYVAR2 at each clear of anything);
+    what was held is the one value the image shows wrong."""
+    result = _run(cell, '[[fault]]\ntarget = "clamp.retracted"\nkind = "stuck"\nvalue = 0\n'
+                  'at = 0.1\nfor_s = 0.2\n', until=1.0)
+    at_clear = [(e["var"], e["value"], e["who"]) for e in result.events
+                if e["event"] == "write" and e["t"] == 0.3]
+    assert at_clear == [("SA31", 1, "plant clamp")]  # the model's own value, back
+
+
 def test_a_stuck_input_wins_over_an_outside_write_and_a_force_wins_over_it(cell: Path) -> None:
     from ncgate.gateway.door import Door
     from ncgate.gateway.wiring import build_runtime, start_plant
