@@ -40,6 +40,20 @@ def bit_edges(trace: Path, var: str) -> list[tuple[float, int]]:
     return edges
 
 
+def traced(tmp_path: Path, scenario: str, *extra: str, name: str = "t.jsonl") -> Path:
+    """Run one of the suite's scenarios with a trace (passing: exit 0); the trace file."""
+    trace = tmp_path / name
+    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
+                  str(FOLDER / "scenarios" / f"{scenario}.toml"), *extra, "--trace",
+                  str(trace), cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return trace
+
+
+def events_in(trace: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in trace.read_text().splitlines()]
+
+
 def expects_of(path: Path) -> list[dict[str, Any]]:
     with path.open("rb") as f:
         expects: list[dict[str, Any]] = tomllib.load(f).get("expect", [])
@@ -135,11 +149,7 @@ def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleare
     (4.0 s) a reset clears the spindle's.  (The rule before cleared the first three, and
     started the spindle: into the same fault, or for the 40 ms until the switch read open;
     the pressure had no alarm.)"""
-    trace = tmp_path / "t.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / f"{scenario}.toml"), "--trace", str(trace),
-                  cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
+    trace = traced(tmp_path, scenario)
     assert bit_edges(trace, alarm) == alarm_edges
     assert bit_edges(trace, output)[-1] == (alarm_edges[0][0], 0)  # off with the alarm
 
@@ -156,11 +166,7 @@ def test_a_reset_after_a_mended_fault_starts_nothing_until_a_cycle_start(
     and P1 held; the spindle and the pump start at the cycle start (4.3 s), not in between
     (they did at 4.0 s: a reset started the machine), and the feed stands at 0 % from the
     alarm until both are back (the cut resumed at once, the spindle at rest)."""
-    trace = tmp_path / "t.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "coolant_wire_mended.toml"), "--trace",
-                  str(trace), cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
+    trace = traced(tmp_path, "coolant_wire_mended")
     assert bit_edges(trace, "SA21") == [(2.23, 1), (3.47, 0), (4.3, 1)]  # spindle_run
     assert bit_edges(trace, "SYVAR13") == [(2.72, 600), (3.47, 0), (4.3, 600)]  # the pump
     # the cut waits for the spindle (at speed 4.78 s) and the pressure (4.83 s)
@@ -172,11 +178,7 @@ def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
     open.  The PLC never turns a valve or the lock on (the rule before closed the clamp and
     the door, and locked it: an alarm drove the door shut on the operator's hand).  The
     scenario's windows see moments; the trace sees every scan."""
-    trace = tmp_path / "t.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
-                  str(trace), cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
+    trace = traced(tmp_path, "coolant_wire_break_idle")
     assert bit_edges(trace, "SA53") == [(0.5, 1)]  # coolant_alarm
     # clamp_valve, door_valve, door_lock: never written, the plant's switches never move
     assert [bit_edges(trace, var) for var in ("SA20", "SA22", "SA23")] == [[], [], []]
@@ -190,21 +192,13 @@ def test_after_an_alarm_with_the_cell_idle_one_cycle_start_starts_the_program(
     the idle P1, and that cycle start only released the hold: nothing started, no word of it
     but a hold event.)  A cycle start while the alarm stands is refused, by the config's
     inhibit input, not taken into a hold."""
-    trace = tmp_path / "t.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "coolant_wire_mended_idle.toml"), "--trace",
-                  str(trace), cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
-    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    trace = traced(tmp_path, "coolant_wire_mended_idle")
+    events = events_in(trace)
     assert not [e for e in events if e["event"] == "hold"]
     assert [(e["t"], e["by"]) for e in events if e["event"] == "start"] == [
         (0.0, "script"), (1.2, "script command[1]")]
-    trace = tmp_path / "refused.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "coolant_wire_break_idle.toml"), "--trace",
-                  str(trace), cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
-    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    trace = traced(tmp_path, "coolant_wire_break_idle", name="refused.jsonl")
+    events = events_in(trace)
     assert [(e["t"], e["message"]) for e in events if e["event"] == "hazard"] == [
         (1.0, "script command[1]: cycle_start: cycle start inhibit input SA49 is set")]
     assert [e["t"] for e in events if e["event"] == "start"] == [0.0]
@@ -216,14 +210,10 @@ def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_i
     restarted program's spindle waits for its own M03, after the tool change (the standing
     M03 started it as the part was clamped, 2.8 s: the changer never started, AL145 at
     7.8 s), and the aborted program counts no part (it counted one at 2.4 s)."""
-    trace = tmp_path / "t.jsonl"
-    done = ncgate("sim", "--config", str(FOLDER / "ncgate.toml"), "--script",
-                  str(FOLDER / "scenarios" / "program_reset_and_restarted.toml"), "--until",
-                  "8", "--trace", str(trace), cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
+    trace = traced(tmp_path, "program_reset_and_restarted", "--until", "8")
     assert bit_edges(trace, "SA21") == [(2.23, 1), (2.4, 0), (4.03, 1)]  # spindle_run
     assert bit_edges(trace, "SA25") == [(1.01, 1), (2.22, 0), (2.81, 1), (4.02, 0)]  # changer
-    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    events = events_in(trace)
     assert not [e for e in events if e["event"] == "alarm"]
     assert bit_edges(trace, "SYVAR20") == []  # parts
 
