@@ -10,6 +10,7 @@ the request.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import socket
 import time
 from collections.abc import Callable
@@ -126,6 +127,6 @@ def test_the_clock_reads_finer_than_a_millisecond(kind: str) -> None:
 
     with asyncio.Runner(loop_factory=_loop_factory(kind)) as runner:
         runner.run(main())
-    for (now_before, input_before), (now, input_at) in zip(seen, seen[1:], strict=False):
+    for (now_before, input_before), (now, input_at) in itertools.pairwise(seen):
         assert now > now_before, seen  # the old driver on uvloop: equal within each ms
         assert input_at > input_before, seen
