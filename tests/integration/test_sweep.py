@@ -583,10 +583,18 @@ def test_a_killed_local_worker_loses_and_duplicates_nothing(big_sweep: Path) -> 
 
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[object]:
+    """Two workers, each under a nanny that starts it again whenever it dies, as under
+    ``dask worker``.  A LocalCluster would give a worker up for good (close its nanny) when,
+    ``distributed.deploy.lost-worker-timeout`` (15 s) after a death of it, the worker is
+    missing again: on a loaded machine a worker that DIE kills every few seconds spends most
+    of its time restarting, both nannies were closed, and the sweep waited for a worker until
+    the test's timeout.  Here the cluster never gives a worker up."""
+    import dask
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as local, Client(local) as client:
+    with dask.config.set({"distributed.deploy.lost-worker-timeout": "1 day"}), \
+            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                         dashboard_address=None) as local, Client(local) as client:
         yield client
 
 
