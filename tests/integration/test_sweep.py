@@ -865,7 +865,11 @@ def test_ctrl_c_stops_the_sweep_quietly_with_130_and_keeps_its_rows(big_sweep: P
     sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o",
                               "ctrl-c.csv", "--workers", "2"], cwd=big_sweep, text=True,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             start_new_session=True)  # its own group, as a terminal's job
+                             start_new_session=True,  # its own group, as a terminal's job
+                             # and SIGINT at its default, as a terminal's job has it: pytest
+                             # started by a script's `&` (or nohup) ignores SIGINT, and the
+                             # sweep inherited that and ran to its end (exit 1, nothing said)
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         wait_for(lambda: len(parts_of(big_sweep, "ctrl-c.csv")) >= 1 or sweep.poll() is not None,
                  "the first part")
