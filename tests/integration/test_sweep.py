@@ -525,6 +525,42 @@ def test_sigterm_keeps_the_rows_done_for_resume(big_sweep: Path) -> None:
     assert (big_sweep / "stopped.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
 
 
+def test_a_sigterm_while_a_part_is_written_keeps_each_row_once(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The stop lands as a part's file is written (the moment the test above reacts to): its
+    rows were written again by the stop's own flush, so the parts held a row twice."""
+    import io
+    import json
+    import threading
+
+    from ncgate.gateway.sweep import main
+    from ncgate.gateway.sweep.main import Options, run_sweep
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    assert threading.current_thread() is threading.main_thread()  # run_sweep's handler
+    spec = load_spec(misbehaving_spec(tmp_path, ("OK.nc", "FINE.nc")))
+    write = Parts.add
+    sent = []
+
+    def add_then_sigterm(parts: Parts, rows: list[dict[str, object]]) -> None:
+        write(parts, rows)
+        if rows and not sent:  # once: the file is there, pending not yet cleared
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(Parts, "add", add_then_sigterm)
+    monkeypatch.setattr(main, "FLUSH_ROWS", 1)  # a part at the first row
+    status, _ = run_sweep(spec, Options(tmp_path / "out.csv", workers=1, progress=False),
+                          io.StringIO())
+    assert status == main.EXIT_FAILED
+    ids = [json.loads(line)["id"] for part in parts_of(tmp_path, "out.csv")
+           for line in part.read_text().splitlines()]
+    assert ids and len(ids) == len(set(ids)), ids
+    assert f"stopped (SIGTERM): {len(ids)} of 4 variants done" in capsys.readouterr().err
+
+
 def test_resume_refuses_parts_of_another_spec(tmp_path: Path) -> None:
     (tmp_path / "OK.nc").write_text(LOOPS["OK"])
     (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
