@@ -3,6 +3,7 @@ print the summary."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -114,20 +115,25 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     progress = Progress(len(todo)) if show else None
     pending: list[Row] = []
     last = time.monotonic()
-    previous = None
+    stops = _Stops()
+    previous: dict[signal.Signals, object] = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminated)
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, stops.handle)
+        # Ctrl-C only where it raises KeyboardInterrupt: ignored (nohup, `&`) it stays so.
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, stops.handle)
     try:
         for variant, result in execute(todo, options, client):
-            row = make_row(variant, result, spec.keys)
-            rows[variant.id] = row
-            pending.append(row)
-            if progress is not None:
-                progress.step()
-            if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
-                parts.add(pending)
-                pending = []
-                last = time.monotonic()
+            with stops.held():
+                row = make_row(variant, result, spec.keys)
+                rows[variant.id] = row
+                pending.append(row)
+                if progress is not None:
+                    progress.step()
+                if len(pending) >= FLUSH_ROWS or time.monotonic() - last >= FLUSH_S:
+                    parts.add(pending)
+                    pending = []
+                    last = time.monotonic()
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: keep what is done, for --resume
         parts.add(pending)
         if progress is not None:
@@ -137,8 +143,8 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
               "--resume to go on", file=sys.stderr)
         return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)  # type: ignore[arg-type]
     parts.add(pending)
     if progress is not None:
         progress.close()
@@ -152,8 +158,34 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
 
 
-def _terminated(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt("SIGTERM")
+class _Stops:
+    """Ctrl-C and SIGTERM as a KeyboardInterrupt ("SIGTERM" for the latter), held back while
+    a result is counted and written (``held()``): it goes into the rows, the rows to write and
+    the parts whole.  A stop while a part was written (between its file and ``pending = []``)
+    wrote that part's rows a second time in the stop's own flush; one between ``rows`` and
+    ``pending`` counted a row the parts never got.  (Not a signal mask: a Dask client's
+    threads would take the signal, and Python still runs the handler in the main thread.)"""
+
+    def __init__(self) -> None:
+        self.holding = False
+        self.stop: KeyboardInterrupt | None = None
+
+    def handle(self, signum: int, frame: object) -> None:
+        stop = KeyboardInterrupt("SIGTERM" if signum == signal.SIGTERM else "")
+        if not self.holding:
+            raise stop
+        self.stop = self.stop or stop
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        self.holding = True
+        try:
+            yield
+        finally:
+            self.holding = False
+        if self.stop is not None:
+            stop, self.stop = self.stop, None
+            raise stop
 
 
 def label(row: Row, keys: Sequence[str]) -> str:

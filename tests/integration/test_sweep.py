@@ -151,6 +151,8 @@ def sim_verdict(out: str, status: int) -> tuple[str, str]:
     return "ok", cycle[0]
 
 
+@pytest.mark.timeout(300)  # twenty `ncgate sim` processes one after another: 60-100 s under
+# load (2 cores, xdist, CPU hogs), and with the examples' sweep set up first, past 120 s
 def test_twenty_rows_rerun_by_their_command_agree(examples_sweep: Path) -> None:
     rows = rows_of(examples_sweep / "first.csv")
     chosen = random.Random(20).sample(rows, 20)
@@ -249,14 +251,20 @@ def misbehaving_spec(folder: Path, programs: tuple[str, ...]) -> Path:
     return folder / "spec.toml"
 
 
-def test_the_pool_survives_a_dying_and_a_stuck_worker(tmp_path: Path) -> None:
+def test_the_pool_survives_a_dying_and_a_stuck_worker(monkeypatch: pytest.MonkeyPatch,
+                                                      tmp_path: Path) -> None:
+    from ncgate.gateway.sweep import pool
     from ncgate.gateway.sweep.pool import run_local
     from ncgate.gateway.sweep.spec import load_spec
 
     from .sweep_runners import misbehaving
 
     spec = load_spec(misbehaving_spec(tmp_path, ("DIE.nc", "HANG.nc", "OK.nc", "FINE.nc")))
-    got = list(run_local(spec.variants, 2, 1.0, runner=misbehaving))
+    # The wall timeout is every variant's: at 1 s a loaded machine (2 cores, xdist, CPU hogs)
+    # ran OK past it, a timeout row.  10 s is far beyond OK's run; the grace shortened
+    # instead keeps HANG's wait short (timeout + grace, then its worker is killed).
+    monkeypatch.setattr(pool, "GRACE_S", 1.0)
+    got = list(run_local(spec.variants, 2, 10.0, runner=misbehaving))
     ids = [v.id for v, _ in got]
     assert sorted(ids) == sorted(v.id for v in spec.variants)  # each once, none lost
     by = {(Path(v.program).stem, dict(v.sets)["nc.feed_override"]): r for v, r in got}
@@ -517,6 +525,42 @@ def test_sigterm_keeps_the_rows_done_for_resume(big_sweep: Path) -> None:
     assert (big_sweep / "stopped.csv").read_bytes() == (big_sweep / "whole.csv").read_bytes()
 
 
+def test_a_sigterm_while_a_part_is_written_keeps_each_row_once(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The stop lands as a part's file is written (the moment the test above reacts to): its
+    rows were written again by the stop's own flush, so the parts held a row twice."""
+    import io
+    import json
+    import threading
+
+    from ncgate.gateway.sweep import main
+    from ncgate.gateway.sweep.main import Options, run_sweep
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    assert threading.current_thread() is threading.main_thread()  # run_sweep's handler
+    spec = load_spec(misbehaving_spec(tmp_path, ("OK.nc", "FINE.nc")))
+    write = Parts.add
+    sent = []
+
+    def add_then_sigterm(parts: Parts, rows: list[dict[str, object]]) -> None:
+        write(parts, rows)
+        if rows and not sent:  # once: the file is there, pending not yet cleared
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(Parts, "add", add_then_sigterm)
+    monkeypatch.setattr(main, "FLUSH_ROWS", 1)  # a part at the first row
+    status, _ = run_sweep(spec, Options(tmp_path / "out.csv", workers=1, progress=False),
+                          io.StringIO())
+    assert status == main.EXIT_FAILED
+    ids = [json.loads(line)["id"] for part in parts_of(tmp_path, "out.csv")
+           for line in part.read_text().splitlines()]
+    assert ids and len(ids) == len(set(ids)), ids
+    assert f"stopped (SIGTERM): {len(ids)} of 4 variants done" in capsys.readouterr().err
+
+
 def test_resume_refuses_parts_of_another_spec(tmp_path: Path) -> None:
     (tmp_path / "OK.nc").write_text(LOOPS["OK"])
     (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n')
@@ -583,10 +627,18 @@ def test_a_killed_local_worker_loses_and_duplicates_nothing(big_sweep: Path) -> 
 
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[object]:
+    """Two workers, each under a nanny that starts it again whenever it dies, as under
+    ``dask worker``.  A LocalCluster would give a worker up for good (close its nanny) when,
+    ``distributed.deploy.lost-worker-timeout`` (15 s) after a death of it, the worker is
+    missing again: on a loaded machine a worker that DIE kills every few seconds spends most
+    of its time restarting, both nannies were closed, and the sweep waited for a worker until
+    the test's timeout.  Here the cluster never gives a worker up."""
+    import dask
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as local, Client(local) as client:
+    with dask.config.set({"distributed.deploy.lost-worker-timeout": "1 day"}), \
+            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                         dashboard_address=None) as local, Client(local) as client:
         yield client
 
 
@@ -857,7 +909,11 @@ def test_ctrl_c_stops_the_sweep_quietly_with_130_and_keeps_its_rows(big_sweep: P
     sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o",
                               "ctrl-c.csv", "--workers", "2"], cwd=big_sweep, text=True,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             start_new_session=True)  # its own group, as a terminal's job
+                             start_new_session=True,  # its own group, as a terminal's job
+                             # and SIGINT at its default, as a terminal's job has it: pytest
+                             # started by a script's `&` (or nohup) ignores SIGINT, and the
+                             # sweep inherited that and ran to its end (exit 1, nothing said)
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         wait_for(lambda: len(parts_of(big_sweep, "ctrl-c.csv")) >= 1 or sweep.poll() is not None,
                  "the first part")
