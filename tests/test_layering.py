@@ -304,3 +304,16 @@ def test_the_rule_checker_sees_a_violation(tmp_path: Path) -> None:
     names = imports_of(bad, "ncgate.interpreter.bad")
     assert {n for n in names if not allowed(n, RULES["interpreter"])} == {
         "ncgate.gateway", "ncgate.plc.image", "config", "ncgate.plc"}
+
+
+def test_the_architecture_box_names_every_module_and_folder_of_the_gateway() -> None:
+    """ARCHITECTURE.md's layer box is the map of ``ncgate.gateway``: a module or sub-package
+    added without its place on the map fails here (stdout.py once came in unnamed)."""
+    text = (ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    start = text.index("ncgate.gateway: the composition root")
+    box = text[start:text.index("└", start)]
+    gateway = ROOT / "gateway"
+    names = [p.name for p in gateway.glob("*.py") if p.name != "__init__.py"]
+    names += [f"{p.name}/" for p in gateway.iterdir()
+              if p.is_dir() and (p / "__init__.py").is_file()]
+    assert [name for name in sorted(names) if name not in box] == []
