@@ -194,7 +194,8 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             source = str(config.source) if config.source else "built-in default"
             log.info("ncgate running: config %s, %d processes, main %s (%s)", source,
                      config.nc.processes, config.nc.main,
-                     "started" if config.nc.autostart else "waits for cycle start")
+                     "started" if config.nc.autostart else "the scenario starts it"
+                     if script is not None else "waits for cycle start")
             for name, adapter in gw.adapters.items():  # where each adapter serves
                 for line in plugin(name).describe(adapter):
                     log.info("%s", line)

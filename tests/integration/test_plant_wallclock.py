@@ -127,6 +127,8 @@ async def test_run_script_judges_the_good_case_with_a_real_plc_connected(
     assert code == 0, log
     assert "PASS clamp closes: SA30=1 at" in log
     assert "PASS P1 ends: P1 IDLE at 1.000 s" in log
+    # The scenario starts the main program: the log said it "waits for cycle start".
+    assert "main O1 (the scenario starts it)" in log and "waits for cycle start" not in log
 
 
 async def test_run_script_fails_a_bad_case_and_exits_1(tmp_path: Path) -> None:
