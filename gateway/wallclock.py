@@ -27,6 +27,13 @@ TURN_BLOCKS = 1_000
 # what it pays: 1 ms turns left bench/plant.py's poller p99 beside 100 moving models at
 # 2.8-3.7x quiet, 0.1 ms turns at 1.2-1.35x, with no cost seen in run's block throughput.
 TURN_S = 0.0001
+# But an engine BEHIND_S (wall seconds) or more behind the clock gets turns as long as a
+# fieldbus round (the Modbus server's ROUND_S): a 0.1 ms turn a loop pass against a flood's
+# 0.5 ms round left it a sixth of the loop, and the PLC scan (an engine timer) came 28 ms
+# late under bench/storm.py's flood (5-6 ms with this).  Not from 1 ms behind: the plant
+# bench's engine is often that far behind, and its poller's p99 paid the longer turns.
+BEHIND_S = 0.005
+TURN_BEHIND_S = 0.0005
 
 
 class WallClockDriver:
@@ -112,7 +119,8 @@ class WallClockDriver:
     def _advance(self, now: float) -> None:
         """A turn of the engine up to ``now``; what it leaves is the next turn's, and how
         far behind the clock that leaves the engine is its lag."""
-        deadline = time.perf_counter() + TURN_S
+        behind = self.lag_s >= BEHIND_S * self.scale
+        deadline = time.perf_counter() + (TURN_BEHIND_S if behind else TURN_S)
         self.engine.turn_over = lambda: time.perf_counter() >= deadline
         try:
             more = self.engine.advance_to(now, self._turn)

@@ -130,3 +130,35 @@ def test_the_clock_reads_finer_than_a_millisecond(kind: str) -> None:
     for (now_before, input_before), (now, input_at) in itertools.pairwise(seen):
         assert now > now_before, seen  # the old driver on uvloop: equal within each ms
         assert input_at > input_before, seen
+
+
+@pytest.mark.parametrize("behind", [False, True])
+def test_an_engine_behind_the_clock_gets_a_fieldbus_rounds_turn(
+        monkeypatch: pytest.MonkeyPatch, behind: bool) -> None:
+    """A turn is TURN_S (here: one timer); an engine BEHIND_S behind gets TURN_BEHIND_S (here:
+    all of them), as long as a fieldbus round: under a flood's rounds the short turns left the
+    PLC scan 28 ms late.  Counted in turns, not timed."""
+    monkeypatch.setattr(wallclock, "TURN_S", 0.0)
+    monkeypatch.setattr(wallclock, "TURN_BEHIND_S", 60.0)
+    engine = make_sim({"A": "N1M30\n"}).engine
+    fired: list[int] = []
+    for i in range(TIMERS):
+        engine.call_at(0.0, lambda i=i: fired.append(i))
+
+    async def main() -> int:
+        driver = WallClockDriver(engine, 1.0, asyncio.get_running_loop())
+        # (as the last turn that ran out of time noted it)
+        driver.lag_s = wallclock.BEHIND_S if behind else 0.0
+        try:
+            before = driver.turns
+            driver.kick()
+            while len(fired) < TIMERS:
+                driver.changed.clear()
+                await driver.changed.wait()
+            return driver.turns - before
+        finally:
+            driver.close()
+
+    turns = asyncio.run(main())
+    assert turns <= 2 if behind else turns >= TIMERS  # (and the one that finds nothing left)
+    assert fired == list(range(TIMERS))
