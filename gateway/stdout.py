@@ -17,18 +17,12 @@ from typing import TextIO, cast
 
 def stdout_gone() -> None:
     """After the reader of standard output went: the rest of the output goes nowhere."""
-    _gone(sys.stdout)
+    _gone("stdout")
 
 
-def stderr_gone() -> None:
-    """After the reader of standard error went (``ncgate check ... 2>&1 | head -1``): the rest
-    of what the command says goes nowhere, and its exit status is still what it found."""
-    _gone(sys.stderr)
-
-
-def _gone(stream: TextIO) -> None:
+def _gone(name: str) -> None:
     null = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(null, stream.fileno())
+    os.dup2(null, getattr(sys, name).fileno())
     os.close(null)
 
 
@@ -44,29 +38,40 @@ def closed_streams() -> None:
 def flush_stdout() -> None:
     """Flush standard output, here rather than at the interpreter's exit: a reader that went
     meanwhile is :func:`stdout_gone`, not exit status 120."""
-    try:
-        sys.stdout.flush()
-    except BrokenPipeError:
-        stdout_gone()
+    _Quiet("stdout").flush()
 
 
-class _Stdout:
-    """sys.stdout (looked up at each write: pytest's capsys swaps it) that a closed reader
-    does not stop."""
+class _Quiet:
+    """sys.stdout or sys.stderr (looked up at each write: pytest's capsys swaps them) that a
+    closed reader does not stop: what is left goes nowhere (:func:`_gone`)."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
 
     def write(self, text: str) -> int:
         try:
-            return sys.stdout.write(text)
+            written: int = getattr(sys, self._name).write(text)
         except BrokenPipeError:
-            stdout_gone()
+            _gone(self._name)
             return len(text)
+        return written
 
     def flush(self) -> None:
-        flush_stdout()
+        try:
+            getattr(sys, self._name).flush()
+        except BrokenPipeError:
+            _gone(self._name)
 
 
 def stdout() -> TextIO:
-    """Standard output for a command whose exit status says what it found (sim, sweep): a
-    reader that goes early stops none of it (see the module's docstring).  Flush it before
-    the command returns, so that a reader gone by then is not the interpreter's to meet."""
-    return cast(TextIO, _Stdout())
+    """Standard output for a command whose exit status says what it found (check, sim,
+    sweep): a reader that goes early stops none of it (see the module's docstring).  Flush it
+    before the command returns, so that a reader gone by then is not the interpreter's to
+    meet."""
+    return cast(TextIO, _Quiet("stdout"))
+
+
+def stderr() -> TextIO:
+    """Standard error, alike: ``ncgate check ... 2>&1 | head -1`` closes it too, and the
+    command's status is still what it found."""
+    return cast(TextIO, _Quiet("stderr"))

@@ -18,13 +18,7 @@ from ncgate.errors import NcgateError
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.examples import examples, examples_folder, find_example
 from ncgate.gateway.lifecycle import tune_interpreter
-from ncgate.gateway.stdout import (
-    closed_streams,
-    flush_stdout,
-    stderr_gone,
-    stdout,
-    stdout_gone,
-)
+from ncgate.gateway.stdout import closed_streams, flush_stdout, stderr, stdout, stdout_gone
 from ncgate.interpreter.diagnostics import ProgramError
 from ncgate.interpreter.settings import Dialect
 from ncgate.plc.st.diagnostics import LogicError
@@ -250,14 +244,12 @@ def _check(args: argparse.Namespace) -> int:
         args.config = str(example.config) if example.config.is_file() else None
     # check opens no server: what only a server needs (the console's bind) is not its concern
     config = load_config(args.config, serving=False) if args.config else None
+    err = stderr()
     cell = None  # the cell whose [plc] and [plant] logic is checked as sim and run load it
     if args.files:
         files, again = expand(args.files)
-        try:
-            for path in again if not args.quiet else ():
-                print(f"ncgate check: {path} is given twice: checked once", file=sys.stderr)
-        except BrokenPipeError:  # (2>&1 | head -0: what it finds is still its status)
-            stderr_gone()
+        for path in again if not args.quiet else ():
+            print(f"ncgate check: {path} is given twice: checked once", file=err)
         if config is not None:
             # --config (or --example): its own logic is checked as the cell loads it (its
             # PROGRAMs chosen), also when named; another ST file named is checked alone (a
@@ -280,29 +272,22 @@ def _check(args: argparse.Namespace) -> int:
     reports = programs + (_check_config_logic(cell) if cell is not None else [])
     errors = sum(r.errors for r in reports)
     warnings = sum(r.warnings for r in reports)
-    try:
-        for report in reports:
-            for diagnostic in report.diagnostics:
-                print(diagnostic.render())
-        sys.stdout.flush()  # (a pipe's buffer: its error here, not at the interpreter's exit)
-    except BrokenPipeError:
-        # `ncgate check | head -1`: the reader has what it wanted, and the status is still
-        # what was found (main's exit 0 is map's: it only prints); the summary still goes
-        # to stderr.
-        stdout_gone()
-    try:
-        if not args.quiet:
-            print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
-                  file=sys.stderr)
-        if errors and dialect is None:
-            from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
+    # `ncgate check | head -1` (or `2>&1 | head -1`): the reader has what it wanted, and the
+    # status is still what was found (main's exit 0 is map's: it only prints).
+    out = stdout()
+    for report in reports:
+        for diagnostic in report.diagnostics:
+            print(diagnostic.render(), file=out)
+    out.flush()  # (a pipe's buffer: its error here, not at the interpreter's exit)
+    if not args.quiet:
+        print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
+              file=err)
+    if errors and dialect is None:
+        from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
 
-            _suggest_dialect("check", [
-                (r.path, config_for(r.path, config)) for r in programs
-                if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
-        sys.stderr.flush()
-    except BrokenPipeError:  # `ncgate check ... 2>&1 | head -1`: stderr was that pipe too
-        stderr_gone()
+        _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in programs
+                                   if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
+    err.flush()
     return EXIT_FAILED if errors else EXIT_OK
 
 
@@ -524,7 +509,7 @@ def _suggest_dialect(command: str, files: Sequence[tuple[Path, Config]]) -> None
         verb = "reads" if len(found) == 1 else "read"
         print(f"ncgate {command}: {', '.join(found)} {verb} without error as {name}: give "
               f"--dialect {name} (or set nc.dialect = \"{name}\" in the config)",
-              file=sys.stderr)
+              file=stderr())
 
 
 def _set_overrides(items: Sequence[str]) -> dict[str, Any]:
