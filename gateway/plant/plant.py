@@ -310,14 +310,21 @@ class Plant:
         elif spent < BUDGET * period / 4 and self.stretch > 1:
             self.stretch //= 2
 
-    def _write(self, model: Model, force: bool = False, t: float | None = None) -> None:
+    def _write(self, model: Model, force: bool = False, t: float | None = None,
+               shown: bool = False) -> None:
+        """Write what ``model`` drives at ``t`` (now) that it has not written yet (``force``:
+        all of it; ``shown``: what the image does not show -- after a hold was released, the
+        held value stays until written, and every output written again put each model's
+        every output, unchanged, in the trace at each clear)."""
         variables = self.variables[model.name]
         written = self._written[model.name]
+        read = self.runtime.image.read
         changes = []
         now = self.runtime.engine.now if t is None else t
         for key, value in model.outputs(now).items():
             var = variables.get(key)
-            if var is None or (not force and written.get(key) == value):
+            if var is None or (read(*var.address) == value if shown else
+                               not force and written.get(key) == value):
                 continue
             changes.append((var, value))
             written[key] = value
@@ -327,26 +334,6 @@ class Plant:
             self._apply(Writes(tuple(changes), self._sources[model.name]))
         except InputRefused as exc:
             self.runtime.engine.note_hazard(0, f"plant {model.name}: {exc}")
-
-    def _restore(self, model: Model) -> None:
-        """After a hold was released: write what ``model`` drives that the image does not show
-        (the held value stays until written).  Only that: every output written again put a
-        write of each model's every output, unchanged, in the trace at each clear."""
-        variables = self.variables[model.name]
-        written = self._written[model.name]
-        read = self.runtime.image.read
-        now = self.runtime.engine.now
-        changes = []
-        for key, value in model.outputs(now).items():
-            var = variables.get(key)
-            if var is not None and read(*var.address) != value:
-                changes.append((var, value))
-                written[key] = value
-        if changes:
-            try:
-                self._apply(Writes(tuple(changes), self._sources[model.name]))
-            except InputRefused as exc:
-                self.runtime.engine.note_hazard(0, f"plant {model.name}: {exc}")
 
     # -- faults ----------------------------------------------------------------------------------
 
@@ -492,7 +479,7 @@ class Plant:
                 image.unhold(*var.address)
             if notify:  # what the models drive is theirs again
                 for model in self.models.values():
-                    self._restore(model)
+                    self._write(model, shown=True)
         elif fault.model is not None and notify:
             self._behave(fault.model)
         if notify:
