@@ -103,11 +103,15 @@ class StateView(NamedTuple):
 def state_view(process: Process) -> StateView:
     """``process``'s state as its nodes show it, read from the engine's process: what
     :func:`process_view` says of its state, without the rest."""
-    state = process.state
     loaded = process.loaded
-    return StateView(process.number, state.name, channel_state(state),
-                     program_status(state, process.stopped is not None),
-                     loaded.program.name if loaded is not None else "")
+    return _state(process.number, process.state, process.stopped is not None,
+                  loaded.program.name if loaded is not None else "")
+
+
+def _state(number: int, state: ProcessState, stopped: bool, program: str) -> StateView:
+    """The one encoding of a process's state for its nodes (a ProcessView begins with it)."""
+    return StateView(number, state.name, channel_state(state), program_status(state, stopped),
+                     program)
 
 
 class EventView(NamedTuple):
@@ -146,8 +150,7 @@ def process_view(gw: Gateway, number: int) -> ProcessView:
         return lines[j].strip() if 0 <= j < len(lines) else ""
 
     position = tuple(round(x, 4) for x in v.position[:3]) + (0.0,) * (3 - len(v.position[:3]))
-    return ProcessView(number, v.state.name, channel_state(v.state),
-                       program_status(v.state, v.stopped is not None), v.program or "",
+    return ProcessView(*_state(number, v.state, v.stopped is not None, v.program or ""),
                        v.line, v.n if v.n is not None else -1, (text(i - 1), text(i), text(i + 1)),
                        float(v.feed or 0.0), v.feed_override, v.rapid_override,
                        position)  # type: ignore[arg-type]
