@@ -465,6 +465,7 @@ class ScanDriver:
         self.wall = wall
         self.closed = closed
         self.leap = leap and closed and wall is None
+        runtime.timed = self.leap
         self.stall_s = stall_s
         self.t0 = engine.now
         self.k = 0
@@ -524,12 +525,17 @@ class ScanDriver:
                 engine.now - engine.last_change >= self.stall_s):
             self._timer = None  # nothing but the scan is left: let the run end as a stall
             return
-        if self.leap and self.runtime.still and not self.runtime.scan_listeners:
-            self._leap(later)
-            return
+        if self.leap and not self.runtime.scan_listeners:
+            if self.runtime.still:
+                self._leap(later)
+                return
+            until = self.runtime.still_until
+            if until is not None:
+                self._leap(later, until)
+                return
         self._timer = engine.call_at(self.t0 + self.k * period, self._scan)
 
-    def _leap(self, later: float | None) -> None:
+    def _leap(self, later: float | None, until: int | None = None) -> None:
         """Arm the first scan that may see something new, past the still ones before it.
 
         The last scan changed nothing and read what it reads now (``PlcRuntime.still``):
@@ -542,17 +548,22 @@ class ScanDriver:
         at the very time the scans one after the other would have given it (each is armed
         from the time the one before ran, and ``now + (t - now)`` need not be ``t``), so the
         trace is the same to the bit.  The scans leapt over are counted.  ``later``: when
-        the next other timer is due (None: there is none)."""
+        the next other timer is due (None: there is none).  ``until``: the last scan was
+        timed still (PlcRuntime.still_until): the first scan at or after this time (ms)
+        sees a running timer's Q change, and is armed if nothing comes first."""
         engine, period = self.engine, self.period
         stalls = later is None and engine.stalled
         reach = LEAP_SCANS
-        if later is None:  # (a stall to come too: the run may end long before it -- a
-            # scenario's horizon -- and a leap to it passed its scans one by one for nothing)
+        if later is None and until is None:  # (a stall to come too: the run may end long
+            # before it -- a scenario's horizon -- and a leap to it passed its scans one by
+            # one for nothing)
             reach, self._reach = self._reach, min(LEAP_SCANS, 2 * self._reach)
         start = now = engine.now
         k = self.k
         for _ in range(reach):
             due = now + max(0.0, self.t0 + k * period - now)  # the time call_at would give
+            if until is not None and round((self.t0 + k * period) * 1000) >= until:
+                break  # scan k sees a timer's Q change
             if (due >= later) if later is not None else stalls and (
                     due - engine.last_change >= self.stall_s):
                 break  # scan k may see something new (or the stall rule stops at it)
@@ -576,11 +587,15 @@ class ScanDriver:
             return
         engine, status = self.engine, self.runtime.status
         t = self._leapt_from
+        last = None
         for k in range(self.k - self._leapt, self.k):
             t += max(0.0, self.t0 + k * self.period - t)
             if t > engine.now:
                 break
             status.scans += 1
+            last = k
+        if last is not None:  # (a timed still scan's running timers: their ETs then)
+            self.runtime.catch_up(round((self.t0 + last * self.period) * 1000))
         self._leapt = 0
 
     def close(self) -> None:

@@ -56,6 +56,28 @@ Predicate = Callable[[int], bool]  # a wait's condition on the variable's curren
 _Key = tuple[str, int]  # ("SA", byte) / ("SAb", bit) / ("SK", byte) / ("SYVAR", n)
 
 
+class Watch:
+    """A generation of part of the image (:meth:`IOImage.watch`)."""
+
+    __slots__ = ("_image", "areas", "generation", "keys")
+
+    def __init__(self, image: IOImage, keys: Iterable[_Key], areas: Iterable[str]) -> None:
+        self._image = image
+        self.keys = frozenset(keys)
+        self.areas = frozenset(areas)
+        self.generation = 0
+
+    def sees(self, touched: set[_Key]) -> bool:
+        """Whether a write that changed ``touched`` changed what this watches."""
+        if self.areas and any(key[0] in self.areas for key in touched):  # (a bit changed
+            return True  # touches its byte's key too)
+        return not self.keys.isdisjoint(touched)
+
+    def close(self) -> None:
+        if self in self._image._watches:
+            self._image._watches.remove(self)
+
+
 class Wait:
     """A registered condition; :meth:`cancel` removes it."""
 
@@ -109,12 +131,22 @@ class IOImage:
         # writes a hold changes are not "forced" events (the fault's event says why).
         self.held: dict[tuple[str, int, str], int] = {}
         self.generation = 0  # +1 on every write that changed something
+        self._watches: list[Watch] = []  # (see watch)
         self._write_number = 0
         # The frozen image of the image as it is (frozen()), not taken yet; and who drops
         # what it holds of one before a write (what is dropped is not copied).
         self._frozen: weakref.ref[FrozenImage] | None = None
         self._before_freeze: list[Callable[[], None]] = []
         self._freeze_lock = threading.Lock()
+
+    def watch(self, keys: Iterable[_Key] = (), areas: Iterable[str] = ()) -> Watch:
+        """A generation of some of the image: +1 on every write that changed one of
+        ``keys`` (("SA", byte), ("SK", byte), ("SYVAR", n)) or anything in ``areas``
+        ("SA", "SK", "SYVAR") -- what one reader reads (PLC logic: a still scan's inputs).
+        Dropped with :meth:`Watch.close`."""
+        watch = Watch(self, keys, areas)
+        self._watches.append(watch)
+        return watch
 
     @property
     def sa_bits(self) -> int:
@@ -233,9 +265,14 @@ class IOImage:
             # Whoever keeps what it read at a generation (the Modbus server's answers, the
             # PLC's still scans) must read again.
             self.generation += 1
+            for watch in self._watches:
+                watch.generation += 1
             raise
         if done:
             self.generation += 1
+            for watch in self._watches:
+                if watch.sees(touched):
+                    watch.generation += 1
         # Listeners (the trace) hear of the write before any wait it satisfies is woken,
         # so that cause comes before effect in everything they record.
         for listener in list(self._listeners):
@@ -407,11 +444,14 @@ class IOImage:
     def _wake(self, touched: set[_Key]) -> None:
         candidates: list[Wait] = []
         seen: set[int] = set()
+        waits = self._waits
         for key in touched:
-            for wait in self._waits.get(key, ()):
+            for wait in waits.get(key, ()):
                 if id(wait) not in seen:
                     seen.add(id(wait))
                     candidates.append(wait)
+        if not candidates:  # (the common case: a value nobody waits on)
+            return
         # Wake in registration-independent, deterministic order.
         candidates.sort(key=lambda w: (AREAS.index(w.area), w.index, VIEWS.index(w.view)))
         ready = [w for w in candidates if w.holds()]

@@ -45,7 +45,7 @@ from ncgate.plc.st.runtime import (
     PlcFault,
     to_real,
 )
-from ncgate.plc.st.stdlib import RUNNING
+from ncgate.plc.st.stdlib import RUNNING, Timer
 from ncgate.plc.st.types import ArrayOf, EnumOf, FbOf, limits
 
 log = logging.getLogger("ncgate.plc")
@@ -183,9 +183,25 @@ class PlcRuntime:
         self._state: Any = None
         self._still = False
         self._still_generation = -1
+        # The image's generation as far as the logic reads and writes it (a write the logic
+        # neither reads nor would overwrite cannot change what a scan does).
+        self._watch = image.watch(logic.image_keys, logic.image_areas)
         self._still_nc: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None = None
         self._pause = 0  # scans before the state is read again (its last reads all moved)
-        self._misses = 0  # reads in a row that found the state moved
+        self._misses = 0  # reads in a row that found the state moved, or that went unused
+        self._judged_at = -1  # status.scans after the last scan judged still
+        # A timed still scan (``timed``: sim's leaps, see _judge_timed): the state but the
+        # timers' ETs as the last scan left it (None: not known), how it is read (None: not
+        # built yet; False: it cannot be), every timer instance, and, after such a scan, the
+        # time (ms) before which the scans that read the same do the same nothing, and the
+        # timers that run until then.
+        self.timed = False
+        self._timeless_of: Callable[[], Any] | None = None
+        self._timeless_tried = False
+        self._timeless: Any = None
+        self._timers: list[Timer] = []
+        self._until: int | None = None
+        self._running: list[Timer] = []
         self.start()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -227,6 +243,8 @@ class PlcRuntime:
         programs = [(logic.program_state(key), self.programs[key]) for key in self.order]
         self._still = False
         self._pause = self._misses = 0
+        self._timeless_of, self._timeless, self._until = None, None, None
+        self._timeless_tried = False
         if globals_state is None or any(state is None for state, _ in programs):
             self._state_of = self._state = None  # (a member of a type it cannot read)
             return
@@ -246,7 +264,7 @@ class PlcRuntime:
     def _changed_state(self) -> None:
         """Something other than a scan changed the programs' state (a force)."""
         self._still = False
-        self._state = None
+        self._state = self._timeless = self._until = None
 
     def _judge(self, quiet: bool, generation: int,
                nc_read: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None) -> None:
@@ -257,19 +275,94 @@ class PlcRuntime:
         scan), so that it pays a read now and then, not every scan."""
         assert self._state_of is not None
         self._still = False
+        self._timeless = None
         if not quiet or self._pause:
             self._pause = max(0, self._pause - 1)
             self._state = None  # (unknown: the next quiet scan reads it, the one after tells)
             return
         state = self._state_of()
         if self._state is not None:
-            if state == self._state:
-                self._still, self._misses = True, 0
+            if state == self._state:  # (misses count on: only a skip shows it was worth it)
+                self._still = True
                 self._still_generation, self._still_nc = generation, nc_read
             else:
-                self._pause = min(STILL_PAUSE_MAX, 1 << self._misses)
-                self._misses += 1
+                self._missed()
         self._state = state
+
+    def _missed(self) -> None:
+        """A read of the state found it moved, or it was for nothing: read it less and less
+        often while that goes on (every 2nd, 4th, .. STILL_PAUSE_MAX-th scan)."""
+        self._pause = min(STILL_PAUSE_MAX, 1 << self._misses)
+        self._misses += 1
+
+    def _judge_timed(self, running: int, now_ms: int, generation: int,
+                     nc_read: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None
+                     ) -> None:
+        """Whether the scan just run, quiet but for ``running`` calls of timers whose Q waits
+        for the time, was *timed still*: the programs' state is as it began but for the
+        timers' ETs.  Then, as long as what it reads stays the same, every scan before the
+        first of those calls' dues does the same nothing (and moves the ETs on): the logic
+        reads no ET (``Logic.reads_et``), so it sees the time only as a running timer's Q,
+        FALSE until its due, and a timer recomputes its ET from its start.  ``sim`` leaps
+        over those scans (gateway/plc.py) -- the leap lands on the due, or on whatever other
+        input comes first.  Read as seldom as :meth:`_judge` reads."""
+        self._still = False
+        self._state = None
+        if self._pause:
+            self._pause -= 1
+            self._timeless = None
+            return
+        if not self._timeless_tried:
+            self._timeless_tried = True
+            self._timeless_of = self._timeless_reader()
+        if self._timeless_of is None:
+            return
+        state = self._timeless_of()
+        if self._timeless is not None:
+            ran = [timer for timer in self._timers if timer._ran == now_ms] if (
+                state == self._timeless) else None
+            # Each call that ran is one timer's (a timer called twice, or a call of another
+            # runtime's in another thread, leaves the counts apart: no leap).
+            if ran is not None and len(ran) == running:
+                self._until = min(timer._due for timer in ran)
+                self._running = ran
+                self._still_generation, self._still_nc = generation, nc_read
+            else:
+                self._missed()
+        self._timeless = state
+
+    def _timeless_reader(self) -> Callable[[], Any] | None:
+        """How the state but the timers' ETs is read, and every timer instance found
+        (None: the state cannot be told, or there are too many objects to look through)."""
+        logic = self.logic
+        globals_state = logic.globals_state(timeless=True)
+        pairs = [(logic.program_state(key, timeless=True), self.programs[key])
+                 for key in self.order]
+        timers = _timers_in([logic.namespace["_G"], *self.programs.values()])
+        if globals_state is None or timers is None:
+            return None
+        self._timers = timers
+        ns, states = self._ns, [(state, program) for state, program in pairs
+                                if state is not None]
+        if len(states) < len(pairs):
+            return None
+
+        def read() -> Any:
+            return globals_state(ns["_G"]), [state(program) for state, program in states]
+
+        return read
+
+    @property
+    def still_until(self) -> int | None:
+        """After a timed still scan (:meth:`_judge_timed`): the time (ms) before which every
+        scan that reads the same does the same nothing; else None."""
+        return self._until
+
+    def catch_up(self, now_ms: int) -> None:
+        """The running timers' ETs as the scans leapt over up to ``now_ms`` left them."""
+        if self._until is not None and now_ms < self._until:
+            for timer in self._running:
+                timer.catch_up(now_ms)
 
     def _bind(self, ns: dict[str, Any]) -> None:
         """The generated module's globals: the scan's copy of the image, the NC's outputs
@@ -322,6 +415,8 @@ class PlcRuntime:
             for i, value in enumerate(old[:len(new)]):
                 new[i] = value[:] if isinstance(value, list) else value
         self.logic = logic
+        self._watch.keys, self._watch.areas = logic.image_keys, logic.image_areas
+        self._watch.generation += 1
         self.order = [name.upper() for name in order]
         self.programs = programs
         self._runs = [programs[key] for key in self.order]
@@ -341,7 +436,7 @@ class PlcRuntime:
             return
         started = self.clock_ns()
         image, ns = self.image, self._ns
-        generation = image.generation
+        generation = self._watch.generation
         nc_read = None
         if self.logic.reads_nc:
             nc = self.nc
@@ -359,17 +454,38 @@ class PlcRuntime:
             # scans (and a scan that did not start from the state the last one left is
             # never judged still: below).
             status.scans += 1
+            self._misses = 0
             self._timed(started)
             for listener in self.scan_listeners:
                 listener()
             return
+        until = self._until
+        if until is not None and now_ms < until and generation == self._still_generation and (
+                nc_read == self._still_nc) and not self.scan_listeners and (
+                self._timeless_of is not None and self._timeless_of() == self._timeless):
+            # The last scan was a timed still one (_judge_timed) and what it read is the
+            # same: this one would do the same nothing but move the running timers' ETs on.
+            for timer in self._running:
+                timer.catch_up(now_ms)
+            status.scans += 1
+            self._misses = 0
+            self._timed(started)
+            return
+        if (self._still or until is not None) and status.scans == self._judged_at:
+            # Judged still, and the very next scan reads something new (a value the plant
+            # moves at every step): reading the state was for nothing.
+            self._missed()
         self._still = False
-        if self._state is not None and not self._pause and self._state_of is not None and (
-                self._state_of() != self._state):
+        self._until = None
+        if not self._pause and self._state_of is not None:
             # Set between scans (a debugger, a test): this scan does not start from the
             # state the last one left, so its end says nothing of whether it was still.
-            # (Read only when _judge will compare: while paused it forgets the state.)
-            self._state = None
+            # (Read only when a judge will compare: while paused it forgets the state.)
+            if self._state is not None and self._state_of() != self._state:
+                self._state = None
+            if self._timeless is not None and self._timeless_of is not None and (
+                    self._timeless_of() != self._timeless):
+                self._timeless = None
         # The programs work on a copy.  Nothing writes the image while they run (the scan
         # is one call on the loop), so the image itself stays the scan's inputs to diff
         # against.
@@ -415,10 +531,16 @@ class PlcRuntime:
         if self._retained:
             self._save_retained()
         if self._state_of is not None:
-            self._judge(not changes and not acts and not self.forced
-                        and (self.retain is None or not self._retained)
-                        and next(RUNNING) == timers + 1, generation, nc_read)
+            quiet = not changes and not acts and not self.forced and (
+                self.retain is None or not self._retained)
+            running = next(RUNNING) - timers - 1
+            if quiet and running and self.timed and not self.logic.reads_et:
+                self._judge_timed(running, now_ms, generation, nc_read)
+            else:
+                self._judge(quiet and not running, generation, nc_read)
         status.scans += 1
+        if self._still or self._until is not None:
+            self._judged_at = status.scans
         self._timed(started)
         for listener in self.scan_listeners:
             listener()
@@ -897,3 +1019,27 @@ def _fits(value: Any, t: Any) -> bool:
         return False
     lo, hi = limits("DINT" if t == "TIME" else t)
     return lo <= value <= hi
+
+
+# The most objects :func:`_timers_in` looks through (beyond: no timed still scans).
+TIMERS_SEARCH_MAX = 100_000
+
+
+def _timers_in(roots: list[Any]) -> list[Timer] | None:
+    """Every TON, TOF and TP instance held by ``roots`` (generated classes' instances, their
+    FB instances and arrays), or None when there are more than TIMERS_SEARCH_MAX objects."""
+    found: list[Timer] = []
+    stack = list(roots)
+    for _ in range(TIMERS_SEARCH_MAX):
+        if not stack:
+            return found
+        item = stack.pop()
+        if isinstance(item, Timer):
+            found.append(item)
+        elif isinstance(item, list):
+            stack.extend(item)
+        else:
+            slots = getattr(type(item), "__slots__", ())
+            if not isinstance(item, str | int | float | bool) and slots:
+                stack.extend(getattr(item, slot, None) for slot in slots)
+    return None

@@ -322,6 +322,13 @@ class Compiler:
         self.helpers: list[_Emitter] = []  # of PROGRAMs and FBs: module-level functions
         self._local_helpers: list[_Emitter] = []  # of the FUNCTION being compiled: closures
         self.reads_nc = False  # a scan takes the NC's status only for logic that reads it
+        # A timer's ET is read (sim leaps over the scans whose only change is a running
+        # timer's ET only when nothing does: plc/scan.py, a timed still scan)
+        self.reads_et = False
+        # What of the image the logic reads or writes: ("SA", byte), ("SK", byte), ("SYVAR",
+        # n) at a constant index, the whole area at one it computes (a still scan's inputs)
+        self.image_keys: set[tuple[str, int]] = set()
+        self.image_areas: set[str] = set()
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -1315,6 +1322,8 @@ class Compiler:
             given.add(key)
             direction, mtype = member
             attr = key if fb.std else f"v_{key}"
+            if fb.std and key == "ET":
+                self.reads_et = True
             if arg.output is None:
                 if direction != "in":
                     raise self.error(StCode.BAD_ARGUMENTS, f"{arg.name} is an output of "
@@ -2525,6 +2534,8 @@ class Scope:
                                   sel.span)
                 if direction == "out":
                     why = f"{sel.name} is an output of {t.name}"
+                if t.std and mkey == "ET":
+                    c.reads_et = True
                 code = f"{code}.{mkey if t.std else 'v_' + mkey}"
                 t = mtype
         if write and why:
@@ -2566,6 +2577,7 @@ class Scope:
         assert v.image is not None
         area, index = v.image
         if area == "SKIN":
+            c.image_keys.update((("SK", index), ("SK", index + 1)))
             place = Place(f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)",
                           "INT", lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535)"
                           ".to_bytes(2, 'little')")
@@ -2606,6 +2618,11 @@ class Scope:
         if i.const is not None and not 0 <= i.const < size:
             raise c.error(StCode.INDEX_RANGE, f"{var.name}[{i.const}] is outside the image "
                           f"({var.name}[0..{size - 1}], [plc] in the config)", sel.span)
+        area = "SYVAR" if key == "SYVAR" else "SK" if key == "SK" else "SA"
+        if i.const is None:
+            c.image_areas.add(area)
+        else:
+            c.image_keys.add((area, i.const >> 3 if key == "SA" else i.const))
         if key == "SA":
             if i.const is not None:
                 byte, mask = i.const >> 3, 1 << (i.const & 7)

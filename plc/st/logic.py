@@ -11,6 +11,7 @@ import dataclasses
 import functools
 import hashlib
 import math
+import threading
 import time
 import types as pytypes
 from collections.abc import Callable, Sequence
@@ -72,6 +73,9 @@ class Logic:
         self.files = tuple(n.SourceFile(f.path, f.text, ()) for f in files)
         self.python_source = source
         self.reads_nc = compiler.reads_nc
+        self.reads_et = compiler.reads_et
+        self.image_keys = frozenset(compiler.image_keys)  # (see Compiler.image_keys)
+        self.image_areas = frozenset(compiler.image_areas)
         # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
         self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
             d.span.file, d.span.line, d.span.column)))
@@ -192,22 +196,37 @@ class Logic:
 
     # -- the state a scan leaves, as one value (the scan's test for a scan that changed nothing)
 
-    def program_state(self, key: str) -> StateOf | None:
+    def program_state(self, key: str, timeless: bool = False) -> StateOf | None:
         """A function giving the whole state of an instance of PROGRAM ``key`` -- its
         variables, its FB instances' inner state (a TON's start), its arrays and structures
         -- as one value that compares equal only when the two states are the same; None
-        when a member is of no type it knows."""
-        return self._object_state(self.namespace[f"P_{key}"], self.programs[key])
+        when a member is of no type it knows.  ``timeless``: all but the timers' ETs."""
+        return self._kept_state(f"P_{key}", self.programs[key], timeless)
 
-    def globals_state(self) -> StateOf | None:
+    def globals_state(self, timeless: bool = False) -> StateOf | None:
         """:meth:`program_state` of the VAR_GLOBALs (the module's ``_G``)."""
-        return self._object_state(self.namespace["_Globals"], self.globals)
+        return self._kept_state("_Globals", self.globals, timeless)
 
-    def _state_of(self, t: Type) -> StateOf | Literal[False] | None:
+    def _kept_state(self, cls: str, table: dict[str, ProgramVar], timeless: bool
+                    ) -> StateOf | None:
+        """:meth:`_object_state` of the generated class ``cls``, made once for the same
+        module and types (a scenario suite loads the same logic at every run)."""
+        key = (self._filename, cls, timeless, tuple((k, str(v.type)) for k, v in table.items()))
+        with _STATES_LOCK:  # (sweeps run logic in threads)
+            if key in _STATES:
+                return _STATES[key]
+        made = self._object_state(self.namespace[cls], table, timeless)
+        with _STATES_LOCK:
+            if len(_STATES) >= COMPILED_KEPT * 4:
+                _STATES.pop(next(iter(_STATES)))
+            _STATES[key] = made
+        return made
+
+    def _state_of(self, t: Type, timeless: bool) -> StateOf | Literal[False] | None:
         """The state of a value of type ``t``: None when the value is its own (a number,
         a string, a BOOL: immutable), False when it cannot be told."""
         if isinstance(t, ArrayOf | AnyLength):
-            each = self._state_of(t.element)
+            each = self._state_of(t.element, timeless)
             if each is False:
                 return False
             if isinstance(t, AnyLength):  # the caller's array, or None before a call
@@ -217,23 +236,24 @@ class Logic:
         if isinstance(t, StructOf | FbOf):
             parts: list[str] = []
             helpers: dict[str, StateOf] = {}
-            if not self._members(t, "o", parts, helpers):
+            if not self._members(t, "o", parts, helpers, timeless):
                 return False
             return _state_function(parts, helpers)
         if t in REALS:
             return _real_state
         return None
 
-    def _object_state(self, cls: Any, table: dict[str, ProgramVar]) -> StateOf | None:
+    def _object_state(self, cls: Any, table: dict[str, ProgramVar], timeless: bool
+                      ) -> StateOf | None:
         """A generated class's instance (a PROGRAM, the VAR_GLOBALs): by its slots."""
         parts: list[str] = []
         helpers: dict[str, StateOf] = {}
-        if not self._slots(cls, table, "o", parts, helpers):
+        if not self._slots(cls, table, "o", parts, helpers, timeless):
             return None
         return _state_function(parts, helpers)
 
     def _slots(self, cls: Any, table: dict[str, ProgramVar], holder: str, parts: list[str],
-               helpers: dict[str, StateOf]) -> bool:
+               helpers: dict[str, StateOf], timeless: bool) -> bool:
         """The state of each member of ``holder`` (code: a generated class's instance) as
         code into ``parts`` -- a structure's or an FB's members are read in place, as
         their holder's -- and the functions that code calls (an array's, a REAL's) into
@@ -247,10 +267,10 @@ class Logic:
                     return False
                 parts.append(path)
             elif isinstance(var.type, StructOf | FbOf):
-                if not self._members(var.type, path, parts, helpers):
+                if not self._members(var.type, path, parts, helpers, timeless):
                     return False
             else:
-                state = self._state_of(var.type)
+                state = self._state_of(var.type, timeless)
                 if state is False:
                     return False
                 if state is None:
@@ -262,14 +282,14 @@ class Logic:
         return True
 
     def _members(self, t: StructOf | FbOf, holder: str, parts: list[str],
-                 helpers: dict[str, StateOf]) -> bool:
+                 helpers: dict[str, StateOf], timeless: bool) -> bool:
         if isinstance(t, StructOf):
             return self._slots(self.namespace[f"S_{t.name}"], self.struct_fields[t.name],
-                               holder, parts, helpers)
+                               holder, parts, helpers, timeless)
         if not t.std:
             return self._slots(self.namespace[f"FB_{t.name}"], self.fb_vars[t.name], holder,
-                               parts, helpers)
-        return _std_members(self.namespace[f"_STD_{t.name}"], holder, parts)
+                               parts, helpers, timeless)
+        return _std_members(self.namespace[f"_STD_{t.name}"], holder, parts, timeless)
 
     def locate(self, tb: pytypes.TracebackType | None) -> tuple[n.Span | None, str]:
         """The ST statement of the innermost generated frame in a traceback."""
@@ -342,6 +362,11 @@ def _real_state(value: float) -> tuple[float, float]:
     return value, math.copysign(1.0, value)
 
 
+# The state functions made (Logic._kept_state): (module, class, timeless, types) -> function.
+_STATES: dict[tuple[str, str, bool, tuple[tuple[str, str], ...]], StateOf | None] = {}
+_STATES_LOCK = threading.Lock()
+
+
 def _state_function(parts: list[str], helpers: dict[str, StateOf]) -> StateOf:
     """``state(o)``: the tuple of ``parts`` (code on ``o``), compiled once for the same code
     -- straight-line attribute reads, 5x faster than an attrgetter of the dotted paths."""
@@ -357,13 +382,16 @@ def _state_code(source: str) -> pytypes.CodeType:
     return compile(source, "<ncgate-st state>", "exec")
 
 
-def _std_members(cls: Any, holder: str, parts: list[str]) -> bool:
-    """A standard FB's members (a dataclass: TON, CTU with its R_TRIG, ...), read in place."""
+def _std_members(cls: Any, holder: str, parts: list[str], timeless: bool = False) -> bool:
+    """A standard FB's members (a dataclass: TON, CTU with its R_TRIG, ...), read in place
+    (``timeless``: a timer's ET left out)."""
     fresh = cls()
     for f in dataclasses.fields(cls):
+        if timeless and f.name == "ET" and isinstance(fresh, stdlib.Timer):
+            continue
         value = getattr(fresh, f.name)
         if dataclasses.is_dataclass(value):
-            if not _std_members(value.__class__, f"{holder}.{f.name}", parts):
+            if not _std_members(value.__class__, f"{holder}.{f.name}", parts, timeless):
                 return False
         elif value is None or isinstance(value, bool | int | str):
             parts.append(f"{holder}.{f.name}")

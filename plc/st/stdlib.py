@@ -55,9 +55,14 @@ def limits(type_name: str) -> tuple[int, int]:
 # scan is never judged still.  (``next`` on a count is atomic: several runtimes in threads
 # only make each other's scans less often still, never wrongly.)
 RUNNING = itertools.count()
+# Such a call also leaves its time and when its Q will change (``_ran``, ``_due``: ms) in the
+# instance -- not a member of the FB (RETAIN, the state compared, the debugger know nothing of
+# them): ``sim`` leaps over the scans whose only change is a running timer's ET, up to the
+# first due (plc/scan.py, a timed still scan).
+
 
 @dataclass
-class _Timer:
+class Timer:
     """The interface IEC gives TON, TOF and TP: IN and PT in, Q and ET out (ms)."""
 
     IN: bool = False
@@ -65,9 +70,18 @@ class _Timer:
     Q: bool = False
     ET: int = 0
 
+    def __post_init__(self) -> None:
+        self._ran: int | None = None  # (the time of the last call that ran, and its due)
+        self._due = 0
+
+    def catch_up(self, now_ms: int) -> None:
+        """A running timer's ET as a call at ``now_ms`` before its due would leave it (the
+        scans ``sim`` leapt over, or the last of them at the run's end)."""
+        raise NotImplementedError
+
 
 @dataclass
-class TON(_Timer):
+class TON(Timer):
     """On-delay: Q rises PT after IN rose, while IN stays TRUE; ET counts up to PT."""
 
     _start: int | None = None
@@ -82,10 +96,15 @@ class TON(_Timer):
         self.Q = self.ET >= self.PT
         if not self.Q:
             next(RUNNING)
+            self._ran, self._due = now_ms, self._start + self.PT
+
+    def catch_up(self, now_ms: int) -> None:
+        if self.IN and self._start is not None and not self.Q:
+            self.ET = min(now_ms - self._start, self.PT)
 
 
 @dataclass
-class TOF(_Timer):
+class TOF(Timer):
     """Off-delay: Q follows IN up at once and falls PT after IN fell; ET counts from the fall."""
 
     _start: int | None = None
@@ -103,10 +122,15 @@ class TOF(_Timer):
             self.Q, self._start = False, None
         else:
             next(RUNNING)
+            self._ran, self._due = now_ms, self._start + self.PT
+
+    def catch_up(self, now_ms: int) -> None:
+        if not self.IN and self.Q and self._start is not None:
+            self.ET = min(now_ms - self._start, self.PT)
 
 
 @dataclass
-class TP(_Timer):
+class TP(Timer):
     """Pulse: a rising IN starts a pulse of PT (Q TRUE); changes of IN during it are ignored."""
 
     _start: int = 0
@@ -120,8 +144,13 @@ class TP(_Timer):
                 self.Q = False
             else:
                 next(RUNNING)
+                self._ran, self._due = now_ms, self._start + self.PT
         if not self.Q and not self.IN:
             self.ET = 0
+
+    def catch_up(self, now_ms: int) -> None:
+        if self.Q:
+            self.ET = min(now_ms - self._start, self.PT)
 
 
 # ---- edge detectors ------------------------------------------------------------------------

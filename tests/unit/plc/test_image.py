@@ -232,3 +232,18 @@ def test_a_frozen_image_read_on_another_thread_is_of_its_moment() -> None:
         sys.setswitchinterval(interval)
     assert len(values) == 19999 // 7
     assert all(syvar[1] == syvar[2] == version for version, syvar in values)
+
+
+def test_a_watch_counts_the_writes_that_changed_what_it_watches() -> None:
+    image = IOImage(64, 16, 8)
+    bytes_ = image.watch([("SA", 1), ("SYVAR", 2)])
+    area = image.watch(areas=["SK"])
+    image.write([("SA", 3, "bit", 1), ("SYVAR", 1, "IN", 5)], "x")  # neither
+    image.write([("SA", 9, "bit", 1)], "x")  # SA9 is in byte 1
+    image.write([("SA", 9, "bit", 1)], "x")  # the same value: no change
+    image.write([("SK", 7, "BY", 3)], "x")
+    image.write([("SYVAR", 2, "IN", -1)], "x")
+    assert (bytes_.generation, area.generation) == (2, 1)
+    area.close()
+    image.write([("SK", 7, "BY", 4)], "x")
+    assert area.generation == 1
