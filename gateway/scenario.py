@@ -87,11 +87,19 @@ class Expectations:
         # The variables' watches by each byte they occupy (a SYVAR is its own): a write
         # looks at the watches of the bytes it touched, not at every watch.
         self._by_byte: dict[tuple[str, int], list[_Watch]] = {}
+        self._watching: dict[tuple[str, int, str], tuple[int, ...]] = {}  # (_watching_of)
         for w in self.watches:
             if w.kind == "var" and w.var is not None:
                 area, first, last = _bytes(*w.var.address)
                 for byte in range(first, last + 1):
                     self._by_byte.setdefault((area, byte), []).append(w)
+
+    def _watching_of(self, area: str, index: int, view: str) -> tuple[int, ...]:
+        """The watches (ids) a write of the variable at (area, index, view) may change:
+        those sharing a byte of its storage."""
+        area, first, last = _bytes(area, index, view)
+        return tuple(id(w) for byte in range(first, last + 1)
+                     for w in self._by_byte.get((area, byte), ()))
 
     def _fail(self, expect: Expect, message: str) -> ScenarioError:
         return ScenarioError(f"{self.script.file}: {expect.key}.cond: {message}")
@@ -209,13 +217,14 @@ class Expectations:
             w.changes.append((self.now, holds))
 
     def _on_write(self, changes: Sequence[Change], writer: str) -> None:
-        by_byte = self._by_byte
         hit: set[int] = set()  # (a write of other bytes: their value and writer are as were)
+        watching = self._watching
         for c in changes:
-            area, first, last = _bytes(c.area, c.index, c.view)
-            for byte in range(first, last + 1):
-                for w in by_byte.get((area, byte), ()):
-                    hit.add(id(w))
+            key = (c.area, c.index, c.view)
+            found = watching.get(key)
+            if found is None:
+                found = watching[key] = self._watching_of(*key)
+            hit.update(found)
         if not hit:
             return
         for w in self.watches:

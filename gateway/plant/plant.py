@@ -56,6 +56,8 @@ MAX_STRETCH = 64
 TICK_S = 0.0001
 # Outputs that carry a number, not a bit: they need a word (a SYVAR, an SK/SA .IN word).
 _NUMBER_OUTPUTS = frozenset({("cylinder", "position"), ("motor", "speed"), ("lag", "actual")})
+# The outputs that need a word: the numbers, and a generator's output unless it is a square
+_WORD_OUTPUTS = _NUMBER_OUTPUTS | {("generator", "output")}
 
 
 @dataclass(eq=False)
@@ -130,8 +132,7 @@ class Plant:
                 self.runtime.image.read(*var.address)
             except (InputRefused, IndexError) as exc:
                 raise ConfigError(f"{where}: {key}.{name}: {exc}") from None
-            if role == "out" and (config.kind, name) in _NUMBER_OUTPUTS | {
-                    ("generator", "output")} and not (
+            if role == "out" and (config.kind, name) in _WORD_OUTPUTS and not (
                     config.kind == "generator" and config.keys.get("shape", "square")
                     == "square"):
                 low, high = value_range(var.area, var.view)

@@ -5,6 +5,7 @@ module through the registry (:mod:`ncgate.interpreter.dialects`), not by naming 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 from ncgate.interpreter.diagnostics import LineError, RuntimeAlarm
@@ -19,6 +20,7 @@ def _image_var(var: VarRef) -> ImageVar:
     return (var.kind.value, var.index, var.view.value)
 
 
+@functools.lru_cache(maxsize=1024)  # (a scenario suite parses the same few at every run)
 def parse_condition(text: str) -> tuple[ImageVar, str, int]:
     """``"SYVAR1=10"`` -> (("SYVAR", 1, "IN"), "=", 10).  Raises ValueError with a reason."""
     try:
