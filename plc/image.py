@@ -249,8 +249,20 @@ class IOImage:
         touched: set[_Key] = set()
         self._write_number += 1
         stamp = (self._write_number, writer)
+        syvar, writers = self.syvar, self._writers
         try:
             for area, index, view, value in items:
+                if area == "SYVAR" and 0 <= index < len(syvar):  # (the samples of a plant's
+                    old = syvar[index]  # ramps and lags: read, _store and _keys inline)
+                    key = ("SYVAR", index)
+                    writers[key] = stamp
+                    change = _new(Change, (area, index, view, value, old))
+                    written.append(change)
+                    if value != old:
+                        syvar[index] = value
+                        touched.add(key)
+                        done.append(change)
+                    continue
                 old = self.read(area, index, view)
                 keys = self._store(area, index, view, value, old)
                 for key in self._keys(area, index, view):
