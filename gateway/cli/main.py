@@ -245,23 +245,26 @@ def _check(args: argparse.Namespace) -> int:
     # check opens no server: what only a server needs (the console's bind) is not its concern
     config = load_config(args.config, serving=False) if args.config else None
     err = stderr()
-    cell = None  # the cell whose [plc] and [plant] logic is checked as sim and run load it
+    # The cells whose [plc] and [plant] logic is checked as sim and run load it (its PROGRAMs
+    # chosen): --config's (or --example's), and without it the config beside a logic file
+    # named that is its own -- the config check takes for that file's folder.
+    cells: list[Config] = []
     if args.files:
         files, again = expand(args.files)
         for path in again if not args.quiet else ():
             print(f"ncgate check: {path} is given twice: checked once", file=err)
         if config is not None:
-            # --config (or --example): its own logic is checked as the cell loads it (its
-            # PROGRAMs chosen), also when named; another ST file named is checked alone (a
-            # library's may hold no PROGRAM).
-            cell = config
-            logic = {path.resolve() for path in (*config.plc.logic, *config.plant.logic)}
-            files = [path for path in files if path.resolve() not in logic]
+            # Its own logic is checked as the cell loads it, also when named; another ST
+            # file named is checked alone (a library's may hold no PROGRAM).
+            cells.append(config)
+            files = [path for path in files if path.resolve() not in _own_logic(config)]
+        else:
+            files = _beside_cells(files, cells)
     else:
-        cell = config or load_config(None, serving=False)
-        _require_default_device(cell)
-        files = storage_files(cell)
-    if not files and (cell is None or not (cell.plc.logic or cell.plant.logic)):
+        cells.append(config or load_config(None, serving=False))
+        _require_default_device(cells[0])
+        files = storage_files(cells[0])
+    if not files and not any(cell.plc.logic or cell.plant.logic for cell in cells):
         raise UsageError("no program to check")
     if args.process is not None:
         count = (config or load_config(None, serving=False)).nc.processes
@@ -269,7 +272,7 @@ def _check(args: argparse.Namespace) -> int:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
     programs = check_files(files, config, args.process, dialect) if files else []
-    reports = programs + (_check_config_logic(cell) if cell is not None else [])
+    reports = programs + [report for cell in cells for report in _check_config_logic(cell)]
     errors = sum(r.errors for r in reports)
     warnings = sum(r.warnings for r in reports)
     # `ncgate check | head -1` (or `2>&1 | head -1`): the reader has what it wanted, and the
@@ -289,6 +292,36 @@ def _check(args: argparse.Namespace) -> int:
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     err.flush()
     return EXIT_FAILED if errors else EXIT_OK
+
+
+def _own_logic(config: Config) -> set[Path]:
+    return {path.resolve() for path in (*config.plc.logic, *config.plant.logic)}
+
+
+def _beside_cells(files: list[Path], cells: list[Config]) -> list[Path]:
+    """``files`` but the logic files that are the own of the config beside them (an
+    ``ncgate.toml``: the config check takes for their folder), whose configs go to
+    ``cells``: ``check plc.st`` of a cell's logic refuses what ``sim`` beside it refuses
+    (plc.programs naming no PROGRAM of it)."""
+    from ncgate.gateway.cli.check import CONFIG_BESIDE, LOGIC_SUFFIXES
+
+    found: dict[Path, tuple[Config, set[Path]]] = {}
+    taken: set[Path] = set()
+    rest = []
+    for path in files:
+        beside = (path.parent / CONFIG_BESIDE).resolve()
+        if path.suffix.lower() in LOGIC_SUFFIXES and beside.is_file():
+            if beside not in found:
+                cell = load_config(beside, serving=False)
+                found[beside] = (cell, _own_logic(cell))
+            cell, own = found[beside]
+            if path.resolve() in own:
+                if beside not in taken:
+                    taken.add(beside)
+                    cells.append(cell)
+                continue
+        rest.append(path)
+    return rest
 
 
 def _check_config_logic(config: Config) -> list[FileReport]:

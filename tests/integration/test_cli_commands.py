@@ -338,6 +338,14 @@ def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
     fine.write_text(f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[{section}]\n'
                     'logic = "main.st"\n')
     assert main(["check", "--config", str(fine), str(tmp_path / "other.st")]) == 0
+    # Without --config, the config beside a logic file named is the one check takes: its own
+    # logic is the cell's there too (`check main.st` beside it said 0 errors, sim refused).
+    assert main(["check", str(tmp_path / logic)]) == 2
+    assert f"{tmp_path.resolve() / 'ncgate.toml'}: {said.format(section=section)}" in \
+        capsys.readouterr().err
+    # A library beside it is checked alone -- under that config, which a PROGRAM listed twice
+    # makes a config error of its own.
+    assert main(["check", str(tmp_path / "other.st")]) == (2 if "twice" in said else 0)
 
 
 @pytest.mark.parametrize(("extra", "said"), [
