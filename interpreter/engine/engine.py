@@ -403,8 +403,7 @@ class Engine:
                 p.held = True
                 p.held_by, p.held_since = by, self.now
                 if p.int_timer is not None:
-                    p.int_timer.cancel()
-                    p.int_timer = None
+                    self._stop_motion(p)
                     p.int_remaining = self._nominal_left(p)
             else:
                 p.held = False
@@ -1072,8 +1071,7 @@ class Engine:
             if item is None or p.held:
                 continue  # a hold keeps its nominal time left: the resume takes the new rate
             if p.int_timer is not None:
-                p.int_timer.cancel()
-                p.int_timer = None
+                self._stop_motion(p)
                 left = self._nominal_left(p)
             elif p.int_remaining is not None:  # it stood at 0 %
                 left, p.int_remaining = p.int_remaining, None
@@ -1082,12 +1080,20 @@ class Engine:
             self._arm_item(p, item, left)
         self.last_change = self.now
 
+    def _stop_motion(self, p: Process) -> None:
+        """The timed item's timer stops (a hold, a new override, an abort): the time it ran
+        is the process's moving time (at the override it ran at: not its nominal time)."""
+        assert p.int_timer is not None
+        p.int_timer.cancel()
+        p.int_timer = None
+        p.stats.moving_s += self.now - p.int_started
+
     def _timed_done(self, p: Process, item: QueueItem) -> None:
         p.int_timer = None
         p.int_move = None
         if item.move is not None:
             p.actual = list(item.move.end)
-        p.stats.moving_s += item.duration
+        p.stats.moving_s += self.now - p.int_started
         if item.kind == ItemKind.SYNC:  # a move inside a # block
             p.sync_i += 1
             self._continue_sync(p)
@@ -1231,7 +1237,7 @@ class Engine:
         for wait in p.waits():
             self._drop_wait(wait)
         if p.int_timer is not None:
-            p.int_timer.cancel()
+            self._stop_motion(p)
         if p.dec_timer is not None:
             p.dec_timer.cancel()
 

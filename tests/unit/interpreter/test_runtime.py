@@ -535,6 +535,30 @@ def test_an_override_changed_mid_move_acts_from_where_the_move_is() -> None:
     assert sim.first("end", proc=1)["t"] == pytest.approx(6.75)
 
 
+def test_moving_time_is_the_time_the_moves_took() -> None:
+    """The process's moving seconds (sim's summary, "moving s") are the machine time its moves
+    ran: 2 s for a 1 s move at 50 %, nothing for a 0 % stand or a hold, the part of a move
+    an NC reset cut short -- not each move's nominal time, counted when it ended."""
+    sim = make_sim({"A": "N1G1X10F600\nN2M30\n"})
+    sim.engine.override(feed=50)
+    sim.engine.start("A")
+    sim.run()
+    assert sim.engine.processes[1].stats.moving_s == pytest.approx(2.0)
+
+    sim = make_sim({"A": "N1G1X10F600\nN2G1X0\nN3M30\n"})
+    engine = sim.engine
+    engine.start("A")
+    engine.call_at(0.25, lambda: engine.override(feed=0))  # stands 1 s
+    engine.call_at(1.25, lambda: engine.override(feed=100))
+    engine.call_at(1.5, lambda: engine.hold(True))  # held 2 s
+    engine.call_at(3.5, lambda: engine.hold(False))
+    engine.call_at(4.25, lambda: engine.reset())  # N1 ended at 4.0; N2 cut short
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(4.25)
+    # N1: 0.25 s before the stand, 0.25 s before the hold, its last 0.5 s; N2: 0.25 s
+    assert engine.processes[1].stats.moving_s == pytest.approx(0.25 + 0.25 + 0.5 + 0.25)
+
+
 def test_a_feed_hold_during_a_hash_blocks_move_keeps_its_time() -> None:
     """A move inside a # block held at 0.5 s and resumed at 2.5 s ends at 3.0 s; it ended
     at once on resume before (the hold measured the # block, not its move)."""
