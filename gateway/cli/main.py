@@ -857,10 +857,11 @@ def _examples() -> int:
     found = examples()
     width = max((len(e.name) for e in found), default=0)
     mains = max((len(e.main or "-") for e in found), default=0)
+    out = stdout()  # (`examples | head -0`: the reader gone, where they are is still said)
     for example in found:
         main = example.main or "-"
-        print(f"{example.name:<{width}} {main:<{mains}} {example.summary}")
-    print(f"installed in {examples_folder()}", file=sys.stderr)
+        print(f"{example.name:<{width}} {main:<{mains}} {example.summary}", file=out)
+    print(f"installed in {examples_folder()}", file=stderr())
     return EXIT_OK
 
 

@@ -511,6 +511,20 @@ def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
     assert proc.returncode == 0 and err == "", err
 
 
+def test_examples_into_a_reader_gone_still_says_where_they_are() -> None:
+    """`ncgate examples | head -0`: the reader gone before the list, the line on stderr that
+    says where the examples are installed was lost with it (unbuffered output, as
+    PYTHONUNBUFFERED makes it, met the closed pipe at the first line)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader went before the first line
+    proc = subprocess.Popen([sys.executable, "-m", "ncgate", "examples"], stdout=write_end,
+                            stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    os.close(write_end)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and err.startswith("installed in "), err
+
+
 @pytest.mark.parametrize(("program", "status"), [("N{n}(WAI,SA1=)\n", 1), ("N{n}G999\n", 0)])
 def test_check_into_a_reader_that_stops_early_ends_quietly_with_the_status_it_found(
         tmp_path: Path, program: str, status: int) -> None:
