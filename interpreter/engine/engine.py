@@ -772,9 +772,9 @@ class Engine:
     def _account(self, p: Process) -> None:
         spent = self.now - p.state_since
         if spent > 0:
-            if p.state in RUNNING_STATES:
+            if p.state in RUNNING_STATES and not p.standing:
                 p.stats.running_s += spent
-            elif p.state in WAITING_STATES or p.state is ProcessState.HOLD or (
+            elif p.standing or p.state in WAITING_STATES or p.state is ProcessState.HOLD or (
                     p.state is ProcessState.STEP):
                 p.stats.waiting_s += spent
         p.state_since = self.now
@@ -1032,6 +1032,7 @@ class Engine:
         p.int_done = item.duration - remaining
         p.int_started = self.now
         rate = p.int_rate = self._rate(p, item)
+        self._stand(p, rate <= 0.0)
         if rate <= 0.0:
             p.int_remaining = remaining
             return
@@ -1079,6 +1080,13 @@ class Engine:
                 continue
             self._arm_item(p, item, left)
         self.last_change = self.now
+
+    def _stand(self, p: Process, on: bool) -> None:
+        """``p``'s timed item stands at a 0 % override (``on``), or no longer: its RUNNING
+        time from now on is waiting time (or running time again)."""
+        if p.standing != on:
+            self._account(p)
+            p.standing = on
 
     def _stop_motion(self, p: Process) -> None:
         """The timed item's timer stops (a hold, a new override, an abort): the time it ran
@@ -1236,6 +1244,7 @@ class Engine:
         """Its waits, its motion timer and its block-time timer: nothing of it fires later."""
         for wait in p.waits():
             self._drop_wait(wait)
+        self._stand(p, False)
         if p.int_timer is not None:
             self._stop_motion(p)
         if p.dec_timer is not None:

@@ -78,6 +78,9 @@ class Process:
         # The overrides in percent (the operator's switches: kept over programs and resets).
         self.feed_override = 100
         self.rapid_override = 100
+        # Its timed item stands at a 0 % override (RUNNING, not held): waiting time, as a
+        # feed hold's is (Engine._stand keeps it, accounting the time at each change).
+        self.standing = False
         self.actual: list[float] = list(self.modal.position)  # the interpolator's position
         self.queued = False  # in the engine's run queue
         self.clear()

@@ -538,7 +538,8 @@ def test_an_override_changed_mid_move_acts_from_where_the_move_is() -> None:
 def test_moving_time_is_the_time_the_moves_took() -> None:
     """The process's moving seconds (sim's summary, "moving s") are the machine time its moves
     ran: 2 s for a 1 s move at 50 %, nothing for a 0 % stand or a hold, the part of a move
-    an NC reset cut short -- not each move's nominal time, counted when it ended."""
+    an NC reset cut short -- not each move's nominal time, counted when it ended.  A stand at
+    0 % is waiting time, as a feed hold is."""
     sim = make_sim({"A": "N1G1X10F600\nN2M30\n"})
     sim.engine.override(feed=50)
     sim.engine.start("A")
@@ -556,7 +557,10 @@ def test_moving_time_is_the_time_the_moves_took() -> None:
     sim.run()
     assert sim.first("end", proc=1)["t"] == pytest.approx(4.25)
     # N1: 0.25 s before the stand, 0.25 s before the hold, its last 0.5 s; N2: 0.25 s
-    assert engine.processes[1].stats.moving_s == pytest.approx(0.25 + 0.25 + 0.5 + 0.25)
+    stats = engine.processes[1].stats
+    assert stats.moving_s == pytest.approx(0.25 + 0.25 + 0.5 + 0.25)
+    # The 1 s standing at 0 % is waiting time, as the 2 s hold is (it was running time).
+    assert (stats.running_s, stats.waiting_s) == (pytest.approx(1.25), pytest.approx(3.0))
 
 
 def test_a_feed_hold_during_a_hash_blocks_move_keeps_its_time() -> None:
