@@ -33,6 +33,19 @@ class WaitIdleTimeout(GatewayError, TimeoutError):
     """``wait_idle``/``wait_state`` ran out of time; the message has the why-records."""
 
 
+class ClusterLost(GatewayError, TimeoutError):
+    """``ncgate sweep --scheduler``: the Dask scheduler has had no worker for
+    ``cluster.WORKERLESS_S`` in a row, so the sweep stopped waiting for its tasks."""
+
+    def __init__(self, scheduler: str, workerless_s: float, unfinished: int) -> None:
+        super().__init__(f"the Dask scheduler at {scheduler} has had no worker for "
+                         f"{workerless_s:.0f} s; {unfinished} variant"
+                         f"{'s' if unfinished != 1 else ''} not done")
+        self.scheduler = scheduler
+        self.workerless_s = workerless_s
+        self.unfinished = unfinished
+
+
 class ProcessAlarmError(GatewayError, RuntimeError):
     """Every process stopped, some in ALARM: the message has the alarms."""
 

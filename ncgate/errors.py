@@ -21,6 +21,7 @@ catch as narrowly as they like::
         │   └── RecordError: a session record's line that is not one
         ├── ListenError (OSError): a port (TCP or serial) that cannot be served
         ├── WaitIdleTimeout (TimeoutError)
+        ├── ClusterLost (TimeoutError): a sweep's Dask scheduler with no worker left
         ├── ProcessAlarmError (RuntimeError)
         ├── ModbusError: a request answered with an exception code
         ├── FramingError (ValueError): a Modbus byte stream that cannot be cut into frames

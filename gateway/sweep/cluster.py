@@ -13,6 +13,15 @@ fails may be innocent, beside the killer on its worker: each such runs once more
 alone (nothing else of the sweep's in flight), and only the variant that kills its worker then
 is a ``crash`` row.
 
+A cluster with no worker left (each died or was retired, or none ever joined) would leave the
+tasks pending at the scheduler for ever: while results are awaited, the scheduler's workers
+are counted about once a second (``POLL_S``), and once it has had none for ``WORKERLESS_S``
+in a row the sweep stops with :class:`ClusterLost` (docs/decisions.md: why 60 s).  A task's
+future is waited for through a queue its done callback feeds, with a timeout, not
+``as_completed``: that one's blocking ``next`` takes no timeout (its ``timeout`` is a deadline
+for the whole iteration, distributed 2026.8), and a wait between its non-blocking batches
+would be a sleep or its private condition.
+
 The workers need ncgate installed (the same version) and the spec's files at the same paths:
 a shared folder, or the same checkout on every machine.
 """
@@ -20,15 +29,25 @@ a shared folder, or the same checkout on every machine.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+import queue
+import time
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
+from ncgate.gateway.errors import ClusterLost
 from ncgate.gateway.sweep.pool import Runner
 from ncgate.gateway.sweep.run import Result, _result, run_variant
 from ncgate.gateway.sweep.spec import SpecError, Variant
 
 MAX_CHUNK = 32
 CHUNKS_PER_THREAD = 24
+# A cluster may be restarting (its workers come back after the scheduler) or scaling up from
+# none: a minute without a worker is not yet lost (docs/decisions.md).
+WORKERLESS_S = 60.0
+POLL_S = 1.0  # the workers are counted at most this often, and only while nothing comes
+# A fetch of a finished task's results is given up (the workers counted) and begun again after
+# this long: far beyond a chunk's few kB, so that a slow fetch is never cut short for ever.
+FETCH_S = 10.0
 
 
 def run_chunk(variants: Sequence[Variant], timeout_s: float | None,
@@ -54,61 +73,142 @@ def connect(scheduler: str) -> Any:
         raise SpecError(f"--scheduler {scheduler}: {exc}") from None
 
 
+class _Tasks:
+    """The sweep's tasks on the cluster: each future as it finishes, and the watch on the
+    scheduler's workers while none does.
+
+    A future's done callback (run in Dask's callback thread) puts it in ``finished``; the
+    sweep's thread waits on that queue at most until the next count of the workers is due.
+    Results that keep coming need no count: a worker made them."""
+
+    def __init__(self, client: Any, scheduler: str, threads: int) -> None:
+        self.client = client
+        self.scheduler = scheduler
+        self.finished: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self.unclaimed: dict[str, Any] = {}  # submitted, not yet taken by next(): by key
+        self.checked = time.monotonic()
+        self.workerless_since: float | None = None if threads else self.checked
+
+    def submit(self, variants: list[Variant], timeout_s: float | None, runner: Runner,
+               key: str) -> Any:
+        future = self.client.submit(run_chunk, variants, timeout_s, runner, pure=False, key=key)
+        self.unclaimed[future.key] = future
+        future.add_done_callback(self.finished.put)
+        return future
+
+    def next(self, unfinished: Callable[[], int]) -> Any:
+        """The next task to finish; ClusterLost once the scheduler has had no worker for
+        ``WORKERLESS_S`` (``unfinished()``: the variants it leaves not done)."""
+        while True:
+            try:
+                future = self.finished.get(
+                    timeout=max(0.0, self.checked + POLL_S - time.monotonic()))
+            except queue.Empty:
+                self.check(unfinished)
+                continue
+            if self.unclaimed.pop(future.key, None) is None:
+                continue  # released before it finished (the sweep stopped)
+            if future.status == "finished":
+                self.workerless_since = None  # a worker ran it
+            return future
+
+    def result(self, future: Any, unfinished: Callable[[], int]) -> list[Result]:
+        """``future``'s results.  Those of a worker that is gone by the time they are fetched
+        are computed again, which waits for a worker as a pending task does."""
+        while True:
+            try:
+                return future.result(timeout=FETCH_S)  # type: ignore[no-any-return]
+            except TimeoutError:
+                if future.status == "error":
+                    raise  # the task's own (the wall timeout is a row, never this)
+                self.check(unfinished)
+
+    def check(self, unfinished: Callable[[], int]) -> None:
+        now = time.monotonic()
+        self.checked = now
+        if sum(self.client.nthreads().values()):
+            self.workerless_since = None
+        elif self.workerless_since is None:
+            self.workerless_since = now
+        elif now - self.workerless_since >= WORKERLESS_S:
+            raise ClusterLost(self.scheduler, now - self.workerless_since, unfinished())
+
+    def release(self) -> None:
+        """The tasks not taken, given up: the scheduler forgets them once no client holds
+        them (a sweep stopped, or a cluster lost)."""
+        for future in self.unclaimed.values():
+            future.release()
+        self.unclaimed.clear()
+
+
 def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | None,
              runner: Runner = run_variant, client: Any = None) -> Iterator[tuple[Variant, Result]]:
     """Each variant's result as its chunk comes back; ``client``: one already connected (the
-    caller closes it), else one of ``scheduler``'s, closed at the end."""
-    from distributed import as_completed
-
+    caller closes it), else one of ``scheduler``'s, closed at the end.  ClusterLost when the
+    scheduler has had no worker for ``WORKERLESS_S``: the results before it were yielded."""
     if not variants:
         return
     own = client is None
     if own:
         client = connect(scheduler)
+    tasks = None
     try:
         threads = sum(client.nthreads().values())
+        tasks = _Tasks(client, scheduler, threads)
         size = chunk_size(len(variants), threads)
-        chunks = {}
-        futures = []
+        chunks: dict[str, list[Variant]] = {}
         for i in range(0, len(variants), size):
             chunk = list(variants[i:i + size])
-            future = client.submit(run_chunk, chunk, timeout_s, runner, pure=False,
-                                   key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}")
+            future = tasks.submit(chunk, timeout_s, runner,
+                                  key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}")
             chunks[future.key] = chunk
-            futures.append(future)
-        pending = as_completed(futures, loop=client.loop)
         suspects: list[Variant] = []
-        for future in pending:
-            chunk = chunks.pop(future.key)
+
+        def unfinished() -> int:
+            return sum(map(len, chunks.values())) + len(suspects)
+
+        while chunks:
+            future = tasks.next(unfinished)
+            chunk = chunks[future.key]
             try:
-                results: list[Result] = future.result()
+                results = tasks.result(future, unfinished)
+            except ClusterLost:
+                raise
             except Exception:
+                del chunks[future.key]
                 if len(chunk) > 1:  # find the one that kills its worker: one task each
                     for v in chunk:
-                        single = client.submit(run_chunk, [v], timeout_s, runner, pure=False,
-                                               key=f"ncgate-sweep-{v.id}-alone")
+                        single = tasks.submit([v], timeout_s, runner,
+                                              key=f"ncgate-sweep-{v.id}-alone")
                         chunks[single.key] = [v]
-                        pending.add(single)
                 else:  # it, or a task beside it on a worker that died, killed its workers
                     suspects.extend(chunk)
                 continue
             finally:
                 future.release()
+            del chunks[future.key]
             yield from zip(chunk, results, strict=True)
-        for v in suspects:  # alone on the cluster: a worker that dies now died of this one
-            yield v, _alone(client, v, timeout_s, runner)
+        for n, v in enumerate(suspects):  # alone: a worker that dies now died of this one
+            yield v, _alone(tasks, v, timeout_s, runner, len(suspects) - n)
     finally:
+        if tasks is not None:
+            tasks.release()
         if own:
             client.close()
 
 
-def _alone(client: Any, variant: Variant, timeout_s: float | None, runner: Runner) -> Result:
+def _alone(tasks: _Tasks, variant: Variant, timeout_s: float | None, runner: Runner,
+           left: int) -> Result:
     """``variant`` run with nothing else of the sweep's in flight, so that Dask's count of the
-    workers that died running a task is this variant's alone: its verdict is final."""
-    future = client.submit(run_chunk, [variant], timeout_s, runner, pure=False,
-                           key=f"ncgate-sweep-{variant.id}-isolated")
+    workers that died running a task is this variant's alone: its verdict is final.  ``left``:
+    the variants not done, this one with them (for ClusterLost)."""
+    future = tasks.submit([variant], timeout_s, runner,
+                          key=f"ncgate-sweep-{variant.id}-isolated")
     try:
-        return future.result()[0]  # type: ignore[no-any-return]
+        tasks.next(lambda: left)
+        return tasks.result(future, lambda: left)[0]
+    except ClusterLost:
+        raise
     except Exception as exc:
         return _result("crash", report=f"its Dask worker failed: "
                        f"{type(exc).__name__}: {str(exc)[:200]}")

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
+from ncgate.gateway.errors import ClusterLost
 from ncgate.gateway.stdout import stdout
 from ncgate.gateway.sweep.run import Result
 from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
@@ -142,6 +143,15 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
               f"{len(spec.variants)} variants done, kept in {parts.folder}; run again with "
               "--resume to go on", file=sys.stderr)
         return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
+    except ClusterLost as exc:  # as a stop: what is done is kept, for --resume
+        parts.add(pending)
+        if progress is not None:
+            progress.close()
+        print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} has had no "
+              f"worker for {exc.workerless_s:.0f} s: {len(rows)} of {len(spec.variants)} "
+              f"variants done, kept in {parts.folder}; run again with --resume once the "
+              "cluster has workers", file=sys.stderr)
+        return EXIT_FAILED, []
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)  # type: ignore[arg-type]

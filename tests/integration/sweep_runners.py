@@ -15,11 +15,25 @@ from ncgate.gateway.sweep.spec import Variant
 def misbehaving(variant: Variant, timeout_s: float | None) -> Result:
     """DIE.nc ends its worker process at once (as a crash of the interpreter would); HANG.nc
     hangs where the worker's own timer cannot reach it (the timer signal blocked, a sleep in
-    C); any other program runs as usual."""
+    C); RAISE.nc raises out of the runner (on Dask, a task that errs: no row, no death); any
+    other program runs as usual."""
     name = Path(variant.program).stem
     if name == "DIE":
         os._exit(3)
+    if name == "RAISE":
+        raise RuntimeError("RAISE.nc: out of the runner")
     if name == "HANG":
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
         time.sleep(3600)
+    return run_variant(variant, timeout_s)
+
+
+SLOW_S = 0.5
+
+
+def slow(variant: Variant, timeout_s: float | None) -> Result:
+    """``run_variant`` after half a second of the wall clock, as a long program takes: a
+    sweep of a few such variants on one worker thread is still running when the test takes
+    its workers away after the first result."""
+    time.sleep(SLOW_S)
     return run_variant(variant, timeout_s)

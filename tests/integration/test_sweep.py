@@ -695,6 +695,136 @@ def test_kill_9_of_a_dask_worker_loses_and_duplicates_nothing(cluster: object,
         (big_sweep / "whole.csv").read_bytes()
 
 
+@pytest.fixture
+def lonely_cluster() -> Iterator[object]:
+    """One worker of one thread, the test's own: it takes the worker away (the module's
+    ``cluster`` must stay whole for the other tests)."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as local:
+        yield local
+
+
+def without_workers(local: object) -> None:
+    """``local`` scaled to no worker, until its scheduler has none left."""
+    local.scale(0)  # type: ignore[attr-defined]
+    # The scheduler's worker table belongs to the cluster's loop thread and no event says it
+    # emptied: read it until it has (ASYNC110's kind of poll, in a thread).
+    wait_for(lambda: not local.scheduler.workers,  # type: ignore[attr-defined]
+             "the scheduler to have no worker")
+
+
+def test_a_dask_cluster_with_no_worker_left_is_cluster_lost_after_the_results_before(
+        monkeypatch: pytest.MonkeyPatch, lonely_cluster: object, tmp_path: Path) -> None:
+    """Every worker retired mid-sweep: the tasks stay pending at the scheduler.  They were
+    waited for for ever; now the results that came are yielded, then ClusterLost."""
+    from ncgate.gateway.errors import ClusterLost
+    from ncgate.gateway.sweep import cluster
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import slow
+
+    monkeypatch.setattr(cluster, "WORKERLESS_S", 2.0)
+    spec = load_spec(misbehaving_spec(tmp_path, tuple(f"OK{i}.nc" for i in range(6))))
+    address = lonely_cluster.scheduler_address  # type: ignore[attr-defined]
+    sweep = cluster.run_dask(spec.variants, address, 60.0, runner=slow)
+    got = [next(sweep)]
+    without_workers(lonely_cluster)
+    with pytest.raises(ClusterLost) as lost:
+        got.extend(sweep)
+    ids = [v.id for v, _ in got]
+    assert len(ids) == len(set(ids)) and all(r["verdict"] == "ok" for _, r in got), got
+    assert lost.value.unfinished == len(spec.variants) - len(got) > 0
+    assert lost.value.workerless_s >= 2.0
+    assert f"the Dask scheduler at {address} has had no worker for " in str(lost.value)
+    assert f"; {lost.value.unfinished} variants not done" in str(lost.value)
+
+
+def test_a_suspect_run_alone_on_a_cluster_with_no_worker_left_is_cluster_lost(
+        monkeypatch: pytest.MonkeyPatch, lonely_cluster: object, tmp_path: Path) -> None:
+    """Both variants' tasks err, so each runs again alone at the end; the workers are gone
+    before the second's run: it was waited for for ever."""
+    from ncgate.gateway.errors import ClusterLost
+    from ncgate.gateway.sweep import cluster
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import misbehaving
+
+    monkeypatch.setattr(cluster, "WORKERLESS_S", 2.0)
+    spec = load_spec(misbehaving_spec(tmp_path, ("RAISE.nc",)))  # feed 50 and 100
+    address = lonely_cluster.scheduler_address  # type: ignore[attr-defined]
+    sweep = cluster.run_dask(spec.variants, address, 60.0, runner=misbehaving)
+    _, first = next(sweep)  # the first run alone: its verdict
+    assert first["verdict"] == "crash" and "RAISE.nc: out of the runner" in first["report"]
+    without_workers(lonely_cluster)
+    with pytest.raises(ClusterLost) as lost:
+        next(sweep)
+    assert lost.value.unfinished == 1, lost.value
+
+
+def test_a_sweep_whose_dask_cluster_has_no_worker_left_stops_with_1_and_resumes(
+        monkeypatch: pytest.MonkeyPatch, lonely_cluster: object, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The rows done are kept as at a stop, the message says why and how to go on, and
+    ``--resume`` on a cluster with a worker again gives the table a whole sweep gives."""
+    import functools
+    import io
+    import json
+
+    from distributed import Client
+
+    from ncgate.gateway.sweep import cluster, main
+    from ncgate.gateway.sweep.main import Options, run_sweep
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    from .sweep_runners import slow
+
+    misbehaving_spec(tmp_path, tuple(f"OK{i}.nc" for i in range(6)))
+    monkeypatch.chdir(tmp_path)  # `sweep spec.toml`, as the resume below: the rows' paths
+    spec = load_spec("spec.toml")
+    total = len(spec.variants)
+    address = lonely_cluster.scheduler_address  # type: ignore[attr-defined]
+    monkeypatch.setattr(cluster, "WORKERLESS_S", 2.0)
+    monkeypatch.setattr(cluster, "run_dask", functools.partial(cluster.run_dask, runner=slow))
+    monkeypatch.setattr(main, "FLUSH_ROWS", 1)  # a part at the first row
+    write = Parts.add
+
+    def add_then_retire_the_workers(parts: Parts, rows: list[dict[str, object]]) -> None:
+        write(parts, rows)
+        if rows:  # the first row is kept: the workers go
+            lonely_cluster.scale(0)  # type: ignore[attr-defined]
+
+    monkeypatch.setattr(Parts, "add", add_then_retire_the_workers)
+    status, rows = run_sweep(spec, Options(Path("out.csv"), scheduler=address, progress=False),
+                             io.StringIO())
+    err = capsys.readouterr().err
+    assert (status, rows) == (main.EXIT_FAILED, []), err
+    kept = [json.loads(line)["id"] for part in parts_of(tmp_path, "out.csv")
+            for line in part.read_text().splitlines()]
+    assert 0 < len(kept) == len(set(kept)) < total
+    assert err.startswith(f"ncgate sweep: stopped: the Dask scheduler at {address} has had no "
+                          "worker for "), err
+    assert err.endswith(f"s: {len(kept)} of {total} variants done, kept in "
+                        f"{tmp_path.resolve() / 'out.csv.parts'}; run again with --resume "
+                        "once the "
+                        "cluster has workers\n"), err
+    assert "Traceback" not in err and not (tmp_path / "out.csv").exists()
+
+    lonely_cluster.scale(1)  # type: ignore[attr-defined]
+    with Client(lonely_cluster, set_as_default=False) as client:
+        client.wait_for_workers(1, timeout=120)
+    again = ncgate("sweep", "spec.toml", "-o", "out.csv", "--resume", "--scheduler", address,
+                   cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert f"resuming: {len(kept)} of {total} variants done" in again.stdout
+    whole = ncgate("sweep", "spec.toml", "-o", "whole.csv", "--workers", "1", cwd=tmp_path)
+    assert whole.returncode == 0, whole.stderr
+    assert (tmp_path / "out.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    assert not (tmp_path / "out.csv.parts").exists()
+
+
 def test_a_plant_models_key_is_swept_by_the_models_name(tmp_path: Path) -> None:
     """`plant.model.clamp.travel_ms`: the machine example's PLC alarms when the clamp takes
     over 1 s to close (plc.st: clamp_slow, PT := T#1s), so a 300 ms stroke passes the good
