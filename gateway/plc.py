@@ -105,14 +105,24 @@ def file_stat(path: Path) -> FileStat:
 _stat_when_read: dict[Path, FileStat] = {}
 
 
-def read_sources(files: tuple[Path, ...]) -> Sources:
-    """The content of every logic file, as the PLC loads it and a session record keeps it."""
+def read_sources(files: tuple[Path, ...], config: Config | None = None,
+                 section: str = "plc") -> Sources:
+    """The content of every logic file, as the PLC loads it and a session record keeps it.
+    With ``config``, a file that cannot be read is a ConfigError naming ``section.logic``
+    (the config checked that each is a file; reading it may still fail: its permissions)."""
     from ncgate.plc.st.plcopen import read_logic_text
 
     out: Sources = {}
-    for path in files:
-        _stat_when_read[path.absolute()] = file_stat(path)
-        out[str(path)] = read_logic_text(path)
+    for i, path in enumerate(files):
+        try:
+            _stat_when_read[path.absolute()] = file_stat(path)
+            out[str(path)] = read_logic_text(path)
+        except OSError as exc:
+            if config is None:
+                raise
+            key = f"{section}.logic" + (f"[{i}]" if len(files) > 1 else "")
+            raise ConfigError(f"{config.source or '<config>'}: {key}: cannot read {path}: "
+                              f"{exc.strerror or exc}") from None
     return out
 
 
@@ -620,7 +630,7 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
     if not plc.logic:
         return None
     if sources is None:
-        sources = read_sources(plc.logic)
+        sources = read_sources(plc.logic, config)
     logic = load_logic(plc.logic, config, sources)
     order = program_order(logic, config)
     store = None
@@ -658,7 +668,7 @@ def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: b
     plant = config.plant
     if not plant.logic:
         return None
-    logic = load_logic(plant.logic, config)
+    logic = load_logic(plant.logic, config, read_sources(plant.logic, config, "plant"))
     order = program_order(logic, config, "plant")
     engine = runtime.engine
     logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door, SourceKind.PLANT),

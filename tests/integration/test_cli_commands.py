@@ -511,6 +511,36 @@ def test_map_into_a_reader_that_stops_early_ends_quietly() -> None:
     assert proc.returncode == 0 and err == "", err
 
 
+@pytest.mark.parametrize(("section", "key"), [("plc", "plc.logic"),
+                                              ("plant", "plant.logic[1]")])
+def test_a_logic_file_that_cannot_be_read_is_its_key(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        section: str, key: str) -> None:
+    """A logic file the config found, whose reading fails (its permissions: a fault injected
+    here, since root reads any file), said only "[Errno 13] Permission denied: 'main.st'":
+    it is the config error of its key, as a missing file is."""
+    logic = '"main.st"' if section == "plc" else '["lib.st", "main.st"]'
+    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[{section}]\n'
+                         f'logic = {logic}\n', {"A": "N1M30\n"})
+    (tmp_path / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
+                                     "END_FUNCTION_BLOCK\n")
+    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                      "END_PROGRAM\n")
+    unreadable = tmp_path / "main.st"
+    read_bytes = Path.read_bytes
+
+    def refuse(self: Path) -> bytes:
+        if self.resolve() == unreadable.resolve():
+            raise PermissionError(13, "Permission denied", str(self))
+        return read_bytes(self)
+
+    monkeypatch.setattr(Path, "read_bytes", refuse)
+    config = tmp_path / "ncgate.toml"
+    assert main(["sim", "--config", str(config)]) == 2
+    assert f"ncgate sim: {config}: {key}: cannot read {unreadable}: Permission denied" in \
+        capsys.readouterr().err
+
+
 def test_examples_into_a_reader_gone_still_says_where_they_are() -> None:
     """`ncgate examples | head -0`: the reader gone before the list, the line on stderr that
     says where the examples are installed was lost with it (unbuffered output, as
