@@ -476,6 +476,7 @@ class ScanDriver:
         self.closed = closed
         self.leap = leap and closed and wall is None
         runtime.timed = self.leap
+        runtime.leap_passed = self._passed_ms if self.leap else None
         self.stall_s = stall_s
         self.t0 = engine.now
         self.k = 0
@@ -513,7 +514,8 @@ class ScanDriver:
         elif self.skips and self.k == 0:
             self.k = self.skips.pop(0, 0)
         due = self.t0 + self.k * period
-        if self._leapt:
+        if self._leapt:  # (a running timer this scan does not call reads as they left it)
+            self.runtime.catch_up(round((self.t0 + (self.k - 1) * period) * 1000))
             status.scans += self._leapt
             self._leapt = 0
         self.runtime.scan(round(due * 1000))
@@ -595,18 +597,29 @@ class ScanDriver:
         that the clock has passed (each ran, as far as anyone can tell)."""
         if not self._leapt:
             return
-        engine, status = self.engine, self.runtime.status
-        t = self._leapt_from
-        last = None
-        for k in range(self.k - self._leapt, self.k):
+        passed = self._passed()
+        self.runtime.status.scans += passed
+        if passed:  # (a timed still scan's running timers: their ETs then)
+            self.runtime.catch_up(self._ms(self.k - self._leapt + passed - 1))
+        self._leapt = 0
+
+    def _passed(self) -> int:
+        """How many of the scans the leap in progress passes the clock has passed."""
+        t, engine = self._leapt_from, self.engine
+        for n, k in enumerate(range(self.k - self._leapt, self.k)):
             t += max(0.0, self.t0 + k * self.period - t)
             if t > engine.now:
-                break
-            status.scans += 1
-            last = k
-        if last is not None:  # (a timed still scan's running timers: their ETs then)
-            self.runtime.catch_up(round((self.t0 + last * self.period) * 1000))
-        self._leapt = 0
+                return n
+        return self._leapt
+
+    def _passed_ms(self) -> int | None:
+        """The time (ms) of the last scan the leap in progress has passed by now, None when
+        none (PlcRuntime.leap_passed: a force or a reload in the middle of a leap)."""
+        passed = self._passed() if self._leapt else 0
+        return self._ms(self.k - self._leapt + passed - 1) if passed else None
+
+    def _ms(self, k: int) -> int:
+        return round((self.t0 + k * self.period) * 1000)
 
     def close(self) -> None:
         if self._timer is not None:

@@ -196,6 +196,9 @@ class PlcRuntime:
         # time (ms) before which the scans that read the same do the same nothing, and the
         # timers that run until then.
         self.timed = False
+        # With ``timed``: the time (ms) of the last scan a leap in progress has passed (the
+        # scan driver's), for the ETs when something else ends the timed still state.
+        self.leap_passed: Callable[[], int | None] | None = None
         self._timeless_of: Callable[[], Any] | None = None
         self._timeless_tried = False
         self._timeless: Any = None
@@ -263,8 +266,18 @@ class PlcRuntime:
 
     def _changed_state(self) -> None:
         """Something other than a scan changed the programs' state (a force)."""
+        self._leave_timed()
         self._still = False
-        self._state = self._timeless = self._until = None
+        self._state = self._timeless = None
+
+    def _leave_timed(self) -> None:
+        """The timed still state ends other than by a scan (a force, a reload, a restart):
+        the running timers' ETs first as the scans a leap passed left them."""
+        if self._until is not None and self.leap_passed is not None:
+            passed = self.leap_passed()
+            if passed is not None:
+                self.catch_up(passed)
+        self._until = None
 
     def _judge(self, quiet: bool, generation: int,
                nc_read: tuple[list[NcSnapshot], int, tuple[int, int, int]] | None) -> None:
@@ -395,6 +408,7 @@ class PlcRuntime:
         running logic's values), and one that is gone is dropped.  VAR_GLOBALs likewise.
         The NC outputs keep their last levels, so an NC.START held TRUE across the change is
         no new edge.  A PLC in FAULT runs again."""
+        self._leave_timed()  # (the ETs carried over are the scans' before it)
         old_logic, old_programs = self.logic, self.programs
         carry = _Carry(old_logic, logic)
         programs = {key: logic.new_program(key) for key in logic.programs}

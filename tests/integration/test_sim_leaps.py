@@ -67,3 +67,38 @@ def test_sim_leaps_over_the_scans_of_a_running_timer_to_its_due(tmp_path: Path) 
     assert seen(leapt) == seen(every) and leapt.outcome == "idle"
     assert every.runtime.plc is not None and every.runtime.plc.status.scans > 3000
     assert calls_every > 3000 and calls_leapt < 10
+
+
+LEAPT_PAST = """PROGRAM p
+VAR a : TON; t : TON; END_VAR
+a(IN := TRUE, PT := T#100MS);
+IF NOT a.Q AND NOT SA[20] THEN
+  t(IN := TRUE, PT := T#5S);
+END_IF
+SA[12] := a.Q AND SA[21];
+END_PROGRAM
+"""
+
+
+@pytest.mark.parametrize("scenario", [
+    "",  # the leap lands on a's due (0.1 s), and t is not called from then on
+    '[[write]]\nat = 1.005\nset = "SA20=1"\n',  # ... or on a write that stops the call
+    '[[command]]\nat = 1.005\ncommand = "reload_plc"\n[[write]]\nat = 1.005\nset = "SA20=1"\n',
+])
+def test_a_timer_the_scans_after_a_leap_do_not_call_reads_as_scan_by_scan(
+        tmp_path: Path, scenario: str) -> None:
+    """A running timer's ET is moved on as the scans a leap passed would have left it, also
+    when the scan the leap lands on (at another timer's due, or after a write) no longer
+    calls it, and when a reload carries it over (a hostile try: 10 ms against 90 ms and
+    1,000 ms)."""
+    (tmp_path / "MAIN.nc").write_text("N10 (WAI,SA12=1)\nN20 M30\n")
+    (tmp_path / "plc.st").write_text(LEAPT_PAST)
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "MAIN"\nstall_s = 60\n'
+                                          '[plc]\nlogic = "plc.st"\n')
+    (tmp_path / "s.toml").write_text(scenario + '[[write]]\nat = 2.0\nset = "SA21=1"\n')
+    config, script = load_config(tmp_path / "ncgate.toml"), load_script(tmp_path / "s.toml")
+    every = run_sim(config, "MAIN", script, before_time=lambda t: None)
+    leapt = run_sim(config, "MAIN", script)
+    assert seen(leapt) == seen(every)
+    assert every.runtime.plc is not None and leapt.runtime.plc is not None
+    assert leapt.runtime.plc.read("p.t.ET") == every.runtime.plc.read("p.t.ET") > 10
