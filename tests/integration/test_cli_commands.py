@@ -303,6 +303,17 @@ def test_check_of_a_config_refuses_what_run_and_sim_refuse_of_its_plant(
     assert main(["sim", "--config", str(tmp_path / "ncgate.toml")]) == 2  # as sim refuses it
 
 
+def logic_cell(folder: Path, section: str, logic: str, programs: str = "") -> None:
+    """A cell whose [plc] or [plant] ``logic`` (TOML) is lib.st (a function block, no
+    PROGRAM) or main.st (PROGRAM Main), beside its config."""
+    write_cell(folder, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+                       f'[{section}]\nlogic = {logic}\n{programs}', {"A": "N1M30\n"})
+    (folder / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
+                                   "END_FUNCTION_BLOCK\n")
+    (folder / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                    "END_PROGRAM\n")
+
+
 @pytest.mark.parametrize("section", ["plc", "plant"])
 @pytest.mark.parametrize(("logic", "programs", "said"), [
     ("lib.st", "", "{section}.logic: the files hold no PROGRAM to run"),
@@ -317,12 +328,7 @@ def test_check_of_a_config_refuses_the_programs_sim_would_not_find_in_its_logic(
         programs: str, said: str) -> None:
     """`check --config` said 0 errors of logic that holds no PROGRAM, or of a `programs`
     entry naming none, which sim and run refuse: check now chooses the PROGRAMs as they do."""
-    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
-                         f'[{section}]\nlogic = "{logic}"\n{programs}', {"A": "N1M30\n"})
-    (tmp_path / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
-                                     "END_FUNCTION_BLOCK\n")
-    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
-                                      "END_PROGRAM\n")
+    logic_cell(tmp_path, section, f'"{logic}"', programs)
     config = str(tmp_path / "ncgate.toml")
     message = f"{config}: {said.format(section=section)}"
     for command in ("sim", "check"):
@@ -519,13 +525,8 @@ def test_a_logic_file_that_cannot_be_read_is_its_key(
     """A logic file the config found, whose reading fails (its permissions: a fault injected
     here, since root reads any file), said only "[Errno 13] Permission denied: 'main.st'":
     it is the config error of its key, as a missing file is."""
-    logic = '"main.st"' if section == "plc" else '["lib.st", "main.st"]'
-    write_cell(tmp_path, f'[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n[{section}]\n'
-                         f'logic = {logic}\n', {"A": "N1M30\n"})
-    (tmp_path / "lib.st").write_text("FUNCTION_BLOCK Lib\nVAR x : INT; END_VAR\nx := 1;\n"
-                                     "END_FUNCTION_BLOCK\n")
-    (tmp_path / "main.st").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
-                                      "END_PROGRAM\n")
+    logic_cell(tmp_path, section,
+               '"main.st"' if section == "plc" else '["lib.st", "main.st"]')
     unreadable = tmp_path / "main.st"
     read_bytes = Path.read_bytes
 
