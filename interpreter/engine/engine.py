@@ -720,9 +720,14 @@ class Engine:
         self._record(ev.Hazard, self.now, proc, None, message)
 
     def finish_stats(self) -> None:
-        """Account the time of the current states up to now (for the summary)."""
+        """Account the time of the current states up to now (for the summary), a move
+        still under way included (its moving time so far; again from now on)."""
         for p in self.processes.values():
             self._account(p)
+            if p.int_timer is not None:
+                p.stats.moving_s += self.now - p.int_started
+                p.int_done += (self.now - p.int_started) * p.int_rate
+                p.int_started = self.now
 
     # ==== processes =========================================================================
 

@@ -563,6 +563,22 @@ def test_moving_time_is_the_time_the_moves_took() -> None:
     assert (stats.running_s, stats.waiting_s) == (pytest.approx(1.25), pytest.approx(3.0))
 
 
+def test_a_move_under_way_when_the_run_stops_counts_its_moving_time_so_far() -> None:
+    """--until (or a SIGTERM) in the middle of a move: its 2.5 s so far are moving time
+    (they were counted only if an override had happened to stop its timer), once however
+    often the summary is made; the move goes on from where it was."""
+    sim = make_sim({"A": "N1G1X100F1000\nN2M30\n"})  # 6 s
+    sim.engine.start("A")
+    sim.run(until=2.5)
+    for _ in range(2):
+        sim.engine.finish_stats()
+        assert sim.engine.processes[1].stats.moving_s == pytest.approx(2.5)
+    sim.run()
+    assert sim.first("end", proc=1)["t"] == pytest.approx(6.0)
+    sim.engine.finish_stats()
+    assert sim.engine.processes[1].stats.moving_s == pytest.approx(6.0)
+
+
 def test_a_feed_hold_during_a_hash_blocks_move_keeps_its_time() -> None:
     """A move inside a # block held at 0.5 s and resumed at 2.5 s ends at 3.0 s; it ended
     at once on resume before (the hold measured the # block, not its move)."""
