@@ -120,10 +120,15 @@ def read_sources(files: tuple[Path, ...], config: Config | None = None,
         except OSError as exc:
             if config is None:
                 raise
-            key = f"{section}.logic" + (f"[{i}]" if len(files) > 1 else "")
-            raise ConfigError(f"{config.source or '<config>'}: {key}: cannot read {path}: "
+            raise ConfigError(f"{config.source or '<config>'}: "
+                              f"{logic_key(section, i, len(files))}: cannot read {path}: "
                               f"{exc.strerror or exc}") from None
     return out
+
+
+def logic_key(section: str, i: int, count: int) -> str:
+    """The config key of the ``i``-th of ``count`` files of ``section.logic``."""
+    return f"{section}.logic" + (f"[{i}]" if count > 1 else "")
 
 
 def parsed_logic(path: str, text: str) -> SourceFile:

@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ncgate.config import Config, StorageConfig, load_config
+from ncgate.config import Config, ConfigError, StorageConfig, load_config
 from ncgate.config.schema import BUILT_IN
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.programs import CheckedFile, dialect_options, storage_of
@@ -90,6 +90,8 @@ def expand(arguments: Sequence[str]) -> tuple[list[Path], list[Path]]:
             elif path.is_file():
                 if not magic or path.suffix.lower() in _CHECKED_SUFFIXES:
                     out.append(path)
+            elif path.exists():  # (a FIFO, a device: what would be read is no program)
+                raise UsageError(f"not a regular file: {arg}")
             else:
                 raise UsageError(f"no such file: {arg}")
     return _once(out)
@@ -215,15 +217,21 @@ def check_logic(files: Sequence[Path], config: Config,
     in them the PROGRAMs it runs are chosen as ``sim`` and ``run`` choose them
     (:func:`ncgate.gateway.plc.program_order`): files with no PROGRAM, or a
     ``section.programs`` entry that names none, is the ConfigError they refuse with."""
-    from ncgate.gateway.plc import logic_context, program_order
+    from ncgate.gateway.plc import logic_context, logic_key, program_order
 
     found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
     parsed: list[SourceFile] = []
-    for path in files:
+    for i, path in enumerate(files):
         try:
             parsed.append(read_logic_file(path))
         except LogicError as exc:
             found[str(path)].extend(exc.diagnostics)
+        except OSError as exc:  # (found, but its reading fails: a FIFO, an I/O error)
+            said = f"cannot read {path}: {exc.strerror or exc}"
+            if section is None:
+                raise UsageError(said) from None
+            raise ConfigError(f"{config.source or BUILT_IN}: "
+                              f"{logic_key(section, i, len(files))}: {said}") from None
     if parsed:
         try:
             logic = compile_logic(parsed, logic_context(config))

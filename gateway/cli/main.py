@@ -259,11 +259,14 @@ def _check(args: argparse.Namespace) -> int:
             cells.append(config)
             files = [path for path in files if path.resolve() not in _own_logic(config)]
         else:
-            files = _beside_cells(files, cells)
+            taken: set[Path] = set()
+            files = _beside_cells(files, cells, taken)
+            _beside_cells(again, cells, taken)  # (one file, two cells' logic: each cell's)
     else:
         cells.append(config or load_config(None, serving=False))
         _require_default_device(cells[0])
-        files = storage_files(cells[0])
+        own = _own_logic(cells[0])  # (its logic may lie among its programs: plc.txt)
+        files = [path for path in storage_files(cells[0]) if path.resolve() not in own]
     if not files and not any(cell.plc.logic or cell.plant.logic for cell in cells):
         raise UsageError("no program to check")
     if args.process is not None:
@@ -298,19 +301,19 @@ def _own_logic(config: Config) -> set[Path]:
     return {path.resolve() for path in (*config.plc.logic, *config.plant.logic)}
 
 
-def _beside_cells(files: list[Path], cells: list[Config]) -> list[Path]:
+def _beside_cells(files: list[Path], cells: list[Config], taken: set[Path]) -> list[Path]:
     """``files`` but the logic files that are the own of the config beside them (an
-    ``ncgate.toml``: the config check takes for their folder), whose configs go to
-    ``cells``: ``check plc.st`` of a cell's logic refuses what ``sim`` beside it refuses
-    (plc.programs naming no PROGRAM of it)."""
-    from ncgate.gateway.cli.check import CONFIG_BESIDE, LOGIC_SUFFIXES
+    ``ncgate.toml``: the config check takes for their folder; whatever their names end
+    in), whose configs go to ``cells``: ``check plc.st`` of a cell's logic refuses what
+    ``sim`` beside it refuses (plc.programs naming no PROGRAM of it).  ``taken``: the
+    configs whose cells are in ``cells`` already."""
+    from ncgate.gateway.cli.check import CONFIG_BESIDE
 
     found: dict[Path, tuple[Config, set[Path]]] = {}
-    taken: set[Path] = set()
     rest = []
     for path in files:
         beside = (path.parent / CONFIG_BESIDE).resolve()
-        if path.suffix.lower() in LOGIC_SUFFIXES and beside.is_file():
+        if beside.is_file():
             if beside not in found:
                 cell = load_config(beside, serving=False)
                 found[beside] = (cell, _own_logic(cell))

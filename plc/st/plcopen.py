@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
+import errno
+import os
 import re
+import stat
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -37,7 +40,7 @@ from xml.parsers import expat
 
 from ncgate.plc.st import nodes as n
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
-from ncgate.plc.st.parser import parse_file, parse_source
+from ncgate.plc.st.parser import parse_source
 
 TC6_NAMESPACES = ("http://www.plcopen.org/xml/tc6_0201", "http://www.plcopen.org/xml/tc6_0200")
 XML_SUFFIX = ".xml"
@@ -601,16 +604,30 @@ def _decoded(data: bytes) -> str:
 def read_logic_file(path: str | Path) -> n.SourceFile:
     """One file of ``[plc] logic``: PLCopen TC6 XML by its ``.xml`` suffix, Structured Text
     otherwise."""
-    path = Path(path)
-    if path.suffix.lower() == XML_SUFFIX:
-        return parse_plcopen(path.read_bytes(), str(path))
-    return parse_file(path)
+    return logic_from_text(str(path), read_logic_text(path))
 
 
 def read_logic_text(path: str | Path) -> str:
     """A logic file's content as text that gives its bytes back (``logic_from_text``):
-    UTF-8, with any byte that is not kept as a surrogate (a session record carries it)."""
-    return Path(path).read_bytes().decode("utf-8", "surrogateescape")
+    UTF-8, with any byte that is not kept as a surrogate (a session record carries it).
+    Only a regular file is read: a FIFO put in its place (``run --watch`` reloads what
+    appears there) is an OSError at once, not a read that waits for a writer for ever."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):  # (as open() says it)
+            raise OSError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read()
+    except OSError as exc:  # (a read's own error names no file: this one does)
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    finally:
+        os.close(fd)
+    return data.decode("utf-8", "surrogateescape")
 
 
 def logic_from_text(path: str, text: str) -> n.SourceFile:

@@ -4,6 +4,7 @@ run; the wording of errors; the built-in cell's first run."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -12,6 +13,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -528,18 +530,78 @@ def test_a_logic_file_that_cannot_be_read_is_its_key(
     logic_cell(tmp_path, section,
                '"main.st"' if section == "plc" else '["lib.st", "main.st"]')
     unreadable = tmp_path / "main.st"
-    read_bytes = Path.read_bytes
+    open_ = os.open
 
-    def refuse(self: Path) -> bytes:
-        if self.resolve() == unreadable.resolve():
-            raise PermissionError(13, "Permission denied", str(self))
-        return read_bytes(self)
+    def refuse(path: Any, flags: int, *args: Any, **kwargs: Any) -> int:
+        if Path(path).resolve() == unreadable.resolve():
+            raise PermissionError(13, "Permission denied", str(path))
+        return open_(path, flags, *args, **kwargs)
 
-    monkeypatch.setattr(Path, "read_bytes", refuse)
+    monkeypatch.setattr(os, "open", refuse)
     config = tmp_path / "ncgate.toml"
     assert main(["sim", "--config", str(config)]) == 2
     assert f"ncgate sim: {config}: {key}: cannot read {unreadable}: Permission denied" in \
         capsys.readouterr().err
+
+
+def test_a_logic_file_whose_read_fails_is_named_by_check_and_a_fifo_is_refused_at_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`check` said "[Errno 5] Input/output error" of a logic file whose read fails (a link
+    to /proc/self/mem: found, then EIO), naming neither the file nor the key; and a FIFO put
+    where a logic file was (run --watch reloads what appears there) held the reload's read
+    for ever, waiting for a writer, and every reload after it (a hostile try)."""
+    import threading
+
+    from ncgate.plc.st.plcopen import read_logic_text
+
+    (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "plc.st"\n')
+    (tmp_path / "plc.st").symlink_to("/proc/self/mem")
+    config = tmp_path / "ncgate.toml"
+    for args in (["check", str(tmp_path / "plc.st")], ["check", "--config", str(config)]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert "plc.logic: cannot read /proc/" in err and "Input/output error" in err, err
+    fifo = tmp_path / "swapped.st"
+    os.mkfifo(fifo)
+    said: list[BaseException] = []
+
+    def read() -> None:
+        try:
+            read_logic_text(fifo)
+        except OSError as exc:
+            said.append(exc)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(30)
+    assert not reader.is_alive(), "the read of a FIFO waits for a writer"
+    assert said and "not a regular file" in str(said[0]) and str(fifo) in str(said[0])
+    assert main(["check", str(fifo)]) == 2
+    assert f"not a regular file: {fifo}" in capsys.readouterr().err
+
+
+def test_check_takes_a_cells_logic_by_its_path_whatever_its_name_or_how_often_named(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A cell's logic named plc.txt was checked as an NC program (4 errors) by `check
+    plc.txt`, `check .` and `check --config`; one file that is the logic of two cells (a
+    link) was the second cell's only when named first (a hostile try)."""
+    (tmp_path / "a").mkdir()
+    write_cell(tmp_path / "a", '[nc]\nmain = "A"\n[nc.storage]\nMP0 = "."\n'
+               '[plc]\nlogic = "plc.txt"\n', {"A": "N1M30\n"})
+    (tmp_path / "a" / "plc.txt").write_text("PROGRAM Main\nVAR x : INT; END_VAR\nx := 1;\n"
+                                            "END_PROGRAM\n")
+    for args in (["plc.txt"], ["."], ["--config", "ncgate.toml"]):
+        with contextlib.chdir(tmp_path / "a"):
+            assert main(["check", *args]) == 0, args
+        assert "NC0" not in capsys.readouterr().out
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "ncgate.toml").write_text('[plc]\nlogic = "../a/plc.txt"\n'
+                                                'programs = ["Nope"]\n')
+    (tmp_path / "b" / "plc.txt").symlink_to("../a/plc.txt")
+    for order in (["b", "a"], ["a", "b"]):
+        args = [str(tmp_path / folder / "plc.txt") for folder in order]
+        assert main(["check", *args]) == 2, order
+        assert "plc.programs[0]: no PROGRAM Nope" in capsys.readouterr().err
 
 
 def test_examples_into_a_reader_gone_still_says_where_they_are() -> None:
