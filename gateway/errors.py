@@ -35,12 +35,18 @@ class WaitIdleTimeout(GatewayError, TimeoutError):
 
 class ClusterLost(GatewayError, TimeoutError):
     """``ncgate sweep --scheduler``: the Dask scheduler has had no worker for
-    ``cluster.WORKERLESS_S`` in a row, so the sweep stopped waiting for its tasks."""
+    ``cluster.WORKERLESS_S`` in a row, or went away itself, so the sweep stopped waiting for
+    its tasks.  ``why``: which, in words ("has had no worker for 60 s", "went away
+    (...)"); ``resume``: when a ``--resume`` can go on."""
 
-    def __init__(self, scheduler: str, workerless_s: float, unfinished: int) -> None:
-        super().__init__(f"the Dask scheduler at {scheduler} has had no worker for "
-                         f"{workerless_s:.0f} s; {unfinished} variant"
-                         f"{'s' if unfinished != 1 else ''} not done")
+    def __init__(self, scheduler: str, unfinished: int, workerless_s: float = 0.0,
+                 gone: str | None = None) -> None:
+        self.why = (f"went away ({gone})" if gone is not None else
+                    f"has had no worker for {workerless_s:.0f} s")
+        self.resume = ("once it serves again" if gone is not None else
+                       "once the cluster has workers")
+        super().__init__(f"the Dask scheduler at {scheduler} {self.why}; {unfinished} "
+                         f"variant{'s' if unfinished != 1 else ''} not done")
         self.scheduler = scheduler
         self.workerless_s = workerless_s
         self.unfinished = unfinished

@@ -90,8 +90,13 @@ class _Tasks:
         self.workerless_since: float | None = None if threads else self.checked
 
     def submit(self, variants: list[Variant], timeout_s: float | None, runner: Runner,
-               key: str) -> Any:
-        future = self.client.submit(run_chunk, variants, timeout_s, runner, pure=False, key=key)
+               key: str, unfinished: Callable[[], int]) -> Any:
+        try:
+            future = self.client.submit(run_chunk, variants, timeout_s, runner, pure=False,
+                                        key=key)
+        except Exception as exc:  # (a client closed: its scheduler went away)
+            self.gone(exc, unfinished)
+            raise
         self.unclaimed[future.key] = future
         future.add_done_callback(self.finished.put)
         return future
@@ -122,16 +127,34 @@ class _Tasks:
                 if future.status == "error":
                     raise  # the task's own (the wall timeout is a row, never this)
                 self.check(unfinished)
+            except Exception as exc:
+                if future.status == "cancelled":  # (the sweep cancels nothing it waits for:
+                    self.gone(exc, unfinished)  # the client did, its scheduler lost)
+                raise
+
+    def gone(self, exc: BaseException, unfinished: Callable[[], int]) -> None:
+        """ClusterLost when the client lost its scheduler (``exc`` what said so): not a
+        worker's death, which would make rows of variants that never ran."""
+        if self.client.status != "running" or isinstance(exc, OSError) or (
+                type(exc).__name__ in ("CancelledError", "FutureCancelledError",
+                                       "ClosedClientError")):
+            raise ClusterLost(self.scheduler, unfinished(),
+                              gone=f"{type(exc).__name__}: {str(exc)[:120]}") from None
 
     def check(self, unfinished: Callable[[], int]) -> None:
         now = time.monotonic()
         self.checked = now
-        if sum(self.client.nthreads().values()):
+        try:
+            threads = sum(self.client.nthreads().values())
+        except Exception as exc:  # (its scheduler cannot be reached)
+            self.gone(exc, unfinished)
+            raise
+        if threads:
             self.workerless_since = None
         elif self.workerless_since is None:
             self.workerless_since = now
         elif now - self.workerless_since >= WORKERLESS_S:
-            raise ClusterLost(self.scheduler, now - self.workerless_since, unfinished())
+            raise ClusterLost(self.scheduler, unfinished(), now - self.workerless_since)
 
     def release(self) -> None:
         """The tasks not taken, given up: the scheduler forgets them once no client holds
@@ -160,7 +183,8 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
         for i in range(0, len(variants), size):
             chunk = list(variants[i:i + size])
             future = tasks.submit(chunk, timeout_s, runner,
-                                  key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}")
+                                  key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}",
+                                  unfinished=lambda: len(variants))
             chunks[future.key] = chunk
         suspects: list[Variant] = []
 
@@ -179,7 +203,8 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
                 if len(chunk) > 1:  # find the one that kills its worker: one task each
                     for v in chunk:
                         single = tasks.submit([v], timeout_s, runner,
-                                              key=f"ncgate-sweep-{v.id}-alone")
+                                              key=f"ncgate-sweep-{v.id}-alone",
+                                              unfinished=unfinished)
                         chunks[single.key] = [v]
                 else:  # it, or a task beside it on a worker that died, killed its workers
                     suspects.extend(chunk)
@@ -203,7 +228,7 @@ def _alone(tasks: _Tasks, variant: Variant, timeout_s: float | None, runner: Run
     workers that died running a task is this variant's alone: its verdict is final.  ``left``:
     the variants not done, this one with them (for ClusterLost)."""
     future = tasks.submit([variant], timeout_s, runner,
-                          key=f"ncgate-sweep-{variant.id}-isolated")
+                          key=f"ncgate-sweep-{variant.id}-isolated", unfinished=lambda: left)
     try:
         tasks.next(lambda: left)
         return tasks.result(future, lambda: left)[0]

@@ -147,10 +147,9 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
         parts.add(pending)
         if progress is not None:
             progress.close()
-        print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} has had no "
-              f"worker for {exc.workerless_s:.0f} s: {len(rows)} of {len(spec.variants)} "
-              f"variants done, kept in {parts.folder}; run again with --resume once the "
-              "cluster has workers", file=sys.stderr)
+        print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} {exc.why}: "
+              f"{len(rows)} of {len(spec.variants)} variants done, kept in {parts.folder}; "
+              f"run again with --resume {exc.resume}", file=sys.stderr)
         return EXIT_FAILED, []
     finally:
         for signum, handler in previous.items():

@@ -1114,3 +1114,57 @@ def test_an_examples_variant_has_the_same_id_wherever_the_spec_is(tmp_path: Path
         assert done.returncode in (0, 1), done.stderr
     ids = [[row["id"] for row in rows_of(folder / "s.csv")] for folder in (tmp_path, deep)]
     assert ids[0] and ids[0] == ids[1]
+
+
+def test_a_dask_scheduler_that_goes_away_stops_the_sweep_and_makes_no_row_up(
+        tmp_path: Path) -> None:
+    """kill -9 of the scheduler mid-sweep: the client cancels every future it holds
+    (scheduler-connection-lost), and the sweep took that for its workers' deaths -- the
+    variants in flight became `crash` rows, final for --resume, then a traceback (a hostile
+    try).  It is ClusterLost now, after the results that came, and no row is made up."""
+    import socket
+
+    import dask
+    from distributed import Client
+
+    from ncgate.gateway.errors import ClusterLost
+    from ncgate.gateway.sweep.cluster import run_dask
+    from ncgate.gateway.sweep.spec import load_spec
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    dask_cli = str(Path(sys.executable).parent / "dask")
+    scheduler = subprocess.Popen([dask_cli, "scheduler", "--host", "127.0.0.1", "--port",
+                                  str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([dask_cli, "worker", address, "--nthreads", "1",
+                               "--no-dashboard"], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    # Programs a worker runs for about a second each (ncgate's own runner: a worker of the
+    # command line imports no test module), six of them.
+    for i in range(3):
+        (tmp_path / f"LONG{i}.nc").write_text("N1 (RPT,20000)\nN2 G1 X1 F100000\nN3 G1 X0\n"
+                                              "N4 (ERP)\nN5 M30\n")
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["LONG*.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100]\n')
+    spec = load_spec(tmp_path / "spec.toml")
+    got: list[tuple[object, dict[str, object]]] = []
+    try:
+        with dask.config.set({"distributed.comm.timeouts.connect": "3s"}), \
+                Client(address, timeout=60, set_as_default=False) as client:
+            client.wait_for_workers(1, timeout=60)
+            with pytest.raises(ClusterLost) as lost:
+                for variant, result in run_dask(spec.variants, address, 60.0,
+                                                client=client):
+                    got.append((variant, result))
+                    if len(got) == 1:
+                        scheduler.kill()
+    finally:
+        for proc in (scheduler, worker):
+            proc.kill()
+            proc.wait()
+    assert got and all(result["verdict"] == "ok" for _, result in got)
+    assert "went away" in str(lost.value) and address in str(lost.value)
+    assert lost.value.unfinished == len(spec.variants) - len(got)
