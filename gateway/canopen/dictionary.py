@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 import os
 from datetime import UTC, datetime
+from typing import TextIO
 
 from canopen.objectdictionary import (
     ObjectDictionary,
@@ -212,8 +213,10 @@ def chunks(total: int) -> list[tuple[int, int]]:
     return [(first, min(CHUNK, total - first)) for first in range(0, total, CHUNK)]
 
 
-def write_eds(config: Config, path: str) -> None:
-    """The node's EDS (CiA 306), for CANopen configuration tools (``ncgate eds``).
+def write_eds(config: Config, path: str, out: TextIO | None = None) -> None:
+    """The node's EDS (CiA 306), for CANopen configuration tools (``ncgate eds``), into the
+    file ``path`` -- or into ``out`` (standard output for ``-o -``), ``path`` then only its
+    [FileInfo] FileName.
 
     [FileInfo] and [DeviceInfo] carry CiA 306's whole keyword sets; the dates are today's
     (or ``SOURCE_DATE_EPOCH``'s, for a reproducible file); COB-IDs are ``$NODEID+...``.
@@ -241,8 +244,12 @@ def write_eds(config: Config, path: str) -> None:
     }
     text = io.StringIO()
     export_eds(od, text, file_info=file_info)
-    with open(path, "w", encoding="utf-8") as out:
-        out.writelines(_cia306(text.getvalue().splitlines(keepends=True)))
+    lines = _cia306(text.getvalue().splitlines(keepends=True))
+    if out is not None:
+        out.write("".join(lines))
+        return
+    with open(path, "w", encoding="utf-8") as file:
+        file.writelines(lines)
 
 
 # The dummy types an RPDO may map to skip bytes (pdo.py's _DUMMY_BITS): 0x0002..0x0007.

@@ -166,6 +166,21 @@ def test_eds_round_trip(tmp_path: Path, ncgate_config: Config) -> None:
     assert 0x2102 in theirs and len(theirs[0x2102].subindices) == 1 + 300 - 256
 
 
+def test_eds_to_standard_output_is_the_same_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`ncgate eds -o -` wrote a file named "-" (a hostile try): "-" is standard output, as
+    for the tools it is piped into; the EDS is the file's, its FileName ncgate.eds."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # (the same dates in both)
+    assert main(["eds", "-o", "-"]) == 0
+    piped = capsys.readouterr().out
+    assert not (tmp_path / "-").exists()
+    assert main(["eds", "-o", "ncgate.eds"]) == 0
+    assert piped == (tmp_path / "ncgate.eds").read_text(encoding="utf-8")
+    assert "FileName=ncgate.eds" in piped
+
+
 async def test_reset_node_boots_again_in_pre_operational(gw: Gateway, master: Master) -> None:
     assert await master.next(0x710) == b"\x00"
     master.nmt(0x01)
