@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import queue
 import time
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -175,6 +176,9 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
     if own:
         client = connect(scheduler)
     tasks = None
+    # The tasks' keys are this sweep's own: two sweeps of one spec on one cluster shared
+    # them (a task is known by its key), and one's release or cancel was the other's.
+    run = uuid.uuid4().hex[:12]
     try:
         threads = sum(client.nthreads().values())
         tasks = _Tasks(client, scheduler, threads)
@@ -183,7 +187,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
         for i in range(0, len(variants), size):
             chunk = list(variants[i:i + size])
             future = tasks.submit(chunk, timeout_s, runner,
-                                  key=f"ncgate-sweep-{chunk[0].id}-{len(chunk)}-{i}",
+                                  key=f"ncgate-sweep-{run}-{chunk[0].id}-{len(chunk)}-{i}",
                                   unfinished=lambda: len(variants))
             chunks[future.key] = chunk
         suspects: list[Variant] = []
@@ -203,7 +207,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
                 if len(chunk) > 1:  # find the one that kills its worker: one task each
                     for v in chunk:
                         single = tasks.submit([v], timeout_s, runner,
-                                              key=f"ncgate-sweep-{v.id}-alone",
+                                              key=f"ncgate-sweep-{run}-{v.id}-alone",
                                               unfinished=unfinished)
                         chunks[single.key] = [v]
                 else:  # it, or a task beside it on a worker that died, killed its workers
@@ -214,7 +218,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
             del chunks[future.key]
             yield from zip(chunk, results, strict=True)
         for n, v in enumerate(suspects):  # alone: a worker that dies now died of this one
-            yield v, _alone(tasks, v, timeout_s, runner, len(suspects) - n)
+            yield v, _alone(tasks, v, timeout_s, runner, len(suspects) - n, run)
     finally:
         if tasks is not None:
             tasks.release()
@@ -223,12 +227,13 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
 
 
 def _alone(tasks: _Tasks, variant: Variant, timeout_s: float | None, runner: Runner,
-           left: int) -> Result:
+           left: int, run: str) -> Result:
     """``variant`` run with nothing else of the sweep's in flight, so that Dask's count of the
     workers that died running a task is this variant's alone: its verdict is final.  ``left``:
     the variants not done, this one with them (for ClusterLost)."""
     future = tasks.submit([variant], timeout_s, runner,
-                          key=f"ncgate-sweep-{variant.id}-isolated", unfinished=lambda: left)
+                          key=f"ncgate-sweep-{run}-{variant.id}-isolated",
+                          unfinished=lambda: left)
     try:
         tasks.next(lambda: left)
         return tasks.result(future, lambda: left)[0]

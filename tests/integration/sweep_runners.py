@@ -37,3 +37,11 @@ def slow(variant: Variant, timeout_s: float | None) -> Result:
     its workers away after the first result."""
     time.sleep(SLOW_S)
     return run_variant(variant, timeout_s)
+
+
+def slow_tagged(variant: Variant, timeout_s: float | None) -> Result:
+    """:func:`slow`, its report saying which runner made it: two sweeps of one spec on one
+    cluster must each get their own runner's rows."""
+    result = slow(variant, timeout_s)
+    result["report"] = "tagged"
+    return result

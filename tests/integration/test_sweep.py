@@ -20,6 +20,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -1168,3 +1169,33 @@ def test_a_dask_scheduler_that_goes_away_stops_the_sweep_and_makes_no_row_up(
     assert got and all(result["verdict"] == "ok" for _, result in got)
     assert "went away" in str(lost.value) and address in str(lost.value)
     assert lost.value.unfinished == len(spec.variants) - len(got)
+
+
+def test_two_sweeps_of_one_spec_on_one_dask_cluster_each_get_their_own_runs(
+        cluster: object, tmp_path: Path) -> None:
+    """A task is known by its key, and the keys were made of the variants alone: a second
+    sweep of the same spec at the same time (another --timeout, another runner) shared the
+    first's tasks and took its results.  Each sweep's keys are its own now."""
+    import threading
+
+    from ncgate.gateway.sweep.cluster import run_dask
+    from ncgate.gateway.sweep.spec import load_spec
+
+    from .sweep_runners import slow, slow_tagged
+
+    spec = load_spec(misbehaving_spec(tmp_path, tuple(f"OK{i}.nc" for i in range(4))))
+    address = cluster.scheduler.address  # type: ignore[attr-defined]
+    got: dict[str, list[str]] = {}
+
+    def sweep(name: str, runner: Any) -> None:
+        got[name] = [str(result["report"]) for _, result in
+                     run_dask(spec.variants, address, 60.0, runner=runner)]
+
+    threads = [threading.Thread(target=sweep, args=("plain", slow)),
+               threading.Thread(target=sweep, args=("tagged", slow_tagged))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(300)
+    assert len(got["plain"]) == len(got["tagged"]) == len(spec.variants)
+    assert "tagged" not in got["plain"] and set(got["tagged"]) == {"tagged"}
