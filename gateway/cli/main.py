@@ -179,7 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
                               description="Write the node's EDS (CiA 306) for your CANopen "
                               "configuration tool.")
     eds.add_argument("--config", metavar="C", help="config file (default: built-in)")
-    eds.add_argument("-o", "--output", metavar="FILE", required=True, help="the .eds file")
+    eds.add_argument("-o", "--output", metavar="FILE", required=True,
+                     help="the .eds file (-: standard output)")
     return parser
 
 
@@ -270,7 +271,15 @@ def _check(args: argparse.Namespace) -> int:
     if not files and not any(cell.plc.logic or cell.plant.logic for cell in cells):
         raise UsageError("no program to check")
     if args.process is not None:
-        count = (config or load_config(None, serving=False)).nc.processes
+        # The processes of the config each file is checked under (the one beside it, when
+        # no --config): a process every one of them has.
+        from ncgate.gateway.cli.check import config_for
+
+        one_each = {path.parent.resolve(): path for path in files}.values()
+        used = [config] if config is not None else [
+            config_for(path, None) for path in one_each] or cells
+        count = min((c.nc.processes for c in used),
+                    default=load_config(None, serving=False).nc.processes)
         if not 1 <= args.process <= count:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
@@ -851,7 +860,13 @@ def plant_rows(config: Config) -> list[dict[str, Any]]:
 def _eds(args: argparse.Namespace) -> int:
     from ncgate.gateway.canopen.dictionary import write_eds
 
-    write_eds(load_config(args.config, serving=False), args.output)
+    config = load_config(args.config, serving=False)
+    if args.output == "-":  # (a file named "-" is ./-)
+        out = stdout()
+        write_eds(config, "ncgate.eds", out)
+        out.flush()
+        return EXIT_OK
+    write_eds(config, args.output)
     print(f"wrote {args.output}", file=sys.stderr)
     return EXIT_OK
 

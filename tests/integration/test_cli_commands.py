@@ -604,6 +604,16 @@ def test_check_takes_a_cells_logic_by_its_path_whatever_its_name_or_how_often_na
         assert "plc.programs[0]: no PROGRAM Nope" in capsys.readouterr().err
 
 
+def test_check_process_is_one_of_the_config_beside_the_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`check A.nc --process 7` beside a config of 8 processes said "expected 1..5" (the
+    built-in config's count), though A.nc is checked under the config beside it."""
+    write_cell(tmp_path, "[nc]\nprocesses = 8\n", {"A": "N1 G1 X1 F100\nN2 M30\n"})
+    assert main(["check", str(tmp_path / "A.nc"), "--process", "7"]) == 0
+    assert main(["check", str(tmp_path / "A.nc"), "--process", "9"]) == 2
+    assert "--process 9: expected 1..8" in capsys.readouterr().err
+
+
 def test_examples_into_a_reader_gone_still_says_where_they_are() -> None:
     """`ncgate examples | head -0`: the reader gone before the list, the line on stderr that
     says where the examples are installed was lost with it (unbuffered output, as
