@@ -518,12 +518,11 @@ class ScanDriver:
             status.max_lateness_us = max(status.max_lateness_us, lateness)
         elif self.skips and self.k == 0:
             self.k = self.skips.pop(0, 0)
-        due = self.t0 + self.k * period
         if self._leapt:  # (a running timer this scan does not call reads as they left it)
-            self.runtime.catch_up(round((self.t0 + (self.k - 1) * period) * 1000))
+            self.runtime.catch_up(self._ms(self.k - 1))
             status.scans += self._leapt
             self._leapt = 0
-        self.runtime.scan(round(due * 1000))
+        self.runtime.scan(self._ms(self.k))
         self.k += 1
         if self.wall is not None:
             late = self.wall() - (self.t0 + self.k * period)
@@ -579,7 +578,7 @@ class ScanDriver:
         k = self.k
         for _ in range(reach):
             due = now + max(0.0, self.t0 + k * period - now)  # the time call_at would give
-            if until is not None and round((self.t0 + k * period) * 1000) >= until:
+            if until is not None and self._ms(k) >= until:
                 break  # scan k sees a timer's Q change
             if (due >= later) if later is not None else stalls and (
                     due - engine.last_change >= self.stall_s):
@@ -620,10 +619,11 @@ class ScanDriver:
     def _passed_ms(self) -> int | None:
         """The time (ms) of the last scan the leap in progress has passed by now, None when
         none (PlcRuntime.leap_passed: a force or a reload in the middle of a leap)."""
-        passed = self._passed() if self._leapt else 0
+        passed = self._passed()
         return self._ms(self.k - self._leapt + passed - 1) if passed else None
 
     def _ms(self, k: int) -> int:
+        """Scan ``k``'s due time in ms, the time the logic's timers see."""
         return round((self.t0 + k * self.period) * 1000)
 
     def close(self) -> None:

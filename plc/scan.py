@@ -190,11 +190,11 @@ class PlcRuntime:
         self._pause = 0  # scans before the state is read again (its last reads all moved)
         self._misses = 0  # reads in a row that found the state moved, or that went unused
         self._judged_at = -1  # status.scans after the last scan judged still
-        # A timed still scan (``timed``: sim's leaps, see _judge_timed): the state but the
-        # timers' ETs as the last scan left it (None: not known), how it is read (None: not
-        # built yet; False: it cannot be), every timer instance, and, after such a scan, the
-        # time (ms) before which the scans that read the same do the same nothing, and the
-        # timers that run until then.
+        # A timed still scan (``timed``: sim's leaps, see _judge_timed): how the state but
+        # the timers' ETs is read (None: it cannot be, or not tried yet), that state as the
+        # last scan left it (None: not known), every timer instance, and, after such a scan,
+        # the time (ms) before which the scans that read the same do the same nothing, and
+        # the timers that run until then.
         self.timed = False
         # With ``timed``: the time (ms) of the last scan a leap in progress has passed (the
         # scan driver's), for the ETs when something else ends the timed still state.
@@ -479,8 +479,7 @@ class PlcRuntime:
                 self._timeless_of is not None and self._timeless_of() == self._timeless):
             # The last scan was a timed still one (_judge_timed) and what it read is the
             # same: this one would do the same nothing but move the running timers' ETs on.
-            for timer in self._running:
-                timer.catch_up(now_ms)
+            self.catch_up(now_ms)
             status.scans += 1
             self._misses = 0
             self._timed(started)
@@ -1052,8 +1051,7 @@ def _timers_in(roots: list[Any]) -> list[Timer] | None:
             found.append(item)
         elif isinstance(item, list):
             stack.extend(item)
-        else:
-            slots = getattr(type(item), "__slots__", ())
-            if not isinstance(item, str | int | float | bool) and slots:
-                stack.extend(getattr(item, slot, None) for slot in slots)
+        else:  # (a generated class's instance; a number or a string has no __slots__)
+            stack.extend(getattr(item, slot, None)
+                         for slot in getattr(type(item), "__slots__", ()))
     return None
