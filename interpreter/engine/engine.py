@@ -725,9 +725,7 @@ class Engine:
         for p in self.processes.values():
             self._account(p)
             if p.int_timer is not None:
-                p.stats.moving_s += self.now - p.int_started
-                p.int_done += (self.now - p.int_started) * p.int_rate
-                p.int_started = self.now
+                self._moved(p)
 
     # ==== processes =========================================================================
 
@@ -1093,20 +1091,28 @@ class Engine:
             self._account(p)
             p.standing = on
 
+    def _moved(self, p: Process) -> None:
+        """The time the timed item's timer has run since it was armed (or last counted) is
+        the process's moving time (at the override it ran at: not its nominal time); it
+        counts on from now, the nominal seconds it did kept (_nominal_left)."""
+        ran = self.now - p.int_started
+        p.stats.moving_s += ran
+        p.int_done += ran * p.int_rate
+        p.int_started = self.now
+
     def _stop_motion(self, p: Process) -> None:
-        """The timed item's timer stops (a hold, a new override, an abort): the time it ran
-        is the process's moving time (at the override it ran at: not its nominal time)."""
+        """The timed item's timer stops (a hold, a new override, an abort)."""
         assert p.int_timer is not None
         p.int_timer.cancel()
         p.int_timer = None
-        p.stats.moving_s += self.now - p.int_started
+        self._moved(p)
 
     def _timed_done(self, p: Process, item: QueueItem) -> None:
         p.int_timer = None
         p.int_move = None
         if item.move is not None:
             p.actual = list(item.move.end)
-        p.stats.moving_s += self.now - p.int_started
+        self._moved(p)
         if item.kind == ItemKind.SYNC:  # a move inside a # block
             p.sync_i += 1
             self._continue_sync(p)
