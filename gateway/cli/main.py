@@ -235,7 +235,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from ncgate.gateway.cli.check import check_files, expand, storage_files
+    from ncgate.gateway.cli.check import (
+        LOGIC_SUFFIXES,
+        check_files,
+        config_for,
+        expand,
+        storage_files,
+    )
 
     if args.example:
         if args.config or args.files:
@@ -273,8 +279,6 @@ def _check(args: argparse.Namespace) -> int:
     if args.process is not None:
         # The processes of the config each file is checked under (the one beside it, when
         # no --config): a process every one of them has.
-        from ncgate.gateway.cli.check import config_for
-
         one_each = {path.parent.resolve(): path for path in files}.values()
         used = [config] if config is not None else [
             config_for(path, None) for path in one_each] or cells
@@ -298,8 +302,6 @@ def _check(args: argparse.Namespace) -> int:
         print(f"{len(reports)} file(s) checked: {errors} error(s), {warnings} warning(s)",
               file=err)
     if errors and dialect is None:
-        from ncgate.gateway.cli.check import LOGIC_SUFFIXES, config_for
-
         _suggest_dialect("check", [(r.path, config_for(r.path, config)) for r in programs
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     err.flush()

@@ -877,9 +877,7 @@ SHOWN_KEPT = 4096
 def _shown(key: str, value: Any) -> _Shown:
     if isinstance(value, list):  # (the SND log: a new list each time, never kept)
         return _Shown(_variant(key, value))
-    area = key.rstrip("0123456789")
-    index = (_VTYPE[area] if area in _VTYPE and key[len(area):].isdigit() else None,
-             type(value), value)  # (True == 1: the type tells them apart)
+    index = (_image_type(key), type(value), value)  # (True == 1: the type tells them apart)
     found = _SHOWN.get(index)
     if found is None:
         if len(_SHOWN) >= SHOWN_KEPT:
@@ -888,10 +886,16 @@ def _shown(key: str, value: Any) -> _Shown:
     return found
 
 
-def _variant(key: str, value: Any) -> ua.Variant:
+def _image_type(key: str) -> ua.VariantType | None:
+    """The variant type of an image variable's node (SA10, SK3, SYVAR7); None for others."""
     area = key.rstrip("0123456789")
-    if area in _VTYPE and key[len(area):].isdigit():
-        return ua.Variant(value, _VTYPE[area])
+    return _VTYPE[area] if area in _VTYPE and key[len(area):].isdigit() else None
+
+
+def _variant(key: str, value: Any) -> ua.Variant:
+    vtype = _image_type(key)
+    if vtype is not None:
+        return ua.Variant(value, vtype)
     if isinstance(value, bool):
         return ua.Variant(value, ua.VariantType.Boolean)
     if isinstance(value, int):

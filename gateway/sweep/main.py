@@ -135,22 +135,18 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                     parts.add(pending)
                     pending = []
                     last = time.monotonic()
-    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: keep what is done, for --resume
-        parts.add(pending)
+    except (KeyboardInterrupt, ClusterLost) as exc:  # Ctrl-C, SIGTERM, the cluster lost:
+        parts.add(pending)  # what is done is kept, for --resume
         if progress is not None:
             progress.close()
-        print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}): {len(rows)} of "
-              f"{len(spec.variants)} variants done, kept in {parts.folder}; run again with "
+        kept = f"{len(rows)} of {len(spec.variants)} variants done, kept in {parts.folder}"
+        if isinstance(exc, ClusterLost):
+            print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} {exc.why}: "
+                  f"{kept}; run again with --resume {exc.resume}", file=sys.stderr)
+            return EXIT_FAILED, []
+        print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}): {kept}; run again with "
               "--resume to go on", file=sys.stderr)
         return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
-    except ClusterLost as exc:  # as a stop: what is done is kept, for --resume
-        parts.add(pending)
-        if progress is not None:
-            progress.close()
-        print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} {exc.why}: "
-              f"{len(rows)} of {len(spec.variants)} variants done, kept in {parts.folder}; "
-              f"run again with --resume {exc.resume}", file=sys.stderr)
-        return EXIT_FAILED, []
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)  # type: ignore[arg-type]
