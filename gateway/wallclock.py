@@ -106,13 +106,18 @@ class WallClockDriver:
         if self._soon is None:
             self._soon = self.loop.call_later(0, self._run)
 
-    def _run(self, due: float = 0.0) -> None:
-        self._soon = None
-        self._timer = None if due else self._timer
+    def _run(self, due: float | None = None) -> None:
+        # Only the handle that fired is spent: clearing the other (a soon still pending
+        # when the timer fired) orphaned it, and a turn that yielded queued one more --
+        # behind the clock, a loop pass ran 6-7 turns before it polled again.
+        if due is not None:
+            self._timer = None
+        else:
+            self._soon = None
         # A loop timer may fire a hair early: never let time run backwards past what is due.
         # At most a slice of blocks at a time: a loop with no motion must leave the event
         # loop free to serve the fieldbus and signals; the rest runs on the next turn.
-        self._advance(max(self.now(), due))
+        self._advance(self.now() if due is None else max(self.now(), due))
         self._arm_stall()
         self.changed.set()
 
@@ -122,13 +127,15 @@ class WallClockDriver:
         behind = self.lag_s >= BEHIND_S * self.scale
         deadline = time.perf_counter() + (TURN_BEHIND_S if behind else TURN_S)
         self.engine.turn_over = lambda: time.perf_counter() >= deadline
+        more = False
         try:
             more = self.engine.advance_to(now, self._turn)
         finally:  # a callback that raised (a bug) is the loop's to log; the clock goes on
             self.turns += 1
+            if more:
+                self._yield()
             self._arm()
         if more:
-            self._yield()
             self._note_lag(now - self.engine.now)
         elif self.lag_s:
             self.lag_s = 0.0
@@ -146,7 +153,9 @@ class WallClockDriver:
 
     def _arm(self) -> None:
         t = self.engine.next_timer()
-        if t is None:
+        if t is None or (self._soon is not None and t <= self.now()):
+            # None due, or due already and a turn is coming anyway: a timer beside it would
+            # be a second turn before the loop polls again.
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None

@@ -386,6 +386,33 @@ def test_on_the_wall_clock_a_tick_due_to_go_on_round_robin_after_every_model_cam
     assert plant._next_in_turn == 0
 
 
+@pytest.mark.parametrize("wall_ahead", [0.0, 0.0095])
+def test_on_the_wall_clock_a_late_tick_is_not_made_up(tmp_path: Path,
+                                                      wall_ahead: float) -> None:
+    """A tick the loop came to late arms the next on the grid after the wall clock's now, not
+    after its own time: made up, the ticks missed queued before a PLC scan due among them."""
+    from ncgate.gateway.door import Door
+    from ncgate.gateway.wiring import build_runtime, start_plant
+
+    (tmp_path / "ncgate.toml").write_text(f'[nc]\nprocesses = 1\n[plant]\nscan_ms = 1\n'
+                                          f'{CYLINDER}')
+    runtime = build_runtime(load_config(tmp_path / "ncgate.toml"), closed=False)
+    plant = start_plant(runtime, Door(runtime).apply_on_time, closed=False)
+    engine = runtime.engine
+    runtime.image.write([("SA", 20, "bit", 1)], "test")  # the clamp moves: sampled
+    engine.advance_to(0.0001, 100)
+    assert plant._tick is not None and plant._tick.time == pytest.approx(0.001)
+    engine.clock = lambda: 0.001 + wall_ahead  # the wall clock when the tick at 1 ms runs
+    engine.advance_to(0.001, 100)
+    assert plant._tick is not None
+    assert plant._tick.time == pytest.approx(0.011 if wall_ahead else 0.002)
+    assert _sampled_position(runtime) > 0  # the late tick wrote the position of its time
+
+
+def _sampled_position(runtime: Any) -> int:
+    return int(runtime.image.read("SYVAR", 10, "word"))
+
+
 PLANT_ST = """PROGRAM tank
 VAR level : INT; END_VAR
 (* the pump fills the tank 10 units a scan while SA20 is on; it drains 2 a scan *)

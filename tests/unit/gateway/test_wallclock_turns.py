@@ -162,3 +162,57 @@ def test_an_engine_behind_the_clock_gets_a_fieldbus_rounds_turn(
     turns = asyncio.run(main())
     assert turns <= 2 if behind else turns >= TIMERS  # (and the one that finds nothing left)
     assert fired == list(range(TIMERS))
+
+
+@pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
+def test_behind_the_clock_a_loop_pass_runs_one_turn(
+        kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Timers due in the past, at different times: each turn (one timer here) is followed by
+    a poll, so a request that arrives during a turn is read after that turn.  The loop timer
+    that fired used to drop the pending turn's handle without cancelling it, and each turn
+    after queued one more: a pass ran 6-7 turns behind 100 switching plant models."""
+    monkeypatch.setattr(wallclock, "TURN_S", 0.0)
+    monkeypatch.setattr(wallclock, "TURN_BEHIND_S", 0.0)
+    engine = make_sim({"A": "N1M30\n"}).engine
+    server, client = socket.socketpair()
+    server.setblocking(False)
+    fired: list[int] = []
+    heard: list[int] = []
+    sent_at = (10, 25)  # timers that send a request while they run
+
+    def timer(i: int) -> None:
+        fired.append(i)
+        if i in sent_at:
+            client.send(b"request")
+
+    for i in range(2 * TIMERS):
+        engine.call_at(0.0001 * i, lambda i=i: timer(i))
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+
+        def readable() -> None:
+            server.recv(64)
+            heard.append(len(fired))
+
+        loop.add_reader(server, readable)
+        driver = WallClockDriver(engine, 1.0, loop)
+        time.sleep(0.02)  # every timer is due when the driver starts: it is behind
+        try:
+            driver.kick()
+            async with asyncio.timeout(10):
+                while len(fired) < 2 * TIMERS:
+                    driver.changed.clear()
+                    await driver.changed.wait()
+        finally:
+            loop.remove_reader(server)
+            driver.close()
+
+    try:
+        with asyncio.Runner(loop_factory=_loop_factory(kind)) as runner:
+            runner.run(main())
+    finally:
+        server.close()
+        client.close()
+    assert fired == list(range(2 * TIMERS))
+    assert heard == [i + 1 for i in sent_at]  # each read right after the turn it came in
