@@ -256,8 +256,10 @@ def _check(args: argparse.Namespace) -> int:
     # chosen): --config's (or --example's), and without it the config beside a logic file
     # named that is its own -- the config check takes for that file's folder.
     cells: list[Config] = []
+    named: dict[Path, Path] = {}  # a file named on the command line: as named
     if args.files:
         files, again = expand(args.files)
+        named = {path.resolve(): path for path in (*again, *files)}
         for path in again if not args.quiet else ():
             print(f"ncgate check: {path} is given twice: checked once", file=err)
         if config is not None:
@@ -288,7 +290,8 @@ def _check(args: argparse.Namespace) -> int:
             raise UsageError(f"--process {args.process}: expected 1..{count}")
     dialect = Dialect(args.dialect) if args.dialect else None
     programs = check_files(files, config, args.process, dialect) if files else []
-    reports = programs + [report for cell in cells for report in _check_config_logic(cell)]
+    reports = _one_per_file(
+        programs + [report for cell in cells for report in _check_config_logic(cell, named)])
     errors = sum(r.errors for r in reports)
     warnings = sum(r.warnings for r in reports)
     # `ncgate check | head -1` (or `2>&1 | head -1`): the reader has what it wanted, and the
@@ -306,6 +309,25 @@ def _check(args: argparse.Namespace) -> int:
                                    if r.errors and r.path.suffix.lower() not in LOGIC_SUFFIXES])
     err.flush()
     return EXIT_FAILED if errors else EXIT_OK
+
+
+def _one_per_file(reports: list[FileReport]) -> list[FileReport]:
+    """One report per file, in order: a file that is both a cell's PLC and plant logic (or
+    two cells' logic) is checked in each role, and what two roles found alike is said and
+    counted once -- its one error was "2 error(s)" in "3 file(s) checked" of two files."""
+    from ncgate.gateway.cli.check import FileReport
+
+    merged: dict[Path, FileReport] = {}
+    for report in reports:
+        key = report.path.resolve()
+        before = merged.get(key)
+        if before is None:
+            merged[key] = report
+            continue
+        said = {d.render() for d in before.diagnostics}
+        merged[key] = FileReport(before.path, before.diagnostics + tuple(
+            d for d in report.diagnostics if d.render() not in said))
+    return list(merged.values())
 
 
 def _own_logic(config: Config) -> set[Path]:
@@ -338,24 +360,27 @@ def _beside_cells(files: list[Path], cells: list[Config], taken: set[Path]) -> l
     return rest
 
 
-def _check_config_logic(config: Config) -> list[FileReport]:
+def _check_config_logic(config: Config, named: dict[Path, Path] | None = None
+                        ) -> list[FileReport]:
     """What `run` and `sim` refuse of the config's PLC and plant before a cell starts, in
     their order: the PLC's logic and the PROGRAMs it runs, the plant's models' variables (one
     driven by two models, a number on a bit), and the plant's own logic, checked alone (a task
     of its own: it shares no name with the PLC's).  A refusal of the config itself is its
-    ConfigError (exit 2), as `sim` says it."""
+    ConfigError (exit 2), as `sim` says it.  ``named``: a logic file's resolved path -> the
+    path the command line gave it, which its diagnostics say (the config's is whole)."""
     from ncgate.gateway.cli.check import check_logic
     from ncgate.gateway.plant import Plant
     from ncgate.gateway.wiring import build_runtime
 
+    named = named or {}
     reports = []
-    plc = list(config.plc.logic)
+    plc = [named.get(path.resolve(), path) for path in config.plc.logic]
     if plc:
         found = check_logic(plc, config, "plc")
         reports += [found[path] for path in plc]
     if config.plant.model:
         Plant(build_runtime(config, closed=True), lambda item: None, closed=True)
-    plant = list(config.plant.logic)
+    plant = [named.get(path.resolve(), path) for path in config.plant.logic]
     if plant:
         found = check_logic(plant, config, "plant")
         reports += [found[path] for path in plant]

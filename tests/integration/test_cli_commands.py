@@ -557,10 +557,11 @@ def test_a_logic_file_whose_read_fails_is_named_by_check_and_a_fifo_is_refused_a
     (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "plc.st"\n')
     (tmp_path / "plc.st").symlink_to("/proc/self/mem")
     config = tmp_path / "ncgate.toml"
-    for args in (["check", str(tmp_path / "plc.st")], ["check", "--config", str(config)]):
+    for args, said in ((["check", str(tmp_path / "plc.st")], str(tmp_path / "plc.st")),
+                       (["check", "--config", str(config)], "/proc/")):
         assert main(args) == 2
-        err = capsys.readouterr().err
-        assert "plc.logic: cannot read /proc/" in err and "Input/output error" in err, err
+        err = capsys.readouterr().err  # (a file named: as named)
+        assert f"plc.logic: cannot read {said}" in err and "Input/output error" in err, err
     fifo = tmp_path / "swapped.st"
     os.mkfifo(fifo)
     said: list[BaseException] = []
@@ -602,6 +603,24 @@ def test_check_takes_a_cells_logic_by_its_path_whatever_its_name_or_how_often_na
         args = [str(tmp_path / folder / "plc.txt") for folder in order]
         assert main(["check", *args]) == 2, order
         assert "plc.programs[0]: no PROGRAM Nope" in capsys.readouterr().err
+
+
+def test_check_says_a_file_that_is_plc_and_plant_logic_once_and_as_it_was_named(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One ST file as both [plc] and [plant] logic, with one error: `check O1.nc l.st` said it
+    twice, as /abs/l.st, and counted "3 file(s) checked: 2 error(s)"."""
+    write_cell(tmp_path, '[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = '
+               '"l.st"\n[plant]\nlogic = "l.st"\n', {"O1": "N10 (DLY,1)\nN20 M30\n"})
+    (tmp_path / "l.st").write_text("PROGRAM main\nVAR x : INT; END_VAR\nx := x + ;\n"
+                                   "END_PROGRAM\n")
+    with contextlib.chdir(tmp_path):
+        assert main(["check", "O1.nc", "l.st"]) == 1
+        out, err = capsys.readouterr()
+        assert out.count("error ST002") == 1 and out.startswith("l.st:3:10: error ST002"), out
+        assert "2 file(s) checked: 1 error(s)" in err
+        assert main(["check", "--config", "ncgate.toml"]) == 1
+        out, err = capsys.readouterr()
+        assert out.count("error ST002") == 1 and "2 file(s) checked: 1 error(s)" in err
 
 
 def test_check_process_is_one_of_the_config_beside_the_file(
