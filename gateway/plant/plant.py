@@ -297,12 +297,11 @@ class Plant:
         if over is not None:  # the wall clock's budget: on the virtual clock (a replay of
             self._budget(time.perf_counter() - started)  # run) a tick takes what it takes
         if self._sampling:
-            # On the wall clock a tick that came late (the loop was busy) is not made up:
-            # the next is the grid's first after now.  Made up, the ticks missed queued in
-            # the engine before the PLC scan due among them (each a turn of the loop), and
-            # a scan came 2-5 ms late beside 100 moving models.  Only a sample of a moving
-            # value is lost; a switch point is a timer of its own (docs/plant.md).
-            self._arm_tick(t if self.closed else self.runtime.engine.read_time())
+            # From its own time, also when it came late: the ticks armed are the ones a
+            # replay arms, in the same order beside the PLC scan at equal times (armed from
+            # the wall clock's now, a late tick swapped the two, and a replay diverged;
+            # docs/decisions.md).
+            self._arm_tick(t)
 
     def _budget(self, spent: float) -> None:
         """On the wall clock the tick takes at most BUDGET of the loop's time: a tick that
