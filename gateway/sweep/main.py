@@ -33,6 +33,7 @@ from ncgate.gateway.sweep.table import (
     names_stdout,
     output_path,
     parquet_bytes,
+    shown_again,
     write_atomic,
 )
 
@@ -147,7 +148,9 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                out: TextIO) -> tuple[int, list[Row]]:
     parts = Parts(output, spec)
     done = parts.start(options.resume)
-    rows: dict[str, Row] = dict(done)
+    variants = {v.id: v for v in spec.variants}
+    rows: dict[str, Row] = {key: shown_again(row, variants[key])
+                           for key, row in done.items()}
     todo = [v for v in spec.variants if v.id not in rows]
     if done:
         print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",

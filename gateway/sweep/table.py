@@ -42,6 +42,17 @@ def make_row(variant: Variant, result: Result, keys: Sequence[str]) -> Row:
     return row
 
 
+def shown_again(row: Row, variant: Variant) -> Row:
+    """A row kept from a stopped sweep (its parts), with its files and command as this run
+    shows them: ``program`` and ``script`` are relative to the working folder, and ``command``
+    runs from there (docs/sweep.md), so a sweep resumed from another folder gave rows of two
+    forms in one table, the kept ones wrong from where the table was written.  The id is the
+    same variant's, the same files (``--resume`` checked the spec and its files), so what the
+    run found stays as it was."""
+    return {**row, "program": variant.program, "script": variant.script or "",
+            "command": command_of(variant, row["signature"])}
+
+
 def command_of(variant: Variant, signature: str) -> str:
     """The ``ncgate sim`` command that runs ``variant`` again as its row says: past its
     virtual-time budget, with ``--until BUDGET`` (sim alone would run on; it stops there)."""

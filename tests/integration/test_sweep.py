@@ -1226,6 +1226,42 @@ def test_a_stopped_sweep_to_stdout_removes_its_parts_and_writes_no_table(
     assert not (big_sweep / "-").exists() and not (big_sweep / "-.parts").exists()
 
 
+# -- the rows' paths, from the folder the table is written in --------------------------------
+
+
+@pytest.mark.parametrize("where", ["parent", "elsewhere"])
+def test_a_sweep_resumed_from_another_folder_shows_every_rows_paths_alike(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, where: str) -> None:
+    """The kept rows showed their program and command as the stopped sweep's working folder
+    saw them (`OK.nc`), the new ones as the resumed sweep's (`x/OK.nc`, or absolute): two
+    forms in one table, and the kept rows' commands ran from neither folder.  A resumed table
+    is the table a whole sweep from the resumed one's folder gives."""
+    from ncgate.gateway.sweep.run import run_variant
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts, make_row
+
+    first = tmp_path / "x"
+    first.mkdir()
+    ok_and_bad(first)
+    then = {"parent": tmp_path, "elsewhere": tmp_path / "y"}[where]
+    then.mkdir(exist_ok=True)
+    monkeypatch.chdir(first)  # `cd x && ncgate sweep spec.toml`, stopped after one row
+    spec = load_spec("spec.toml")
+    kept = spec.variants[0]
+    Parts(Path("spec.csv"), spec).start(resume=False)
+    Parts(Path("spec.csv"), spec).add([make_row(kept, run_variant(kept, 30.0), spec.keys)])
+    resumed = ncgate("sweep", str(first / "spec.toml"), "-o", str(first / "spec.csv"),
+                     "--resume", "--workers", "1", cwd=then)
+    assert resumed.returncode == 1, resumed.stderr
+    assert "resuming: 1 of 2 variants done, 1 to run" in resumed.stdout
+    whole = ncgate("sweep", str(first / "spec.toml"), "-o", "whole.csv", "--workers", "1",
+                   cwd=then)
+    assert whole.returncode == 1, whole.stderr
+    rows = rows_of(first / "spec.csv")
+    assert {Path(r["program"]).is_absolute() for r in rows} == {where == "elsewhere"}
+    assert (first / "spec.csv").read_bytes() == (then / "whole.csv").read_bytes()
+
+
 @pytest.mark.parametrize("url", ["bogus", "tcp://", "tcp://10.0.0.5", "tcp://:8786",
                                  "tcp://host:99999", "10.0.0.5:8786"])
 def test_a_scheduler_that_is_no_address_is_refused_at_once(tmp_path: Path, url: str) -> None:
