@@ -1,10 +1,10 @@
 """Standard output whose reader may go early (``ncgate sim | head -1``, ``ncgate map | head``,
-``ncgate sweep ... | head``): the one answer of the command line and the sweep to a closed
-pipe.  What is left to say goes to /dev/null, as the Python docs advise (signal module, "Note
-on SIGPIPE"), so that neither a later write nor the interpreter's last flush fails again --
-that flush, failing, says "Exception ignored ... BrokenPipeError" and makes the exit status
-120, whatever the command found.  The command goes on to its end (a sweep's table, sim's
-JUnit file) and exits with its own status.
+``ncgate sweep ... | head``, ``ncgate sweep -o - | head``): the one answer of the command
+line and the sweep to a closed pipe.  What is left to say goes to /dev/null, as the Python
+docs advise (signal module, "Note on SIGPIPE"), so that neither a later write nor the
+interpreter's last flush fails again -- that flush, failing, says "Exception ignored ...
+BrokenPipeError" and makes the exit status 120, whatever the command found.  The command
+goes on to its end (a sweep's table, sim's JUnit file) and exits with its own status.
 
 Imports the standard library only: the CLI and the sweep both use it."""
 
@@ -75,3 +75,14 @@ def stderr() -> TextIO:
     """Standard error, alike: ``ncgate check ... 2>&1 | head -1`` closes it too, and the
     command's status is still what it found."""
     return cast(TextIO, _Quiet("stderr"))
+
+
+def write_stdout_bytes(data: bytes) -> None:
+    """``data`` to standard output as it is (a table: ``ncgate sweep -o -``, Parquet too),
+    after what was written there as text; a reader that goes early stops none of it."""
+    flush_stdout()
+    try:
+        sys.stdout.buffer.write(data)
+        sys.stdout.buffer.flush()
+    except BrokenPipeError:
+        _gone("stdout")

@@ -764,7 +764,8 @@ def _add_sweep(commands: Any) -> None:
         "not, 2 on a bad spec.")
     sweep.add_argument("spec", metavar="SPEC.toml")
     sweep.add_argument("-o", "--output", metavar="FILE", help="the table (default: "
-                       "SPEC's name with .csv or .parquet, in the working folder)")
+                       "SPEC's name with .csv or .parquet, in the working folder; -: "
+                       "standard output, the summary then on stderr)")
     sweep.add_argument("--format", choices=("csv", "parquet"), default="csv")
     sweep.add_argument("--workers", type=int, metavar="N", help="local worker processes "
                        "(default: one per core)")
@@ -791,7 +792,9 @@ def _sweep(args: argparse.Namespace) -> int:
         raise UsageError("--explore: expected 1 or more")
     suffix = ".parquet" if args.format == "parquet" else ".csv"
     stem = Path(args.spec).stem + ("-explore" if args.explore else "")
-    output = Path(args.output) if args.output else Path(stem + suffix)
+    output: Path | None = Path(args.output) if args.output else Path(stem + suffix)
+    if args.output == "-":  # standard output, as eds -o - (a file named "-" is ./-)
+        output = None
     options = Options(output, args.format, args.workers, args.scheduler, args.resume,
                       args.timeout or None, False if args.quiet else None)
     return sweep(args.spec, options, explore=args.explore)

@@ -8,8 +8,10 @@ import dataclasses
 import math
 import os
 import re
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections import Counter
@@ -19,7 +21,7 @@ from pathlib import Path
 from typing import TextIO
 
 from ncgate.gateway.errors import ClusterLost
-from ncgate.gateway.stdout import stdout
+from ncgate.gateway.stdout import stderr, stdout, write_stdout_bytes
 from ncgate.gateway.sweep.run import Result
 from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
 from ncgate.gateway.sweep.table import (
@@ -28,8 +30,10 @@ from ncgate.gateway.sweep.table import (
     command_of,
     csv_bytes,
     make_row,
+    names_stdout,
     output_path,
     parquet_bytes,
+    shown_again,
     write_atomic,
 )
 
@@ -47,7 +51,7 @@ WORST = 10
 
 @dataclass
 class Options:
-    output: Path
+    output: Path | None  # None: standard output (-o -), as is a name of it (/dev/stdout)
     format: str = "csv"  # or "parquet"
     workers: int | None = None
     scheduler: str | None = None
@@ -56,10 +60,28 @@ class Options:
     progress: bool | None = None  # None: on a terminal, not in CI
 
 
+def table_to_stdout(options: Options) -> bool:
+    """The table goes to standard output: ``-o -``, or a name of this process's stdout
+    (``/dev/stdout``), which as a path had its parts beside a pipe's "pipe:[...]" -- no
+    folder.  What the sweep says then goes to stderr, so that stdout carries the table
+    alone."""
+    return options.output is None or names_stdout(options.output)
+
+
 def check_options(options: Options) -> None:
     """The command line's values, refused (UsageError: exit 2) before anything is made."""
     from ncgate.gateway.errors import UsageError
 
+    if table_to_stdout(options):
+        # A sweep to stdout keeps its parts in a temporary folder of its own, removed at its
+        # end however it ends: a stopped one leaves nothing to go on from.
+        if options.resume:
+            raise UsageError("--resume with -o - (standard output): a sweep to stdout keeps "
+                             "no parts to resume from; give -o FILE to sweep resumably")
+        # Parquet is binary: on a terminal it is garbage and can upset the terminal itself.
+        if options.format == "parquet" and sys.stdout is not None and sys.stdout.isatty():
+            raise UsageError("--format parquet -o -: standard output is a terminal; "
+                             "redirect it (> FILE.parquet, | a program) or give -o FILE")
     timeout = options.timeout_s
     if timeout is not None and not (math.isfinite(timeout) and 0 <= timeout <= MAX_TIMEOUT_S):
         raise UsageError(f"--timeout {timeout}: expected seconds > 0, at most "
@@ -83,29 +105,52 @@ def execute(variants: Sequence[Variant], options: Options,
         yield from run_local(variants, options.workers or default_workers(), options.timeout_s)
 
 
-def run_sweep(spec: Spec, options: Options, out: TextIO = sys.stdout) -> tuple[int, list[Row]]:
-    """Run what the parts lack, write the table; the exit status and the rows by id."""
+def run_sweep(spec: Spec, options: Options,
+              out: TextIO | None = None) -> tuple[int, list[Row]]:
+    """Run what the parts lack, write the table; the exit status and the rows by id.  What
+    it says goes to ``out``: by default stdout, or stderr when the table goes to stdout."""
     check_options(options)
-    output = output_path(options.output, spec.files)
-    if options.format == "parquet":
-        parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
-    client = None
-    if options.scheduler:  # reached (or said) before the parts are made
-        from ncgate.gateway.sweep.cluster import connect
+    if out is None:
+        out = sys.stderr if table_to_stdout(options) else sys.stdout
+    with _output(spec, options) as output:
+        if options.format == "parquet":
+            parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
+        client = None
+        if options.scheduler:  # reached (or said) before the parts are made
+            from ncgate.gateway.sweep.cluster import connect
 
-        client = connect(options.scheduler)
+            client = connect(options.scheduler)
+        try:
+            return _run_sweep(spec, options, output, client, out)
+        finally:
+            if client is not None:
+                client.close()
+
+
+@contextlib.contextmanager
+def _output(spec: Spec, options: Options) -> Iterator[Path]:
+    """The table's file, its parts beside it (``OUTPUT.parts/``, for ``--resume``).  For a
+    table on stdout, a name in a private temporary folder that only its parts use, removed
+    when the sweep ends however it ends (Ctrl-C, SIGTERM, an error): nothing is left to
+    resume from, and nothing is left over in the working folder."""
+    if not table_to_stdout(options):
+        assert options.output is not None
+        yield output_path(options.output, spec.files)
+        return
+    private = Path(tempfile.mkdtemp(prefix="ncgate-sweep-"))
     try:
-        return _run_sweep(spec, options, output, client, out)
+        yield private / "table"
     finally:
-        if client is not None:
-            client.close()
+        shutil.rmtree(private, ignore_errors=True)
 
 
 def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                out: TextIO) -> tuple[int, list[Row]]:
     parts = Parts(output, spec)
     done = parts.start(options.resume)
-    rows: dict[str, Row] = dict(done)
+    variants = {v.id: v for v in spec.variants}
+    rows: dict[str, Row] = {key: shown_again(row, variants[key])
+                           for key, row in done.items()}
     todo = [v for v in spec.variants if v.id not in rows]
     if done:
         print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
@@ -139,14 +184,19 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
         parts.add(pending)  # what is done is kept, for --resume
         if progress is not None:
             progress.close()
-        kept = f"{len(rows)} of {len(spec.variants)} variants done, kept in {parts.folder}"
+        count = f"{len(rows)} of {len(spec.variants)} variants done"
         if isinstance(exc, ClusterLost):
-            print(f"ncgate sweep: stopped: the Dask scheduler at {exc.scheduler} {exc.why}: "
-                  f"{kept}; run again with --resume {exc.resume}", file=sys.stderr)
-            return EXIT_FAILED, []
-        print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}): {kept}; run again with "
-              "--resume to go on", file=sys.stderr)
-        return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
+            why, later = f": the Dask scheduler at {exc.scheduler} {exc.why}", exc.resume
+        else:
+            why, later = f" ({str(exc) or 'Ctrl-C'})", "to go on"
+        if table_to_stdout(options):  # its parts go with their temporary folder
+            what = (f"{count}, no table written (-o -: nothing to resume; give -o FILE to "
+                    "keep the rows done)")
+        else:
+            what = f"{count}, kept in {parts.folder}; run again with --resume {later}"
+        print(f"ncgate sweep: stopped{why}: {what}", file=sys.stderr)
+        ctrl_c = not isinstance(exc, ClusterLost) and str(exc) != "SIGTERM"
+        return (EXIT_INTERRUPTED if ctrl_c else EXIT_FAILED), []
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)  # type: ignore[arg-type]
@@ -156,10 +206,13 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     ordered = [rows[v.id] for v in spec.variants]  # spec.variants is sorted by id
     data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
             else csv_bytes(ordered, spec.keys))
-    write_atomic(output, data)
+    if table_to_stdout(options):
+        write_stdout_bytes(data)
+    else:
+        write_atomic(output, data)
     parts.finish()
     summary(ordered, spec.keys, out)
-    print(f"wrote {options.output}", file=out)
+    print(f"wrote {options.output or '-'}", file=out)
     return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
 
 
@@ -246,7 +299,9 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     check_options(options)
     # `ncgate sweep ... | head`: a reader that goes early stops neither the sweep nor its
     # table, and the status is still the rows' (the flush at the end: it was exit 120).
-    out = stdout()
+    # With the table on stdout (-o -) what the sweep says goes to stderr, which a reader
+    # (2>&1 | head) may close alike.
+    out = stderr() if table_to_stdout(options) else stdout()
     spec = load_spec(spec_path, explore)
     if spec.draws is not None and spec.draws[1] < spec.draws[0]:
         where = "--explore" if explore is not None else "[random]"

@@ -42,6 +42,17 @@ def make_row(variant: Variant, result: Result, keys: Sequence[str]) -> Row:
     return row
 
 
+def shown_again(row: Row, variant: Variant) -> Row:
+    """A row kept from a stopped sweep (its parts), with its files and command as this run
+    shows them: ``program`` and ``script`` are relative to the working folder, and ``command``
+    runs from there (docs/sweep.md), so a sweep resumed from another folder gave rows of two
+    forms in one table, the kept ones wrong from where the table was written.  The id is the
+    same variant's, the same files (``--resume`` checked the spec and its files), so what the
+    run found stays as it was."""
+    return {**row, "program": variant.program, "script": variant.script or "",
+            "command": command_of(variant, row["signature"])}
+
+
 def command_of(variant: Variant, signature: str) -> str:
     """The ``ncgate sim`` command that runs ``variant`` again as its row says: past its
     virtual-time budget, with ``--until BUDGET`` (sim alone would run on; it stops there)."""
@@ -51,21 +62,45 @@ def command_of(variant: Variant, signature: str) -> str:
     return command
 
 
+def names_stdout(output: Path) -> bool:
+    """Whether ``output`` is a name of this process's standard output (``/dev/stdout``,
+    ``/dev/fd/1``, ``/proc/self/fd/1``, a link to one): the sweep takes it as ``-o -``.
+
+    Told by the names, link by link, not by what the links reach: /proc's ``fd/1`` stands for
+    the open file, and its target (``pipe:[4115907]``, a socket) is no path -- the table's
+    parts beside it could not be made.  A regular file that stdout was redirected to, given
+    by its own name, stays a file written whole (atomically), not appended to."""
+    fds = {Path("/proc/self/fd"), Path(f"/proc/{os.getpid()}/fd"), Path("/dev/fd")}
+    path = Path(os.path.abspath(output))
+    for _ in range(40):  # as the kernel's limit of links in one lookup (ELOOP)
+        if path == Path("/dev/stdout") or (path.name == "1" and (
+                path.parent in fds or Path(os.path.realpath(path.parent)) in fds)):
+            return True
+        if not path.is_symlink():
+            return False
+        path = Path(os.path.abspath(path.parent / os.readlink(path)))
+    return False
+
+
 def output_path(output: Path, inputs: Iterable[Path] = ()) -> Path:
     """Where the table goes: ``output`` with its symbolic links followed (the table is written
     through them, not over them).  A folder, FIFO or device, or one of the sweep's own inputs
-    (the spec, a program), is refused: UsageError, exit 2."""
+    (the spec, a program), is refused: UsageError, exit 2.  (Standard output is told apart
+    before: :func:`names_stdout`.)"""
     from ncgate.gateway.errors import UsageError
 
     target = output.resolve()
     try:
-        mode = target.stat().st_mode
+        # What ``output`` reaches, not ``target``: a descriptor's link in /proc (/dev/fd/3 on
+        # a pipe) resolves to a name such as "pipe:[4115907]" that is no file, but is a FIFO.
+        mode = output.stat().st_mode
     except FileNotFoundError:
         mode = None
     except OSError as exc:
         raise UsageError(f"-o {output}: {exc.strerror}") from None
     if mode is not None and not stat.S_ISREG(mode):
-        raise UsageError(f"-o {output}: not a regular file (the table replaces a file)")
+        raise UsageError(f"-o {output}: not a regular file (the table replaces a file; for "
+                         "standard output give -o -)")
     if target in {Path(p).resolve() for p in inputs}:
         raise UsageError(f"-o {output}: is one of the sweep's inputs (the spec or a file it "
                          "names): give another output")

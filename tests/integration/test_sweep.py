@@ -940,21 +940,32 @@ def test_the_table_is_written_through_a_link_and_with_the_umasks_mode(tmp_path: 
     assert (tmp_path / "results" / "real.csv").stat().st_mode & 0o777 == 0o640
 
 
-@pytest.mark.parametrize("kind", ["fifo", "folder", "spec", "program"])
+@pytest.mark.parametrize("kind", ["fifo", "folder", "descriptor", "spec", "program"])
 def test_an_output_that_is_not_a_table_file_is_refused(tmp_path: Path, kind: str) -> None:
     (tmp_path / "OK.nc").write_text(LOOPS["OK"])
     spec = '[sweep]\nprograms = ["OK.nc"]\n'
     (tmp_path / "spec.toml").write_text(spec)
-    output = {"fifo": "out.csv", "folder": "out.csv", "spec": "spec.toml",
-              "program": "OK.nc"}[kind]
+    read_end, write_end = os.pipe()  # a pipe other than stdout, named by its descriptor:
+    # its /proc link resolves to "pipe:[NNN]", and it was "No such file ... pipe:[NNN].parts"
+    output = {"fifo": "out.csv", "folder": "out.csv", "descriptor": f"/dev/fd/{write_end}",
+              "spec": "spec.toml", "program": "OK.nc"}[kind]
     if kind == "fifo":
         os.mkfifo(tmp_path / output)
     elif kind == "folder":
         (tmp_path / output).mkdir()
-    done = ncgate("sweep", "spec.toml", "-o", output, cwd=tmp_path, timeout=120)
+    try:
+        done = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o",
+                               output], cwd=tmp_path, text=True, capture_output=True,
+                              timeout=120, pass_fds=(write_end,))
+    finally:
+        os.close(read_end)
+        os.close(write_end)
     assert done.returncode == 2, done.stderr
-    said = "not a regular file" if kind in ("fifo", "folder") else "one of the sweep's inputs"
-    assert said in done.stderr, done.stderr
+    said = "is one of the sweep's inputs" if kind in ("spec", "program") else \
+        "not a regular file"
+    assert f"-o {output}: {said}" in done.stderr, done.stderr
+    if said == "not a regular file":
+        assert "for standard output give -o -" in done.stderr
     assert (tmp_path / "spec.toml").read_text() == spec
     assert (tmp_path / "OK.nc").read_text() == LOOPS["OK"]
     assert not (tmp_path / f"{output}.parts").exists()
@@ -1081,6 +1092,174 @@ def test_a_closed_stdout_stops_neither_the_sweep_nor_its_status(
     os.close(write_end)
     assert sweep.returncode == status and sweep.stderr == b"", sweep.stderr
     assert len(rows_of(tmp_path / "spec.csv")) == 2
+
+
+# -- the table on standard output: -o -, /dev/stdout ---------------------------------------
+
+
+def ok_and_bad(folder: Path) -> None:
+    """A spec of two rows, one not ok (exit 1): its status is the rows', not 0 by chance."""
+    for name in ("OK", "BAD"):
+        (folder / f"{name}.nc").write_text(LOOPS[name])
+    (folder / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc", "BAD.nc"]\n')
+
+
+def private_folders(tmp: Path) -> list[Path]:
+    return sorted(tmp.glob("ncgate-sweep-*"))
+
+
+@pytest.fixture
+def short_tmp(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A TMPDIR for a sweep, whose private folder is looked for there.  Short: the local
+    pool's forkserver puts its socket there too, and under a test's own tmp_path that
+    socket's path passed AF_UNIX's 107 bytes ("AF_UNIX path too long", exit 2)."""
+    return tmp_path_factory.mktemp("t")
+
+
+@pytest.mark.parametrize("output", ["-", "/dev/stdout", "/dev/fd/1", "/proc/self/fd/1"])
+def test_the_table_goes_to_stdout_and_the_summary_to_stderr(tmp_path: Path, short_tmp: Path,
+                                                            output: str) -> None:
+    """`-o -` wrote a file named "-"; `-o /dev/stdout | cat` was exit 2, "No such file or
+    directory: '/proc/NNN/fd/pipe:[4115907].parts'".  stdout is a pipe here, as under `|`."""
+    ok_and_bad(tmp_path)
+    whole = ncgate("sweep", "spec.toml", "-o", "whole.csv", "--workers", "1", cwd=tmp_path)
+    assert whole.returncode == 1, whole.stderr
+    done = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", output,
+                           "--workers", "1"], cwd=tmp_path, capture_output=True, timeout=120,
+                          env={**os.environ, "TMPDIR": str(short_tmp)})
+    assert done.returncode == 1, done.stderr
+    assert done.stdout == (tmp_path / "whole.csv").read_bytes()  # the table, and only it
+    assert b"2 variants: 1 ok, 1 error" in done.stderr and b"not ok:" in done.stderr
+    # Nothing made beside the inputs (no file "-", no parts), and the parts' private folder
+    # is gone.
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "BAD.nc", "OK.nc", "spec.toml", "whole.csv"]
+    assert private_folders(short_tmp) == []
+
+
+@pytest.mark.parametrize("reader", ["head -0", "head -1"])
+@pytest.mark.parametrize(("program", "status"), [("OK", 0), ("BAD", 1)])
+def test_the_table_on_stdout_to_a_reader_that_goes_early_keeps_the_rows_status(
+        tmp_path: Path, program: str, status: int, reader: str) -> None:
+    """`sweep -o - | head -1`: the rest of the table goes nowhere, and the status is still
+    the rows' (gateway/stdout.py); the summary, on stderr, is whole."""
+    (tmp_path / f"{program}.nc").write_text(LOOPS[program])
+    (tmp_path / "spec.toml").write_text(f'[sweep]\nprograms = ["{program}.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100]\n')
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # as a shell's
+    sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", "-",
+                              "--workers", "1"], cwd=tmp_path, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, env=env)
+    assert sweep.stdout is not None and sweep.stderr is not None
+    first = sweep.stdout.readline() if reader == "head -1" else b""
+    sweep.stdout.close()  # the reader goes: head -0 before the table, head -1 after a line
+    err = sweep.stderr.read()
+    assert sweep.wait(timeout=120) == status, err
+    if reader == "head -1":
+        assert first.startswith(b"id,verdict,program,")
+    assert b"2 variants: 2 " in err and b"Traceback" not in err and b"Exception" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{program}.nc", "spec.toml"]
+
+
+def test_resume_with_the_table_on_stdout_is_refused(tmp_path: Path) -> None:
+    ok_and_bad(tmp_path)
+    for output in ("-", "/dev/stdout"):
+        done = ncgate("sweep", "spec.toml", "-o", output, "--resume", cwd=tmp_path)
+        assert done.returncode == 2, done.stderr
+        assert "--resume with -o - (standard output)" in done.stderr
+        assert "nothing to resume" in done.stderr or "no parts to resume" in done.stderr
+        assert done.stdout == "" and "Traceback" not in done.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["BAD.nc", "OK.nc", "spec.toml"]
+
+
+def test_parquet_on_stdout_goes_to_a_pipe_not_to_a_terminal(tmp_path: Path) -> None:
+    import io
+    import pty
+
+    import pyarrow.parquet as pq
+
+    ok_and_bad(tmp_path)
+    piped = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", "-",
+                            "--format", "parquet", "--workers", "1"], cwd=tmp_path,
+                           capture_output=True, timeout=120)
+    assert piped.returncode == 1, piped.stderr
+    whole = ncgate("sweep", "spec.toml", "-o", "whole.csv", "--workers", "1", cwd=tmp_path)
+    table = pq.read_table(io.BytesIO(piped.stdout)).to_pylist()
+    assert [(r["id"], r["verdict"], r["command"]) for r in table] == \
+        [(r["id"], r["verdict"], r["command"]) for r in rows_of(tmp_path / "whole.csv")]
+    assert whole.returncode == 1
+    # Binary on a terminal is garbage (and may upset the terminal): refused before any run.
+    terminal, other_end = pty.openpty()
+    try:
+        done = subprocess.run([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", "-",
+                               "--format", "parquet"], cwd=tmp_path, stdout=other_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(other_end)
+        os.close(terminal)
+    assert done.returncode == 2, done.stderr
+    assert "--format parquet -o -: standard output is a terminal" in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "BAD.nc", "OK.nc", "spec.toml", "whole.csv"]
+
+
+def test_a_stopped_sweep_to_stdout_removes_its_parts_and_writes_no_table(
+        big_sweep: Path, short_tmp: Path) -> None:
+    total = len(rows_of(big_sweep / "whole.csv"))
+    env = {**os.environ, "TMPDIR": str(short_tmp)}
+    sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", "-",
+                              "--workers", "1"], cwd=big_sweep, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        wait_for(lambda: any(part for f in private_folders(short_tmp)
+                             for part in f.glob("*.parts/part-*.jsonl"))
+                 or sweep.poll() is not None, "the first part in the private folder")
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        sweep.send_signal(signal.SIGTERM)
+        out, err = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 1, err
+    assert re.search(rf"stopped \(SIGTERM\): \d+ of {total} variants done, no table written "
+                     r"\(-o -: nothing to resume", err), err
+    assert out == "" and private_folders(short_tmp) == []
+    assert not (big_sweep / "-").exists() and not (big_sweep / "-.parts").exists()
+
+
+# -- the rows' paths, from the folder the table is written in --------------------------------
+
+
+@pytest.mark.parametrize("where", ["parent", "elsewhere"])
+def test_a_sweep_resumed_from_another_folder_shows_every_rows_paths_alike(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, where: str) -> None:
+    """The kept rows showed their program and command as the stopped sweep's working folder
+    saw them (`OK.nc`), the new ones as the resumed sweep's (`x/OK.nc`, or absolute): two
+    forms in one table, and the kept rows' commands ran from neither folder.  A resumed table
+    is the table a whole sweep from the resumed one's folder gives."""
+    from ncgate.gateway.sweep.run import run_variant
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts, make_row
+
+    first = tmp_path / "x"
+    first.mkdir()
+    ok_and_bad(first)
+    then = {"parent": tmp_path, "elsewhere": tmp_path / "y"}[where]
+    then.mkdir(exist_ok=True)
+    monkeypatch.chdir(first)  # `cd x && ncgate sweep spec.toml`, stopped after one row
+    spec = load_spec("spec.toml")
+    kept = spec.variants[0]
+    Parts(Path("spec.csv"), spec).start(resume=False)
+    Parts(Path("spec.csv"), spec).add([make_row(kept, run_variant(kept, 30.0), spec.keys)])
+    resumed = ncgate("sweep", str(first / "spec.toml"), "-o", str(first / "spec.csv"),
+                     "--resume", "--workers", "1", cwd=then)
+    assert resumed.returncode == 1, resumed.stderr
+    assert "resuming: 1 of 2 variants done, 1 to run" in resumed.stdout
+    whole = ncgate("sweep", str(first / "spec.toml"), "-o", "whole.csv", "--workers", "1",
+                   cwd=then)
+    assert whole.returncode == 1, whole.stderr
+    rows = rows_of(first / "spec.csv")
+    assert {Path(r["program"]).is_absolute() for r in rows} == {where == "elsewhere"}
+    assert (first / "spec.csv").read_bytes() == (then / "whole.csv").read_bytes()
 
 
 @pytest.mark.parametrize("url", ["bogus", "tcp://", "tcp://10.0.0.5", "tcp://:8786",
