@@ -33,6 +33,7 @@ import asyncio
 import errno
 import logging
 import os
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final, cast
@@ -58,6 +59,8 @@ FRAMES_PER_TURN: Final = 16
 BACKLOG_HIGH: Final = 16 * 1024
 BACKLOG_LOW: Final = 4 * 1024
 WRITE_HIGH_WATER: Final = 64 * 1024
+# How early a loop timer may come (uvloop rounds its delays to whole milliseconds).
+EARLY_S: Final = 0.0005
 REOPEN_S: Final = 1.0  # a serial port that went away is looked for again this often
 # Answers a serial line's driver has not taken above which its requests are no longer read,
 # and below which reading resumes (a master that never reads cannot make us buffer for it).
@@ -125,7 +128,10 @@ class RtuLink:
         self.backlog_high, self.backlog_low = backlog
         self.framer = RtuFramer()
         self.loop = asyncio.get_running_loop()
-        self.last_byte = self.loop.time()
+        # The line's clock is the monotonic clock, not the loop's: uvloop's counts whole
+        # milliseconds, cached at each loop pass, and its timers may come half a millisecond
+        # early -- a silence timer armed again for that half came a millisecond later.
+        self.last_byte = time.monotonic()
         self.gap_timer: asyncio.TimerHandle | None = None
         self.turn: asyncio.Handle | None = None
         self.held: tuple[Request, asyncio.TimerHandle] | None = None  # a delay fault's
@@ -134,7 +140,7 @@ class RtuLink:
         self.closed = False
 
     def received(self, data: bytes) -> None:
-        self.last_byte = self.loop.time()
+        self.last_byte = time.monotonic()
         framer = self.framer
         if framer.idle and self.turn is None and self.held is None:
             # The common case, one whole frame in one read: answered without the buffer's
@@ -152,15 +158,21 @@ class RtuLink:
         """Arm the silence timer while the framer has something the silence decides: a
         frame begun, or a burst being dropped."""
         if self.gap_timer is None and not self.framer.idle:
-            self.gap_timer = self.loop.call_at(self.last_byte + self.silence, self._silence)
+            self._arm_silence()
+
+    def _arm_silence(self) -> None:
+        delay = self.last_byte + self.silence - time.monotonic()
+        self.gap_timer = self.loop.call_later(max(0.0, delay), self._silence)
 
     def _silence(self) -> None:
         self.gap_timer = None
         if self.closed:
             return
-        due = self.last_byte + self.silence
-        if self.loop.time() < due:  # bytes came since it was armed: the silence is later
-            self.gap_timer = self.loop.call_at(due, self._silence)
+        # Bytes came since it was armed: the silence is later.  (A timer up to EARLY_S
+        # early is the silence: a pause past 1.5 characters already breaks a frame,
+        # Modbus over Serial Line 2.5.1.1.)
+        if time.monotonic() < self.last_byte + self.silence - EARLY_S:
+            self._arm_silence()
             return
         if self.turn is not None or self.held is not None:
             return  # whole frames wait their turn: the silence counts after them
@@ -266,6 +278,22 @@ class RtuLink:
         self.held = None
 
 
+def _errno_of(exc: BaseException) -> int | None:
+    """A termios.error's errno: its first argument (it is no OSError)."""
+    number = exc.args[0] if exc.args else None
+    return number if isinstance(number, int) else None
+
+
+def is_pty(device: str) -> bool:
+    """``device`` (or what its link names) is a Unix 98 pseudo-terminal's slave (Linux:
+    majors 136-143, /dev/pts/N)."""
+    try:
+        rdev = os.stat(device).st_rdev
+    except OSError:
+        return False
+    return 136 <= os.major(rdev) <= 143
+
+
 class SerialLine:
     """A serial port on the event loop: pyserial opens and configures the device, then its
     file descriptor is read by the loop (no thread) and written without blocking (what the
@@ -287,20 +315,50 @@ class SerialLine:
         self.backlogged = False  # reading stopped: frames wait their turns
         self.error: str | None = None
         self.reopen: asyncio.TimerHandle | None = None
+        self._said_pty = False  # "a pseudo-terminal that refuses parity": said once
+        self._said_reopen = False  # an unexpected error reopening: logged once
         # Set each time the port opens or goes away, and its reading stops or resumes.
         self.changed = asyncio.Event()
 
     def open(self) -> None:
         """Open the device (ListenError naming modbus.rtu.port if it cannot be)."""
+        import termios  # (POSIX, as the loop's reading of the device's descriptor)
+
         import serial  # pyserial: imported only when a serial line is served
 
         rtu = self.server.config.rtu
         parity = {Parity.EVEN: serial.PARITY_EVEN, Parity.ODD: serial.PARITY_ODD,
                   Parity.NONE: serial.PARITY_NONE}[rtu.parity]
-        try:
-            port = serial.Serial(self.device, baudrate=rtu.baudrate, bytesize=rtu.bytesize,
+
+        def opened(parity: str) -> Any:
+            return serial.Serial(self.device, baudrate=rtu.baudrate, bytesize=rtu.bytesize,
                                  parity=parity, stopbits=rtu.stopbits, timeout=0,
                                  exclusive=True)
+
+        try:
+            try:
+                port = opened(parity)
+            except termios.error as exc:
+                # The device refused the line's settings (tcsetattr).  Linux 6.x refuses
+                # parity without input parity checking on a pseudo-terminal once it had
+                # parity set (pyserial sets it without): a socat pair served once was
+                # refused by the next `ncgate run`.  A pty carries no parity bit; it is
+                # opened without (the inter-frame silence still counts the configured one).
+                if not (_errno_of(exc) == errno.EINVAL and parity != serial.PARITY_NONE
+                        and is_pty(self.device)):
+                    raise
+                port = opened(serial.PARITY_NONE)
+                if not self._said_pty:
+                    self._said_pty = True
+                    log.info("modbus-rtu %s: a pseudo-terminal that refuses parity %s: "
+                             "opened without (a pty carries no parity bit)", self.device,
+                             parity)
+        except termios.error as exc:
+            number = _errno_of(exc)
+            raise ListenError(number or errno.EINVAL, f"modbus.rtu.port: cannot open "
+                              f"{self.device}: it refuses the line's settings ("
+                              f"{rtu.baudrate} {rtu.bytesize}{parity}{rtu.stopbits}): "
+                              f"{os.strerror(number) if number else exc}") from None
         except (serial.SerialException, OSError, ValueError) as exc:
             number = getattr(exc, "errno", None)
             if number in (errno.EAGAIN, errno.EWOULDBLOCK):  # pyserial's exclusive lock
@@ -409,9 +467,15 @@ class SerialLine:
         self.reopen = None
         try:
             self.open()
-        except ListenError:
+        except Exception as exc:  # ListenError, or a library's surprise: it must not end
+            # the looking for the port (a termios.error did, and the line stayed closed)
+            if not isinstance(exc, ListenError) and not self._said_reopen:
+                self._said_reopen = True
+                log.exception("modbus-rtu %s: reopening failed; trying again every %g s",
+                              self.device, REOPEN_S)
             self.reopen = asyncio.get_running_loop().call_later(REOPEN_S, self._try_reopen)
             return
+        self._said_reopen = False
         log.info("modbus-rtu %s: open again", self.device)
 
     def _close_port(self) -> None:

@@ -5,6 +5,7 @@ serves on meanwhile."""
 from __future__ import annotations
 
 import asyncio
+import os
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
@@ -56,6 +57,64 @@ async def test_a_port_that_goes_away_is_taken_again_when_it_comes_back(
             rc, values, text = await mbpoll(rtu(plc), "input", 1)
             assert rc == 0 and values == {1: 4}, text
             assert serial()["answered"] == 2  # counted across the two openings
+        finally:
+            second.terminate()
+            second.wait()
+
+
+def used_with_parity(device: str) -> None:
+    """Open ``device`` with even parity and close it, as a gateway that served it before
+    did: Linux 6.x then refuses even parity on that pseudo-terminal (tcsetattr: EINVAL)."""
+    import serial
+
+    serial.Serial(device, 19200, parity=serial.PARITY_EVEN, timeout=0).close()
+
+
+async def test_a_pty_served_before_is_served_again(tmp_path: Path, cell: Path) -> None:
+    """The README's socat pair, served by one `ncgate run` and then the next: the second
+    crashed at the start with termios.error (exit 70, "a bug in ncgate"), the pty refusing
+    the parity it had been given once."""
+    need("socat", "socat")
+    need("mbpoll", "mbpoll")
+    pair = relay(tmp_path)
+    try:
+        used_with_parity(str(tmp_path / "ttyGW"))  # the gateway before
+        async with Gateway(ncgate_test_config(
+                cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})):
+            rc, values, text = await mbpoll(rtu(str(tmp_path / "ttyPLC")), "input", 1)
+            assert rc == 0 and values == {1: 4}, text
+    finally:
+        pair.terminate()
+        pair.wait()
+
+
+async def test_a_port_that_comes_back_refusing_its_settings_is_still_looked_for(
+        tmp_path: Path, cell: Path) -> None:
+    """A port that went away came back as a pty served before: its reopening raised
+    termios.error, which ended the looking for it for good (the line stayed closed, the
+    status said "end of file")."""
+    need("socat", "socat")
+    need("mbpoll", "mbpoll")
+    first = relay(tmp_path)
+    async with Gateway(ncgate_test_config(
+            cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})) as gw:
+        def serial() -> dict[str, object]:
+            port: dict[str, object] = fieldbus(gw)["modbus_rtu"]["ports"][0]
+            return port
+
+        first.kill()
+        first.wait()
+        await until(gw, lambda: serial()["open"] is False)
+        # The new pair is used before the gateway may find it: made under other names,
+        # then put where the port was.
+        second = socat(*(f"pty,raw,echo=0,link={tmp_path / end}"
+                         for end in ("ttyGW2", "ttyPLC2")))
+        try:
+            used_with_parity(str(tmp_path / "ttyGW2"))
+            os.replace(tmp_path / "ttyGW2", tmp_path / "ttyGW")
+            await until(gw, lambda: serial()["open"] is True)
+            rc, values, text = await mbpoll(rtu(str(tmp_path / "ttyPLC2")), "input", 1)
+            assert rc == 0 and values == {1: 4}, text
         finally:
             second.terminate()
             second.wait()
