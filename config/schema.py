@@ -1203,7 +1203,12 @@ host = "127.0.0.1"
   CRC is right; a frame whose code does not give its length ends at the line's silence of 3.5
   characters (2 ms at 19,200 bit/s 8E1; 1.75 ms above 19,200; `gap_ms` over TCP). What was
   begun and is not whole at a silence is dropped and counted as `partial`; a bad CRC is
-  dropped, not answered, and counted as a `crc_error`.
+  dropped, not answered, and counted as a `crc_error`. The silence is timed from when the
+  gateway reads the bytes: what lies between the wire and the gateway (a USB adapter's
+  latency timer, a pty and a `socat` relay) can shorten or stretch a pause by milliseconds,
+  so on such a line a frame cut by a few milliseconds may be taken whole (on a bare pty, a
+  pause of 3 ms or more at 19,200 bit/s was dropped in most of ten tries, one of 2 ms or
+  less never).
 - Unit 0 is the broadcast: a write is applied and not answered. A frame for an address that
   is not in `unit_ids` is not answered (counted as `other_units`); 0xFF, Modbus TCP's "the
   server itself", is not an RTU address.
@@ -1224,8 +1229,17 @@ host = "127.0.0.1"
   they have gone (`unsent` and `reading` in the port's status).
 - A serial port that cannot be opened at start stops `ncgate run` with the key to change
   (`ncgate run: [Errno 2] modbus.rtu.port: cannot open /dev/ttyUSB0: No such file or
-  directory`; one another program holds: `... another program has it open`); one that goes
-  away while serving (a USB adapter pulled) is logged and looked for again every second.
+  directory`; one another program holds: `... another program has it open`; one that refuses
+  the line's settings: `... it refuses the line's settings (19200 8E1): Invalid argument`);
+  one that goes away while serving (a USB adapter pulled) is logged and looked for again
+  every second, whatever opening it again says. A pseudo-terminal that refuses parity (Linux
+  6.x refuses even or odd parity on a pty that had it set once: a `socat` pair served by an
+  earlier `ncgate run`) is opened without it, and the log says so once: a pty carries no
+  parity bit.
+- A `socat` pair stalls when its gateway side is not read: past 64 KiB of answers a master
+  left unread, the gateway stops reading the line (above), socat then blocks writing the
+  master's bytes to it, and the answers are never drained; start the pair again. A real
+  UART drains.
   With RTU on, `modbus.unit_ids` must hold a serial address (1..247), or
   `modbus.rtu.unit_ids` name them.
 - Without a cable: a `socat` pty pair is a serial line (`socat pty,raw,echo=0,link=/tmp/gw
