@@ -251,8 +251,13 @@ class _Reader:
                 return origin
         if self.given and self.file == BUILT_IN:
             # The built-in default is sound on its own: what went wrong came with the
-            # overrides (--web 0.0.0.0:8080 without a token fails on web.token).
-            return " ".join(sorted(set(self.given.values())))
+            # overrides (--web 0.0.0.0:8080 without a token fails on web.token) -- those of
+            # the key's own section when there are any (opcua.security refused for the
+            # opcua.host of --set and the --opcua given: not also --port and --no-web).
+            section = key.split(".", 1)[0].split("[", 1)[0]
+            near = {origin for dotted, origin in self.given.items()
+                    if dotted.split(".", 1)[0].split("[", 1)[0] == section}
+            return " ".join(sorted(near or set(self.given.values())))
         return self.file
 
     def section(self, cls: type, raw: Any, key: str,

@@ -184,6 +184,9 @@ def test_a_taken_hub_port_names_canopen_hub_port(tmp_path: Path) -> None:
     (["sim", "--set", "nc.main.x=1"], "ncgate sim: --set: nc.main.x: nc.main is a value, not"),
     (["run", "--port", "70000"], "ncgate run: --port: modbus.port: expected an integer"),
     (["run", "--web", "0.0.0.0:18080"], "ncgate run: --web: web.token: the console listens on"),
+    # (a key no option set, refused for its section's: those options, not every one given)
+    (["run", "--no-web", "--opcua", "0", "--port", "0", "--set", "opcua.host=0.0.0.0"],
+     "ncgate run: --opcua --set: opcua.security: "),
     (["sim", "--set", "nc.lookahed=0"], "--set: nc.lookahed: unknown key (did you mean "
                                         "lookahead?)"),
 ])
