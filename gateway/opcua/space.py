@@ -536,11 +536,22 @@ class Space:
             for subscription in list(subscriptions.values()):
                 await subscription.monitored_item_srv.trigger_event(seen)
 
-    async def _refresh(self, parent: ua.NodeId, subscription_id: ua.Variant,
-                       monitored_item: ua.Variant | None = None) -> ua.StatusCode | list[Any]:
-        """ConditionType's ConditionRefresh and ConditionRefresh2 (OPC 10000-9 5.5.7, 5.5.8):
-        a RefreshStart event to every event item of the subscription (or to the one item), each
-        retained condition to the items whose notifier it reaches, and a RefreshEnd."""
+    async def _refresh(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType's ConditionRefresh (OPC 10000-9 5.5.7): SubscriptionId."""
+        refused = _arguments(args, (ua.VariantType.UInt32,))
+        return refused if refused is not None else await self._refreshed(args[0])
+
+    async def _refresh2(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType's ConditionRefresh2 (OPC 10000-9 5.5.8): SubscriptionId,
+        MonitoredItemId."""
+        refused = _arguments(args, (ua.VariantType.UInt32, ua.VariantType.UInt32))
+        return refused if refused is not None else await self._refreshed(*args)
+
+    async def _refreshed(self, subscription_id: ua.Variant,
+                         monitored_item: ua.Variant | None = None) -> ua.StatusCode | list[Any]:
+        """ConditionRefresh and ConditionRefresh2: a RefreshStart event to every event item
+        of the subscription (or to the one item), each retained condition to the items whose
+        notifier it reaches, and a RefreshEnd."""
         server = self._server
         assert server is not None and self._refresh_events is not None
         subscription = server.iserver.subscription_service.subscriptions.get(
@@ -573,17 +584,20 @@ class Space:
             await items.trigger_event(_at(end, notifier), mid)
         return []
 
-    async def _acknowledge(self, parent: ua.NodeId, event_id: ua.Variant,
-                           comment: ua.Variant) -> ua.StatusCode | list[Any]:
+    async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         """AcknowledgeableConditionType's Acknowledge, called on a condition (OPC 10000-9
-        5.7.3): it changes the condition's AckedState only; the alarm stays in ncgate until
-        a reset, as on the console."""
+        5.7.3): EventId, Comment.  It changes the condition's AckedState only; the alarm stays
+        in ncgate until a reset, as on the console."""
+        refused = _arguments(args, (ua.VariantType.ByteString, ua.VariantType.LocalizedText))
+        if refused is not None:
+            return refused
+        event_id = args[0]
         condition = next((c for c in self._conditions.values() if c.node == parent), None)
         if condition is None:
             return ua.StatusCode(StatusCodes.BadNodeIdUnknown)  # type: ignore[arg-type]
-        refused = await condition.acknowledge(bytes(event_id.Value or b""))
-        if refused is not None:
-            return ua.StatusCode(refused)  # type: ignore[arg-type]
+        why = await condition.acknowledge(bytes(event_id.Value or b""))
+        if why is not None:
+            return ua.StatusCode(why)  # type: ignore[arg-type]
         return []
 
     # -- the address space (before it serves) ----------------------------------------------
@@ -749,9 +763,10 @@ class Space:
             await generator.init(etype, add_generates_event=False)  # from the Server object
             brackets.append(generator.event)
         self._refresh_events = (brackets[0], brackets[1])
-        for method in (ObjectIds.ConditionType_ConditionRefresh,
-                       ObjectIds.ConditionType_ConditionRefresh2):
-            isession.add_method_callback(_id(method, 0), self._refresh)
+        isession.add_method_callback(_id(ObjectIds.ConditionType_ConditionRefresh, 0),
+                                     self._refresh)
+        isession.add_method_callback(_id(ObjectIds.ConditionType_ConditionRefresh2, 0),
+                                     self._refresh2)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
                    initial: Any, node_key: str | None = None,
@@ -803,6 +818,31 @@ class Space:
 
 
 _UNSET = object()
+
+
+def _arguments(args: tuple[Any, ...],
+               types: tuple[ua.VariantType, ...]) -> ua.CallMethodResult | None:
+    """A method call's input arguments against the method's (OPC 10000-4 5.12.2, Call): too
+    few is Bad_ArgumentsMissing, too many Bad_TooManyArguments, and an argument not a scalar
+    of its DataType Bad_InvalidArgument, with Bad_TypeMismatch in its inputArgumentResults.
+    None when they fit.  Checked here, before the method runs: asyncua answers a method that
+    raises with Bad_UnexpectedError and an ERROR traceback in the log, which a client could
+    fill by calling with a wrong argument (docs/opcua.md has the checks)."""
+    result = ua.CallMethodResult()
+    if len(args) != len(types):
+        result.StatusCode = ua.StatusCode(
+            StatusCodes.BadArgumentsMissing if len(args) < len(types)  # type: ignore[arg-type]
+            else StatusCodes.BadTooManyArguments)
+        return result
+    checks = [ua.StatusCode() if isinstance(arg, ua.Variant) and arg.VariantType == vtype
+              and not arg.is_array and not isinstance(arg.Value, list)
+              else ua.StatusCode(StatusCodes.BadTypeMismatch)  # type: ignore[arg-type]
+              for arg, vtype in zip(args, types, strict=True)]
+    if all(check.is_good() for check in checks):
+        return None
+    result.StatusCode = ua.StatusCode(StatusCodes.BadInvalidArgument)  # type: ignore[arg-type]
+    result.InputArgumentResults = checks
+    return result
 
 
 async def _enumeration(server: Server, enumeration: Enumeration) -> ua.NodeId:
