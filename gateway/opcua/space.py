@@ -20,6 +20,7 @@ import hmac
 import itertools
 import logging
 import os
+import re
 import signal
 import sys
 import uuid
@@ -341,6 +342,10 @@ class Space:
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
         self.sessions: set[_Session] = set()  # the clients' activated sessions
+        # The image's nodes and the I/O names' (by key: SA10, door_closed): each one's
+        # VariantType, and which of them opcua.writable lets a client write.
+        self.image_types: dict[str, ua.VariantType] = {}
+        self.writable: set[str] = set()
         self._clients = (0, 0)  # (sessions, subscriptions) as last told to the gateway
 
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
@@ -791,8 +796,10 @@ class Space:
                 key = f"{area}{i}"
                 node = await folder.add_variable(_id(key, img), ua.QualifiedName(key, img),
                                                  ua.Variant(initial, _VTYPE[area]))
+                self.image_types[key] = _VTYPE[area]
                 if REGION[area] in writable:
                     await node.set_writable()
+                    self.writable.add(key)
                 if key in names:
                     await node.write_attribute(AttributeIds.Description, ua.DataValue(
                         ua.Variant(ua.LocalizedText(f"I/O name {names[key]}"))))
@@ -812,8 +819,10 @@ class Space:
             if comment:
                 await node.write_attribute(AttributeIds.Description, ua.DataValue(
                     ua.Variant(ua.LocalizedText(comment))))
+            self.image_types[name] = _VTYPE[parsed.area]
             if REGION[parsed.area] in writable:
                 await node.set_writable()
+                self.writable.add(name)
             self._symbol_nodes.setdefault(var, []).append(node.nodeid)
 
 
@@ -994,16 +1003,33 @@ class _Session(InternalSession):
             return f"{name[0]}:{name[1]}"
         return str(name)
 
+    def may_write(self, key: str) -> bool:
+        """Whether this session may write the image node ``key``: its region is in
+        opcua.writable and, with [opcua.users] set, the session is a user's (what
+        ``write_on_loop`` holds it to, and what its UserAccessLevel says)."""
+        owner = self.owner
+        return key in owner.writable and (not owner.link.config.users or self._named())
+
+    def _named(self) -> bool:
+        """A user's session (a name and password, or a certificate), not an anonymous one."""
+        return self.user is not None and bool(self.user.name)
+
     async def write(self, params: ua.WriteParameters) -> list[ua.StatusCode]:
         owner = self.owner
         results: list[ua.StatusCode] = []
         for item in params.NodesToWrite:
             node = item.NodeId
             key = _image_key(owner, node)
-            if key is None or item.AttributeId != AttributeIds.Value:
-                one = ua.WriteParameters(NodesToWrite=[item])
+            if key not in owner.image_types or item.AttributeId != AttributeIds.Value:
+                one = ua.WriteParameters(NodesToWrite=[item])  # (not a node: NodeIdUnknown)
                 results.extend(await super().write(one))
                 continue
+            assert key is not None
+            if self.may_write(key):  # (one that may not is refused by the loop's table)
+                wrong = _write_refused(item, owner.image_types[key])
+                if wrong is not None:
+                    results.append(ua.StatusCode(wrong))  # type: ignore[arg-type]
+                    continue
             value = item.Value.Value.Value if item.Value.Value is not None else None
             refused = await owner.link.write(key, value, self._who())
             code = (StatusCodes.Good if refused is None
@@ -1011,6 +1037,46 @@ class _Session(InternalSession):
                     else StatusCodes.BadInternalError)
             results.append(ua.StatusCode(code))  # type: ignore[arg-type]
         return results
+
+
+# A NumericRange (OPC 10000-4 7.27, its BNF in A.3): dimensions of an index or a range.
+_NUMERIC_RANGE = re.compile(r"\d+(:\d+)?(,\d+(:\d+)?)*")
+# A DataValue's parts a write may carry that the image does not keep (its value alone).
+_NOT_KEPT = ("SourceTimestamp", "SourcePicoseconds", "ServerTimestamp", "ServerPicoseconds")
+
+
+def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
+    """The protocol's own refusal of a write of an image node (OPC 10000-4 5.11.4, Write),
+    before it goes to the gateway's loop, so that nothing of it is applied or traced; None
+    when the gateway's door is to judge the value.  The image keeps a scalar value and
+    nothing else: an IndexRange is Bad_IndexRangeInvalid when its syntax is (7.27), and
+    Bad_WriteNotSupported otherwise, as is a StatusCode or a timestamp (5.11.4.2: a Server
+    that cannot write what the client asks writes nothing); a value not a scalar of the
+    node's DataType is Bad_TypeMismatch, exactly, no widening (docs/opcua.md, "Writes")."""
+    if item.IndexRange:
+        return (StatusCodes.BadWriteNotSupported if _valid_range(item.IndexRange)
+                else StatusCodes.BadIndexRangeInvalid)
+    data = item.Value
+    status = data.StatusCode
+    if (status is not None and not status.is_good()) or any(
+            getattr(data, part, None) for part in _NOT_KEPT):
+        return StatusCodes.BadWriteNotSupported
+    variant = data.Value
+    if (variant is None or variant.VariantType != vtype or variant.is_array
+            or isinstance(variant.Value, list) or variant.Value is None):
+        return StatusCodes.BadTypeMismatch
+    return None
+
+
+def _valid_range(text: str) -> bool:
+    """``text`` is a NumericRange by its syntax: each range's low index below its high."""
+    if not _NUMERIC_RANGE.fullmatch(text):
+        return False
+    for dimension in text.split(","):
+        low, _, high = dimension.partition(":")
+        if high and int(low) >= int(high):
+            return False
+    return True
 
 
 def _image_key(owner: Space, node: ua.NodeId) -> str | None:

@@ -1,8 +1,10 @@
 """The OPC UA server against what a client may send (docs/opcua.md), driven by asyncua's client
-(it needs no node): a method called with the wrong arguments."""
+(it needs no node): a method called with the wrong arguments, and a write of the wrong type
+or with parts the image does not keep."""
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -11,7 +13,7 @@ from asyncua import Client, ua
 from ncgate.gateway import Gateway
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
 
-from .conftest import NCGATE
+from .conftest import IMAGE, NCGATE
 
 Bad = ua.StatusCodes
 V, T = ua.Variant, ua.VariantType
@@ -70,3 +72,53 @@ async def test_a_method_called_with_missing_extra_or_mistyped_arguments_is_refus
             assert result.StatusCode.value == status, (method, args)
     err = capfd.readouterr().err
     assert "Traceback" not in err and "TypeError" not in err, err
+
+
+async def write(client: Client, node: ua.NodeId, value: ua.DataValue,
+                index_range: str | None = None) -> int:
+    item = ua.WriteValue(NodeId=node, AttributeId=ua.AttributeIds.Value, Value=value,
+                         IndexRange=index_range)  # type: ignore[arg-type]
+    status: ua.StatusCode = (await client.uaclient.write(
+        ua.WriteParameters(NodesToWrite=[item])))[0]
+    return status.value
+
+
+async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_refused(
+        ) -> None:
+    """OPC 10000-4 5.11.4 (Write): a value not exactly of the node's DataType is
+    Bad_TypeMismatch; an IndexRange on these scalars Bad_WriteNotSupported (or
+    Bad_IndexRangeInvalid, its syntax wrong); a StatusCode or a timestamp, which the image
+    does not keep, Bad_WriteNotSupported.  Nothing of them is written or traced."""
+    async with gateway(**{"opcua.writable": ["sa_bits", "syvars"],
+                          "symbols": {"door_closed": "SA10"}}) as gw, \
+            Client(gw.opcua_endpoint) as client:
+        ns = await client.get_namespace_index(IMAGE)
+        syvar, sa, door = (ua.NodeId(key, ns) for key in ("SYVAR7", "SA12", "door_closed"))
+        for node, variant in ((syvar, V(True, T.Boolean)), (syvar, V(2.0, T.Double)),
+                              (syvar, V(3.0, T.Float)), (syvar, V(4, T.UInt64)),
+                              (syvar, V(4, T.Int32)), (syvar, V(4, T.UInt16)),
+                              (syvar, V("8", T.String)), (syvar, V([1, 2], T.Int16)),
+                              (syvar, V(None, T.Null)), (sa, V(1, T.Int32)),
+                              (sa, V(1, T.Byte)), (door, V(1, T.Int16))):
+            assert await write(client, node, ua.DataValue(variant)) == Bad.BadTypeMismatch, (
+                node, variant)
+        int16 = V(5, T.Int16)
+        for index_range, status in (("0", Bad.BadWriteNotSupported),
+                                    ("7:9", Bad.BadWriteNotSupported),
+                                    ("9:7", Bad.BadIndexRangeInvalid),
+                                    ("x", Bad.BadIndexRangeInvalid)):
+            assert await write(client, syvar, ua.DataValue(int16), index_range) == status
+        for value in (ua.DataValue(int16, StatusCode=ua.StatusCode(Bad.BadSensorFailure)),
+                      ua.DataValue(int16, StatusCode=ua.StatusCode(
+                          ua.StatusCodes.UncertainLastUsableValue)),
+                      ua.DataValue(int16, SourceTimestamp=datetime(2000, 1, 1, tzinfo=UTC)),
+                      ua.DataValue(int16, ServerTimestamp=datetime(2000, 1, 1, tzinfo=UTC))):
+            assert await write(client, syvar, value) == Bad.BadWriteNotSupported, value
+        assert (gw.read("SYVAR7"), gw.read("SA12"), gw.read("SA10")) == (0, 0, 0)
+        assert written(gw) == []
+        # Its own type is written; a region not writable is still Bad_NotWritable first.
+        assert await write(client, syvar, ua.DataValue(V(-5, T.Int16))) == 0
+        assert await write(client, door, ua.DataValue(V(True, T.Boolean))) == 0
+        assert await write(client, ua.NodeId("SK2", ns),
+                           ua.DataValue(V(2.0, T.Double))) == Bad.BadNotWritable
+        assert written(gw) == [("SYVAR7", -5), ("SA10", 1)]
