@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import copy
+import dataclasses
 import hashlib
 import hmac
 import itertools
@@ -956,6 +957,12 @@ def _variant(key: str, value: Any) -> ua.Variant:
     return ua.Variant(value, ua.VariantType.String)
 
 
+# The AccessLevel bits that let a client write (OPC 10000-3 8.57, AccessLevelType):
+# CurrentWrite, HistoryWrite, StatusWrite, TimestampWrite.
+_WRITE_BITS = sum(1 << bit for bit in (ua.AccessLevel.CurrentWrite, ua.AccessLevel.HistoryWrite,
+                                       ua.AccessLevel.StatusWrite, ua.AccessLevel.TimestampWrite))
+
+
 class _Session(InternalSession):
     """A client's session: its writes of the image go through the gateway's door."""
 
@@ -993,6 +1000,21 @@ class _Session(InternalSession):
         result = await super().delete_subscriptions(ids)
         self.owner.clients_changed()
         return result
+
+    async def read(self, params: ua.ReadParameters) -> list[ua.DataValue]:
+        """asyncua's Read, with UserAccessLevel for this session: asyncua keeps one per node,
+        what set_writable gave every session alike; an anonymous session while [opcua.users]
+        is set writes nothing (``may_write``), so its UserAccessLevel drops every write bit."""
+        results = await super().read(params)
+        if not self.owner.link.config.users or self._named():
+            return results
+        for i, item in enumerate(params.NodesToRead):
+            shown = results[i]
+            if (item.AttributeId == AttributeIds.UserAccessLevel and shown.Value is not None
+                    and isinstance(shown.Value.Value, int) and shown.Value.Value & _WRITE_BITS):
+                results[i] = dataclasses.replace(shown, Value=ua.Variant(
+                    shown.Value.Value & ~_WRITE_BITS, ua.VariantType.Byte))
+        return results
 
     def _who(self) -> str:
         user = self.user

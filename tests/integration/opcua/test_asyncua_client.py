@@ -1,9 +1,12 @@
 """The OPC UA server against what a client may send (docs/opcua.md), driven by asyncua's client
-(it needs no node): a method called with the wrong arguments, and a write of the wrong type
-or with parts the image does not keep."""
+(it needs no node): a method called with the wrong arguments, a write of the wrong type or
+with parts the image does not keep, and what an anonymous session is told it may write while
+[opcua.users] is set."""
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import AsyncIterator
 from datetime import UTC, datetime
 from typing import Any
 
@@ -122,3 +125,32 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
         assert await write(client, ua.NodeId("SK2", ns),
                            ua.DataValue(V(2.0, T.Double))) == Bad.BadNotWritable
         assert written(gw) == [("SYVAR7", -5), ("SA10", 1)]
+
+
+@pytest.fixture
+async def with_users() -> AsyncIterator[Gateway]:
+    digest = hashlib.pbkdf2_hmac("sha256", b"s3cret", b"pepper", 1000).hex()
+    async with gateway(**{"opcua.writable": ["syvars"], "opcua.users": {
+            "alice": f"pbkdf2_sha256$1000$pepper${digest}"}}) as gw:
+        yield gw
+
+
+async def test_with_users_set_an_anonymous_session_reads_a_user_access_level_of_read_only(
+        with_users: Gateway) -> None:
+    """UserAccessLevel says what this session may do: CurrentRead alone for an anonymous
+    session while [opcua.users] is set, as its writes are refused; a user's says it writes."""
+    gw = with_users
+    levels = (ua.AttributeIds.AccessLevel, ua.AttributeIds.UserAccessLevel)
+    async with Client(gw.opcua_endpoint) as anonymous:
+        node = anonymous.get_node(ua.NodeId("SYVAR7", await anonymous.get_namespace_index(IMAGE)))
+        assert [(await node.read_attribute(a)).Value.Value for a in levels] == [3, 1]
+        assert await write(anonymous, node.nodeid, ua.DataValue(V(5, T.Int16))) == (
+            Bad.BadUserAccessDenied)
+    alice = Client(gw.opcua_endpoint)
+    alice.set_user("alice")
+    alice.set_password("s3cret")
+    async with alice:
+        node = alice.get_node(ua.NodeId("SYVAR7", await alice.get_namespace_index(IMAGE)))
+        assert [(await node.read_attribute(a)).Value.Value for a in levels] == [3, 3]
+        assert await write(alice, node.nodeid, ua.DataValue(V(5, T.Int16))) == 0
+    assert written(gw) == [("SYVAR7", 5)]
