@@ -343,6 +343,7 @@ class Space:
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
         self.sessions: set[_Session] = set()  # the clients' activated sessions
+        self.created: set[_Session] = set()  # every session not closed (opcua.max_sessions)
         # The image's nodes and the I/O names' (by key: SA10, door_closed): each one's
         # VariantType, and which of them opcua.writable lets a client write.
         self.image_types: dict[str, ua.VariantType] = {}
@@ -375,7 +376,21 @@ class Space:
             server.set_certificate_validator(await trust_validator(config.trusted))
             logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
+        # A client gone without closing its session (killed) holds it, and its subscriptions,
+        # this long at most (asyncua's own cap is 10 minutes).
+        server.iserver.max_session_timeout_ms = config.max_session_timeout_s * 1000
         await self._build(server, layout)
+        # The limits where a client reads them (OPC 10000-5 6.3.2, ServerCapabilitiesType).
+        for capability, limit in (
+                (ObjectIds.Server_ServerCapabilities_MaxSessions, config.max_sessions),
+                (ObjectIds.Server_ServerCapabilities_MaxSubscriptionsPerSession,
+                 config.max_subscriptions_per_session),
+                (ObjectIds.Server_ServerCapabilities_MaxMonitoredItemsPerSubscription,
+                 config.max_monitored_items_per_subscription),
+                (ObjectIds.Server_ServerCapabilities_MaxSubscriptions,
+                 server.iserver.max_subscriptions)):
+            await server.write_attribute_value(_id(capability, 0), ua.DataValue(
+                ua.Variant(limit, ua.VariantType.UInt32)))
         starting = logging.getLogger("asyncua.server.server")
         level = starting.level
         starting.setLevel(logging.CRITICAL)  # (it logs a bind's failure with a traceback)
@@ -982,19 +997,61 @@ class _Session(InternalSession):
         self.owner.clients_changed()
         return result
 
+    async def create_session(self, params: ua.CreateSessionParameters,
+                             sockname: tuple[str, int] | None = None,
+                             ) -> ua.CreateSessionResult:
+        """CreateSession: Bad_TooManySessions past opcua.max_sessions (OPC 10000-4 5.6.2).
+        asyncua's only cap is 1,000 activated sessions, as one count for its whole process."""
+        owner = self.owner
+        if len(owner.created) >= owner.link.config.max_sessions:
+            raise ServiceError(StatusCodes.BadTooManySessions)
+        result = await super().create_session(params, sockname)
+        owner.created.add(self)
+        return result
+
     async def close_session(self, delete_subs: bool = True) -> None:
         try:
             await super().close_session(delete_subs)
         finally:
+            self.owner.created.discard(self)
             self.owner.sessions.discard(self)
             self.owner.clients_changed()
 
     async def create_subscription(self, params: ua.CreateSubscriptionParameters,
                                   callback: Any, request_callback: Any = None,
                                   ) -> ua.CreateSubscriptionResult:
+        """CreateSubscription: Bad_TooManySubscriptions past this session's
+        opcua.max_subscriptions_per_session (asyncua counts only the whole server's, 1,000, which
+        one client could take alone and, killed, keep until its session timed out)."""
+        subscriptions = self.subscription_service.subscriptions.values()
+        mine = sum(1 for sub in subscriptions if sub.session_id == self.session_id)
+        if mine >= self.owner.link.config.max_subscriptions_per_session:
+            raise ServiceError(StatusCodes.BadTooManySubscriptions)
         result = await super().create_subscription(params, callback, request_callback)
         self.owner.clients_changed()
         return result
+
+    async def create_monitored_items(self, params: ua.CreateMonitoredItemsParameters,
+                                     ) -> list[ua.MonitoredItemCreateResult]:
+        """CreateMonitoredItems: the items past the subscription's
+        opcua.max_monitored_items_per_subscription are each Bad_TooManyMonitoredItems (OPC
+        10000-4 5.13.2), the others are created."""
+        subscription = self.subscription_service.subscriptions.get(params.SubscriptionId)
+        if subscription is None:  # asyncua's answer: Bad_SubscriptionIdInvalid
+            return await super().create_monitored_items(params)
+        # (asyncua 2.1 counts a subscription's items nowhere else.)
+        held = len(subscription.monitored_item_srv._monitored_items)
+        room = max(0, self.owner.link.config.max_monitored_items_per_subscription - held)
+        items = list(params.ItemsToCreate)
+        over = [ua.MonitoredItemCreateResult(StatusCode=ua.StatusCode(
+            StatusCodes.BadTooManyMonitoredItems)) for _ in items[room:]]  # type: ignore[arg-type]
+        if not over:
+            return await super().create_monitored_items(params)
+        created: list[ua.MonitoredItemCreateResult] = []
+        if room:
+            created = await super().create_monitored_items(
+                dataclasses.replace(params, ItemsToCreate=items[:room]))
+        return created + over
 
     async def delete_subscriptions(self, ids: list[int]) -> list[ua.StatusCode]:
         result = await super().delete_subscriptions(ids)

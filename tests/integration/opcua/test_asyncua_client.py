@@ -1,7 +1,7 @@
 """The OPC UA server against what a client may send (docs/opcua.md), driven by asyncua's client
 (it needs no node): a method called with the wrong arguments, a write of the wrong type or
-with parts the image does not keep, and what an anonymous session is told it may write while
-[opcua.users] is set."""
+with parts the image does not keep, what an anonymous session is told it may write while
+[opcua.users] is set, and the limits one client cannot pass to starve another."""
 
 from __future__ import annotations
 
@@ -154,3 +154,48 @@ async def test_with_users_set_an_anonymous_session_reads_a_user_access_level_of_
         assert [(await node.read_attribute(a)).Value.Value for a in levels] == [3, 3]
         assert await write(alice, node.nodeid, ua.DataValue(V(5, T.Int16))) == 0
     assert written(gw) == [("SYVAR7", 5)]
+
+
+class _Quiet:
+    def datachange_notification(self, *args: Any) -> None:
+        pass
+
+
+async def test_one_client_at_its_subscription_limit_leaves_a_second_its_subscription() -> None:
+    """opcua.max_subscriptions_per_session and max_monitored_items_per_subscription hold one
+    session to its share, so another client still subscribes; max_sessions caps the
+    sessions, and a session's timeout is revised down to max_session_timeout_s.  The limits
+    are in the Server object's ServerCapabilities."""
+    async with gateway(**{"opcua.max_subscriptions_per_session": 2,
+                          "opcua.max_monitored_items_per_subscription": 3,
+                          "opcua.max_sessions": 2,
+                          "opcua.max_session_timeout_s": 30}) as gw:
+        greedy = Client(gw.opcua_endpoint)
+        greedy.session_timeout = 3_600_000  # asks an hour
+        async with greedy:
+            assert greedy.session_timeout == 30_000
+            for _ in range(2):
+                await greedy.create_subscription(100, _Quiet())
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await greedy.create_subscription(100, _Quiet())
+            assert refused.value.code == Bad.BadTooManySubscriptions
+            async with Client(gw.opcua_endpoint) as newcomer:
+                subscription = await newcomer.create_subscription(100, _Quiet())
+                ns = await newcomer.get_namespace_index(IMAGE)
+                nodes = [newcomer.get_node(ua.NodeId(f"SA{i}", ns)) for i in range(4)]
+                handles = await subscription.subscribe_data_change(nodes)
+                assert [isinstance(h, int) for h in handles] == [True, True, True, False]
+                assert handles[3] == ua.StatusCode(Bad.BadTooManyMonitoredItems)
+                with pytest.raises(ua.UaStatusCodeError) as full:
+                    await subscription.subscribe_data_change(nodes[3])
+                assert full.value.code == Bad.BadTooManyMonitoredItems
+                capabilities = newcomer.get_node(ua.ObjectIds.Server_ServerCapabilities)
+                read = {name: await (await capabilities.get_child(f"0:{name}")).read_value()
+                        for name in ("MaxSessions", "MaxSubscriptionsPerSession",
+                                     "MaxMonitoredItemsPerSubscription")}
+                assert read == {"MaxSessions": 2, "MaxSubscriptionsPerSession": 2,
+                                "MaxMonitoredItemsPerSubscription": 3}
+                with pytest.raises(ua.UaStatusCodeError) as many:
+                    async with Client(gw.opcua_endpoint):
+                        pass
+                assert many.value.code == Bad.BadTooManySessions
