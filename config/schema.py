@@ -1037,6 +1037,19 @@ class OpcuaConfig:
         "of them (*.pem, *.der, *.crt, *.cer), beside the config; a client's own certificate "
         "or its CA's. Empty: any client certificate on loopback, and refused at start with any "
         "other host", parse=_opcua_trusted)
+    # A client's resources (docs/opcua.md, "Limits"): without a cap per session one client could
+    # hold asyncua's 1,000 subscriptions of the whole server, and keep them, killed, until
+    # its session times out.
+    max_sessions: int = setting(32, "the sessions the server holds at once (a client killed "
+                                "holds its own until max_session_timeout_s)", lo=1, hi=1000)
+    max_subscriptions_per_session: int = setting(
+        16, "the subscriptions one session may hold", lo=1, hi=1000)
+    max_monitored_items_per_subscription: int = setting(
+        10000, "the monitored items one subscription may hold", lo=1, hi=100000)
+    max_session_timeout_s: float = setting(
+        60.0, "the longest session timeout a client is granted (a longer request is revised "
+        "down to it): how long a client gone without closing holds its session", lo=5,
+        hi=3600)
 
 
 @dataclass(frozen=True, slots=True)

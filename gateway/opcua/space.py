@@ -15,11 +15,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import copy
+import dataclasses
 import hashlib
 import hmac
 import itertools
 import logging
 import os
+import re
 import signal
 import sys
 import uuid
@@ -341,6 +343,11 @@ class Space:
         self.image_ns = 0
         self._snds: list[str] = []  # the SND log, oldest first
         self.sessions: set[_Session] = set()  # the clients' activated sessions
+        self.created: set[_Session] = set()  # every session not closed (opcua.max_sessions)
+        # The image's nodes and the I/O names' (by key: SA10, door_closed): each one's
+        # VariantType, and which of them opcua.writable lets a client write.
+        self.image_types: dict[str, ua.VariantType] = {}
+        self.writable: set[str] = set()
         self._clients = (0, 0)  # (sessions, subscriptions) as last told to the gateway
 
     async def serve(self, reader: asyncio.StreamReader, layout: dict[str, Any]) -> None:
@@ -369,7 +376,21 @@ class Space:
             server.set_certificate_validator(await trust_validator(config.trusted))
             logging.getLogger("asyncuagds.validate").setLevel(logging.CRITICAL)
         server.iserver.create_session = self._session  # type: ignore[method-assign]
+        # A client gone without closing its session (killed) holds it, and its subscriptions,
+        # this long at most (asyncua's own cap is 10 minutes).
+        server.iserver.max_session_timeout_ms = config.max_session_timeout_s * 1000
         await self._build(server, layout)
+        # The limits where a client reads them (OPC 10000-5 6.3.2, ServerCapabilitiesType).
+        for capability, limit in (
+                (ObjectIds.Server_ServerCapabilities_MaxSessions, config.max_sessions),
+                (ObjectIds.Server_ServerCapabilities_MaxSubscriptionsPerSession,
+                 config.max_subscriptions_per_session),
+                (ObjectIds.Server_ServerCapabilities_MaxMonitoredItemsPerSubscription,
+                 config.max_monitored_items_per_subscription),
+                (ObjectIds.Server_ServerCapabilities_MaxSubscriptions,
+                 server.iserver.max_subscriptions)):
+            await server.write_attribute_value(_id(capability, 0), ua.DataValue(
+                ua.Variant(limit, ua.VariantType.UInt32)))
         starting = logging.getLogger("asyncua.server.server")
         level = starting.level
         starting.setLevel(logging.CRITICAL)  # (it logs a bind's failure with a traceback)
@@ -536,11 +557,22 @@ class Space:
             for subscription in list(subscriptions.values()):
                 await subscription.monitored_item_srv.trigger_event(seen)
 
-    async def _refresh(self, parent: ua.NodeId, subscription_id: ua.Variant,
-                       monitored_item: ua.Variant | None = None) -> ua.StatusCode | list[Any]:
-        """ConditionType's ConditionRefresh and ConditionRefresh2 (OPC 10000-9 5.5.7, 5.5.8):
-        a RefreshStart event to every event item of the subscription (or to the one item), each
-        retained condition to the items whose notifier it reaches, and a RefreshEnd."""
+    async def _refresh(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType's ConditionRefresh (OPC 10000-9 5.5.7): SubscriptionId."""
+        refused = _arguments(args, (ua.VariantType.UInt32,))
+        return refused if refused is not None else await self._refreshed(args[0])
+
+    async def _refresh2(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType's ConditionRefresh2 (OPC 10000-9 5.5.8): SubscriptionId,
+        MonitoredItemId."""
+        refused = _arguments(args, (ua.VariantType.UInt32, ua.VariantType.UInt32))
+        return refused if refused is not None else await self._refreshed(*args)
+
+    async def _refreshed(self, subscription_id: ua.Variant,
+                         monitored_item: ua.Variant | None = None) -> ua.StatusCode | list[Any]:
+        """ConditionRefresh and ConditionRefresh2: a RefreshStart event to every event item
+        of the subscription (or to the one item), each retained condition to the items whose
+        notifier it reaches, and a RefreshEnd."""
         server = self._server
         assert server is not None and self._refresh_events is not None
         subscription = server.iserver.subscription_service.subscriptions.get(
@@ -573,17 +605,20 @@ class Space:
             await items.trigger_event(_at(end, notifier), mid)
         return []
 
-    async def _acknowledge(self, parent: ua.NodeId, event_id: ua.Variant,
-                           comment: ua.Variant) -> ua.StatusCode | list[Any]:
+    async def _acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         """AcknowledgeableConditionType's Acknowledge, called on a condition (OPC 10000-9
-        5.7.3): it changes the condition's AckedState only; the alarm stays in ncgate until
-        a reset, as on the console."""
+        5.7.3): EventId, Comment.  It changes the condition's AckedState only; the alarm stays
+        in ncgate until a reset, as on the console."""
+        refused = _arguments(args, (ua.VariantType.ByteString, ua.VariantType.LocalizedText))
+        if refused is not None:
+            return refused
+        event_id = args[0]
         condition = next((c for c in self._conditions.values() if c.node == parent), None)
         if condition is None:
             return ua.StatusCode(StatusCodes.BadNodeIdUnknown)  # type: ignore[arg-type]
-        refused = await condition.acknowledge(bytes(event_id.Value or b""))
-        if refused is not None:
-            return ua.StatusCode(refused)  # type: ignore[arg-type]
+        why = await condition.acknowledge(bytes(event_id.Value or b""))
+        if why is not None:
+            return ua.StatusCode(why)  # type: ignore[arg-type]
         return []
 
     # -- the address space (before it serves) ----------------------------------------------
@@ -749,9 +784,10 @@ class Space:
             await generator.init(etype, add_generates_event=False)  # from the Server object
             brackets.append(generator.event)
         self._refresh_events = (brackets[0], brackets[1])
-        for method in (ObjectIds.ConditionType_ConditionRefresh,
-                       ObjectIds.ConditionType_ConditionRefresh2):
-            isession.add_method_callback(_id(method, 0), self._refresh)
+        isession.add_method_callback(_id(ObjectIds.ConditionType_ConditionRefresh, 0),
+                                     self._refresh)
+        isession.add_method_callback(_id(ObjectIds.ConditionType_ConditionRefresh2, 0),
+                                     self._refresh2)
 
     async def _var(self, parent: Node, key: str, ns: int, browse_ns: int, name: str,
                    initial: Any, node_key: str | None = None,
@@ -776,8 +812,10 @@ class Space:
                 key = f"{area}{i}"
                 node = await folder.add_variable(_id(key, img), ua.QualifiedName(key, img),
                                                  ua.Variant(initial, _VTYPE[area]))
+                self.image_types[key] = _VTYPE[area]
                 if REGION[area] in writable:
                     await node.set_writable()
+                    self.writable.add(key)
                 if key in names:
                     await node.write_attribute(AttributeIds.Description, ua.DataValue(
                         ua.Variant(ua.LocalizedText(f"I/O name {names[key]}"))))
@@ -797,12 +835,39 @@ class Space:
             if comment:
                 await node.write_attribute(AttributeIds.Description, ua.DataValue(
                     ua.Variant(ua.LocalizedText(comment))))
+            self.image_types[name] = _VTYPE[parsed.area]
             if REGION[parsed.area] in writable:
                 await node.set_writable()
+                self.writable.add(name)
             self._symbol_nodes.setdefault(var, []).append(node.nodeid)
 
 
 _UNSET = object()
+
+
+def _arguments(args: tuple[Any, ...],
+               types: tuple[ua.VariantType, ...]) -> ua.CallMethodResult | None:
+    """A method call's input arguments against the method's (OPC 10000-4 5.12.2, Call): too
+    few is Bad_ArgumentsMissing, too many Bad_TooManyArguments, and an argument not a scalar
+    of its DataType Bad_InvalidArgument, with Bad_TypeMismatch in its inputArgumentResults.
+    None when they fit.  Checked here, before the method runs: asyncua answers a method that
+    raises with Bad_UnexpectedError and an ERROR traceback in the log, which a client could
+    fill by calling with a wrong argument (docs/opcua.md has the checks)."""
+    result = ua.CallMethodResult()
+    if len(args) != len(types):
+        result.StatusCode = ua.StatusCode(
+            StatusCodes.BadArgumentsMissing if len(args) < len(types)  # type: ignore[arg-type]
+            else StatusCodes.BadTooManyArguments)
+        return result
+    checks = [ua.StatusCode() if isinstance(arg, ua.Variant) and arg.VariantType == vtype
+              and not arg.is_array and not isinstance(arg.Value, list)
+              else ua.StatusCode(StatusCodes.BadTypeMismatch)  # type: ignore[arg-type]
+              for arg, vtype in zip(args, types, strict=True)]
+    if all(check.is_good() for check in checks):
+        return None
+    result.StatusCode = ua.StatusCode(StatusCodes.BadInvalidArgument)  # type: ignore[arg-type]
+    result.InputArgumentResults = checks
+    return result
 
 
 async def _enumeration(server: Server, enumeration: Enumeration) -> ua.NodeId:
@@ -907,6 +972,12 @@ def _variant(key: str, value: Any) -> ua.Variant:
     return ua.Variant(value, ua.VariantType.String)
 
 
+# The AccessLevel bits that let a client write (OPC 10000-3 8.57, AccessLevelType):
+# CurrentWrite, HistoryWrite, StatusWrite, TimestampWrite.
+_WRITE_BITS = sum(1 << bit for bit in (ua.AccessLevel.CurrentWrite, ua.AccessLevel.HistoryWrite,
+                                       ua.AccessLevel.StatusWrite, ua.AccessLevel.TimestampWrite))
+
+
 class _Session(InternalSession):
     """A client's session: its writes of the image go through the gateway's door."""
 
@@ -926,24 +997,81 @@ class _Session(InternalSession):
         self.owner.clients_changed()
         return result
 
+    async def create_session(self, params: ua.CreateSessionParameters,
+                             sockname: tuple[str, int] | None = None,
+                             ) -> ua.CreateSessionResult:
+        """CreateSession: Bad_TooManySessions past opcua.max_sessions (OPC 10000-4 5.6.2).
+        asyncua's only cap is 1,000 activated sessions, as one count for its whole process."""
+        owner = self.owner
+        if len(owner.created) >= owner.link.config.max_sessions:
+            raise ServiceError(StatusCodes.BadTooManySessions)
+        result = await super().create_session(params, sockname)
+        owner.created.add(self)
+        return result
+
     async def close_session(self, delete_subs: bool = True) -> None:
         try:
             await super().close_session(delete_subs)
         finally:
+            self.owner.created.discard(self)
             self.owner.sessions.discard(self)
             self.owner.clients_changed()
 
     async def create_subscription(self, params: ua.CreateSubscriptionParameters,
                                   callback: Any, request_callback: Any = None,
                                   ) -> ua.CreateSubscriptionResult:
+        """CreateSubscription: Bad_TooManySubscriptions past this session's
+        opcua.max_subscriptions_per_session (asyncua counts only the whole server's, 1,000, which
+        one client could take alone and, killed, keep until its session timed out)."""
+        subscriptions = self.subscription_service.subscriptions.values()
+        mine = sum(1 for sub in subscriptions if sub.session_id == self.session_id)
+        if mine >= self.owner.link.config.max_subscriptions_per_session:
+            raise ServiceError(StatusCodes.BadTooManySubscriptions)
         result = await super().create_subscription(params, callback, request_callback)
         self.owner.clients_changed()
         return result
+
+    async def create_monitored_items(self, params: ua.CreateMonitoredItemsParameters,
+                                     ) -> list[ua.MonitoredItemCreateResult]:
+        """CreateMonitoredItems: the items past the subscription's
+        opcua.max_monitored_items_per_subscription are each Bad_TooManyMonitoredItems (OPC
+        10000-4 5.13.2), the others are created."""
+        subscription = self.subscription_service.subscriptions.get(params.SubscriptionId)
+        if subscription is None:  # asyncua's answer: Bad_SubscriptionIdInvalid
+            return await super().create_monitored_items(params)
+        # (asyncua 2.1 counts a subscription's items nowhere else.)
+        held = len(subscription.monitored_item_srv._monitored_items)
+        room = max(0, self.owner.link.config.max_monitored_items_per_subscription - held)
+        items = list(params.ItemsToCreate)
+        over = [ua.MonitoredItemCreateResult(StatusCode=ua.StatusCode(
+            StatusCodes.BadTooManyMonitoredItems)) for _ in items[room:]]  # type: ignore[arg-type]
+        if not over:
+            return await super().create_monitored_items(params)
+        created: list[ua.MonitoredItemCreateResult] = []
+        if room:
+            created = await super().create_monitored_items(
+                dataclasses.replace(params, ItemsToCreate=items[:room]))
+        return created + over
 
     async def delete_subscriptions(self, ids: list[int]) -> list[ua.StatusCode]:
         result = await super().delete_subscriptions(ids)
         self.owner.clients_changed()
         return result
+
+    async def read(self, params: ua.ReadParameters) -> list[ua.DataValue]:
+        """asyncua's Read, with UserAccessLevel for this session: asyncua keeps one per node,
+        what set_writable gave every session alike; an anonymous session while [opcua.users]
+        is set writes nothing (``may_write``), so its UserAccessLevel drops every write bit."""
+        results = await super().read(params)
+        if not self.owner.link.config.users or self._named():
+            return results
+        for i, item in enumerate(params.NodesToRead):
+            shown = results[i]
+            if (item.AttributeId == AttributeIds.UserAccessLevel and shown.Value is not None
+                    and isinstance(shown.Value.Value, int) and shown.Value.Value & _WRITE_BITS):
+                results[i] = dataclasses.replace(shown, Value=ua.Variant(
+                    shown.Value.Value & ~_WRITE_BITS, ua.VariantType.Byte))
+        return results
 
     def _who(self) -> str:
         user = self.user
@@ -954,16 +1082,33 @@ class _Session(InternalSession):
             return f"{name[0]}:{name[1]}"
         return str(name)
 
+    def may_write(self, key: str) -> bool:
+        """Whether this session may write the image node ``key``: its region is in
+        opcua.writable and, with [opcua.users] set, the session is a user's (what
+        ``write_on_loop`` holds it to, and what its UserAccessLevel says)."""
+        owner = self.owner
+        return key in owner.writable and (not owner.link.config.users or self._named())
+
+    def _named(self) -> bool:
+        """A user's session (a name and password, or a certificate), not an anonymous one."""
+        return self.user is not None and bool(self.user.name)
+
     async def write(self, params: ua.WriteParameters) -> list[ua.StatusCode]:
         owner = self.owner
         results: list[ua.StatusCode] = []
         for item in params.NodesToWrite:
             node = item.NodeId
             key = _image_key(owner, node)
-            if key is None or item.AttributeId != AttributeIds.Value:
-                one = ua.WriteParameters(NodesToWrite=[item])
+            if key not in owner.image_types or item.AttributeId != AttributeIds.Value:
+                one = ua.WriteParameters(NodesToWrite=[item])  # (not a node: NodeIdUnknown)
                 results.extend(await super().write(one))
                 continue
+            assert key is not None
+            if self.may_write(key):  # (one that may not is refused by the loop's table)
+                wrong = _write_refused(item, owner.image_types[key])
+                if wrong is not None:
+                    results.append(ua.StatusCode(wrong))  # type: ignore[arg-type]
+                    continue
             value = item.Value.Value.Value if item.Value.Value is not None else None
             refused = await owner.link.write(key, value, self._who())
             code = (StatusCodes.Good if refused is None
@@ -971,6 +1116,46 @@ class _Session(InternalSession):
                     else StatusCodes.BadInternalError)
             results.append(ua.StatusCode(code))  # type: ignore[arg-type]
         return results
+
+
+# A NumericRange (OPC 10000-4 7.27, its BNF in A.3): dimensions of an index or a range.
+_NUMERIC_RANGE = re.compile(r"\d+(:\d+)?(,\d+(:\d+)?)*")
+# A DataValue's parts a write may carry that the image does not keep (its value alone).
+_NOT_KEPT = ("SourceTimestamp", "SourcePicoseconds", "ServerTimestamp", "ServerPicoseconds")
+
+
+def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
+    """The protocol's own refusal of a write of an image node (OPC 10000-4 5.11.4, Write),
+    before it goes to the gateway's loop, so that nothing of it is applied or traced; None
+    when the gateway's door is to judge the value.  The image keeps a scalar value and
+    nothing else: an IndexRange is Bad_IndexRangeInvalid when its syntax is (7.27), and
+    Bad_WriteNotSupported otherwise, as is a StatusCode or a timestamp (5.11.4.2: a Server
+    that cannot write what the client asks writes nothing); a value not a scalar of the
+    node's DataType is Bad_TypeMismatch, exactly, no widening (docs/opcua.md, "Writes")."""
+    if item.IndexRange:
+        return (StatusCodes.BadWriteNotSupported if _valid_range(item.IndexRange)
+                else StatusCodes.BadIndexRangeInvalid)
+    data = item.Value
+    status = data.StatusCode
+    if (status is not None and not status.is_good()) or any(
+            getattr(data, part, None) for part in _NOT_KEPT):
+        return StatusCodes.BadWriteNotSupported
+    variant = data.Value
+    if (variant is None or variant.VariantType != vtype or variant.is_array
+            or isinstance(variant.Value, list) or variant.Value is None):
+        return StatusCodes.BadTypeMismatch
+    return None
+
+
+def _valid_range(text: str) -> bool:
+    """``text`` is a NumericRange by its syntax: each range's low index below its high."""
+    if not _NUMERIC_RANGE.fullmatch(text):
+        return False
+    for dimension in text.split(","):
+        low, _, high = dimension.partition(":")
+        if high and int(low) >= int(high):
+            return False
+    return True
 
 
 def _image_key(owner: Space, node: ua.NodeId) -> str | None:

@@ -1,0 +1,201 @@
+"""The OPC UA server against what a client may send (docs/opcua.md), driven by asyncua's client
+(it needs no node): a method called with the wrong arguments, a write of the wrong type or
+with parts the image does not keep, what an anonymous session is told it may write while
+[opcua.users] is set, and the limits one client cannot pass to starve another."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import AsyncIterator
+from datetime import UTC, datetime
+from typing import Any
+
+import pytest
+from asyncua import Client, ua
+
+from ncgate.gateway import Gateway
+from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+from .conftest import IMAGE, NCGATE
+
+Bad = ua.StatusCodes
+V, T = ua.Variant, ua.VariantType
+
+
+def gateway(**overrides: Any) -> Gateway:
+    return Gateway(ncgate_test_config(**{"opcua.enabled": True, "opcua.port": 0,
+                                         "canopen.enabled": False, **overrides}))
+
+
+def written(gw: Gateway) -> list[tuple[str, int]]:
+    return [(e["var"], e["value"]) for e in gw.trace if e["event"] == "write"]
+
+
+async def call(client: Client, obj: ua.NodeId, method: int,
+               args: list[ua.Variant]) -> ua.CallMethodResult:
+    request = ua.CallMethodRequest(ObjectId=obj, MethodId=ua.NodeId(method),
+                                   InputArguments=args)
+    result: ua.CallMethodResult = (await client.uaclient.call([request]))[0]
+    return result
+
+
+async def test_a_method_called_with_missing_extra_or_mistyped_arguments_is_refused_unlogged(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """OPC 10000-4 5.12.2 (Call): Bad_ArgumentsMissing, Bad_TooManyArguments, and
+    Bad_InvalidArgument with Bad_TypeMismatch for the argument -- never asyncua's
+    Bad_UnexpectedError, and no traceback in the log (the server's stderr)."""
+    event_id = V(b"not an event", T.ByteString)
+    comment = V(ua.LocalizedText("seen"))
+    async with gateway() as gw, Client(gw.opcua_endpoint) as client:
+        ns = await client.get_namespace_index(NCGATE)
+        condition = ua.NodeId("Alarms/Process 1", ns)
+        acknowledge = ua.ObjectIds.AcknowledgeableConditionType_Acknowledge
+        for args, status in (([], Bad.BadArgumentsMissing),
+                             ([event_id], Bad.BadArgumentsMissing),
+                             ([event_id, comment, V(1, T.Int32)], Bad.BadTooManyArguments),
+                             ([event_id, V("seen", T.String)], Bad.BadInvalidArgument),
+                             ([V([b"a"], T.ByteString), comment], Bad.BadInvalidArgument)):
+            result = await call(client, condition, acknowledge, args)
+            assert result.StatusCode.value == status, args
+        assert [r.value for r in result.InputArgumentResults] == [Bad.BadTypeMismatch, 0]
+        # Well formed, it reaches the condition: an EventId it never raised.
+        result = await call(client, condition, acknowledge, [event_id, comment])
+        assert result.StatusCode.value == Bad.BadEventIdUnknown
+        # ConditionRefresh and ConditionRefresh2 alike (their ids are UInt32).
+        condition_type = ua.NodeId(ua.ObjectIds.ConditionType)
+        refresh, refresh2 = (ua.ObjectIds.ConditionType_ConditionRefresh,
+                             ua.ObjectIds.ConditionType_ConditionRefresh2)
+        for method, args, status in (
+                (refresh, [], Bad.BadArgumentsMissing),
+                (refresh, [V(1, T.Int64)], Bad.BadInvalidArgument),
+                (refresh, [V(1, T.UInt32)], Bad.BadSubscriptionIdInvalid),
+                (refresh2, [V(1, T.UInt32)], Bad.BadArgumentsMissing),
+                (refresh2, [V(1, T.UInt32)] * 3, Bad.BadTooManyArguments)):
+            result = await call(client, condition_type, method, args)
+            assert result.StatusCode.value == status, (method, args)
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "TypeError" not in err, err
+
+
+async def write(client: Client, node: ua.NodeId, value: ua.DataValue,
+                index_range: str | None = None) -> int:
+    item = ua.WriteValue(NodeId=node, AttributeId=ua.AttributeIds.Value, Value=value,
+                         IndexRange=index_range)  # type: ignore[arg-type]
+    status: ua.StatusCode = (await client.uaclient.write(
+        ua.WriteParameters(NodesToWrite=[item])))[0]
+    return status.value
+
+
+async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_refused(
+        ) -> None:
+    """OPC 10000-4 5.11.4 (Write): a value not exactly of the node's DataType is
+    Bad_TypeMismatch; an IndexRange on these scalars Bad_WriteNotSupported (or
+    Bad_IndexRangeInvalid, its syntax wrong); a StatusCode or a timestamp, which the image
+    does not keep, Bad_WriteNotSupported.  Nothing of them is written or traced."""
+    async with gateway(**{"opcua.writable": ["sa_bits", "syvars"],
+                          "symbols": {"door_closed": "SA10"}}) as gw, \
+            Client(gw.opcua_endpoint) as client:
+        ns = await client.get_namespace_index(IMAGE)
+        syvar, sa, door = (ua.NodeId(key, ns) for key in ("SYVAR7", "SA12", "door_closed"))
+        for node, variant in ((syvar, V(True, T.Boolean)), (syvar, V(2.0, T.Double)),
+                              (syvar, V(3.0, T.Float)), (syvar, V(4, T.UInt64)),
+                              (syvar, V(4, T.Int32)), (syvar, V(4, T.UInt16)),
+                              (syvar, V("8", T.String)), (syvar, V([1, 2], T.Int16)),
+                              (syvar, V(None, T.Null)), (sa, V(1, T.Int32)),
+                              (sa, V(1, T.Byte)), (door, V(1, T.Int16))):
+            assert await write(client, node, ua.DataValue(variant)) == Bad.BadTypeMismatch, (
+                node, variant)
+        int16 = V(5, T.Int16)
+        for index_range, status in (("0", Bad.BadWriteNotSupported),
+                                    ("7:9", Bad.BadWriteNotSupported),
+                                    ("9:7", Bad.BadIndexRangeInvalid),
+                                    ("x", Bad.BadIndexRangeInvalid)):
+            assert await write(client, syvar, ua.DataValue(int16), index_range) == status
+        for value in (ua.DataValue(int16, StatusCode=ua.StatusCode(Bad.BadSensorFailure)),
+                      ua.DataValue(int16, StatusCode=ua.StatusCode(
+                          ua.StatusCodes.UncertainLastUsableValue)),
+                      ua.DataValue(int16, SourceTimestamp=datetime(2000, 1, 1, tzinfo=UTC)),
+                      ua.DataValue(int16, ServerTimestamp=datetime(2000, 1, 1, tzinfo=UTC))):
+            assert await write(client, syvar, value) == Bad.BadWriteNotSupported, value
+        assert (gw.read("SYVAR7"), gw.read("SA12"), gw.read("SA10")) == (0, 0, 0)
+        assert written(gw) == []
+        # Its own type is written; a region not writable is still Bad_NotWritable first.
+        assert await write(client, syvar, ua.DataValue(V(-5, T.Int16))) == 0
+        assert await write(client, door, ua.DataValue(V(True, T.Boolean))) == 0
+        assert await write(client, ua.NodeId("SK2", ns),
+                           ua.DataValue(V(2.0, T.Double))) == Bad.BadNotWritable
+        assert written(gw) == [("SYVAR7", -5), ("SA10", 1)]
+
+
+@pytest.fixture
+async def with_users() -> AsyncIterator[Gateway]:
+    digest = hashlib.pbkdf2_hmac("sha256", b"s3cret", b"pepper", 1000).hex()
+    async with gateway(**{"opcua.writable": ["syvars"], "opcua.users": {
+            "alice": f"pbkdf2_sha256$1000$pepper${digest}"}}) as gw:
+        yield gw
+
+
+async def test_with_users_set_an_anonymous_session_reads_a_user_access_level_of_read_only(
+        with_users: Gateway) -> None:
+    """UserAccessLevel says what this session may do: CurrentRead alone for an anonymous
+    session while [opcua.users] is set, as its writes are refused; a user's says it writes."""
+    gw = with_users
+    levels = (ua.AttributeIds.AccessLevel, ua.AttributeIds.UserAccessLevel)
+    async with Client(gw.opcua_endpoint) as anonymous:
+        node = anonymous.get_node(ua.NodeId("SYVAR7", await anonymous.get_namespace_index(IMAGE)))
+        assert [(await node.read_attribute(a)).Value.Value for a in levels] == [3, 1]
+        assert await write(anonymous, node.nodeid, ua.DataValue(V(5, T.Int16))) == (
+            Bad.BadUserAccessDenied)
+    alice = Client(gw.opcua_endpoint)
+    alice.set_user("alice")
+    alice.set_password("s3cret")
+    async with alice:
+        node = alice.get_node(ua.NodeId("SYVAR7", await alice.get_namespace_index(IMAGE)))
+        assert [(await node.read_attribute(a)).Value.Value for a in levels] == [3, 3]
+        assert await write(alice, node.nodeid, ua.DataValue(V(5, T.Int16))) == 0
+    assert written(gw) == [("SYVAR7", 5)]
+
+
+class _Quiet:
+    def datachange_notification(self, *args: Any) -> None:
+        pass
+
+
+async def test_one_client_at_its_subscription_limit_leaves_a_second_its_subscription() -> None:
+    """opcua.max_subscriptions_per_session and max_monitored_items_per_subscription hold one
+    session to its share, so another client still subscribes; max_sessions caps the
+    sessions, and a session's timeout is revised down to max_session_timeout_s.  The limits
+    are in the Server object's ServerCapabilities."""
+    async with gateway(**{"opcua.max_subscriptions_per_session": 2,
+                          "opcua.max_monitored_items_per_subscription": 3,
+                          "opcua.max_sessions": 2,
+                          "opcua.max_session_timeout_s": 30}) as gw:
+        greedy = Client(gw.opcua_endpoint)
+        greedy.session_timeout = 3_600_000  # asks an hour
+        async with greedy:
+            assert greedy.session_timeout == 30_000
+            for _ in range(2):
+                await greedy.create_subscription(100, _Quiet())
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await greedy.create_subscription(100, _Quiet())
+            assert refused.value.code == Bad.BadTooManySubscriptions
+            async with Client(gw.opcua_endpoint) as newcomer:
+                subscription = await newcomer.create_subscription(100, _Quiet())
+                ns = await newcomer.get_namespace_index(IMAGE)
+                nodes = [newcomer.get_node(ua.NodeId(f"SA{i}", ns)) for i in range(4)]
+                handles = await subscription.subscribe_data_change(nodes)
+                assert [isinstance(h, int) for h in handles] == [True, True, True, False]
+                assert handles[3] == ua.StatusCode(Bad.BadTooManyMonitoredItems)
+                with pytest.raises(ua.UaStatusCodeError) as full:
+                    await subscription.subscribe_data_change(nodes[3])
+                assert full.value.code == Bad.BadTooManyMonitoredItems
+                capabilities = newcomer.get_node(ua.ObjectIds.Server_ServerCapabilities)
+                read = {name: await (await capabilities.get_child(f"0:{name}")).read_value()
+                        for name in ("MaxSessions", "MaxSubscriptionsPerSession",
+                                     "MaxMonitoredItemsPerSubscription")}
+                assert read == {"MaxSessions": 2, "MaxSubscriptionsPerSession": 2,
+                                "MaxMonitoredItemsPerSubscription": 3}
+                with pytest.raises(ua.UaStatusCodeError) as many:
+                    async with Client(gw.opcua_endpoint):
+                        pass
+                assert many.value.code == Bad.BadTooManySessions
