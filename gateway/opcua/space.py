@@ -984,6 +984,7 @@ class _Session(InternalSession):
     def __init__(self, owner: Space, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.owner = owner
+        self._activation: asyncio.Task[None] | None = None  # (_unless_activated)
 
     def activate_session(self, params: ua.ActivateSessionParameters,
                          peer_certificate: bytes | None) -> ua.ActivateSessionResult:
@@ -1007,9 +1008,21 @@ class _Session(InternalSession):
             raise ServiceError(StatusCodes.BadTooManySessions)
         result = await super().create_session(params, sockname)
         owner.created.add(self)
+        self._activation = asyncio.create_task(self._unless_activated())
         return result
 
+    async def _unless_activated(self) -> None:
+        """Close this session if it is not activated within its timeout (OPC 10000-4 5.6.2).
+        asyncua closes one only when its connection goes: a client sending CreateSession
+        again and again on one connection, activating none, held max_sessions for good
+        (asyncua forgets all but the connection's last)."""
+        await asyncio.sleep(self.session_timeout or self.owner.link.config.max_session_timeout_s)
+        if not self.is_activated() and self in self.owner.created:
+            await self.close_session(True)
+
     async def close_session(self, delete_subs: bool = True) -> None:
+        if self._activation is not None and self._activation is not asyncio.current_task():
+            self._activation.cancel()
         try:
             await super().close_session(delete_subs)
         finally:

@@ -5,6 +5,7 @@ with parts the image does not keep, what an anonymous session is told it may wri
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
@@ -199,3 +200,34 @@ async def test_one_client_at_its_subscription_limit_leaves_a_second_its_subscrip
                     async with Client(gw.opcua_endpoint):
                         pass
                 assert many.value.code == Bad.BadTooManySessions
+
+
+async def test_sessions_never_activated_do_not_hold_the_session_limit() -> None:
+    """A client may send CreateSession again and again on one connection and never activate
+    one: asyncua forgets all but the last (none is closed), and max_sessions, counting them,
+    refused every other client for good.  A session not activated within its timeout is
+    closed (OPC 10000-4 5.6.2), so the limit comes back."""
+    async with gateway(**{"opcua.max_sessions": 3,
+                          "opcua.max_session_timeout_s": 5}) as gw:
+        hostile = Client(gw.opcua_endpoint)
+        hostile.session_timeout = 5_000
+        await hostile.connect_socket()
+        try:
+            await hostile.send_hello()
+            await hostile.open_secure_channel()
+            for _ in range(3):
+                await hostile.create_session()  # never activated
+            with pytest.raises(ua.UaStatusCodeError) as full:
+                await hostile.create_session()
+            assert full.value.code == Bad.BadTooManySessions
+            async with asyncio.timeout(30):
+                while True:  # until the sessions not activated are closed (5 s)
+                    try:
+                        async with Client(gw.opcua_endpoint) as newcomer:
+                            assert await newcomer.get_namespace_index(IMAGE) > 0
+                            break
+                    except ua.UaStatusCodeError as exc:
+                        assert exc.code == Bad.BadTooManySessions
+                        await asyncio.sleep(0.5)  # (asks again: the expiry is a timeout)
+        finally:
+            hostile.disconnect_socket()
