@@ -33,30 +33,37 @@ async def until(gw: Gateway, what: Callable[[], bool], timeout_s: float = 10.0) 
             await line.changed.wait()
 
 
+def port_status(gw: Gateway) -> dict[str, object]:
+    """The serial port's status (fieldbus.modbus_rtu's only port)."""
+    port: dict[str, object] = fieldbus(gw)["modbus_rtu"]["ports"][0]
+    return port
+
+
+def served(tmp_path: Path, cell: Path) -> Gateway:
+    """A gateway serving the relay's ttyGW."""
+    return Gateway(ncgate_test_config(cell / "ncgate.toml",
+                                      **{"modbus.rtu.port": str(tmp_path / "ttyGW")}))
+
+
 async def test_a_port_that_goes_away_is_taken_again_when_it_comes_back(
         tmp_path: Path, cell: Path, caplog: pytest.LogCaptureFixture) -> None:
     need("socat", "socat")
     need("mbpoll", "mbpoll")
     first = relay(tmp_path)
-    async with Gateway(ncgate_test_config(
-            cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})) as gw:
-        def serial() -> dict[str, object]:
-            port: dict[str, object] = fieldbus(gw)["modbus_rtu"]["ports"][0]
-            return port
-
+    async with served(tmp_path, cell) as gw:
         plc = str(tmp_path / "ttyPLC")
         assert (await mbpoll(rtu(plc), "input", 1))[1] == {1: 4}
         first.kill()
         first.wait()
-        await until(gw, lambda: serial()["open"] is False)
+        await until(gw, lambda: port_status(gw)["open"] is False)
         assert "the port went away" in caplog.text
         assert (await mbpoll(tcp(gw), "input", 1))[1] == {1: 4}  # TCP serves on
         second = relay(tmp_path)
         try:
-            await until(gw, lambda: serial()["open"] is True)
+            await until(gw, lambda: port_status(gw)["open"] is True)
             rc, values, text = await mbpoll(rtu(plc), "input", 1)
             assert rc == 0 and values == {1: 4}, text
-            assert serial()["answered"] == 2  # counted across the two openings
+            assert port_status(gw)["answered"] == 2  # counted across the two openings
         finally:
             second.terminate()
             second.wait()
@@ -79,8 +86,7 @@ async def test_a_pty_served_before_is_served_again(tmp_path: Path, cell: Path) -
     pair = relay(tmp_path)
     try:
         used_with_parity(str(tmp_path / "ttyGW"))  # the gateway before
-        async with Gateway(ncgate_test_config(
-                cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})):
+        async with served(tmp_path, cell):
             rc, values, text = await mbpoll(rtu(str(tmp_path / "ttyPLC")), "input", 1)
             assert rc == 0 and values == {1: 4}, text
     finally:
@@ -96,15 +102,10 @@ async def test_a_port_that_comes_back_refusing_its_settings_is_still_looked_for(
     need("socat", "socat")
     need("mbpoll", "mbpoll")
     first = relay(tmp_path)
-    async with Gateway(ncgate_test_config(
-            cell / "ncgate.toml", **{"modbus.rtu.port": str(tmp_path / "ttyGW")})) as gw:
-        def serial() -> dict[str, object]:
-            port: dict[str, object] = fieldbus(gw)["modbus_rtu"]["ports"][0]
-            return port
-
+    async with served(tmp_path, cell) as gw:
         first.kill()
         first.wait()
-        await until(gw, lambda: serial()["open"] is False)
+        await until(gw, lambda: port_status(gw)["open"] is False)
         # The new pair is used before the gateway may find it: made under other names,
         # then put where the port was.
         second = socat(*(f"pty,raw,echo=0,link={tmp_path / end}"
@@ -112,7 +113,7 @@ async def test_a_port_that_comes_back_refusing_its_settings_is_still_looked_for(
         try:
             used_with_parity(str(tmp_path / "ttyGW2"))
             os.replace(tmp_path / "ttyGW2", tmp_path / "ttyGW")
-            await until(gw, lambda: serial()["open"] is True)
+            await until(gw, lambda: port_status(gw)["open"] is True)
             rc, values, text = await mbpoll(rtu(str(tmp_path / "ttyPLC2")), "input", 1)
             assert rc == 0 and values == {1: 4}, text
         finally:
