@@ -424,6 +424,11 @@ class Space:
                  external: bool = False) -> InternalSession:
         server = self._server
         assert server is not None
+        if external and len(self.created) >= self.link.config.max_sessions:
+            # Refused before the session exists: asyncua registers a session as it makes it,
+            # and one refused later (in its CreateSession) stayed registered, 0.5 kB each,
+            # and an ActivateSession after it raised in asyncua (a hostile try).
+            raise ServiceError(StatusCodes.BadTooManySessions)
         iserver = server.iserver
         return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
                         user=user, external=external)
@@ -1024,7 +1029,11 @@ class _Session(InternalSession):
         if self._activation is not None and self._activation is not asyncio.current_task():
             self._activation.cancel()
         try:
-            await super().close_session(delete_subs)
+            # Its subscriptions go with it, whatever DeleteSubscriptions says: kept, they
+            # belonged to no session, no limit counted them, and a client closing sessions
+            # with false filled the server's 1,000 for good (a hostile try).  None is kept
+            # for a TransferSubscriptions, which only the same user's session may make.
+            await super().close_session(True)
         finally:
             self.owner.created.discard(self)
             self.owner.sessions.discard(self)
@@ -1043,6 +1052,41 @@ class _Session(InternalSession):
         result = await super().create_subscription(params, callback, request_callback)
         self.owner.clients_changed()
         return result
+
+    async def transfer_subscriptions(  # type: ignore[override]
+            self, params: ua.TransferSubscriptionsParameters, callback: Any,
+    ) -> list[ua.TransferResult]:
+        """TransferSubscriptions (OPC 10000-4 5.13.7) of a subscription of another session of
+        the same user (a name or a certificate; an anonymous session takes none: any other
+        client could take its subscriptions), within this session's
+        opcua.max_subscriptions_per_session.  asyncua checked neither: one session gathered
+        64 subscriptions, and any session took another client's (a hostile try)."""
+        subscriptions = self.subscription_service.subscriptions
+        mine = sum(1 for sub in subscriptions.values() if sub.session_id == self.session_id)
+        room = self.owner.link.config.max_subscriptions_per_session - mine
+        sessions = {session.session_id: session for session in self.owner.created}
+        taken: list[int] = []
+        results: list[ua.TransferResult | None] = []
+        for sid in params.SubscriptionIds:
+            sub = subscriptions.get(sid)
+            owner = sessions.get(sub.session_id) if sub is not None else None
+            if sub is None or sub.session_id == self.session_id:
+                results.append(None)  # asyncua's answer (unknown; already this session's)
+                taken.append(sid)
+            elif not self._named() or owner is None or owner.user is None or (
+                    owner.user.name != self.user.name):
+                results.append(ua.TransferResult(StatusCode=ua.StatusCode(
+                    StatusCodes.BadUserAccessDenied)))  # type: ignore[arg-type]
+            elif room <= 0:
+                results.append(ua.TransferResult(StatusCode=ua.StatusCode(
+                    StatusCodes.BadTooManySubscriptions)))  # type: ignore[arg-type]
+            else:
+                room -= 1
+                results.append(None)
+                taken.append(sid)
+        done = iter(await super().transfer_subscriptions(dataclasses.replace(
+            params, SubscriptionIds=taken), callback) if taken else [])
+        return [next(done) if result is None else result for result in results]
 
     async def create_monitored_items(self, params: ua.CreateMonitoredItemsParameters,
                                      ) -> list[ua.MonitoredItemCreateResult]:
@@ -1133,8 +1177,6 @@ class _Session(InternalSession):
 
 # A NumericRange (OPC 10000-4 7.27, its BNF in A.3): dimensions of an index or a range.
 _NUMERIC_RANGE = re.compile(r"\d+(:\d+)?(,\d+(:\d+)?)*")
-# A DataValue's parts a write may carry that the image does not keep (its value alone).
-_NOT_KEPT = ("SourceTimestamp", "SourcePicoseconds", "ServerTimestamp", "ServerPicoseconds")
 
 
 def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
@@ -1150,9 +1192,11 @@ def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
                 else StatusCodes.BadIndexRangeInvalid)
     data = item.Value
     status = data.StatusCode
-    if (status is not None and not status.is_good()) or any(
-            getattr(data, part, None) for part in _NOT_KEPT):
+    if status is not None and not status.is_good():
         return StatusCodes.BadWriteNotSupported
+    # A timestamp is not kept and not refused: asyncua's own write_value stamps every write
+    # with a SourceTimestamp, so refusing it (as Part 4 5.11.4 lets a server that keeps none)
+    # refused every asyncua dashboard's writes (a hostile try; docs/decisions.md).
     variant = data.Value
     if (variant is None or variant.VariantType != vtype or variant.is_array
             or isinstance(variant.Value, list) or variant.Value is None):

@@ -91,8 +91,10 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
         ) -> None:
     """OPC 10000-4 5.11.4 (Write): a value not exactly of the node's DataType is
     Bad_TypeMismatch; an IndexRange on these scalars Bad_WriteNotSupported (or
-    Bad_IndexRangeInvalid, its syntax wrong); a StatusCode or a timestamp, which the image
-    does not keep, Bad_WriteNotSupported.  Nothing of them is written or traced."""
+    Bad_IndexRangeInvalid, its syntax wrong); a StatusCode other than Good, which the image
+    does not keep, Bad_WriteNotSupported.  Nothing of them is written or traced.  A
+    timestamp is not kept and not refused: asyncua's own write_value (docs/opcua.md's
+    recipe) stamps every write with one, and every such write was refused."""
     async with gateway(**{"opcua.writable": ["sa_bits", "syvars"],
                           "symbols": {"door_closed": "SA10"}}) as gw, \
             Client(gw.opcua_endpoint) as client:
@@ -114,9 +116,7 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
             assert await write(client, syvar, ua.DataValue(int16), index_range) == status
         for value in (ua.DataValue(int16, StatusCode=ua.StatusCode(Bad.BadSensorFailure)),
                       ua.DataValue(int16, StatusCode=ua.StatusCode(
-                          ua.StatusCodes.UncertainLastUsableValue)),
-                      ua.DataValue(int16, SourceTimestamp=datetime(2000, 1, 1, tzinfo=UTC)),
-                      ua.DataValue(int16, ServerTimestamp=datetime(2000, 1, 1, tzinfo=UTC))):
+                          ua.StatusCodes.UncertainLastUsableValue))):
             assert await write(client, syvar, value) == Bad.BadWriteNotSupported, value
         assert (gw.read("SYVAR7"), gw.read("SA12"), gw.read("SA10")) == (0, 0, 0)
         assert written(gw) == []
@@ -126,6 +126,11 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
         assert await write(client, ua.NodeId("SK2", ns),
                            ua.DataValue(V(2.0, T.Double))) == Bad.BadNotWritable
         assert written(gw) == [("SYVAR7", -5), ("SA10", 1)]
+        # docs/opcua.md's recipe: asyncua's write_value, which sends a SourceTimestamp.
+        await client.get_node(syvar).write_value(V(9, T.Int16))
+        assert await write(client, syvar, ua.DataValue(
+            V(11, T.Int16), ServerTimestamp=datetime(2000, 1, 1, tzinfo=UTC))) == 0
+        assert written(gw)[2:] == [("SYVAR7", 9), ("SYVAR7", 11)]
 
 
 @pytest.fixture
@@ -231,3 +236,58 @@ async def test_sessions_never_activated_do_not_hold_the_session_limit() -> None:
                         await asyncio.sleep(0.5)  # (asks again: the expiry is a timeout)
         finally:
             hostile.disconnect_socket()
+
+
+async def test_a_session_closed_keeping_its_subscriptions_takes_them_along() -> None:
+    """CloseSession with DeleteSubscriptions false left its subscriptions to no session:
+    no limit counted them, and a client closing sessions so filled the server's 1,000 for
+    good (a hostile try).  They go with the session."""
+    async with gateway(**{"opcua.writable": ["syvars"]}) as gw:
+        adapter = gw.adapters["opcua"]
+        leaver = Client(gw.opcua_endpoint)
+        await leaver.connect()
+        try:
+            for _ in range(3):
+                await leaver.create_subscription(100, _Quiet())
+            await leaver.uaclient.close_session(False)
+        finally:
+            leaver.disconnect_socket()
+        async with Client(gw.opcua_endpoint) as probe:
+            ns = await probe.get_namespace_index(IMAGE)
+            # Its write goes through the gateway after the counts told before it.
+            await probe.get_node(ua.NodeId("SYVAR7", ns)).write_value(V(1, T.Int16))
+            assert (adapter.sessions, adapter.subscriptions) == (1, 0)
+
+
+async def test_a_create_session_refused_leaves_nothing_and_an_activate_after_it_is_refused(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """A CreateSession refused for max_sessions left its session registered (0.5 kB each,
+    for ever), and an ActivateSession after it on that connection raised inside asyncua
+    (a traceback in the log, Bad_InternalError)."""
+    async with gateway(**{"opcua.max_sessions": 1}) as gw, Client(gw.opcua_endpoint):
+        hostile = Client(gw.opcua_endpoint)
+        await hostile.connect_socket()
+        try:
+            await hostile.send_hello()
+            await hostile.open_secure_channel()
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await hostile.create_session()
+            assert refused.value.code == Bad.BadTooManySessions
+            with pytest.raises(ua.UaStatusCodeError) as activate:
+                await hostile.activate_session()
+            assert activate.value.code != Bad.BadInternalError
+        finally:
+            hostile.disconnect_socket()
+    assert "Traceback" not in capfd.readouterr().err
+
+
+async def test_an_anonymous_session_takes_no_other_sessions_subscription() -> None:
+    """TransferSubscriptions: asyncua moved any session's subscription to any other, past
+    the taker's max_subscriptions_per_session (one session gathered 64), and an anonymous
+    client took another's (a hostile try).  Only a session of the same named user may."""
+    async with gateway() as gw, Client(gw.opcua_endpoint) as owner, \
+            Client(gw.opcua_endpoint) as taker:
+        subscription = await owner.create_subscription(100, _Quiet())
+        results = await taker.uaclient.transfer_subscriptions(ua.TransferSubscriptionsParameters(
+            SubscriptionIds=[subscription.subscription_id], SendInitialValues=False))
+        assert [r.StatusCode.value for r in results] == [Bad.BadUserAccessDenied]
