@@ -317,6 +317,7 @@ class SerialLine:
         self.reopen: asyncio.TimerHandle | None = None
         self._said_pty = False  # "a pseudo-terminal that refuses parity": said once
         self._said_reopen = False  # an unexpected error reopening: logged once
+        self.no_parity = False  # a pty that refuses parity was opened without
         # Set each time the port opens or goes away, and its reading stops or resumes.
         self.changed = asyncio.Event()
 
@@ -335,6 +336,7 @@ class SerialLine:
                                  parity=parity, stopbits=rtu.stopbits, timeout=0,
                                  exclusive=True)
 
+        no_parity = False
         try:
             try:
                 port = opened(parity)
@@ -348,6 +350,7 @@ class SerialLine:
                         and is_pty(self.device)):
                     raise
                 port = opened(serial.PARITY_NONE)
+                no_parity = True
                 if not self._said_pty:
                     self._said_pty = True
                     log.info("modbus-rtu %s: a pseudo-terminal that refuses parity %s: "
@@ -369,6 +372,7 @@ class SerialLine:
                                   f"{os.strerror(number)}") from None
             raise ListenError(f"modbus.rtu.port: cannot open {self.device}: {exc}") from None
         self.serial = port
+        self.no_parity = no_parity  # (the status says so)
         self.error = None
         fd = port.fileno()
         loop = asyncio.get_running_loop()
@@ -469,6 +473,10 @@ class SerialLine:
             self.open()
         except Exception as exc:  # ListenError, or a library's surprise: it must not end
             # the looking for the port (a termios.error did, and the line stayed closed)
+            why = str(exc) if isinstance(exc, ListenError) else f"{type(exc).__name__}: {exc}"
+            if why != self.error:  # (the status says why it is closed now, not at first)
+                self.error = why
+                self.changed.set()
             if not isinstance(exc, ListenError) and not self._said_reopen:
                 self._said_reopen = True
                 log.exception("modbus-rtu %s: reopening failed; trying again every %g s",
@@ -504,7 +512,8 @@ class SerialLine:
         counts = self.counters.now([self.link] if self.link is not None else [])
         return {"port": self.device, "open": self.is_open, "error": self.error,
                 "unsent": len(self.pending), "reading": self.is_open and not self.paused,
-                "settings": f"{rtu.baudrate} {rtu.bytesize}{rtu.parity.value}{rtu.stopbits}",
+                "settings": f"{rtu.baudrate} {rtu.bytesize}{rtu.parity.value}{rtu.stopbits}"
+                + (" (a pty: opened without parity)" if self.no_parity else ""),
                 **counts}
 
 

@@ -86,9 +86,10 @@ async def test_a_pty_served_before_is_served_again(tmp_path: Path, cell: Path) -
     pair = relay(tmp_path)
     try:
         used_with_parity(str(tmp_path / "ttyGW"))  # the gateway before
-        async with served(tmp_path, cell):
+        async with served(tmp_path, cell) as gw:
             rc, values, text = await mbpoll(rtu(str(tmp_path / "ttyPLC")), "input", 1)
             assert rc == 0 and values == {1: 4}, text
+            assert port_status(gw)["settings"] == "19200 8E1 (a pty: opened without parity)"
     finally:
         pair.terminate()
         pair.wait()
