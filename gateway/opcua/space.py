@@ -1157,7 +1157,11 @@ class _Session(InternalSession):
             node = item.NodeId
             key = _image_key(owner, node)
             if key not in owner.image_types or item.AttributeId != AttributeIds.Value:
-                one = ua.WriteParameters(NodesToWrite=[item])  # (not a node: NodeIdUnknown)
+                if node not in self.aspace:  # (asyncua said Bad_UserAccessDenied of it)
+                    results.append(ua.StatusCode(
+                        StatusCodes.BadNodeIdUnknown))  # type: ignore[arg-type]
+                    continue
+                one = ua.WriteParameters(NodesToWrite=[item])
                 results.extend(await super().write(one))
                 continue
             assert key is not None

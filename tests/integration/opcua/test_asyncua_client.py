@@ -125,6 +125,11 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
         assert await write(client, door, ua.DataValue(V(True, T.Boolean))) == 0
         assert await write(client, ua.NodeId("SK2", ns),
                            ua.DataValue(V(2.0, T.Double))) == Bad.BadNotWritable
+        # A node that does not exist (asyncua's answer was Bad_UserAccessDenied).
+        for missing in (ua.NodeId("SYVAR999999", ns), ua.NodeId("SYVAR007", ns),
+                        ua.NodeId("nothing", 7)):
+            assert await write(client, missing, ua.DataValue(
+                V(1, T.Int16))) == Bad.BadNodeIdUnknown, missing
         assert written(gw) == [("SYVAR7", -5), ("SA10", 1)]
         # docs/opcua.md's recipe: asyncua's write_value, which sends a SourceTimestamp.
         await client.get_node(syvar).write_value(V(9, T.Int16))
