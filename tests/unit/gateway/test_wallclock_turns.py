@@ -32,23 +32,25 @@ def _loop_factory(kind: str) -> Callable[[], asyncio.AbstractEventLoop]:
     return asyncio.new_event_loop
 
 
-@pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
-def test_a_request_that_arrives_during_a_turn_waits_for_that_turn_only(
-        kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(wallclock, "TURN_S", 0.0)  # every turn is over after one timer
+def _heard(kind: str, times: list[float], sent_at: tuple[int, ...],
+           behind_s: float = 0.0) -> tuple[list[int], list[int]]:
+    """Run engine timers at ``times`` on a wall-clock driver started ``behind_s`` ago (every
+    timer before then is due at once); those numbered in ``sent_at`` send a request on a
+    socket the loop reads.  The timers fired, in order, and for each request read, how many
+    timers had fired when it was read."""
     engine = make_sim({"A": "N1M30\n"}).engine
     server, client = socket.socketpair()
     server.setblocking(False)
     fired: list[int] = []
-    heard: list[int] = []  # how many timers had fired when the socket was read
+    heard: list[int] = []
 
     def timer(i: int) -> None:
         fired.append(i)
-        if i == 0:
-            client.send(b"request")  # arrives during the first turn
+        if i in sent_at:
+            client.send(b"request")
 
-    for i in range(TIMERS):
-        engine.call_at(0.0, lambda i=i: timer(i))
+    for i, t in enumerate(times):
+        engine.call_at(t, lambda i=i: timer(i))
 
     async def main() -> None:
         loop = asyncio.get_running_loop()
@@ -56,16 +58,18 @@ def test_a_request_that_arrives_during_a_turn_waits_for_that_turn_only(
         def readable() -> None:
             server.recv(64)
             heard.append(len(fired))
-            loop.remove_reader(server)
 
         loop.add_reader(server, readable)
         driver = WallClockDriver(engine, 1.0, loop)
+        driver.t0 -= behind_s
         try:
             driver.kick()
-            while len(fired) < TIMERS:
-                driver.changed.clear()
-                await driver.changed.wait()
+            async with asyncio.timeout(10):
+                while len(fired) < len(times):
+                    driver.changed.clear()
+                    await driver.changed.wait()
         finally:
+            loop.remove_reader(server)
             driver.close()
 
     try:
@@ -74,6 +78,14 @@ def test_a_request_that_arrives_during_a_turn_waits_for_that_turn_only(
     finally:
         server.close()
         client.close()
+    return fired, heard
+
+
+@pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
+def test_a_request_that_arrives_during_a_turn_waits_for_that_turn_only(
+        kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(wallclock, "TURN_S", 0.0)  # every turn is over after one timer
+    fired, heard = _heard(kind, [0.0] * TIMERS, sent_at=(0,))  # arrives during the first turn
     assert fired == list(range(TIMERS))  # all of them, in order, each once
     assert heard == [1]  # read right after the turn it arrived in (asyncio gave 2 with call_soon)
 
@@ -173,46 +185,8 @@ def test_behind_the_clock_a_loop_pass_runs_one_turn(
     after queued one more: a pass ran 6-7 turns behind 100 switching plant models."""
     monkeypatch.setattr(wallclock, "TURN_S", 0.0)
     monkeypatch.setattr(wallclock, "TURN_BEHIND_S", 0.0)
-    engine = make_sim({"A": "N1M30\n"}).engine
-    server, client = socket.socketpair()
-    server.setblocking(False)
-    fired: list[int] = []
-    heard: list[int] = []
     sent_at = (10, 25)  # timers that send a request while they run
-
-    def timer(i: int) -> None:
-        fired.append(i)
-        if i in sent_at:
-            client.send(b"request")
-
-    for i in range(2 * TIMERS):
-        engine.call_at(0.0001 * i, lambda i=i: timer(i))
-
-    async def main() -> None:
-        loop = asyncio.get_running_loop()
-
-        def readable() -> None:
-            server.recv(64)
-            heard.append(len(fired))
-
-        loop.add_reader(server, readable)
-        driver = WallClockDriver(engine, 1.0, loop)
-        driver.t0 -= 0.02  # started 20 ms ago: every timer is due, it is behind
-        try:
-            driver.kick()
-            async with asyncio.timeout(10):
-                while len(fired) < 2 * TIMERS:
-                    driver.changed.clear()
-                    await driver.changed.wait()
-        finally:
-            loop.remove_reader(server)
-            driver.close()
-
-    try:
-        with asyncio.Runner(loop_factory=_loop_factory(kind)) as runner:
-            runner.run(main())
-    finally:
-        server.close()
-        client.close()
+    # Started 20 ms ago: every timer is due, the driver is behind.
+    fired, heard = _heard(kind, [0.0001 * i for i in range(2 * TIMERS)], sent_at, 0.02)
     assert fired == list(range(2 * TIMERS))
     assert heard == [i + 1 for i in sent_at]  # each read right after the turn it came in
