@@ -425,9 +425,11 @@ class Space:
         server = self._server
         assert server is not None
         if external and len(self.created) >= self.link.config.max_sessions:
-            # Refused before the session exists: asyncua registers a session as it makes it,
-            # and one refused later (in its CreateSession) stayed registered, 0.5 kB each,
-            # and an ActivateSession after it raised in asyncua (a hostile try).
+            # CreateSession past opcua.max_sessions: Bad_TooManySessions (OPC 10000-4 5.6.2;
+            # asyncua's only cap is 1,000 activated sessions for its whole process).  Refused
+            # before the session exists: asyncua registers a session as it makes it, and one
+            # refused later (in its CreateSession) stayed registered, 0.5 kB each, and an
+            # ActivateSession after it raised in asyncua (a hostile try).
             raise ServiceError(StatusCodes.BadTooManySessions)
         iserver = server.iserver
         return _Session(self, iserver, iserver.aspace, iserver.subscription_service, name,
@@ -864,8 +866,7 @@ def _arguments(args: tuple[Any, ...],
             StatusCodes.BadArgumentsMissing if len(args) < len(types)  # type: ignore[arg-type]
             else StatusCodes.BadTooManyArguments)
         return result
-    checks = [ua.StatusCode() if isinstance(arg, ua.Variant) and arg.VariantType == vtype
-              and not arg.is_array and not isinstance(arg.Value, list)
+    checks = [ua.StatusCode() if _scalar_of(arg, vtype)
               else ua.StatusCode(StatusCodes.BadTypeMismatch)  # type: ignore[arg-type]
               for arg, vtype in zip(args, types, strict=True)]
     if all(check.is_good() for check in checks):
@@ -873,6 +874,13 @@ def _arguments(args: tuple[Any, ...],
     result.StatusCode = ua.StatusCode(StatusCodes.BadInvalidArgument)  # type: ignore[arg-type]
     result.InputArgumentResults = checks
     return result
+
+
+def _scalar_of(variant: object, vtype: ua.VariantType) -> bool:
+    """``variant`` is one value of exactly ``vtype``: no widening, no array (what a method's
+    argument and a write of an image node must be, OPC 10000-4 5.12.2 and 5.11.4)."""
+    return (isinstance(variant, ua.Variant) and variant.VariantType == vtype
+            and not variant.is_array and not isinstance(variant.Value, list))
 
 
 async def _enumeration(server: Server, enumeration: Enumeration) -> ua.NodeId:
@@ -1006,13 +1014,10 @@ class _Session(InternalSession):
     async def create_session(self, params: ua.CreateSessionParameters,
                              sockname: tuple[str, int] | None = None,
                              ) -> ua.CreateSessionResult:
-        """CreateSession: Bad_TooManySessions past opcua.max_sessions (OPC 10000-4 5.6.2).
-        asyncua's only cap is 1,000 activated sessions, as one count for its whole process."""
-        owner = self.owner
-        if len(owner.created) >= owner.link.config.max_sessions:
-            raise ServiceError(StatusCodes.BadTooManySessions)
+        """CreateSession, counted for opcua.max_sessions (refused before this session was
+        made: :meth:`Space._session`), and closed unless activated in time."""
         result = await super().create_session(params, sockname)
-        owner.created.add(self)
+        self.owner.created.add(self)
         self._activation = asyncio.create_task(self._unless_activated())
         return result
 
@@ -1045,13 +1050,18 @@ class _Session(InternalSession):
         """CreateSubscription: Bad_TooManySubscriptions past this session's
         opcua.max_subscriptions_per_session (asyncua counts only the whole server's, 1,000, which
         one client could take alone and, killed, keep until its session timed out)."""
-        subscriptions = self.subscription_service.subscriptions.values()
-        mine = sum(1 for sub in subscriptions if sub.session_id == self.session_id)
-        if mine >= self.owner.link.config.max_subscriptions_per_session:
+        if self._room() <= 0:
             raise ServiceError(StatusCodes.BadTooManySubscriptions)
         result = await super().create_subscription(params, callback, request_callback)
         self.owner.clients_changed()
         return result
+
+    def _room(self) -> int:
+        """The subscriptions this session may still take (opcua.max_subscriptions_per_session
+        less those it holds: asyncua counts only the whole server's)."""
+        held = sum(1 for sub in self.subscription_service.subscriptions.values()
+                   if sub.session_id == self.session_id)
+        return self.owner.link.config.max_subscriptions_per_session - held
 
     async def transfer_subscriptions(  # type: ignore[override]
             self, params: ua.TransferSubscriptionsParameters, callback: Any,
@@ -1062,8 +1072,7 @@ class _Session(InternalSession):
         opcua.max_subscriptions_per_session.  asyncua checked neither: one session gathered
         64 subscriptions, and any session took another client's (a hostile try)."""
         subscriptions = self.subscription_service.subscriptions
-        mine = sum(1 for sub in subscriptions.values() if sub.session_id == self.session_id)
-        room = self.owner.link.config.max_subscriptions_per_session - mine
+        room = self._room()
         sessions = {session.session_id: session for session in self.owner.created}
         taken: list[int] = []
         results: list[ua.TransferResult | None] = []
@@ -1187,10 +1196,11 @@ def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
     """The protocol's own refusal of a write of an image node (OPC 10000-4 5.11.4, Write),
     before it goes to the gateway's loop, so that nothing of it is applied or traced; None
     when the gateway's door is to judge the value.  The image keeps a scalar value and
-    nothing else: an IndexRange is Bad_IndexRangeInvalid when its syntax is (7.27), and
-    Bad_WriteNotSupported otherwise, as is a StatusCode or a timestamp (5.11.4.2: a Server
-    that cannot write what the client asks writes nothing); a value not a scalar of the
-    node's DataType is Bad_TypeMismatch, exactly, no widening (docs/opcua.md, "Writes")."""
+    nothing else: an IndexRange is Bad_IndexRangeInvalid when its syntax is wrong (7.27),
+    and Bad_WriteNotSupported otherwise, as is a StatusCode other than Good (5.11.4.2: a
+    Server that cannot write what the client asks writes nothing); a timestamp is ignored
+    (below); a value not a scalar of the node's DataType is Bad_TypeMismatch, exactly, no
+    widening (docs/opcua.md, "Writes")."""
     if item.IndexRange:
         return (StatusCodes.BadWriteNotSupported if _valid_range(item.IndexRange)
                 else StatusCodes.BadIndexRangeInvalid)
@@ -1202,8 +1212,7 @@ def _write_refused(item: ua.WriteValue, vtype: ua.VariantType) -> int | None:
     # with a SourceTimestamp, so refusing it (as Part 4 5.11.4 lets a server that keeps none)
     # refused every asyncua dashboard's writes (a hostile try; docs/decisions.md).
     variant = data.Value
-    if (variant is None or variant.VariantType != vtype or variant.is_array
-            or isinstance(variant.Value, list) or variant.Value is None):
+    if not _scalar_of(variant, vtype) or variant.Value is None:
         return StatusCodes.BadTypeMismatch
     return None
 
