@@ -104,6 +104,12 @@ def _given_twice(source: Path, message: str) -> str | None:
     return f"{source}:{line}: {dotted} is given twice: a TOML key is given once"
 
 
+def _table_of(dotted: str) -> str:
+    """The top table a dotted key is in: ``opcua`` of ``opcua.host``, ``plant`` of
+    ``plant.model[0].name``."""
+    return re.split(r"[.\[]", dotted, maxsplit=1)[0]
+
+
 def _set_dotted(raw: dict[str, Any], dotted: str, value: Any, origin: str) -> str:
     """Set ``dotted`` in the raw tables.  In an array of tables (``[[plant.model]]``,
     ``[[nc.process]]``) an entry is named by its ``name`` or ``number`` key, or by its index
@@ -254,9 +260,9 @@ class _Reader:
             # overrides (--web 0.0.0.0:8080 without a token fails on web.token) -- those of
             # the key's own section when there are any (opcua.security refused for the
             # opcua.host of --set and the --opcua given: not also --port and --no-web).
-            section = key.split(".", 1)[0].split("[", 1)[0]
+            section = _table_of(key)
             near = {origin for dotted, origin in self.given.items()
-                    if dotted.split(".", 1)[0].split("[", 1)[0] == section}
+                    if _table_of(dotted) == section}
             return " ".join(sorted(near or set(self.given.values())))
         return self.file
 
