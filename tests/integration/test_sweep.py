@@ -42,9 +42,22 @@ def ncgate(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedP
                           capture_output=True, timeout=timeout)
 
 
-def start(*args: str, cwd: Path) -> subprocess.Popen[str]:
+def start(*args: str, cwd: Path, env: dict[str, str] | None = None
+          ) -> subprocess.Popen[str]:
     return subprocess.Popen([sys.executable, "-m", "ncgate", *args], cwd=cwd, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+
+
+def terminated_once(sweep: subprocess.Popen[str], ready: Callable[[], bool],
+                    what: str) -> tuple[str, str]:
+    """SIGTERM to ``sweep`` once ``ready()`` holds (it must still run then); its output."""
+    try:
+        wait_for(lambda: ready() or sweep.poll() is not None, what)
+        assert sweep.poll() is None, "the sweep ended before it could be stopped"
+        sweep.send_signal(signal.SIGTERM)
+        return sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
 
 
 def rows_of(path: Path) -> list[dict[str, str]]:
@@ -508,14 +521,8 @@ def test_sigterm_keeps_the_rows_done_for_resume(big_sweep: Path) -> None:
 
     total = len(rows_of(big_sweep / "whole.csv"))
     sweep = start("sweep", "spec.toml", "-o", "stopped.csv", "--workers", "1", cwd=big_sweep)
-    try:
-        wait_for(lambda: len(parts_of(big_sweep, "stopped.csv")) >= 1 or sweep.poll() is not None,
-                 "the first part")
-        assert sweep.poll() is None, "the sweep ended before it could be stopped"
-        sweep.send_signal(signal.SIGTERM)
-        _, err = sweep.communicate(timeout=60)
-    finally:
-        sweep.kill()
+    _, err = terminated_once(sweep, lambda: len(parts_of(big_sweep, "stopped.csv")) >= 1,
+                             "the first part")
     assert sweep.returncode == 1, err
     kept = [json.loads(line) for part in parts_of(big_sweep, "stopped.csv")
             for line in part.read_text().splitlines()]
@@ -1206,19 +1213,12 @@ def test_parquet_on_stdout_goes_to_a_pipe_not_to_a_terminal(tmp_path: Path) -> N
 def test_a_stopped_sweep_to_stdout_removes_its_parts_and_writes_no_table(
         big_sweep: Path, short_tmp: Path) -> None:
     total = len(rows_of(big_sweep / "whole.csv"))
-    env = {**os.environ, "TMPDIR": str(short_tmp)}
-    sweep = subprocess.Popen([sys.executable, "-m", "ncgate", "sweep", "spec.toml", "-o", "-",
-                              "--workers", "1"], cwd=big_sweep, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        wait_for(lambda: any(part for f in private_folders(short_tmp)
-                             for part in f.glob("*.parts/part-*.jsonl"))
-                 or sweep.poll() is not None, "the first part in the private folder")
-        assert sweep.poll() is None, "the sweep ended before it could be stopped"
-        sweep.send_signal(signal.SIGTERM)
-        out, err = sweep.communicate(timeout=60)
-    finally:
-        sweep.kill()
+    sweep = start("sweep", "spec.toml", "-o", "-", "--workers", "1", cwd=big_sweep,
+                  env={**os.environ, "TMPDIR": str(short_tmp)})
+    out, err = terminated_once(
+        sweep, lambda: any(part for f in private_folders(short_tmp)
+                           for part in f.glob("*.parts/part-*.jsonl")),
+        "the first part in the private folder")
     assert sweep.returncode == 1, err
     assert re.search(rf"stopped \(SIGTERM\): \d+ of {total} variants done, no table written "
                      r"\(-o -: nothing to resume", err), err
