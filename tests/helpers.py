@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import types
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -87,3 +91,39 @@ def write_cell(folder: Path, config_text: str, programs: dict[str, str]) -> Path
     for name, text in programs.items():
         (folder / f"{name}.nc").write_text(text)
     return folder
+
+
+def _ncgate_owned(obj: object) -> str | None:
+    """What an object is, if it is ncgate's: an instance of one of its classes, one of its
+    functions or a method bound to one (else None)."""
+    if isinstance(obj, types.MethodType):
+        obj = obj.__func__
+    if isinstance(obj, types.FunctionType):
+        return f"{obj.__module__}.{obj.__qualname__}" if obj.__module__.startswith(
+            "ncgate.") else None
+    kind = type(obj)
+    if kind.__module__.startswith("ncgate."):
+        return f"{kind.__module__}.{kind.__qualname__}"
+    return None
+
+
+@contextlib.contextmanager
+def cyclic_garbage() -> Iterator[list[str]]:
+    """What of ncgate's became garbage only the cyclic collector could free, in the body:
+    the list is filled when the body ends.  The collector stands still meanwhile, so nothing
+    is freed behind the test's back; what the test's own clients leave (a canopen master,
+    pytest's loop) is not counted."""
+    gc.collect()
+    flags, enabled = gc.get_debug(), gc.isenabled()
+    gc.disable()
+    gc.set_debug(flags | gc.DEBUG_SAVEALL)
+    found: list[str] = []
+    try:
+        yield found
+        gc.collect()
+        found.extend(sorted({name for o in gc.garbage if (name := _ncgate_owned(o))}))
+    finally:
+        gc.garbage.clear()
+        gc.set_debug(flags)
+        if enabled:
+            gc.enable()

@@ -12,6 +12,7 @@ from pymodbus.client import AsyncModbusTcpClient
 import ncgate.gateway.modbus.server as modbus_server
 from ncgate.gateway import Gateway
 
+from ...helpers import cyclic_garbage
 from .rawclient import Raw, mbap, pdu
 
 GOOD = pdu(4, "HH", 0, 1)
@@ -195,3 +196,22 @@ async def test_a_client_that_never_reads_is_not_buffered_for_and_hurts_no_one(
     assert transport.get_write_buffer_size() >= modbus_server.WRITE_HIGH_WATER
     flood.writer.transport.abort()
     other.close()
+
+
+async def test_a_poller_and_a_running_cell_leave_nothing_for_the_cyclic_collector(
+        ncgate_gateway: Gateway) -> None:
+    """A poller's reads and writes and the engine's turns are freed by their reference
+    counts: garbage that only the cyclic collector frees makes it run, with the interpreter's
+    lock held, inside the turns that must stay on time."""
+    client = await Raw.open(*ncgate_gateway.modbus_address)
+    with cyclic_garbage() as found:
+        ncgate_gateway.command(1)  # MAIN: EXE 2 SIDE, moves, then waits for SA10
+        await ncgate_gateway.wait_state(1, "WAIT_COND", timeout_s=5)
+        for value in range(100):
+            assert (await client.ask(pdu(4, "HH", 100, 40)))[0] == 4  # P1, P2 records
+            assert (await client.ask(pdu(6, "HH", 5, value)))[0] == 6  # SK5
+            assert (await client.ask(pdu(1, "HH", 0, 16)))[0] == 1
+        assert (await client.ask(pdu(5, "HH", 10, 0xFF00)))[0] == 5  # SA10: P1 goes on
+        await ncgate_gateway.wait_state(1, "WAIT_PROC", timeout_s=5)
+    client.close()
+    assert found == []
