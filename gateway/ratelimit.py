@@ -13,6 +13,7 @@ import asyncio
 import logging
 import threading
 import time
+from typing import Any
 
 
 class RateLimitedLog:
@@ -81,3 +82,50 @@ class RateLimitedLog:
                 self.logger.log(self.level, self.held_format, held, self._last_held)
             else:
                 self.logger.log(self.level, self.held_format, held)
+
+
+class LogFlood(logging.Filter):
+    """The same budget for the lines of a library that logs for itself (asyncua logs an ERROR
+    for every request it refuses: 40,000 abusive requests gave 40,000 lines).  Put on a
+    handler: each kind of line (its logger and message template) gets at most ``burst`` lines
+    per ``interval_s``; the count held back is said with the next line of its kind, and by
+    :meth:`flush` (at the process's end)."""
+
+    MAX_KINDS = 256  # templates are the library's code: past this, the counts start again
+
+    def __init__(self, interval_s: float = 10.0, burst: int = 5) -> None:
+        super().__init__()
+        self.interval_s = interval_s
+        self.burst = burst
+        self._kinds: dict[tuple[str, object], list[Any]] = {}  # [window, used, held, last]
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        key = (record.name, record.msg if isinstance(record.msg, str) else type(record.msg))
+        now = time.monotonic()
+        with self._lock:
+            kind = self._kinds.get(key)
+            if kind is None:
+                if len(self._kinds) >= self.MAX_KINDS:
+                    self._kinds.clear()
+                kind = self._kinds[key] = [float("-inf"), 0, 0, ""]
+            if now - kind[0] >= self.interval_s:
+                kind[0], kind[1] = now, 0
+            if kind[1] >= self.burst:
+                kind[2] += 1
+                kind[3] = record.getMessage()
+                return False
+            kind[1] += 1
+            held, kind[2] = kind[2], 0
+        if held:
+            record.msg, record.args = f"{record.getMessage()} (and {held} more like it)", None
+        return True
+
+    def flush(self, logger: logging.Logger) -> None:
+        """Say each count held back since its kind's last line, on ``logger``."""
+        with self._lock:
+            held = [(kind[2], kind[3]) for kind in self._kinds.values() if kind[2]]
+            for kind in self._kinds.values():
+                kind[2] = 0
+        for count, last in held:
+            logger.warning("%d more like: %s", count, last)

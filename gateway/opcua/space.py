@@ -65,6 +65,7 @@ from ncgate.gateway.opcua.model import (
 )
 from ncgate.gateway.opcua.server import REGION
 from ncgate.gateway.opcua.wire import frame, read_frame
+from ncgate.gateway.ratelimit import LogFlood
 from ncgate.gateway.tls import expiry_warning
 from ncgate.inputs import Var
 
@@ -72,6 +73,8 @@ if TYPE_CHECKING:
     from asyncua.common.node import Node
 
 log = logging.getLogger("ncgate.opcua")
+# The budget of the lines asyncua logs for itself (main puts it on the process's handler).
+FLOOD = LogFlood()
 NICE = 10
 
 # The companion specifications' namespaces (their URIs as the OPC Foundation publishes them).
@@ -294,6 +297,10 @@ def main() -> None:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     # Its warnings of a None endpoint and of its revised values are asyncua's to itself.
     logging.getLogger("asyncua").setLevel(logging.ERROR)
+    # And it logs an ERROR for every request it refuses: a client's flood of them is said in
+    # a few lines with their count, not a line each.
+    for handler in logging.getLogger().handlers:
+        handler.addFilter(FLOOD)
     # stdout carries the frames only: anything printed goes to stderr.
     out = os.fdopen(os.dup(1), "wb", buffering=0)
     os.dup2(2, 1)
@@ -418,6 +425,7 @@ class Space:
                 elif kind == "stop":
                     return
         finally:
+            FLOOD.flush(log)  # before asyncua's stop, which may outlast the process's time
             await server.stop()
 
     def _session(self, name: Any, user: User = User(role=UserRole.Anonymous),  # noqa: B008
@@ -991,6 +999,11 @@ _WRITE_BITS = sum(1 << bit for bit in (ua.AccessLevel.CurrentWrite, ua.AccessLev
                                        ua.AccessLevel.StatusWrite, ua.AccessLevel.TimestampWrite))
 
 
+# ConditionType's two refresh methods: each takes a subscription of the calling session.
+_REFRESHES = frozenset(_id(i, 0) for i in (ObjectIds.ConditionType_ConditionRefresh,
+                                           ObjectIds.ConditionType_ConditionRefresh2))
+
+
 class _Session(InternalSession):
     """A client's session: its writes of the image go through the gateway's door."""
 
@@ -1043,6 +1056,27 @@ class _Session(InternalSession):
             self.owner.created.discard(self)
             self.owner.sessions.discard(self)
             self.owner.clients_changed()
+
+    async def call(self, params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
+        """Call: a ConditionRefresh or ConditionRefresh2 for a subscription of another session
+        is Bad_SubscriptionIdInvalid, as for one that does not exist (OPC 10000-9 5.5.7: a
+        subscription of the calling session).  asyncua does not tell a method who calls it,
+        so it is answered here: before, any client had another's alarms sent again."""
+        subscriptions = self.subscription_service.subscriptions
+        refused: dict[int, ua.CallMethodResult] = {}
+        for i, request in enumerate(params):
+            first = request.InputArguments[0] if request.InputArguments else None
+            if request.MethodId in _REFRESHES and first is not None and (
+                    first.VariantType == ua.VariantType.UInt32):
+                sub = subscriptions.get(first.Value)
+                if sub is not None and sub.session_id != self.session_id:
+                    refused[i] = ua.CallMethodResult(StatusCode=ua.StatusCode(
+                        StatusCodes.BadSubscriptionIdInvalid))  # type: ignore[arg-type]
+        if not refused:
+            return await super().call(params)
+        rest = [request for i, request in enumerate(params) if i not in refused]
+        answered = iter(await super().call(rest) if rest else [])
+        return [refused[i] if i in refused else next(answered) for i in range(len(params))]
 
     async def create_subscription(self, params: ua.CreateSubscriptionParameters,
                                   callback: Any, request_callback: Any = None,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
+import re
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
 from typing import Any
@@ -296,3 +297,54 @@ async def test_an_anonymous_session_takes_no_other_sessions_subscription() -> No
         results = await taker.uaclient.transfer_subscriptions(ua.TransferSubscriptionsParameters(
             SubscriptionIds=[subscription.subscription_id], SendInitialValues=False))
         assert [r.StatusCode.value for r in results] == [Bad.BadUserAccessDenied]
+
+
+async def test_condition_refresh_of_another_sessions_subscription_is_refused() -> None:
+    """ConditionRefresh and ConditionRefresh2 take a subscription of the calling session
+    (OPC 10000-9 5.5.7): another client's is Bad_SubscriptionIdInvalid, as one that does not
+    exist (before, any client had another's alarms sent to it again).  Its owner refreshes it."""
+    async with gateway() as gw, Client(gw.opcua_endpoint) as owner, \
+            Client(gw.opcua_endpoint) as other:
+        subscription = await owner.create_subscription(100, _Quiet())
+        item = await subscription.subscribe_events(owner.nodes.server)
+        sid = V(subscription.subscription_id, T.UInt32)
+        condition_type = ua.NodeId(ua.ObjectIds.ConditionType)
+        refresh, refresh2 = (ua.ObjectIds.ConditionType_ConditionRefresh,
+                             ua.ObjectIds.ConditionType_ConditionRefresh2)
+        for method, args in ((refresh, [sid]), (refresh2, [sid, V(item, T.UInt32)])):
+            assert (await call(other, condition_type, method, args)).StatusCode.value == (
+                Bad.BadSubscriptionIdInvalid), method
+            assert (await call(owner, condition_type, method, args)).StatusCode.is_good(), method
+        # One Call of several methods: each answered in its place.
+        requests = [ua.CallMethodRequest(ObjectId=condition_type, MethodId=ua.NodeId(refresh),
+                                         InputArguments=[sid]),
+                    ua.CallMethodRequest(ObjectId=condition_type, MethodId=ua.NodeId(refresh),
+                                         InputArguments=[V(999999, T.UInt32)])]
+        results = await other.uaclient.call(requests)
+        assert [r.StatusCode.value for r in results] == [Bad.BadSubscriptionIdInvalid] * 2
+        results = await owner.uaclient.call(requests)
+        assert [r.StatusCode.is_good() for r in results] == [True, False]
+
+
+async def test_a_flood_of_refused_requests_is_a_few_lines_of_the_servers_log(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """asyncua logs an ERROR for every request it refuses: 40 refused CreateSubscriptions
+    gave 40 lines of the server's log (ncgate run's stderr).  Now a few, and the server goes on
+    answering."""
+    async with gateway(**{"opcua.max_subscriptions_per_session": 1}) as gw, \
+            Client(gw.opcua_endpoint) as client:
+        await client.create_subscription(100, _Quiet())
+        for _ in range(40):
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await client.create_subscription(100, _Quiet())
+            assert refused.value.code == Bad.BadTooManySubscriptions
+        assert await client.nodes.server_state.read_value() == ua.ServerState.Running
+    lines = [line for line in capfd.readouterr().err.splitlines()
+             if "BadTooManySubscriptions" in line]
+    assert 2 <= len(lines) <= 6, lines  # a few lines, and the count of the rest
+    said = 0
+    for line in lines:  # every refusal is counted once: a line, or in a count
+        held = re.search(r"(\d+) more like: |\(and (\d+) more like it\)", line)
+        said += 1 if held is None or held[2] else int(held[1])
+        said += int(held[2]) if held is not None and held[2] else 0
+    assert said == 40, lines

@@ -8,7 +8,7 @@ import logging
 
 import pytest
 
-from ncgate.gateway.ratelimit import RateLimitedLog
+from ncgate.gateway.ratelimit import LogFlood, RateLimitedLog
 
 log = logging.getLogger("ncgate.test.ratelimit")
 
@@ -62,3 +62,40 @@ async def test_on_a_loop_the_count_is_said_once_the_flood_stops(
     finally:
         log.removeHandler(handler)
     assert lines(caplog) == ["event", "9 more sync events"]
+
+
+def test_a_library_flood_is_said_in_a_few_lines_with_its_count() -> None:
+    """LogFlood, on a handler: a library's lines (asyncua logs an ERROR per refused request)
+    of one template at most ``burst`` per interval; the count held back comes with the next
+    line of that kind, or at flush; other kinds keep their own budget."""
+    records: list[str] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            records.append(record.getMessage())
+
+    library = logging.getLogger("ncgate.test.library")
+    library.propagate = False
+    handler = Keep()
+    flood = LogFlood(interval_s=3600.0, burst=2)
+    handler.addFilter(flood)
+    library.addHandler(handler)
+    try:
+        for i in range(1000):
+            library.error("sending service fault response: %s (%s)", "refused", i)
+        library.error("another kind %d", 1)
+        assert records == ["sending service fault response: refused (0)",
+                           "sending service fault response: refused (1)", "another kind 1"]
+        for kind in flood._kinds.values():
+            kind[0] = float("-inf")  # the interval is over
+        library.error("sending service fault response: %s (%s)", "refused", 1000)
+        assert records[-1] == "sending service fault response: refused (1000) (and 998 more " \
+                              "like it)"
+        for i in range(1001, 1004):
+            library.error("sending service fault response: %s (%s)", "refused", i)
+        flood.flush(library)
+        assert records[-1] == "2 more like: sending service fault response: refused (1003)"
+        flood.flush(library)  # said once
+        assert len(records) == 6
+    finally:
+        library.removeHandler(handler)
