@@ -112,19 +112,47 @@ def run_sweep(spec: Spec, options: Options,
     check_options(options)
     if out is None:
         out = sys.stderr if table_to_stdout(options) else sys.stdout
-    with _output(spec, options) as output:
-        if options.format == "parquet":
-            parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
-        client = None
-        if options.scheduler:  # reached (or said) before the parts are made
-            from ncgate.gateway.sweep.cluster import connect
-
-            client = connect(options.scheduler)
+    stops = _Stops()
+    # The stop handlers go in before anything is made: a SIGTERM that came before them, once
+    # the private folder of -o - was made, left it behind.
+    with _stop_signals(stops):
         try:
-            return _run_sweep(spec, options, output, client, out)
-        finally:
-            if client is not None:
-                client.close()
+            with _output(spec, options) as output:
+                if options.format == "parquet":
+                    parquet_bytes([], spec.keys)  # pyarrow is there (or say so before any run)
+                client = None
+                if options.scheduler:  # reached (or said) before the parts are made
+                    from ncgate.gateway.sweep.cluster import connect
+
+                    client = connect(options.scheduler)
+                try:
+                    return _run_sweep(spec, options, output, client, out, stops)
+                finally:
+                    if client is not None:
+                        client.close()
+        except KeyboardInterrupt as exc:
+            if stops.started:  # (a second stop, while the first was said)
+                raise
+            print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}) before any variant ran",
+                  file=sys.stderr)
+            return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
+
+
+@contextlib.contextmanager
+def _stop_signals(stops: _Stops) -> Iterator[None]:
+    """SIGTERM, and Ctrl-C where it raises KeyboardInterrupt, go to ``stops`` in the body (in
+    the main thread: only there can a handler be set)."""
+    previous: dict[signal.Signals, object] = {}
+    if threading.current_thread() is threading.main_thread():
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, stops.handle)
+        # Ctrl-C only where it raises KeyboardInterrupt: ignored (nohup, `&`) it stays so.
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, stops.handle)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)  # type: ignore[arg-type]
 
 
 @contextlib.contextmanager
@@ -145,7 +173,7 @@ def _output(spec: Spec, options: Options) -> Iterator[Path]:
 
 
 def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
-               out: TextIO) -> tuple[int, list[Row]]:
+               out: TextIO, stops: _Stops) -> tuple[int, list[Row]]:
     parts = Parts(output, spec)
     done = parts.start(options.resume)
     variants = {v.id: v for v in spec.variants}
@@ -161,13 +189,7 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     progress = Progress(len(todo)) if show else None
     pending: list[Row] = []
     last = time.monotonic()
-    stops = _Stops()
-    previous: dict[signal.Signals, object] = {}
-    if threading.current_thread() is threading.main_thread():
-        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, stops.handle)
-        # Ctrl-C only where it raises KeyboardInterrupt: ignored (nohup, `&`) it stays so.
-        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            previous[signal.SIGINT] = signal.signal(signal.SIGINT, stops.handle)
+    stops.started = True
     try:
         for variant, result in execute(todo, options, client):
             with stops.held():
@@ -197,9 +219,6 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
         print(f"ncgate sweep: stopped{why}: {what}", file=sys.stderr)
         ctrl_c = not isinstance(exc, ClusterLost) and str(exc) != "SIGTERM"
         return (EXIT_INTERRUPTED if ctrl_c else EXIT_FAILED), []
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)  # type: ignore[arg-type]
     parts.add(pending)
     if progress is not None:
         progress.close()
@@ -227,6 +246,7 @@ class _Stops:
     def __init__(self) -> None:
         self.holding = False
         self.stop: KeyboardInterrupt | None = None
+        self.started = False  # the variants are run (a stop before is said by run_sweep)
 
     def handle(self, signum: int, frame: object) -> None:
         stop = KeyboardInterrupt("SIGTERM" if signum == signal.SIGTERM else "")

@@ -1378,3 +1378,45 @@ def test_two_sweeps_of_one_spec_on_one_dask_cluster_each_get_their_own_runs(
         thread.join(300)
     assert len(got["plain"]) == len(got["tagged"]) == len(spec.variants)
     assert "tagged" not in got["plain"] and set(got["tagged"]) == {"tagged"}
+
+
+def test_a_sigterm_before_the_first_variant_leaves_no_private_folder(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The stop handlers are in before anything is made: a SIGTERM that came after -o -'s
+    private folder was made and before they were left that folder behind (the process died
+    by the signal).  The test's own handler stands for that default: it must not be met."""
+    import io
+    import tempfile
+
+    from ncgate.gateway.sweep import main
+    from ncgate.gateway.sweep.main import Options, run_sweep
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    class Unhandled(Exception):
+        pass
+
+    def unhandled(signum: int, frame: object) -> None:
+        raise Unhandled("SIGTERM met no handler of the sweep's")
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("OK.nc", "FINE.nc")))
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temporary))
+    start = Parts.start
+
+    def sigterm_then_start(parts: Parts, resume: bool) -> dict[str, dict[str, object]]:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return start(parts, resume)
+
+    monkeypatch.setattr(Parts, "start", sigterm_then_start)
+    previous = signal.signal(signal.SIGTERM, unhandled)
+    try:
+        status, rows = run_sweep(spec, Options(None, workers=1, progress=False), io.StringIO())
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert (status, rows) == (main.EXIT_FAILED, [])
+    assert list(temporary.iterdir()) == []
+    assert "ncgate sweep: stopped (SIGTERM) before any variant ran" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is previous
