@@ -812,8 +812,7 @@ class Engine:
             if p.int_remaining is not None:
                 done = 1.0 - (p.int_remaining / item.duration if item.duration else 0.0)
             elif item.duration > 0:
-                now = self.read_time()
-                nominal = p.int_done + (now - p.int_started) * p.int_rate
+                nominal = self._nominal_done(p, self.read_time())
                 done = min(1.0, max(0.0, nominal / item.duration))
             else:
                 done = 1.0
@@ -1053,8 +1052,13 @@ class Engine:
         """The nominal seconds of the timed item still to run."""
         item = p.int_move
         assert item is not None
-        done = p.int_done + (self.now - p.int_started) * p.int_rate
-        return max(0.0, item.duration - done)
+        return max(0.0, item.duration - self._nominal_done(p, self.now))
+
+    @staticmethod
+    def _nominal_done(p: Process, at: float) -> float:
+        """The nominal seconds of the timed item done at ``at``: those kept before its last
+        rate change, and the time since at its rate."""
+        return p.int_done + (at - p.int_started) * p.int_rate
 
     def override(self, feed: int | None = None, rapid: int | None = None,
                  process: int | None = None) -> None:
