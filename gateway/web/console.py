@@ -48,7 +48,7 @@ from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.tls import server_context
 from ncgate.gateway.view import plant_status
-from ncgate.gateway.web.feed import EventFeed
+from ncgate.gateway.web.feed import EventFeed, Turns
 from ncgate.gateway.web.status import LiveStatus, status
 from ncgate.inputs import (
     Break,
@@ -149,8 +149,7 @@ class WebConsole:
         self._batches: dict[tuple[int, int], tuple[int, str]] = {}
         # Streams take turns: at most STREAMS_PER_TURN of them send in one loop turn, so that
         # fifty pages woken by one batch do not hold the fieldbus up for one long turn.
-        self._turn_count = 0
-        self._next_turn: asyncio.Future[None] | None = None
+        self._turns: Turns | None = None  # (made on the loop, at start)
         self._runner: web.AppRunner | None = None
         self._status_cache: tuple[tuple[int, ...], float, dict[str, str]] | None = None
         self._last_record: Path | None = None  # the record GET /api/record serves
@@ -204,6 +203,7 @@ class WebConsole:
         host, bound = runner.addresses[0][:2]
         self.address = (host, bound)
         self._feed = feed
+        self._turns = Turns(asyncio.get_running_loop(), STREAMS_PER_TURN)
 
     async def close(self) -> None:
         if self._live is not None:
@@ -211,6 +211,8 @@ class WebConsole:
             self._live = None
         if self._feed is not None:
             self._feed.close()  # every stream returns
+        if self._turns is not None:
+            self._turns.close()
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
@@ -272,21 +274,6 @@ class WebConsole:
     async def _status(self, request: web.Request) -> web.StreamResponse:
         image = request.query.get("image", "1") != "0"
         return web.json_response(status(self.gw, image=image))
-
-    async def _take_turn(self, loop: asyncio.AbstractEventLoop) -> None:
-        while self._turn_count >= STREAMS_PER_TURN:
-            if self._next_turn is None:
-                self._next_turn = loop.create_future()
-            await self._next_turn
-        if self._turn_count == 0:  # the first of this turn: the count starts again after it
-            loop.call_soon(self._new_turn)
-        self._turn_count += 1
-
-    def _new_turn(self) -> None:
-        self._turn_count = 0
-        turn, self._next_turn = self._next_turn, None
-        if turn is not None and not turn.done():
-            turn.set_result(None)
 
     def _batch(self, feed: EventFeed, position: int) -> tuple[int, str]:
         """The event messages after ``position`` and the position after them, made once for
@@ -420,8 +407,8 @@ class WebConsole:
         ``id`` = the last seq so that a reconnecting page resumes where it was).  No message
         is longer than MESSAGE_BYTES but a single status part: a client that connects to a
         full ring, or falls behind, gets its events in several messages."""
-        feed = self._feed
-        assert feed is not None
+        feed, turns = self._feed, self._turns
+        assert feed is not None and turns is not None
         if self.streams >= self.config.max_streams:
             raise ApiError(503, f"{self.streams} live streams already (web.max_streams)")
         since = _int_query(request, "since", -1)
@@ -443,7 +430,7 @@ class WebConsole:
             loop = asyncio.get_running_loop()
             await self._send(response, "retry: 1000\n\n")
             while not feed.closed and not _gone(request):
-                await self._take_turn(loop)
+                await turns.take()
                 messages: list[str] = []
                 now = loop.time()
                 if now - status_at >= STATUS_EVERY_S:  # first: it names the session

@@ -14,13 +14,19 @@ A stream keeps only its position (a sequence number): memory does
 not grow with clients or with time, and a client that reads slowly -- or not at all -- holds
 nobody else up; if it falls out of the ring it is told how many events it missed.
 
+Fifty streams are never woken at once: a batch wakes at most WAKE_PER_TURN of the streams
+waiting for it in one loop turn, in the order they began waiting, and :class:`Turns` lets at
+most so many go on in one turn, waking only those it lets go.  Before, one shared future woke
+all fifty in one turn, and each turn woke every stream still waiting for a turn again, to
+let eight go: about 175 wake-ups a batch, 5-11 ms of one loop turn at a time (bench/storm.py's
+streams phase, where the PLC scan came 20-30 ms late).
+
 No web library here (the HTTP side is :mod:`ncgate.gateway.web.console`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections import deque
 
 from ncgate.interpreter.engine.events import Event, as_line
@@ -28,6 +34,7 @@ from ncgate.interpreter.engine.events import Event, as_line
 RING = 5000  # events kept for streams that connect or fall behind
 BATCH_S = 0.05  # events reach the streams at most this often (bench/console_browser.py)
 SINCE_MAX = 250  # events rendered for one read of the ring (about 0.5 ms); the rest next time
+WAKE_PER_TURN = 8  # streams a batch wakes in one loop turn; the others in the next ones
 
 
 class EventFeed:
@@ -37,7 +44,11 @@ class EventFeed:
         # [seq, the event -- or its JSON once a stream asked for it]
         self._ring: deque[list[int | Event | str]] = deque(maxlen=keep)
         self._flush: asyncio.Handle | None = None
-        self._tick: asyncio.Future[None] | None = None
+        # The streams waiting (wait), in the order they began: each its future and ticket.
+        self._waiters: dict[asyncio.Future[None], int] = {}
+        self._tickets = 0
+        self._wake_below = 0  # a wake wakes the tickets below this (those waiting at it)
+        self._waking: asyncio.Handle | None = None  # the next turn's share of a wake
         self._flushed_at = -1e9  # loop time of the last flush
         self.seq = 0  # the last event rendered
         self.closed = False
@@ -62,18 +73,40 @@ class EventFeed:
         self.wake()
 
     def wake(self) -> None:
-        tick, self._tick = self._tick, None
-        if tick is not None and not tick.done():
-            tick.set_result(None)
+        """Wake every stream waiting now (not one that begins waiting after), at most
+        WAKE_PER_TURN of them in one loop turn, in the order they began waiting."""
+        self._wake_below = self._tickets + 1
+        if self._waking is None:
+            self._wake_some()
+
+    def _wake_some(self) -> None:
+        self._waking = None
+        waiters = self._waiters
+        woken = 0
+        while waiters and woken < WAKE_PER_TURN:
+            future, ticket = next(iter(waiters.items()))
+            if ticket >= self._wake_below:
+                return
+            del waiters[future]
+            if not future.done():
+                future.set_result(None)
+                woken += 1
+        if waiters and next(iter(waiters.values())) < self._wake_below:
+            self._waking = self._loop.call_soon(self._wake_some)
 
     async def wait(self, timeout_s: float) -> None:
         """Until new events are in (or the feed closes), at most ``timeout_s``."""
-        if self._tick is None:
-            self._tick = self._loop.create_future()
-        # shield: one client's timeout must not cancel the future the others wait on
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(timeout_s):
-                await asyncio.shield(self._tick)
+        if self.closed:
+            return
+        future = self._loop.create_future()
+        self._tickets += 1
+        self._waiters[future] = self._tickets
+        timer = self._loop.call_later(timeout_s, _resolve, future)
+        try:
+            await future
+        finally:
+            timer.cancel()
+            self._waiters.pop(future, None)
 
     def since(self, seq: int) -> tuple[list[str], int]:
         """The events after ``seq`` as JSON texts (at most SINCE_MAX: ask again for the
@@ -101,4 +134,66 @@ class EventFeed:
         if self._flush is not None:
             self._flush.cancel()
             self._flush = None
-        self.wake()
+        if self._waking is not None:
+            self._waking.cancel()
+            self._waking = None
+        waiters, self._waiters = self._waiters, {}
+        for future in waiters:  # all at once: they end
+            _resolve(future)
+
+
+class Turns:
+    """At most ``per_turn`` tasks go on in one loop turn (:meth:`take`); the others wait for
+    a later turn in the order they came, and each turn wakes only those it lets go."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, per_turn: int) -> None:
+        self._loop = loop
+        self.per_turn = per_turn
+        self._count = 0  # gone on in this turn
+        self._queue: deque[asyncio.Future[None]] = deque()
+        self._next: asyncio.Handle | None = None  # the next turn's start
+
+    async def take(self) -> None:
+        """Go on in this loop turn if it has room (and nobody waits), else in a later one."""
+        if self._count < self.per_turn and not self._queue:
+            self._count += 1
+            self._arm()
+            return
+        future = self._loop.create_future()
+        self._queue.append(future)
+        self._arm()
+        try:
+            await future
+        except asyncio.CancelledError:
+            if not future.done():
+                self._queue.remove(future)
+            raise
+
+    def _arm(self) -> None:
+        if self._next is None:
+            self._next = self._loop.call_soon(self._new_turn)
+
+    def _new_turn(self) -> None:
+        self._next = None
+        self._count = 0
+        while self._queue and self._count < self.per_turn:
+            future = self._queue.popleft()
+            if not future.done():
+                future.set_result(None)
+                self._count += 1
+        if self._count or self._queue:  # (the count starts again at the turn after)
+            self._arm()
+
+    def close(self) -> None:
+        """Let every waiting task go on (to find what it serves closed)."""
+        if self._next is not None:
+            self._next.cancel()
+            self._next = None
+        queue, self._queue = self._queue, deque()
+        for future in queue:
+            _resolve(future)
+
+
+def _resolve(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 
-from ncgate.gateway.web.feed import SINCE_MAX, EventFeed
+from ncgate.gateway.web.feed import SINCE_MAX, WAKE_PER_TURN, EventFeed, Turns
 from ncgate.interpreter.engine import events as ev
 
 
@@ -22,3 +22,82 @@ async def test_nothing_is_rendered_until_asked_and_a_read_is_bounded() -> None:
     assert f'"message": "h{SINCE_MAX + 1}"' in texts[0]
     rendered = sum(isinstance(item, str) for _, item in feed._ring)
     assert rendered == 2 * SINCE_MAX  # kept rendered for the next reader
+
+
+class _Ticks:
+    """Counts the loop's turns: a callback that schedules itself again each turn."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop, self.now, self._handle = loop, 0, loop.call_soon(self._tick)
+
+    def _tick(self) -> None:
+        self.now += 1
+        self._handle = self.loop.call_soon(self._tick)
+
+    def stop(self) -> None:
+        self._handle.cancel()
+
+
+async def test_a_batch_wakes_its_waiting_streams_a_few_per_loop_turn_in_order() -> None:
+    """Fifty streams waiting for one batch: at most WAKE_PER_TURN go on in one loop turn, in
+    the order they began waiting (one shared future woke all fifty in one turn: 5-11 ms that
+    the PLC scan and the pollers waited behind).  A stream that begins waiting after the
+    batch is not woken by it; a wait still ends at its timeout; close ends every wait."""
+    loop = asyncio.get_running_loop()
+    feed = EventFeed(loop)
+    woke: list[tuple[int, int]] = []  # (stream, turn)
+    late: list[asyncio.Task[None]] = []
+
+    async def stream(n: int) -> None:
+        await feed.wait(60)
+        woke.append((n, ticks.now))
+        if n == 0:  # a stream that begins waiting while the batch wakes the others
+            late.append(asyncio.create_task(feed.wait(60)))
+
+    tasks = [asyncio.create_task(stream(n)) for n in range(50)]
+    await asyncio.sleep(0)  # all fifty wait
+    ticks = _Ticks(loop)
+    feed.listen(ev.Hazard(1, 0.001, 1, None, "h1"))  # a batch (flushed soon: none before)
+    await asyncio.gather(*tasks)
+    ticks.stop()
+    assert [n for n, _ in woke] == list(range(50))
+    per_turn = [sum(1 for _, t in woke if t == turn) for turn in {t for _, t in woke}]
+    assert max(per_turn) <= WAKE_PER_TURN and len(per_turn) >= 50 // WAKE_PER_TURN
+    assert not late[0].done()  # began waiting after the batch
+    timed = asyncio.create_task(feed.wait(0.01))
+    async with asyncio.timeout(5):
+        await timed  # its timeout ends it
+    feed.close()
+    async with asyncio.timeout(5):
+        await late[0]
+    assert feed._waiters == {}
+
+
+async def test_turns_let_a_few_tasks_go_on_per_loop_turn_and_wake_only_those() -> None:
+    loop = asyncio.get_running_loop()
+    turns = Turns(loop, 8)
+    went: list[tuple[int, int]] = []
+
+    async def task(n: int) -> None:
+        await turns.take()
+        went.append((n, ticks.now))
+
+    ticks = _Ticks(loop)
+    tasks = [asyncio.create_task(task(n)) for n in range(50)]
+    cancelled = asyncio.create_task(turns.take())
+    await asyncio.sleep(0)
+    cancelled.cancel()  # a task that gives up its place in the queue leaves it
+    await asyncio.gather(*tasks)
+    ticks.stop()
+    assert [n for n, _ in went] == list(range(50))
+    per_turn = [sum(1 for _, t in went if t == turn) for turn in {t for _, t in went}]
+    assert max(per_turn) <= 8
+    assert all(future.done() for future in turns._queue) or not turns._queue
+    # Each turn lets go only those it wakes: the ones still waiting stay asleep.
+    waiting = [asyncio.create_task(turns.take()) for _ in range(24)]
+    await asyncio.sleep(0)
+    await asyncio.sleep(0)
+    assert sum(t.done() for t in waiting) <= 8 + 8
+    turns.close()  # the rest go on at once
+    async with asyncio.timeout(5):
+        await asyncio.gather(*waiting)
