@@ -249,7 +249,10 @@ def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
                 raise fail(where, f"expected a whole number, got {v!r}")
         elif name in ("period_ms", "factor", "ms"):
             default = {"period_ms": 100.0, "factor": 2.0, "ms": 100.0}[name]
-            low, high = {"period_ms": (MIN_PERIOD_MS, MAX_MS), "factor": (0.0, MAX_FACTOR),
+            # A slow fault's factor is 1 or more: below 1 it sped a model up, and shrank a
+            # 1 ms generator's period past MIN_PERIOD_MS with no end (a sim that never got
+            # on, a run flooding its log).
+            low, high = {"period_ms": (MIN_PERIOD_MS, MAX_MS), "factor": (1.0, MAX_FACTOR),
                          "ms": (0.0, MAX_MS)}[name]
             v = default if v is None else v
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \

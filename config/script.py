@@ -69,7 +69,12 @@ class Script:
 
     @property
     def horizon(self) -> float | None:
-        """The end of the last window, or of the last timed entry: how long a scenario runs."""
+        """The end of the last window, or of the last timed entry: how long a scenario runs.
+        None for a scenario whose expectations are all ``always``: it runs to the run's own
+        end, as a script without expectations does (cut at its last entry, an ``always``
+        was judged over nothing: a write at 0 ran 0 s and passed what broke at 0.5 s)."""
+        if self.expects and all(e.within is None for e in self.expects):
+            return None
         ends = [e.within[1] for e in self.expects if e.within is not None]
         ends += [e.at for e in self.entries if e.at is not None]
         ends += [e.fault.at + (e.fault.for_s or 0.0) for e in self.entries
@@ -111,6 +116,9 @@ def load_script(path: str | Path | None) -> Script:
         named[expect.name] = expect.key
     for entry in entries:  # a script fault's end is where the scenario runs to
         f = entry.fault
+        if f is not None and f.after > MAX_SCENARIO_S:
+            raise fail(f"{f.key}.after", f"expected a delay in seconds, 0 .. "
+                       f"{MAX_SCENARIO_S:g} (a day), got {f.after:g}")
         if f is not None and f.at is not None and f.at + (f.for_s or 0.0) > MAX_SCENARIO_S:
             raise fail(f"{f.key}.for_s", f"ends at {f.at + (f.for_s or 0.0):g} s, past "
                        f"{MAX_SCENARIO_S:g} s (a day): a scenario's times are at most that")
@@ -146,6 +154,10 @@ def _expect(table: Any, key: str, fail: Any) -> Expect:
     name, cond = table.get("name", key), table.get("cond")
     if not isinstance(name, str) or not name.strip():
         raise fail(f"{key}.name", f"expected a name, got {name!r}")
+    if not name.isprintable():
+        # A newline forged a verdict line of its own on the console, and a control character
+        # made --junit's XML unreadable (XML 1.0 has no way to write one).
+        raise fail(f"{key}.name", f"a name is one line of printable characters, got {name!r}")
     if not isinstance(cond, str) or not cond.strip():
         raise fail(f"{key}.cond", "expected a condition such as \"SA30=1\", \"P1 IDLE\", "
                    f"\"alarm AL145\", \"alarm\" or \"no alarm\"; got {cond!r}")

@@ -35,7 +35,7 @@ from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.timers import Timer
-from ncgate.plc.image import Change, PlcError
+from ncgate.plc.image import Change, ImageValueError, PlcError
 
 
 class ScenarioError(ConfigError):
@@ -135,6 +135,10 @@ class Expectations:
             self.runtime.image.read(area, index, view)
         except (ValueError, PlcError, InputRefused) as exc:
             raise self._fail(expect, self._unknown_name(text) or str(exc)) from None
+        try:  # (SA40=2 never held, SA40#2 always: either verdict said nothing)
+            self.runtime.image.check(area, index, view, value)
+        except ImageValueError as exc:
+            raise self._fail(expect, f"{exc}: the condition could never change") from None
         return _Watch(expect, "var", var=var, test=comparison(op, value))
 
     def _unknown_name(self, text: str) -> str | None:
@@ -259,8 +263,10 @@ class Expectations:
 
     def verdicts(self, end: float | None = None) -> list[Verdict]:
         """The verdicts of the run so far, or up to ``end`` (the scenario's time; what
-        changed after it is not seen)."""
-        end = self.now if end is None else end
+        changed after it is not seen).  By default up to now: on the wall clock the
+        clock's now, not the engine's last event (a run stopped after seconds of nothing
+        said it ended at that event's time)."""
+        end = self.runtime.engine.read_time() - self.t0 if end is None else end
         return [self._verdict(w, end) for w in self.watches]
 
     def _verdict(self, w: _Watch, end: float) -> Verdict:

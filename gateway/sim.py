@@ -53,7 +53,7 @@ from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.breaks import parse_breakpoint
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
-from ncgate.plc.image import PlcError
+from ncgate.plc.image import ImageValueError, PlcError
 from ncgate.plc.scan import PlcState
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -155,6 +155,15 @@ class ScriptPlayer:
                                  f"({', '.join(kinds)})")
         if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
             raise self._fail(entry, "process", f"process {entry.process} is not configured")
+        if entry.fault is not None and entry.fault.clear and entry.fault.target not in (
+                "*", "all"):
+            # (A clear of a name nothing could target is a typo: refused now, as the console
+            # refuses it, not a hazard in the run whose verdicts then pass.)
+            plant = self.runtime.plant
+            if plant is not None and not plant.knows(entry.fault.target):
+                raise self._fail(entry, "target", f"clear {entry.fault.target!r}: no such "
+                                 "target (a plant model, its output, a variable or I/O name, "
+                                 "modbus, canopen, or all)")
         if entry.fault is not None and not entry.fault.clear:
             plant = self.runtime.plant
             item = self._fault(entry)
@@ -184,6 +193,11 @@ class ScriptPlayer:
             self.runtime.image.read(*var)
         except (ValueError, PlcError) as exc:
             raise self._fail(entry, "when", str(exc)) from None
+        try:
+            self.runtime.image.check(*var, value)
+        except ImageValueError as exc:
+            raise self._fail(entry, "when", f"{exc}: the condition could never change") \
+                from None
         return CondTrigger(var, op, value)
 
     def may_start(self, n: int) -> bool:
@@ -273,6 +287,19 @@ class ScriptPlayer:
                 apply(Snd(entry.sender, entry.target, source))
         except InputRefused as exc:
             self.runtime.engine.note_hazard(entry.sender or 0, f"script {entry.key}: {exc}")
+
+
+def check_scenario(config: Config, script: Script) -> None:
+    """Refuse (ConfigError) what :func:`run_sim` would refuse of ``script`` on this cell --
+    its entries, faults and conditions -- without running it: with several ``--script``s
+    each is checked before the first runs (a bad third one was found after two had run, and
+    no ``--junit`` was written)."""
+    script = timed_script(script, config)
+    runtime = build_runtime(config, closed=True)
+    door = Door(runtime, lambda: runtime.plc)
+    start_plant(runtime, door.apply_on_time, closed=True)
+    ScriptPlayer(runtime, script, door, plant_faults(config))
+    Expectations(runtime, script)
 
 
 def run_sim(config: Config, main: str | Sequence[str], script: Script,

@@ -432,6 +432,11 @@ def _sim(args: argparse.Namespace) -> int:
     mains = args.main or [config.nc.main]
     if len(scripts) > 1 and (args.trace or args.gantt):
         raise UsageError("--trace and --gantt take one scenario: give one --script")
+    if len(scripts) > 1:  # each checked on the cell before the first runs
+        from ncgate.gateway.sim import check_scenario
+
+        for script in scripts:
+            check_scenario(config, script)
     status = EXIT_OK
     verdicts = []
     # `sim | head -1`: a reader that goes early stops neither the scenarios nor the files

@@ -436,6 +436,21 @@ def test_a_wait_on_a_process_the_script_will_start_again_is_no_orphan(tmp_path: 
     ('[[fault]]\ntarget = "clamp"\nkind = "slow"\nfactor = 1e308\n', "fault[0].factor"),
     ('[[fault]]\ntarget = "modbus"\nkind = "delay"\nms = 1e12\n', "fault[0].ms"),
     ('[[fault]]\ntarget = "clamp"\nkind = "never"\nfor_s = 1e9\n', "fault[0].for_s"),
+    # A second hostile try: a slow factor below 1 sped a 1 ms generator up past the 1 ms
+    # bound (a sim that never got on, its memory growing); a fault's `after` had no day
+    # bound; a clear of a typo was a hazard in a run that passed; a condition on a value the
+    # variable cannot hold was judged (SA30=2 never, SA30#2 always); a control character or
+    # a newline in a name made --junit unreadable or forged a verdict line.
+    ('[[fault]]\ntarget = "clamp"\nkind = "slow"\nfactor = 0.001\n', "fault[0].factor"),
+    ('[[fault]]\ntarget = "clamp"\nkind = "never"\nwhen = "SA20=1"\nafter = 1e300\n',
+     "fault[0].after"),
+    ('[[fault]]\ntarget = "nosuch"\nclear = true\n', "fault[0].target"),
+    ('[[expect]]\nname = "a"\ncond = "SA30=2"\nby = 1\n', "expect[0].cond"),
+    ('[[expect]]\nname = "a"\ncond = "SA30#2"\nby = 1\n', "expect[0].cond"),
+    ('[[expect]]\nname = "a"\ncond = "SYVAR2>99999"\nby = 1\n', "expect[0].cond"),
+    ('[[write]]\nwhen = "SA30=7"\nset = "SA20=1"\n', "write[0].when"),
+    ('[[expect]]\nname = "a\\u0000"\ncond = "SA30=1"\nby = 1\n', "expect[0].name"),
+    ('[[expect]]\nname = "a\\nPASS fake: ok"\ncond = "SA30=1"\nby = 1\n', "expect[0].name"),
 ])
 def test_a_hostile_scenario_is_a_usage_error_naming_its_key(
         cell: Path, script: str, key: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -484,3 +499,50 @@ def test_a_condition_on_a_name_that_names_nothing_says_so_and_the_closest(
     assert ("s.toml: expect[0].cond: 'clamp_closd' is neither an image variable (SA30, SK4, "
             "SYVAR10) nor an I/O name of [symbols] (did you mean clamp_closed?)"
             in capsys.readouterr().err)
+
+
+def test_a_scenario_of_always_expectations_runs_to_the_runs_end(cell: Path) -> None:
+    """Cut at its last timed entry (a write at 0), an `always` was judged over 0 s and
+    passed what broke at the stroke's end; `when` instead of `at` gave the opposite verdict.
+    Now it runs to the run's own end, as a script without expectations does."""
+    for trigger in ('at = 0', 'when = "SA31=1"'):
+        result = _run(cell, f'[[write]]\n{trigger}\nset = "SA20=1"\n[[expect]]\n'
+                      'name = "never closed"\ncond = "SA30=0"\nalways = true\n', until=None)
+        assert [v.line() for v in result.verdicts] == [
+            "FAIL never closed: SA30=0 stopped holding at 0.300 s (SA30 = 1, set by plant "
+            "clamp at 0.300 s)"], trigger
+        assert result.exit_status == 1
+
+
+def test_several_scripts_are_each_checked_before_the_first_runs(
+        cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good, bad = cell.parent / "good.toml", cell.parent / "bad.toml"
+    good.write_text(VALVE + EXPECTS)
+    bad.write_text('[[expect]]\nname = "a"\ncond = "SA30==1"\nby = 1\n')
+    junit = cell.parent / "verdicts.xml"
+    status = main(["sim", "--config", str(cell), "--script", str(good), "--script", str(bad),
+                   "--script", str(good), "--junit", str(junit), "O1"])
+    captured = capsys.readouterr()
+    assert status == 2
+    assert "bad.toml: expect[0].cond:" in captured.err
+    assert "PASS" not in captured.out and "==" not in captured.out  # none ran
+    assert not junit.exists()
+
+
+def test_verdicts_of_a_run_stopped_on_the_wall_clock_say_when_it_was_stopped(
+        cell: Path) -> None:
+    """The engine's time moves at its events: a `run --script` stopped after seconds of
+    nothing said it ended at the last event's time.  The verdicts' end is the clock's now."""
+    from ncgate.gateway.scenario import Expectations
+    from ncgate.gateway.wiring import build_runtime
+
+    path = cell.parent / "s.toml"
+    path.write_text('[[expect]]\nname = "late"\ncond = "SA30=1"\nwithin = [30, 31]\n')
+    runtime = build_runtime(load_config(cell), closed=False)
+    expectations = Expectations(runtime, load_script(path))
+    expectations.start()
+    engine = runtime.engine
+    engine.clock = lambda: engine.now + 5.5  # the wall clock, 5.5 s past the last event
+    assert [v.line() for v in expectations.verdicts()] == [
+        "FAIL late: not reached: the run ended at 5.500 s, before the window [30, 31] s "
+        "opened"]
