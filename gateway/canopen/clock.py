@@ -34,17 +34,46 @@ class Timer:
 
     def cancel(self) -> None:
         self.cancelled = True
+        self.fn = _nothing  # (what it would have called is let go: no cycle through its owner)
 
     def fire(self) -> None:
         if not self.cancelled:
             self.cancelled = True
-            self.fn()
+            fn, self.fn = self.fn, _nothing
+            fn()
+
+
+def _nothing() -> None:
+    pass
 
 
 class Clock(Protocol):
     def monotonic(self) -> float: ...
 
     def call_later(self, delay_s: float, fn: Callable[[], None]) -> Timer: ...
+
+
+class UnlessClosed:
+    """A clock whose timers do nothing once ``closed()`` says so: the node's.  Between the
+    start of its close and the bus's disconnect, python-can's receive thread still served
+    requests, and a timer one armed (an SDO transfer's timeout, the SYNC deadline) fired a
+    second after close: a send on a bus no longer connected, a false "SYNC timeout"."""
+
+    def __init__(self, inner: Clock, closed: Callable[[], bool]) -> None:
+        self.inner = inner
+        self._closed = closed
+
+    def monotonic(self) -> float:
+        return self.inner.monotonic()
+
+    def call_later(self, delay_s: float, fn: Callable[[], None]) -> Timer:
+        closed = self._closed
+
+        def unless_closed() -> None:
+            if not closed():
+                fn()
+
+        return self.inner.call_later(delay_s, unless_closed)
 
 
 class LoopClock:

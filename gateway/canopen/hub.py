@@ -26,6 +26,10 @@ from can_remote.server import ClientRequestHandler, RemoteServer, RemoteServerPr
 from can_remote.websocket import WebSocket, get_accept_key
 
 log = logging.getLogger("ncgate.canopen")
+# How long a client has for its request line and headers (the WebSocket handshake): a client
+# that sent half a request line held a thread reading it for ever, also after the gateway's
+# close.  Once the session runs, reads wait as long as the client is silent.
+HANDSHAKE_S = 10.0
 
 
 class Session(RemoteServerProtocol):  # type: ignore[misc]  # (can_remote is untyped)
@@ -89,6 +93,10 @@ class Session(RemoteServerProtocol):  # type: ignore[misc]  # (can_remote is unt
 
 
 class _ClientHandler(ClientRequestHandler):  # type: ignore[misc]
+    def setup(self) -> None:
+        self.timeout = HANDSHAKE_S  # (StreamRequestHandler sets it on the socket)
+        super().setup()
+
     def start_websocket(self) -> None:
         # python-can-remote 0.3's own, with a Session, removed from the hub's list however
         # it ends.
@@ -103,6 +111,7 @@ class _ClientHandler(ClientRequestHandler):  # type: ignore[misc]
         protocol = "can.binary+json.v1" if "can.binary+json.v1" in protocols else "can.json.v1"
         self.send_header("Sec-WebSocket-Protocol", protocol)
         self.end_headers()
+        self.request.settimeout(None)  # the handshake is done: a master may be silent
         session = Session(self.server.config, WebSocket(None, protocol, sock=self.request))
         self.server.clients.append(session)
         try:
@@ -118,6 +127,15 @@ class Hub(RemoteServer):  # type: ignore[misc]
     def __init__(self, host: str, port: int, **config: Any) -> None:
         super().__init__(host=host, port=port, **config)
         self.RequestHandlerClass = _ClientHandler
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A client's connection that failed (it went, it sent no request in time): one line,
+        not socketserver's traceback on stderr (296 of them when 300 half-open clients went)."""
+        import sys
+
+        exc = sys.exc_info()[1]
+        log.info("CANopen hub: the client from %s: %s", client_address[0],
+                 f"{type(exc).__name__}: {exc}" if exc is not None else "failed")
 
     def end_sessions(self) -> None:
         """The hub closes: every client's session ends (its tasks, its bus, its socket)."""

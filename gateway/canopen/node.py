@@ -52,7 +52,7 @@ from ncgate.config import Config, MasterLost
 from ncgate.config.state import state_folder
 from ncgate.errors import InputRefused
 from ncgate.gateway.canopen import pdo, store
-from ncgate.gateway.canopen.clock import Clock, LoopClock, Timer
+from ncgate.gateway.canopen.clock import Clock, LoopClock, Timer, UnlessClosed
 from ncgate.gateway.canopen.codes import (
     ABORT_APPLICATION_DEVICE_STATE,
     ABORT_GENERAL_ERROR,
@@ -176,6 +176,7 @@ class CanopenNode:
         self.loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
         self._clock = clock
+        self._timers: Clock | None = None  # (start: the clock, its timers off once closed)
         self.pdos = pdo.Pdos(self)
         self.heartbeats: HeartbeatConsumer | None = None
         self.store_path = config.canopen.store_file or store.default_path(
@@ -217,8 +218,9 @@ class CanopenNode:
 
     @property
     def clock(self) -> Clock:
-        assert self._clock is not None, "the node is not started"
-        return self._clock
+        """The clock of everything the node arms: its timers do nothing once it is closed."""
+        assert self._timers is not None, "the node is not started"
+        return self._timers
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -238,8 +240,9 @@ class CanopenNode:
         self._loop_thread = threading.get_ident()
         if self._clock is None:
             self._clock = LoopClock(self.loop)
-        self.node.clock = self._clock
-        self.heartbeats = HeartbeatConsumer(self._clock, self.subscribe, self.unsubscribe,
+        self._timers = UnlessClosed(self._clock, lambda: self._closed)
+        self.node.clock = self._timers
+        self.heartbeats = HeartbeatConsumer(self._timers, self.subscribe, self.unsubscribe,
                                             self.call_soon, self._on_master_lost,
                                             self._on_master_back)
         self._restore_stored()
@@ -324,7 +327,7 @@ class CanopenNode:
 
     async def _close(self) -> None:
         """Close's second part: the bus, then the hub."""
-        # Joins the receive thread: a timer it armed just before is disarmed by _closed.
+        # Joins the receive thread: a timer it armed meanwhile does nothing (UnlessClosed).
         self.network.disconnect()
         if self._hub is not None:
             # In a thread: the loop goes on serving (and the NC on running) while the hub's

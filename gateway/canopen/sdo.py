@@ -54,6 +54,8 @@ from ncgate.gateway.canopen.codes import (
 log = logging.getLogger("ncgate.canopen")
 
 SEGMENTED_TIMEOUT_S = 1.0
+# A segmented download to an object that is no number carries at most this many bytes.
+MAX_SEGMENTED_BYTES = 1 << 16
 
 
 CCS_MASK = 0xE0  # the command specifier's bits of an SDO request's first byte
@@ -88,6 +90,7 @@ class SdoService(SdoServer):
         self._buffer_: bytearray = bytearray()
         self._toggle_ = 0
         self._size: int | None = None  # the size a segmented download announced
+        self._room = 0  # the most bytes the segmented download open may carry
         self._requests = 0  # requests served: a deferred answer is for the latest only
         self._where = (0, 0)  # the open (or last) transfer's index and sub-index
         self._timer: Timer | None = None
@@ -188,6 +191,12 @@ class SdoService(SdoServer):
                       else None)
         if self._size is not None:
             node.check_size(obj, self._size)  # a number of the wrong size: refused now
+        # The most it may carry: what it announced, else the number's own size (every
+        # writable object here is a number; else a cap).  Past it, the transfer is aborted at
+        # that segment: an unsized one took 20,000 segments into memory before its last one's
+        # abort (CiA 301 lets a server abort as soon as the data passes the object's size).
+        self._room = (self._size if self._size is not None else len(obj) // 8
+                      if obj.data_type in NUMBER_TYPES else MAX_SEGMENTED_BYTES)
         self._mode, self._buffer_, self._toggle_ = "download", bytearray(), 0
         self.send_response(struct.pack("<BHB4x", RESPONSE_DOWNLOAD, index, subindex))
 
@@ -195,6 +204,9 @@ class SdoService(SdoServer):
         if command & TOGGLE_BIT != self._toggle_:
             raise SdoAbortedError(ABORT_TOGGLE_NOT_ALTERNATED)
         self._buffer_ += request[1:8 - (command >> 1 & 0x7)]
+        if len(self._buffer_) > self._room:
+            raise SdoAbortedError(ABORT_LENGTH_NOT_MATCHED if self._size is not None
+                                  else ABORT_LENGTH_TOO_HIGH)
         if command & NO_MORE_DATA:  # the last segment
             data = bytes(self._buffer_)
             if self._size is not None and len(data) != self._size:

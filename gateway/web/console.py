@@ -38,12 +38,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from ncgate import commands
 from ncgate.config.checks import is_loopback
 from ncgate.config.schema import WebConfig
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import only_releases_hold
+from ncgate.gateway.ratelimit import LogFlood
 from ncgate.gateway.record import program_files
 from ncgate.gateway.timeline import write_gantt
 from ncgate.gateway.tls import server_context
@@ -80,6 +82,10 @@ PING_S = 15.0  # a comment line on a quiet stream, so that proxies and clients k
 WRITE_TIMEOUT_S = 10.0  # a client that takes no data this long is dropped
 BODY_LIMIT = 16 * 1024
 BODY_TIMEOUT_S = 5.0  # a request body not whole this long after its headers is refused (408)
+# A connection with no request under way is closed after this long: a client that sent half a
+# request line was held for aiohttp's default hour, and 1,100 such ones took every file
+# descriptor of a process at the common limit of 1,024 (the Modbus server could accept no one).
+IDLE_S = 10.0
 # The longest variable, target or program name a request may give (the longest real one, an
 # I/O name of [symbols] or a PLC path, is far shorter); what is longer is refused unechoed.
 NAME_LIMIT = 200
@@ -186,8 +192,9 @@ class WebConsole:
         app.router.add_get("/api/record", self._record)
         app.router.add_post("/api/record", self._record_switch)
         runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
-                               handle_signals=False)
+                               handle_signals=False, keepalive_timeout=IDLE_S)
         await runner.setup()
+        logging.getLogger("aiohttp.server").addFilter(_MALFORMED)
         tls = self.config.tls
         # [web.tls]: HTTPS only, with the loader the Modbus TLS port uses (the files were
         # checked when the config loaded).
@@ -206,6 +213,7 @@ class WebConsole:
         self._turns = Turns(asyncio.get_running_loop(), STREAMS_PER_TURN)
 
     async def close(self) -> None:
+        logging.getLogger("aiohttp.server").removeFilter(_MALFORMED)
         if self._live is not None:
             self._live.close()
             self._live = None
@@ -453,8 +461,11 @@ class WebConsole:
                     await asyncio.sleep(0)
                     continue
                 await feed.wait(STATUS_EVERY_S)
-        except (ConnectionResetError, TimeoutError):
-            pass  # the client went away (or read nothing for WRITE_TIMEOUT_S): its stream ends
+        except (ConnectionError, TimeoutError):
+            # The client went away (a reset; aiohttp's "Connection lost" when it went while a
+            # write waited: that was an ERROR with a traceback each), or read nothing for
+            # WRITE_TIMEOUT_S: its stream ends.
+            pass
         finally:
             self.streams -= 1
         return response
@@ -771,3 +782,27 @@ def _loopback_host(host_header: str) -> bool:
     elif host.count(":") == 1:
         host = host.split(":", 1)[0]
     return is_loopback(host.lower())
+
+
+class _MalformedRequests(logging.Filter):
+    """aiohttp logs a request it cannot parse (a header line of 20 KB, a bad request line) as
+    an ERROR with a traceback: any client could write one per request.  It is the client's
+    fault, not ours: one INFO line, a few of a kind every 10 s (LogFlood)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._flood = LogFlood()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, HttpProcessingError):
+            remote = record.args[0] if isinstance(record.args, tuple) and record.args else "?"
+            record.msg, record.args = "web %s: a malformed request (%s)", (
+                remote, str(exc).replace("\n", " ")[:200])
+            record.exc_info = record.exc_text = None
+            record.levelno, record.levelname = logging.INFO, "INFO"
+            return self._flood.filter(record)
+        return True
+
+
+_MALFORMED = _MalformedRequests()

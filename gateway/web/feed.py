@@ -112,6 +112,7 @@ class EventFeed:
         """The events after ``seq`` as JSON texts (at most SINCE_MAX: ask again for the
         rest), and how many were missed (out of the ring)."""
         ring = self._ring
+        seq = max(seq, 0)  # (before the first event: none was missed)
         if not ring or ring[-1][0] <= seq:  # type: ignore[operator]
             return [], 0
         first: int = ring[0][0]  # type: ignore[assignment]

@@ -183,3 +183,30 @@ async def test_a_masters_heartbeat_in_the_hub_ends_when_the_gateway_closes(
     finally:
         tick.stop()
         ticker.shutdown()
+
+
+@pytest.mark.parametrize("ncgate_config", [{"canopen.hub": True, "canopen.hub_port": 0}],
+                         indirect=True)
+async def test_a_client_that_sends_half_a_request_is_let_go_and_says_one_line(
+        ncgate_config: Config, master: Master, monkeypatch: pytest.MonkeyPatch,
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """A hub client that sent half a request line held a thread reading it for ever, also
+    after the gateway's close, and socketserver printed a traceback to stderr for each one
+    when they went (296 of 300, a hostile try).  It has hub.HANDSHAKE_S for its handshake."""
+    from ncgate.gateway.canopen import hub
+
+    monkeypatch.setattr(hub, "HANDSHAKE_S", 0.3)
+    async with Gateway(ncgate_config) as gw:
+        node = gw.canopen_node
+        assert node is not None and node.hub_address is not None
+        half = []
+        for _ in range(5):
+            reader, writer = await asyncio.open_connection(*node.hub_address)
+            writer.write(b"GET / HT")
+            await writer.drain()
+            half.append((reader, writer))
+        for reader, writer in half:
+            async with asyncio.timeout(10):
+                assert await reader.read() == b""  # let go by the hub
+            writer.close()
+    assert "Traceback" not in capfd.readouterr().err

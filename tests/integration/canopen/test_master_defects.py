@@ -143,6 +143,25 @@ async def test_segmented_download_of_the_wrong_size(gw: Gateway, master: Master,
     assert gw.image.read("SYVAR", 0, "IN") == 0
 
 
+async def test_a_segmented_download_past_its_objects_size_is_aborted_at_that_segment(
+        gw: Gateway, master: Master, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Unsized, a download to a 2-byte number went on taking segments (20,000 of them, 140 kB
+    in memory: a hostile try) until its last one's abort: CiA 301 lets a server abort as soon
+    as the data passes the object's size, so it does, at that segment.  Sized, past the size
+    it announced: 0x06070010."""
+    from ncgate.gateway.canopen import sdo as sdo_module
+
+    monkeypatch.setattr(sdo_module, "SEGMENTED_TIMEOUT_S", 60.0)  # (as the test above)
+    for initiate, code in ((struct.pack("<BHB4x", 0x20, 0x2200, 1), 0x06070012),
+                           (struct.pack("<BHBL", 0x21, 0x2200, 1, 2), 0x06070010)):
+        assert (await master.raw_sdo(initiate))[0] == 0x60
+        answer = await master.raw_sdo(bytes((0x00,)) + bytes(7))  # 7 bytes, more to come
+        assert abort_code(answer) == code
+        # The transfer is gone: a further segment meets none.
+        assert abort_code(await master.raw_sdo(bytes((0x10,)) + bytes(7))) == 0x05040001
+    assert gw.image.read("SYVAR", 0, "IN") == 0
+
+
 async def test_block_transfers_are_refused(gw: Gateway, master: Master) -> None:
     for command in (0xA0, 0xC0):  # block upload, block download
         answer = await master.raw_sdo(struct.pack("<BHBL", command, 0x1000, 0, 0))

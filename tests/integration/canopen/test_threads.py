@@ -6,6 +6,7 @@ chance are forced here, not waited for."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import queue
 import struct
 import threading
@@ -14,7 +15,9 @@ from typing import Any
 
 import pytest
 
+from ncgate.config import Config
 from ncgate.gateway import Gateway
+from ncgate.gateway.canopen.clock import ManualClock
 from ncgate.interpreter.engine import Engine
 
 from ...helpers import cyclic_garbage
@@ -177,3 +180,37 @@ async def test_frames_handed_to_the_loop_are_freed_without_the_collector(
         frames = [await master.next(TPDO3) for _ in range(100)]  # every SYNC answered
     assert len(frames) == 100
     assert found == []
+
+
+async def test_nothing_the_node_armed_during_its_close_runs_after_it(
+        master: Master, ncgate_config: Config, caplog: pytest.LogCaptureFixture,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Between the start of the node's close and the bus's disconnect the receive thread still
+    serves requests: an SDO transfer it opened then armed the transfer's 1 s timeout, and a
+    SYNC the SYNC deadline (0x1006).  Both fired after close: an abort sent on a bus no longer
+    connected ("Not connected to CAN bus", raised in a loop callback) and a false "SYNC
+    timeout" in the log (a hostile try).  Forced here: the frames come just before the
+    disconnect, and are served."""
+    clock = ManualClock()
+    async with Gateway(ncgate_config, canopen_clock=clock) as gw:
+        node = gw.canopen_node
+        assert node is not None
+        await master.download(0x1006, 0, (100_000).to_bytes(4, "little"))  # 100 ms
+        master.nmt(0x01)
+        await master.barrier()
+        disconnect = node.network.disconnect
+        answers: list[bytes] = []
+        sdo = master.listen(0x580 + master.node_id)
+
+        def frames_then_disconnect() -> None:  # (on the loop, in the close)
+            master.sync()
+            master.network.send_message(0x600 + master.node_id,
+                                        bytes((0x40, 0x08, 0x10, 0)) + bytes(4))  # 0x1008
+            answers.append(sdo.get(timeout=5))  # served by the receive thread: the SYNC too
+            disconnect()
+
+        monkeypatch.setattr(node.network, "disconnect", frames_then_disconnect)
+    assert answers and answers[0][0] & 0xE3 == 0x41  # a segmented upload opened: timer armed
+    caplog.clear()
+    clock.advance(5.0)  # both are due: the transfer's 1 s, the SYNC's 100 ms
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
