@@ -122,7 +122,8 @@ def session_files(config: Config) -> dict[str, str]:
     """sha256 of the files a session uses from its start: the config, the PLC logic."""
     paths = ([config.source] if config.source else []) + list(config.plc.logic) + list(
         config.plant.logic)
-    return {str(p): digest for p in paths if (digest := _sha256(Path(p))) is not None}
+    return {str(Path(p).resolve()): digest for p in paths
+            if (digest := _sha256(Path(p))) is not None}
 
 
 # -- inputs as lines, and back ------------------------------------------------------------------
@@ -306,7 +307,9 @@ class SessionRecorder:
         self._file = TraceFile(self.path, UNBOUNDED, 0, loop=loop, fresh=True)
         self._programs: dict[str, str] = {}
         header = {"ncgate_record": FORMAT, "version": __version__,
-                  "config": str(config.source) if config.source else None,
+                  # Absolute: a replay from another folder finds it (a relative one was
+                  # looked for in the replay's folder).
+                  "config": str(Path(config.source).resolve()) if config.source else None,
                   "overrides": overrides, "time_scale": config.nc.time_scale,
                   "files": session_files(config)}
         self._file.append(json.dumps(header) + "\n")
@@ -483,14 +486,18 @@ class ReplayResult:
         return self.runtime.trace.events
 
 
-def _changed(recorded: dict[str, str], now: Callable[[str], str | None]) -> list[str]:
+def _changed(recorded: dict[str, str], used: Callable[[str], Path]) -> list[str]:
+    """A warning for each recorded file whose counterpart now (``used``) is missing or not
+    the same."""
     out = []
     for file, digest in sorted(recorded.items()):
-        found = now(file)
+        path = used(file)
+        found = _sha256(path)
+        as_now = "" if str(path) == file else f" (replayed with {path})"
         if found is None:
-            out.append(f"{file}: recorded but not found now")
+            out.append(f"{file}: recorded but not found now{as_now}")
         elif found != digest:
-            out.append(f"{file}: changed since the recording")
+            out.append(f"{file}: changed since the recording{as_now}")
     return out
 
 
@@ -515,7 +522,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     try:
         cfg = load_config(source, overrides=dict(overrides))
     except ConfigError as exc:
-        raise UsageError(f"the recorded config: {exc}") from None
+        hint = "" if config is not None else " (a record taken elsewhere: give --config)"
+        raise UsageError(f"the recorded config: {exc}{hint}") from None
     runtime = build_runtime(cfg, closed=False)  # as in `run`: the fieldbus may start programs
     engine = runtime.engine
     door = Door(runtime, lambda: runtime.plc)
@@ -527,20 +535,31 @@ def replay(path: str | Path, config: str | Path | None = None,
             except InputRefused as exc:
                 raise RecordError(f"{recording.path}:{recorded.line}: {exc} (in the "
                                   "recorded config)") from None
-    # Which programs a file name finds now, by path and by name (a record taken home).
+    # Each recorded file is compared with the one the replay uses: the config it loads for the
+    # recorded config, and the logic files and programs of the same name that config finds
+    # (by name first: the recorded path may still hold the file the session ran, while the
+    # replay, given --config, loads another).  Else the recorded path itself.
     by_name = {p.name: p for p in program_files(cfg)}
+    logic_now = {Path(p).name: Path(p) for p in (*cfg.plc.logic, *cfg.plant.logic)}
+    recorded_config = header.get("config")
 
-    def program_now(file: str) -> str | None:
+    def program_now(file: str) -> Path:
         p = Path(file)
-        return _sha256(p) if p.is_file() else (
-            _sha256(by_name[p.name]) if p.name in by_name else None)
+        return by_name[p.name].resolve() if p.name in by_name else p
+
+    def file_now(file: str) -> Path:
+        if file == recorded_config and cfg.source is not None:
+            return Path(cfg.source).resolve()
+        p = Path(file)
+        return logic_now[p.name].resolve() if p.name in logic_now else p
 
     files = header.get("files")
     files = files if isinstance(files, dict) else {}
-    if recording.logic:  # the logic is the record's: its files now do not matter
-        files = {k: v for k, v in files.items() if Path(k) not in cfg.plc.logic}
-    warnings = _changed({str(k): str(v) for k, v in files.items()},
-                        lambda f: _sha256(Path(f)))
+    if recording.logic:  # the PLC logic is the record's: its files now do not matter
+        plc_names = {Path(p).name for p in cfg.plc.logic}
+        files = {k: v for k, v in files.items() if Path(k).name not in plc_names
+                 and Path(k) not in cfg.plc.logic}
+    warnings = _changed({str(k): str(v) for k, v in files.items()}, file_now)
     warnings += _changed(recording.programs, program_now)
     plc = start_plc(cfg, runtime, door, closed=True,
                     sources=recording.logic[0] if recording.logic else None)

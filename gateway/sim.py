@@ -331,6 +331,11 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     player = ScriptPlayer(runtime, script, door, plant_faults(config))
     expectations = Expectations(runtime, script)
     engine = runtime.engine
+    for entry in player.entries:  # the same file runs in `run`, where they act: said here
+        f = entry.fault
+        if f is not None and not f.clear and f.target.lower() in ("modbus", "canopen"):
+            engine.note_hazard(0, f"{entry.key}: a {f.target.lower()} fault acts on the "
+                               "fieldbus, which sim does not serve: traced, with no effect")
     horizon = script.horizon if script.expects else None
     to_horizon = until is None and horizon is not None
     if to_horizon:

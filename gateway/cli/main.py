@@ -557,8 +557,12 @@ def _replay(args: argparse.Namespace) -> int:
         print(result.divergence, file=output)
         output.flush()
         return EXIT_FAILED
-    print(f"the replay matches: {result.compared} events of the processes, in the same order, "
-          f"within {args.tolerance_ms:g} ms", file=output)
+    if not result.compared:  # (a session whose processes did nothing: no "match" to claim)
+        print("nothing to compare: the session recorded no event of the processes (the "
+              "image's and the plant's writes are replayed, not compared)", file=output)
+    else:
+        print(f"the replay matches: {result.compared} events of the processes, in the same "
+              f"order, within {args.tolerance_ms:g} ms", file=output)
     output.flush()
     return EXIT_OK
 
@@ -735,8 +739,11 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
     script = None
     if args.script:
         from ncgate.config.script import load_script
+        from ncgate.gateway.sim import check_scenario
 
         script = load_script(args.script)
+        check_scenario(config, script)  # on the cell, before anything serves: a PLC that
+        # connected at once wrote to a gateway that then refused its script
     return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
                              watch=args.watch, checked=checked, script=script))
 

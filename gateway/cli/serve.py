@@ -278,6 +278,9 @@ class _Scenario:
         if self.horizon is not None:
             self._end = engine.call_at(t0 + self.horizon, self._ended)
             log.info("scenario %s: ends at its t = %.3f s", script.file, self.horizon)
+        elif script.expects:
+            log.info("scenario %s: its expectations are all 'always': it runs until Ctrl-C "
+                     "(or SIGTERM), and is judged over that", script.file)
 
     def _ended(self) -> None:
         self.reached = True

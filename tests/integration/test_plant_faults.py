@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -546,3 +547,27 @@ def test_verdicts_of_a_run_stopped_on_the_wall_clock_say_when_it_was_stopped(
     assert [v.line() for v in expectations.verdicts()] == [
         "FAIL late: not reached: the run ended at 5.500 s, before the window [30, 31] s "
         "opened"]
+
+
+def test_a_fieldbus_fault_in_sim_is_said_to_have_no_effect(cell: Path) -> None:
+    """sim serves no fieldbus: a modbus or canopen fault of a scenario is traced and does
+    nothing, so the same file could pass in `run` and fail in `sim` with no word why (a new
+    user's try).  The report says so."""
+    result = _run(cell, '[[fault]]\ntarget = "modbus"\nkind = "no_reply"\n' + VALVE)
+    hazards = [e["message"] for e in result.events if e["event"] == "hazard"]
+    assert hazards == ["fault[0]: a modbus fault acts on the fieldbus, which sim does not "
+                       "serve: traced, with no effect"]
+
+
+def test_run_refuses_a_bad_script_before_anything_serves(
+        cell: Path, caplog: pytest.LogCaptureFixture,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A PLC that connected at once wrote to a gateway that then refused its script."""
+    (cell.parent / "bad.toml").write_text(
+        '[[expect]]\nname = "a"\ncond = "clamp_closd=1"\nby = 1\n')
+    with caplog.at_level(logging.INFO):
+        status = main(["run", "--config", str(cell), "--port", "0", "--no-web", "--set",
+                       "canopen.enabled=false", "--script", str(cell.parent / "bad.toml")])
+    assert status == 2
+    assert "bad.toml: expect[0].cond:" in capsys.readouterr().err
+    assert not [r for r in caplog.records if "Modbus TCP on" in r.getMessage()]

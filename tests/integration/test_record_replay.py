@@ -5,6 +5,7 @@ diverges at the block that changed."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import itertools
 import json
 import shutil
@@ -383,3 +384,52 @@ async def test_every_prefix_of_a_session_replays_as_a_match(cell: Path,
         result = run_replay(prefix)
         assert result.divergence is None, (n, lines[n - 1], result.divergence)
         assert result.warnings == []
+
+
+async def test_a_replay_with_another_config_compares_the_files_it_uses(
+        cell: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A record taken home, replayed with --config: the config and the programs it loads are
+    compared with the recording, not the files at the recorded paths (a new user's try: an
+    edited copy said "ncgate.toml: recorded but not found now" and nothing of the edited
+    program).  From another folder the recorded config is found by its absolute path."""
+    record = tmp_path / "session.jsonl"
+    monkeypatch.chdir(cell.parent)
+    overrides = {"modbus.port": 0}
+    cfg = dataclasses.replace(ncgate_test_config(cell, **overrides),
+                              source=Path("ncgate.toml"))  # run from the cell's folder
+    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.command(1)
+        await plc.wait_state(2, "WAIT_COND")
+        await plc.set("SA10", 1)
+        await gw.wait_idle(timeout_s=30)
+    assert read_record(record).header["config"] == str(cell.resolve())
+    home = tmp_path / "home"
+    shutil.copytree(cell.parent / "programs", home / "programs")
+    (home / "ncgate.toml").write_text(cell.read_text().replace("time_scale = 50.0",
+                                                               "time_scale = 50"))
+    prog92 = home / "programs" / "PROG92.nc"
+    prog92.write_text(prog92.read_text().replace("N40(WAI,SA10=1)", "N40(WAI,SA11=1)"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["sim", "--replay", str(record), "--config", str(home / "ncgate.toml")]) == 1
+    err = capsys.readouterr().err
+    assert "recorded but not found now" not in err, err
+    assert f"warning: {cell.resolve()}: changed since the recording" in err  # the config
+    assert "PROG92.nc: changed since the recording" in err  # the program it loads
+    assert main(["sim", "--replay", str(record)]) == 0  # the cell itself, from elsewhere
+    assert "warning" not in capsys.readouterr().err
+
+
+async def test_a_session_whose_processes_did_nothing_is_no_match_to_claim(
+        cell: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    async with Gateway(ncgate_test_config(cell, **overrides), record=record,
+                       overrides=overrides) as gw, \
+            VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        await plc.set("SA10", 1)
+    assert main(["sim", "--replay", str(record)]) == 0
+    out = capsys.readouterr().out
+    assert "nothing to compare: the session recorded no event of the processes" in out
+    assert "the replay matches" not in out
