@@ -70,9 +70,10 @@ class Script:
     @property
     def horizon(self) -> float | None:
         """The end of the last window, or of the last timed entry: how long a scenario runs.
-        None for a scenario whose expectations are all ``always``: it runs to the run's own
-        end, as a script without expectations does (cut at its last entry, an ``always``
-        was judged over nothing: a write at 0 ran 0 s and passed what broke at 0.5 s)."""
+        None for a scenario whose expectations are all ``always``: it has no end of its own
+        (``sim`` needs ``--until``, ``run`` runs until stopped).  Cut at its last entry, an
+        ``always`` was judged over nothing: a write at 0 ran 0 s and passed what broke at
+        0.5 s."""
         if self.expects and all(e.within is None for e in self.expects):
             return None
         ends = [e.within[1] for e in self.expects if e.within is not None]

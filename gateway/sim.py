@@ -289,11 +289,16 @@ class ScriptPlayer:
             self.runtime.engine.note_hazard(entry.sender or 0, f"script {entry.key}: {exc}")
 
 
-def check_scenario(config: Config, script: Script) -> None:
-    """Refuse (ConfigError) what :func:`run_sim` would refuse of ``script`` on this cell --
-    its entries, faults and conditions -- without running it: with several ``--script``s
-    each is checked before the first runs (a bad third one was found after two had run, and
-    no ``--junit`` was written)."""
+def check_scenario(config: Config, script: Script, *, until: float | None = None,
+                   sim: bool = True) -> None:
+    """Refuse (ConfigError) what :func:`run_sim` (``sim``; else ``run --script``) would refuse
+    of ``script`` on this cell -- its entries, faults and conditions -- without running it:
+    with several ``--script``s each is checked before the first runs (a bad third one was
+    found after two had run, and no ``--junit`` was written)."""
+    if sim and script.expects and script.horizon is None and until is None:
+        raise ConfigError(f"{script.file}: expect: every expectation is 'always', which gives "
+                          "the scenario no end in sim: give one a window (by = T), or run "
+                          "it with --until T")
     script = timed_script(script, config)
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
@@ -337,6 +342,10 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             engine.note_hazard(0, f"{entry.key}: a {f.target.lower()} fault acts on the "
                                "fieldbus, which sim does not serve: traced, with no effect")
     horizon = script.horizon if script.expects else None
+    if script.expects and horizon is None and until is None:
+        # Its end would be the run's own (the cell idle), which a program that loops never
+        # reaches, and which comes a scan before a PLC's last change: no end to judge over.
+        check_scenario(config, script, until=until)  # (raises)
     to_horizon = until is None and horizon is not None
     if to_horizon:
         until = horizon  # a scenario runs until its last window closes

@@ -134,8 +134,11 @@ class Hub(RemoteServer):  # type: ignore[misc]
         import sys
 
         exc = sys.exc_info()[1]
-        log.info("CANopen hub: the client from %s: %s", client_address[0],
-                 f"{type(exc).__name__}: {exc}" if exc is not None else "failed")
+        if isinstance(exc, OSError | TimeoutError | ValueError):  # (the client's doing)
+            log.info("CANopen hub: the client from %s: %s: %s", client_address[0],
+                     type(exc).__name__, exc)
+        else:  # (ours)
+            log.exception("CANopen hub: the client from %s", client_address[0])
 
     def end_sessions(self) -> None:
         """The hub closes: every client's session ends (its tasks, its bus, its socket)."""

@@ -436,7 +436,7 @@ def _sim(args: argparse.Namespace) -> int:
         from ncgate.gateway.sim import check_scenario
 
         for script in scripts:
-            check_scenario(config, script)
+            check_scenario(config, script, until=args.until)
     status = EXIT_OK
     verdicts = []
     # `sim | head -1`: a reader that goes early stops neither the scenarios nor the files
@@ -742,8 +742,8 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
         from ncgate.gateway.sim import check_scenario
 
         script = load_script(args.script)
-        check_scenario(config, script)  # on the cell, before anything serves: a PLC that
-        # connected at once wrote to a gateway that then refused its script
+        check_scenario(config, script, sim=False)  # on the cell, before anything serves:
+        # a PLC that connected at once wrote to a gateway that then refused its script
     return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
                              watch=args.watch, checked=checked, script=script))
 

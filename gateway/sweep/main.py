@@ -131,10 +131,11 @@ def run_sweep(spec: Spec, options: Options,
                     if client is not None:
                         client.close()
         except KeyboardInterrupt as exc:
-            if stops.started:  # (a second stop, while the first was said)
-                raise
-            print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}) before any variant ran",
-                  file=sys.stderr)
+            # Before the first variant ran; or after: a second stop while the first was
+            # said, or one while the table was written (written whole, or not at all).
+            when = ("while it ended (what was written stands)" if stops.started else
+                    "before any variant ran")
+            print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}) {when}", file=sys.stderr)
             return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
 
 

@@ -194,6 +194,7 @@ class WebConsole:
         runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0,
                                handle_signals=False, keepalive_timeout=IDLE_S)
         await runner.setup()
+        # (Once per process, and left: a console closed must not take it from another.)
         logging.getLogger("aiohttp.server").addFilter(_MALFORMED)
         tls = self.config.tls
         # [web.tls]: HTTPS only, with the loader the Modbus TLS port uses (the files were
@@ -213,7 +214,6 @@ class WebConsole:
         self._turns = Turns(asyncio.get_running_loop(), STREAMS_PER_TURN)
 
     async def close(self) -> None:
-        logging.getLogger("aiohttp.server").removeFilter(_MALFORMED)
         if self._live is not None:
             self._live.close()
             self._live = None

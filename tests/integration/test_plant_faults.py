@@ -502,17 +502,22 @@ def test_a_condition_on_a_name_that_names_nothing_says_so_and_the_closest(
             in capsys.readouterr().err)
 
 
-def test_a_scenario_of_always_expectations_runs_to_the_runs_end(cell: Path) -> None:
+def test_a_scenario_of_always_expectations_is_judged_to_until_and_needs_it(
+        cell: Path, tmp_path: Path) -> None:
     """Cut at its last timed entry (a write at 0), an `always` was judged over 0 s and
     passed what broke at the stroke's end; `when` instead of `at` gave the opposite verdict.
-    Now it runs to the run's own end, as a script without expectations does."""
+    With no window it has no end of its own: `sim` asks for --until (run to the cell idle, a
+    program that loops never ended, and a PLC's last change came a scan after the end)."""
     for trigger in ('at = 0', 'when = "SA31=1"'):
-        result = _run(cell, f'[[write]]\n{trigger}\nset = "SA20=1"\n[[expect]]\n'
-                      'name = "never closed"\ncond = "SA30=0"\nalways = true\n', until=None)
+        script = (f'[[write]]\n{trigger}\nset = "SA20=1"\n[[expect]]\n'
+                  'name = "never closed"\ncond = "SA30=0"\nalways = true\n')
+        result = _run(cell, script, until=1.0)
         assert [v.line() for v in result.verdicts] == [
             "FAIL never closed: SA30=0 stopped holding at 0.300 s (SA30 = 1, set by plant "
             "clamp at 0.300 s)"], trigger
         assert result.exit_status == 1
+        with pytest.raises(ConfigError, match=r"every expectation is 'always'.*--until"):
+            _run(cell, script, until=None)
 
 
 def test_several_scripts_are_each_checked_before_the_first_runs(

@@ -404,6 +404,12 @@ async def test_a_replay_with_another_config_compares_the_files_it_uses(
         await plc.wait_state(2, "WAIT_COND")
         await plc.set("SA10", 1)
         await gw.wait_idle(timeout_s=30)
+    _replay_with_another_config(cell, record, tmp_path, capsys, monkeypatch)
+
+
+def _replay_with_another_config(cell: Path, record: Path, tmp_path: Path,
+                                capsys: pytest.CaptureFixture[str],
+                                monkeypatch: pytest.MonkeyPatch) -> None:
     assert read_record(record).header["config"] == str(cell.resolve())
     home = tmp_path / "home"
     shutil.copytree(cell.parent / "programs", home / "programs")

@@ -1420,3 +1420,30 @@ def test_a_sigterm_before_the_first_variant_leaves_no_private_folder(
     assert list(temporary.iterdir()) == []
     assert "ncgate sweep: stopped (SIGTERM) before any variant ran" in capsys.readouterr().err
     assert signal.getsignal(signal.SIGTERM) is previous
+
+
+def test_a_sigterm_while_the_sweep_ends_is_exit_1_not_an_interrupt(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The stop handlers stay in until the sweep has said its summary: a SIGTERM there was
+    re-raised as a Ctrl-C (exit 130, "interrupted"; a maintainer's review).  It is exit 1,
+    as every SIGTERM of a sweep, and the table written stands."""
+    import io
+
+    from ncgate.gateway.sweep import main
+    from ncgate.gateway.sweep.main import Options, run_sweep
+    from ncgate.gateway.sweep.spec import load_spec
+
+    spec = load_spec(misbehaving_spec(tmp_path, ("OK.nc", "FINE.nc")))
+    said = main.summary
+
+    def sigterm_then_summary(*args: object) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)
+        said(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(main, "summary", sigterm_then_summary)
+    status, _ = run_sweep(spec, Options(tmp_path / "out.csv", workers=1, progress=False),
+                          io.StringIO())
+    assert status == main.EXIT_FAILED
+    assert "ncgate sweep: stopped (SIGTERM) while it ended" in capsys.readouterr().err
+    assert len(rows_of(tmp_path / "out.csv")) == 4  # written whole before

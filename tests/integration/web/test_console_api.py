@@ -1002,7 +1002,33 @@ async def test_a_header_line_too_long_is_a_line_of_the_log_not_a_traceback(
             writer.close()
     assert [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info] == []
     lines = [r.getMessage() for r in caplog.records if "malformed request" in r.getMessage()]
-    assert 1 <= len(lines) <= 5, lines  # a few of a kind, the rest counted
+    assert len(lines) <= 5, lines  # a few of a kind (the budget is the process's), the rest
+    # counted
+
+
+async def test_a_closed_console_leaves_another_its_quiet_malformed_requests(
+        gw: Gateway, caplog: pytest.LogCaptureFixture) -> None:
+    """The filter is the process's: a second console closing took it from the first, whose
+    malformed requests were tracebacks again (a maintainer's review)."""
+    host, port = gw.web_address
+    async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+            http.get("/api/status") as answer:
+        assert answer.status == 200  # its console is loaded (at its first connection)
+    async with await console() as other:
+        host, port = other.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http, \
+                http.get("/api/status") as answer:
+            assert answer.status == 200
+    host, port = gw.web_address
+    with caplog.at_level(logging.INFO):
+        reader, writer = await asyncio.open_connection(host, port)
+        writer.write(b"GET /api/status HTTP/1.1\r\nHost: x\r\nX-Long: " + b"a" * 20_000
+                     + b"\r\n\r\n")
+        await writer.drain()
+        async with asyncio.timeout(10):
+            await reader.read()
+        writer.close()
+    assert [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info] == []
 
 
 async def test_events_since_a_negative_number_missed_none(
