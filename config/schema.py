@@ -1179,15 +1179,31 @@ def config_markdown() -> str:
     lines = ["# Configuration keys", "",
              "Generated from `config/schema.py` (the dataclasses are the schema; "
              "`tests/unit/config/test_loader.py` keeps this page in sync). A config file "
-             "sets any of these in TOML tables (`[nc]`, `[nc.storage]`, `[[nc.process]]`, "
-             "`[nc.limits]`, `[nc.aux]`, `[plc]`, `[modbus]`, `[modbus.map]`, `[modbus.tls]`, "
-             "`[modbus.roles]`, `[modbus.rtu]`, `[modbus.rtu_tcp]`, `[canopen]`, `[trace]`, "
-             "`[sim]`, `[web]`); an unknown key or a bad value is an error naming the file and "
-             "the dotted key. Paths are relative to the config file.", "",
+             f"sets any of these in TOML tables ({_tables()}); an unknown key or a bad value "
+             "is an error naming the file and the dotted key. Paths are relative to the config "
+             "file.", "",
              "| key | default | what |", "|---|---|---|"]
     for dotted, default, doc in keys(Config):
         lines.append(f"| `{dotted}` | {_shown(default)} | {doc} |")
     return "\n".join(lines) + "\n" + _SERIAL_SECTION
+
+
+def _tables() -> str:
+    """The TOML tables of the keys, in the schema's order (a table's array as [[...]]), so that
+    the list is never short of one (it lacked [plant] and [opcua] for two issues)."""
+    names: list[str] = []
+    for dotted, _, _ in keys(Config):
+        table = dotted.rsplit(".", 1)[0] if "." in dotted else None
+        if table is None or " " in table:
+            continue  # (a top-level key; nc.storage's devices, named by the user)
+        table = table.removesuffix(".NAME")  # (nc.ve's variables, named by the user)
+        shown = f"[[{table[:-2]}]]" if table.endswith("[]") else f"[{table}]"
+        if shown not in names:
+            names.append(shown)
+    names[names.index("[plant]") + 1:names.index("[plant]") + 1] = [
+        "[[plant.model]]", "[[plant.fault]]"]  # (arrays of tables the schema keeps as one key)
+    names += ["[modbus.roles]", "[opcua.users]", "[symbols]"]  # (tables of the user's names)
+    return ", ".join(f"`{name}`" for name in names)
 
 
 # docs/config.md's section on the serial line: what the keys above do not say on their own.
