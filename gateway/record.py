@@ -557,8 +557,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     files = files if isinstance(files, dict) else {}
     if recording.logic:  # the PLC logic is the record's: its files now do not matter
         plc_names = {Path(p).name for p in cfg.plc.logic}
-        files = {k: v for k, v in files.items() if Path(k).name not in plc_names
-                 and Path(k) not in cfg.plc.logic}
+        files = {k: v for k, v in files.items() if Path(k).name not in plc_names}
     warnings = _changed({str(k): str(v) for k, v in files.items()}, file_now)
     warnings += _changed(recording.programs, program_now)
     plc = start_plc(cfg, runtime, door, closed=True,

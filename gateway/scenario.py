@@ -35,7 +35,18 @@ from ncgate.interpreter.engine import Process, ProcessState
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.timers import Timer
-from ncgate.plc.image import Change, ImageValueError, PlcError
+from ncgate.plc.image import Change, ImageValueError, IOImage, PlcError
+
+
+def never_changes(image: IOImage, address: tuple[str, int, str], value: int) -> str | None:
+    """Why a condition comparing the variable at ``address`` with ``value`` could never
+    change -- a value the variable cannot hold: ``SA40=2`` never holds, ``SA40#2`` never
+    fails, and either verdict says nothing -- or None."""
+    try:
+        image.check(*address, value)
+    except ImageValueError as exc:
+        return f"{exc}: the condition could never change"
+    return None
 
 
 class ScenarioError(ConfigError):
@@ -135,10 +146,9 @@ class Expectations:
             self.runtime.image.read(area, index, view)
         except (ValueError, PlcError, InputRefused) as exc:
             raise self._fail(expect, self._unknown_name(text) or str(exc)) from None
-        try:  # (SA40=2 never held, SA40#2 always: either verdict said nothing)
-            self.runtime.image.check(area, index, view, value)
-        except ImageValueError as exc:
-            raise self._fail(expect, f"{exc}: the condition could never change") from None
+        never = never_changes(self.runtime.image, (area, index, view), value)
+        if never is not None:
+            raise self._fail(expect, never)
         return _Watch(expect, "var", var=var, test=comparison(op, value))
 
     def _unknown_name(self, text: str) -> str | None:

@@ -18,12 +18,13 @@ from dataclasses import dataclass
 from typing import Any, TextIO
 
 from ncgate.config import Config, ConfigError
+from ncgate.config.plant import CANOPEN_FAULTS, MODBUS_FAULTS
 from ncgate.config.script import Script, ScriptEntry
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
 from ncgate.gateway.plc import start_plant_logic, start_plc
-from ncgate.gateway.scenario import Expectations, Verdict
+from ncgate.gateway.scenario import Expectations, Verdict, never_changes
 from ncgate.gateway.wiring import (
     ImageVar,
     Runtime,
@@ -53,7 +54,7 @@ from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.breaks import parse_breakpoint
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.trace import EventDict, write_jsonl
-from ncgate.plc.image import ImageValueError, PlcError
+from ncgate.plc.image import PlcError
 from ncgate.plc.scan import PlcState
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -155,22 +156,19 @@ class ScriptPlayer:
                                  f"({', '.join(kinds)})")
         if entry.process is not None and not 1 <= entry.process <= config.nc.processes:
             raise self._fail(entry, "process", f"process {entry.process} is not configured")
-        if entry.fault is not None and entry.fault.clear and entry.fault.target not in (
-                "*", "all"):
-            # (A clear of a name nothing could target is a typo: refused now, as the console
-            # refuses it, not a hazard in the run whose verdicts then pass.)
-            plant = self.runtime.plant
-            if plant is not None and not plant.knows(entry.fault.target):
-                raise self._fail(entry, "target", f"clear {entry.fault.target!r}: no such "
-                                 "target (a plant model, its output, a variable or I/O name, "
-                                 "modbus, canopen, or all)")
-        if entry.fault is not None and not entry.fault.clear:
+        if entry.fault is not None:
             plant = self.runtime.plant
             item = self._fault(entry)
             try:
-                if plant is None:
+                if isinstance(item, ClearFault):
+                    # A clear of a name nothing could target is a typo: refused now, as the
+                    # console refuses it, not a hazard in a run whose verdicts then pass.
+                    if plant is not None:
+                        plant.clear(item)
+                elif plant is None:
                     raise InputRefused(Reason.NOT_CONFIGURED, "no plant runs here")
-                plant.check(item)  # type: ignore[arg-type]
+                else:
+                    plant.check(item)
             except InputRefused as exc:
                 raise self._fail(entry, "target", str(exc)) from None
         if entry.when is not None:
@@ -193,11 +191,9 @@ class ScriptPlayer:
             self.runtime.image.read(*var)
         except (ValueError, PlcError) as exc:
             raise self._fail(entry, "when", str(exc)) from None
-        try:
-            self.runtime.image.check(*var, value)
-        except ImageValueError as exc:
-            raise self._fail(entry, "when", f"{exc}: the condition could never change") \
-                from None
+        never = never_changes(self.runtime.image, var, value)
+        if never is not None:
+            raise self._fail(entry, "when", never)
         return CondTrigger(var, op, value)
 
     def may_start(self, n: int) -> bool:
@@ -289,16 +285,24 @@ class ScriptPlayer:
             self.runtime.engine.note_hazard(entry.sender or 0, f"script {entry.key}: {exc}")
 
 
+def _require_end(script: Script, until: float | None) -> None:
+    """A scenario of ``always`` expectations alone has no end of its own in ``sim``: run to the
+    cell idle, a program that loops never ended, and a PLC's last change came a scan after
+    the end.  It needs ``--until``."""
+    if script.expects and script.horizon is None and until is None:
+        raise ConfigError(f"{script.file}: expect: every expectation is 'always', which gives "
+                          "the scenario no end in sim: give one a window (by = T), or run "
+                          "it with --until T")
+
+
 def check_scenario(config: Config, script: Script, *, until: float | None = None,
                    sim: bool = True) -> None:
     """Refuse (ConfigError) what :func:`run_sim` (``sim``; else ``run --script``) would refuse
     of ``script`` on this cell -- its entries, faults and conditions -- without running it:
     with several ``--script``s each is checked before the first runs (a bad third one was
     found after two had run, and no ``--junit`` was written)."""
-    if sim and script.expects and script.horizon is None and until is None:
-        raise ConfigError(f"{script.file}: expect: every expectation is 'always', which gives "
-                          "the scenario no end in sim: give one a window (by = T), or run "
-                          "it with --until T")
+    if sim:
+        _require_end(script, until)
     script = timed_script(script, config)
     runtime = build_runtime(config, closed=True)
     door = Door(runtime, lambda: runtime.plc)
@@ -338,14 +342,11 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     engine = runtime.engine
     for entry in player.entries:  # the same file runs in `run`, where they act: said here
         f = entry.fault
-        if f is not None and not f.clear and f.target.lower() in ("modbus", "canopen"):
+        if f is not None and f.kind in MODBUS_FAULTS | CANOPEN_FAULTS:
             engine.note_hazard(0, f"{entry.key}: a {f.target.lower()} fault acts on the "
                                "fieldbus, which sim does not serve: traced, with no effect")
+    _require_end(script, until)
     horizon = script.horizon if script.expects else None
-    if script.expects and horizon is None and until is None:
-        # Its end would be the run's own (the cell idle), which a program that loops never
-        # reaches, and which comes a scan before a PLC's last change: no end to judge over.
-        check_scenario(config, script, until=until)  # (raises)
     to_horizon = until is None and horizon is not None
     if to_horizon:
         until = horizon  # a scenario runs until its last window closes

@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import socket
+import sys
 import threading
 from typing import Any
 
@@ -131,8 +132,6 @@ class Hub(RemoteServer):  # type: ignore[misc]
     def handle_error(self, request: Any, client_address: Any) -> None:
         """A client's connection that failed (it went, it sent no request in time): one line,
         not socketserver's traceback on stderr (296 of them when 300 half-open clients went)."""
-        import sys
-
         exc = sys.exc_info()[1]
         if isinstance(exc, OSError | TimeoutError | ValueError):  # (the client's doing)
             log.info("CANopen hub: the client from %s: %s: %s", client_address[0],

@@ -450,13 +450,13 @@ class Plant:
         name = target.strip()
         found = [f for f in self.faults if f.target.lower() == name.lower()
                  or f.target.split(".")[0] == name]
-        if not found and not self.knows(name):
+        if not found and not self._known(name):
             raise InputRefused(Reason.UNKNOWN_VARIABLE, f"clear {name!r}: no such target (a "
                                "plant model, its output, a variable or I/O name, modbus, "
                                "canopen, or all)")
         return found
 
-    def knows(self, name: str) -> bool:
+    def _known(self, name: str) -> bool:
         """Whether ``name`` is something a fault could target (a clear of it is no typo)."""
         if name.lower() in ("modbus", "canopen") or name.split(".")[0] in self.models:
             return True

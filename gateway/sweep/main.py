@@ -136,7 +136,7 @@ def run_sweep(spec: Spec, options: Options,
             when = ("while it ended (what was written stands)" if stops.started else
                     "before any variant ran")
             print(f"ncgate sweep: stopped ({str(exc) or 'Ctrl-C'}) {when}", file=sys.stderr)
-            return (EXIT_FAILED if str(exc) == "SIGTERM" else EXIT_INTERRUPTED), []
+            return _stopped_status(exc), []
 
 
 @contextlib.contextmanager
@@ -218,8 +218,7 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
         else:
             what = f"{count}, kept in {parts.folder}; run again with --resume {later}"
         print(f"ncgate sweep: stopped{why}: {what}", file=sys.stderr)
-        ctrl_c = not isinstance(exc, ClusterLost) and str(exc) != "SIGTERM"
-        return (EXIT_INTERRUPTED if ctrl_c else EXIT_FAILED), []
+        return _stopped_status(exc), []
     parts.add(pending)
     if progress is not None:
         progress.close()
@@ -234,6 +233,12 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     summary(ordered, spec.keys, out)
     print(f"wrote {options.output or '-'}", file=out)
     return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
+
+
+def _stopped_status(stop: BaseException) -> int:
+    """A sweep stopped by Ctrl-C is interrupted (130); by SIGTERM or a lost cluster, failed (1)."""
+    ctrl_c = isinstance(stop, KeyboardInterrupt) and str(stop) != "SIGTERM"
+    return EXIT_INTERRUPTED if ctrl_c else EXIT_FAILED
 
 
 class _Stops:
