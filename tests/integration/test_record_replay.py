@@ -43,10 +43,13 @@ def cell(tmp_path: Path) -> Path:
     return config
 
 
-async def record_session(config: Path, record: Path) -> None:
-    """A commissioning engineer's session: cycle start and SA10 from a PLC over Modbus."""
+async def record_session(config: Path, record: Path, source: Path | None = None) -> None:
+    """A commissioning engineer's session: cycle start and SA10 from a PLC over Modbus.
+    ``source``: the config's name as `run` was given it (relative, from its folder)."""
     overrides = {"modbus.port": 0}
     cfg = ncgate_test_config(config, **overrides)
+    if source is not None:
+        cfg = dataclasses.replace(cfg, source=source)
     async with Gateway(cfg, record=record, overrides=overrides) as gw, \
             VirtualPLC(*gw.modbus_address, gw.config) as plc:
         await plc.command(1)
@@ -395,15 +398,7 @@ async def test_a_replay_with_another_config_compares_the_files_it_uses(
     program).  From another folder the recorded config is found by its absolute path."""
     record = tmp_path / "session.jsonl"
     monkeypatch.chdir(cell.parent)
-    overrides = {"modbus.port": 0}
-    cfg = dataclasses.replace(ncgate_test_config(cell, **overrides),
-                              source=Path("ncgate.toml"))  # run from the cell's folder
-    async with Gateway(cfg, record=record, overrides=overrides) as gw, \
-            VirtualPLC(*gw.modbus_address, gw.config) as plc:
-        await plc.command(1)
-        await plc.wait_state(2, "WAIT_COND")
-        await plc.set("SA10", 1)
-        await gw.wait_idle(timeout_s=30)
+    await record_session(cell, record, source=Path("ncgate.toml"))  # run from the cell's folder
     _replay_with_another_config(cell, record, tmp_path, capsys, monkeypatch)
 
 
