@@ -128,8 +128,13 @@ class IOImage:
         self.on_overridden: Callable[[list[tuple[str, int, str, int]], str], None] | None = None
         # Held variables: an injected fault (a stuck sensor, a wire break) holds what every
         # reader sees, whatever writes it, as a force does; a force wins over a hold.  The
-        # writes a hold changes are not "forced" events (the fault's event says why).
+        # writes a hold changes are not "forced" events (the fault's event says why), and
+        # what they wanted is given back when it ends (unhold).
         self.held: dict[tuple[str, int, str], int] = {}
+        # While something is held: the image as its writers wrote it, holds aside (a copy
+        # written beside this one), so that a clear gives back what the writers' last writes
+        # make of a held variable -- a wire mended (unhold).
+        self._unheld: IOImage | None = None
         self.generation = 0  # +1 on every write that changed something
         self._watches: list[Watch] = []  # (see watch)
         self._write_number = 0
@@ -240,6 +245,8 @@ class IOImage:
         if not checked:
             for area, index, view, value in items:
                 self.check(area, index, view, value)
+        if self._unheld is not None:
+            self._unheld.write(items, writer, checked=True)
         if self.forced or self.held:
             items = self._apply_forces(items, writer)
         if self._frozen is not None:
@@ -315,14 +322,40 @@ class IOImage:
         """Hold a variable at ``value`` (a fault): stored now, and kept whatever writes it
         until :meth:`unhold`; a force of it wins."""
         self.check(area, index, view, value)
+        if self._unheld is None:
+            self._unheld = self._copy()
         self.held[(area, index, view)] = value
         self._force_index()
-        self.write([(area, index, view, value)], writer, checked=True)
+        unheld, self._unheld = self._unheld, None  # (the hold's own write is nobody's wish)
+        try:
+            self.write([(area, index, view, value)], writer, checked=True)
+        finally:
+            self._unheld = unheld
 
-    def unhold(self, area: str, index: int, view: str) -> None:
-        """Release a held variable; its value stays until it is written."""
+    def unhold(self, area: str, index: int, view: str) -> tuple[int, str | None] | None:
+        """Release a held variable; the value it shows stays until it is written.  Returns
+        what its writers' writes make of it (their last, or what it held before the hold)
+        and who last wrote it (None: nobody), when that is not what it shows: the caller
+        writes it back when that is what a clear means (a wire mended), else None."""
         self.held.pop((area, index, view), None)
         self._force_index()
+        unheld = self._unheld
+        if not self.held:
+            self._unheld = None
+        if unheld is None:
+            return None
+        value = unheld.read(area, index, view)
+        if value == self.read(area, index, view):
+            return None
+        return value, unheld.last_writer(area, index, view)
+
+    def _copy(self) -> IOImage:
+        """A copy of the values and writers (no waits, listeners, forces or holds)."""
+        copy = IOImage(len(self.sa) * 8, len(self.k), len(self.syvar))
+        copy.sa[:], copy.k[:], copy.syvar[:] = self.sa, self.k, self.syvar
+        copy._writers = dict(self._writers)
+        copy._write_number = self._write_number
+        return copy
 
     def forced_over(self, area: str, index: int, view: str) -> tuple[str, int, str] | None:
         """Another forced variable with bits of this one (SA1.BY over a forced SA10), or

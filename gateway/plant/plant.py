@@ -478,13 +478,21 @@ class Plant:
             timer.cancel()
         fault.timers.clear()
         self.runtime.engine.note_fault_clear(fault.target, fault.kind, who)
-        if fault.kind in VARIABLE_FAULTS:
+        if fault.kind in VARIABLE_FAULTS and not notify:
+            pass  # replaced: the new fault holds the same variables (what was wanted stays)
+        elif fault.kind in VARIABLE_FAULTS:
             image = self.runtime.image
             for var in fault.variables:
-                image.unhold(*var.address)
-            if notify:  # what the models drive is theirs again
-                for model in self.models.values():
-                    self._write(model, shown=True)
+                wanted = image.unhold(*var.address)
+                if wanted is not None and var.address not in self._drives:
+                    # What no model drives shows again what its writers last wrote (the
+                    # PLC's output as it set it, a sensor as the script or a client wrote
+                    # it), in that writer's name: a wire mended.  A model's, below.
+                    value, writer = wanted
+                    image.write([(*var.address, value)], writer or f"fault clear {who}",
+                                checked=True)
+            for model in self.models.values():  # what the models drive is theirs again
+                self._write(model, shown=True)
         elif fault.model is not None and notify:
             self._behave(fault.model)
         if notify:

@@ -133,6 +133,36 @@ def test_a_stuck_input_wins_over_an_outside_write_and_a_force_wins_over_it(cell:
     assert [e["event"] for e in runtime.trace.events].count("forced") == 0
 
 
+def test_a_clear_gives_back_what_the_writers_last_wrote_in_their_name(cell: Path) -> None:
+    """A wire mended: what no model drives shows again what its writers wrote -- the last
+    write made under the hold, or, with none, the value from before it.  (A clear kept
+    the held value until the next write: a PLC that writes on change never did.)"""
+    result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR5=7"\n'
+                  '[[write]]\nat = 0.0\nset = "SA40=1"\n'
+                  '[[fault]]\ntarget = "SYVAR5"\nkind = "stuck"\nvalue = 3\nat = 0.1\n'
+                  'for_s = 0.2\n[[write]]\nat = 0.2\nset = "SYVAR5=9"\n'
+                  '[[fault]]\ntarget = "SA40"\nkind = "wire_break"\nat = 0.1\nfor_s = 0.4\n',
+                  until=1.0)
+    writes = [(e["t"], e["var"], e["value"], e["who"]) for e in result.events
+              if e["event"] == "write" and e["var"] in ("SYVAR5", "SA40")]
+    assert writes == [
+        (0.0, "SYVAR5", 7, "script write[0]"), (0.0, "SA40", 1, "script write[1]"),
+        (0.1, "SYVAR5", 3, "fault stuck SYVAR5"), (0.1, "SA40", 0, "fault wire_break SA40"),
+        (0.2, "SYVAR5", 3, "script write[2]"),  # held: stored as the hold's value
+        (0.3, "SYVAR5", 9, "script write[2]"),  # the clear: that last write, back
+        (0.5, "SA40", 1, "script write[1]"),    # none under the hold: the value before it
+    ]
+
+
+def test_a_replaced_hold_gives_back_the_writers_value_not_the_first_holds(
+        cell: Path) -> None:
+    result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR5=7"\n'
+                  '[[fault]]\ntarget = "SYVAR5"\nkind = "stuck"\nvalue = 3\nat = 0.1\n'
+                  '[[fault]]\ntarget = "SYVAR5"\nkind = "wire_break"\nlive_zero = -1\n'
+                  'at = 0.2\nfor_s = 0.1\n', until=1.0)
+    assert _edges(result.events, "SYVAR5") == [(0.0, 7), (0.1, 3), (0.2, -1), (0.3, 7)]
+
+
 def test_wire_break_reads_zero_or_the_live_zero(cell: Path) -> None:
     result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR1=1000"\n'
                   '[[fault]]\ntarget = "SYVAR2"\nkind = "wire_break"\nlive_zero = -4000\n'
@@ -387,6 +417,27 @@ async def test_each_value_fault_through_the_api_holds_what_readers_see_until_cle
         assert read(gw.read(var))
         gw.clear_fault(target)
         assert gw.read(var) == before  # the model writes what it drives again
+
+
+async def test_a_clients_coil_written_under_a_hold_is_its_value_after_the_clear(
+        cell: Path) -> None:
+    """The real PLC (a Modbus client) sets the clamp valve while a wire break holds it at
+    0: the clamp does not move; the clear mends the wire, and the valve is the client's 1
+    again -- in the client's name -- and the clamp extends."""
+    from ncgate.gateway.testing.plant_kit import PlantKit
+
+    config = ncgate_test_config(cell, **{"modbus.port": 0, "nc.time_scale": 10.0})
+    async with Gateway(config) as gw, VirtualPLC(*gw.modbus_address, gw.config) as plc:
+        plant = PlantKit(gw)
+        gw.fault("SA20", "wire_break")
+        await plc.set("SA20", 1)
+        assert await plc.get("SA20") == 0
+        assert plant.state("clamp")["state"] == "retracted"
+        gw.clear_fault("SA20")
+        assert await plc.get("SA20") == 1
+        writer = gw.image.last_writer("SA", 20, "bit")
+        assert writer is not None and writer.startswith("modbus"), writer
+        await plant.wait_state("clamp", "extended", timeout_s=10)
 
 
 async def test_chatter_through_the_api_toggles_on_the_wall_clock(cell: Path) -> None:
