@@ -378,15 +378,18 @@ class CanopenNode:
         TPDO, ``emcy`` raises an EMCY with that error code (its end: EMCY 0x0000)."""
         if heartbeat_stop != self._fault_heartbeat:
             self._fault_heartbeat = heartbeat_stop
+            # Silenced for as long as the fault is in force: a master's write of 0x1017 or
+            # an NMT reset does not start it again (sdo.Nmt).
+            self.node.nmt.silenced = heartbeat_stop
             if heartbeat_stop:
                 self.node.nmt.stop_heartbeat()
             elif not self._closed:
                 self.node.nmt.start_heartbeat(int(pdo.param(self.node, 0x1017, 0)))
         self._fault_pdo = pdo_stop
         if emcy != self._fault_emcy:
-            if self._fault_emcy is not None:
+            old, self._fault_emcy = self._fault_emcy, emcy
+            if old is not None:  # with the register as it is now: without the old fault's
                 self._emcy_reset()
-            self._fault_emcy = emcy
             if emcy is not None:
                 self._emcy_error(emcy)
 

@@ -10,6 +10,7 @@ import threading
 from collections.abc import Callable
 
 import canopen
+from canopen.nmt import NmtSlave
 from canopen.objectdictionary import ODVariable
 from canopen.objectdictionary.datatypes import NUMBER_TYPES, SIGNED_TYPES
 from canopen.sdo.constants import (
@@ -300,6 +301,21 @@ def _run_now(work: Callable[[], None], done: Callable[[int | None], None],
     done(None)
 
 
+class Nmt(NmtSlave):
+    """canopen's NMT slave, whose heartbeat producer a fault can silence: while
+    ``silenced``, nothing starts it -- not a write of 0x1017, not an NMT reset (its boot-up
+    message still goes) -- and the period asked for is kept for when it ends."""
+
+    silenced = False
+
+    def start_heartbeat(self, heartbeat_time_ms: int) -> None:
+        if self.silenced:
+            self._heartbeat_time_ms = heartbeat_time_ms
+            self.stop_heartbeat()
+            return
+        super().start_heartbeat(heartbeat_time_ms)
+
+
 class Device(canopen.LocalNode):
     """A LocalNode with our SDO server and the value-range checks of spec 3.3."""
 
@@ -307,6 +323,9 @@ class Device(canopen.LocalNode):
 
     def __init__(self, node_id: int, od: canopen.ObjectDictionary) -> None:
         super().__init__(node_id, od)
+        self._write_callbacks.remove(self.nmt.on_write)
+        self.nmt: Nmt = Nmt(node_id, self)
+        self.add_write_callback(self.nmt.on_write)
         self.sdo = SdoService(0x600 + node_id, 0x580 + node_id, self)
         # Called (on the CAN thread) once a write is stored: the node reconfigures what the
         # value controls (a PDO, the SYNC, the heartbeat consumer).

@@ -29,6 +29,32 @@ async def test_heartbeat_stop_silences_the_producer_until_cleared(gw: Gateway,
     assert await master.next(0x710) == bytes((127,))
 
 
+@pytest.mark.parametrize("ncgate_config", [{"canopen.heartbeat_ms": 20}], indirect=True)
+@pytest.mark.parametrize("how", ["write 0x1017", "reset communication", "reset node"])
+async def test_a_master_does_not_start_a_stopped_heartbeat_while_the_fault_is_in_force(
+        gw: Gateway, master: Master, how: str) -> None:
+    """A master's configuration writes 0x1017 or resets the node: canopen's NMT slave
+    started its producer again with either, the fault still in force."""
+    assert await master.next(0x710) == b"\x00"  # boot-up
+    gw.fault("canopen", "heartbeat_stop")
+    if how == "write 0x1017":
+        await master.download(0x1017, 0, struct.pack("<H", 10))
+    else:
+        master.nmt(0x82 if how == "reset communication" else 0x81)
+        await master.until(0x710, b"\x00")  # its boot-up message still goes
+    node = gw.canopen_node
+    assert node is not None
+    await master.barrier()
+    assert node.node.nmt._send_task is None  # no producer running
+    while not master.frames[0x710].empty():  # what was on its way before the fault
+        master.frames[0x710].get_nowait()
+    for _ in range(3):
+        await master.barrier()
+    assert master.frames[0x710].empty()
+    gw.clear_fault("canopen")
+    assert (await master.next(0x710))[0] in (0x7F, 0x05)  # beating again
+
+
 async def test_an_emcy_fault_raises_its_code_and_its_clear_ends_it(gw: Gateway,
                                                                    master: Master) -> None:
     gw.fault("canopen", "emcy", code=0x3120)
@@ -37,8 +63,10 @@ async def test_an_emcy_fault_raises_its_code_and_its_clear_ends_it(gw: Gateway,
     history = await master.upload(0x1003, 1)
     assert int.from_bytes(history, "little") & 0xFFFF == 0x3120
     gw.clear_fault("canopen")
-    code, _, _ = struct.unpack("<HB5s", await master.next(0x90))
-    assert code == 0
+    code, register, _ = struct.unpack("<HB5s", await master.next(0x90))
+    # The end of the error, with the register as it is now: nothing left (it said 0x01).
+    assert (code, register) == (0, 0)
+    assert await master.upload(0x1001, 0) == b"\x00"
 
 
 async def test_pdo_stop_silences_the_tpdos_until_cleared(gw: Gateway, master: Master) -> None:
