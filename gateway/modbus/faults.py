@@ -24,9 +24,13 @@ What each kind does on the wire (the connection does it, ``server._Connection``)
   clients (libmodbus, pymodbus) meet a timeout by reconnecting, and a new connection is
   served by the table then in force.
 
-The first row that matches a request decides (the table is in order).  A row matches a
-request of its ``unit`` (None: every unit) whose addresses, in any table, meet its
-``addresses`` range (None: every request, those without addresses too: FC43).
+Of the rows that match a request, the strongest decides: a ``no_reply``, else an
+``exception``, else the longest ``delay`` (of equals, the first).  (The first row in the
+table decided: a delay injected before an exception let a write the exception covers through,
+stored.)  A row matches a request of its ``unit`` (None: every unit) whose addresses, in any
+table, meet its ``addresses`` range (None: every request, those without addresses too: FC43).
+A clear, or a table whose delays no longer match a held request, answers that request at
+once (``server._Connection.faults_changed``).
 """
 
 from __future__ import annotations
@@ -115,9 +119,16 @@ class FaultTable:
         self.rows = tuple(rows)
 
     def match(self, unit: int, pdu: bytes) -> ModbusFault | None:
-        """The first row that applies to the request, counted; None: answer it as usual."""
+        """The strongest row that applies to the request (module doc), counted; None: answer
+        it as usual."""
+        found: ModbusFault | None = None
         for row in self.rows:
-            if row.matches(unit, pdu):
-                self.counts[row.kind] += 1
-                return row
-        return None
+            if row.matches(unit, pdu) and (found is None or (_RANK[row.kind], row.ms) > (
+                    _RANK[found.kind], found.ms)):
+                found = row
+        if found is not None:
+            self.counts[found.kind] += 1
+        return found
+
+
+_RANK: Final = {"delay": 0, "exception": 1, "no_reply": 2}

@@ -105,6 +105,9 @@ FRAMES_PER_TURN: Final = 16
 ROUND_S: Final = 0.0005
 MIN_TURN_S: Final = 0.00005
 BACKLOG_HIGH: Final = 16 * 1024
+# Delayed requests whose clients left, still to act at their time (a delay fault): a bound on
+# what clients that connect, send a write and leave can leave behind.
+ORPHANS_MAX: Final = 1024
 BACKLOG_LOW: Final = 4 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
 
@@ -408,7 +411,7 @@ class _Connection(asyncio.Protocol):
         # A delay fault: the request held, when (time.monotonic) it may be answered, and the
         # timer; the requests after it wait in the framer.
         self.held: tuple[Request, float] | None = None
-        self.hold_timer: asyncio.TimerHandle | None = None
+        self.hold_timer: asyncio.Handle | None = None
         self.silent = False  # a no_reply fault: this connection answers nothing any more
         self.direct = False  # a whole request in a segment may be answered at once (below)
         self.update_direct()
@@ -517,8 +520,18 @@ class _Connection(asyncio.Protocol):
             self.turn = None
             self.server.due_turns.discard(self)
         if self.hold_timer is not None:
-            self.hold_timer.cancel()
-            self.hold_timer = None
+            orphans = self.server.orphans
+            if self.held is not None and len(orphans) < ORPHANS_MAX \
+                    and not self.server.closing:
+                # The client gave up waiting and left: the device had the request, and a
+                # write under a delay acts at its time all the same (docs/plant.md); what it
+                # had not taken yet goes with the connection.
+                orphans.add(self)
+                self.framer.buffer.clear()
+            else:
+                self.hold_timer.cancel()
+                self.hold_timer = None
+                self.held = None
 
     def evict(self) -> None:
         """Out of the count at once (its connection_lost comes later), and closed."""
@@ -709,14 +722,32 @@ class _Connection(asyncio.Protocol):
             return
         self.held = None
         self.update_direct()
+        unit, pdu, _ = request
+        if self in self.server.orphans:  # its client left: it acts, unanswered
+            self.server.orphans.discard(self)
+            self.handle(unit, pdu, self.source, self.writable)
+            return
         if self.transport is None or self.transport.is_closing():
             return
-        unit, pdu, _ = request
         answer = self.handle(unit, pdu, self.source, self.writable)
         self._send([self.framer.encode(request, answer)])
         self.completed_at = self.loop.time()
         if self.turn is None:
             self._process()
+
+    def faults_changed(self, table: FaultTable | None) -> None:
+        """A new fault table: a request a delay holds that no delay of it matches any more
+        is answered now (a clear ends the slowness; it used to wait out its delay)."""
+        self.update_direct()
+        if self.held is None or self.hold_timer is None:
+            return
+        (unit, pdu, _), _ = self.held
+        if table is not None and any(row.kind == "delay" and row.matches(unit, pdu)
+                                     for row in table.rows):
+            return
+        self.hold_timer.cancel()
+        self.held = (self.held[0], time.monotonic())
+        self.hold_timer = self.loop.call_soon(self._release)  # (after the caller's turn)
 
     def _send(self, answers: list[bytes]) -> None:
         assert self.transport is not None
@@ -789,6 +820,10 @@ class ModbusServer:
         self.chatter = RateLimitedLog(log, level=logging.INFO, burst=10)
         self.connections: set[_Connection] = set()
         self.due_turns: set[_Connection] = set()  # connections whose next turn is due
+        # Connections whose client left while a delay fault held a request: it acts at its
+        # time (at most ORPHANS_MAX of them; more are dropped with their connection).
+        self.orphans: set[_Connection] = set()
+        self.closing = False
         self.all_closed = asyncio.Event()
         self.connections_changed = asyncio.Event()  # set when a connection comes or goes
         self._servers: list[asyncio.Server] = []
@@ -809,8 +844,8 @@ class ModbusServer:
         FaultError (a ValueError) for a row that is not a ModbusFault; nothing changes."""
         self._faults.set(faults)
         self.fault_table = self._faults if self._faults.rows else None
-        for connection in self.connections:
-            connection.update_direct()
+        for connection in [*self.connections, *self.orphans]:
+            connection.faults_changed(self.fault_table)
 
     @property
     def faults(self) -> tuple[ModbusFault, ...]:
@@ -875,6 +910,11 @@ class ModbusServer:
         return host, bound
 
     async def close(self) -> None:
+        self.closing = True
+        for orphan in list(self.orphans):  # the gateway stops: nothing acts after it
+            if orphan.hold_timer is not None:
+                orphan.hold_timer.cancel()
+        self.orphans.clear()
         self.refusals.flush()  # the counts of lines held back, said before the end
         self.chatter.flush()
         if not self._servers:

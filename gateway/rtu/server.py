@@ -34,6 +34,7 @@ import errno
 import logging
 import os
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final, cast
@@ -43,7 +44,13 @@ from ncgate.gateway.errors import ListenError, listen_error
 from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
 from ncgate.gateway.modbus.framer import Request, RtuFramer, exception_pdu
 from ncgate.gateway.modbus.map import ModbusMap
-from ncgate.gateway.modbus.server import WRITES, RequestHandler, allow_list, allowed
+from ncgate.gateway.modbus.server import (
+    ORPHANS_MAX,
+    WRITES,
+    RequestHandler,
+    allow_list,
+    allowed,
+)
 from ncgate.gateway.ratelimit import RateLimitedLog
 from ncgate.gateway.wiring import Backend
 from ncgate.inputs import Source, SourceKind
@@ -134,7 +141,8 @@ class RtuLink:
         self.last_byte = time.monotonic()
         self.gap_timer: asyncio.TimerHandle | None = None
         self.turn: asyncio.Handle | None = None
-        self.held: tuple[Request, asyncio.TimerHandle] | None = None  # a delay fault's
+        self.held: tuple[Request, asyncio.Handle] | None = None  # a delay fault's
+        self.orphan = False  # closed with a held request, which acts at its time
         self.silent = False  # a no_reply fault caught a request: nothing is answered
         self.backlogged = False
         self.closed = False
@@ -224,10 +232,8 @@ class RtuLink:
             if fault.kind == "exception":  # not executed
                 self._answer(request, exception_pdu(pdu[0], fault.code))
                 return
-            if fault.kind == "no_reply":
+            if fault.kind == "no_reply":  # (counted as no_reply; those after: silenced)
                 self.silent = True
-                counts["silenced"] += 1
-                server._faults.counts["silenced"] += 1
                 server.chatter.note(f"{self.source}: no answers any more (a no_reply fault)")
                 return
             timer = self.loop.call_later(fault.ms / 1000, self._release)
@@ -255,27 +261,48 @@ class RtuLink:
         self.write(self.framer.encode(request, answer))
 
     def _release(self) -> None:
-        """A delayed request's time has come: execute and answer it, then the rest."""
-        if self.held is None or self.closed:
+        """A delayed request's time has come: execute and answer it, then the rest (its
+        client gone: it acts, unanswered)."""
+        if self.held is None or (self.closed and not self.orphan):
             return
         request, _ = self.held
         self.held = None
+        if self.orphan:
+            self.orphan = False
+            if request[1][:1] and request[1][0] in WRITES:
+                self.server.handler.handle(request[0] if request[0] != BROADCAST
+                                           else self.server.any_unit, request[1], self.source)
+            return
         self._execute(request)
         self._process()
 
-    def faults_changed(self) -> None:
+    def faults_changed(self, table: FaultTable | None) -> None:
         """A new fault table: a silenced line answers again (the next request meets the new
-        table)."""
+        table), and a request a delay holds that no delay of it matches any more is answered
+        now."""
         self.silent = False
+        if self.held is None:
+            return
+        (unit, pdu, _), timer = self.held
+        if table is not None and any(row.kind == "delay" and row.matches(unit, pdu)
+                                     for row in table.rows):
+            return
+        timer.cancel()
+        self.held = (self.held[0], self.loop.call_soon(self._release))
 
-    def close(self) -> None:
+    def close(self, gone: bool = False) -> None:
+        """``gone``: the client left (not the gateway stopping): a write a delay holds acts
+        at its time all the same (docs/plant.md); what was not taken yet goes with it."""
         self.closed = True
-        for timer in (self.gap_timer, self.turn, self.held[1] if self.held else None):
+        self.orphan = gone and self.held is not None
+        for timer in (self.gap_timer, self.turn,
+                      self.held[1] if self.held and not self.orphan else None):
             if timer is not None:
                 timer.cancel()
         self.gap_timer = None
         self.turn = None
-        self.held = None
+        if not self.orphan:
+            self.held = None
 
 
 def _errno_of(exc: BaseException) -> int | None:
@@ -610,7 +637,10 @@ class _TcpConnection(asyncio.Protocol):
                 self.link.framer.partial += 1
             listener.counters.add(self.link.framer)
             listener.server.chatter.note(f"{self.link.source} disconnected")
-            self.link.close()
+            gone = not listener.closing and len(listener.orphans) < ORPHANS_MAX
+            self.link.close(gone=gone)
+            if self.link.orphan:
+                listener.orphans.add(self.link)
         if not listener.connections:
             listener.all_closed.set()
 
@@ -630,6 +660,10 @@ class RtuTcpListener:
         self.all_closed = asyncio.Event()
         self.address: tuple[str, int] | None = None
         self._server: asyncio.Server | None = None
+        self.closing = False
+        # Links whose client left while a delay held a write, which acts at its time (each
+        # kept by its timer alone: gone from here once it fired).
+        self.orphans: weakref.WeakSet[RtuLink] = weakref.WeakSet()
 
     async def start(self) -> None:
         config = self.server.config.rtu_tcp
@@ -649,6 +683,10 @@ class RtuTcpListener:
     async def close(self) -> None:
         if self._server is None:
             return
+        self.closing = True
+        for link in list(self.orphans):  # the gateway stops: nothing acts after it
+            link.orphan = False
+            link.close()
         self._server.close()
         if self.connections:
             self.all_closed.clear()
@@ -715,11 +753,15 @@ class RtuServer:
         return out + (self.tcp.links() if self.tcp is not None else [])
 
     def set_faults(self, faults: list[ModbusFault]) -> None:
-        """The plant's Modbus faults in force (``ModbusServer.set_faults``'s rows)."""
+        """The plant's Modbus faults in force (``ModbusServer.set_faults``'s rows).  The
+        same table again (another fieldbus's fault changed) changes nothing: a silenced line
+        stays silent until the Modbus faults change."""
+        if tuple(faults) == self._faults.rows:
+            return
         self._faults.set(faults)
         self.fault_table = self._faults if self._faults.rows else None
         for link in self.links():
-            link.faults_changed()
+            link.faults_changed(self.fault_table)
 
     @property
     def faults(self) -> tuple[ModbusFault, ...]:

@@ -176,3 +176,57 @@ async def test_set_faults_is_all_or_nothing(ncgate_gateway: Gateway) -> None:
     with pytest.raises(FaultError):
         server.set_faults([ModbusFault("exception"), "busy"])  # type: ignore[list-item]
     assert server.faults == (row,)
+
+
+async def test_a_delayed_write_acts_at_its_time_when_its_client_has_left(
+        ncgate_gateway: Gateway) -> None:
+    """docs/plant.md: a write under a delay acts then, "also when the client gave up
+    waiting" -- and masters give up by closing the connection, which dropped it."""
+    gw = ncgate_gateway
+    server = server_of(gw)
+    server.set_faults([ModbusFault("delay", ms=300, addresses=(1000, 1000))])
+    stored = asyncio.Event()
+    gw.image.subscribe(lambda changes, writer: stored.set() if gw.image.read(
+        "SYVAR", 0, "IN") == 42 else None)
+    leaver = await Raw.open(*gw.modbus_address)
+    began = time.monotonic()
+    await leaver.send(mbap(1, 1, pdu(6, "HH", 1000, 42)) + mbap(2, 1, pdu(6, "HH", 1001, 7)))
+    leaver.close()
+    async with asyncio.timeout(10):
+        await stored.wait()
+    assert time.monotonic() - began >= 0.3
+    assert gw.image.read("SYVAR", 1, "IN") == 0  # not taken yet when it left: gone with it
+    assert not server.orphans
+
+
+async def test_a_clear_answers_a_held_request_at_once(ncgate_gateway: Gateway) -> None:
+    server = server_of(ncgate_gateway)
+    server.set_faults([ModbusFault("delay", ms=3_600_000, unit=1)])
+    raw, other = (await Raw.open(*ncgate_gateway.modbus_address),
+                  await Raw.open(*ncgate_gateway.modbus_address))
+    await raw.send(mbap(1, 1, pdu(4, "HH", 0, 2)) + mbap(2, 1, pdu(4, "HH", 0, 2)))
+    answer = asyncio.create_task(raw.recv(timeout_s=10))
+    await other.ask(pdu(4, "HH", 0, 2), unit=7)  # served after the loop read the first
+    assert [c.held is not None for c in server.connections].count(True) == 1
+    server.set_faults([ModbusFault("exception", unit=9)])  # no delay matches it any more
+    assert await answer == (1, 1, bytes.fromhex("04 04 0001 0004"))
+    assert (await raw.recv())[0] == 2  # and the one behind it
+    raw.close()
+    other.close()
+
+
+@pytest.mark.parametrize("order", ["delay first", "exception first"])
+async def test_an_exception_wins_over_a_delay_whatever_came_first(
+        ncgate_gateway: Gateway, order: str) -> None:
+    """The first row decided: a delay injected before an exception let a write the
+    exception covers through, and stored it."""
+    gw = ncgate_gateway
+    server = server_of(gw)
+    rows = [ModbusFault("delay", ms=50), ModbusFault("exception", code=4, unit=1,
+                                                     addresses=(1000, 1000))]
+    server.set_faults(rows if order == "delay first" else rows[::-1])
+    raw = await Raw.open(*gw.modbus_address)
+    assert await raw.ask(pdu(6, "HH", 1000, 42)) == bytes.fromhex("86 04")
+    assert gw.image.read("SYVAR", 0, "IN") == 0
+    assert (await raw.ask(pdu(4, "HH", 0, 2)))[0] == 4  # the delay still acts elsewhere
+    raw.close()

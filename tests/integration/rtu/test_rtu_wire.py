@@ -136,11 +136,30 @@ async def test_the_plants_modbus_faults_apply_to_the_serial_line(raw_gateway: Ga
     raw_line.send(frame("01 04 0001 0001"))
     await raw_line.silence(0.1)
     assert raw_line.received == b""  # silent while the fault is in force
+    gw.fault("canopen", "pdo_stop")  # another fieldbus's fault: the line stays silent
+    raw_line.send(frame("01 04 0001 0001"))
+    await raw_line.silence(0.1)
+    assert raw_line.received == b""
     gw.clear_fault("modbus")
     raw_line.send(frame("01 04 0001 0001"))
     assert await raw_line.answer(7) == frame("01 04 02 0004")
     status = fieldbus(gw)["modbus_rtu"]
-    assert status["fault_counts"]["exception"] == 1 and status["silenced"] == 1
+    # As Modbus TCP counts them: the request that met the fault, and those dropped after it
+    # (the first was counted as both).
+    counts = status["fault_counts"]
+    assert (counts["exception"], counts["no_reply"], counts["silenced"]) == (1, 1, 1)
+    assert status["silenced"] == 1
+
+
+async def test_a_clear_answers_a_request_a_delay_holds_at_once(raw_gateway: Gateway,
+                                                               raw_line: RawLine) -> None:
+    gw = raw_gateway
+    gw.fault("modbus", "delay", ms=3_600_000, addresses=[0, 0])
+    raw_line.send(frame("01 04 0000 0001"))
+    await raw_line.silence(0.1)
+    assert raw_line.received == b""
+    gw.clear_fault("modbus")
+    assert await raw_line.answer(7) == frame("01 04 02 0001")
 
 
 async def test_a_delay_fault_answers_late_and_in_order(raw_gateway: Gateway,

@@ -57,11 +57,25 @@ def test_a_row_with_a_range_matches_requests_that_meet_it(request_pdu: bytes,
     assert ModbusFault("exception").matches(1, request_pdu)  # no range: every request
 
 
+def test_the_strongest_matching_row_decides_whatever_the_order() -> None:
+    table = FaultTable()
+    slow, slower = ModbusFault("delay", ms=5), ModbusFault("delay", ms=50)
+    busy, silent = ModbusFault("exception", code=4), ModbusFault("no_reply", unit=3)
+    for rows in ([slow, slower, busy, silent], [silent, busy, slower, slow]):
+        table.set(rows)
+        assert table.match(3, H("03 0000 0001")) is silent
+        assert table.match(1, H("03 0000 0001")) is busy
+    table.set([slow, slower])
+    assert table.match(1, H("03 0000 0001")) is slower  # the longest delay
+    table.set([slow, ModbusFault("delay", ms=5, unit=1)])
+    assert table.match(1, H("03 0000 0001")) is slow  # of equals, the first
+
+
 def test_a_row_of_one_unit_and_the_table_order() -> None:
     table = FaultTable()
     busy, slow = ModbusFault("exception", unit=7), ModbusFault("delay", ms=5)
     table.set([busy, slow])
-    assert table.match(7, H("03 0000 0001")) is busy  # the first that matches
+    assert table.match(7, H("03 0000 0001")) is busy
     assert table.match(1, H("03 0000 0001")) is slow
     table.set([busy])
     assert table.match(1, H("03 0000 0001")) is None
