@@ -37,13 +37,16 @@ class AdapterPlugin:
     ``status(adapter)``: a JSON-able summary for the console and ``/api/status`` (None: it has
     none); ``describe(adapter)``: the lines ``ncgate run`` logs once it serves (where it
     listens); ``faults(adapter, faults)``: the plant's fieldbus faults in force
-    (docs/plant.md), each time they change -- an adapter takes those of its own target."""
+    (docs/plant.md), each time they change -- an adapter takes those of its own target,
+    ``fault_target`` (``modbus``, ``canopen``): a fault of a target no adapter serving takes
+    is said to have no effect."""
 
     enabled: Callable[[Gateway], bool]
     factory: Callable[[Gateway], Adapter]
     status: Callable[[Any], dict[str, Any] | None] = lambda adapter: None
     describe: Callable[[Any], list[str]] = lambda adapter: []
     faults: Callable[[Any, list[ActiveFault]], None] | None = None
+    fault_target: str | None = None
 
 
 # name -> "module:attribute" of its AdapterPlugin, in start order.

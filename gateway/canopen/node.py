@@ -393,6 +393,13 @@ class CanopenNode:
             if emcy is not None:
                 self._emcy_error(emcy)
 
+    def faults(self) -> list[str]:
+        """The plant's faults in force on the node, as the status names them."""
+        return [name for name, on in (("heartbeat_stop", self._fault_heartbeat),
+                                      ("pdo_stop", self._fault_pdo),
+                                      (f"emcy 0x{self._fault_emcy or 0:04X}",
+                                       self._fault_emcy is not None)) if on]
+
     def subscribe(self, cob: int, callback: Callable[[int, bytearray, float], None]) -> None:
         self.network.subscribe(cob, callback)
 

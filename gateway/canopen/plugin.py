@@ -26,6 +26,7 @@ def status(node: CanopenNode) -> dict[str, Any]:
         "node_id": node.node_id,
         "nmt": node.node.nmt.state,  # its name, e.g. "PRE-OPERATIONAL"
         "heartbeat_ms": node.config.canopen.heartbeat_ms,
+        "faults": node.faults(),  # the plant's CANopen faults in force (docs/plant.md)
         "masters_lost": list(heartbeats.lost_nodes) if heartbeats is not None else [],
         "sync": sync_status(node.pdos),
     }
@@ -65,4 +66,5 @@ def faults(node: CanopenNode, faults: list[ActiveFault]) -> None:
 
 
 PLUGIN = AdapterPlugin(enabled=lambda gw: gw.config.canopen.enabled, factory=_factory,
-                       status=status, describe=describe, faults=faults)
+                       status=status, describe=describe, faults=faults,
+                       fault_target="canopen")

@@ -111,7 +111,7 @@ def describe(event: Event) -> str | None:
         return (f"fault {event.fault_kind} on {event.target}{f' ({params})' if params else ''}"
                 f" (by {event.who})")
     if isinstance(event, ev.FaultClear):
-        by = event.who if event.who.startswith("for_s") else f"by {event.who}"
+        by = event.who if event.who.startswith(("for_s", "replaced by")) else f"by {event.who}"
         return f"fault {event.fault_kind} on {event.target} cleared ({by})"
     return None
 

@@ -132,3 +132,16 @@ class FaultTable:
 
 
 _RANK: Final = {"delay": 0, "exception": 1, "no_reply": 2}
+
+
+def row_status(row: ModbusFault) -> dict[str, object]:
+    """A row as the status shows it: its kind and scope, and the key its kind has (an
+    exception's ``code``, a delay's ``ms``; a no_reply's neither)."""
+    shown: dict[str, object] = {"kind": row.kind}
+    if row.kind == "exception":
+        shown["code"] = row.code
+    elif row.kind == "delay":
+        shown["ms"] = row.ms
+    shown["unit"] = row.unit
+    shown["addresses"] = list(row.addresses) if row.addresses else None
+    return shown

@@ -21,15 +21,15 @@ def _factory(gw: Gateway) -> ModbusServer:
 
 
 def status(server: ModbusServer) -> dict[str, Any]:
+    from ncgate.gateway.modbus.faults import row_status
+
     return {
         "address": list(server.address) if server.address else None,
         "tls_address": list(server.tls_address) if server.tls_address else None,
         "clients": sorted(c.source.peer or c.source.detail for c in server.connections),
         "max_clients": server.config.max_clients,
         # The plant's Modbus faults in force and what they did (docs/plant.md).
-        "faults": [{"kind": f.kind, "code": f.code, "ms": f.ms, "unit": f.unit,
-                    "addresses": list(f.addresses) if f.addresses else None}
-                   for f in server.faults],
+        "faults": [row_status(f) for f in server.faults],
         "fault_counts": server.fault_counts,
     }
 
@@ -66,4 +66,5 @@ def faults(server: ModbusServer, faults: list[ActiveFault]) -> None:
 
 
 PLUGIN = AdapterPlugin(enabled=lambda gw: gw.config.modbus.enabled, factory=_factory,
-                       status=status, describe=describe, faults=faults)
+                       status=status, describe=describe, faults=faults,
+                       fault_target="modbus")

@@ -421,9 +421,12 @@ class Plant:
         """Put a checked fault in force (the door's, after it recorded it)."""
         engine = self.runtime.engine
         fault.since = engine.now
+        # The same target's fault of the same group goes (a fieldbus's of the same kind
+        # and scope: Modbus faults of other units or ranges stay beside it; the CANopen node
+        # has one of each kind -- two EMCYs of other codes were both listed, one raised).
         for old in [f for f in self.faults if f.target == fault.target
                     and f.group == fault.group and (f.group != fault.kind or f.params
-                                                    == fault.params)]:
+                                                    == fault.params or f.target == "canopen")]:
             self._remove(old, f"replaced by {fault.who}", notify=False)
         self.faults.append(fault)
         engine.note_fault(fault.target, fault.kind, fault.params, fault.who)

@@ -50,4 +50,5 @@ def faults(server: RtuServer, faults: list[ActiveFault]) -> None:
 
 
 PLUGIN = AdapterPlugin(enabled=_enabled, factory=_factory, status=status, describe=describe,
-                       faults=faults)
+                       faults=faults,
+                       fault_target="modbus")

@@ -41,7 +41,7 @@ from typing import Any, Final, cast
 
 from ncgate.config import ModbusConfig, Parity
 from ncgate.gateway.errors import ListenError, listen_error
-from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
+from ncgate.gateway.modbus.faults import FaultTable, ModbusFault, row_status
 from ncgate.gateway.modbus.framer import Request, RtuFramer, exception_pdu
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import (
@@ -775,7 +775,5 @@ class RtuServer:
             ports.append(self.tcp.status())
         totals = {name: sum(p[name] for p in ports) for name in COUNTERS}
         return {**totals, "unit_ids": sorted(self.unit_ids), "ports": ports,
-                "faults": [{"kind": f.kind, "code": f.code, "ms": f.ms, "unit": f.unit,
-                            "addresses": list(f.addresses) if f.addresses else None}
-                           for f in self.faults],
+                "faults": [row_status(f) for f in self.faults],
                 "fault_counts": dict(self._faults.counts)}

@@ -437,3 +437,13 @@ def test_run_script_into_a_reader_gone_early_exits_with_its_verdicts_status(
                           stderr=subprocess.PIPE, text=True, timeout=60)
     os.close(write_end)
     assert done.returncode == 1 and done.stderr == "", done.stderr
+
+
+def test_the_log_says_a_fault_was_replaced_in_words() -> None:
+    from ncgate.gateway.cli.serve import describe
+    from ncgate.interpreter.engine import events as ev
+
+    replaced = ev.FaultClear(1, 0.5, 0, None, "canopen", "emcy", "replaced by web 127.0.0.1")
+    assert describe(replaced) == "fault emcy on canopen cleared (replaced by web 127.0.0.1)"
+    cleared = ev.FaultClear(2, 0.6, 0, None, "canopen", "emcy", "web 127.0.0.1")
+    assert describe(cleared) == "fault emcy on canopen cleared (by web 127.0.0.1)"

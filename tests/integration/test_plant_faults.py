@@ -627,3 +627,19 @@ def test_run_refuses_a_bad_script_before_anything_serves(
     assert status == 2
     assert "bad.toml: expect[0].cond:" in capsys.readouterr().err
     assert not [r for r in caplog.records if "Modbus TCP on" in r.getMessage()]
+
+
+async def test_a_fault_on_a_fieldbus_the_gateway_does_not_serve_is_said_to_have_no_effect(
+        cell: Path) -> None:
+    """canopen.enabled = false: a heartbeat_stop was 200 and logged as if it acted."""
+    config = ncgate_test_config(cell, **{"canopen.enabled": False, "modbus.port": 0})
+    async with Gateway(config) as gw:
+        gw.fault("canopen", "heartbeat_stop")
+        gw.fault("modbus", "delay", ms=10)  # served: nothing to say
+        gw.fault("canopen", "pdo_stop")
+        hazards = [e["message"] for e in gw.trace if e["event"] == "hazard"]
+        assert hazards == [
+            "a canopen fault (heartbeat_stop, by api) acts on canopen, which this gateway "
+            "does not serve: traced, with no effect",
+            "a canopen fault (pdo_stop, by api) acts on canopen, which this gateway does not "
+            "serve: traced, with no effect"]

@@ -21,6 +21,9 @@ async def test_heartbeat_stop_silences_the_producer_until_cleared(gw: Gateway,
     gw.fault("canopen", "heartbeat_stop")
     node = gw.canopen_node
     assert node is not None and node.node.nmt._send_task is None
+    from ncgate.gateway.web.status import fieldbus
+
+    assert fieldbus(gw)["canopen"]["faults"] == ["heartbeat_stop"]  # heartbeat_ms: as set
     while not master.frames[0x710].empty():  # what was on its way before the fault
         master.frames[0x710].get_nowait()
     await master.barrier()  # the node answered a request: time passed, no heartbeat came
@@ -103,3 +106,20 @@ async def test_an_interlocked_cycle_start_on_0x2400_is_refused_in_the_sdo_answer
     gw.write("SA100", 0)
     await master.download(0x2400, 1, struct.pack("<H", 0x0101))  # now taken
     await gw.wait_state(1, "WAIT_COND")
+
+
+async def test_a_second_emcy_fault_replaces_the_first(gw: Gateway, master: Master) -> None:
+    """Two EMCY faults of other codes were both listed while the node raised the newer one;
+    when it ended, the older came back (EMCY 0x0000, then its code again)."""
+    gw.fault("canopen", "emcy", code=0x3120)
+    assert struct.unpack("<H", (await master.next(0x90))[:2]) == (0x3120,)
+    gw.fault("canopen", "emcy", code=0x4210)
+    assert [f["kind"] for f in gw.plant.status()["faults"]] == ["emcy"]  # type: ignore[union-attr]
+    codes = [struct.unpack("<H", (await master.next(0x90))[:2])[0] for _ in range(2)]
+    assert codes == [0, 0x4210]
+    clear = [e for e in gw.trace if e["event"] == "fault_clear"]
+    assert [(e["target"], e["kind"]) for e in clear] == [("canopen", "emcy")]
+    gw.clear_fault("canopen")
+    assert struct.unpack("<H", (await master.next(0x90))[:2]) == (0,)
+    await master.barrier()
+    assert master.frames[0x90].empty()  # nothing raised again
