@@ -24,6 +24,7 @@ import logging
 import math
 import sqlite3
 import threading
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -464,6 +465,10 @@ class LogicWatcher:
 LEAP_SCANS = 1 << 16
 
 
+# The scan drivers of each engine (the PLC's and the plant logic's), for the stall rule.
+_DRIVERS: weakref.WeakKeyDictionary[Engine, list[ScanDriver]] = weakref.WeakKeyDictionary()
+
+
 class ScanDriver:
     """Runs the scan every ``scan_ms`` as an engine timer."""
 
@@ -494,6 +499,15 @@ class ScanDriver:
         self.on_skip: Callable[[int, int], None] | None = None
         self.skips: dict[int, int] = {}
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
+        _DRIVERS.setdefault(engine, []).append(self)
+
+    def _only_scans_left(self) -> bool:
+        """No timer is armed but the other scan drivers' (the PLC's beside the plant's
+        logic): each saw the other's next scan as something still to come, and a stalled
+        closed run with both never ended."""
+        others = sum(1 for d in _DRIVERS.get(self.engine, ()) if d is not self
+                     and d._timer is not None and d._timer.callback is not None)
+        return self.engine.live_timers == others
 
     def _scan(self) -> None:
         engine, period = self.engine, self.period
@@ -537,9 +551,9 @@ class ScanDriver:
             status.overruns += missed
             self.k += missed
         later = engine.next_timer() if self.closed else None
-        if self.closed and later is None and engine.stalled and (
+        if self.closed and (later is None or self._only_scans_left()) and engine.stalled and (
                 engine.now - engine.last_change >= self.stall_s):
-            self._timer = None  # nothing but the scan is left: let the run end as a stall
+            self._timer = None  # nothing but the scans is left: let the run end as a stall
             return
         if self.leap and not self.runtime.scan_listeners:
             if self.runtime.still:

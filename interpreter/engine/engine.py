@@ -485,6 +485,11 @@ class Engine:
     def next_timer(self) -> float | None:
         return self._timers.next_time()
 
+    @property
+    def live_timers(self) -> int:
+        """Timers armed and neither fired nor cancelled."""
+        return self._timers.live
+
     def advance_to(self, t: float, blocks: int | None = None) -> bool:
         """Let time pass to ``t``: fire the timers due, each followed by what it made
         runnable, then run what is runnable at ``t``.

@@ -437,6 +437,23 @@ def test_the_plant_logic_is_a_second_st_task_whose_writes_are_the_plants(
     assert result.runtime.plant.status()["logic"]["state"] == "RUNNING"
 
 
+@pytest.mark.parametrize("until", [None, 600.0])
+def test_a_cell_with_plc_and_plant_logic_that_stands_still_ends_as_a_stall(
+        tmp_path: Path, until: float | None) -> None:
+    """Each scan driver saw the other's next scan as work still to come: a stalled cell
+    with both ran for ever (and to --until, exit 0) where either alone ended as a stall."""
+    (tmp_path / "tank.st").write_text(PLANT_ST)
+    (tmp_path / "plc.st").write_text("PROGRAM ctl\nSA[21] := TRUE;\nEND_PROGRAM\n")
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SA99=1)\nN20 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\nstall_s = 2\n[plc]\nlogic = "plc.st"\n'
+        '[plant]\nlogic = "tank.st"\nscan_ms = 10\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None), until)
+    stall = [e for e in result.events if e["event"] == "stall"]
+    assert len(stall) == 1 and stall[0]["t"] == pytest.approx(2.0, abs=0.011)
+    assert result.runtime.engine.now < 3.0
+
+
 def test_plant_programs_name_programs_of_the_plant_logic(tmp_path: Path) -> None:
     (tmp_path / "tank.st").write_text(PLANT_ST)
     (tmp_path / "O1.nc").write_text("N10 M30\n")
