@@ -128,13 +128,14 @@ class IOImage:
         self.on_overridden: Callable[[list[tuple[str, int, str, int]], str], None] | None = None
         # Held variables: an injected fault (a stuck sensor, a wire break) holds what every
         # reader sees, whatever writes it, as a force does; a force wins over a hold.  The
-        # writes a hold changes are not "forced" events (the fault's event says why), and
-        # what they wanted is given back when it ends (unhold).
+        # writes of a held variable are kept aside, not stored (write), and the last is
+        # given back when the hold ends (unhold).
         self.held: dict[tuple[str, int, str], int] = {}
         # While something is held: the image as its writers wrote it, holds aside (a copy
         # written beside this one), so that a clear gives back what the writers' last writes
         # make of a held variable -- a wire mended (unhold).
         self._unheld: IOImage | None = None
+        self._placing = False  # a hold's own write (hold): the one a held variable takes
         self.generation = 0  # +1 on every write that changed something
         self._watches: list[Watch] = []  # (see watch)
         self._write_number = 0
@@ -247,6 +248,14 @@ class IOImage:
                 self.check(area, index, view, value)
         if self._unheld is not None:
             self._unheld.write(items, writer, checked=True)
+        if self.held and not self._placing:
+            # A variable a fault holds takes no write: kept aside (above) for the clear, it
+            # is neither stored, nor heard, nor its writer's -- the trace said "plc wrote 1"
+            # each scan for a chatter the logic never wrote, and a verdict named the PLC.
+            held, forced = self.held, self.forced
+            items = [c for c in items if c[:3] not in held or c[:3] in forced]
+            if not items:
+                return []
         if self.forced or self.held:
             items = self._apply_forces(items, writer)
         if self._frozen is not None:
@@ -327,10 +336,12 @@ class IOImage:
         self.held[(area, index, view)] = value
         self._force_index()
         unheld, self._unheld = self._unheld, None  # (the hold's own write is nobody's wish)
+        self._placing = True
         try:
             self.write([(area, index, view, value)], writer, checked=True)
         finally:
             self._unheld = unheld
+            self._placing = False
 
     def unhold(self, area: str, index: int, view: str) -> tuple[int, str | None] | None:
         """Release a held variable; the value it shows stays until it is written.  Returns

@@ -135,8 +135,9 @@ def test_a_stuck_input_wins_over_an_outside_write_and_a_force_wins_over_it(cell:
 
 def test_a_clear_gives_back_what_the_writers_last_wrote_in_their_name(cell: Path) -> None:
     """A wire mended: what no model drives shows again what its writers wrote -- the last
-    write made under the hold, or, with none, the value from before it.  (A clear kept
-    the held value until the next write: a PLC that writes on change never did.)"""
+    write made under the hold (not stored, nor traced, meanwhile), or, with none, the value
+    from before it.  (A clear kept the held value until the next write: a PLC that writes
+    on change never did.)"""
     result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR5=7"\n'
                   '[[write]]\nat = 0.0\nset = "SA40=1"\n'
                   '[[fault]]\ntarget = "SYVAR5"\nkind = "stuck"\nvalue = 3\nat = 0.1\n'
@@ -148,10 +149,27 @@ def test_a_clear_gives_back_what_the_writers_last_wrote_in_their_name(cell: Path
     assert writes == [
         (0.0, "SYVAR5", 7, "script write[0]"), (0.0, "SA40", 1, "script write[1]"),
         (0.1, "SYVAR5", 3, "fault stuck SYVAR5"), (0.1, "SA40", 0, "fault wire_break SA40"),
-        (0.2, "SYVAR5", 3, "script write[2]"),  # held: stored as the hold's value
         (0.3, "SYVAR5", 9, "script write[2]"),  # the clear: that last write, back
         (0.5, "SA40", 1, "script write[1]"),    # none under the hold: the value before it
     ]
+
+
+def test_logic_writing_a_held_output_every_scan_is_not_traced_as_writing_the_faults_value(
+        cell: Path) -> None:
+    """The PLC sets SA21 every scan; a stuck SA21 = 0 held it.  The trace had "SA21 = 0
+    by plc" at every scan (the logic never wrote 0), and a verdict named the PLC."""
+    (cell.parent / "plc.st").write_text("PROGRAM ctl\nSA[21] := TRUE;\nEND_PROGRAM\n")
+    cell.write_text(cell.read_text().replace("[plant]", '[plc]\nlogic = "plc.st"\n[plant]'))
+    result = _run(cell, '[[fault]]\ntarget = "SA21"\nkind = "stuck"\nvalue = 0\nat = 0.1\n'
+                  'for_s = 0.3\n[[expect]]\nname = "on"\ncond = "SA21=1"\nwithin = [0.2, 0.3]\n',
+                  until=0.6)
+    writes = [(e["t"], e["value"], e["who"]) for e in result.events
+              if e["event"] == "write" and e["var"] == "SA21"]
+    assert writes == [(0.0, 1, "plc"), (0.1, 0, "fault stuck SA21"), (0.4, 1, "plc")]
+    (verdict,) = result.verdicts
+    assert not verdict.ok
+    assert verdict.line() == ("FAIL on: SA21 still 0 at 0.300 s (set by fault stuck SA21 at "
+                              "0.100 s); fault stuck on SA21 (by script fault[0])")
 
 
 def test_a_replaced_hold_gives_back_the_writers_value_not_the_first_holds(
