@@ -394,18 +394,21 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
         start_plc(config, runtime, door, closed=True, leap=leap),
         start_plant_logic(config, runtime, door, closed=True, leap=leap)) if started]
 
+    def logic_runs() -> bool:
+        """An ST task runs (the PLC's, or the plant's: either may press NC.START)."""
+        plant = runtime.plant
+        return any(logic is not None and logic.status.state is PlcState.RUNNING for logic in (
+            runtime.plc, plant.logic if plant is not None else None))
+
     def active() -> bool:
-        """Something may still start a program: the PLC logic's scan, a scripted input."""
-        plc = runtime.plc
-        return player.due > 0 or (plc is not None and plc.status.state is PlcState.RUNNING) \
+        """Something may still start a program: an ST task's scan, a scripted input."""
+        return player.due > 0 or logic_runs() \
             or (horizon is not None and engine.now < horizon) \
             or (runtime.plant is not None and runtime.plant.moving)
 
     def plc_may_start(n: int) -> bool:
-        """The PLC logic's NC.START is a cycle start: nc.main in process 1 (orphan check)."""
-        plc = runtime.plc
-        return (n == 1 and engine.settings.main is not None and plc is not None
-                and plc.status.state is PlcState.RUNNING)
+        """An ST task's NC.START is a cycle start: nc.main in process 1 (orphan check)."""
+        return n == 1 and engine.settings.main is not None and logic_runs()
 
     engine.sync.outside_starts = lambda n: plc_may_start(n) or player.may_start(n)
 

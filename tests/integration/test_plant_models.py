@@ -454,6 +454,22 @@ def test_a_cell_with_plc_and_plant_logic_that_stands_still_ends_as_a_stall(
     assert result.runtime.engine.now < 3.0
 
 
+def test_sim_until_runs_on_for_the_plant_logics_cycle_start(tmp_path: Path) -> None:
+    """plant.md: the plant logic's NC outputs are its own; with --until a closed run
+    stopped when every program had ended, before the plant's NC.START at 1 s (run obeyed
+    it; the same ST as PLC logic did too)."""
+    (tmp_path / "starter.st").write_text(
+        "PROGRAM starter\nVAR t : TON; END_VAR\nt(IN := TRUE, PT := T#1s);\n"
+        "NC.START := t.Q;\nEND_PROGRAM\n")
+    (tmp_path / "PART.nc").write_text("N10 G4 X0.1\nN20 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "PART"\n[plant]\nlogic = "starter.st"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "PART", load_script(None), 3.0)
+    starts = [e for e in result.events if e["event"] == "start"]
+    assert [e["t"] for e in starts] == [0.0, pytest.approx(1.0)], starts
+    assert result.runtime.engine.now == pytest.approx(3.0)
+
+
 def test_plant_programs_name_programs_of_the_plant_logic(tmp_path: Path) -> None:
     (tmp_path / "tank.st").write_text(PLANT_ST)
     (tmp_path / "O1.nc").write_text("N10 M30\n")
