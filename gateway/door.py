@@ -267,8 +267,9 @@ class Door:
         if kind in _CELL_ONLY and process is not None:
             raise InputRefused(Reason.BAD_VALUE, f"{kind.label} acts on the whole cell: give "
                                "it without a process")
-        if kind is CommandKind.RESTART_PLC and self._plc() is None:
-            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic)")
+        if kind is CommandKind.RESTART_PLC and not self._logics():
+            raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to restart ([plc] logic, "
+                               "[plant] logic)")
         if kind is CommandKind.RELOAD_PLC and (self._plc() is None or self.reload_plc is None):
             raise InputRefused(Reason.NOT_CONFIGURED, "no PLC logic to reload ([plc] logic)")
         if kind is CommandKind.CYCLE_START or kind is CommandKind.STEP:
@@ -283,9 +284,8 @@ class Door:
         engine = self.runtime.engine
         if kind is CommandKind.RESTART_PLC:
             self._enter(item)
-            plc = self._plc()
-            assert plc is not None  # (checked)
-            plc.restart()  # after a FAULT; a running one is left alone, the NC untouched
+            for logic in self._logics():  # after a FAULT (the PLC's, the plant's); a
+                logic.restart()  # running one is left alone, the NC untouched
             return
         if kind is CommandKind.RELOAD_PLC:
             self._enter(item)  # a load error is no refusal: the old logic runs on, and the
@@ -311,9 +311,15 @@ class Door:
             engine.single_block(kind is CommandKind.SINGLE_BLOCK_ON, process)
         else:
             engine.reset(process)
-            plc = self._plc()
-            if plc is not None and process is None:  # a reset of the cell also restarts a
-                plc.restart()  # faulted PLC
+            if process is None:  # a reset of the cell also restarts a faulted PLC (or
+                for logic in self._logics():  # plant logic)
+                    logic.restart()
+
+    def _logics(self) -> list[PlcRuntime]:
+        """The ST tasks a restart restarts: the PLC's logic and the plant's."""
+        plant = self.runtime.plant
+        return [logic for logic in (self._plc(), plant.logic if plant is not None else None)
+                if logic is not None]
 
     def _force(self, item: Force) -> None:
         image, engine = self.runtime.image, self.runtime.engine

@@ -25,7 +25,7 @@ import math
 import sqlite3
 import threading
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,7 +53,7 @@ from ncgate.interpreter.engine.states import WAITING_STATES
 from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
-from ncgate.plc.st.diagnostics import LogicError
+from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
 from ncgate.plc.st.logic import Logic
 
 if TYPE_CHECKING:
@@ -170,6 +170,15 @@ def load_logic(files: tuple[Path, ...], config: Config,
     for warning in logic.warnings:  # plc.strict = false: what IEC would refuse
         log.warning("%s", warning.render())
     return logic
+
+
+def retain_in_plant(files: Sequence[SourceFile]) -> list[StDiagnostic]:
+    """SW005 for each ``VAR RETAIN`` of the plant's logic: accepted, and nothing kept."""
+    return [StDiagnostic(StCode.RETAIN_IN_PLANT, f"{decl.name} is RETAIN: the plant's logic "
+                         "keeps nothing across a restart (docs/plant.md)", decl.span,
+                         f.line(decl.span.line))
+            for f in files for decl in (*f.globals, *(d for pou in f.pous for d in pou.decls))
+            if decl.qualifier == "RETAIN"]
 
 
 def program_order(logic: Logic, config: Config, section: str = "plc") -> list[str]:
@@ -700,7 +709,10 @@ def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: b
     plant = config.plant
     if not plant.logic:
         return None
-    logic = load_logic(plant.logic, config, read_sources(plant.logic, config, "plant"))
+    sources = read_sources(plant.logic, config, "plant")
+    logic = load_logic(plant.logic, config, sources)
+    for warning in retain_in_plant([parsed_logic(path, text) for path, text in sources.items()]):
+        log.warning("%s", warning.render())
     order = program_order(logic, config, "plant")
     engine = runtime.engine
     logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door, SourceKind.PLANT),

@@ -700,7 +700,7 @@ class PlcRuntime:
         fault = PlcFault(message, span, line)
         self.status.state = PlcState.FAULT
         self.status.fault = fault
-        log.error("PLC fault: %s", fault)
+        log.error("%s fault: %s", "plant logic" if self.writer == "plant" else "PLC", fault)
         self.nc.fault(str(fault))
         for listener in self.scan_listeners:
             listener()

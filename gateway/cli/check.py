@@ -217,7 +217,7 @@ def check_logic(files: Sequence[Path], config: Config,
     in them the PROGRAMs it runs are chosen as ``sim`` and ``run`` choose them
     (:func:`ncgate.gateway.plc.program_order`): files with no PROGRAM, or a
     ``section.programs`` entry that names none, is the ConfigError they refuse with."""
-    from ncgate.gateway.plc import logic_context, logic_key, program_order
+    from ncgate.gateway.plc import logic_context, logic_key, program_order, retain_in_plant
 
     found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
     parsed: list[SourceFile] = []
@@ -235,7 +235,7 @@ def check_logic(files: Sequence[Path], config: Config,
     if parsed:
         try:
             logic = compile_logic(parsed, logic_context(config))
-            for d in logic.warnings:
+            for d in (*logic.warnings, *(retain_in_plant(parsed) if section == "plant" else ())):
                 found.setdefault(d.span.file, []).append(d)
         except LogicError as exc:
             for d in exc.diagnostics:

@@ -69,6 +69,8 @@ class StCode(enum.Enum):
     ENUM_AS_INTEGER = ("SW003", "an enumeration value used as an integer, or the reverse")
     UNKNOWN_PRAGMA = ("SW004", "a pragma ncgate does not know (matiec's inline C {{ … }}, "
                       "a CODESYS conditional {IF …}): ignored, in strict mode too")
+    RETAIN_IN_PLANT = ("SW005", "VAR RETAIN in the plant's logic ([plant] logic): ignored, the "
+                       "plant keeps nothing across a restart")
     # -- PLCopen XML -------------------------------------------------------------------------------
     XML_PROJECT = ("ST040", "a PLCopen XML file that is not well-formed or not a TC6 project")
 
@@ -134,7 +136,7 @@ def codes_markdown() -> str:
     lines = ["", "## Structured Text (PLC logic)", "",
              "Generated from `plc/st/diagnostics.py`. SW codes are warnings: SW001..SW003 "
              "are given only with `plc.strict = false` (where strict IEC refuses the "
-             "construct), SW004 always.", "",
+             "construct), SW004 always, SW005 in the plant's logic.", "",
              "| code | what |", "|---|---|"]
     lines += [f"| {c.code} | {c.summary} |" for c in StCode]
     return "\n".join(lines) + "\n"

@@ -626,6 +626,22 @@ def test_check_says_a_file_that_is_plc_and_plant_logic_once_and_as_it_was_named(
         assert out.count("error ST002") == 1 and "2 file(s) checked: 1 error(s)" in err
 
 
+def test_retain_in_the_plant_logic_is_a_warning_where_it_was_accepted_in_silence(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+        ) -> None:
+    write_cell(tmp_path, '[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n[plant]\nlogic = '
+               '"p.st"\n', {"O1": "N10 M30\n"})
+    (tmp_path / "p.st").write_text("PROGRAM tank\nVAR RETAIN level : INT; END_VAR\n"
+                                   "level := level + 1;\nEND_PROGRAM\n")
+    with contextlib.chdir(tmp_path):
+        assert main(["check", "--config", "ncgate.toml"]) == 0
+        out = capsys.readouterr().out
+        assert "p.st:2:12: warning SW005: level is RETAIN: the plant's logic keeps nothing" \
+            in out, out
+        assert main(["sim", "--config", "ncgate.toml"]) == 0
+    assert "warning SW005" in caplog.text
+
+
 def test_check_process_is_one_of_the_config_beside_the_file(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`check A.nc --process 7` beside a config of 8 processes said "expected 1..5" (the

@@ -470,6 +470,30 @@ def test_sim_until_runs_on_for_the_plant_logics_cycle_start(tmp_path: Path) -> N
     assert result.runtime.engine.now == pytest.approx(3.0)
 
 
+@pytest.mark.parametrize("command", ["reset", "restart_plc"])
+def test_a_faulted_plant_logic_is_restarted_as_a_faulted_plc_is(
+        tmp_path: Path, command: str, caplog: pytest.LogCaptureFixture) -> None:
+    """Both commands answered 200 and left the plant logic in FAULT for good."""
+    (tmp_path / "p.st").write_text(
+        "PROGRAM p\nVAR d : INT; n : INT; END_VAR\nIF SA[50] THEN SYVAR[1] := 10 / d; END_IF;\n"
+        "n := n + 1;\nSYVAR[2] := n;\nEND_PROGRAM\n")
+    (tmp_path / "O1.nc").write_text("N10 M30\n")
+    (tmp_path / "s.toml").write_text(
+        '[[write]]\nat = 0.1\nset = "SA50=1"\n[[write]]\nat = 0.2\nset = "SA50=0"\n'
+        f'[[command]]\nat = 0.3\ncommand = "{command}"\n')
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\n[plant]\nlogic = "p.st"\nscan_ms = 10\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1",
+                     load_script(tmp_path / "s.toml"), 0.5)
+    alarms = [e for e in result.events if e["event"] == "alarm"]
+    assert len(alarms) == 1 and "plant logic fault" in alarms[0]["message"]
+    assert "plant logic fault: " in caplog.text and "PLC fault" not in caplog.text
+    plant = result.runtime.plant
+    assert plant is not None and plant.status()["logic"]["state"] == "RUNNING"
+    counts = [e["t"] for e in result.events if e["event"] == "write" and e["var"] == "SYVAR2"]
+    assert counts[-1] == pytest.approx(0.5)  # scanning again after the restart at 0.3
+
+
 def test_plant_programs_name_programs_of_the_plant_logic(tmp_path: Path) -> None:
     (tmp_path / "tank.st").write_text(PLANT_ST)
     (tmp_path / "O1.nc").write_text("N10 M30\n")
