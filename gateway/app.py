@@ -653,6 +653,11 @@ class Gateway:
         self.apply(ClearFault(target, source))
 
     @property
+    def running(self) -> bool:
+        """Between the ``async with``'s start and its end (what it ran stays readable after)."""
+        return self._driver is not None
+
+    @property
     def plant(self) -> Plant:
         """The plant: ``gw.plant.status()``, ``gw.plant.models``."""
         plant = self.runtime.plant

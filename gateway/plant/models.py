@@ -33,6 +33,7 @@ class Model:
     """One model: its config, its behaviour fault (``never``, ``slow``), what it is doing."""
 
     kind = ""
+    states: tuple[str, ...] = ("at rest",)  # what ``state`` may say
     inputs: tuple[str, ...] = ()  # the keys that name variables it reads
     outputs_keys: tuple[str, ...] = ()  # the keys that name variables it writes
 
@@ -46,12 +47,15 @@ class Model:
         self.state = "at rest"
         self.since = 0.0
         self.progress: tuple[float, float] | None = None  # (done s, of s) of the current move
+        self.on_state: Callable[[], None] | None = None  # told of each change of ``state``
         # Every key of its kind, its default filled in: read on every step.
         self._keys = {name: config.get(name) for name in MODEL_KEYS[config.kind]}
 
     def _state(self, now: float, state: str) -> None:
         if state != self.state:
             self.state, self.since = state, now
+            if self.on_state is not None:
+                self.on_state()
 
     def start(self, now: float) -> float | None:
         return self.command(now)
@@ -113,6 +117,7 @@ class Delay(Model):
     goes back before its time leaves the output as it was (a relay, a pressure switch)."""
 
     kind = "delay"
+    states = ("at rest", "on", "off", "switching on", "switching off")
     inputs = ("input",)
     outputs_keys = ("output",)
 
@@ -168,6 +173,7 @@ class Cylinder(Model):
     neither coil on holds the rod where it is."""
 
     kind = "cylinder"
+    states = ("retracted", "extends", "extended", "retracts", "stopped mid-stroke")
     inputs = ("extend", "retract")
     outputs_keys = ("extended", "retracted", "position")
 
@@ -258,6 +264,7 @@ class Motor(Model):
     ``standstill`` at 0 with no run command (it drops as the motor is told to run)."""
 
     kind = "motor"
+    states = ("stands still", "runs up", "at speed", "runs down")
     inputs = ("run", "reverse")
     outputs_keys = ("speed", "at_speed", "standstill")
 
@@ -334,6 +341,7 @@ class Lag(Model):
     unit of the target, then the target exactly."""
 
     kind = "lag"
+    states = ("settled", "follows")
     inputs = ("target",)
     outputs_keys = ("actual",)
 
@@ -388,6 +396,7 @@ class Generator(Model):
     ``low`` and ``high`` -- from t = 0, free running."""
 
     kind = "generator"
+    states = ("square", "counter", "sine", "ramp")  # its shape: it never stops
     outputs_keys = ("output",)
 
     def __init__(self, config: PlantModelConfig, host: Host, scan_s: float) -> None:
@@ -456,6 +465,7 @@ class Switch(Model):
     part program's motion, sampled every scan."""
 
     kind = "switch"
+    states = ("at rest", "on", "off")
     outputs_keys = ("output",)
 
     def command(self, now: float) -> float | None:

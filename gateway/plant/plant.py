@@ -111,6 +111,9 @@ class Plant:
         self.stretch = 1  # the tick's period in scans (run: the budget's)
         self.logic: PlcRuntime | None = None  # the plant's ST logic ([plant] logic)
         self.stretched = 0  # how often the budget stretched it
+        # Told when a model's state changes (also one that writes nothing: a cylinder
+        # stopped mid-stroke by a fault): the pytest kit's wait_state.
+        self.state_listeners: list[Callable[[], None]] = []
         for i, model_config in enumerate(config.model):
             self._build(model_config, f"plant.model[{i}]")
         runtime.engine.state_listeners.append(self._on_state)
@@ -150,6 +153,7 @@ class Plant:
             if process not in self.runtime.engine.processes:
                 raise ConfigError(f"{where}: {key}.axis: no process {process}")
         model = KINDS[config.kind](config, _ModelHost(self, variables), self.scan_s)
+        model.on_state = self._state_changed
         self.models[config.name] = model
         self.variables[config.name] = variables
         for name, var in variables.items():
@@ -547,6 +551,10 @@ class Plant:
         bus = [f for f in self.faults if f.target in ("modbus", "canopen")]
         for listener in list(self.fieldbus_listeners):
             listener(bus)
+
+    def _state_changed(self) -> None:
+        for listener in list(self.state_listeners):
+            listener()
 
     # -- what people see ---------------------------------------------------------------------
 

@@ -18,7 +18,7 @@ import asyncio
 from typing import Any
 
 from ncgate.gateway.app import Gateway
-from ncgate.gateway.errors import WaitIdleTimeout
+from ncgate.gateway.errors import GatewayError, WaitIdleTimeout
 from ncgate.inputs import API, Source
 
 
@@ -54,10 +54,21 @@ class PlantKit:
 
     async def wait_state(self, model: str, state: str, timeout_s: float = 10.0) -> None:
         """Until the model is in ``state`` ("extended", "at speed", ...); WaitIdleTimeout
-        naming what it is doing instead.  Woken by every write of the image, no polling."""
+        naming what it is doing instead.  Woken by every write of the image and every change
+        of a model's state (one that writes nothing too), no polling.  KeyError for a model
+        the config has not, ValueError for a state its kind never is, GatewayError once the
+        gateway is closed."""
+        if not self.gw.running:
+            raise GatewayError("the gateway is not running: wait_state waits on a running "
+                               "one (use 'async with Gateway(...)')")
         self.state(model)  # the name, or KeyError now
+        kind = self.gw.plant.models[model]
+        if state not in kind.states:
+            raise ValueError(f"a {kind.kind} is never {state!r}: it is "
+                             f"{', '.join(repr(s) for s in kind.states)}")
         changed = asyncio.Event()
         unsubscribe = self.gw.image.subscribe(lambda changes, writer: changed.set())
+        self.gw.plant.state_listeners.append(changed.set)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout_s
         try:
@@ -74,3 +85,4 @@ class PlantKit:
                     continue  # said above, with what it is doing
         finally:
             unsubscribe()
+            self.gw.plant.state_listeners.remove(changed.set)

@@ -393,6 +393,29 @@ async def test_the_kits_plant_helper_beside_a_virtual_plc(cell: Path) -> None:
             plant.state("nothing")
 
 
+async def test_the_kits_wait_state_hears_a_change_that_writes_nothing(cell: Path) -> None:
+    """A cylinder stopped mid-stroke by a fault writes nothing (its switches are both off
+    already): wait_state heard only image writes, and came back at its timeout."""
+    from ncgate.gateway.errors import GatewayError
+    from ncgate.gateway.testing.plant_kit import PlantKit
+
+    config = ncgate_test_config(cell, **{"modbus.port": 0})
+    async with Gateway(config) as gw:
+        plant = PlantKit(gw)
+        with pytest.raises(ValueError, match="a cylinder is never 'extendd'"):
+            await plant.wait_state("clamp", "extendd")
+        gw.write("SA20", 1)
+        await plant.wait_state("clamp", "extends", timeout_s=10)
+        waiting = asyncio.create_task(plant.wait_state("clamp", "stopped mid-stroke",
+                                                       timeout_s=60))
+        await asyncio.sleep(0)  # (it waits now)
+        assert not waiting.done()
+        gw.fault("clamp", "never")
+        await asyncio.wait_for(waiting, 10)  # not the 60 s of its timeout
+    with pytest.raises(GatewayError, match="not running"):  # (it timed out, a GatewayError)
+        await plant.wait_state("clamp", "extended", timeout_s=30)
+
+
 def test_ncgate_map_lists_what_each_model_reads_and_writes(
         cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["map", "--config", str(cell), "--format", "json"]) == 0
