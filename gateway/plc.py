@@ -560,8 +560,8 @@ class ScanDriver:
             status.overruns += missed
             self.k += missed
         later = engine.next_timer() if self.closed else None
-        if self.closed and (later is None or self._only_scans_left()) and engine.stalled and (
-                engine.now - engine.last_change >= self.stall_s):
+        if self.closed and engine.now - engine.last_change >= self.stall_s and (
+                engine.stalled and (later is None or self._only_scans_left())):
             self._timer = None  # nothing but the scans is left: let the run end as a stall
             return
         if self.leap and not self.runtime.scan_listeners:

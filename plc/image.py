@@ -343,22 +343,22 @@ class IOImage:
             self._unheld = unheld
             self._placing = False
 
-    def unhold(self, area: str, index: int, view: str) -> tuple[int, str | None] | None:
-        """Release a held variable; the value it shows stays until it is written.  Returns
-        what its writers' writes make of it (their last, or what it held before the hold)
-        and who last wrote it (None: nobody), when that is not what it shows: the caller
-        writes it back when that is what a clear means (a wire mended), else None."""
+    def unhold(self, area: str, index: int, view: str, give_back: str | None = None) -> None:
+        """Release a held variable.  With ``give_back`` (a writer's name for a variable
+        nobody wrote), what its writers' writes make of it -- their last, or what it held
+        before the hold -- is written back now, in the last writer's name, when the image
+        shows something else (a wire mended); without, what it shows stays until written."""
         self.held.pop((area, index, view), None)
         self._force_index()
         unheld = self._unheld
         if not self.held:
             self._unheld = None
-        if unheld is None:
-            return None
+        if unheld is None or give_back is None:
+            return
         value = unheld.read(area, index, view)
-        if value == self.read(area, index, view):
-            return None
-        return value, unheld.last_writer(area, index, view)
+        if value != self.read(area, index, view):
+            writer = unheld.last_writer(area, index, view) or give_back
+            self.write([(area, index, view, value)], writer, checked=True)
 
     def _copy(self) -> IOImage:
         """A copy of the values and writers (no waits, listeners, forces or holds)."""

@@ -490,14 +490,11 @@ class Plant:
         elif fault.kind in VARIABLE_FAULTS:
             image = self.runtime.image
             for var in fault.variables:
-                wanted = image.unhold(*var.address)
-                if wanted is not None and var.address not in self._drives:
-                    # What no model drives shows again what its writers last wrote (the
-                    # PLC's output as it set it, a sensor as the script or a client wrote
-                    # it), in that writer's name: a wire mended.  A model's, below.
-                    value, writer = wanted
-                    image.write([(*var.address, value)], writer or f"fault clear {who}",
-                                checked=True)
+                # What no model drives shows again what its writers last wrote (the PLC's
+                # output as it set it, a sensor as the script or a client wrote it), in
+                # that writer's name: a wire mended.  A model's, below.
+                image.unhold(*var.address, give_back=None if var.address in self._drives
+                             else f"fault clear {who}")
             for model in self.models.values():  # what the models drive is theirs again
                 self._write(model, shown=True)
         elif fault.model is not None and notify:
