@@ -32,6 +32,7 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import socket
 import ssl
 import struct
 import time
@@ -108,6 +109,7 @@ BACKLOG_HIGH: Final = 16 * 1024
 # Delayed requests whose clients left, still to act at their time (a delay fault): a bound on
 # what clients that connect, send a write and leave can leave behind.
 ORPHANS_MAX: Final = 1024
+TCP_CLOSE_WAIT: Final = 8  # Linux's tcpi_state (include/net/tcp_states.h)
 BACKLOG_LOW: Final = 4 * 1024
 NO_SUB_UNIT: Final = 0xFF  # Modbus TCP implementation guide: "the server itself"
 
@@ -495,6 +497,18 @@ class _Connection(asyncio.Protocol):
                 unsent += struct.unpack("i", queued)[0]
         return unsent
 
+    def _peer_closed(self) -> bool:
+        """The client closed its side (Linux: the socket is in CLOSE-WAIT), though the end
+        of stream waits unread behind what reading paused for."""
+        transport = self.transport
+        sock = transport.get_extra_info("socket") if transport is not None else None
+        if sock is None or not hasattr(socket, "TCP_INFO"):
+            return False
+        try:
+            return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] == TCP_CLOSE_WAIT
+        except OSError:
+            return False
+
     def _reading(self) -> None:
         """Read while the client reads its answers and its backlog is small."""
         transport = self.transport
@@ -767,6 +781,12 @@ class _Connection(asyncio.Protocol):
             what = ("TLS handshake" if self.tls is not None and not self.tls.established
                     else "partial frame")
             self.close(f"{what} not completed in {PARTIAL_FRAME_TIMEOUT_S:g} s")
+            return
+        if (self.paused or self.backlogged or self.held is not None) and self._peer_closed():
+            # Reading is paused (or it waits for a delayed answer): its end of stream is not
+            # read, and the connection held a slot of max_clients in CLOSE-WAIT until the
+            # idle timeout -- for a delay's whole length while it held a request.
+            self.close("the client closed its side")
             return
         unsent = self._unsent()
         if (self.paused and unsent < self.drain_mark) or self.held is not None:

@@ -230,3 +230,24 @@ async def test_an_exception_wins_over_a_delay_whatever_came_first(
     assert gw.image.read("SYVAR", 0, "IN") == 0
     assert (await raw.ask(pdu(4, "HH", 0, 2)))[0] == 4  # the delay still acts elsewhere
     raw.close()
+
+
+@pytest.mark.parametrize("ncgate_config", [{"modbus.idle_timeout_s": 0.5}], indirect=True)
+async def test_a_client_that_left_behind_a_backlog_and_a_held_request_frees_its_slot(
+        ncgate_gateway: Gateway) -> None:
+    """Past the backlog's high-water mark reading pauses, so the end of stream was never
+    read: the connection sat in CLOSE-WAIT, a slot of max_clients, for the delay's hour."""
+    server = server_of(ncgate_gateway)
+    server.set_faults([ModbusFault("delay", ms=3_600_000)])
+    leaver = await Raw.open(*ncgate_gateway.modbus_address)
+    await leaver.send(mbap(1, 1, pdu(3, "HH", 1000, 1)) * 3000)  # 36 KB, then gone
+    async with asyncio.timeout(10):
+        while not server.connections:
+            server.connections_changed.clear()
+            await server.connections_changed.wait()
+    leaver.close()
+    async with asyncio.timeout(10):  # the idle check sees it gone (0.5 s), not the hour
+        while server.connections:
+            server.connections_changed.clear()
+            await server.connections_changed.wait()
+    assert len(server.orphans) == 1  # its held read acts at its time, unanswered
