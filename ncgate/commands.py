@@ -55,9 +55,11 @@ COMMANDS: Final[tuple[CommandWord, ...]] = (
                 plc="HOLD", button="Hold"),
     CommandWord(3, "reset", "reset",
                 "alarms cleared, queues, waits and tokens discarded, every process to IDLE "
-                "(of the cell: a faulted PLC restarts too)", plc="RESET", button="Reset"),
+                "(of the cell: a faulted PLC, or plant logic, restarts too)", plc="RESET",
+                button="Reset"),
     CommandWord(4, "restart_plc", "restart the PLC",
-                "the PLC logic starts again after a FAULT; the NC is untouched",
+                "the PLC logic (and the plant's, [plant] logic) starts again after a FAULT; "
+                "the NC is untouched",
                 cell_only=True),
     CommandWord(5, "step", "step",
                 "exactly one more block, then stop (state STEP); refused while an interlock "

@@ -107,6 +107,37 @@ def _pieces(view: str, index: int, value: int) -> list[tuple[int, int, int]]:
     return [(index, 0xFF, word & 0xFF), (index + 1, 0xFF, word >> 8)]
 
 
+def _kept(change: tuple[str, int, str, int], by_byte: dict[tuple[str, int], tuple[int, int]],
+          by_syvar: dict[int, int]) -> int:
+    """What a write stores of ``change``'s value under per-byte (mask, bits) and per-SYVAR
+    values that win over it (forces, holds)."""
+    area, index, view, value = change
+    if area == "SYVAR":
+        return by_syvar.get(index, value)
+    if view == "bit":
+        mask, bits = by_byte.get((area, index >> 3), (0, 0))
+        bit = 1 << (index & 7)
+        return (1 if bits & bit else 0) if mask & bit else value
+    if view == "BY":
+        mask, bits = by_byte.get((area, index), (0, 0))
+        return (value & ~mask) | bits
+    word = value & 0xFFFF
+    lo_mask, lo_bits = by_byte.get((area, index), (0, 0))
+    hi_mask, hi_bits = by_byte.get((area, index + 1), (0, 0))
+    kept = (((word >> 8) & ~hi_mask | hi_bits) << 8) | ((word & ~lo_mask) | lo_bits)
+    return kept - 0x10000 if kept & 0x8000 else kept
+
+
+def _overlap(a: tuple[str, int, str], b: tuple[str, int, str]) -> bool:
+    """Two variables share a bit (SA37 and SA4.BY; SK2.IN and SK3)."""
+    if a[0] != b[0]:
+        return False
+    if a[0] == "SYVAR":
+        return a[1] == b[1]
+    mine = {byte: mask for byte, mask, _ in _pieces(a[2], a[1], 0)}
+    return any(mine.get(byte, 0) & mask for byte, mask, _ in _pieces(b[2], b[1], 0))
+
+
 class IOImage:
     """SA packet (bits), K packet (bytes) and SYVARs (int16), with writers and waits."""
 
@@ -125,12 +156,17 @@ class IOImage:
         self.forced: dict[tuple[str, int, str], int] = {}
         self._force_bytes: dict[tuple[str, int], tuple[int, int]] = {}
         self._force_syvars: dict[int, int] = {}
+        self._forced_bytes: dict[tuple[str, int], tuple[int, int]] = {}  # the forces alone
+        self._forced_syvars: dict[int, int] = {}
+        self._held_masks: dict[tuple[str, int], int] = {}  # the holds alone: bits held
+        self._held_syvars: set[int] = set()
         self.on_overridden: Callable[[list[tuple[str, int, str, int]], str], None] | None = None
         # Held variables: an injected fault (a stuck sensor, a wire break) holds what every
         # reader sees, whatever writes it, as a force does; a force wins over a hold.  The
         # writes of a held variable are kept aside, not stored (write), and the last is
         # given back when the hold ends (unhold).
         self.held: dict[tuple[str, int, str], int] = {}
+        self._hold_writers: dict[tuple[str, int, str], str] = {}  # who placed each hold
         # While something is held: the image as its writers wrote it, holds aside (a copy
         # written beside this one), so that a clear gives back what the writers' last writes
         # make of a held variable -- a wire mended (unhold).
@@ -161,7 +197,8 @@ class IOImage:
     @property
     def writes(self) -> int:
         """The write counter: +1 on every write, changed or not (a writer is stored even
-        when the value is not); a :class:`FrozenImage`'s ``version``."""
+        when the value is not), but one a hold keeps aside whole; a :class:`FrozenImage`'s
+        ``version``."""
         return self._write_number
 
     # -- the image as of now, immutable ----------------------------------------------------
@@ -219,7 +256,13 @@ class IOImage:
         raise ImageAddressError(f"{_name(area, index, view)} is outside the image")
 
     def last_writer(self, area: str, index: int, view: str) -> str | None:
-        """Who last wrote any part of the variable (a bit's byte, a byte's bits, …)."""
+        """Who last wrote any part of the variable (a bit's byte, a byte's bits, …); the
+        fault that holds all of it, while one does."""
+        if self.held and self._absorbed((area, index, view, 0)):
+            covering = [(key, writer) for key, writer in self._hold_writers.items()
+                        if _overlap(key, (area, index, view))]
+            if covering:
+                return covering[-1][1]
         found = [self._writers[k] for k in self._related_keys(area, index, view)
                  if k in self._writers]
         return max(found)[1] if found else None
@@ -249,11 +292,11 @@ class IOImage:
         if self._unheld is not None:
             self._unheld.write(items, writer, checked=True)
         if self.held and not self._placing:
-            # A variable a fault holds takes no write: kept aside (above) for the clear, it
-            # is neither stored, nor heard, nor its writer's -- the trace said "plc wrote 1"
-            # each scan for a chatter the logic never wrote, and a verdict named the PLC.
-            held, forced = self.held, self.forced
-            items = [c for c in items if c[:3] not in held or c[:3] in forced]
+            # A write whose every bit a fault holds takes nothing: kept aside (above) for the
+            # clear, it is neither stored, nor heard, nor its writer's -- the trace said "plc
+            # wrote 1" each scan for a chatter the logic never wrote, and a verdict named the
+            # PLC.  (One that is partly held is stored with the held bits kept.)
+            items = [c for c in items if not self._absorbed(c)]
             if not items:
                 return []
         if self.forced or self.held:
@@ -326,6 +369,11 @@ class IOImage:
         else:
             self.forced.pop((area, index, view), None)
         self._force_index()
+        # What a fault holds under it shows the fault's value again (a write would not put
+        # it back: it is kept aside while held).
+        for (a, i, v), value in list(self.held.items()):
+            if self.read(a, i, v) != value and not self._any_forced(a, i, v):
+                self._place(a, i, v, value, self._hold_writers[(a, i, v)])
 
     def hold(self, area: str, index: int, view: str, value: int, writer: str) -> None:
         """Hold a variable at ``value`` (a fault): stored now, and kept whatever writes it
@@ -334,8 +382,14 @@ class IOImage:
         if self._unheld is None:
             self._unheld = self._copy()
         self.held[(area, index, view)] = value
+        self._hold_writers[(area, index, view)] = writer
         self._force_index()
-        unheld, self._unheld = self._unheld, None  # (the hold's own write is nobody's wish)
+        self._place(area, index, view, value, writer)
+
+    def _place(self, area: str, index: int, view: str, value: int, writer: str) -> None:
+        """A hold's own write: the one a held variable takes, and nobody's wish (not kept
+        aside for the clear)."""
+        unheld, self._unheld = self._unheld, None
         self._placing = True
         try:
             self.write([(area, index, view, value)], writer, checked=True)
@@ -349,6 +403,7 @@ class IOImage:
         before the hold -- is written back now, in the last writer's name, when the image
         shows something else (a wire mended); without, what it shows stays until written."""
         self.held.pop((area, index, view), None)
+        self._hold_writers.pop((area, index, view), None)
         self._force_index()
         unheld = self._unheld
         if not self.held:
@@ -383,60 +438,68 @@ class IOImage:
         return None
 
     def _force_index(self) -> None:
-        self._force_bytes.clear()
-        self._force_syvars.clear()
-        # Holds first, then forces over them: a force wins.
-        for (area, index, view), value in [*self.held.items(), *self.forced.items()]:
+        """Per SA/SK byte and SYVAR what the holds and forces make of a write (holds first,
+        then forces over them: a force wins), and each alone: the holds' masks (what a write
+        cannot change), the forces' (what is told to on_overridden)."""
+        for table in (self._force_bytes, self._force_syvars, self._forced_bytes,
+                      self._forced_syvars, self._held_masks):
+            table.clear()
+        self._held_syvars.clear()
+        for (area, index, view), value in self.held.items():
             if area == "SYVAR":
-                self._force_syvars[index] = value
-                continue
-            for byte, mask, bits in _pieces(view, index, value):
-                old_mask, old_bits = self._force_bytes.get((area, byte), (0, 0))
-                self._force_bytes[(area, byte)] = (old_mask | mask,
-                                                   (old_bits & ~mask) | bits)
+                self._held_syvars.add(index)
+            else:
+                for byte, mask, _ in _pieces(view, index, value):
+                    self._held_masks[(area, byte)] = self._held_masks.get((area, byte), 0) | mask
+        for tables, entries in (((self._force_bytes, self._force_syvars),
+                                 [*self.held.items(), *self.forced.items()]),
+                                ((self._forced_bytes, self._forced_syvars),
+                                 list(self.forced.items()))):
+            by_byte, by_syvar = tables
+            for (area, index, view), value in entries:
+                if area == "SYVAR":
+                    by_syvar[index] = value
+                    continue
+                for byte, mask, bits in _pieces(view, index, value):
+                    old_mask, old_bits = by_byte.get((area, byte), (0, 0))
+                    by_byte[(area, byte)] = (old_mask | mask, (old_bits & ~mask) | bits)
 
     def _apply_forces(self, items: list[tuple[str, int, str, int]],
                       writer: str) -> list[tuple[str, int, str, int]]:
-        """The writes as the forces let them through: forced bits (and SYVARs) are written
-        with their forced values whatever the write said; every write changed so is told to
-        ``on_overridden``."""
+        """The writes as the forces and holds let them through: forced and held bits (and
+        SYVARs) are written with their values whatever the write said; every write a
+        *force* changed is told to ``on_overridden`` (a hold's are not: the fault says why)."""
         out = []
         overridden = []
-        forced_bytes = self._force_bytes
+        both, forces = (self._force_bytes, self._force_syvars), (self._forced_bytes,
+                                                                 self._forced_syvars)
         for change in items:
-            area, index, view, value = change
-            if area == "SYVAR":
-                forced = self._force_syvars.get(index)
-                if forced is not None and value != forced:
-                    overridden.append(change)
-                    change = (area, index, view, forced)
-                out.append(change)
-                continue
-            if view == "bit":
-                mask, bits = forced_bytes.get((area, index >> 3), (0, 0))
-                bit = 1 << (index & 7)
-                if mask & bit and (value << (index & 7)) != (bits & bit):
-                    overridden.append(change)
-                    change = (area, index, view, 1 if bits & bit else 0)
-                out.append(change)
-                continue
-            if view == "BY":
-                mask, bits = forced_bytes.get((area, index), (0, 0))
-                kept = (value & ~mask) | bits
-            else:
-                word = value & 0xFFFF
-                lo_mask, lo_bits = forced_bytes.get((area, index), (0, 0))
-                hi_mask, hi_bits = forced_bytes.get((area, index + 1), (0, 0))
-                kept = (((word >> 8) & ~hi_mask | hi_bits) << 8) | ((word & ~lo_mask) | lo_bits)
-                kept = kept - 0x10000 if kept & 0x8000 else kept
-            if kept != value:
+            kept = _kept(change, *both)
+            if (forces[0] or forces[1]) and _kept(change, *forces) != change[3]:
                 overridden.append(change)
-            out.append((area, index, view, kept))
-        if overridden and self.held:
-            overridden = [c for c in overridden if c[:3] not in self.held]
+            out.append(change if kept == change[3] else (*change[:3], kept))
         if overridden and self.on_overridden is not None:
             self.on_overridden(overridden, writer)
         return out
+
+    def _any_forced(self, area: str, index: int, view: str) -> bool:
+        if area == "SYVAR":
+            return index in self._forced_syvars
+        forced = self._forced_bytes
+        return any(forced.get((area, byte), (0, 0))[0] & mask
+                   for byte, mask, _ in _pieces(view, index, 0))
+
+    def _absorbed(self, change: tuple[str, int, str, int]) -> bool:
+        """Every bit of the write is held by a fault and none forced: it stores nothing."""
+        area, index, view, _ = change
+        if area == "SYVAR":
+            return index in self._held_syvars and index not in self._forced_syvars
+        held, forced = self._held_masks, self._forced_bytes
+        for byte, mask, _ in _pieces(view, index, 0):
+            if held.get((area, byte), 0) & mask != mask or forced.get((area, byte),
+                                                                       (0, 0))[0] & mask:
+                return False
+        return True
 
     def _store(self, area: str, index: int, view: str, value: int, old: int) -> list[_Key]:
         """Store one value; the keys whose storage changed."""

@@ -134,6 +134,14 @@ class FaultTable:
 _RANK: Final = {"delay": 0, "exception": 1, "no_reply": 2}
 
 
+def held_delay(table: FaultTable | None, unit: int, pdu: bytes) -> float:
+    """Seconds the longest delay of ``table`` that matches a request holds it (0: none)."""
+    if table is None:
+        return 0.0
+    return max((row.ms for row in table.rows if row.kind == "delay" and row.matches(unit, pdu)),
+               default=0.0) / 1000
+
+
 def row_status(row: ModbusFault) -> dict[str, object]:
     """A row as the status shows it: its kind and scope, and the key its kind has (an
     exception's ``code``, a delay's ``ms``; a no_reply's neither)."""

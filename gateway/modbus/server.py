@@ -68,7 +68,7 @@ from ncgate.gateway.modbus.codes import (
     TARGET_NO_RESPONSE,
 )
 from ncgate.gateway.modbus.codes import FunctionCode as FC
-from ncgate.gateway.modbus.faults import FaultTable, ModbusFault
+from ncgate.gateway.modbus.faults import FaultTable, ModbusFault, held_delay
 from ncgate.gateway.modbus.framer import (
     FramingError,
     MbapFramer,
@@ -414,6 +414,7 @@ class _Connection(asyncio.Protocol):
         # timer; the requests after it wait in the framer.
         self.held: tuple[Request, float] | None = None
         self.hold_timer: asyncio.Handle | None = None
+        self.held_since = 0.0  # when the held request came
         self.silent = False  # a no_reply fault: this connection answers nothing any more
         self.direct = False  # a whole request in a segment may be answered at once (below)
         self.update_direct()
@@ -505,9 +506,10 @@ class _Connection(asyncio.Protocol):
         if sock is None or not hasattr(socket, "TCP_INFO"):
             return False
         try:
-            return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] == TCP_CLOSE_WAIT
+            state: int = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0]
         except OSError:
             return False
+        return state == TCP_CLOSE_WAIT
 
     def _reading(self) -> None:
         """Read while the client reads its answers and its backlog is small."""
@@ -719,7 +721,8 @@ class _Connection(asyncio.Protocol):
             server.chatter.note(f"{self.who}: no answers any more (a no_reply fault)")
             return None
         seconds = fault.ms / 1000
-        self.held = (request, time.monotonic() + seconds)
+        self.held_since = time.monotonic()
+        self.held = (request, self.held_since + seconds)
         self.direct = False
         self.hold_timer = self.loop.call_later(seconds, self._release)
         return None
@@ -737,9 +740,10 @@ class _Connection(asyncio.Protocol):
         self.held = None
         self.update_direct()
         unit, pdu, _ = request
-        if self in self.server.orphans:  # its client left: it acts, unanswered
+        if self in self.server.orphans:  # its client left: a write acts, unanswered
             self.server.orphans.discard(self)
-            self.handle(unit, pdu, self.source, self.writable)
+            if pdu[:1] and pdu[0] in WRITES:
+                self.handle(unit, pdu, self.source, self.writable)
             return
         if self.transport is None or self.transport.is_closing():
             return
@@ -750,18 +754,21 @@ class _Connection(asyncio.Protocol):
             self._process()
 
     def faults_changed(self, table: FaultTable | None) -> None:
-        """A new fault table: a request a delay holds that no delay of it matches any more
-        is answered now (a clear ends the slowness; it used to wait out its delay)."""
+        """A new fault table: a request a delay holds is answered at its arrival plus the
+        longest delay of the new table that matches it -- at once when none does any more,
+        or that time is past (a clear ends the slowness; it used to wait out its delay)."""
         self.update_direct()
         if self.held is None or self.hold_timer is None:
             return
-        (unit, pdu, _), _ = self.held
-        if table is not None and any(row.kind == "delay" and row.matches(unit, pdu)
-                                     for row in table.rows):
+        request, due = self.held
+        new_due = self.held_since + held_delay(table, request[0], request[1])
+        if new_due == due:
             return
         self.hold_timer.cancel()
-        self.held = (self.held[0], time.monotonic())
-        self.hold_timer = self.loop.call_soon(self._release)  # (after the caller's turn)
+        self.held = (request, new_due)
+        wait = new_due - time.monotonic()
+        self.hold_timer = (self.loop.call_later(wait, self._release) if wait > 0
+                           else self.loop.call_soon(self._release))  # (after the caller)
 
     def _send(self, answers: list[bytes]) -> None:
         assert self.transport is not None

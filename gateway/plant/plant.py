@@ -490,6 +490,13 @@ class Plant:
         elif fault.kind in VARIABLE_FAULTS:
             image = self.runtime.image
             for var in fault.variables:
+                still = [f for f in self.faults if f.kind in VARIABLE_FAULTS
+                         and any(v.address == var.address for v in f.variables)]
+                if still:  # another fault holds it too (by another name: clamp.extended
+                    f = still[-1]  # and SA30): its value again, not the writers'
+                    image.hold(*var.address, self._held_value(f, var),
+                               f"fault {f.kind} {f.target}")
+                    continue
                 # What no model drives shows again what its writers last wrote (the PLC's
                 # output as it set it, a sensor as the script or a client wrote it), in
                 # that writer's name: a wire mended.  A model's, below.

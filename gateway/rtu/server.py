@@ -41,7 +41,7 @@ from typing import Any, Final, cast
 
 from ncgate.config import ModbusConfig, Parity
 from ncgate.gateway.errors import ListenError, listen_error
-from ncgate.gateway.modbus.faults import FaultTable, ModbusFault, row_status
+from ncgate.gateway.modbus.faults import FaultTable, ModbusFault, held_delay, row_status
 from ncgate.gateway.modbus.framer import Request, RtuFramer, exception_pdu
 from ncgate.gateway.modbus.map import ModbusMap
 from ncgate.gateway.modbus.server import (
@@ -143,6 +143,7 @@ class RtuLink:
         self.turn: asyncio.Handle | None = None
         self.held: tuple[Request, asyncio.Handle] | None = None  # a delay fault's
         self.orphan = False  # closed with a held request, which acts at its time
+        self.held_since = 0.0  # when the held request came
         self.silent = False  # a no_reply fault caught a request: nothing is answered
         self.backlogged = False
         self.closed = False
@@ -238,6 +239,7 @@ class RtuLink:
                 return
             timer = self.loop.call_later(fault.ms / 1000, self._release)
             self.held = (request, timer)
+            self.held_since = time.monotonic()
             return
         self._execute(request)
 
@@ -283,12 +285,11 @@ class RtuLink:
         self.silent = False
         if self.held is None:
             return
-        (unit, pdu, _), timer = self.held
-        if table is not None and any(row.kind == "delay" and row.matches(unit, pdu)
-                                     for row in table.rows):
-            return
-        timer.cancel()
-        self.held = (self.held[0], self.loop.call_soon(self._release))
+        request, timer = self.held
+        wait = self.held_since + held_delay(table, request[0], request[1]) - time.monotonic()
+        timer.cancel()  # (at the arrival plus the longest delay that matches now)
+        self.held = (request, self.loop.call_later(wait, self._release) if wait > 0
+                     else self.loop.call_soon(self._release))
 
     def close(self, gone: bool = False) -> None:
         """``gone``: the client left (not the gateway stopping): a write a delay holds acts
@@ -760,7 +761,8 @@ class RtuServer:
             return
         self._faults.set(faults)
         self.fault_table = self._faults if self._faults.rows else None
-        for link in self.links():
+        orphans = list(self.tcp.orphans) if self.tcp is not None else []
+        for link in [*self.links(), *orphans]:  # (a clear reaches a left client's write too)
             link.faults_changed(self.fault_table)
 
     @property

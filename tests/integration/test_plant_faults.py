@@ -181,6 +181,20 @@ def test_a_replaced_hold_gives_back_the_writers_value_not_the_first_holds(
     assert _edges(result.events, "SYVAR5") == [(0.0, 7), (0.1, 3), (0.2, -1), (0.3, 7)]
 
 
+def test_two_faults_on_one_variable_by_two_names_hold_it_until_both_are_cleared(
+        cell: Path) -> None:
+    """stuck clamp.extended and stuck SA30 hold one variable: the first's clear released
+    it (the image kept one hold a variable), and the program's WAI SA30=1 ended while the
+    other was still listed."""
+    result = _run(cell, VALVE + '[[fault]]\ntarget = "clamp.extended"\nkind = "stuck"\n'
+                  'value = 0\nat = 0.1\n[[fault]]\ntarget = "clamp_closed"\nkind = "stuck"\n'
+                  'value = 1\nat = 0.2\nfor_s = 0.1\n', until=2.0)
+    # 1 from the second at 0.2; at its end (0.3) the first's 0 again, for good.
+    assert _edges(result.events, "SA30") == [(0.0, 0), (0.2, 1), (0.3, 0)]
+    resumes = [e for e in result.events if e["event"] == "resume"]
+    assert [(e["t"], e["writer"]) for e in resumes] == [(0.2, "fault stuck clamp_closed")]
+
+
 def test_wire_break_reads_zero_or_the_live_zero(cell: Path) -> None:
     result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR1=1000"\n'
                   '[[fault]]\ntarget = "SYVAR2"\nkind = "wire_break"\nlive_zero = -4000\n'
@@ -399,7 +413,9 @@ async def test_the_kits_wait_state_hears_a_change_that_writes_nothing(cell: Path
     from ncgate.gateway.errors import GatewayError
     from ncgate.gateway.testing.plant_kit import PlantKit
 
-    config = ncgate_test_config(cell, **{"modbus.port": 0})
+    # A twentieth of real time: the fault comes well inside the stroke (6 s of wall time),
+    # however busy the machine.
+    config = ncgate_test_config(cell, **{"modbus.port": 0, "nc.time_scale": 0.05})
     async with Gateway(config) as gw:
         plant = PlantKit(gw)
         with pytest.raises(ValueError, match="a cylinder is never 'extendd'"):

@@ -251,3 +251,21 @@ async def test_a_client_that_left_behind_a_backlog_and_a_held_request_frees_its_
             server.connections_changed.clear()
             await server.connections_changed.wait()
     assert len(server.orphans) == 1  # its held read acts at its time, unanswered
+
+
+async def test_a_held_request_is_due_at_its_arrival_plus_the_longest_delay_now_in_force(
+        ncgate_gateway: Gateway) -> None:
+    """The 1 h row ends (its for_s) and a 10 ms one stays: the request waited the hour,
+    since a delay still matched it."""
+    server = server_of(ncgate_gateway)
+    server.set_faults([ModbusFault("delay", ms=3_600_000, unit=1), ModbusFault("delay", ms=10)])
+    raw, other = (await Raw.open(*ncgate_gateway.modbus_address),
+                  await Raw.open(*ncgate_gateway.modbus_address))
+    await raw.send(mbap(1, 1, pdu(4, "HH", 0, 2)))
+    answer = asyncio.create_task(raw.recv(timeout_s=10))
+    await other.ask(pdu(4, "HH", 0, 2), unit=7)  # (10 ms late: the loop read the first)
+    assert [c.held is not None for c in server.connections].count(True) == 1
+    server.set_faults([ModbusFault("delay", ms=10)])
+    assert await answer == (1, 1, bytes.fromhex("04 04 0001 0004"))
+    raw.close()
+    other.close()

@@ -126,3 +126,28 @@ def test_rtu_without_a_serial_address_is_a_config_error(cell: Path) -> None:
                                                    "modbus.rtu_tcp.port": 0})
     assert "modbus.rtu.unit_ids: missing: modbus.unit_ids ([255]) has no serial address" \
         in str(caught.value)
+
+
+async def test_rtu_over_tcp_a_delayed_write_acts_after_its_client_left_and_at_a_clear(
+        cell: Path) -> None:
+    """As on Modbus TCP: a write a delay holds acts at its time when its client has gone
+    (it was dropped), and a clear brings that time to now (it waited the hour)."""
+    async with await rtu_tcp_gateway(cell) as gw:
+        listener = gw.adapters["modbus_rtu"].tcp
+        gw.fault("modbus", "delay", ms=3_600_000)
+        _, writer = await connect(gw)
+        writer.write(frame("01 06 03E9 04D2"))  # SYVAR1 = 1234
+        await writer.drain()
+        async with asyncio.timeout(10):  # held: the frame is whole after the 20 ms gap
+            while not any(c.link is not None and c.link.held for c in listener.connections):
+                await asyncio.sleep(0.01)
+        writer.close()
+        await writer.wait_closed()
+        await listener.all_closed.wait()
+        assert len(listener.orphans) == 1 and gw.image.syvar[1] == 0
+        stored = asyncio.Event()
+        gw.image.subscribe(lambda changes, who: stored.set() if gw.image.syvar[1] else None)
+        gw.clear_fault("modbus")
+        async with asyncio.timeout(10):
+            await stored.wait()
+        assert gw.image.syvar[1] == 1234

@@ -247,3 +247,36 @@ def test_a_watch_counts_the_writes_that_changed_what_it_watches() -> None:
     area.close()
     image.write([("SK", 7, "BY", 4)], "x")
     assert area.generation == 1
+
+
+def test_a_released_force_over_a_held_variable_shows_the_holds_value_again() -> None:
+    """A write of a held variable is kept aside, so after the force's release nothing put
+    the fault's value back: SA40 read the released force's 1 under a stuck-at-0."""
+    image = IOImage()
+    image.hold("SA", 40, "bit", 0, "fault stuck SA40")
+    image.force("SA", 40, "bit", 1, "web")
+    assert image.read("SA", 40, "bit") == 1  # a force wins over a fault
+    image.unforce("SA", 40, "bit")
+    assert image.read("SA", 40, "bit") == 0
+    assert image.last_writer("SA", 40, "bit") == "fault stuck SA40"
+    image.write([("SA", 40, "bit", 1)], "plc")
+    assert image.read("SA", 40, "bit") == 0
+
+
+def test_a_write_of_other_views_of_held_bits_keeps_them_and_names_no_writer_for_them(
+        ) -> None:
+    image = IOImage()
+    heard: list[tuple[list[object], str]] = []
+    image.subscribe(lambda changes, writer: heard.append((list(changes), writer)))
+    told: list[object] = []
+    image.on_overridden = lambda changes, writer: told.append((changes, writer))
+    image.hold("SA", 37, "bit", 0, "fault stuck SA37")  # byte 4, bit 5
+    image.write([("SA", 4, "BY", 0xFF)], "plc")  # partly held: stored with the bit kept
+    assert image.read("SA", 4, "BY") == 0xDF and told == []  # not a force's: no "forced"
+    assert image.last_writer("SA", 37, "bit") == "fault stuck SA37"
+    assert image.last_writer("SA", 36, "bit") == "plc"
+    image.hold("SK", 2, "IN", 300, "fault stuck SK2.IN")
+    heard.clear()
+    image.write([("SK", 2, "BY", 7), ("SK", 3, "BY", 9)], "modbus")  # all held: nothing
+    assert heard == [] and image.read("SK", 2, "IN") == 300
+    assert image.last_writer("SK", 3, "BY") == "fault stuck SK2.IN"
