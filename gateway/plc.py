@@ -24,7 +24,6 @@ import logging
 import math
 import sqlite3
 import threading
-import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -474,10 +473,6 @@ class LogicWatcher:
 LEAP_SCANS = 1 << 16
 
 
-# The scan drivers of each engine (the PLC's and the plant logic's), for the stall rule.
-_DRIVERS: weakref.WeakKeyDictionary[Engine, list[ScanDriver]] = weakref.WeakKeyDictionary()
-
-
 class ScanDriver:
     """Runs the scan every ``scan_ms`` as an engine timer."""
 
@@ -508,14 +503,15 @@ class ScanDriver:
         self.on_skip: Callable[[int, int], None] | None = None
         self.skips: dict[int, int] = {}
         self._timer: Timer | None = engine.call_at(self.t0, self._scan)
-        _DRIVERS.setdefault(engine, []).append(self)
+        engine.periodic.append(self)
 
     def _only_scans_left(self) -> bool:
         """No timer is armed but the other scan drivers' (the PLC's beside the plant's
         logic): each saw the other's next scan as something still to come, and a stalled
         closed run with both never ended."""
-        others = sum(1 for d in _DRIVERS.get(self.engine, ()) if d is not self
-                     and d._timer is not None and d._timer.callback is not None)
+        others = sum(1 for d in self.engine.periodic if isinstance(d, ScanDriver)
+                     and d is not self and d._timer is not None
+                     and d._timer.callback is not None)
         return self.engine.live_timers == others
 
     def _scan(self) -> None:
@@ -653,6 +649,8 @@ class ScanDriver:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+        if self in self.engine.periodic:
+            self.engine.periodic.remove(self)
         self.runtime.stop()
 
 

@@ -147,6 +147,9 @@ class Engine:
         # Hooks for drivers and the gateway.
         self.on_kick: Callable[[], None] | None = None  # work became runnable from outside
         self.on_timer: Callable[[float], None] | None = None  # a timer was armed
+        # The periodic tasks on this engine's timers (the ST tasks' scan drivers,
+        # gateway/plc.py): a closed run is a stall when nothing but they is left.
+        self.periodic: list[Any] = []
         # The driver's say on when a turn has taken long enough (the wall clock's: timers
         # differ in weight -- a dwell's is a few blocks, a plant model's a write through the
         # door -- so a count of them does not bound a turn); None: only ``blocks`` does.

@@ -454,6 +454,25 @@ def test_a_cell_with_plc_and_plant_logic_that_stands_still_ends_as_a_stall(
     assert result.runtime.engine.now < 3.0
 
 
+def test_a_sim_with_st_tasks_leaves_nothing_alive_after_it(tmp_path: Path) -> None:
+    """The scan drivers' registry (for the stall rule) kept every engine that ran an ST
+    task alive, with its image and trace: a sweep's worker grew with every variant."""
+    import gc
+    import weakref
+
+    (tmp_path / "tank.st").write_text(PLANT_ST)
+    (tmp_path / "O1.nc").write_text("N10 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\n[plant]\nlogic = "tank.st"\n')
+    engines = []
+    for _ in range(3):
+        result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None))
+        engines.append(weakref.ref(result.runtime.engine))
+        del result
+    gc.collect()
+    assert [e() for e in engines] == [None, None, None]
+
+
 def test_sim_until_runs_on_for_the_plant_logics_cycle_start(tmp_path: Path) -> None:
     """plant.md: the plant logic's NC outputs are its own; with --until a closed run
     stopped when every program had ended, before the plant's NC.START at 1 s (run obeyed

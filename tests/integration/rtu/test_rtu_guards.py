@@ -134,13 +134,17 @@ async def test_rtu_over_tcp_a_delayed_write_acts_after_its_client_left_and_at_a_
     (it was dropped), and a clear brings that time to now (it waited the hour)."""
     async with await rtu_tcp_gateway(cell) as gw:
         listener = gw.adapters["modbus_rtu"].tcp
-        gw.fault("modbus", "delay", ms=3_600_000)
+        gw.fault("modbus", "delay", ms=3_600_000, addresses=[1001, 1001])
         _, writer = await connect(gw)
         writer.write(frame("01 06 03E9 04D2"))  # SYVAR1 = 1234
         await writer.drain()
-        async with asyncio.timeout(10):  # held: the frame is whole after the 20 ms gap
-            while not any(c.link is not None and c.link.held for c in listener.connections):
-                await asyncio.sleep(0.01)
+        # Another client's request, answered after its own 20 ms gap: the first frame's
+        # gap, armed before, has passed by then, and the write is held.
+        other_reader, other = await connect(gw)
+        other.write(frame("01 04 0001 0001"))
+        assert await other_reader.readexactly(7) == frame("01 04 02 0004")
+        assert sum(1 for c in listener.connections if c.link is not None and c.link.held) == 1
+        other.close()
         writer.close()
         await writer.wait_closed()
         await listener.all_closed.wait()
