@@ -307,12 +307,21 @@ def main() -> None:
     # Ctrl-C in a terminal reaches the whole process group: the gateway stops this process
     # itself, by its stdin, after its own clean shutdown.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
-    # Nice 10, as the program checker's child (interpreter/child.py: weight 110 beside the
-    # gateway's 1024).
+    below_the_gateway()
+    asyncio.run(_serve(out))
+
+
+def below_the_gateway() -> None:
+    """When the machine is busy, the cell's scan and pollers come first: Linux's SCHED_IDLE
+    (it runs on what the others leave; one of theirs that wakes takes the core at once --
+    at nice 10 it waited for the scheduler's next chance, and a poller's p99 under 10
+    dashboards doubled as a bare server's did), else nice 10, as the program checker's
+    child (interpreter/child.py).  Every thread started after inherits it."""
     if hasattr(os, "nice"):  # (POSIX)
         os.nice(NICE)
-    asyncio.run(_serve(out))
+    if hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE"):
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
 
 
 async def _serve(out: Any) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
+import os
 import re
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
@@ -348,3 +349,17 @@ async def test_a_flood_of_refused_requests_is_a_few_lines_of_the_servers_log(
         said += 1 if held is None or held[2] else int(held[1])
         said += int(held[2]) if held is not None and held[2] else 0
     assert said == 40, lines
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux's SCHED_IDLE")
+async def test_the_server_process_runs_on_what_the_gateway_leaves() -> None:
+    """At nice 10 the server, busy with ten dashboards, delayed a poller's answers as much
+    as a bare server's (p99 2.4x quiet in bench/storm.py's OPC UA phase): it takes the
+    cores only when nothing else wants them (SCHED_IDLE), every thread of it."""
+    async with gateway() as gw:
+        process = gw.adapters["opcua"]._process
+        assert process is not None
+        tasks = os.listdir(f"/proc/{process.pid}/task")
+        assert tasks and all(os.sched_getscheduler(int(t)) == os.SCHED_IDLE for t in tasks)
+        assert os.getpriority(os.PRIO_PROCESS, process.pid) == 10
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the gateway's own: untouched
