@@ -37,6 +37,7 @@ from ncgate.gateway.plc import (
     OnlineChange,
     ReloadOutcome,
     ScanDriver,
+    prepare_logic,
     start_plant_logic,
     start_plc,
 )
@@ -176,6 +177,9 @@ class Gateway:
         stack.callback(self.stop_record)
         if self._record_path is not None:
             self.start_record(self._record_path)
+        # The logic read and compiled before anything serves: an error in it stops the
+        # gateway before a PLC connected sees the CANopen node boot (and go again).
+        prepared = {section: prepare_logic(self.config, section) for section in ("plc", "plant")}
         # Each enabled adapter of the registry, in its order: its module is imported only
         # now, and only if it is enabled (a cell without a console never loads aiohttp).
         for name in ADAPTERS:
@@ -192,7 +196,7 @@ class Gateway:
         # The PLC scans from here: its first scan is due once the fieldbus is up, not while
         # the adapters start (which would make the next scans late from the start).
         plc = start_plc(self.config, runtime, self.door, closed=False, wall=driver.now,
-                        cold=self._cold)
+                        cold=self._cold, prepared=prepared["plc"])
         if plc is not None:
             self._plc = plc
             plc[1].on_skip = self._skipped("plc")
@@ -208,7 +212,7 @@ class Gateway:
         stack.callback(plant.close)
         plant.fieldbus_listeners.append(self._fieldbus_faults)
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
-                                        wall=driver.now)
+                                        wall=driver.now, prepared=prepared["plant"])
         if plant_logic is not None:
             plant_logic[1].on_skip = self._skipped("plant")
             stack.callback(plant_logic[1].close)

@@ -654,24 +654,46 @@ class ScanDriver:
         self.runtime.stop()
 
 
+@dataclass(frozen=True, slots=True)
+class Prepared:
+    """A section's logic read and compiled, its PROGRAMs chosen (:func:`prepare_logic`)."""
+
+    sources: Sources
+    logic: Logic
+    order: tuple[str, ...]
+
+
+def prepare_logic(config: Config, section: str, sources: Sources | None = None
+                  ) -> Prepared | None:
+    """``section``'s (``plc``, ``plant``) logic read (or ``sources``: a replay's), compiled
+    and its PROGRAMs chosen: LogicError or ConfigError now.  ``run`` prepares both before its
+    fieldbus serves: a PLC connected saw the CANopen node boot, then go, for a typo."""
+    files = getattr(config, section).logic
+    if not files:
+        return None
+    if sources is None:
+        sources = read_sources(files, config, section)
+    logic = load_logic(files, config, sources)
+    return Prepared(sources, logic, tuple(program_order(logic, config, section)))
+
+
 def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
               wall: Callable[[], float] | None = None, cold: bool = False,
-              sources: Sources | None = None, leap: bool = False
-              ) -> tuple[PlcRuntime, ScanDriver] | None:
+              sources: Sources | None = None, leap: bool = False,
+              prepared: Prepared | None = None) -> tuple[PlcRuntime, ScanDriver] | None:
     """The PLC logic of ``[plc] logic`` running on the engine's clock, or None without it.
 
     RETAIN values are kept in ``plc.retain_file`` in ``run`` only: a simulation (``closed``)
     starts from the initial values every time, so that it stays deterministic.
     ``sources``: the files' content to load instead of the files (a replay's, recorded).
     ``leap``: every input comes from an engine timer (``sim``): still scans are leapt over
-    (:meth:`ScanDriver._leap`)."""
+    (:meth:`ScanDriver._leap`).  ``prepared``: :func:`prepare_logic`'s, done already."""
     plc = config.plc
-    if not plc.logic:
+    if prepared is None:
+        prepared = prepare_logic(config, "plc", sources)
+    if prepared is None:
         return None
-    if sources is None:
-        sources = read_sources(plc.logic, config)
-    logic = load_logic(plc.logic, config, sources)
-    order = program_order(logic, config)
+    sources, logic, order = prepared.sources, prepared.logic, list(prepared.order)
     store = None
     if not closed and any(v.retain for table in logic.programs.values()
                           for v in table.values()):
@@ -698,20 +720,21 @@ def start_plc(config: Config, runtime: Runtime, door: Door, *, closed: bool,
 
 
 def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: bool,
-                      wall: Callable[[], float] | None = None, leap: bool = False
+                      wall: Callable[[], float] | None = None, leap: bool = False,
+                      prepared: Prepared | None = None
                       ) -> tuple[PlcRuntime, ScanDriver] | None:
     """The plant's own logic (``[plant] logic``): a second ST task on the engine's clock,
     every ``plant.scan_ms``, its image writes attributed to ``plant`` and its NC outputs to
     ``plant FILE:LINE``; no RETAIN (a machine's physics has no memory to keep), no online
     change.  None without it."""
     plant = config.plant
-    if not plant.logic:
+    if prepared is None:
+        prepared = prepare_logic(config, "plant")
+    if prepared is None:
         return None
-    sources = read_sources(plant.logic, config, "plant")
-    logic = load_logic(plant.logic, config, sources)
+    sources, logic, order = prepared.sources, prepared.logic, list(prepared.order)
     for warning in retain_in_plant([parsed_logic(path, text) for path, text in sources.items()]):
         log.warning("%s", warning.render())
-    order = program_order(logic, config, "plant")
     engine = runtime.engine
     logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door, SourceKind.PLANT),
                                order, config.plc.loop_limit,

@@ -101,6 +101,22 @@ END_PROGRAM
 """
 
 
+@pytest.mark.parametrize("section", ["plc", "plant"])
+async def test_logic_that_does_not_compile_stops_the_gateway_before_anything_serves(
+        tmp_path: Path, section: str, caplog: pytest.LogCaptureFixture) -> None:
+    """A PLC connected saw the CANopen node boot (and the Modbus server answer), then go,
+    for a typo in the ST: the logic is compiled before the first adapter starts."""
+    (tmp_path / "logic.st").write_text("PROGRAM main\nVAR x : INT; END_VAR\nx := x + ;\n"
+                                       "END_PROGRAM\n")
+    (tmp_path / "ncgate.toml").write_text(f'[{section}]\nlogic = "logic.st"\n')
+    from ncgate.plc.st.diagnostics import LogicError
+
+    with caplog.at_level("INFO"), pytest.raises(LogicError, match="logic.st:3:10"):
+        async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml")):
+            pass
+    assert "CANopen node" not in caplog.text and "Modbus" not in caplog.text, caplog.text
+
+
 async def test_a_fault_is_raised_and_cleared_over_modbus(tmp_path: Path) -> None:
     (tmp_path / "logic.st").write_text(FAULTY)
     (tmp_path / "ncgate.toml").write_text('[plc]\nlogic = "logic.st"\n[canopen]\n'
