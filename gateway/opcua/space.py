@@ -307,21 +307,25 @@ def main() -> None:
     # Ctrl-C in a terminal reaches the whole process group: the gateway stops this process
     # itself, by its stdin, after its own clean shutdown.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    below_the_gateway()
+    # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
+    # Nice 10 while it starts, as the program checker's child (interpreter/child.py);
+    # below_the_gateway once it serves.
+    if hasattr(os, "nice"):  # (POSIX)
+        os.nice(NICE)
     asyncio.run(_serve(out))
 
 
 def below_the_gateway() -> None:
-    """When the machine is busy, the cell's scan and pollers come first: Linux's SCHED_IDLE
-    (it runs on what the others leave; one of theirs that wakes takes the core at once --
-    at nice 10 it waited for the scheduler's next chance, and a poller's p99 under 10
-    dashboards doubled as a bare server's did), else nice 10, as the program checker's
-    child (interpreter/child.py).  Every thread started after inherits it."""
-    if hasattr(os, "nice"):  # (POSIX)
-        os.nice(NICE)
-    if hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE"):
+    """Once serving: Linux's SCHED_IDLE, every thread of the process (it runs on what the
+    others leave, and one of theirs that wakes takes the core at once -- at nice 10 it held
+    the core a while, and a poller's p99 under 10 dashboards doubled, as a bare server's
+    did); elsewhere it stays at nice 10.  Not while it starts: asyncua's init is a second of
+    CPU, and on a machine whose cores are full it took longer than a start may."""
+    if not (hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE")):
+        return
+    for task in os.listdir("/proc/self/task") if os.path.isdir("/proc/self/task") else ["0"]:
         with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            os.sched_setscheduler(int(task), os.SCHED_IDLE, os.sched_param(0))
 
 
 async def _serve(out: Any) -> None:
@@ -420,6 +424,7 @@ class Space:
         finally:
             starting.setLevel(level)
         try:
+            below_the_gateway()  # (before ready: the gateway's start sees it done)
             self.link.send(("ready", int(server.bserver.port or 0)))  # type: ignore[union-attr]
             while True:
                 try:
