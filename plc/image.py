@@ -124,11 +124,13 @@ def _kept(change: tuple[str, int, str, int], by_byte: dict[tuple[str, int], tupl
     word = value & 0xFFFF
     lo_mask, lo_bits = by_byte.get((area, index), (0, 0))
     hi_mask, hi_bits = by_byte.get((area, index + 1), (0, 0))
-    kept = (((word >> 8) & ~hi_mask | hi_bits) << 8) | ((word & ~lo_mask) | lo_bits)
+    # (Each byte on its own: the low byte's masks once worked on the whole word, and a word
+    # write set bits of a held or forced high byte.)
+    kept = (((word >> 8) & ~hi_mask | hi_bits) << 8) | ((word & 0xFF & ~lo_mask) | lo_bits)
     return kept - 0x10000 if kept & 0x8000 else kept
 
 
-def _overlap(a: tuple[str, int, str], b: tuple[str, int, str]) -> bool:
+def overlap(a: tuple[str, int, str], b: tuple[str, int, str]) -> bool:
     """Two variables share a bit (SA37 and SA4.BY; SK2.IN and SK3)."""
     if a[0] != b[0]:
         return False
@@ -259,10 +261,10 @@ class IOImage:
         """Who last wrote any part of the variable (a bit's byte, a byte's bits, …); the
         fault that holds all of it, while one does."""
         if self.held and self._absorbed((area, index, view, 0)):
-            covering = [(key, writer) for key, writer in self._hold_writers.items()
-                        if _overlap(key, (area, index, view))]
+            covering = [writer for key, writer in self._hold_writers.items()
+                        if overlap(key, (area, index, view))]
             if covering:
-                return covering[-1][1]
+                return covering[-1]  # (the latest placed: the one whose bits show)
         found = [self._writers[k] for k in self._related_keys(area, index, view)
                  if k in self._writers]
         return max(found)[1] if found else None
@@ -289,9 +291,14 @@ class IOImage:
         if not checked:
             for area, index, view, value in items:
                 self.check(area, index, view, value)
-        if self._unheld is not None:
-            self._unheld.write(items, writer, checked=True)
-        if self.held and not self._placing:
+        placing = self._placing
+        if self._unheld is not None and not placing:
+            # (As the forces let it through: what a force refused is nobody's wish either.)
+            forced = (self._forced_bytes, self._forced_syvars)
+            self._unheld.write([c if not (forced[0] or forced[1]) else
+                                (*c[:3], _kept(c, *forced)) for c in items], writer,
+                               checked=True)
+        if self.held and not placing:
             # A write whose every bit a fault holds takes nothing: kept aside (above) for the
             # clear, it is neither stored, nor heard, nor its writer's -- the trace said "plc
             # wrote 1" each scan for a chatter the logic never wrote, and a verdict named the
@@ -371,9 +378,7 @@ class IOImage:
         self._force_index()
         # What a fault holds under it shows the fault's value again (a write would not put
         # it back: it is kept aside while held).
-        for (a, i, v), value in list(self.held.items()):
-            if self.read(a, i, v) != value and not self._any_forced(a, i, v):
-                self._place(a, i, v, value, self._hold_writers[(a, i, v)])
+        self._reassert_holds()
 
     def hold(self, area: str, index: int, view: str, value: int, writer: str) -> None:
         """Hold a variable at ``value`` (a fault): stored now, and kept whatever writes it
@@ -381,39 +386,62 @@ class IOImage:
         self.check(area, index, view, value)
         if self._unheld is None:
             self._unheld = self._copy()
-        self.held[(area, index, view)] = value
-        self._hold_writers[(area, index, view)] = writer
+        key = (area, index, view)
+        # The latest hold wins where holds overlap (and last_writer names it): placed again
+        # (a chatter's toggle, a fault replaced) it moves to the end.
+        self.held.pop(key, None)
+        self._hold_writers.pop(key, None)
+        self.held[key] = value
+        self._hold_writers[key] = writer
         self._force_index()
         self._place(area, index, view, value, writer)
 
     def _place(self, area: str, index: int, view: str, value: int, writer: str) -> None:
-        """A hold's own write: the one a held variable takes, and nobody's wish (not kept
-        aside for the clear)."""
-        unheld, self._unheld = self._unheld, None
+        """The image's own write (a hold placed, a value given back): through the forces and
+        holds, never kept aside nor absorbed, no ``forced`` event."""
         self._placing = True
         try:
             self.write([(area, index, view, value)], writer, checked=True)
         finally:
-            self._unheld = unheld
             self._placing = False
+
+    def _reassert_holds(self) -> None:
+        """Every hold shows what the holds and forces make of it (after a force or a hold
+        over some of its bits went: nothing else puts it back, its writes being kept
+        aside)."""
+        both = (self._force_bytes, self._force_syvars)
+        for (a, i, v), value in list(self.held.items()):
+            if self.read(a, i, v) != _kept((a, i, v, value), *both):
+                self._place(a, i, v, value, self._hold_writers[(a, i, v)])
+
+    def _stamp(self, area: str, index: int, view: str, writer: str) -> None:
+        """``writer`` as the variable's last, its value unchanged (nothing to trace)."""
+        if self._frozen is not None:
+            self._freeze()
+        self._write_number += 1
+        for key in self._keys(area, index, view):
+            self._writers[key] = (self._write_number, writer)
 
     def unhold(self, area: str, index: int, view: str, give_back: str | None = None) -> None:
         """Release a held variable.  With ``give_back`` (a writer's name for a variable
         nobody wrote), what its writers' writes make of it -- their last, or what it held
-        before the hold -- is written back now, in the last writer's name, when the image
-        shows something else (a wire mended); without, what it shows stays until written."""
+        before the hold -- is written back now, in the last writer's name (or, the same
+        value, that writer named again); without, what it shows stays until written.  Other
+        holds over some of its bits show theirs again either way."""
         self.held.pop((area, index, view), None)
         self._hold_writers.pop((area, index, view), None)
         self._force_index()
         unheld = self._unheld
         if not self.held:
             self._unheld = None
-        if unheld is None or give_back is None:
-            return
-        value = unheld.read(area, index, view)
-        if value != self.read(area, index, view):
+        if unheld is not None and give_back is not None:
+            value = unheld.read(area, index, view)
             writer = unheld.last_writer(area, index, view) or give_back
-            self.write([(area, index, view, value)], writer, checked=True)
+            if value != self.read(area, index, view):
+                self._place(area, index, view, value, writer)
+            else:
+                self._stamp(area, index, view, writer)
+        self._reassert_holds()
 
     def _copy(self) -> IOImage:
         """A copy of the values and writers (no waits, listeners, forces or holds)."""
@@ -478,16 +506,9 @@ class IOImage:
             if (forces[0] or forces[1]) and _kept(change, *forces) != change[3]:
                 overridden.append(change)
             out.append(change if kept == change[3] else (*change[:3], kept))
-        if overridden and self.on_overridden is not None:
-            self.on_overridden(overridden, writer)
+        if overridden and self.on_overridden is not None and not self._placing:
+            self.on_overridden(overridden, writer)  # (the image's own writes: none)
         return out
-
-    def _any_forced(self, area: str, index: int, view: str) -> bool:
-        if area == "SYVAR":
-            return index in self._forced_syvars
-        forced = self._forced_bytes
-        return any(forced.get((area, byte), (0, 0))[0] & mask
-                   for byte, mask, _ in _pieces(view, index, 0))
 
     def _absorbed(self, change: tuple[str, int, str, int]) -> bool:
         """Every bit of the write is held by a fault and none forced: it stores nothing."""

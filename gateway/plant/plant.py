@@ -38,7 +38,7 @@ from ncgate.gateway.plant.models import KINDS, Model
 from ncgate.inputs import ClearFault, Fault, Source, SourceKind, Var, Writes
 from ncgate.interpreter.engine.timers import Timer
 from ncgate.interpreter.settings import AXES
-from ncgate.plc.image import ImageValueError, value_range
+from ncgate.plc.image import ImageValueError, overlap, value_range
 
 if TYPE_CHECKING:
     from ncgate.config.plant import PlantModelConfig
@@ -500,7 +500,8 @@ class Plant:
                 # What no model drives shows again what its writers last wrote (the PLC's
                 # output as it set it, a sensor as the script or a client wrote it), in
                 # that writer's name: a wire mended.  A model's, below.
-                image.unhold(*var.address, give_back=None if var.address in self._drives
+                driven = any(overlap(var.address, address) for address in self._drives)
+                image.unhold(*var.address, give_back=None if driven
                              else f"fault clear {who}")
             for model in self.models.values():  # what the models drive is theirs again
                 self._write(model, shown=True)
@@ -539,7 +540,11 @@ class Plant:
             return
         image = self.runtime.image
         who = f"fault chatter {fault.target}"
+        later = self.faults[self.faults.index(fault) + 1:]
         for var in fault.variables:
+            if any(f.kind in VARIABLE_FAULTS and any(overlap(var.address, v.address)
+                                                     for v in f.variables) for f in later):
+                continue  # a fault injected after it holds it: the latest wins
             value = image.read(*var.address)
             low, high = value_range(var.area, var.view)
             image.hold(*var.address, (1 - value) if var.view == "bit" else (

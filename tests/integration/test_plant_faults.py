@@ -195,6 +195,32 @@ def test_two_faults_on_one_variable_by_two_names_hold_it_until_both_are_cleared(
     assert [(e["t"], e["writer"]) for e in resumes] == [(0.2, "fault stuck clamp_closed")]
 
 
+def test_a_chatter_gives_way_to_a_fault_injected_after_it_on_the_same_variable(
+        cell: Path) -> None:
+    """The chatter's timer placed its toggle over a stuck injected later under another
+    name: SA30 went on toggling while the why-record named the stuck fault."""
+    (cell.parent / "O1.nc").write_text("N10 (DLY,1)\nN20 M30\n")  # the cell runs on
+    result = _run(cell, '[[fault]]\ntarget = "SA30"\nkind = "chatter"\nperiod_ms = 50\n'
+                  'at = 0.1\n[[fault]]\ntarget = "clamp.extended"\nkind = "stuck"\nvalue = 0\n'
+                  'at = 0.22\n', until=0.6)
+    assert _edges(result.events, "SA30") == [(0.0, 0), (0.1, 1), (0.15, 0), (0.2, 1),
+                                             (0.22, 0)]
+
+
+def test_a_byte_fault_over_a_models_outputs_gives_them_back_to_the_model(cell: Path) -> None:
+    """SA3.BY covers the clamp's SA30/SA31: its clear wrote the whole byte in the script's
+    name (the model's switches too), and the model never named them again."""
+    result = _run(cell, '[[write]]\nat = 0.0\nset = "SA24=1"\n'
+                  '[[fault]]\ntarget = "SA3.BY"\nkind = "stuck"\nvalue = 0\nat = 0.1\n'
+                  'for_s = 0.25\n[[write]]\nat = 0.2\nset = "SA25=1"\n', until=0.6)
+    at_clear = [(e["var"], e["value"], e["who"]) for e in result.events
+                if e["event"] == "write" and e["t"] == 0.35]
+    assert ("SA31", 1, "plant clamp") in at_clear, at_clear  # the model's, in its name
+    assert not any(who.startswith("script") for _, _, who in at_clear), at_clear
+    image = result.runtime.image
+    assert image.last_writer("SA", 31, "bit") == "plant clamp"
+
+
 def test_wire_break_reads_zero_or_the_live_zero(cell: Path) -> None:
     result = _run(cell, '[[write]]\nat = 0.0\nset = "SYVAR1=1000"\n'
                   '[[fault]]\ntarget = "SYVAR2"\nkind = "wire_break"\nlive_zero = -4000\n'

@@ -111,7 +111,7 @@ async def test_logic_that_does_not_compile_stops_the_gateway_before_anything_ser
     (tmp_path / "ncgate.toml").write_text(f'[{section}]\nlogic = "logic.st"\n')
     from ncgate.plc.st.diagnostics import LogicError
 
-    with caplog.at_level("INFO"), pytest.raises(LogicError, match="logic.st:3:10"):
+    with caplog.at_level("INFO"), pytest.raises(LogicError, match=r"logic\.st:3:10"):
         async with Gateway(ncgate_test_config(tmp_path / "ncgate.toml")):
             pass
     assert "CANopen node" not in caplog.text and "Modbus" not in caplog.text, caplog.text

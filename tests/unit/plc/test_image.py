@@ -280,3 +280,54 @@ def test_a_write_of_other_views_of_held_bits_keeps_them_and_names_no_writer_for_
     image.write([("SK", 2, "BY", 7), ("SK", 3, "BY", 9)], "modbus")  # all held: nothing
     assert heard == [] and image.read("SK", 2, "IN") == 300
     assert image.last_writer("SK", 3, "BY") == "fault stuck SK2.IN"
+
+
+def test_a_word_write_keeps_a_held_or_forced_high_byte() -> None:
+    """The low byte's masks worked on the whole word: the write's high bits were ORed in
+    over a held (or forced) high byte."""
+    image = IOImage()
+    image.hold("SA", 1, "BY", 0, "fault stuck SA1.BY")
+    image.write([("SA", 0, "IN", -1)], "plc")
+    assert (image.read("SA", 0, "BY"), image.read("SA", 1, "BY")) == (0xFF, 0)
+    image.force("SK", 3, "BY", 0, "op")
+    image.write([("SK", 2, "IN", 0x7F00)], "modbus")
+    assert image.read("SK", 3, "BY") == 0
+
+
+def test_overlapping_holds_and_forces_show_what_is_left_of_them() -> None:
+    image = IOImage()
+    image.hold("SA", 3, "BY", 0, "A")  # SA24..SA31
+    image.hold("SA", 30, "bit", 1, "B")
+    assert image.read("SA", 30, "bit") == 1 and image.last_writer("SA", 3, "BY") == "B"
+    image.unhold("SA", 30, "bit", give_back="clear")
+    assert image.read("SA", 30, "bit") == 0  # A's again: it still holds the byte
+    assert image.last_writer("SA", 30, "bit") == "A"
+    image.force("SA", 28, "bit", 1, "op")
+    image.force("SA", 31, "bit", 1, "op")
+    image.unforce("SA", 28, "bit")  # SA31 still forced: SA28 shows the hold's 0 again
+    assert (image.read("SA", 28, "bit"), image.read("SA", 31, "bit")) == (0, 1)
+
+
+def test_the_images_own_writes_are_no_forced_events_and_a_clear_names_the_writer() -> None:
+    image = IOImage()
+    told: list[object] = []
+    image.on_overridden = lambda changes, writer: told.append((changes, writer))
+    image.force("SA", 30, "bit", 1, "op")
+    image.hold("SA", 3, "BY", 0, "fault stuck SA3.BY")  # placed under the force
+    image.unhold("SA", 3, "BY", give_back="clear")
+    assert told == []
+    image.write([("SA", 40, "bit", 0)], "plc")
+    image.hold("SA", 40, "bit", 0, "fault stuck SA40")  # the same value
+    image.unhold("SA", 40, "bit", give_back="clear")
+    assert image.last_writer("SA", 40, "bit") == "plc"  # not the fault that is gone
+
+
+def test_a_write_a_force_refused_is_not_given_back_at_a_later_clear() -> None:
+    image = IOImage()
+    image.force("SK", 0, "BY", 255, "op")
+    image.hold("SA", 3, "bit", 0, "fault other")  # (the copy kept beside it from here)
+    image.write([("SK", 0, "BY", 2)], "modbus")  # refused by the force
+    image.unforce("SK", 0, "BY")
+    image.hold("SK", 0, "BY", 7, "fault SK0")
+    image.unhold("SK", 0, "BY", give_back="clear")
+    assert image.read("SK", 0, "BY") == 255  # as the force left it, not the refused 2
