@@ -608,14 +608,20 @@ def test_check_takes_a_cells_logic_by_its_path_whatever_its_name_or_how_often_na
         assert "plc.programs[0]: no PROGRAM Nope" in capsys.readouterr().err
 
 
+def st_cell(folder: Path, sections: tuple[str, ...], name: str, text: str) -> None:
+    """A cell whose ``sections`` ([plc], [plant]) run the ST file ``name``: ``text``."""
+    write_cell(folder, '[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n' + "".join(
+        f'[{section}]\nlogic = "{name}"\n' for section in sections),
+        {"O1": "N10 (DLY,1)\nN20 M30\n"})
+    (folder / name).write_text(text)
+
+
 def test_check_says_a_file_that_is_plc_and_plant_logic_once_and_as_it_was_named(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """One ST file as both [plc] and [plant] logic, with one error: `check O1.nc l.st` said it
     twice, as /abs/l.st, and counted "3 file(s) checked: 2 error(s)"."""
-    write_cell(tmp_path, '[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n[plc]\nlogic = '
-               '"l.st"\n[plant]\nlogic = "l.st"\n', {"O1": "N10 (DLY,1)\nN20 M30\n"})
-    (tmp_path / "l.st").write_text("PROGRAM main\nVAR x : INT; END_VAR\nx := x + ;\n"
-                                   "END_PROGRAM\n")
+    st_cell(tmp_path, ("plc", "plant"), "l.st", "PROGRAM main\nVAR x : INT; END_VAR\n"
+               "x := x + ;\nEND_PROGRAM\n")
     with contextlib.chdir(tmp_path):
         assert main(["check", "O1.nc", "l.st"]) == 1
         out, err = capsys.readouterr()
@@ -629,10 +635,8 @@ def test_check_says_a_file_that_is_plc_and_plant_logic_once_and_as_it_was_named(
 def test_retain_in_the_plant_logic_is_a_warning_where_it_was_accepted_in_silence(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
         ) -> None:
-    write_cell(tmp_path, '[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n[plant]\nlogic = '
-               '"p.st"\n', {"O1": "N10 M30\n"})
-    (tmp_path / "p.st").write_text("PROGRAM tank\nVAR RETAIN level : INT; END_VAR\n"
-                                   "level := level + 1;\nEND_PROGRAM\n")
+    st_cell(tmp_path, ("plant",), "p.st", "PROGRAM tank\nVAR RETAIN level : INT; END_VAR\n"
+               "level := level + 1;\nEND_PROGRAM\n")
     with contextlib.chdir(tmp_path):
         assert main(["check", "--config", "ncgate.toml"]) == 0
         out = capsys.readouterr().out
