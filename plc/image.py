@@ -291,14 +291,13 @@ class IOImage:
         if not checked:
             for area, index, view, value in items:
                 self.check(area, index, view, value)
-        placing = self._placing
-        if self._unheld is not None and not placing:
+        if self._unheld is not None and not self._placing:
             # (As the forces let it through: what a force refused is nobody's wish either.)
             forced = (self._forced_bytes, self._forced_syvars)
             self._unheld.write([c if not (forced[0] or forced[1]) else
                                 (*c[:3], _kept(c, *forced)) for c in items], writer,
                                checked=True)
-        if self.held and not placing:
+        if self.held and not self._placing:
             # A write whose every bit a fault holds takes nothing: kept aside (above) for the
             # clear, it is neither stored, nor heard, nor its writer's -- the trace said "plc
             # wrote 1" each scan for a chatter the logic never wrote, and a verdict named the

@@ -490,8 +490,9 @@ class Engine:
 
     @property
     def live_timers(self) -> int:
-        """Timers armed and neither fired nor cancelled."""
-        return self._timers.live
+        """Timers armed and neither fired nor cancelled (counted when asked: a stall's
+        question, asked once it has stood still for stall_s)."""
+        return self._timers.live()
 
     def advance_to(self, t: float, blocks: int | None = None) -> bool:
         """Let time pass to ``t``: fire the timers due, each followed by what it made

@@ -10,32 +10,30 @@ from collections.abc import Callable
 
 
 class Timer:
-    __slots__ = ("callback", "heap", "time")
+    __slots__ = ("callback", "time")
 
-    def __init__(self, time: float, callback: Callable[[], None] | None,
-                 heap: TimerHeap | None = None) -> None:
+    def __init__(self, time: float, callback: Callable[[], None] | None) -> None:
         self.time = time
         self.callback = callback
-        self.heap = heap  # while it waits in one: the heap's count of live timers
 
     def cancel(self) -> None:
-        if self.callback is not None and self.heap is not None:
-            self.heap.live -= 1
         self.callback = None
-        self.heap = None
 
 
 class TimerHeap:
     def __init__(self) -> None:
         self._heap: list[tuple[float, int, Timer]] = []
         self._order = itertools.count()  # equal times fire in the order they were armed
-        self.live = 0  # timers armed, neither fired nor cancelled
 
     def push(self, t: float, callback: Callable[[], None]) -> Timer:
-        timer = Timer(t, callback, self)
+        timer = Timer(t, callback)
         heapq.heappush(self._heap, (t, next(self._order), timer))
-        self.live += 1
         return timer
+
+    def live(self) -> int:
+        """Timers armed and neither fired nor cancelled (a walk of the heap: for the rare
+        question, not for every timer)."""
+        return sum(1 for _, _, timer in self._heap if timer.callback is not None)
 
     def next_time(self) -> float | None:
         heap = self._heap
@@ -49,7 +47,5 @@ class TimerHeap:
         while heap and heap[0][0] <= t:
             _, _, timer = heapq.heappop(heap)
             if timer.callback is not None:
-                self.live -= 1
-                timer.heap = None
                 return timer
         return None
