@@ -156,17 +156,19 @@ def _kept_parse(path: str, text: str) -> SourceFile:
 
 
 def load_logic(files: tuple[Path, ...], config: Config,
-               sources: Sources | None = None) -> Logic:
+               sources: Sources | None = None, section: str = "plc") -> Logic:
     """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix) --
     from ``sources`` when given (a replay runs the logic its record carries); raises
-    LogicError with all the diagnostics."""
+    LogicError with all the diagnostics.  ``section``: ``plant`` warns of its RETAIN
+    (SW005)."""
     from ncgate.plc.st.compiler import compile_logic
     from ncgate.plc.st.plcopen import read_logic_file
 
     parsed = ([read_logic_file(path) for path in files] if sources is None else
               [parsed_logic(path, text) for path, text in sources.items()])
     logic = compile_logic(parsed, logic_context(config))
-    for warning in logic.warnings:  # plc.strict = false: what IEC would refuse
+    for warning in (*logic.warnings,  # plc.strict = false: what IEC would refuse
+                    *(retain_in_plant(parsed) if section == "plant" else ())):
         log.warning("%s", warning.render())
     return logic
 
@@ -673,7 +675,7 @@ def prepare_logic(config: Config, section: str, sources: Sources | None = None
         return None
     if sources is None:
         sources = read_sources(files, config, section)
-    logic = load_logic(files, config, sources)
+    logic = load_logic(files, config, sources, section)
     return Prepared(sources, logic, tuple(program_order(logic, config, section)))
 
 
@@ -732,9 +734,7 @@ def start_plant_logic(config: Config, runtime: Runtime, door: Door, *, closed: b
         prepared = prepare_logic(config, "plant")
     if prepared is None:
         return None
-    sources, logic, order = prepared.sources, prepared.logic, list(prepared.order)
-    for warning in retain_in_plant([parsed_logic(path, text) for path, text in sources.items()]):
-        log.warning("%s", warning.render())
+    logic, order = prepared.logic, list(prepared.order)
     engine = runtime.engine
     logic_runtime = PlcRuntime(logic, runtime.image, EngineNc(engine, door, SourceKind.PLANT),
                                order, config.plc.loop_limit,

@@ -294,9 +294,9 @@ class IOImage:
         if self._unheld is not None and not self._placing:
             # (As the forces let it through: what a force refused is nobody's wish either.)
             forced = (self._forced_bytes, self._forced_syvars)
-            self._unheld.write([c if not (forced[0] or forced[1]) else
-                                (*c[:3], _kept(c, *forced)) for c in items], writer,
-                               checked=True)
+            wished = items if not (forced[0] or forced[1]) else [
+                (*c[:3], _kept(c, *forced)) for c in items]
+            self._unheld.write(wished, writer, checked=True)
         if self.held and not self._placing:
             # A write whose every bit a fault holds takes nothing: kept aside (above) for the
             # clear, it is neither stored, nor heard, nor its writer's -- the trace said "plc
@@ -455,14 +455,8 @@ class IOImage:
         None: two forces of one bit would make the force list say what the image does not."""
         if area == "SYVAR":
             return None  # a SYVAR has one view: forcing it again is the same variable
-        mine = {byte: mask for byte, mask, _ in _pieces(view, index, 0)}
-        for key in self.forced:
-            other_area, other_index, other_view = key
-            if other_area == area and key != (area, index, view) and any(
-                    mine.get(byte, 0) & mask
-                    for byte, mask, _ in _pieces(other_view, other_index, 0)):
-                return key
-        return None
+        mine = (area, index, view)
+        return next((key for key in self.forced if key != mine and overlap(key, mine)), None)
 
     def _force_index(self) -> None:
         """Per SA/SK byte and SYVAR what the holds and forces make of a write (holds first,

@@ -485,30 +485,32 @@ class Plant:
             timer.cancel()
         fault.timers.clear()
         self.runtime.engine.note_fault_clear(fault.target, fault.kind, who)
-        if fault.kind in VARIABLE_FAULTS and not notify:
-            pass  # replaced: the new fault holds the same variables (what was wanted stays)
-        elif fault.kind in VARIABLE_FAULTS:
-            image = self.runtime.image
-            for var in fault.variables:
-                still = [f for f in self.faults if f.kind in VARIABLE_FAULTS
-                         and any(v.address == var.address for v in f.variables)]
-                if still:  # another fault holds it too (by another name: clamp.extended
-                    f = still[-1]  # and SA30): its value again, not the writers'
-                    image.hold(*var.address, self._held_value(f, var),
-                               f"fault {f.kind} {f.target}")
-                    continue
-                # What no model drives shows again what its writers last wrote (the PLC's
-                # output as it set it, a sensor as the script or a client wrote it), in
-                # that writer's name: a wire mended.  A model's, below.
-                driven = any(overlap(var.address, address) for address in self._drives)
-                image.unhold(*var.address, give_back=None if driven
-                             else f"fault clear {who}")
-            for model in self.models.values():  # what the models drive is theirs again
-                self._write(model, shown=True)
+        if fault.kind in VARIABLE_FAULTS:
+            if notify:  # (replaced, it is not: the new fault holds the same variables)
+                self._release(fault, who)
         elif fault.model is not None and notify:
             self._behave(fault.model)
         if notify:
             self._notify(fault)
+
+    def _release(self, fault: ActiveFault, who: str) -> None:
+        """What a cleared value fault held: another fault's again where one holds it too (by
+        another name: clamp.extended and SA30); else what no model drives shows again what
+        its writers last wrote (the PLC's output as it set it, a sensor as the script or a
+        client wrote it), in that writer's name -- a wire mended -- and the models write
+        what they drive."""
+        image = self.runtime.image
+        for var in fault.variables:
+            still = [f for f in self.faults if f.kind in VARIABLE_FAULTS
+                     and any(v.address == var.address for v in f.variables)]
+            if still:
+                f = still[-1]
+                image.hold(*var.address, self._held_value(f, var), f"fault {f.kind} {f.target}")
+                continue
+            driven = any(overlap(var.address, address) for address in self._drives)
+            image.unhold(*var.address, give_back=None if driven else f"fault clear {who}")
+        for model in self.models.values():
+            self._write(model, shown=True)
 
     def _behave(self, model: Model) -> None:
         never = any(f.model is model and f.kind == "never" for f in self.faults)

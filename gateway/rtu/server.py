@@ -243,13 +243,19 @@ class RtuLink:
             return
         self._execute(request)
 
-    def _execute(self, request: Request) -> None:
+    def _execute(self, request: Request, answered: bool = True) -> None:
+        """Execute and answer ``request`` (``answered`` False: its client is gone -- a write
+        acts, unanswered; a read is nothing)."""
         unit, pdu, _ = request
         if unit == BROADCAST:
             if pdu[0] in WRITES:  # applied, never answered (2.1); a broadcast read is nothing
                 answer = self.server.handler.handle(self.server.any_unit, pdu, self.source)
                 if not answer[0] & 0x80:  # refused (read-only, a bad value): not applied
                     self.counters.counts["broadcasts"] += 1
+            return
+        if not answered:
+            if pdu[0] in WRITES:
+                self.server.handler.handle(unit, pdu, self.source)
             return
         self._answer(request, self.server.handler.handle(unit, pdu, self.source))
 
@@ -271,9 +277,7 @@ class RtuLink:
         self.held = None
         if self.orphan:
             self.orphan = False
-            if request[1][:1] and request[1][0] in WRITES:
-                self.server.handler.handle(request[0] if request[0] != BROADCAST
-                                           else self.server.any_unit, request[1], self.source)
+            self._execute(request, answered=False)
             return
         self._execute(request)
         self._process()
