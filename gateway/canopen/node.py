@@ -202,8 +202,8 @@ class CanopenNode:
         self.hub_address: tuple[str, int] | None = None
         self._closed = True  # until start(); then until close()
         # The plant's CANopen faults in force (docs/plant.md): the heartbeat producer
-        # silenced, the TPDOs silenced, an EMCY error code raised by hand.
-        self._fault_heartbeat = False
+        # silenced (the node's NMT slave keeps that: sdo.Nmt.silenced), the TPDOs silenced,
+        # an EMCY error code raised by hand.
         self._fault_pdo = False
         self._fault_emcy: int | None = None
         self._pending: set[_Handoff] = set()  # callbacks handed to the loop, not yet run
@@ -376,8 +376,7 @@ class CanopenNode:
         """The plant's CANopen faults in force (on the loop): ``heartbeat_stop`` silences
         the heartbeat producer (a master's consumer sees the node lost), ``pdo_stop`` every
         TPDO, ``emcy`` raises an EMCY with that error code (its end: EMCY 0x0000)."""
-        if heartbeat_stop != self._fault_heartbeat:
-            self._fault_heartbeat = heartbeat_stop
+        if heartbeat_stop != self.node.nmt.silenced:
             # Silenced for as long as the fault is in force: a master's write of 0x1017 or
             # an NMT reset does not start it again (sdo.Nmt).
             self.node.nmt.silenced = heartbeat_stop
@@ -395,7 +394,7 @@ class CanopenNode:
 
     def faults(self) -> list[str]:
         """The plant's faults in force on the node, as the status names them."""
-        return [name for name, on in (("heartbeat_stop", self._fault_heartbeat),
+        return [name for name, on in (("heartbeat_stop", self.node.nmt.silenced),
                                       ("pdo_stop", self._fault_pdo),
                                       (f"emcy 0x{self._fault_emcy or 0:04X}",
                                        self._fault_emcy is not None)) if on]
