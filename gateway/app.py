@@ -117,7 +117,6 @@ class Gateway:
         self._driver: WallClockDriver | None = None
         # The adapters serving now, by their name in ncgate.gateway.adapters.ADAPTERS.
         self.adapters: dict[str, Any] = {}
-        self._idle_faults: set[int] = set()  # fieldbus faults no adapter takes (said once)
         self._trace_file: TraceFile | None = None
         self._cold = cold
         self._plc: tuple[PlcRuntime, ScanDriver] | None = None
@@ -208,7 +207,10 @@ class Gateway:
         from ncgate.config.script import Script
         from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
-        plant = start_plant(runtime, self.door.apply_on_time, closed=False)
+        served = frozenset(found.fault_target for found in map(plugin, self.adapters)
+                           if found.faults is not None and found.fault_target is not None)
+        plant = start_plant(runtime, self.door.apply_on_time, closed=False, served=served,
+                            server="this gateway")
         stack.callback(plant.close)
         plant.fieldbus_listeners.append(self._fieldbus_faults)
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
@@ -230,22 +232,12 @@ class Gateway:
         return note
 
     def _fieldbus_faults(self, faults: list[Any]) -> None:
-        """The plant's fieldbus faults in force, to each adapter that takes them; a new
-        one that none takes (its fieldbus is not served: ``canopen.enabled = false``) is a
-        hazard line saying it has no effect, as in sim."""
-        taken = set()
+        """The plant's fieldbus faults in force, to each adapter that takes them (a fault
+        of a fieldbus not served the plant said to have no effect as it came)."""
         for name, adapter in self.adapters.items():
             found = plugin(name)
             if found.faults is not None:
                 found.faults(adapter, faults)
-                taken.add(found.fault_target)
-        idle = {id(f): f for f in faults if f.target not in taken}
-        for key in idle.keys() - self._idle_faults:
-            f = idle[key]
-            self.runtime.engine.note_hazard(0, f"a {f.target} fault ({f.kind}, by {f.who}) "
-                                            f"acts on {f.target}, which this gateway does not "
-                                            "serve: traced, with no effect")
-        self._idle_faults = set(idle)
 
     def _stop_loading(self) -> None:
         self.runtime.store.cancel()  # a child checking a big program is killed

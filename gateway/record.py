@@ -568,7 +568,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.config.script import Script
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
-    start_plant(runtime, door.apply_on_time, closed=False)
+    start_plant(runtime, door.apply_on_time, closed=False, served=None)
     plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
     # The session's scans never stopped (run's do not stop at a stall, which the replay's
     # inputs, not timers, may end): neither do the replay's.  Those it did not run (an

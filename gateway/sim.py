@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import Any, TextIO
 
 from ncgate.config import Config, ConfigError
-from ncgate.config.plant import CANOPEN_FAULTS, MODBUS_FAULTS
 from ncgate.config.script import Script, ScriptEntry
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
@@ -340,11 +339,6 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     player = ScriptPlayer(runtime, script, door, plant_faults(config))
     expectations = Expectations(runtime, script)
     engine = runtime.engine
-    for entry in player.entries:  # the same file runs in `run`, where they act: said here
-        f = entry.fault
-        if f is not None and f.kind in MODBUS_FAULTS | CANOPEN_FAULTS:
-            engine.note_hazard(0, f"{entry.key}: a {f.target.lower()} fault acts on the "
-                               "fieldbus, which sim does not serve: traced, with no effect")
     _require_end(script, until)
     horizon = script.horizon if script.expects else None
     to_horizon = until is None and horizon is not None

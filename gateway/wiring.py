@@ -114,13 +114,17 @@ def build_runtime(config: Config, closed: bool, trace: Trace | None = None) -> R
     return Runtime(config, image, store, engine, trace, interlocks=interlocks, symbols=symbols)
 
 
-def start_plant(runtime: Runtime, apply: Callable[[Input], None], *, closed: bool) -> Plant:
+def start_plant(runtime: Runtime, apply: Callable[[Input], None], *, closed: bool,
+                served: frozenset[str] | None = frozenset(), server: str = "sim") -> Plant:
     """The plant of ``[plant]`` on ``runtime`` (its models at rest, their outputs written,
     the faults of ``[[plant.fault]]`` armed by the caller); faults need it even without
-    models."""
+    models.  ``served``: the fieldbuses whose faults act (``modbus``, ``canopen``), and
+    ``server`` who serves them: a fault of another is said to have no effect (None: say
+    nothing -- a replay, whose record holds what the fault did)."""
     from ncgate.gateway.plant import Plant
 
     plant = Plant(runtime, apply, closed=closed)
+    plant.served, plant.server = served, server
     runtime.plant = plant
     plant.start()
     return plant

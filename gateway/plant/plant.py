@@ -50,6 +50,7 @@ log = logging.getLogger("ncgate")
 # stretched (x2 each time, up to MAX_STRETCH scans), never the switch points.
 BUDGET = 0.2
 MAX_STRETCH = 64
+FIELDBUSES = frozenset({"modbus", "canopen"})  # the targets of the fieldbus faults
 # And one tick holds the loop this long at most, and no longer than the engine's turn has
 # left (a poller waits no longer behind it); the models it did not get to are written first
 # at the next tick.
@@ -103,6 +104,12 @@ class Plant:
         self.faults: list[ActiveFault] = []
         # Adapters hear the fieldbus faults in force (the Modbus server, the CANopen node).
         self.fieldbus_listeners: list[Callable[[list[ActiveFault]], None]] = []
+        # The fieldbuses whose faults act here, and who serves them: a fieldbus fault of
+        # another is said, as it is injected, to have no effect -- the same file could pass
+        # in `run` and fail in `sim` with no word why.  None: say nothing (a replay: the
+        # record holds what the fault did).  The gateway sets them before any fault comes.
+        self.served: frozenset[str] | None = frozenset()
+        self.server = "sim"
         self._nc_change = 0.0
         self._sampling: dict[Model, None] = {}  # what the tick writes (in order)
         self._asleep: list[Model] = []  # free runners stopped while a closed run stands still
@@ -374,7 +381,7 @@ class Plant:
         fault = ActiveFault(target.strip(), kind, params, str(item.source),
                             self.runtime.engine.now)
         name = fault.target
-        if name.lower() in ("modbus", "canopen"):
+        if name.lower() in FIELDBUSES:
             fault.target = name.lower()
             allowed = MODBUS_FAULTS if fault.target == "modbus" else CANOPEN_FAULTS
             if kind not in allowed:
@@ -434,6 +441,11 @@ class Plant:
             self._remove(old, f"replaced by {fault.who}", notify=False)
         self.faults.append(fault)
         engine.note_fault(fault.target, fault.kind, fault.params, fault.who)
+        if fault.target in FIELDBUSES and self.served is not None and (
+                fault.target not in self.served):
+            engine.note_hazard(0, f"a {fault.target} fault ({fault.kind}, by {fault.who}) acts "
+                               f"on {fault.target}, which {self.server} does not serve: "
+                               "traced, with no effect")
         if for_s is not None:
             fault.timers.append(engine.call_at(engine.now + for_s, functools.partial(
                 self._expire, fault, for_s)))
@@ -465,7 +477,7 @@ class Plant:
 
     def _known(self, name: str) -> bool:
         """Whether ``name`` is something a fault could target (a clear of it is no typo)."""
-        if name.lower() in ("modbus", "canopen") or name.split(".")[0] in self.models:
+        if name.lower() in FIELDBUSES or name.split(".")[0] in self.models:
             return True
         try:
             var = self.runtime.var(name)
@@ -557,9 +569,9 @@ class Plant:
             self._chatter, fault, period)))
 
     def _notify(self, fault: ActiveFault) -> None:
-        if fault.target not in ("modbus", "canopen"):
+        if fault.target not in FIELDBUSES:
             return
-        bus = [f for f in self.faults if f.target in ("modbus", "canopen")]
+        bus = [f for f in self.faults if f.target in FIELDBUSES]
         for listener in list(self.fieldbus_listeners):
             listener(bus)
 

@@ -63,6 +63,11 @@ def _run(cell: Path, script: str, until: float | None = 3.0) -> Any:
     return run_sim(load_config(cell), "O1", load_script(path), until)
 
 
+def _with_faults(cell: Path, faults: str) -> None:
+    """The cell with ``faults`` (``[[plant.fault]]`` tables) in its config."""
+    cell.write_text(CELL.replace("[symbols]", faults + "[symbols]"))
+
+
 def _edges(events: list[dict[str, Any]], var: str) -> list[tuple[float, int]]:
     out: list[tuple[float, int]] = []
     for e in events:
@@ -400,16 +405,21 @@ async def test_a_session_with_a_plant_and_faults_replays_and_matches(
             VirtualPLC(*gw.modbus_address, gw.config) as plc:
         await gw.start("O1")
         gw.fault("clamp", "slow", factor=2)
+        gw.fault("modbus", "delay", ms=1)
         await plc.set("SA20", 1)
         await gw.wait_idle(timeout_s=10)
     recording = read_record(record)
     kinds = [line["input"] for line in map(json.loads, record.read_text().splitlines())
              if "input" in line]
-    assert kinds == ["start", "fault", "write"]  # the plant's writes are not inputs
+    assert kinds == ["start", "fault", "fault", "write"]  # the plant's writes are not inputs
     result = run_replay(record)
     assert result.divergence is None, result.divergence
     assert result.compared >= 4
     assert any(e["event"] == "fault" for e in recording.events)
+    # The Modbus fault acted in the session (the record holds what it did): the replay,
+    # which serves no fieldbus, does not call it a fault with no effect.
+    assert [e for e in result.events if e["event"] == "fault" and e["target"] == "modbus"]
+    assert not [e for e in result.events if e["event"] == "hazard"]
 
 
 async def test_the_kits_plant_helper_beside_a_virtual_plc(cell: Path) -> None:
@@ -693,9 +703,20 @@ def test_a_fieldbus_fault_in_sim_is_said_to_have_no_effect(cell: Path) -> None:
     nothing, so the same file could pass in `run` and fail in `sim` with no word why (a new
     user's try).  The report says so."""
     result = _run(cell, '[[fault]]\ntarget = "modbus"\nkind = "no_reply"\n' + VALVE)
-    hazards = [e["message"] for e in result.events if e["event"] == "hazard"]
-    assert hazards == ["fault[0]: a modbus fault acts on the fieldbus, which sim does not "
-                       "serve: traced, with no effect"]
+    hazards = [(e["t"], e["message"]) for e in result.events if e["event"] == "hazard"]
+    assert hazards == [(0.0, "a modbus fault (no_reply, by script fault[0]) acts on modbus, "
+                        "which sim does not serve: traced, with no effect")]
+
+
+def test_a_fieldbus_fault_of_the_config_in_sim_is_said_to_have_no_effect(cell: Path) -> None:
+    """The hazard was said of the script's entries only: a config's [[plant.fault]] on the
+    fieldbus (here at 1 s, said as it comes) passed in silence."""
+    _with_faults(cell, '[[plant.fault]]\ntarget = "canopen"\nkind = "emcy"\ncode = 0x5000\n'
+                 'at = 1.0\n')
+    result = _run(cell, VALVE)
+    hazards = [(e["t"], e["message"]) for e in result.events if e["event"] == "hazard"]
+    assert hazards == [(1.0, "a canopen fault (emcy, by plant plant.fault[0]) acts on "
+                        "canopen, which sim does not serve: traced, with no effect")]
 
 
 def test_run_refuses_a_bad_script_before_anything_serves(
@@ -726,3 +747,27 @@ async def test_a_fault_on_a_fieldbus_the_gateway_does_not_serve_is_said_to_have_
             "does not serve: traced, with no effect",
             "a canopen fault (pdo_stop, by api) acts on canopen, which this gateway does not "
             "serve: traced, with no effect"]
+
+
+async def test_a_config_fault_on_a_fieldbus_the_gateway_does_not_serve_is_said_at_start(
+        cell: Path) -> None:
+    """The config's faults are armed as the plant starts, after the adapters: one on the
+    CANopen node of a gateway that serves none is said to have no effect, one on the Modbus
+    server it serves is not."""
+    _with_faults(cell, '[[plant.fault]]\ntarget = "canopen"\nkind = "pdo_stop"\n'
+                 '[[plant.fault]]\ntarget = "modbus"\nkind = "delay"\nms = 5\n')
+    config = ncgate_test_config(cell, **{"canopen.enabled": False, "modbus.port": 0})
+    async with Gateway(config) as gw:
+        both = asyncio.Event()
+
+        def heard(event: dict[str, Any]) -> None:
+            if {e["target"] for e in gw.trace if e["event"] == "fault"} == {"canopen",
+                                                                              "modbus"}:
+                both.set()
+
+        gw.runtime.trace.subscribe(heard)
+        heard({})
+        await asyncio.wait_for(both.wait(), 10)
+        assert [e["message"] for e in gw.trace if e["event"] == "hazard"] == [
+            "a canopen fault (pdo_stop, by plant plant.fault[0]) acts on canopen, which "
+            "this gateway does not serve: traced, with no effect"]
