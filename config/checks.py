@@ -23,7 +23,10 @@ if TYPE_CHECKING:
     from ncgate.config.reader import _Reader
 
 
-def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
+def _check_config(r: _Reader, config: Config, serving: bool = True,
+                  cell: str = "ncgate") -> None:
+    """``cell``: the cell's name (the config file's stem), which the OPC UA server's
+    application URI carries."""
     nc, plc, canopen = config.nc, config.plc, config.canopen
     in_image = [(f"nc.ve.{name}.map", ve.map) for name, ve in nc.ve.items()]
     in_image += [(f"nc.{key}", getattr(nc, key))
@@ -57,6 +60,8 @@ def _check_config(r: _Reader, config: Config, serving: bool = True) -> None:
                          f"K bytes, got {plc.k_bytes}")
     _check_tls(r, config.modbus.tls)
     _check_web_tls(r, config.web.tls)
+    if config.opcua.enabled:
+        _check_ua_certificate(r, config.opcua.certificate, config.opcua.private_key, cell)
     web = config.web
     if serving and web.enabled and not is_loopback(web.host) and not web.token:
         raise r.fail("web.token", f"the console listens on {web.host}, beyond this "
@@ -118,6 +123,47 @@ def _load_pair(r: _Reader, key: str, cert: Path | None, private: Path | None,
         raise r.fail(f"{key}.key", f"the certificate {cert.name} and key {private.name} do "
                      f"not load as a pair: {exc}") from None
     return context
+
+
+def _check_ua_certificate(r: _Reader, cert: Path | None, private: Path | None,
+                          cell: str) -> None:
+    """The OPC UA server's certificate and key load, are a pair, and the certificate names the
+    server's application URI: asyncua took any, and then every secure client timed out (a
+    key of another certificate: the server failed to decrypt) or a strict one refused the
+    server (Bad_CertificateUriInvalid)."""
+    if cert is None or private is None:
+        return
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+
+    r.regular("opcua.certificate", cert)
+    r.regular("opcua.private_key", private)
+    data = cert.read_bytes()
+    try:
+        loaded = (x509.load_pem_x509_certificate(data) if data.lstrip().startswith(b"-----")
+                  else x509.load_der_x509_certificate(data))
+    except ValueError as exc:
+        raise r.fail("opcua.certificate", f"{cert.name} is not a certificate (PEM or DER): "
+                     f"{exc}") from None
+    try:
+        key = serialization.load_pem_private_key(private.read_bytes(), None)
+    except (ValueError, TypeError) as exc:
+        raise r.fail("opcua.private_key", f"{private.name} is not a private key (PEM, "
+                     f"unencrypted): {exc}") from None
+    spki = (serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo)
+    if key.public_key().public_bytes(*spki) != loaded.public_key().public_bytes(*spki):
+        raise r.fail("opcua.private_key", f"{private.name} is not the key of the certificate "
+                     f"{cert.name}")
+    uri = f"urn:ncgate:{cell}"
+    try:
+        names = loaded.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+        uris = names.value.get_values_for_type(x509.UniformResourceIdentifier)
+    except x509.ExtensionNotFound:
+        uris = []
+    if uri not in uris:
+        raise r.fail("opcua.certificate", f"{cert.name}'s subjectAltName holds "
+                     f"{', '.join(uris) or 'no URI'}, not the server's application URI "
+                     f"{uri} (the config file's name: docs/opcua.md): clients refuse it")
 
 
 def _check_web_tls(r: _Reader, tls: WebTlsConfig) -> None:

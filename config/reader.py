@@ -52,7 +52,7 @@ def load_config(
             given.setdefault(where, given[dotted])  # knows it by (plant.model[0]...)
     reader = _Reader(file, source.parent, given)
     config: Config = reader.section(Config, raw, "")
-    _check_config(reader, config, serving)
+    _check_config(reader, config, serving, source.stem if path is not None else "ncgate")
     return dataclasses.replace(config, source=source if path is not None else None)
 
 

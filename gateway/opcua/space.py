@@ -313,6 +313,12 @@ def main() -> None:
     if hasattr(os, "nice"):  # (POSIX)
         os.nice(NICE)
     asyncio.run(_serve(out))
+    # Nothing of this process outlives it (it keeps nothing on disk): the interpreter's own
+    # teardown of asyncua's address space took a second, past the gateway's wait, which
+    # then killed it at every stop.
+    logging.shutdown()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def below_the_gateway() -> None:
@@ -440,6 +446,14 @@ class Space:
                     return
         finally:
             FLOOD.flush(log)  # before asyncua's stop, which may outlast the process's time
+            # asyncua's stop awaits its clock task, which sleeps a second between ticks: every
+            # stop outlasted the gateway's wait and was killed.  The task is ended here.
+            iserver = server.iserver
+            ticking, iserver.time_task = iserver.time_task, None
+            if ticking is not None:
+                ticking.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await ticking
             await server.stop()
 
     def _session(self, name: Any, user: User = User(role=UserRole.Anonymous),  # noqa: B008
@@ -1207,6 +1221,16 @@ class _Session(InternalSession):
         """A user's session (a name and password, or a certificate), not an anonymous one."""
         return self.user is not None and bool(self.user.name)
 
+    def _writable(self, node: ua.NodeId, attribute: int) -> bool:
+        """Whether anyone may write this attribute of a node outside the image: its Value by
+        its AccessLevel, any other by its WriteMask (every view of ours says no)."""
+        if attribute == AttributeIds.Value:
+            level = self.aspace.read_attribute_value(node, AttributeIds.AccessLevel)
+            return level.Value is not None and bool(
+                level.Value.Value & ua.AccessLevel.CurrentWrite.mask)
+        mask = self.aspace.read_attribute_value(node, AttributeIds.WriteMask)
+        return mask.Value is not None and bool(mask.Value.Value)
+
     async def write(self, params: ua.WriteParameters) -> list[ua.StatusCode]:
         owner = self.owner
         results: list[ua.StatusCode] = []
@@ -1217,6 +1241,12 @@ class _Session(InternalSession):
                 if node not in self.aspace:  # (asyncua said Bad_UserAccessDenied of it)
                     results.append(ua.StatusCode(
                         StatusCodes.BadNodeIdUnknown))  # type: ignore[arg-type]
+                    continue
+                if not self._writable(node, item.AttributeId):
+                    # No one may write it (asyncua said Bad_UserAccessDenied, as if another
+                    # user could; OPC 10000-4 7.34: the access level does not allow it).
+                    results.append(ua.StatusCode(
+                        StatusCodes.BadNotWritable))  # type: ignore[arg-type]
                     continue
                 one = ua.WriteParameters(NodesToWrite=[item])
                 results.extend(await super().write(one))

@@ -140,6 +140,27 @@ async def test_a_write_of_another_type_or_with_what_the_image_does_not_keep_is_r
         assert written(gw)[2:] == [("SYVAR7", 9), ("SYVAR7", 11)]
 
 
+async def test_a_write_of_a_view_no_one_may_write_is_bad_not_writable() -> None:
+    """A process's state, the PLC's, or any other attribute than a Value: asyncua answered
+    Bad_UserAccessDenied, as if another user could, beside Bad_NotWritable for an image
+    variable of the same AccessLevel (a dashboard builder's try)."""
+    async with gateway(**{"opcua.writable": ["sa_bits"]}) as gw, \
+            Client(gw.opcua_endpoint) as client:
+        ns = await client.get_namespace_index(IMAGE)
+        for key in ("Process 1.State", "PLC.State", "SK5"):
+            node = ua.NodeId(key, ns)
+            assert (await client.get_node(node).read_attribute(
+                ua.AttributeIds.AccessLevel)).Value.Value == 1, key
+            assert await write(client, node, ua.DataValue(V("RUN", T.String))) == (
+                Bad.BadNotWritable), key
+        item = ua.WriteValue(NodeId=ua.NodeId("SA12", ns),
+                             AttributeId=ua.AttributeIds.DisplayName,
+                             Value=ua.DataValue(V(ua.LocalizedText("x"))))
+        assert [r.value for r in await client.uaclient.write(
+            ua.WriteParameters(NodesToWrite=[item]))] == [Bad.BadNotWritable]
+        assert written(gw) == []
+
+
 @pytest.fixture
 async def with_users() -> AsyncIterator[Gateway]:
     digest = hashlib.pbkdf2_hmac("sha256", b"s3cret", b"pepper", 1000).hex()

@@ -127,3 +127,65 @@ def test_trusted_takes_files_and_folders_beside_the_config_and_is_needed_beyond_
     config.write_text('[opcua]\ntrusted = ["pki"]\n')
     with pytest.raises(ConfigError, match=r"opcua\.trusted: .*sign"):
         load_config(config)
+
+
+def _pair(folder: Path, name: str, uri: str | None) -> tuple[Path, Path]:
+    """A self-signed RSA certificate (its subjectAltName: ``uri``, if any) and its key."""
+    import datetime
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import rsa
+    from cryptography.x509.oid import NameOID
+
+    key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)])
+    now = datetime.datetime.now(datetime.UTC)
+    builder = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
+               .public_key(key.public_key()).serial_number(x509.random_serial_number())
+               .not_valid_before(now).not_valid_after(now + datetime.timedelta(days=30)))
+    if uri is not None:
+        builder = builder.add_extension(x509.SubjectAlternativeName(
+            [x509.UniformResourceIdentifier(uri)]), critical=False)
+    cert = folder / f"{name}.crt"
+    cert.write_bytes(builder.sign(key, hashes.SHA256()).public_bytes(
+        serialization.Encoding.PEM))
+    private = folder / f"{name}.key"
+    private.write_bytes(key.private_bytes(serialization.Encoding.PEM,
+                                          serialization.PrivateFormat.PKCS8,
+                                          serialization.NoEncryption()))
+    return cert, private
+
+
+def test_the_servers_certificate_and_key_are_checked_at_start(tmp_path: Path) -> None:
+    """asyncua took a key of another certificate (every secure client then timed out, the
+    server failing to decrypt) and a certificate of another application URI (a strict
+    client refuses it) without a word (a dashboard builder's try)."""
+    good, good_key = _pair(tmp_path, "press", "urn:ncgate:press")
+    other, other_key = _pair(tmp_path, "other", "urn:ncgate:other")
+    bare, bare_key = _pair(tmp_path, "bare", None)
+    config = tmp_path / "press.toml"
+    config.write_text('[opcua]\nenabled = true\nsecurity = "sign_encrypt"\n')
+
+    def load(cert: Path, key: Path) -> None:
+        load_config(config, overrides={"opcua.certificate": str(cert),
+                                       "opcua.private_key": str(key)})
+
+    load(good, good_key)
+    with pytest.raises(ConfigError, match=r"press.toml: opcua.private_key: other.key is not "
+                                          r"the key of the certificate press.crt"):
+        load(good, other_key)
+    with pytest.raises(ConfigError, match=r"opcua.certificate: other.crt's subjectAltName "
+                                          r"holds urn:ncgate:other, not the server's "
+                                          r"application URI urn:ncgate:press"):
+        load(other, other_key)
+    with pytest.raises(ConfigError, match=r"bare.crt's subjectAltName holds no URI"):
+        load(bare, bare_key)
+    with pytest.raises(ConfigError, match=r"opcua.certificate: press.key is not a "
+                                          r"certificate"):
+        load(good_key, good_key)
+    with pytest.raises(ConfigError, match=r"opcua.private_key: press.crt is not a private"):
+        load(good, good)
+    # The server off: nothing is loaded (a certificate kept for later is no error).
+    load_config(config, overrides={"opcua.enabled": False, "opcua.certificate": str(other),
+                                   "opcua.private_key": str(good_key)})
