@@ -28,6 +28,7 @@ a shared folder, or the same checkout on every machine.
 
 from __future__ import annotations
 
+import logging
 import math
 import queue
 import time
@@ -72,6 +73,22 @@ def connect(scheduler: str) -> Any:
         return Client(scheduler, timeout=30, set_as_default=False)
     except (OSError, ValueError, TypeError) as exc:
         raise SpecError(f"--scheduler {scheduler}: {exc}") from None
+
+
+def close(client: Any) -> None:
+    """Close ``client``.  One whose scheduler went away is still reconnecting, and closing it
+    cancels that: ``distributed.client`` logged the cancel as an ERROR with its traceback,
+    after the one line that says why the sweep stopped.  Quieted then, and only then."""
+    if client.status == "running":
+        client.close()
+        return
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        client.close()
+    finally:
+        logger.setLevel(level)
 
 
 class _Tasks:
@@ -139,8 +156,11 @@ class _Tasks:
         if self.client.status != "running" or isinstance(exc, OSError) or (
                 type(exc).__name__ in ("CancelledError", "FutureCancelledError",
                                        "ClosedClientError")):
+            # One line: a FutureCancelledError's text has two (why, then Dask's advice).
+            said = " ".join(str(exc).split())
+            said = said if len(said) <= 120 else said[:117] + "..."
             raise ClusterLost(self.scheduler, unfinished(),
-                              gone=f"{type(exc).__name__}: {str(exc)[:120]}") from None
+                              gone=f"{type(exc).__name__}: {said}") from None
 
     def check(self, unfinished: Callable[[], int]) -> None:
         now = time.monotonic()
@@ -223,7 +243,7 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
         if tasks is not None:
             tasks.release()
         if own:
-            client.close()
+            close(client)
 
 
 def _alone(tasks: _Tasks, variant: Variant, timeout_s: float | None, runner: Runner,

@@ -82,6 +82,14 @@ def check_options(options: Options) -> None:
         if options.format == "parquet" and sys.stdout is not None and sys.stdout.isatty():
             raise UsageError("--format parquet -o -: standard output is a terminal; "
                              "redirect it (> FILE.parquet, | a program) or give -o FILE")
+    elif options.output is not None:
+        # The table goes into a folder that is there: atomic writing makes the missing ones,
+        # so a typo in -o made a tree of folders, unsaid.  (Links followed: where it goes.)
+        folder = options.output.resolve().parent
+        if not folder.is_dir():
+            what = "not a folder" if folder.exists() else "no such folder"
+            raise UsageError(f"-o {options.output}: {folder}: {what} (the table goes into a "
+                             "folder that is there: make it first)")
     timeout = options.timeout_s
     if timeout is not None and not (math.isfinite(timeout) and 0 <= timeout <= MAX_TIMEOUT_S):
         raise UsageError(f"--timeout {timeout}: expected seconds > 0, at most "
@@ -129,7 +137,9 @@ def run_sweep(spec: Spec, options: Options,
                     return _run_sweep(spec, options, output, client, out, stops)
                 finally:
                     if client is not None:
-                        client.close()
+                        from ncgate.gateway.sweep.cluster import close
+
+                        close(client)
         except KeyboardInterrupt as exc:
             # Before the first variant ran; or after: a second stop while the first was
             # said, or one while the table was written (written whole, or not at all).
@@ -183,6 +193,9 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     todo = [v for v in spec.variants if v.id not in rows]
     if done:
         print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
+              file=out)
+    elif options.resume:  # nothing to go on from: said, not run again unsaid
+        print(f"resuming: no rows kept in {parts.folder}: all {n_variants(len(todo))} to run",
               file=out)
     show = options.progress
     if show is None:
@@ -272,6 +285,11 @@ class _Stops:
             raise stop
 
 
+def n_variants(count: int) -> str:
+    """``count`` variants, in words: "1 variant", "2 variants"."""
+    return f"{count} variant{'' if count == 1 else 's'}"
+
+
 def label(row: Row, keys: Sequence[str]) -> str:
     values = " ".join(f"{k}={row[k]}" for k in keys if row.get(k) is not None)
     script = f" {Path(row['script']).name}" if row.get("script") else ""
@@ -281,7 +299,7 @@ def label(row: Row, keys: Sequence[str]) -> str:
 def summary(rows: Sequence[Row], keys: Sequence[str], out: TextIO) -> None:
     counts = Counter(r["verdict"] for r in rows)
     order = sorted(counts, key=lambda v: (v != "ok", -counts[v], v))
-    print(f"{len(rows)} variants: " + ", ".join(f"{counts[v]} {v}" for v in order), file=out)
+    print(f"{n_variants(len(rows))}: " + ", ".join(f"{counts[v]} {v}" for v in order), file=out)
     ran = [r for r in rows if r["verdict"] not in ("crash", "error")]
     if ran:
         print("slowest (cycle time):", file=out)
@@ -332,7 +350,7 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
     if spec.draws is not None and spec.draws[1] < spec.draws[0]:
         where = "--explore" if explore is not None else "[random]"
         print(f"{where}: the {spec.draws[0]} draws gave {spec.draws[1]} distinct samples (a "
-              f"repeated draw runs once): {len(spec.variants)} variants", file=out)
+              f"repeated draw runs once): {n_variants(len(spec.variants))}", file=out)
     status, rows = run_sweep(spec, options, out)
     if explore is not None and rows:
         findings(rows, spec, out, options.timeout_s)
@@ -352,9 +370,9 @@ def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
             key = (row["verdict"], row["signature"] or row["report"])
             groups.setdefault(key, []).append(row)
     if not groups:
-        print(f"explored {len(rows)} variants: no failure", file=out)
+        print(f"explored {n_variants(len(rows))}: no failure", file=out)
         return
-    print(f"explored {len(rows)} variants: {len(groups)} distinct failure"
+    print(f"explored {n_variants(len(rows))}: {len(groups)} distinct failure"
           f"{'s' if len(groups) > 1 else ''}", file=out)
     variants = {v.id: v for v in spec.variants}
     for (verdict, signature), found in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):

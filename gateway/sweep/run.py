@@ -121,9 +121,10 @@ def _run(variant: Variant) -> Result:
 
     overrides = variant.overrides()
     try:
-        config = load_config(variant.config, overrides=overrides,
+        # The absolute paths: a Dask worker's working folder is not the client's.
+        config = load_config(variant.config_file or variant.config, overrides=overrides,
                              origins=dict.fromkeys(overrides, "--set"), serving=False)
-        script = load_script(variant.script)
+        script = load_script(variant.script_file or variant.script)
     except ConfigError as exc:
         return _result("error", report=str(exc).splitlines()[0])
     budget = variant.budget_s if variant.until is None else None

@@ -83,6 +83,10 @@ class Variant:
     sets: tuple[tuple[str, Value], ...]  # the swept keys and their values, in column order
     budget_s: float = DEFAULT_BUDGET_S
     storage: str | None = None  # without a config: the program's folder, as MP0
+    # What the run reads: the config and script as absolute paths.  ``config`` and ``script``
+    # are as shown, relative to the client's working folder, which a Dask worker's is not.
+    config_file: str | None = None
+    script_file: str | None = None
 
     def set_args(self) -> list[str]:
         return [f"{key}={render_value(value)}" for key, value in self.sets]
@@ -118,6 +122,7 @@ class Spec:
     seed: int | None = None
     files: list[Path] = field(default_factory=list)
     draws: tuple[int, int] | None = None  # random draws made, and the distinct ones kept
+    explore: int | None = None  # --explore N's N
 
 
 def render_value(value: Value) -> str:
@@ -191,9 +196,9 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
     runs = _programs(sweep, base, config_path, scripts, fail)
     if not runs:
         raise fail("sweep.programs", "no program to run (give programs or examples)")
-    grid = _flat(_table(raw, "grid", fail))
-    rand = _flat(_table(raw, "random", fail))
-    table = _flat(_table(raw, "explore", fail))
+    grid = _flat(_table(raw, "grid", fail), "grid", fail)
+    rand = _flat(_table(raw, "random", fail), "random", fail)
+    table = _flat(_table(raw, "explore", fail), "explore", fail)
     if "samples" in table:  # N is the command line's: --explore N
         raise fail("explore.samples", "unknown key: the number of samples is --explore N's "
                    "(expected seed and key = [low, high])")
@@ -231,7 +236,9 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
                 variant_id(identity), shown(run.program), run.main,
                 None if run.config is None else shown(run.config),
                 None if run.script is None else shown(run.script), until, sets,
-                budget, None if run.config is not None else str(run.program.parent.resolve())))
+                budget, None if run.config is not None else str(run.program.parent.resolve()),
+                None if run.config is None else str(run.config.resolve()),
+                None if run.script is None else str(run.script.resolve())))
     ids = [v.id for v in variants]
     if len(set(ids)) != len(ids):
         dup = next(i for i in ids if ids.count(i) > 1)
@@ -241,7 +248,7 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
     for f in sorted(files):
         digest.update(str(f).encode() + b"\0" + f.read_bytes() + b"\0")
     return Spec(file, sorted(variants, key=lambda v: v.id), keys, digest.hexdigest(), seed,
-                sorted(files), (draws, len(samples)) if draws else None)
+                sorted(files), (draws, len(samples)) if draws else None, explore)
 
 
 def _read_spec(file: Path) -> dict[str, Any]:
@@ -380,15 +387,19 @@ def _programs(sweep: dict[str, Any], base: Path, config: Path | None,
     return runs
 
 
-def _flat(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+def _flat(table: dict[str, Any], section: str, fail: Any, prefix: str = "") -> dict[str, Any]:
     """A table's dotted keys as written, quoted (``"nc.snd" = ...``) or not (``nc.snd = ...``,
-    which TOML reads as nested tables)."""
+    which TOML reads as nested tables).  One key in both forms is two keys to TOML, and one
+    here: it is the spec's error, as a value given twice is (the later one won, unsaid)."""
     out: dict[str, Any] = {}
     for key, value in table.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
+        found = (_flat(value, section, fail, f"{prefix}{key}.") if isinstance(value, dict)
+                 else {f"{prefix}{key}": value})
+        for name, item in found.items():
+            if name in out:
+                raise fail(f"{section}.{name}", "the key is given twice (quoted and dotted: "
+                           f'"{name}" and {name}); give it once')
+            out[name] = item
     return out
 
 
@@ -403,11 +414,21 @@ def _grid(grid: dict[str, Any], fail: Any) -> tuple[list[list[Value]], list[str]
         for v in values:
             if not isinstance(v, bool | int | float | str):
                 raise fail(f"grid.{key}", f"expected numbers, strings or booleans, got {v!r}")
-        if len({json.dumps(v) for v in values}) != len(values):
+        if len({_same(v) for v in values}) != len(values):
             raise fail(f"grid.{key}", "a value is given twice")
         keys.append(key)
         lists.append(values)
     return lists, keys
+
+
+def _same(value: Value) -> tuple[str, Any]:
+    """What tells two of a key's values apart: a number by its value (``1`` and ``1.0`` are
+    one value, given twice: they ran twice), a boolean or a string by itself."""
+    if isinstance(value, bool):
+        return "bool", value
+    if isinstance(value, int | float):
+        return ("number", value) if value == value else ("nan", None)
+    return "text", value
 
 
 def _random(table: dict[str, Any], fail: Any,

@@ -184,7 +184,27 @@ class Parts:
 
     def manifest(self) -> dict[str, Any]:
         return {"format": PARTS_FORMAT, "spec": str(self.spec.file.resolve()),
-                "fingerprint": self.spec.fingerprint, "variants": len(self.spec.variants)}
+                "fingerprint": self.spec.fingerprint, "variants": len(self.spec.variants),
+                "explore": self.spec.explore}
+
+    def changed(self, found: dict[str, Any]) -> str | None:
+        """What differs between the stopped sweep's manifest ``found`` and this one's, said
+        for --resume's refusal; None: nothing.  (A manifest from before "explore" was kept
+        has no such key: the count of variants tells.)"""
+        now = self.manifest()
+        if any(found.get(k) != now[k] for k in ("format", "spec", "fingerprint")):
+            return f"the spec or a file it names changed since the sweep in {self.folder} " \
+                   "was stopped"
+        was = found.get("explore", now["explore"])
+        if was != now["explore"]:
+            then = "without --explore" if was is None else f"with --explore {was}"
+            this = ("no --explore" if self.spec.explore is None
+                    else f"--explore {self.spec.explore}")
+            return f"the sweep in {self.folder} was run {then}, this one has {this}"
+        if found.get("variants") != now["variants"]:
+            return (f"the sweep in {self.folder} had {found.get('variants')} variants, the "
+                    f"spec gives {now['variants']} now")
+        return None
 
     def start(self, resume: bool) -> dict[str, Row]:
         """The rows of a stopped sweep (``resume``), else none: the parts are cleared."""
@@ -195,10 +215,10 @@ class Parts:
                 found = json.loads(manifest.read_text(encoding="utf-8"))
             except (OSError, ValueError):
                 found = None
-            if found is not None and found != self.manifest():
-                raise SpecError(f"{self.spec.file}: --resume: the spec or a file it names "
-                                f"changed since the sweep in {self.folder} was stopped; run "
-                                "again without --resume")
+            changed = None if found is None else self.changed(found)
+            if changed is not None:
+                raise SpecError(f"{self.spec.file}: --resume: {changed}; run again "
+                                "without --resume")
             ids = {v.id for v in self.spec.variants}
             for part in sorted(self.folder.glob("part-*.jsonl")):
                 number = part.stem.removeprefix("part-")
