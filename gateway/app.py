@@ -175,7 +175,7 @@ class Gateway:
             runtime.trace.subscribe(listener)
         stack.callback(self.stop_record)
         if self._record_path is not None:
-            self.start_record(self._record_path)
+            self.start_record(self._record_path, staged=True)
         # The logic read and compiled before anything serves: an error in it stops the
         # gateway before a PLC connected sees the CANopen node boot (and go again).
         prepared = {section: prepare_logic(self.config, section) for section in ("plc", "plant")}
@@ -222,6 +222,8 @@ class Gateway:
         self._driver.settle()
         if self.config.nc.autostart:
             await self.start(source=Source(SourceKind.API, "nc.autostart"))
+        if self.recorder is not None:
+            self.recorder.commit()  # it serves: the record is the session's
 
     def _skipped(self, who: str) -> Callable[[int, int], None]:
         """The scans ``who``'s logic did not run, into the record being written (if any): a
@@ -260,15 +262,16 @@ class Gateway:
             runtime.retain.close()
         self._plc = None
 
-    def start_record(self, path: str | Path) -> Path:
+    def start_record(self, path: str | Path, *, staged: bool = False) -> Path:
         """Write the session from now on to ``path`` (``run --record``, or the console's
         Record): the header, then every input and event (docs/console.md).  One record at a
-        time: GatewayError while one is written."""
+        time: GatewayError while one is written.  ``staged``: beside ``path`` until the
+        gateway serves (SessionRecorder)."""
         if self.recorder is not None:
             raise GatewayError(f"a record is being written already ({self.recorder.path})")
         runtime = self.runtime
         recorder = SessionRecorder(path, self.config, self._overrides,
-                                   asyncio.get_running_loop())
+                                   asyncio.get_running_loop(), staged=staged)
         self.recorder = recorder
         unsubscribe = runtime.trace.subscribe(recorder.event)
         runtime.store.loaded.append(recorder.program)

@@ -42,9 +42,11 @@ tolerance -- against the recording.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import json
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -302,9 +304,16 @@ class SessionRecorder:
     and trace events as they come."""
 
     def __init__(self, path: str | Path, config: Config, overrides: dict[str, Any],
-                 loop: asyncio.AbstractEventLoop | None = None) -> None:
+                 loop: asyncio.AbstractEventLoop | None = None, *,
+                 staged: bool = False) -> None:
+        """``staged``: written beside ``path`` until :meth:`commit` puts it there (``run
+        --record`` while the gateway starts: a start that fails, a port taken, leaves a
+        file already at ``path`` as it was -- it was emptied, and given a stop line)."""
         self.path = Path(path)
-        self._file = TraceFile(self.path, UNBOUNDED, 0, loop=loop, fresh=True)
+        self.staged = staged
+        where = (self.path.with_name(f".{self.path.name}.{os.getpid()}.starting") if staged
+                 else self.path)
+        self._file = TraceFile(where, UNBOUNDED, 0, loop=loop, fresh=True)
         self._programs: dict[str, str] = {}
         header = {"ncgate_record": FORMAT, "version": __version__,
                   # Absolute: a replay from another folder finds it (a relative one was
@@ -345,7 +354,21 @@ class SessionRecorder:
         """Write what is pending now (a download of the record as far as it is)."""
         self._file.flush()
 
+    def commit(self) -> None:
+        """The staged record at its path from now on (the file written so far, renamed)."""
+        if self.staged:
+            self._file.flush()
+            os.replace(self._file.path, self.path)
+            self._file.path, self.staged = self.path, False
+
     def close(self, t: float) -> None:
+        """The stop line, and the file closed; a record still staged is removed (the
+        session never served: nothing of it is a session to replay)."""
+        if self.staged:
+            self._file.close()
+            with contextlib.suppress(OSError):
+                os.unlink(self._file.path)
+            return
         self._file.append(json.dumps({"stop": round(t, 6)}) + "\n")
         self._file.close()
 

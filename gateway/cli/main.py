@@ -715,6 +715,10 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
             return None
         checked = ready
     record = str(Path(args.record).resolve()) if args.record else None
+    if record is not None and config.trace.file is not None and (
+            Path(config.trace.file).resolve() == Path(record)):
+        raise UsageError(f"--record {args.record}: it is the trace file too (trace.file): "
+                         "each would overwrite the other; give the record another name")
     # The loop shares the interpreter with python-can's receive thread, the CANopen hub and
     # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
     # not CPython's default 5 ms, so none of them makes another late (measured with

@@ -9,6 +9,7 @@ import dataclasses
 import itertools
 import json
 import shutil
+import socket
 import time
 import types
 from importlib import resources
@@ -18,6 +19,7 @@ import pytest
 
 from ncgate.gateway import Gateway
 from ncgate.gateway.cli.main import main
+from ncgate.gateway.errors import GatewayError
 from ncgate.gateway.record import COMPARED, read_record
 from ncgate.gateway.record import replay as run_replay
 from ncgate.gateway.testing import replay, wait_event
@@ -434,3 +436,52 @@ async def test_a_session_whose_processes_did_nothing_is_no_match_to_claim(
     out = capsys.readouterr().out
     assert "nothing to compare: the session recorded no event of the processes" in out
     assert "the replay matches" not in out
+
+
+def _hidden(folder: Path) -> list[str]:
+    """What is staged in ``folder`` (a record is written beside its path while it starts)."""
+    return [p.name for p in folder.iterdir() if p.name.startswith(".")]
+
+
+async def test_a_start_that_fails_leaves_the_file_at_the_records_path_as_it_was(
+        cell: Path, tmp_path: Path) -> None:
+    """`run --record session.jsonl` over a record of yesterday, with the console's port
+    taken: the start failed, and the 103 kB record was a header and a stop line, which
+    replayed as a clean empty session (a hostile try)."""
+    record = tmp_path / "session.jsonl"
+    await record_session(cell, record)
+    yesterday = record.read_bytes()
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        overrides = {"modbus.port": taken.getsockname()[1]}
+        with pytest.raises(GatewayError):
+            async with Gateway(ncgate_test_config(cell, **overrides), record=record,
+                               overrides=overrides):
+                pass
+    assert record.read_bytes() == yesterday
+    assert _hidden(tmp_path) == []
+
+
+async def test_a_record_is_at_its_path_once_the_gateway_serves(cell: Path,
+                                                                tmp_path: Path) -> None:
+    record = tmp_path / "session.jsonl"
+    record.write_text("yesterday\n")
+    overrides = {"modbus.port": 0}
+    async with Gateway(ncgate_test_config(cell, **overrides), record=record,
+                       overrides=overrides) as gw:
+        assert gw.recorder is not None and gw.recorder.path == record
+        gw.recorder.flush()
+        assert json.loads(record.read_text().splitlines()[0])["ncgate_record"]
+        assert _hidden(tmp_path) == []
+    assert json.loads(record.read_text().splitlines()[-1])["stop"] >= 0
+
+
+def test_the_record_and_the_trace_file_may_not_be_one_file(
+        cell: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Each overwrote the other, and the replay then refused the record."""
+    same = cell.parent / "same.jsonl"
+    assert main(["run", "--config", str(cell), "--record", str(same), "--set",
+                 f"trace.file={same}", "--port", "0", "--no-web"]) == 2
+    assert "--record" in capsys.readouterr().err
+    assert not same.exists()
