@@ -372,6 +372,16 @@ class WebConsole:
         if busy:
             raise ApiError(409, f"process {busy[0]} runs a program: start a record while "
                            "every process is idle (Reset first)")
+        # Nor do forces or faults come into a replay that were in force before its record:
+        # it would replay another cell (a hostile try: a clamp that never closes, replayed
+        # closing, and a divergence that named neither).
+        plc, plant = gw.runtime.plc, gw.runtime.plant
+        forces = len(gw.image.forced) + (len(plc.forced) if plc is not None else 0)
+        faults = len(plant.faults) if plant is not None else 0
+        if forces or faults:
+            raise ApiError(409, f"{forces} force(s) and {faults} fault(s) are in force, which "
+                           "a replay of this record would not have: release the forces and "
+                           "clear the faults first (or record from the start: run --record)")
         path = gw.start_record(record_path(gw.record_folder))
         self._last_record = path
         log.info("web %s: recording to %s", request.remote, path)

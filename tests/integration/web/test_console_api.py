@@ -675,6 +675,28 @@ async def test_a_record_started_and_stopped_from_the_console_replays_and_downloa
     assert result.divergence is None, result.divergence
 
 
+async def test_a_record_is_not_started_over_forces_or_faults_a_replay_would_not_have(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A record begun with a fault and a force in force held neither, and its replay
+    diverged from a cell it never saw (a hostile try)."""
+    monkeypatch.chdir(tmp_path)
+    async with await console() as gw:
+        host, port = gw.web_address
+        async with aiohttp.ClientSession(f"http://{host}:{port}") as http:
+            assert (await post(http, "/api/force", {"var": "SA12", "value": 1}))[0] == 200
+            assert (await post(http, "/api/fault", {"target": "SA13", "kind": "stuck",
+                                                    "value": 1}))[0] == 200
+            code, body = await post(http, "/api/record", {"on": True})
+            assert code == 409 and "1 force(s) and 1 fault(s)" in body["error"], body
+            assert gw.recorder is None
+            assert (await post(http, "/api/force", {"var": "SA12", "value": None}))[0] == 200
+            code, body = await post(http, "/api/record", {"on": True})
+            assert code == 409 and "0 force(s) and 1 fault(s)" in body["error"], body
+            assert (await post(http, "/api/fault", {"clear": "all"}))[0] == 200
+            code, body = await post(http, "/api/record", {"on": True})
+            assert code == 200, body
+
+
 async def test_status_says_where_each_process_is_and_its_feed(tmp_path: Path) -> None:
     """Issue 30: a lane shows X/Y/Z and the feed: after G1 X10 Y20 Z-5 F300 the process
     stands there, with the modal feed 300 mm/min."""
