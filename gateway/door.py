@@ -333,6 +333,7 @@ class Door:
             if plc is not None:
                 plc.unforce()
             engine.note_force(None, None, str(item.source))
+            self._forces_released()
             return
         if isinstance(var, PlcVar):
             self._force_plc(item, var)
@@ -358,6 +359,15 @@ class Door:
         else:
             image.force(var.area, var.index, var.view, value, str(item.source))
         engine.note_force(str(var), value, str(item.source))
+        if value is None:
+            self._forces_released()
+
+    def _forces_released(self) -> None:
+        """The plant's models write what they drive that a force kept (after the release's
+        own event: cause before effect)."""
+        plant = self.runtime.plant
+        if plant is not None:
+            plant.forces_released()
 
     def _force_plc(self, item: Force, var: PlcVar) -> None:
         """Force a variable of the PLC logic: kept at the start and the end of every scan

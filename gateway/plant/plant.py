@@ -334,7 +334,8 @@ class Plant:
         every output, unchanged, in the trace at each clear)."""
         variables = self.variables[model.name]
         written = self._written[model.name]
-        read = self.runtime.image.read
+        image = self.runtime.image
+        read, forced = image.read, image.forced
         changes = []
         now = self.runtime.engine.now if t is None else t
         for key, value in model.outputs(now).items():
@@ -342,6 +343,9 @@ class Plant:
             if var is None or (read(*var.address) == value if shown else
                                not force and written.get(key) == value):
                 continue
+            if shown and forced and any(overlap(f, var.address) for f in forced):
+                continue  # a force shows its value, whatever is written: only a "forced"
+                # event of every clear (a hostile try)
             changes.append((var, value))
             written[key] = value
         if not changes:
@@ -521,6 +525,13 @@ class Plant:
                 continue
             driven = any(overlap(var.address, address) for address in self._drives)
             image.unhold(*var.address, give_back=None if driven else f"fault clear {who}")
+        for model in self.models.values():
+            self._write(model, shown=True)
+
+    def forces_released(self) -> None:
+        """A force was released: what the models drive shows their value again.  A model
+        writes what changes, so the forced value stayed until its next change -- a running
+        spindle read at standstill and at speed at once (a hostile try)."""
         for model in self.models.values():
             self._write(model, shown=True)
 

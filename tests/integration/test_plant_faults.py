@@ -24,6 +24,7 @@ from ncgate.gateway.record import replay as run_replay
 from ncgate.gateway.sim import run_sim
 from ncgate.gateway.testing.modbus_kit import VirtualPLC
 from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+from ncgate.inputs import API, Force
 
 CELL = """
 [nc]
@@ -771,3 +772,35 @@ async def test_a_config_fault_on_a_fieldbus_the_gateway_does_not_serve_is_said_a
         assert [e["message"] for e in gw.trace if e["event"] == "hazard"] == [
             "a canopen fault (pdo_stop, by plant plant.fault[0]) acts on canopen, which "
             "this gateway does not serve: traced, with no effect"]
+
+
+async def test_a_force_released_on_a_models_output_shows_the_model_again(cell: Path) -> None:
+    """A model writes what changes: the forced value stayed after the release until the
+    model's next change -- a running spindle read at standstill and at speed at once (a
+    hostile try).  The clamp at rest is retracted: SA30 forced to 1 reads 0 again."""
+    config = ncgate_test_config(cell, **{"modbus.port": 0, "canopen.enabled": False})
+    async with Gateway(config) as gw:
+        gw.force("SA30", 1)
+        assert gw.read("SA30") == 1
+        gw.force("SA30", None)
+        assert gw.read("SA30") == 0
+        last = [e for e in gw.trace if e["event"] == "write" and e["var"] == "SA30"][-1]
+        assert (last["value"], last["who"]) == (0, "plant clamp")
+        gw.force("SA31", 0)  # (retracted: the clamp at rest reads 1)
+        gw.apply(Force(None, None, API))  # every force released (the console's Unforce)
+        assert gw.read("SA31") == 1
+
+
+async def test_a_fault_clear_writes_no_forced_event_of_a_forced_models_output(
+        cell: Path) -> None:
+    """Each clear had every model write what the image did not show: a forced output is
+    never shown, so every clear of any fault put a `forced` event of it in the trace."""
+    config = ncgate_test_config(cell, **{"modbus.port": 0, "canopen.enabled": False})
+    async with Gateway(config) as gw:
+        gw.force("SA31", 0)
+        before = [e for e in gw.trace if e["event"] == "forced"]
+        for _ in range(3):
+            gw.fault("SYVAR2", "stuck", value=5)
+            gw.clear_fault("SYVAR2")
+        assert [e for e in gw.trace if e["event"] == "forced"] == before
+        assert gw.read("SA31") == 0
