@@ -273,6 +273,7 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
     if kind == "fault":
         params = _field(item, "params", dict, "an object of the fault's keys")
         for_s = _field(item, "for_s", (int, float), "seconds or null", optional=True)
+        _check_fault(_field(item, "kind", str, "a fault kind"), params, for_s)
         return t, Fault(_field(item, "target", str, "a fault's target"),
                         _field(item, "kind", str, "a fault kind"),
                         tuple(sorted((str(k), tuple(v) if isinstance(v, list) else v)
@@ -283,6 +284,28 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
                              source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
                      "alarm, override, break, force, fault, fault_clear)")
+
+
+def _check_fault(kind: str, params: dict[str, Any], for_s: float | None) -> None:
+    """A fault input as any cell's plant takes it: a known kind, its keys, their values
+    (what only a cell can say -- its models, its image -- the replay says).  A kind no
+    plant knows was a divergence "700 ms apart", its cause a hazard in the trace."""
+    from ncgate.config.plant import FAULT_KEYS, MAX_FOR_S, fault_params
+
+    def fail(where: str, message: str) -> ValueError:
+        return ValueError(f'"{where}": {message}')
+
+    if kind not in FAULT_KEYS:
+        raise ValueError(f'"kind": unknown fault kind {json.dumps(kind)} '
+                         f"({', '.join(sorted(FAULT_KEYS))})")
+    extra = sorted(set(params) - set(FAULT_KEYS[kind]))
+    if extra:
+        raise ValueError(f'"params": {extra[0]} is no key of a {kind} fault '
+                         f"({', '.join(FAULT_KEYS[kind]) or 'it has none'})")
+    fault_params(kind, params, "params", fail)
+    if for_s is not None and (isinstance(for_s, bool) or not 0 < for_s < MAX_FOR_S):
+        raise ValueError(f'"for_s": expected seconds > 0 and < {MAX_FOR_S:g}, or null, got '
+                         f"{for_s!r}")
 
 
 def _check_event(item: dict[str, Any]) -> None:
@@ -623,8 +646,9 @@ def replay(path: str | Path, config: str | Path | None = None,
     engine.finish_stats()
     divergence, compared = compare(recording.events, runtime.trace.events, end,
                                    tolerance_ms / 1000.0, cut=recording.stop is None)
-    if refused is not None and divergence is None:
-        divergence = refused[1]
+    if refused is not None:  # the cause comes first: a fault the replay refused named only
+        # the process's divergence it caused, "560 ms apart"
+        divergence = refused[1] if divergence is None else f"{refused[1]}; then {divergence}"
     return ReplayResult(recording, runtime, warnings, divergence, compared)
 
 

@@ -423,6 +423,30 @@ async def test_a_session_with_a_plant_and_faults_replays_and_matches(
     assert not [e for e in result.events if e["event"] == "hazard"]
 
 
+async def test_a_fault_the_replay_refuses_is_named_before_the_divergence_it_causes(
+        cell: Path, tmp_path: Path) -> None:
+    """Replayed on a cell without the clamp, the session's clamp fault is refused: that is
+    the cause, and was said only if no process diverged (a hostile try's edits)."""
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0, "nc.time_scale": 20.0}
+    config = ncgate_test_config(cell, **overrides)
+    async with Gateway(config, record=record, overrides=overrides) as gw:
+        await gw.start("O1")
+        gw.fault("clamp", "slow", factor=3)
+        gw.write("SA20", 1)
+        await gw.wait_idle(timeout_s=10)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "O1.nc").write_text("N10 (WAI,SA30=1)\nN20 M30\n")
+    (other / "ncgate.toml").write_text(CELL.replace('name = "clamp"', 'name = "vice"'))
+    result = await asyncio.to_thread(run_replay, record, other / "ncgate.toml")
+    assert result.divergence is not None
+    assert result.divergence.startswith("replay diverges at the input of line "), (
+        result.divergence)
+    assert "no such" in result.divergence or "clamp" in result.divergence
+    assert "; then " in result.divergence, result.divergence  # the resume came sooner
+
+
 async def test_the_kits_plant_helper_beside_a_virtual_plc(cell: Path) -> None:
     from ncgate.gateway.errors import WaitIdleTimeout
     from ncgate.gateway.testing.plant_kit import PlantKit

@@ -343,6 +343,19 @@ MALFORMED = [
     ({"skipped": "hmi", "k": 3, "n": 1, "t": 0.5}, '"skipped": expected "plc" or "plant"'),
     ({"skipped": "plc", "k": 3, "n": 0, "t": 0.5}, "not a run of scans"),
     ({"skipped": "plc", "k": 3, "t": 0.5}, '"n" is missing'),
+    # A fault no plant takes, whatever the cell (a hostile try's hand edits: each replayed
+    # as a divergence "560 ms apart", the refusal only a hazard in the replay's trace).
+    ({"input": "fault", **GOOD, "target": "clamp", "kind": "melt", "params": {}},
+     'unknown fault kind "melt"'),
+    ({"input": "fault", **GOOD, "target": "SA30", "kind": "stuck", "params": {"value": 1,
+                                                                          "ms": 3}},
+     '"params": ms is no key of a stuck fault'),
+    ({"input": "fault", **GOOD, "target": "SA30", "kind": "stuck", "params": {}},
+     '"params.value": missing'),
+    ({"input": "fault", **GOOD, "target": "SA30", "kind": "chatter",
+      "params": {"period_ms": -5}}, '"params.period_ms": expected'),
+    ({"input": "fault", **GOOD, "target": "SA30", "kind": "never", "params": {},
+      "for_s": -1}, '"for_s": expected seconds > 0'),
 ]
 
 
