@@ -962,6 +962,32 @@ def _loopback(host: str) -> bool:
     return host in ("localhost", "::1") or host.startswith("127.")
 
 
+UA_TRUSTED_SUFFIXES = (".pem", ".der", ".crt", ".cer")  # what a trusted folder's files are
+
+
+def _ua_certificates(r: _Reader, path: Path, where: str) -> None:
+    """A trusted file, or every certificate of a trusted folder, loads (PEM or DER); a
+    folder holds one at least -- asyncua refused an empty one at start with "can't create
+    an empty store", naming nothing (a dashboard builder's try)."""
+    from cryptography import x509
+
+    files = [path] if path.is_file() else sorted(
+        f for f in path.iterdir() if f.suffix.lower() in UA_TRUSTED_SUFFIXES)
+    if not files:
+        raise r.fail(where, f"the folder {path} holds no certificate "
+                     f"({', '.join('*' + s for s in UA_TRUSTED_SUFFIXES)}); an empty list "
+                     "trusts any client on loopback")
+    for f in files:
+        data = f.read_bytes().lstrip()
+        try:
+            if data[:1] == b"0":  # DER starts with a SEQUENCE
+                x509.load_der_x509_certificate(data)
+            else:
+                x509.load_pem_x509_certificate(data)
+        except ValueError:
+            raise r.fail(where, f"{f} is not a certificate (PEM or DER)") from None
+
+
 def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]) -> Any:
     raw = t.get("trusted", [])
     items = [raw] if isinstance(raw, str) else raw
@@ -974,6 +1000,8 @@ def _opcua_trusted(r: _Reader, t: dict[str, Any], key: str, done: dict[str, Any]
         # gateway/opcua/space.py; "" would be the config's folder, /dev/null neither)
         text = r.path_name(item, where, "a certificate file or a folder of them")
         paths.append(r.file_or_folder(where, r.path(key, text, where)))
+    for i, path in enumerate(paths):  # (once every name is one: a bad name is said first)
+        _ua_certificates(r, path, key if isinstance(raw, str) else f"{key}[{i}]")
     security, host = done["security"], done["host"]
     if paths and security is UaSecurity.NONE:
         raise r.fail(key, 'client certificates are exchanged only with security "sign" or '

@@ -48,7 +48,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 
 from ncgate import __version__
-from ncgate.config.schema import OpcuaConfig, UaSecurity
+from ncgate.config.schema import UA_TRUSTED_SUFFIXES, OpcuaConfig, UaSecurity
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.model import (
@@ -154,10 +154,6 @@ class _Users(UserManager):
         return User(role=UserRole.User, name=username)
 
 
-
-TRUSTED_SUFFIXES = (".pem", ".der", ".crt", ".cer")
-
-
 class _Trusted(TrustStore):
     """asyncua's trust store over ``opcua.trusted``: its verification (the certificate itself
     or a CA that signed it, by cryptography's verifier), with files as well as folders.
@@ -172,7 +168,7 @@ class _Trusted(TrustStore):
 def _trusted_files(location: Path) -> list[bytes]:
     """The certificates' bytes (read once, at the start, before the server serves)."""
     files = ([location] if location.is_file() else
-             sorted(f for f in location.iterdir() if f.suffix.lower() in TRUSTED_SUFFIXES))
+             sorted(f for f in location.iterdir() if f.suffix.lower() in UA_TRUSTED_SUFFIXES))
     return [f.read_bytes().lstrip() for f in files]
 
 

@@ -109,11 +109,21 @@ def test_a_certificate_user_is_a_path_beside_the_config_and_other_tables_are_ref
 def test_trusted_takes_files_and_folders_beside_the_config_and_is_needed_beyond_loopback(
         tmp_path: Path) -> None:
     (tmp_path / "pki").mkdir()
-    (tmp_path / "ua.crt").write_text("")
+    _pair(tmp_path, "ua", None)
     config = tmp_path / "cell.toml"
-    secure = ('[opcua]\nsecurity = "sign"\ncertificate = "ua.crt"\nprivate_key = "ua.crt"\n')
+    secure = ('[opcua]\nsecurity = "sign"\ncertificate = "ua.crt"\nprivate_key = "ua.key"\n')
+    # A folder with no certificate: asyncua's "can't create an empty store" at start.
     config.write_text(secure + 'trusted = ["pki", "ua.crt"]\n')
+    with pytest.raises(ConfigError, match=r"opcua\.trusted\[0\]: the folder .*pki holds no "
+                                          r"certificate \(\*\.pem"):
+        load_config(config)
+    _pair(tmp_path / "pki", "client", "urn:client")
     assert load_config(config).opcua.trusted == (tmp_path / "pki", tmp_path / "ua.crt")
+    (tmp_path / "pki" / "notes.pem").write_text("not a certificate")
+    with pytest.raises(ConfigError, match=r"opcua\.trusted\[0\]: .*notes.pem is not a "
+                                          r"certificate"):
+        load_config(config)
+    (tmp_path / "pki" / "notes.pem").unlink()
     config.write_text(secure + 'trusted = ["pki", "gone.pem"]\n')
     with pytest.raises(ConfigError, match=r"opcua\.trusted\[1\]: no such file"):
         load_config(config)
