@@ -22,6 +22,7 @@ from typing import Any
 
 from ncgate.gateway.sweep.run import VERDICTS, run_variant
 from ncgate.gateway.sweep.spec import Variant, load_spec
+from ncgate.gateway.sweep.table import command_of
 
 
 def ncgate_sweep(spec: str | Path, *, allow: Iterable[str] = ("ok",),
@@ -50,6 +51,6 @@ def ncgate_sweep(spec: str | Path, *, allow: Iterable[str] = ("ok",),
         result: dict[str, Any] = run_variant(variant, timeout_s)
         if result["verdict"] not in allowed:
             raise AssertionError(f"{result['verdict']}: {result['report']}\n"
-                                 f"reproduce: {variant.command()}")
+                                 f"reproduce: {command_of(variant, result['signature'])}")
 
     return test_variant

@@ -236,8 +236,6 @@ def test_resume_with_no_parts_says_it_runs_everything(tmp_path: Path) -> None:
 # -- 4. the pytest kit's reproducer is the row's command ----------------------------------
 
 
-@pytest.mark.xfail(strict=True, reason="gateway/testing/sweep_kit.py prints variant.command(), "
-                   "not table.command_of(variant, result['signature']): not this file's to fix")
 def test_the_pytest_kits_reproducer_of_a_budget_timeout_has_its_until(tmp_path: Path) -> None:
     """The kit's `reproduce:` line left out --until BUDGET: the command it printed ran on for
     ever, where the table's `command` stops at the budget."""
