@@ -6,7 +6,8 @@
   imports no dialect's front end;
 - plc: stdlib + lark, for its Structured Text compiler (+
   ``ncgate.errors``, and ``ncgate.commands``, the command table its NC outputs give words
-  of); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``;
+  of); config: stdlib (+ ``ncgate.errors``) and ``ncgate.interpreter.settings``, and
+  cryptography to read certificates;
 - ``ncgate.commands`` and ``ncgate.errors`` are leaves: the standard library only;
 - inside gateway: only ``modbus/`` (and the test kit's Modbus client) imports pymodbus, only
   ``canopen/`` (and the test kit's CANopen master) imports canopen or can, only ``rtu/``
@@ -81,7 +82,10 @@ RULES = {
     # The PLC's NC outputs give command words: named by the one command table, a leaf.
     "plc": STDLIB | {"lark", "ncgate.plc", "ncgate.errors", "ncgate.commands"},
     # The config names the engine's choices (the SND policy), defined once in its leaf module.
-    "config": STDLIB | {"ncgate.config", "ncgate.errors", "ncgate.interpreter.settings"},
+    "config": STDLIB | {"ncgate.config", "ncgate.errors", "ncgate.interpreter.settings",
+                        # The OPC UA server's certificates, checked as the TLS files are (with
+                        # ssl): a bad one is the config's error, naming its key.
+                        "cryptography"},
 }
 
 
