@@ -213,6 +213,7 @@ class Gateway:
                             server="this gateway")
         stack.callback(plant.close)
         plant.fieldbus_listeners.append(self._fieldbus_faults)
+        plant.on_decision = self._plant_decided
         plant_logic = start_plant_logic(self.config, runtime, self.door, closed=False,
                                         wall=driver.now, prepared=prepared["plant"])
         if plant_logic is not None:
@@ -232,6 +233,12 @@ class Gateway:
             if self.recorder is not None:
                 self.recorder.skipped(who, k, n, self.engine.now)
         return note
+
+    def _plant_decided(self, kind: str, t: float, n: int) -> None:
+        """The plant's tick budget decided (a tick cut, the period stretched): into the
+        record being written (if any), which the replay follows instead of its own budget."""
+        if self.recorder is not None:
+            self.recorder.plant(kind, t, n)
 
     def _fieldbus_faults(self, faults: list[Any]) -> None:
         """The plant's fieldbus faults in force, to each adapter that takes them (a fault

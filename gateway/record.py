@@ -25,6 +25,9 @@ The record is JSON Lines, in the order things happened:
   logic (or of the plant's) that the session did not run -- those due while the fieldbus
   started (``k`` 0), and each overrun, the loop a whole period late -- which the replay skips
   too;
+- ``{"plant": "cut" | "stretch", "t", "n"}``: what the wall clock's budget decided at the
+  plant's tick at ``t`` -- the tick cut short after ``n`` models, the tick's period stretched
+  to ``n`` scans -- which the replay decides the same;
 - on a clean stop, ``{"stop": t}``.
 
 An input's line is written before the events it causes, and lines are written whole
@@ -373,6 +376,10 @@ class SessionRecorder:
         self._file.append(json.dumps({"skipped": who, "k": k, "n": n, "t": round(t, 6)})
                           + "\n")
 
+    def plant(self, kind: str, t: float, n: int) -> None:
+        """A decision of the plant's tick budget (``Plant.on_decision``): the replay's."""
+        self._file.append(json.dumps({"plant": kind, "t": round(t, 6), "n": n}) + "\n")
+
     def flush(self) -> None:
         """Write what is pending now (a download of the record as far as it is)."""
         self._file.flush()
@@ -415,6 +422,9 @@ class Recording:
     logic: list[dict[str, str]] = field(default_factory=list)  # the PLC logic's sources
     # The scans the session did not run, per logic ("plc", "plant"): first index -> how many.
     skipped: dict[str, dict[int, int]] = field(default_factory=dict)
+    # The plant's tick budget's decisions: "cut" / "stretch" -> the tick's time -> n.
+    plant: dict[str, dict[float, int]] = field(
+        default_factory=lambda: {"cut": {}, "stretch": {}})
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -490,11 +500,21 @@ def read_record(path: str | Path) -> Recording:
                     raise ValueError(f'"k" {first}, "n" {count}: not a run of scans (k >= 0, '
                                      "n >= 1)")
                 recording.skipped.setdefault(who, {})[first] = count
+            elif "plant" in item:
+                kind = _field(item, "plant", str, '"cut" or "stretch"')
+                if kind not in ("cut", "stretch"):
+                    raise ValueError(f'"plant": expected "cut" or "stretch", got '
+                                     f"{json.dumps(kind)}")
+                n = _field(item, "n", int, "a number of models or scans")
+                if n < 1 or (kind == "stretch" and n & (n - 1)):
+                    raise ValueError(f'"n" {n}: not a ' + ("number of models (>= 1)"
+                                     if kind == "cut" else "stretch (a power of 2)"))
+                recording.plant[kind][round(_time(item, "t"), 6)] = n
             elif "stop" in item:
                 recording.stop = _time(item, "stop")
             else:
                 raise ValueError("neither an input, an event, a program, the PLC logic, "
-                                 "skipped scans nor the stop")
+                                 "skipped scans, the plant's budget nor the stop")
         except ValueError as exc:
             raise RecordError(f"{path}:{number}: {exc}") from None
     if recording is None:
@@ -615,6 +635,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
     start_plant(runtime, door.apply_on_time, closed=False, served=None)
+    assert runtime.plant is not None
+    runtime.plant.decided = recording.plant  # the session's budget, not this machine's
     plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
     # The session's scans never stopped (run's do not stop at a stall, which the replay's
     # inputs, not timers, may end): neither do the replay's.  Those it did not run (an

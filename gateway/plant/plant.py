@@ -116,6 +116,12 @@ class Plant:
         self._tick: Timer | None = None
         self._next_in_turn = 0  # the sampled model a tick starts with (run: round robin)
         self.stretch = 1  # the tick's period in scans (run: the budget's)
+        # What the wall clock's budget decided at a tick (a tick cut short after n models, the
+        # period stretched to n scans), told as it is decided (run --record), and the decisions
+        # a replay takes from its record instead of the replaying machine's budget (tick time,
+        # rounded to the microsecond -> n): the ticks and their writes are then the session's.
+        self.on_decision: Callable[[str, float, int], None] | None = None
+        self.decided: dict[str, dict[float, int]] | None = None
         self.logic: PlcRuntime | None = None  # the plant's ST logic ([plant] logic)
         self.stretched = 0  # how often the budget stretched it
         # Told when a model's state changes (also one that writes nothing: a cylinder
@@ -292,11 +298,15 @@ class Plant:
             start = self._next_in_turn % len(models)
             models = models[start:] + models[:start]
         self._next_in_turn = 0
-        over = None if self.closed else self.runtime.engine.turn_over
+        decided = self.decided
+        over = None if self.closed or decided is not None else self.runtime.engine.turn_over
+        cut = None if decided is None else decided["cut"].get(round(t, 6))
         for done, model in enumerate(models):
-            if over is not None and done and (time.perf_counter() - started > TICK_S
-                                              or over()):
+            if done == cut or (over is not None and done and (
+                    time.perf_counter() - started > TICK_S or over())):
                 self._next_in_turn = list(self._sampling).index(model)
+                if over is not None and self.on_decision is not None:
+                    self.on_decision("cut", t, done)
                 break
             if model.free_running and self._idle():
                 self._sampling.pop(model, None)
@@ -305,8 +315,13 @@ class Plant:
             self._write(model, t=t)
             if not model.sampled:
                 self._sampling.pop(model, None)
-        if over is not None:  # the wall clock's budget: on the virtual clock (a replay of
-            self._budget(time.perf_counter() - started)  # run) a tick takes what it takes
+        if over is not None:  # the wall clock's budget: on the virtual clock a tick takes
+            stretch = self.stretch  # what it takes, and a replay stretches as its record says
+            self._budget(time.perf_counter() - started)
+            if self.stretch != stretch and self.on_decision is not None:
+                self.on_decision("stretch", t, self.stretch)
+        elif decided is not None:
+            self.stretch = decided["stretch"].get(round(t, 6), self.stretch)
         if self._sampling:
             # From its own time, also when it came late: the ticks armed are the ones a
             # replay arms, in the same order beside the PLC scan at equal times (armed from

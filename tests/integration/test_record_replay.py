@@ -498,3 +498,80 @@ def test_the_record_and_the_trace_file_may_not_be_one_file(
                  f"trace.file={same}", "--port", "0", "--no-web"]) == 2
     assert "--record" in capsys.readouterr().err
     assert not same.exists()
+
+
+LAGS = """
+[nc]
+processes = 1
+main = "O1"
+time_scale = 20.0
+[nc.storage]
+MP0 = "."
+[plant]
+scan_ms = 1
+[[plant.model]]
+name = "oil"
+kind = "lag"
+target = "SYVAR1"
+actual = "SYVAR2"
+time_constant_ms = 40
+[[plant.model]]
+name = "air"
+kind = "lag"
+target = "SYVAR3"
+actual = "SYVAR4"
+time_constant_ms = 60
+"""
+
+
+async def test_the_plants_budget_in_the_session_is_the_replays(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """On the wall clock a busy loop cuts the plant's tick short and stretches its period,
+    which the record did not keep: the replay ticked every scan, and wrote the moving values
+    at other times and counts than the session (94 writes of a speed live, 143 replayed: a
+    hostile try) -- a threshold crossed a scan apart, a divergence of a faithful session.
+    Here the budget is nil: every tick is cut after one model and the period stretches."""
+    import ncgate.gateway.plant.plant as plant_module
+
+    monkeypatch.setattr(plant_module, "TICK_S", 0.0)
+    monkeypatch.setattr(plant_module, "BUDGET", 0.0)
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SYVAR2>989)\nN20 (WAI,SYVAR4>989)\nN30 M30\n")
+    (tmp_path / "ncgate.toml").write_text(LAGS)
+    record = tmp_path / "session.jsonl"
+    overrides = {"modbus.port": 0}
+    config = ncgate_test_config(tmp_path / "ncgate.toml", **overrides)
+    async with Gateway(config, record=record, overrides=overrides) as gw:
+        gw.write("SYVAR1", 1000)
+        gw.write("SYVAR3", 1000)
+        await gw.start()
+        await gw.wait_idle(timeout_s=30)
+    lines = [json.loads(line) for line in record.read_text().splitlines()]
+    decided = {line["plant"] for line in lines if "plant" in line}
+    assert decided == {"cut", "stretch"}, decided  # the budget acted, and was kept
+
+    def plant_writes(events: list[dict[str, object]]) -> list[tuple[float, object, object]]:
+        return [(round(float(str(e["t"])), 6), e["var"], e["value"]) for e in events
+                if e["event"] == "write" and str(e["who"]).startswith("plant ")]
+
+    result = await asyncio.to_thread(run_replay, record)
+    assert result.divergence is None, result.divergence
+    live = plant_writes([line for line in lines if "seq" in line])
+    assert len(live) > 10
+    # (To the session's last: a tick due at the stop's instant the replay runs, and the
+    # session, closing, may not have.)
+    assert [w for w in plant_writes(result.events) if w[0] <= live[-1][0]] == live
+
+
+def test_a_malformed_plant_budget_line_names_its_line(
+        cell: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    header = {"ncgate_record": 2, "config": str(cell), "overrides": {}, "files": {}}
+    for line, said in (({"plant": "pause", "t": 0.1, "n": 2}, '"plant": expected "cut"'),
+                       ({"plant": "stretch", "t": 0.1, "n": 3}, "a power of 2"),
+                       ({"plant": "cut", "t": 0.1, "n": 0}, "a number of models"),
+                       ({"plant": "cut", "t": -1, "n": 1}, '"t": expected a time')):
+        record = tmp_path / "r.jsonl"
+        record.write_text("".join(json.dumps(x) + "\n" for x in (header, line,
+                                                                 {"stop": 1.0})))
+        assert main(["sim", "--replay", str(record)]) == 2
+        err = capsys.readouterr().err
+        assert f"{record}:2: " in err and said in err, err
