@@ -432,6 +432,11 @@ class Gateway:
         return self._driver.lag_s if self._driver is not None else 0.0
 
     @property
+    def max_lag_s(self) -> float:
+        """The most the engine fell behind the wall clock since the start (machine s)."""
+        return self._driver.max_lag_s if self._driver is not None else 0.0
+
+    @property
     def plc_status(self) -> PlcStatus | None:
         """The PLC's status (None: no logic), for the fieldbus status objects."""
         return self._plc[0].status if self._plc is not None else None
