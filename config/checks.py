@@ -17,6 +17,7 @@ from ncgate.config.schema import (
     PlcConfig,
     WebTlsConfig,
     _outside_image,
+    x509_certificate,
 )
 
 if TYPE_CHECKING:
@@ -138,10 +139,8 @@ def _check_ua_certificate(r: _Reader, cert: Path | None, private: Path | None,
 
     r.regular("opcua.certificate", cert)
     r.regular("opcua.private_key", private)
-    data = cert.read_bytes()
     try:
-        loaded = (x509.load_pem_x509_certificate(data) if data.lstrip().startswith(b"-----")
-                  else x509.load_der_x509_certificate(data))
+        loaded = x509_certificate(cert.read_bytes())
     except ValueError as exc:
         raise r.fail("opcua.certificate", f"{cert.name} is not a certificate (PEM or DER): "
                      f"{exc}") from None

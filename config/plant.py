@@ -234,6 +234,24 @@ def read_fault(table: Any, key: str, fail: Fail, *, script: bool = False) -> Fau
                        None if for_s is None else float(for_s), clear)
 
 
+def fault_input(kind: object, params: Mapping[str, Any], for_s: object,
+                refuse: Callable[[str], Exception]) -> list[tuple[str, Any]]:
+    """A fault input's kind, parameters and ``for_s`` as any cell's plant takes them (the
+    plant's check, and a record's reader before a replay: what needs no cell): its
+    parameters, checked and with their defaults; ``refuse(message)`` the error otherwise."""
+    if not isinstance(kind, str) or kind not in FAULT_KEYS:
+        raise refuse(f"fault kind {kind!r}: one of {', '.join(FAULT_KEYS)}")
+    if for_s is not None and (isinstance(for_s, bool) or not isinstance(
+            for_s, int | float) or not 0 < for_s < MAX_FOR_S):
+        raise refuse(f"for_s: a time in seconds > 0 and < {MAX_FOR_S:g}, not {for_s!r}")
+    unknown = sorted(set(params) - set(FAULT_KEYS[kind]))
+    if unknown:
+        raise refuse(f"a {kind} fault takes {', '.join(FAULT_KEYS[kind]) or 'no parameter'}, "
+                     f"not {', '.join(unknown)}")
+    return fault_params(kind, params, kind,
+                        lambda where, message: refuse(f"{where}: {message}"))
+
+
 def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
                  ) -> list[tuple[str, Any]]:
     """The parameters of a fault of ``kind`` from ``table`` (a config table, an API body),

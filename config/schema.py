@@ -965,12 +965,20 @@ def _loopback(host: str) -> bool:
 UA_TRUSTED_SUFFIXES = (".pem", ".der", ".crt", ".cer")  # what a trusted folder's files are
 
 
+def x509_certificate(data: bytes) -> Any:
+    """A certificate's bytes, PEM (by its armour) or DER, as a cryptography Certificate;
+    ValueError when they are neither."""
+    from cryptography import x509
+
+    if data.lstrip().startswith(b"-----"):
+        return x509.load_pem_x509_certificate(data)
+    return x509.load_der_x509_certificate(data)
+
+
 def _ua_certificates(r: _Reader, path: Path, where: str) -> None:
     """A trusted file, or every certificate of a trusted folder, loads (PEM or DER); a
     folder holds one at least -- asyncua refused an empty one at start with "can't create
     an empty store", naming nothing (a dashboard builder's try)."""
-    from cryptography import x509
-
     files = [path] if path.is_file() else sorted(
         f for f in path.iterdir() if f.suffix.lower() in UA_TRUSTED_SUFFIXES)
     if not files:
@@ -978,12 +986,8 @@ def _ua_certificates(r: _Reader, path: Path, where: str) -> None:
                      f"({', '.join('*' + s for s in UA_TRUSTED_SUFFIXES)}); an empty list "
                      "trusts any client on loopback")
     for f in files:
-        data = f.read_bytes().lstrip()
         try:
-            if data[:1] == b"0":  # DER starts with a SEQUENCE
-                x509.load_der_x509_certificate(data)
-            else:
-                x509.load_pem_x509_certificate(data)
+            x509_certificate(f.read_bytes())
         except ValueError:
             raise r.fail(where, f"{f} is not a certificate (PEM or DER)") from None
 

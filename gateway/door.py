@@ -367,7 +367,7 @@ class Door:
         own event: cause before effect)."""
         plant = self.runtime.plant
         if plant is not None:
-            plant.forces_released()
+            plant.show_driven()
 
     def _force_plc(self, item: Force, var: PlcVar) -> None:
         """Force a variable of the PLC logic: kept at the start and the end of every scan

@@ -57,6 +57,7 @@ from typing import Any
 
 from ncgate import __version__
 from ncgate.config import Config, ConfigError, load_config
+from ncgate.config.plant import fault_input
 from ncgate.errors import InputRefused
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
@@ -276,7 +277,10 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
     if kind == "fault":
         params = _field(item, "params", dict, "an object of the fault's keys")
         for_s = _field(item, "for_s", (int, float), "seconds or null", optional=True)
-        _check_fault(_field(item, "kind", str, "a fault kind"), params, for_s)
+        # What no cell's plant takes is no record's (a kind "melt" replayed as a divergence
+        # "560 ms apart", its refusal a hazard in the trace); what this cell's refuses (its
+        # models, its image) the replay says.
+        fault_input(_field(item, "kind", str, "a fault kind"), params, for_s, ValueError)
         return t, Fault(_field(item, "target", str, "a fault's target"),
                         _field(item, "kind", str, "a fault kind"),
                         tuple(sorted((str(k), tuple(v) if isinstance(v, list) else v)
@@ -287,28 +291,6 @@ def parse_input(item: dict[str, Any]) -> tuple[float, Input]:
                              source)
     raise ValueError(f'"input": unknown kind {json.dumps(kind)} (write, command, snd, start, '
                      "alarm, override, break, force, fault, fault_clear)")
-
-
-def _check_fault(kind: str, params: dict[str, Any], for_s: float | None) -> None:
-    """A fault input as any cell's plant takes it: a known kind, its keys, their values
-    (what only a cell can say -- its models, its image -- the replay says).  A kind no
-    plant knows was a divergence "700 ms apart", its cause a hazard in the trace."""
-    from ncgate.config.plant import FAULT_KEYS, MAX_FOR_S, fault_params
-
-    def fail(where: str, message: str) -> ValueError:
-        return ValueError(f'"{where}": {message}')
-
-    if kind not in FAULT_KEYS:
-        raise ValueError(f'"kind": unknown fault kind {json.dumps(kind)} '
-                         f"({', '.join(sorted(FAULT_KEYS))})")
-    extra = sorted(set(params) - set(FAULT_KEYS[kind]))
-    if extra:
-        raise ValueError(f'"params": {extra[0]} is no key of a {kind} fault '
-                         f"({', '.join(FAULT_KEYS[kind]) or 'it has none'})")
-    fault_params(kind, params, "params", fail)
-    if for_s is not None and (isinstance(for_s, bool) or not 0 < for_s < MAX_FOR_S):
-        raise ValueError(f'"for_s": expected seconds > 0 and < {MAX_FOR_S:g}, or null, got '
-                         f"{for_s!r}")
 
 
 def _check_event(item: dict[str, Any]) -> None:
@@ -634,9 +616,8 @@ def replay(path: str | Path, config: str | Path | None = None,
     from ncgate.config.script import Script
     from ncgate.gateway.sim import ScriptPlayer, plant_faults
 
-    start_plant(runtime, door.apply_on_time, closed=False, served=None)
-    assert runtime.plant is not None
-    runtime.plant.decided = recording.plant  # the session's budget, not this machine's
+    plant = start_plant(runtime, door.apply_on_time, closed=False, served=None)
+    plant.decided = recording.plant  # the session's budget, not this machine's
     plant_logic = start_plant_logic(cfg, runtime, door, closed=True)
     # The session's scans never stopped (run's do not stop at a stall, which the replay's
     # inputs, not timers, may end): neither do the replay's.  Those it did not run (an

@@ -48,7 +48,12 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 
 from ncgate import __version__
-from ncgate.config.schema import UA_TRUSTED_SUFFIXES, OpcuaConfig, UaSecurity
+from ncgate.config.schema import (
+    UA_TRUSTED_SUFFIXES,
+    OpcuaConfig,
+    UaSecurity,
+    x509_certificate,
+)
 from ncgate.errors import Reason
 from ncgate.gateway.opcua.codes import REFUSAL
 from ncgate.gateway.opcua.model import (
@@ -132,10 +137,7 @@ class _Users(UserManager):
         self.certificates: dict[bytes, str] = {}
         for name, path in users.items():
             if isinstance(path, Path):
-                cert = path.read_bytes()
-                pem = cert.lstrip().startswith(b"-----")
-                loaded = (x509.load_pem_x509_certificate(cert) if pem
-                          else x509.load_der_x509_certificate(cert))
+                loaded = x509_certificate(path.read_bytes())
                 self.certificates[loaded.public_bytes(serialization.Encoding.DER)] = name
         # Set while a session activates with an X.509 identity token: asyncua passes the
         # secure channel's client certificate for every token, an anonymous one too.

@@ -25,13 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 from ncgate.config.plant import (
     CANOPEN_FAULTS,
-    FAULT_KEYS,
-    MAX_FOR_S,
     MODBUS_FAULTS,
     MODEL_FAULTS,
     MODEL_KEYS,
     VARIABLE_FAULTS,
-    fault_params,
+    fault_input,
 )
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.plant.models import KINDS, Model
@@ -377,26 +375,11 @@ class Plant:
         target, kind = item.target, item.kind
         if not isinstance(target, str) or not target.strip():
             raise InputRefused(Reason.BAD_VALUE, f"a fault names its target, not {target!r}")
-        if kind not in FAULT_KEYS:
-            raise InputRefused(Reason.BAD_VALUE, f"fault kind {kind!r}: one of "
-                               f"{', '.join(FAULT_KEYS)}")
-        if item.for_s is not None and (isinstance(item.for_s, bool) or not isinstance(
-                item.for_s, int | float) or not 0 < item.for_s < MAX_FOR_S):
-            raise InputRefused(Reason.BAD_VALUE, f"for_s: a time in seconds > 0 and < "
-                               f"{MAX_FOR_S:g}, not {item.for_s!r}")
         raw = dict(item.params) if isinstance(item.params, tuple | list) else None
         if raw is None or not all(isinstance(k, str) for k in raw):
             raise InputRefused(Reason.BAD_VALUE, "a fault's parameters are (name, value) pairs")
-        unknown = sorted(set(raw) - set(FAULT_KEYS[kind]))
-        if unknown:
-            raise InputRefused(Reason.BAD_VALUE, f"a {kind} fault takes "
-                               f"{', '.join(FAULT_KEYS[kind]) or 'no parameter'}, not "
-                               f"{', '.join(unknown)}")
-
-        def fail(key: str, message: str) -> Exception:
-            return InputRefused(Reason.BAD_VALUE, f"{key}: {message}")
-
-        params = dict(fault_params(kind, raw, kind, fail))
+        params = dict(fault_input(kind, raw, item.for_s,
+                                  lambda message: InputRefused(Reason.BAD_VALUE, message)))
         fault = ActiveFault(target.strip(), kind, params, str(item.source),
                             self.runtime.engine.now)
         name = fault.target
@@ -540,13 +523,13 @@ class Plant:
                 continue
             driven = any(overlap(var.address, address) for address in self._drives)
             image.unhold(*var.address, give_back=None if driven else f"fault clear {who}")
-        for model in self.models.values():
-            self._write(model, shown=True)
+        self.show_driven()
 
-    def forces_released(self) -> None:
-        """A force was released: what the models drive shows their value again.  A model
-        writes what changes, so the forced value stayed until its next change -- a running
-        spindle read at standstill and at speed at once (a hostile try)."""
+    def show_driven(self) -> None:
+        """What the models drive, written where the image shows something else: after a
+        hold or a force over it went (a model writes what changes, so the held or forced
+        value stayed until its next change -- a running spindle read at standstill and at
+        speed at once: a hostile try)."""
         for model in self.models.values():
             self._write(model, shown=True)
 

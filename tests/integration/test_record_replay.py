@@ -346,16 +346,16 @@ MALFORMED = [
     # A fault no plant takes, whatever the cell (a hostile try's hand edits: each replayed
     # as a divergence "560 ms apart", the refusal only a hazard in the replay's trace).
     ({"input": "fault", **GOOD, "target": "clamp", "kind": "melt", "params": {}},
-     'unknown fault kind "melt"'),
+     "fault kind 'melt': one of stuck, wire_break"),
     ({"input": "fault", **GOOD, "target": "SA30", "kind": "stuck", "params": {"value": 1,
                                                                           "ms": 3}},
-     '"params": ms is no key of a stuck fault'),
+     "a stuck fault takes value, not ms"),
     ({"input": "fault", **GOOD, "target": "SA30", "kind": "stuck", "params": {}},
-     '"params.value": missing'),
+     "stuck.value: missing"),
     ({"input": "fault", **GOOD, "target": "SA30", "kind": "chatter",
-      "params": {"period_ms": -5}}, '"params.period_ms": expected'),
+      "params": {"period_ms": -5}}, "chatter.period_ms: expected"),
     ({"input": "fault", **GOOD, "target": "SA30", "kind": "never", "params": {},
-      "for_s": -1}, '"for_s": expected seconds > 0'),
+      "for_s": -1}, "for_s: a time in seconds > 0 and < 1e+09, not -1"),
 ]
 
 
