@@ -715,6 +715,8 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
             return None
         checked = ready
     record = str(Path(args.record).resolve()) if args.record else None
+    if record is not None and Path(record).is_dir():
+        raise UsageError(f"--record {args.record}: is a folder: give the record a file name")
     if record is not None and config.trace.file is not None and (
             Path(config.trace.file).resolve() == Path(record)):
         raise UsageError(f"--record {args.record}: it is the trace file too (trace.file): "
