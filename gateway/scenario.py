@@ -19,14 +19,17 @@ ended before the scenario's end (its last window or timed entry).
 from __future__ import annotations
 
 import html
+import io
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TextIO
 
 from ncgate.config import ConfigError
 from ncgate.config.script import Expect, Script
 from ncgate.errors import InputRefused
+from ncgate.gateway.atomic import write_atomic
 from ncgate.gateway.wiring import Runtime, parse_condition
 from ncgate.inputs import Var
 from ncgate.interpreter.diagnostics import did_you_mean
@@ -392,8 +395,19 @@ def _bytes(area: str, index: int, view: str) -> tuple[str, int, int]:
     return area, index, index + 1 if view == "IN" else index
 
 
-def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO) -> None:
-    """JUnit XML: one testsuite per scenario, one testcase per expectation."""
+def save_junit(path: Path, verdicts: Sequence[tuple[str, list[Verdict]]],
+               notes: Mapping[str, str] | None = None) -> None:
+    """:func:`write_junit` into ``path``, whole or not at all (a CI reading a half-written
+    file after a kill would see an XML error, or fewer failures than there were)."""
+    out = io.StringIO()
+    write_junit(verdicts, out, notes)
+    write_atomic(path, out.getvalue().encode("utf-8"))
+
+
+def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO,
+                notes: Mapping[str, str] | None = None) -> None:
+    """JUnit XML: one testsuite per scenario, one testcase per expectation; ``notes``: a
+    scenario's note (``run --script`` on a machine that fell behind) as its system-err."""
     total = sum(len(v) for _, v in verdicts)
     failures = sum(1 for _, v in verdicts for x in v if not x.ok)
     out.write('<?xml version="1.0" encoding="UTF-8"?>\n')
@@ -411,5 +425,8 @@ def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO) -> N
             else:
                 out.write(f'>\n      <failure message="{html.escape(v.detail)}">'
                           f'{html.escape(v.line())}</failure>\n    </testcase>\n')
+        note = (notes or {}).get(name)
+        if note:
+            out.write(f"    <system-err>{html.escape(note)}</system-err>\n")
         out.write("  </testsuite>\n")
     out.write("</testsuites>\n")

@@ -143,6 +143,9 @@ def build_parser() -> argparse.ArgumentParser:
                      "its [[expect]] judged as in sim (PASS/FAIL lines); it starts the main "
                      "program itself (nc.autostart off), and that moment is its t = 0; it stops "
                      "at its last window's end, exit 1 when an expectation failed (docs/script.md)")
+    run.add_argument("--junit", metavar="F.xml", help="with --script: write its verdicts as "
+                     "JUnit XML for CI, as sim --junit does (written when the scenario ends, "
+                     "whole or not at all)")
     run.add_argument("--trace", metavar="T.jsonl", help="write every event as JSON Lines, "
                      "rotated at trace.max_mb (default: none; memory keeps trace.ring events)")
     run.add_argument("--loop", choices=("auto", "asyncio", "uvloop"), default="auto",
@@ -460,10 +463,9 @@ def _sim(args: argparse.Namespace) -> int:
         verdicts.append((name, result.verdicts))
         status = max(status, result.exit_status)
     if args.junit:
-        from ncgate.gateway.scenario import write_junit
+        from ncgate.gateway.scenario import save_junit
 
-        with open(args.junit, "w", encoding="utf-8") as out:
-            write_junit(verdicts, out)
+        save_junit(Path(args.junit), verdicts)
     if len(scripts) > 1:
         failed = sum(1 for _, items in verdicts for v in items if not v.ok)
         total = sum(len(items) for _, items in verdicts)
@@ -714,6 +716,12 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
         if ready is None:
             return None
         checked = ready
+    junit = None
+    if args.junit:
+        if not args.script:
+            raise UsageError("--junit goes with --script: it writes the scenario's verdicts")
+        _check_output_folder("--junit", args.junit)
+        junit = (Path(args.junit).resolve(), _relative(Path(args.script), Path.cwd()))
     record = str(Path(args.record).resolve()) if args.record else None
     if record is not None and Path(record).is_dir():
         raise UsageError(f"--record {args.record}: is a folder: give the record a file name")
@@ -751,7 +759,8 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
         check_scenario(config, script, sim=False)  # on the cell, before anything serves:
         # a PLC that connected at once wrote to a gateway that then refused its script
     return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                             watch=args.watch, checked=checked, script=script))
+                             watch=args.watch, checked=checked, script=script,
+                             junit=junit))
 
 
 def _programs_ready(config: Config) -> tuple[CheckedFile, ...] | None:

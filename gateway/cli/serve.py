@@ -15,6 +15,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from contextlib import suppress
+from pathlib import Path
 from typing import Any
 
 from ncgate.config import Config
@@ -147,12 +148,14 @@ LOG_LINES_PER_S = 100
 async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = False,
                 record: str | None = None, overrides: dict[str, Any] | None = None,
                 watch: bool = False, checked: Sequence[CheckedFile] = (),
-                script: Script | None = None) -> int:
+                script: Script | None = None, junit: tuple[Path, str] | None = None) -> int:
     """``watch``: reload the PLC logic when one of its files changes (``run --watch``).
     ``checked``: what the start-up check found no error in (``Gateway``'s ``checked``).
     ``script``: a scenario played on the wall clock (``run --script``): its inputs and faults
     at their machine times, its expectations judged as in ``sim``; it stops at the end of
-    its last window (or at a signal) and returns 1 when an expectation failed, else 0."""
+    its last window (or at a signal) and returns 1 when an expectation failed, else 0;
+    ``junit``: the file its verdicts are written to as JUnit XML, and the scenario's name
+    there (``run --junit``)."""
     status = 0
     stop = stop if stop is not None else asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -203,7 +206,7 @@ async def serve(config: Config, stop: asyncio.Event | None = None, cold: bool = 
             if gw.recorder is not None:
                 log.info("recording the session to %s", gw.recorder.path)
             watcher = _watch(gw, config, loop) if watch else None
-            scenario = await _play(gw, script, stop) if script is not None else None
+            scenario = await _play(gw, script, stop, junit) if script is not None else None
             try:
                 await stop.wait()
             finally:
@@ -230,11 +233,13 @@ class _Scenario:
     not from the gateway's (whose start-up takes a moment, seconds under load).  ``run
     --script`` turns ``nc.autostart`` off for it (the CLI does)."""
 
-    def __init__(self, gw: Gateway, script: Script, stop: asyncio.Event) -> None:
+    def __init__(self, gw: Gateway, script: Script, stop: asyncio.Event,
+                 junit: tuple[Path, str] | None = None) -> None:
         from ncgate.gateway.scenario import Expectations
 
         self.gw = gw
         self.script = script
+        self.junit = junit
         self.stop = stop
         self.expectations = Expectations(gw.runtime, script)
         self.horizon = script.horizon if script.expects else None
@@ -303,12 +308,23 @@ class _Scenario:
             print(v.line(), file=out, flush=True)
         ok = all(v.ok for v in verdicts)
         late = self.late()
+        note = ""
         if late and not ok:
             # A FAIL of a machine too busy to keep the time scale blamed the cell (a hostile
             # try: coolant_wire_mended on a loaded host, 39 scans skipped).
-            print(f"ncgate run: note: {late}: a FAIL may be this machine's load, not the "
-                  "cell's (ncgate sim runs the same scenario on the virtual clock)",
-                  file=sys.stderr, flush=True)
+            note = (f"note: {late}: a FAIL may be this machine's load, not the cell's "
+                    "(ncgate sim runs the same scenario on the virtual clock)")
+            print(f"ncgate run: {note}", file=sys.stderr, flush=True)
+        if self.junit is not None:
+            from ncgate.gateway.scenario import save_junit
+
+            path, name = self.junit
+            try:
+                save_junit(path, [(name, verdicts)], {name: note} if note else None)
+            except OSError as exc:  # (the folder was checked at the start: gone since)
+                print(f"ncgate run: --junit {path}: {exc.strerror or exc}", file=sys.stderr,
+                      flush=True)
+                return 1
         return 0 if ok else 1
 
     def late(self) -> str:
@@ -325,7 +341,8 @@ class _Scenario:
         return " and ".join(said)
 
 
-async def _play(gw: Gateway, script: Script, stop: asyncio.Event) -> _Scenario:
-    scenario = _Scenario(gw, script, stop)
+async def _play(gw: Gateway, script: Script, stop: asyncio.Event,
+                junit: tuple[Path, str] | None = None) -> _Scenario:
+    scenario = _Scenario(gw, script, stop, junit)
     await scenario.start()
     return scenario

@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import asyncio
 import json
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
+
+from ncgate.gateway.cli.main import main
 
 from .test_cli_run import start_run, stop_run
 
@@ -98,10 +101,10 @@ within = [1.0, 3.0]
 """
 
 
-async def _scenario(tmp_path: Path, script: str) -> tuple[int, str]:
+async def _scenario(tmp_path: Path, script: str, *more: str) -> tuple[int, str]:
     path = tmp_path / "scenario.toml"
     path.write_text(script)
-    proc, port, lines = await start_run(_cell(tmp_path), "--script", str(path))
+    proc, port, lines = await start_run(_cell(tmp_path), "--script", str(path), *more)
     assert proc.stdout is not None
     async with asyncio.timeout(20):  # the scenario starts O1: its t = 0, its faults in force
         while "the scenario's t = 0" not in lines[-1]:
@@ -177,3 +180,51 @@ async def test_a_scripts_modbus_fault_is_seen_by_the_client_inside_its_window(
     clear = next(e for e in events if e["event"] == "fault_clear")
     assert (fault["target"], fault["who"]) == ("modbus", "script fault[0]")
     assert clear["t"] - fault["t"] == pytest.approx(1.0, abs=1e-6)
+
+
+def _junit(path: Path) -> dict[str, str | None]:
+    """Each testcase's name, and its failure's text (None: it passed)."""
+    suites = ET.parse(path).getroot()
+    assert suites.tag == "testsuites"
+    (suite,) = suites  # one scenario
+    assert suite.get("name") == str(path.parent / "scenario.toml")
+    cases = {}
+    for case in suite.iter("testcase"):
+        failure = case.find("failure")
+        cases[case.get("name") or ""] = None if failure is None else failure.text
+    assert suites.get("tests") == str(len(cases))
+    assert suites.get("failures") == str(sum(v is not None for v in cases.values()))
+    return cases
+
+
+async def test_run_script_writes_its_verdicts_as_junit_for_ci(tmp_path: Path) -> None:
+    junit = tmp_path / "verdicts.xml"
+    code, log = await _scenario(tmp_path, SCENARIO, "--junit", str(junit))
+    assert code == 0, log
+    assert _junit(junit) == {"clamp closes": None, "P1 ends": None}
+    assert not list(tmp_path.glob(".verdicts.xml.*"))  # written whole, nothing left beside it
+
+
+async def test_run_script_junit_holds_the_failures_a_bad_case_prints(tmp_path: Path) -> None:
+    junit = tmp_path / "verdicts.xml"
+    code, log = await _scenario(tmp_path, SCENARIO + '[[fault]]\ntarget = "clamp"\n'
+                                'kind = "never"\nat = 0.0\n', "--junit", str(junit))
+    assert code == 1, log
+    cases = _junit(junit)
+    assert set(cases) == {"clamp closes", "P1 ends"}
+    failed = cases["clamp closes"]
+    assert failed is not None and failed.startswith("FAIL clamp closes: SA30 still 0 at 3.000 s")
+    assert failed in log  # the line the run printed, word for word
+    assert cases["P1 ends"] is not None
+
+
+def test_run_junit_is_refused_before_anything_serves(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    config = _cell(tmp_path)
+    script = tmp_path / "scenario.toml"
+    script.write_text(SCENARIO)
+    assert main(["run", "--config", str(config), "--junit", str(tmp_path / "v.xml")]) == 2
+    assert "--junit goes with --script" in capsys.readouterr().err
+    assert main(["run", "--config", str(config), "--script", str(script), "--junit",
+                 str(tmp_path / "missing" / "v.xml")]) == 2
+    assert "no folder" in capsys.readouterr().err
