@@ -69,6 +69,7 @@ from ncgate.gateway.opcua.model import (
     StateView,
 )
 from ncgate.gateway.opcua.server import REGION
+from ncgate.gateway.opcua.transport import CheckedServer
 from ncgate.gateway.opcua.wire import frame, read_frame
 from ncgate.gateway.ratelimit import LogFlood
 from ncgate.gateway.tls import expiry_warning
@@ -378,7 +379,7 @@ class Space:
         """Build, serve, and apply the gateway's frames until stop (or its pipe closes)."""
         config = self.link.config
         self.users = _Users(config.users)
-        server = self._server = Server(user_manager=self.users)
+        server = self._server = CheckedServer(user_manager=self.users)
         await server.init()  # (ConditionRefresh is ncgate's own: _build_conditions)
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
         server.set_server_name(f"ncgate {layout['cell']} (virtual)")

@@ -1,0 +1,111 @@
+"""The OPC UA server's connections (in the server's process): asyncua's binary protocol, with
+each message header checked before asyncua buffers or parses what follows it.
+
+asyncua 2.1's ``OPCUAProtocol`` reads any 3 bytes as a message type and the next 4 as a
+size.  Bytes that are not OPC UA (an HTTP request, a port scanner's probe) got no answer and
+no close: ``GET / HTTP/1.0`` reads as a chunk of 1.4 GB, which it waited for, buffering
+whatever came; a short one of an unknown type raised in its message loop, a traceback in the
+log, the connection left open.  OPC 10000-6 7.1.2.5 and 7.1.5 have the server answer an
+Error message (``ERRF``) with the reason and close the connection.  This module imports
+asyncua and is imported only by :mod:`ncgate.gateway.opcua.space`.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from typing import Any
+
+from asyncua import ua
+from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
+from asyncua.server.server import Server
+from asyncua.ua.status_codes import StatusCodes
+from asyncua.ua.ua_binary import uatcp_to_binary
+
+log = logging.getLogger("ncgate.opcua")
+
+# OPC 10000-6 7.1.2.2: the message types a server receives, and the chunk types each may
+# have (Acknowledge and ReverseHello go from a server to a client; asyncua raised on them).
+_FINAL_ONLY = frozenset({b"F"})
+_CHUNKS = {b"HEL": _FINAL_ONLY, b"ERR": _FINAL_ONLY, b"OPN": _FINAL_ONLY,
+           b"CLO": _FINAL_ONLY, b"MSG": frozenset({b"F", b"C", b"A"})}
+_SECURE = frozenset({b"OPN", b"CLO", b"MSG"})  # their header has a SecureChannelId: 12 bytes
+HEADER = struct.Struct("<3scI")
+
+
+def header_refusal(header: bytes, max_chunk: int) -> tuple[int, str] | None:
+    """What a message header (its first 8 bytes) is refused with, or None: an unknown
+    message or chunk type is Bad_TcpMessageTypeInvalid, a chunk larger than the server's
+    receive buffer Bad_TcpMessageTooLarge (7.1.2.4), one smaller than its own header
+    Bad_DecodingError."""
+    kind, chunk, size = HEADER.unpack(header)
+    if chunk not in _CHUNKS.get(kind, ()):
+        return StatusCodes.BadTcpMessageTypeInvalid, f"message type {(kind + chunk)!r}"
+    if 0 < max_chunk < size:  # (0: no limit)
+        return StatusCodes.BadTcpMessageTooLarge, f"a chunk of {size} bytes (at most {max_chunk})"
+    if size <= (12 if kind in _SECURE else 8):
+        return StatusCodes.BadDecodingError, f"a {kind.decode()} chunk of {size} bytes"
+    return None
+
+
+class _Protocol(OPCUAProtocol):
+    """asyncua's protocol, which sees only headers it can take."""
+
+    refused = False
+
+    def data_received(self, data: bytes) -> None:
+        if self.refused or self.transport is None:
+            return
+        # asyncua's data_received adds the bytes to _buffer and takes every whole message
+        # from its front, so _buffer holds at most the start of one: the headers from there.
+        self._buffer += data
+        buffer, at = self._buffer, 0
+        while len(buffer) - at >= HEADER.size:
+            refusal = header_refusal(buffer[at:at + HEADER.size], self.limits.max_recv_buffer)
+            if refusal is not None:
+                self._refuse(*refusal)
+                return
+            at += HEADER.unpack_from(buffer, at)[2]
+        super().data_received(b"")  # (b"" adds nothing to _buffer, and copies nothing)
+
+    def _refuse(self, code: int, what: str) -> None:
+        """OPC 10000-6 7.1.5: an Error message, then the connection is closed."""
+        self.refused = True
+        self._buffer = b""
+        status = ua.StatusCode(ua.UInt32(code))
+        log.warning("opcua %s: not OPC UA (%s): answered %s and closed",
+                    _peer(self.peer_name), what, status.name)
+        assert self.transport is not None
+        error = ua.ErrorMessage(status, ua.String(f"{status.name}: {what}"))
+        # (asyncua annotates the message type as its class MessageType; its values are bytes)
+        self.transport.write(uatcp_to_binary(ua.MessageType.Error, error))  # type: ignore[arg-type]
+        self.transport.close()
+
+
+def _peer(name: Any) -> str:
+    return f"{name[0]}:{name[1]}" if isinstance(name, tuple) and len(name) >= 2 else str(name)
+
+
+class CheckedServer(Server):
+    """asyncua's server, its connections :class:`_Protocol`'s.
+
+    ``Server.start`` makes its ``BinaryServer`` and starts it in one go, with no protocol
+    factory to pass in: this attribute's setter gives the new ``BinaryServer`` the factory
+    before it listens (no library code is changed)."""
+
+    _bserver: BinaryServer | None = None
+
+    @property
+    def bserver(self) -> BinaryServer | None:
+        return self._bserver
+
+    @bserver.setter
+    def bserver(self, binary: BinaryServer | None) -> None:
+        if binary is not None:
+            def make() -> OPCUAProtocol:
+                return _Protocol(iserver=binary.iserver,
+                                 policies=binary._policies,  # (set_policies', after this)
+                                 clients=binary.clients, closing_tasks=binary.closing_tasks,
+                                 limits=binary.limits)
+            binary._make_protocol = make  # type: ignore[method-assign]
+        self._bserver = binary
