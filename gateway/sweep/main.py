@@ -23,7 +23,7 @@ from typing import TextIO
 from ncgate.gateway.errors import ClusterLost
 from ncgate.gateway.stdout import stderr, stdout, write_stdout_bytes
 from ncgate.gateway.sweep.run import Result
-from ncgate.gateway.sweep.spec import Spec, SpecError, Variant
+from ncgate.gateway.sweep.spec import Spec, SpecError, Variant, render_value
 from ncgate.gateway.sweep.table import (
     Parts,
     Row,
@@ -187,10 +187,14 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                out: TextIO, stops: _Stops) -> tuple[int, list[Row]]:
     parts = Parts(output, spec)
     done = parts.start(options.resume)
-    variants = {v.id: v for v in spec.variants}
-    rows: dict[str, Row] = {key: shown_again(row, variants[key])
-                           for key, row in done.items()}
-    todo = [v for v in spec.variants if v.id not in rows]
+    rows: dict[str, Row] = {}
+    for key, row in done.items():  # Parts.start kept only the rows of this spec's ids
+        variant = spec.variants.find(key)
+        assert variant is not None
+        rows[key] = shown_again(row, variant)
+    # The variants are made one at a time as they go out (a spec of a million: no list).
+    todo: Sequence[Variant] = (spec.variants if not rows else
+                               [v for v in spec.variants if v.id not in rows])
     if done:
         print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
               file=out)
@@ -235,7 +239,7 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     parts.add(pending)
     if progress is not None:
         progress.close()
-    ordered = [rows[v.id] for v in spec.variants]  # spec.variants is sorted by id
+    ordered = [rows[key] for key in spec.variants.ids()]  # sorted by id
     data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
             else csv_bytes(ordered, spec.keys))
     if table_to_stdout(options):
@@ -374,12 +378,20 @@ def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
         return
     print(f"explored {n_variants(len(rows))}: {len(groups)} distinct failure"
           f"{'s' if len(groups) > 1 else ''}", file=out)
-    variants = {v.id: v for v in spec.variants}
     for (verdict, signature), found in sorted(groups.items(), key=lambda g: (-len(g[1]), g[0])):
         first = min(found, key=lambda r: (r["cycle_s"], r["id"]))
         print(f"{verdict} in {len(found)} of {len(rows)} variants: {signature}", file=out)
         print(f"  first in {first['cycle_s']:.3f} s of simulated time: {first['id']}", file=out)
-        smallest = reduce(variants[first["id"]], verdict, first["signature"], timeout_s)
+        variant = spec.variants.find(first["id"])
+        assert variant is not None
+        if first["signature"] == "timeout wall":
+            # Each try could take a whole --timeout, and a try that times out tells nothing
+            # of the failure: not reduced.
+            print(f"  smallest reproducer: not looked for (a wall timeout: each try could take "
+                  f"the --timeout); the variant: {command_of(variant, first['signature'])}",
+                  file=out)
+            continue
+        smallest = reduce(variant, verdict, first["signature"], timeout_s)
         # As the row's own command: a run past its budget stops there (--until BUDGET).
         print(f"  smallest reproducer: {command_of(smallest, first['signature'])}", file=out)
 
@@ -388,14 +400,21 @@ def reduce(variant: Variant, verdict: str, signature: str,
            timeout_s: float | None) -> Variant:
     """``variant`` without each swept key (its default instead) that the failure does not
     need: one key at a time, in column order, kept out when the run without it fails with
-    the same verdict and signature."""
+    the same verdict and signature.  Each try is a line on stderr (a try may take up to
+    ``timeout_s``), and one past the wall timeout says so: its key is kept."""
     from ncgate.gateway.sweep.run import run_variant
 
-    for key, _ in variant.sets:
+    for step, (key, value) in enumerate(variant.sets, 1):
+        print(f"reducing {variant.id}: trying {key} at its default, not "
+              f"{render_value(value)} ({step} of {len(variant.sets)})...", file=sys.stderr,
+              flush=True)
         fewer = dataclasses.replace(variant, sets=tuple(s for s in variant.sets if s[0] != key))
         result = run_variant(fewer, timeout_s)
         if (result["verdict"], result["signature"]) == (verdict, signature):
             variant = fewer
+        elif result["signature"] == "timeout wall":
+            print(f"reducing {variant.id}: {key} at its default ran past the --timeout of "
+                  f"{timeout_s or 0:g} s: {key} kept", file=sys.stderr, flush=True)
     return variant
 
 

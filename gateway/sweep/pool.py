@@ -68,7 +68,8 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["ncgate.gateway.sweep.worker_signals",
                                     "ncgate.gateway.sweep.run", "ncgate.gateway.sim"])
-    todo = deque(variants)
+    todo: deque[Variant] = deque()  # given back: a dead worker's variant runs again first
+    rest = iter(variants)  # made one at a time (a spec's Variants are lazy)
     deaths: dict[str, int] = {}
     pool: list[_Worker] = []
 
@@ -81,9 +82,9 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
 
     def give(worker: _Worker) -> None:
         worker.variant = None
-        if not todo:
+        variant = todo.popleft() if todo else next(rest, None)
+        if variant is None:
             return
-        variant = todo.popleft()
         try:
             worker.conn.send(variant)
         except OSError:  # it died after its last answer: the variant goes to a new one

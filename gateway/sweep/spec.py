@@ -31,6 +31,8 @@ same spec gives the same ids wherever it runs.  Errors name the spec file and th
 
 from __future__ import annotations
 
+import array
+import bisect
 import contextlib
 import glob
 import hashlib
@@ -41,10 +43,10 @@ import os
 import random
 import shlex
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 from ncgate.config import ConfigError, load_config
 from ncgate.config.reader import read_toml
@@ -116,7 +118,7 @@ class Variant:
 @dataclass
 class Spec:
     file: Path
-    variants: list[Variant]
+    variants: Variants  # sorted by id, made lazily
     keys: list[str]  # the swept keys, one column each
     fingerprint: str  # the spec and the files it names: a resumed sweep must match it
     seed: int | None = None
@@ -218,37 +220,163 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
         raise fail("sweep", f"{count:,} variants (programs x scripts x [grid] x samples): "
                    f"more than the {MAX_VARIANTS:,} a sweep may run; split the spec")
     samples = _draw(rand, seed, draws)
-    combos = [dict(zip(keys, c, strict=True)) for c in itertools.product(*lists)]
     keys += random_keys
-    choices = [{**g, **r} for g in combos for r in samples] if samples else combos
-    variants = []
     files: set[Path] = {file.resolve()}
     for run in runs:
         files.update(p.resolve() for p in run.files)
     files.update(_inputs(runs))
-    for run in runs:
-        for values in choices:
-            sets = tuple((k, values[k]) for k in keys if k in values)
-            identity = {"program": _rel(run.program, base), "config": _rel(run.config, base),
-                        "script": _rel(run.script, base), "until": until, "sets": sets,
-                        "budget_s": budget if until is None else None}
-            variants.append(Variant(
-                variant_id(identity), shown(run.program), run.main,
-                None if run.config is None else shown(run.config),
-                None if run.script is None else shown(run.script), until, sets,
-                budget, None if run.config is not None else str(run.program.parent.resolve()),
-                None if run.config is None else str(run.config.resolve()),
-                None if run.script is None else str(run.script.resolve())))
-    ids = [v.id for v in variants]
-    if len(set(ids)) != len(ids):
-        dup = next(i for i in ids if ids.count(i) > 1)
+    variants = Variants(runs, base, until, budget, grid_keys=keys[:len(lists)], lists=lists,
+                        samples=samples)
+    dup = variants.duplicate()
+    if dup is not None:
         raise fail("sweep", f"two variants are the same run (id {dup}): a program, script "
                    "or value is given twice")
     digest = hashlib.sha256()
     for f in sorted(files):
         digest.update(str(f).encode() + b"\0" + f.read_bytes() + b"\0")
-    return Spec(file, sorted(variants, key=lambda v: v.id), keys, digest.hexdigest(), seed,
+    return Spec(file, variants, keys, digest.hexdigest(), seed,
                 sorted(files), (draws, len(samples)) if draws else None, explore)
+
+
+class Variants(Sequence[Variant]):
+    """A spec's variants, sorted by id, each made when it is asked for.
+
+    What is the same for every variant of a run -- its files' paths as shown, as hashed and
+    as read -- is worked out once per run, and each swept value's JSON once per value: a
+    variant's own work is its id's hash (all are hashed here, to sort them and to find a run
+    given twice) and, when it is taken, one small object.  A spec of 1,000,000 variants is
+    two arrays of numbers here (made in seconds), not a list of a million objects."""
+
+    def __init__(self, runs: Sequence[_Run], base: Path, until: float | None, budget: float,
+                 grid_keys: Sequence[str], lists: Sequence[Sequence[Value]],
+                 samples: Sequence[dict[str, Value]]) -> None:
+        self._runs = [_Shown.of(run, base, until, budget) for run in runs]
+        self._until = until
+        self._budget = budget
+        self._grid = [[(key, v) for v in values] for key, values in zip(grid_keys, lists,
+                                                                         strict=True)]
+        self._samples = [tuple(s.items()) for s in samples]
+        self._per_run = math.prod(len(v) for v in lists) * max(1, len(samples))
+        # The ids, as 48-bit numbers, sorted; and each one's place in the spec's order
+        # (run, then grid combination, then sample).
+        found = [(number << 20) | place for place, number in enumerate(self._numbers())]
+        found.sort()
+        self._ids = array.array("Q", (f >> 20 for f in found))
+        self._order = array.array("L", (f & 0xFFFFF for f in found))
+        del found
+
+    def _numbers(self) -> Iterator[int]:
+        """Each variant's id, as a number, in the spec's order: the JSON ``variant_id``
+        hashes, put together from its parts (the same bytes as ``json.dumps``)."""
+        pieces = [[_json([k, v]) for k, v in values] for values in self._grid]
+        tails: list[str | None] = [",".join(_json([k, v]) for k, v in s)
+                                   for s in self._samples] or [None]
+        sha = hashlib.sha256
+        for run in self._runs:
+            head, end = run.json_head, run.json_end
+            for combo in itertools.product(*pieces):
+                sets = ",".join(combo)
+                for tail in tails:
+                    text = sets if tail is None else (f"{sets},{tail}" if sets else tail)
+                    digest = sha(f"{head}{text}{end}".encode()).digest()
+                    yield int.from_bytes(digest[:ID_LENGTH // 2], "big")
+
+    def duplicate(self) -> str | None:
+        """An id two variants have (the same run given twice), else None."""
+        ids = self._ids
+        for i in range(1, len(ids)):
+            if ids[i] == ids[i - 1]:
+                return f"{ids[i]:0{ID_LENGTH}x}"
+        return None
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+    @overload
+    def __getitem__(self, index: int) -> Variant: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[Variant]: ...
+
+    def __getitem__(self, index: int | slice) -> Variant | list[Variant]:
+        if isinstance(index, slice):
+            return [self._make(i) for i in range(*index.indices(len(self)))]
+        if index < 0:
+            index += len(self)
+        if not 0 <= index < len(self):
+            raise IndexError("variant index out of range")
+        return self._make(index)
+
+    def __iter__(self) -> Iterator[Variant]:
+        return (self._make(i) for i in range(len(self)))
+
+    def ids(self) -> Iterator[str]:
+        """The ids, in order, without making the variants."""
+        return (f"{number:0{ID_LENGTH}x}" for number in self._ids)
+
+    def find(self, id: str) -> Variant | None:
+        """The variant of this id, or None."""
+        try:
+            number = int(id, 16)
+        except ValueError:
+            return None
+        i = bisect.bisect_left(self._ids, number)
+        if len(id) != ID_LENGTH or i == len(self) or self._ids[i] != number:
+            return None
+        return self._make(i)
+
+    def _make(self, index: int) -> Variant:
+        place = self._order[index]
+        run = self._runs[place // self._per_run]
+        rest = place % self._per_run
+        if self._samples:
+            rest, sample = divmod(rest, len(self._samples))
+        sets: list[tuple[str, Value]] = []
+        for values in reversed(self._grid):  # the last key varies fastest (itertools.product)
+            rest, i = divmod(rest, len(values))
+            sets.append(values[i])
+        sets.reverse()
+        if self._samples:
+            sets += self._samples[sample]
+        return Variant(f"{self._ids[index]:0{ID_LENGTH}x}", run.program, run.main, run.config,
+                       run.script, self._until, tuple(sets), self._budget, run.storage,
+                       run.config_file, run.script_file)
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, separators=(",", ":"))
+
+
+@dataclass(frozen=True, slots=True)
+class _Shown:
+    """What each variant of a run shares: its files as rows show them, as ``ncgate sim``
+    reads them, and its part of the id's JSON (all but the swept values)."""
+
+    program: str
+    main: str
+    config: str | None
+    script: str | None
+    storage: str | None
+    config_file: str | None
+    script_file: str | None
+    json_head: str
+    json_end: str
+
+    @classmethod
+    def of(cls, run: _Run, base: Path, until: float | None, budget: float) -> _Shown:
+        identity: dict[str, Any] = {
+            "program": _rel(run.program, base), "config": _rel(run.config, base),
+            "script": _rel(run.script, base), "until": until, "sets": [],
+                    "budget_s": budget if until is None else None}
+        text = json.dumps(identity, sort_keys=True, separators=(",", ":"))
+        head, _, end = text.partition('"sets":[]')
+        return cls(shown(run.program), run.main,
+                   None if run.config is None else shown(run.config),
+                   None if run.script is None else shown(run.script),
+                   None if run.config is not None else str(run.program.parent.resolve()),
+                   None if run.config is None else str(run.config.resolve()),
+                   None if run.script is None else str(run.script.resolve()),
+                   head + '"sets":[', "]" + end)
 
 
 def _read_spec(file: Path) -> dict[str, Any]:

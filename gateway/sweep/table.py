@@ -219,13 +219,12 @@ class Parts:
             if changed is not None:
                 raise SpecError(f"{self.spec.file}: --resume: {changed}; run again "
                                 "without --resume")
-            ids = {v.id for v in self.spec.variants}
             for part in sorted(self.folder.glob("part-*.jsonl")):
                 number = part.stem.removeprefix("part-")
                 self.count = max(self.count, int(number) if number.isdigit() else 0)
                 for line in part.read_text(encoding="utf-8").splitlines():
                     row = json.loads(line)
-                    if row["id"] in ids:
+                    if self.spec.variants.find(row["id"]) is not None:
                         done[row["id"]] = row
             for tmp in self.folder.glob(".*.tmp"):
                 tmp.unlink()
