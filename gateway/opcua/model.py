@@ -17,6 +17,7 @@ mappings from a process's state to the companion specifications' enumerations ar
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
 from ncgate.inputs import Var
@@ -186,6 +187,19 @@ def plc_view(gw: Gateway) -> PlcView:
         return PlcView("NONE", 0, "")
     return PlcView(status.state.name, status.scans,
                    str(status.fault) if status.fault is not None else "")
+
+
+def machine_name(source: Path | None) -> str:
+    """The machine's name under ``Objects/Machines`` (docs/opcua.md): the config file's name
+    without ``.toml``; for ``ncgate.toml``, the name every example and ``ncgate init`` give
+    it, the name of its folder, so that two cells' servers do not both show a machine
+    ``ncgate`` on one dashboard; ``ncgate`` for the built-in config.  The application URI
+    keeps the file's name (``urn:ncgate:<stem>``): the server's certificate names it."""
+    if source is None:
+        return "ncgate"
+    if source.stem == "ncgate" and source.resolve().parent.name:
+        return source.resolve().parent.name
+    return source.stem
 
 
 def node_rows(cell: str, processes: list[int], sizes: dict[str, int],

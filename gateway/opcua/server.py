@@ -40,6 +40,7 @@ from ncgate.gateway.opcua.model import (
     PlcView,
     ProcessView,
     StateView,
+    machine_name,
     plant_views,
     plc_view,
     process_view,
@@ -169,7 +170,8 @@ class OpcuaServer:
         runtime = gw.runtime
         symbols = {name: str(runtime.var(name)) for name in gw.config.symbols}
         source = gw.config.source
-        return {"cell": source.stem if source is not None else "ncgate",
+        return {"cell": source.stem if source is not None else "ncgate",  # its certificate's
+                "machine": machine_name(source),
                 "plant": [model.name for model in gw.config.plant.model],
                 "processes": sorted(gw.engine.processes),
                 "sa_bits": plc.sa_bits, "k_bytes": plc.k_bytes, "syvars": plc.syvars,

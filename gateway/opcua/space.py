@@ -382,7 +382,7 @@ class Space:
         server = self._server = CheckedServer(user_manager=self.users)
         await server.init()  # (ConditionRefresh is ncgate's own: _build_conditions)
         server.set_endpoint(f"opc.tcp://{config.host}:{config.port}/")
-        server.set_server_name(f"ncgate {layout['cell']} (virtual)")
+        server.set_server_name(f"ncgate {layout['machine']} (virtual)")
         await server.set_application_uri(f"urn:ncgate:{layout['cell']}")
         server.set_security_policy(_SECURITY[config.security])
         if config.certificate is not None and config.private_key is not None:
@@ -706,7 +706,7 @@ class Space:
         message_type = await base_event.add_object_type(
             _id(CNC_MESSAGE_TYPE_ID, cnc), ua.QualifiedName("CncMessageType", cnc))
 
-        cell = layout["cell"]
+        cell = layout["machine"]  # (not the application URI's: model.machine_name)
         machines = await objects.add_folder(_id("Machines", own),
                                             ua.QualifiedName("Machines", machinery))
         machine = await machines.add_object(_id(f"Machines/{cell}", own),
