@@ -40,6 +40,7 @@ from ncgate.gateway.plc import (
     prepare_logic,
     start_plant_logic,
     start_plc,
+    warn_shared_writes,
 )
 from ncgate.gateway.programs import CheckedFile
 from ncgate.gateway.ratelimit import RateLimitedLog
@@ -179,6 +180,8 @@ class Gateway:
         # The logic read and compiled before anything serves: an error in it stops the
         # gateway before a PLC connected sees the CANopen node boot (and go again).
         prepared = {section: prepare_logic(self.config, section) for section in ("plc", "plant")}
+        warn_shared_writes(self.config, *(None if p is None else p.logic
+                                          for p in prepared.values()))
         # Each enabled adapter of the registry, in its order: its module is imported only
         # now, and only if it is enabled (a cell without a console never loads aiohttp).
         for name in ADAPTERS:

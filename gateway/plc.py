@@ -44,6 +44,7 @@ from ncgate.inputs import (
     SourceKind,
     Var,
     Write,
+    var_name,
 )
 from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
@@ -180,6 +181,85 @@ def retain_in_plant(files: Sequence[SourceFile]) -> list[StDiagnostic]:
                          f.line(decl.span.line))
             for f in files for decl in (*f.globals, *(d for pou in f.pous for d in pou.decls))
             if decl.qualifier == "RETAIN"]
+
+
+def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
+                  ) -> list[StDiagnostic]:
+    """SW006 for each image variable a logic writes (at a constant place) that another
+    writer of the cell writes too: a plant model's output (the model drives what the machine
+    does; the logic overwrites it, or it the logic), or the other logic.  Each overwrites the
+    other, and the image shows whichever wrote last -- a classic of commissioning, found
+    nowhere else (each writer alone is right).  The PLC's logic and the plant's are told
+    apart on the plant's side: its line is where the machine builder models the machine."""
+    from ncgate.config.plant import MODEL_KEYS
+    from ncgate.gateway.wiring import image_var
+    from ncgate.plc.st.nodes import Span
+
+    symbols = {name.upper(): (name, image_var(text)) for name, text in config.symbols.items()}
+    named = {var.address: name for name, var in symbols.values()}
+
+    def shown(area: str, index: int, view: str) -> str:
+        name = named.get((area, index, view))
+        text = var_name(area, index, view)
+        return f"{text} ({name})" if name else text
+
+    def diagnostic(logic: Logic, key: tuple[str, int], message: str) -> StDiagnostic:
+        file, line, column = logic.image_writes[key]
+        text = next((f.line(line) for f in logic.files if f.path == file), "")
+        return StDiagnostic(StCode.SHARED_OUTPUT, message, Span(file, line, column), text)
+
+    out: list[StDiagnostic] = []
+    logics = [(logic, what) for logic, what in ((plc, "the PLC's"), (plant, "the plant's"))
+              if logic is not None]
+    for model in config.plant.model:
+        for key, text in model.keys.items():
+            if MODEL_KEYS[model.kind][key][0] != "out" or not isinstance(text, str):
+                continue
+            found = symbols.get(text.strip().upper())
+            try:
+                var = found[1] if found is not None else image_var(text)
+            except (InputRefused, ValueError):
+                continue  # (the plant refuses it, naming the key)
+            for logic, _ in logics:
+                hit = next((k for k in _storage(*var.address) if k in logic.image_writes), None)
+                if hit is not None:
+                    out.append(diagnostic(logic, hit, (
+                        f"{shown(*var.address)} is written here and by plant model "
+                        f"{model.name} ({key}): each overwrites the other (a model's output "
+                        "is the machine's answer: read it, or drop the model)")))
+    if plc is not None and plant is not None:
+        told: set[tuple[int, int, int]] = set()
+        for place in sorted(plant.image_writes.keys() & plc.image_writes.keys()):
+            area, index = place
+            where = plant.image_writes[place]
+            at = plc.image_writes[place]
+            if (where[1], at[1], at[2]) in told:
+                continue  # (the 8 bits of one byte written by both: said once)
+            told.add((where[1], at[1], at[2]))
+            shown_key = shown(area, index, "bit" if area == "SA" else "BY" if area == "SK"
+                              else "IN")
+            out.append(diagnostic(plant, place, (
+                f"{shown_key} is written here and by the PLC's logic at {at[0]}:{at[1]}:"
+                f"{at[2]}: each overwrites the other (the plant's logic models the machine: "
+                "it reads what the PLC writes)")))
+    return sorted(out, key=lambda d: (d.span.file, d.span.line, d.span.column))
+
+
+def warn_shared_writes(config: Config, plc: Logic | None, plant: Logic | None) -> None:
+    """:func:`shared_writes` in the log, as the logic's other warnings are (load_logic)."""
+    for shared in shared_writes(config, plc, plant):
+        log.warning("%s", shared.render())
+
+
+def _storage(area: str, index: int, view: str) -> tuple[tuple[str, int], ...]:
+    """The places of a variable as Logic.image_writes names them."""
+    if area == "SA":
+        if view == "bit":
+            return (("SA", index),)
+        return tuple(("SA", index * 8 + bit) for bit in range(16 if view == "IN" else 8))
+    if area == "SK":
+        return (("SK", index), ("SK", index + 1)) if view == "IN" else (("SK", index),)
+    return ((area, index),)
 
 
 def program_order(logic: Logic, config: Config, section: str = "plc") -> list[str]:

@@ -22,7 +22,7 @@ from ncgate.config.script import Script, ScriptEntry
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.plc import start_plant_logic, start_plc
+from ncgate.gateway.plc import start_plant_logic, start_plc, warn_shared_writes
 from ncgate.gateway.scenario import Expectations, Verdict, never_changes
 from ncgate.gateway.wiring import (
     ImageVar,
@@ -387,6 +387,9 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     drivers = [started[1] for started in (
         start_plc(config, runtime, door, closed=True, leap=leap),
         start_plant_logic(config, runtime, door, closed=True, leap=leap)) if started]
+    plant_logic = runtime.plant.logic if runtime.plant is not None else None
+    warn_shared_writes(config, runtime.plc.logic if runtime.plc else None,
+                       plant_logic.logic if plant_logic else None)
 
     def logic_runs() -> bool:
         """An ST task runs (the PLC's, or the plant's: either may press NC.START)."""

@@ -32,6 +32,7 @@ from ncgate.interpreter.settings import Dialect
 from ncgate.interpreter.storage import PROGRAM_SUFFIXES, file_version
 from ncgate.plc.st.compiler import compile_logic
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
+from ncgate.plc.st.logic import Logic
 from ncgate.plc.st.nodes import SourceFile, Span
 from ncgate.plc.st.plcopen import read_logic_file
 
@@ -208,15 +209,16 @@ def _sync_codes(path: Path) -> int:
         return 0
 
 
-def check_logic(files: Sequence[Path], config: Config,
-                section: str | None = None) -> dict[Path, FileReport]:
+def check_logic(files: Sequence[Path], config: Config, section: str | None = None,
+                compiled: list[Logic] | None = None) -> dict[Path, FileReport]:
     """Structured Text files, checked together (one may use another's function blocks)
     against the config's image sizes and processes, as ``[plc] logic`` loads them.
 
     ``section`` ("plc" or "plant"): the files are that section's ``logic``, and with no error
     in them the PROGRAMs it runs are chosen as ``sim`` and ``run`` choose them
     (:func:`ncgate.gateway.plc.program_order`): files with no PROGRAM, or a
-    ``section.programs`` entry that names none, is the ConfigError they refuse with."""
+    ``section.programs`` entry that names none, is the ConfigError they refuse with.
+    ``compiled``: given, the logic is appended to it when it compiled."""
     from ncgate.gateway.plc import logic_context, logic_key, program_order, retain_in_plant
 
     found: dict[str, list[StDiagnostic]] = {str(p): [] for p in files}
@@ -244,6 +246,8 @@ def check_logic(files: Sequence[Path], config: Config,
             if section is not None and not any(d.is_error for said in found.values()
                                                for d in said):
                 program_order(logic, config, section)
+            if compiled is not None:
+                compiled.append(logic)
     return {path: FileReport(path, tuple(found[str(path)])) for path in files}
 
 

@@ -371,22 +371,36 @@ def _check_config_logic(config: Config, named: dict[Path, Path] | None = None
     of its own: it shares no name with the PLC's).  A refusal of the config itself is its
     ConfigError (exit 2), as `sim` says it.  ``named``: a logic file's resolved path -> the
     path the command line gave it, which its diagnostics say (the config's is whole)."""
+    from dataclasses import replace
+
     from ncgate.gateway.cli.check import check_logic
     from ncgate.gateway.plant import Plant
+    from ncgate.gateway.plc import shared_writes
     from ncgate.gateway.wiring import build_runtime
+    from ncgate.plc.st.logic import Logic
 
     named = named or {}
     reports = []
+    logics: dict[str, list[Logic]] = {"plc": [], "plant": []}
     plc = [named.get(path.resolve(), path) for path in config.plc.logic]
     if plc:
-        found = check_logic(plc, config, "plc")
+        found = check_logic(plc, config, "plc", logics["plc"])
         reports += [found[path] for path in plc]
     if config.plant.model:
         Plant(build_runtime(config, closed=True), lambda item: None, closed=True)
     plant = [named.get(path.resolve(), path) for path in config.plant.logic]
     if plant:
-        found = check_logic(plant, config, "plant")
+        found = check_logic(plant, config, "plant", logics["plant"])
         reports += [found[path] for path in plant]
+    # SW006: a variable a logic writes that another writer writes too, in the file of the
+    # logic's write (a file both logics load gets it once).
+    shared = shared_writes(config, *(found[0] if found else None for found in logics.values()))
+    for i, report in enumerate(reports):
+        more = [d for d in shared if d.span.file == str(report.path)
+                and d not in report.diagnostics]
+        if more:
+            reports[i] = replace(report, diagnostics=(*report.diagnostics, *more))
+            shared = [d for d in shared if d not in more]
     return reports
 
 
@@ -878,9 +892,9 @@ def _map(args: argparse.Namespace) -> int:
 
 def _ua_nodes(config: Config) -> None:
     """The OPC UA nodes beside the registers (``[opcua]`` enabled; docs/opcua.md)."""
-    from ncgate.gateway.opcua.model import node_rows
+    from ncgate.gateway.opcua.model import machine_name, node_rows
 
-    cell = config.source.stem if config.source is not None else "ncgate"
+    cell = machine_name(config.source)
     plc = config.plc
     rows = node_rows(cell, list(range(1, config.nc.processes + 1)),
                      {"sa_bits": plc.sa_bits, "k_bytes": plc.k_bytes, "syvars": plc.syvars},

@@ -33,7 +33,7 @@ import re
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ncgate.plc.st import nodes as n
@@ -225,6 +225,21 @@ class Place:
     lower: str = ""  # given to an ARRAY[*] VAR_IN_OUT: the code of its lower bound
 
 
+def _writing(c: Compiler, place: Place, keys: tuple[tuple[str, int], ...],
+             span: n.Span) -> Place:
+    """``place``, its writes noted as writes of ``keys`` at ``span`` (the first of each)."""
+    store = place.store
+    if store is None:
+        return place
+
+    def noted(value: str) -> str:
+        for key in keys:
+            c.image_writes.setdefault(key, span)
+        return store(value)
+
+    return replace(place, store=noted)
+
+
 def wrap_code(code: str, t: Type) -> str:
     if t == "TOD":
         return f"(({code}) % {TOD_MS})"
@@ -329,6 +344,11 @@ class Compiler:
         # n) at a constant index, the whole area at one it computes (a still scan's inputs)
         self.image_keys: set[tuple[str, int]] = set()
         self.image_areas: set[str] = set()
+        # What of the image the logic writes at a constant place, and where it first does:
+        # ("SA", bit), ("SK", byte), ("SYVAR", n) -> the write's span (SW006: another writer
+        # of the cell writes it too, gateway/plc.py's shared_writes).  A write at a place it
+        # computes is not known here.
+        self.image_writes: dict[tuple[str, int], n.Span] = {}
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -2578,12 +2598,14 @@ class Scope:
         area, index = v.image
         if area == "SKIN":
             c.image_keys.update((("SK", index), ("SK", index + 1)))
-            place = Place(f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)",
-                          "INT", lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535)"
-                          ".to_bytes(2, 'little')")
+            place = _writing(c, Place(
+                f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)", "INT",
+                lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535).to_bytes(2, "
+                            "'little')"), (("SK", index), ("SK", index + 1)), var.span)
         else:
             place = self._image(n.Var(area, (n.Index(n.Literal(index, None, var.span),
-                                                     var.span),), var.span), area, False)
+                                                     var.span),), var.span), area, False,
+                                noted=not var.selectors)
         if not var.selectors:
             return place
         sel = var.selectors[0]
@@ -2599,10 +2621,16 @@ class Scope:
                           f"{place.type} (0..{width - 1})", sel.span)
         mask, read, store = 1 << sel.bit, place.read, place.store
         assert store is not None
-        return Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
-            wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type)))
+        # The one bit of an SA byte the logic writes; of an SK byte or a SYVAR, the variable.
+        written = ("SA", index * 8 + sel.bit) if area == "SAB" else (
+            ("SK", index) if area == "SK" else ("SYVAR", index))
+        return _writing(c, Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
+            wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type))),
+            (written,), var.span)
 
-    def _image(self, var: n.Var, key: str, write: bool) -> Place:
+    def _image(self, var: n.Var, key: str, write: bool, noted: bool = True) -> Place:
+        """``noted``: its writes at a constant index are noted (Compiler.image_writes) --
+        not by a symbol's bit access, which notes the one bit it writes."""
         c = self.c
         ctx = c.ctx
         if len(var.selectors) != 1 or not isinstance(var.selectors[0], n.Index):
@@ -2619,17 +2647,29 @@ class Scope:
             raise c.error(StCode.INDEX_RANGE, f"{var.name}[{i.const}] is outside the image "
                           f"({var.name}[0..{size - 1}], [plc] in the config)", sel.span)
         area = "SYVAR" if key == "SYVAR" else "SK" if key == "SK" else "SA"
-        if i.const is None:
+        const = i.const
+        if const is None:
             c.image_areas.add(area)
         else:
-            c.image_keys.add((area, i.const >> 3 if key == "SA" else i.const))
+            c.image_keys.add((area, const >> 3 if key == "SA" else const))
+            if noted:
+                keys: tuple[tuple[str, int], ...] = (
+                    (("SA", const),) if key == "SA" else
+                    tuple(("SA", const * 8 + bit) for bit in range(8)) if key == "SAB" else
+                    ((area, const),))
+                return _writing(c, self._image_at(key, i, size), keys, var.span)
+        return self._image_at(key, i, size)
+
+    def _image_at(self, key: str, i: E, size: int) -> Place:
+        """SA[i], SAB[i], SK[i] or SYVAR[i] (``i`` checked: an integer, in range if known)."""
+        const = i.const
         if key == "SA":
-            if i.const is not None:
-                byte, mask = i.const >> 3, 1 << (i.const & 7)
+            if const is not None:
+                byte, mask = const >> 3, 1 << (const & 7)
                 return Place(f"((_SA[{byte}] & {mask}) != 0)", "BOOL",
                              lambda v: f"_SA[{byte}] = (_SA[{byte}] | {mask}) if {v} else "
                                        f"(_SA[{byte}] & {255 ^ mask})")
-            t = c.temp()
+            t = self.c.temp()
             idx = f"_ix({i.code}, 0, {size})"
             return Place(f"((_SA[({t} := {idx}) >> 3] >> ({t} & 7)) & 1 == 1)", "BOOL",
                          lambda v: f"{t} = {idx}; _SA[{t} >> 3] = (_SA[{t} >> 3] | "

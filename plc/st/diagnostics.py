@@ -71,6 +71,9 @@ class StCode(enum.Enum):
                       "a CODESYS conditional {IF …}): ignored, in strict mode too")
     RETAIN_IN_PLANT = ("SW005", "VAR RETAIN in the plant's logic ([plant] logic): ignored, the "
                        "plant keeps nothing across a restart")
+    SHARED_OUTPUT = ("SW006", "an image variable the logic writes that another writer of the "
+                     "cell writes too (the PLC's logic, the plant's logic, a plant model): "
+                     "each overwrites the other")
     # -- PLCopen XML -------------------------------------------------------------------------------
     XML_PROJECT = ("ST040", "a PLCopen XML file that is not well-formed or not a TC6 project")
 
@@ -136,7 +139,8 @@ def codes_markdown() -> str:
     lines = ["", "## Structured Text (PLC logic)", "",
              "Generated from `plc/st/diagnostics.py`. SW codes are warnings: SW001..SW003 "
              "are given only with `plc.strict = false` (where strict IEC refuses the "
-             "construct), SW004 always, SW005 in the plant's logic.", "",
+             "construct), SW004 always, SW005 in the plant's logic, SW006 where a logic and "
+             "another writer share a variable.", "",
              "| code | what |", "|---|---|"]
     lines += [f"| {c.code} | {c.summary} |" for c in StCode]
     return "\n".join(lines) + "\n"

@@ -76,6 +76,10 @@ class Logic:
         self.reads_et = compiler.reads_et
         self.image_keys = frozenset(compiler.image_keys)  # (see Compiler.image_keys)
         self.image_areas = frozenset(compiler.image_areas)
+        # What of the image it writes at a constant place -> where it first does (file,
+        # line, column): Compiler.image_writes
+        self.image_writes = {key: (s.file, s.line, s.column)
+                             for key, s in compiler.image_writes.items()}
         # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
         self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
             d.span.file, d.span.line, d.span.column)))

@@ -184,6 +184,7 @@ async def test_a_scripts_modbus_fault_is_seen_by_the_client_inside_its_window(
 
 def _junit(path: Path) -> dict[str, str | None]:
     """Each testcase's name, and its failure's text (None: it passed)."""
+    assert not list(path.parent.glob(f".{path.name}.*"))  # written whole, nothing beside it
     suites = ET.parse(path).getroot()
     assert suites.tag == "testsuites"
     (suite,) = suites  # one scenario
@@ -202,7 +203,6 @@ async def test_run_script_writes_its_verdicts_as_junit_for_ci(tmp_path: Path) ->
     code, log = await _scenario(tmp_path, SCENARIO, "--junit", str(junit))
     assert code == 0, log
     assert _junit(junit) == {"clamp closes": None, "P1 ends": None}
-    assert not list(tmp_path.glob(".verdicts.xml.*"))  # written whole, nothing left beside it
 
 
 async def test_run_script_junit_holds_the_failures_a_bad_case_prints(tmp_path: Path) -> None:
