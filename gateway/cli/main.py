@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 import traceback
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -884,8 +884,10 @@ def _map(args: argparse.Namespace) -> int:
             sys.stdout.write("\n# Plant models (docs/plant.md)\n\n| model | kind | reads | "
                              "writes |\n|---|---|---|---|\n")
             for m in plant:
-                reads = ", ".join(f"{k} {v}" for k, v in m["reads"].items()) or "—"
-                writes = ", ".join(f"{k} {v}" for k, v in m["writes"].items())
+                # (a model's variables by its keys; the logic's, a list, by themselves)
+                reads, writes = (", ".join(
+                    [f"{k} {v}" for k, v in m[key].items()] if isinstance(m[key], dict)
+                    else m[key]) or "—" for key in ("reads", "writes"))
                 sys.stdout.write(f"| {m['name']} | {m['kind']} | {reads} | {writes} |\n")
     return EXIT_OK
 
@@ -925,7 +927,48 @@ def plant_rows(config: Config) -> list[dict[str, Any]]:
                                if spec[k][0] == "out"}})
         if model.kind == "switch":
             out[-1]["reads"] = {"axis": str(model.keys["axis"])}
+    if config.plant.logic:
+        out.append(_plant_logic_row(config))
     return out
+
+
+def _plant_logic_row(config: Config) -> dict[str, Any]:
+    """The plant's ST logic as a row of the plant's table: the image variables it reads and
+    writes at constant places (a computed place: the area, ``SA[…]``)."""
+    from ncgate.config import ConfigError
+    from ncgate.gateway.plc import prepare_logic
+    from ncgate.gateway.wiring import image_var
+    from ncgate.inputs import var_name
+    from ncgate.plc.st.diagnostics import LogicError
+
+    files = ", ".join(path.name for path in config.plant.logic)
+    row: dict[str, Any] = {"name": "(logic)", "kind": f"st: {files}, every "
+                           f"{config.plant.scan_ms} ms", "reads": {}, "writes": {}}
+    try:
+        prepared = prepare_logic(config, "plant")
+    except (LogicError, ConfigError, OSError):
+        row["kind"] += " (does not load: ncgate check says why)"
+        return row
+    assert prepared is not None
+    logic = prepared.logic
+
+    symbols = {image_var(text).address: name for name, text in config.symbols.items()}
+
+    def named(places: Iterable[tuple[str, int]]) -> list[str]:
+        view = {"SA": "bit", "SK": "BY", "SYVAR": "IN"}
+        out = []
+        for area, index in sorted(places, key=lambda p: (("SA", "SK", "SYVAR").index(p[0]),
+                                                         p[1])):
+            name = symbols.get((area, index, view[area]))
+            text = var_name(area, index, view[area])
+            out.append(f"{text} ({name})" if name else text)
+        return out
+
+    for key, places, computed in (
+            ("reads", logic.image_reads, logic.computed_reads),
+            ("writes", logic.image_writes, logic.computed_writes)):
+        row[key] = [*named(places), *(f"{area}[…]" for area in sorted(computed))]
+    return row
 
 
 def _eds(args: argparse.Namespace) -> int:

@@ -349,6 +349,9 @@ class Compiler:
         # of the cell writes it too, gateway/plc.py's shared_writes).  A write at a place it
         # computes is not known here.
         self.image_writes: dict[tuple[str, int], n.Span] = {}
+        self.image_reads: dict[tuple[str, int], n.Span] = {}  # likewise, what it reads
+        self.computed_reads: set[str] = set()  # the areas it reads, writes at a place it
+        self.computed_writes: set[str] = set()  # computes (ncgate map's plant logic)
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -2468,7 +2471,7 @@ class Scope:
             raise c.error(StCode.UNKNOWN_NAME, f"unknown variable {var.name}{hint}", var.span)
         v, code = found
         if v.image is not None:
-            return self._symbol(var, v)
+            return self._symbol(var, v, write)
         t: Type = v.type
         why = ""
         if v.qualifier == "CONSTANT":
@@ -2590,7 +2593,7 @@ class Scope:
                      (lambda v: f"{code} = _set_char({code}, {index}, {v}, {length})")
                      if not why else None, why)
 
-    def _symbol(self, var: n.Var, v: VarInfo) -> Place:
+    def _symbol(self, var: n.Var, v: VarInfo, write: bool = False) -> Place:
         """An I/O name of [symbols]: its image variable, read and written as SA[i], SAB[i],
         SK[i] or SYVAR[i] are (SKn.IN: the two bytes n, n+1 as an INT, low byte first)."""
         c = self.c
@@ -2598,14 +2601,17 @@ class Scope:
         area, index = v.image
         if area == "SKIN":
             c.image_keys.update((("SK", index), ("SK", index + 1)))
+            if not write:
+                for key in (("SK", index), ("SK", index + 1)):
+                    c.image_reads.setdefault(key, var.span)
             place = _writing(c, Place(
                 f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)", "INT",
                 lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535).to_bytes(2, "
                             "'little')"), (("SK", index), ("SK", index + 1)), var.span)
         else:
             place = self._image(n.Var(area, (n.Index(n.Literal(index, None, var.span),
-                                                     var.span),), var.span), area, False,
-                                noted=not var.selectors)
+                                                     var.span),), var.span), area,
+                                write and not var.selectors, noted=not var.selectors)
         if not var.selectors:
             return place
         sel = var.selectors[0]
@@ -2624,6 +2630,8 @@ class Scope:
         # The one bit of an SA byte the logic writes; of an SK byte or a SYVAR, the variable.
         written = ("SA", index * 8 + sel.bit) if area == "SAB" else (
             ("SK", index) if area == "SK" else ("SYVAR", index))
+        if not write:
+            c.image_reads.setdefault(written, var.span)
         return _writing(c, Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
             wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type))),
             (written,), var.span)
@@ -2650,13 +2658,17 @@ class Scope:
         const = i.const
         if const is None:
             c.image_areas.add(area)
+            (c.computed_writes if write else c.computed_reads).add(area)
         else:
             c.image_keys.add((area, const >> 3 if key == "SA" else const))
+            keys: tuple[tuple[str, int], ...] = (
+                (("SA", const),) if key == "SA" else
+                tuple(("SA", const * 8 + bit) for bit in range(8)) if key == "SAB" else
+                ((area, const),))
+            if not write and noted:
+                for place in keys:
+                    c.image_reads.setdefault(place, var.span)
             if noted:
-                keys: tuple[tuple[str, int], ...] = (
-                    (("SA", const),) if key == "SA" else
-                    tuple(("SA", const * 8 + bit) for bit in range(8)) if key == "SAB" else
-                    ((area, const),))
                 return _writing(c, self._image_at(key, i, size), keys, var.span)
         return self._image_at(key, i, size)
 

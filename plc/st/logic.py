@@ -80,6 +80,9 @@ class Logic:
         # line, column): Compiler.image_writes
         self.image_writes = {key: (s.file, s.line, s.column)
                              for key, s in compiler.image_writes.items()}
+        self.image_reads = frozenset(compiler.image_reads)  # (ncgate map's plant logic)
+        self.computed_reads = frozenset(compiler.computed_reads)
+        self.computed_writes = frozenset(compiler.computed_writes)
         # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
         self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
             d.span.file, d.span.line, d.span.column)))

@@ -6,6 +6,7 @@ as the logic's other warnings are."""
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 from pathlib import Path
 
@@ -139,3 +140,19 @@ async def test_run_says_sw006_in_its_log_before_it_serves(
             said = [r.getMessage() for r in caplog.records if "SW006" in r.getMessage()]
     assert len(said) == 5 and any("SYVAR5 is written here and by the PLC's logic" in s
                                   for s in said), said
+
+
+def test_map_lists_what_the_plant_logic_reads_and_writes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _cell(tmp_path, plant="PROGRAM machine\nVAR i : INT; END_VAR\nSYVAR[5] := 4;\n"
+          "SA[33] := SA[20] AND flags.2;\nclamp_closed := SYVAR[i] > 3;\nEND_PROGRAM\n")
+    with contextlib.chdir(tmp_path):
+        assert main(["map", "--config", "ncgate.toml", "--format", "json"]) == 0
+        logic = json.loads(capsys.readouterr().out)["plant"][-1]
+        assert logic == {"name": "(logic)", "kind": "st: plant.st, every 10 ms",
+                         # flags.2: bit 2 of SA byte 6; SYVAR[i]: a place it computes
+                         "reads": ["SA20", "SA50", "SYVAR[…]"],
+                         "writes": ["SA30 (clamp_closed)", "SA33", "SYVAR5"]}
+        assert main(["map", "--config", "ncgate.toml"]) == 0
+        assert ("| (logic) | st: plant.st, every 10 ms | SA20, SA50, SYVAR[…] | "
+                "SA30 (clamp_closed), SA33, SYVAR5 |") in capsys.readouterr().out
