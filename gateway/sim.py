@@ -211,10 +211,16 @@ class ScriptPlayer:
         return False
 
     def arm(self, at_once: bool = False) -> None:
-        """Arm every entry on the clock.  ``at_once``: an entry already due (its ``at`` not
-        past the engine's now) is applied here and now, in the file's order, not on the
-        clock's next turn (``run --script``: a fault at the scenario's 0 is in force before
-        a fieldbus client's first request is served)."""
+        """Arm every entry on the clock, late: it acts after every other timer of its time
+        (a PLC scan of that instant, the plant's tick), as a replay of the session applies
+        it, a recorded input (docs/decisions.md).  An entry due as it is armed (its ``at``
+        not past the engine's now, or its ``when`` holding with no ``after``: the
+        scenario's t = 0) acts as the scenario starts, before any scan sees the program
+        run, as in a replay.  ``at_once`` applies it here and now, in the file's order, not
+        on the clock's next turn (``run --script``: a fault at the scenario's 0 is in force
+        before a fieldbus client's first request is served); without, it is a plain timer
+        of now, armed before the PLC's first scan (``run_sim`` arms the player before it
+        starts the PLC), which fires once what the start made runnable has run."""
         engine = self.runtime.engine
         self._unfired = list(self.entries)
         for entry in self.entries:
@@ -223,20 +229,21 @@ class ScriptPlayer:
                 if at_once and entry.at <= engine.now:
                     self._fire(entry)
                     continue
-                engine.call_at(entry.at, functools.partial(self._fire, entry))
+                engine.call_at(entry.at, functools.partial(self._fire, entry),
+                               late=entry.at > engine.now)
                 continue
             trigger = self._parse_when(entry)
             if isinstance(trigger, StateTrigger):
                 self._state_watch.append((trigger, entry))
                 if engine.processes[trigger.process].state is trigger.state:
-                    self._triggered(entry)
+                    self._triggered(entry, late=entry.after > 0)
             else:
                 area, index, view = trigger.var
                 handle = self.runtime.image.wait(area, index, view,
                                                  comparison(trigger.op, trigger.value),
                                                  functools.partial(self._triggered, entry))
-                if handle is None:
-                    self._triggered(entry)
+                if handle is None:  # (holds already: due as armed, as an `at` of now)
+                    self._triggered(entry, late=entry.after > 0)
 
     def _on_state(self, process: Process, old: ProcessState) -> None:
         for watch in list(self._state_watch):
@@ -245,10 +252,11 @@ class ScriptPlayer:
                 self._state_watch.remove(watch)
                 self._triggered(entry)
 
-    def _triggered(self, entry: ScriptEntry) -> None:
+    def _triggered(self, entry: ScriptEntry, late: bool = True) -> None:
         engine = self.runtime.engine
         self.due += 1
-        engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry))
+        engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry),
+                       late=late)
 
     def _write(self, entry: ScriptEntry) -> Write:
         """The entry's ``set`` as an input, checked against the image (not applied)."""
@@ -380,7 +388,7 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
 
     runtime.trace.subscribe(count_plc_alarm)
     expectations.start()
-    player.arm()
+    player.arm()  # (before the PLC starts: its entries at t = 0 act before the first scan)
     # Every input of a sim is an engine timer, so still scans may be leapt over -- but not
     # under before_time, which hears each time the clock moves to (a budget acts there).
     leap = before_time is None

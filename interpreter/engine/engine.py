@@ -532,9 +532,10 @@ class Engine:
         self.run_until_blocked(blocks)
         return self._unfinished
 
-    def call_at(self, t: float, callback: Callable[[], None]) -> Timer:
-        """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic)."""
-        return self._schedule(max(0.0, t - self.now), callback)
+    def call_at(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
+        """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic); ``late``: after
+        every other timer of that time (a script's entry: ``TimerHeap.push``)."""
+        return self._schedule(max(0.0, t - self.now), callback, late)
 
     def set_time(self, t: float) -> None:
         """The wall-clock driver tells the engine what time it is before outside events."""
@@ -772,9 +773,10 @@ class Engine:
 
     kick = _kick  # sync.SyncHost
 
-    def _schedule(self, delay: float, callback: Callable[[], None]) -> Timer:
+    def _schedule(self, delay: float, callback: Callable[[], None],
+                  late: bool = False) -> Timer:
         t = self.now + delay
-        timer = self._timers.push(t, callback)
+        timer = self._timers.push(t, callback, late)
         if self.on_timer is not None:
             self.on_timer(t)
         return timer

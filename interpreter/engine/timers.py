@@ -1,6 +1,11 @@
 """The engine's timers: a heap of (time, order, timer); a cancelled timer stays in the heap with
 no callback and is dropped when it reaches the top.  No clock is read here: whoever drives the
-engine says what time it is (the virtual clock, or the wall clock in the gateway)."""
+engine says what time it is (the virtual clock, or the wall clock in the gateway).
+
+Timers of one time fire in the order they were armed, but a *late* timer fires after every
+other timer of its time, those armed while its time's timers fire included: a script's entry,
+which a replay of the session applies as a recorded input, after every timer of its time
+(docs/decisions.md, "Script entries act after the timers of their instant")."""
 
 from __future__ import annotations
 
@@ -20,14 +25,23 @@ class Timer:
         self.callback = None
 
 
+# Added to a late timer's order: past any count of timers ever armed, so that a late timer
+# comes after every other timer of its time, and the late ones among themselves in arm order.
+LATE = 1 << 62
+
+
 class TimerHeap:
     def __init__(self) -> None:
         self._heap: list[tuple[float, int, Timer]] = []
         self._order = itertools.count()  # equal times fire in the order they were armed
 
-    def push(self, t: float, callback: Callable[[], None]) -> Timer:
+    def push(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
+        """Arm ``callback`` at ``t``; ``late``: after every other timer of ``t``."""
         timer = Timer(t, callback)
-        heapq.heappush(self._heap, (t, next(self._order), timer))
+        order = next(self._order)
+        if late:
+            order += LATE
+        heapq.heappush(self._heap, (t, order, timer))
         return timer
 
     def live(self) -> int:

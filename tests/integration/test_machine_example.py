@@ -134,10 +134,10 @@ def test_the_operators_reset_clears_a_latched_alarm_once_its_cause_is_gone(
 
 
 @pytest.mark.parametrize(("scenario", "alarm", "alarm_edges", "output"), [
-    ("spindle_reset_while_slow", "SA52", [(3.24, 1), (4.2, 0)], "SA21"),
+    ("spindle_reset_while_slow", "SA52", [(3.24, 1), (4.21, 0)], "SA21"),
     ("io_device_silent", "SA54", [(4.02, 1)], "SA25"),
     ("door_switch_chatters", "SA51", [(4.27, 1)], "SA21"),
-    ("coolant_pressure_low", "SA55", [(4.47, 1)], "SYVAR13")])
+    ("coolant_pressure_low", "SA55", [(4.48, 1)], "SYVAR13")])
 def test_a_reset_with_the_cause_still_there_leaves_the_alarm_not_one_scan_cleared(
         tmp_path: Path, scenario: str, alarm: str, alarm_edges: list[tuple[float, int]],
         output: str) -> None:
@@ -163,14 +163,15 @@ def overrides(trace: Path) -> list[tuple[float, int]]:
 def test_a_reset_after_a_mended_fault_starts_nothing_until_a_cycle_start(
         tmp_path: Path) -> None:
     """coolant_wire_mended: the reset at 4.0 s clears the alarm with M03 and M08 in force
-    and P1 held; the spindle and the pump start at the cycle start (4.3 s), not in between
-    (they did at 4.0 s: a reset started the machine), and the feed stands at 0 % from the
-    alarm until both are back (the cut resumed at once, the spindle at rest)."""
+    and P1 held; the spindle and the pump start at the cycle start (4.3 s; the scan after
+    it), not in between (they did at 4.0 s: a reset started the machine), and the feed
+    stands at 0 % from the alarm until both are back (the cut resumed at once, the spindle
+    at rest)."""
     trace = traced(tmp_path, "coolant_wire_mended")
-    assert bit_edges(trace, "SA21") == [(2.23, 1), (3.47, 0), (4.3, 1)]  # spindle_run
-    assert bit_edges(trace, "SYVAR13") == [(2.72, 600), (3.47, 0), (4.3, 600)]  # the pump
-    # the cut waits for the spindle (at speed 4.78 s) and the pressure (4.83 s)
-    assert [o for o in overrides(trace) if o[0] > 3.4] == [(3.47, 0), (4.83, 100)]
+    assert bit_edges(trace, "SA21") == [(2.23, 1), (3.48, 0), (4.31, 1)]  # spindle_run
+    assert bit_edges(trace, "SYVAR13") == [(2.72, 600), (3.48, 0), (4.31, 600)]  # the pump
+    # the cut waits for the spindle (at speed 4.79 s) and the pressure (4.84 s)
+    assert [o for o in overrides(trace) if o[0] > 3.4] == [(3.48, 0), (4.84, 100)]
 
 
 def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
@@ -179,7 +180,7 @@ def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
     the door, and locked it: an alarm drove the door shut on the operator's hand).  The
     scenario's windows see moments; the trace sees every scan."""
     trace = traced(tmp_path, "coolant_wire_break_idle")
-    assert bit_edges(trace, "SA53") == [(0.5, 1)]  # coolant_alarm
+    assert bit_edges(trace, "SA53") == [(0.51, 1)]  # coolant_alarm: the scan after the fault
     # clamp_valve, door_valve, door_lock: never written, the plant's switches never move
     assert [bit_edges(trace, var) for var in ("SA20", "SA22", "SA23")] == [[], [], []]
     assert bit_edges(trace, "SA42")[-1] == (0.0, 1)  # door_open
@@ -187,7 +188,7 @@ def test_an_alarm_with_the_cell_idle_moves_nothing(tmp_path: Path) -> None:
 
 def test_after_an_alarm_with_the_cell_idle_one_cycle_start_starts_the_program(
         tmp_path: Path) -> None:
-    """coolant_wire_mended_idle: the PLC's alarm (0.5 s, P1 idle) holds no idle program, so
+    """coolant_wire_mended_idle: the PLC's alarm (0.51 s, P1 idle) holds no idle program, so
     the one cycle start after the reset (1.2 s) starts PART.  (NC.HOLD_LEVEL := any_alarm held
     the idle P1, and that cycle start only released the hold: nothing started, no word of it
     but a hold event.)  A cycle start while the alarm stands is refused, by the config's
@@ -211,8 +212,8 @@ def test_a_program_restarted_after_an_nc_reset_asks_afresh_and_the_aborted_one_i
     M03 started it as the part was clamped, 2.8 s: the changer never started, AL145 at
     7.8 s), and the aborted program counts no part (it counted one at 2.4 s)."""
     trace = traced(tmp_path, "program_reset_and_restarted", "--until", "8")
-    assert bit_edges(trace, "SA21") == [(2.23, 1), (2.4, 0), (4.03, 1)]  # spindle_run
-    assert bit_edges(trace, "SA25") == [(1.01, 1), (2.22, 0), (2.81, 1), (4.02, 0)]  # changer
+    assert bit_edges(trace, "SA21") == [(2.23, 1), (2.41, 0), (4.04, 1)]  # spindle_run
+    assert bit_edges(trace, "SA25") == [(1.01, 1), (2.22, 0), (2.82, 1), (4.03, 0)]  # changer
     events = events_in(trace)
     assert not [e for e in events if e["event"] == "alarm"]
     assert bit_edges(trace, "SYVAR20") == []  # parts

@@ -429,8 +429,9 @@ def test_the_plant_logic_is_a_second_st_task_whose_writes_are_the_plants(
                      load_script(tmp_path / "s.toml"), None)
     writes = [e for e in result.events if e["event"] == "write" and e["var"] == "SA37"]
     assert writes[0]["who"] == "plant" and writes[0]["value"] == 1
-    # 10 a scan from the scan at 0.5 s on: 100 at the tenth, 0.59 s.
-    assert writes[0]["t"] == pytest.approx(0.59)
+    # 10 a scan from the scan after the write's (0.5 s: the scan of that instant comes
+    # first, docs/script.md) on: 100 at the tenth, 0.60 s.
+    assert writes[0]["t"] == pytest.approx(0.60)
     resume = next(e for e in result.events if e["event"] == "resume")
     assert (resume["t"], resume["writer"]) == (writes[0]["t"], "plant")
     assert result.runtime.plant is not None
