@@ -29,8 +29,14 @@
    server in a process of its own, polled alike): the clients and the server run on this
    machine too, so what the machine's load does to any server shows there.
 
+5. **How long a start takes** (``--starts N``, alone): N ``Gateway`` starts with ``[opcua]``
+   (Modbus on a free port, no CANopen, no console), each timed from ``__aenter__`` to
+   serving, on whatever the machine is doing -- run it beside a load (a suite, CPU hogs) to
+   see a start on a busy machine (docs/decisions.md: the server starts at nice 0).
+
     .venv/bin/python bench/opcua.py                  # 300 rounds of each
     .venv/bin/python bench/opcua.py --rounds 1000 --storm --seconds 10
+    .venv/bin/python bench/opcua.py --starts 3
 """
 
 from __future__ import annotations
@@ -339,14 +345,39 @@ async def storm(seconds: float, rounds: int) -> None:
               f"the control's poller p99 {control:.2f} ms ({control / quiet[3]:.2f}x quiet)")
 
 
+async def starts(n: int) -> None:
+    from ncgate.gateway import Gateway
+    from ncgate.gateway.testing.pytest_plugin import ncgate_test_config
+
+    times = []
+    for _ in range(n):
+        gw = Gateway(ncgate_test_config(**{
+            "opcua.enabled": True, "opcua.port": 0, "canopen.enabled": False,
+            "modbus.port": 0, "web.enabled": False}))
+        t0 = time.perf_counter()
+        try:
+            await gw.__aenter__()
+        except TimeoutError:
+            times.append(float("inf"))  # (START_TIMEOUT_S)
+            continue
+        times.append(time.perf_counter() - t0)
+        await gw.__aexit__(None, None, None)
+    print(f"5. a start with [opcua], s: {' '.join(f'{t:.2f}' for t in times)} "
+          f"(inf: START_TIMEOUT_S passed); load {os.getloadavg()[0]:.1f}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=300)
     parser.add_argument("--storm", action="store_true", help="also the storm phases")
     parser.add_argument("--seconds", type=float, default=6.0, help="each storm phase")
     parser.add_argument("--storm-rounds", type=int, default=2, help="quiet/storm pairs")
+    parser.add_argument("--starts", type=int, metavar="N", help="only: time N starts")
     args = parser.parse_args()
     sys.setswitchinterval(0.0002)  # as `ncgate run` has it (gateway/cli/main.py)
+    if args.starts:
+        asyncio.run(starts(args.starts))
+        return 0
     asyncio.run(startup())
     asyncio.run(loop_cost(args.rounds))
     asyncio.run(latency(args.rounds))

@@ -306,10 +306,13 @@ def main() -> None:
     # Ctrl-C in a terminal reaches the whole process group: the gateway stops this process
     # itself, by its stdin, after its own clean shutdown.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Below the gateway: when the machine is busy, the cell's scan and pollers come first.
-    # Nice 10 while it starts, as the program checker's child (interpreter/child.py);
-    # below_the_gateway once it serves.
-    if hasattr(os, "nice"):  # (POSIX)
+    # Below the gateway: when the machine is busy, the cell's scan and pollers come first --
+    # once it serves (below_the_gateway: Linux's SCHED_IDLE).  It starts at the gateway's
+    # own priority: its start is the gateway's (the PLC scans once every adapter is up), and
+    # at nice 10 on two cores a test suite kept full (load 7) it got 3 % of a core and did
+    # not start within START_TIMEOUT_S.  Where there is no SCHED_IDLE, nice 10 from the start,
+    # as the program checker's child (interpreter/child.py).
+    if hasattr(os, "nice") and not _idle_scheduler():  # (POSIX)
         os.nice(NICE)
     asyncio.run(_serve(out))
     # Nothing of this process outlives it (it keeps nothing on disk): the interpreter's own
@@ -320,13 +323,18 @@ def main() -> None:
     os._exit(0)
 
 
+def _idle_scheduler() -> bool:
+    return hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE")
+
+
 def below_the_gateway() -> None:
     """Once serving: Linux's SCHED_IDLE, every thread of the process (it runs on what the
     others leave, and one of theirs that wakes takes the core at once -- at nice 10 it held
     the core a while, and a poller's p99 under 10 dashboards doubled, as a bare server's
     did); elsewhere it stays at nice 10.  Not while it starts: asyncua's init is a second of
-    CPU, and on a machine whose cores are full it took longer than a start may."""
-    if not (hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE")):
+    CPU, and on a machine whose cores are full it took longer than a start may (at nice 10
+    too: it starts at nice 0)."""
+    if not _idle_scheduler():
         return
     for task in os.listdir("/proc/self/task") if os.path.isdir("/proc/self/task") else ["0"]:
         with contextlib.suppress(OSError):
