@@ -234,9 +234,12 @@ class ScriptPlayer:
                 continue
             trigger = self._parse_when(entry)
             if isinstance(trigger, StateTrigger):
-                self._state_watch.append((trigger, entry))
                 if engine.processes[trigger.process].state is trigger.state:
+                    # (holds already: it fires now, and once -- watched too, it fired again
+                    # as the process came back to the state)
                     self._triggered(entry, late=entry.after > 0)
+                else:
+                    self._state_watch.append((trigger, entry))
             else:
                 area, index, view = trigger.var
                 handle = self.runtime.image.wait(area, index, view,

@@ -77,6 +77,21 @@ def test_the_sim_script_takes_names(tmp_path: Path) -> None:
     assert writes == [("SYVAR3", 7, 0.5), ("SA10", 1, 1.0), ("SYVAR4", 7, 1.0)]
 
 
+def test_a_state_entry_that_holds_as_it_is_armed_fires_once(tmp_path: Path) -> None:
+    """`when = "P1 RUNNING"` holds as the scenario starts: it fires then, and not again as P1
+    runs on after its first dwell ("fires once, the first time it holds": docs/script.md;
+    it wrote SYVAR1=1 again at 0.1 s)."""
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "D"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "D.nc").write_text("N1 (DLY,0.1)\nN2 G4 X0.1\nN3 (DLY,0.1)\nN4 M30\n")  # dwells
+    (tmp_path / "s.toml").write_text('[[write]]\nwhen = "P1 RUNNING"\nset = "SYVAR1=1"\n'
+                                     '[[write]]\nat = 0.05\nset = "SYVAR1=0"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "D",
+                     load_script(tmp_path / "s.toml"))
+    writes = [(e["value"], e["t"]) for e in result.events
+              if e["event"] == "write" and e["var"] == "SYVAR1"]
+    assert writes == [(1, 0.0), (0, 0.05)]
+
+
 @pytest.mark.parametrize(("table", "message"), [
     ('door = "SA99999"', "symbols.door: SA99999 is outside the image"),
     ('door = "X10"', "symbols.door: expected an image variable"),
