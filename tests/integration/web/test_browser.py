@@ -861,16 +861,22 @@ def test_each_trend_has_a_scale_of_its_own(browser: Any, web_port: int,
             browser.find_element(By.ID, "trend-var").send_keys(name)
             browser.find_element(By.CSS_SELECTOR, "#trend-form button").click()
         api(web_port, "POST", "/api/write", {"var": "SYVAR3", "value": 2000})
-        until(browser, "SA12 sampled at 0", lambda d: len(d.find_element(
-            By.CSS_SELECTOR, "#trend polyline[data-name='SA12']").get_attribute("points")
-            .split()) > 2)
+
+        def points(d: Any) -> list[str]:
+            # Read in the page in one call: the chart is drawn anew every 250 ms, and on a
+            # loaded machine a line found by one WebDriver call was replaced before the next
+            # read its points, every time until the wait ran out.
+            found = d.execute_script("const l = document.querySelector(\"#trend "
+                                     "polyline[data-name='SA12']\"); "
+                                     "return l ? l.getAttribute('points') : '';")
+            return str(found or "").split()
+
+        until(browser, "SA12 sampled at 0", lambda d: len(points(d)) > 2)
         api(web_port, "POST", "/api/write", {"var": "SA12", "value": 1})
 
         def span(d: Any) -> float:
-            points = d.find_element(By.CSS_SELECTOR, "#trend polyline[data-name='SA12']") \
-                .get_attribute("points").split()
-            ys = [float(p.split(",")[1]) for p in points]
-            return max(ys) - min(ys)
+            ys = [float(p.split(",")[1]) for p in points(d)]
+            return max(ys) - min(ys) if ys else 0.0
 
         # The chart's plot is 150 - 8 - 20 = 122 px high: the bit spans it from 0 to 1.
         until(browser, "the bit spanning the chart", lambda d: span(d) > 100)
