@@ -435,6 +435,12 @@ class Gateway:
         return self._driver.lag_s if self._driver is not None else 0.0
 
     @property
+    def behind(self) -> bool:
+        """The engine is far enough behind the wall clock that what is not on time gives way
+        (WallClockDriver.behind)."""
+        return self._driver is not None and self._driver.behind
+
+    @property
     def max_lag_s(self) -> float:
         """The most the engine fell behind the wall clock since the start (machine s)."""
         return self._driver.max_lag_s if self._driver is not None else 0.0

@@ -34,6 +34,20 @@ TURN_S = 0.0001
 # bench's engine is often that far behind, and its poller's p99 paid the longer turns.
 BEHIND_S = 0.005
 TURN_BEHIND_S = 0.0005
+# And the further behind, the longer: a turn of TURN_BEHIND_S for each BEHIND_S behind, up to
+# TURN_BEHIND_MAX_S.  On a host where the cell's own work took 2/3 of a core, the flood's
+# rounds left the engine too little even at 0.5 ms turns: it fell behind for good, and the
+# PLC scan came 116-300 ms late with half its scans overrun (bench/storm.py, flood).  A poll
+# waits for one turn at most: 2 ms keeps its p99 under bench/storm.py's 5 ms.
+TURN_BEHIND_MAX_S = 0.001
+
+
+def turn_length(behind_s: float) -> float:
+    """How long (wall seconds) a turn of the engine may run when it is ``behind_s`` wall
+    seconds behind the clock."""
+    if behind_s < BEHIND_S:
+        return TURN_S
+    return min(TURN_BEHIND_MAX_S, TURN_BEHIND_S * behind_s / BEHIND_S)
 
 
 class WallClockDriver:
@@ -70,6 +84,12 @@ class WallClockDriver:
         engine.on_kick = self.kick
         engine.on_timer = lambda t: self.kick()
         engine.clock = self.now  # a status read sees the position now, not at the last input
+
+    @property
+    def behind(self) -> bool:
+        """The engine is BEHIND_S (wall seconds) or more behind the clock: what is not on
+        time (the console's streams) gives way."""
+        return self.lag_s >= BEHIND_S * self.scale
 
     def now(self) -> float:
         """Simulated seconds since the driver started."""
@@ -124,8 +144,7 @@ class WallClockDriver:
     def _advance(self, now: float) -> None:
         """A turn of the engine up to ``now``; what it leaves is the next turn's, and how
         far behind the clock that leaves the engine is its lag."""
-        behind = self.lag_s >= BEHIND_S * self.scale
-        deadline = time.perf_counter() + (TURN_BEHIND_S if behind else TURN_S)
+        deadline = time.perf_counter() + turn_length(self.lag_s / self.scale)
         self.engine.turn_over = lambda: time.perf_counter() >= deadline
         more = False
         try:

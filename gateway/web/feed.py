@@ -28,18 +28,26 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
+from collections.abc import Callable
 
 from ncgate.interpreter.engine.events import Event, as_line
 
 RING = 5000  # events kept for streams that connect or fall behind
 BATCH_S = 0.05  # events reach the streams at most this often (bench/console_browser.py)
+# And while the engine is behind the clock: a page needs no more, and the streams' writes
+# (a thousand a second for 50 pages) took the loop from the engine, whose PLC scan came
+# 80-150 ms late (bench/storm.py, streams).
+BATCH_BEHIND_S = 0.25
 SINCE_MAX = 250  # events rendered for one read of the ring (about 0.5 ms); the rest next time
 WAKE_PER_TURN = 8  # streams a batch wakes in one loop turn; the others in the next ones
 
 
 class EventFeed:
-    def __init__(self, loop: asyncio.AbstractEventLoop, keep: int = RING) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, keep: int = RING,
+                 behind: Callable[[], bool] | None = None) -> None:
+        """``behind``: whether the engine is behind the clock (then BATCH_BEHIND_S)."""
         self._loop = loop
+        self._behind = behind
         self._pending: list[Event] = []
         # [seq, the event -- or its JSON once a stream asked for it]
         self._ring: deque[list[int | Event | str]] = deque(maxlen=keep)
@@ -57,7 +65,8 @@ class EventFeed:
         """The trace listener."""
         self._pending.append(event)
         if self._flush is None:
-            due = self._flushed_at + BATCH_S - self._loop.time()
+            behind = self._behind is not None and self._behind()
+            due = self._flushed_at + (BATCH_BEHIND_S if behind else BATCH_S) - self._loop.time()
             self._flush = (self._loop.call_later(due, self.flush) if due > 0 else
                            self._loop.call_soon(self.flush))
 

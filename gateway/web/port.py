@@ -81,7 +81,8 @@ class ConsolePort:
             raise listen_error(exc, "web.port", self.config.host, port) from None
         host, bound = self._sockets[0].getsockname()[:2]  # the port asked for may be 0
         self.address = (host, bound)
-        self._feed = EventFeed(loop)
+        gw = self.gw
+        self._feed = EventFeed(loop, behind=lambda: gw.behind)
         self._unsubscribe = self.gw.runtime.trace.subscribe(self._feed.listen)
         for sock in self._sockets:
             loop.add_reader(sock.fileno(), self._knock)

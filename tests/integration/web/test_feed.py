@@ -4,8 +4,18 @@ costs a list append per event, and no read of the ring renders more than SINCE_M
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
-from ncgate.gateway.web.feed import SINCE_MAX, WAKE_PER_TURN, EventFeed, Turns
+import pytest
+
+from ncgate.gateway.web.feed import (
+    BATCH_BEHIND_S,
+    BATCH_S,
+    SINCE_MAX,
+    WAKE_PER_TURN,
+    EventFeed,
+    Turns,
+)
 from ncgate.interpreter.engine import events as ev
 
 
@@ -101,3 +111,39 @@ async def test_turns_let_a_few_tasks_go_on_per_loop_turn_and_wake_only_those() -
     turns.close()  # the rest go on at once
     async with asyncio.timeout(5):
         await asyncio.gather(*waiting)
+
+
+class _StillClock:
+    """The running loop, but its clock stands still (a test reads what a delay was set to,
+    not how long anything took)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self.delays: list[float] = []
+
+    def time(self) -> float:
+        return 1000.0
+
+    def call_later(self, delay: float, callback: Any, *args: Any) -> asyncio.TimerHandle:
+        self.delays.append(delay)
+        return self._loop.call_later(delay, callback, *args)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loop, name)
+
+
+async def test_while_the_engine_is_behind_a_batch_waits_longer() -> None:
+    """The streams' writes took the loop from an engine behind the clock (the PLC scan
+    80-150 ms late under 50 pages): while it is behind, the next batch is due BATCH_BEHIND_S
+    after the last, not BATCH_S."""
+    clock = _StillClock(asyncio.get_running_loop())
+    behind = False
+    feed = EventFeed(clock, behind=lambda: behind)  # type: ignore[arg-type]
+    for late in (False, True):
+        behind = late
+        feed.flush()  # (at the clock's now)
+        feed.listen(ev.Hazard(1, 0.0, 1, None, "next"))
+        assert feed._flush is not None
+        feed._flush.cancel()
+        feed._flush = None
+    assert clock.delays == pytest.approx([BATCH_S, BATCH_BEHIND_S])

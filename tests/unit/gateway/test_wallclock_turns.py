@@ -152,6 +152,7 @@ def test_an_engine_behind_the_clock_gets_a_fieldbus_rounds_turn(
     PLC scan 28 ms late.  Counted in turns, not timed."""
     monkeypatch.setattr(wallclock, "TURN_S", 0.0)
     monkeypatch.setattr(wallclock, "TURN_BEHIND_S", 60.0)
+    monkeypatch.setattr(wallclock, "TURN_BEHIND_MAX_S", 60.0)
     engine = make_sim({"A": "N1M30\n"}).engine
     fired: list[int] = []
     for i in range(TIMERS):
@@ -174,6 +175,19 @@ def test_an_engine_behind_the_clock_gets_a_fieldbus_rounds_turn(
     turns = asyncio.run(main())
     assert turns <= 2 if behind else turns >= TIMERS  # (and the one that finds nothing left)
     assert fired == list(range(TIMERS))
+
+
+def test_the_further_behind_the_longer_the_turn_up_to_a_poll_s_bound() -> None:
+    """Under a flood on a host where the cell's own work took 2/3 of a core, 0.5 ms turns left
+    the engine behind for good (the PLC scan 116-300 ms late): a turn grows with the lag,
+    TURN_BEHIND_S for each BEHIND_S, and stops at TURN_BEHIND_MAX_S (what a poll may wait)."""
+    behind, turn = wallclock.BEHIND_S, wallclock.TURN_BEHIND_S
+    assert wallclock.turn_length(0.0) == wallclock.turn_length(0.99 * behind) == \
+        wallclock.TURN_S
+    assert wallclock.turn_length(behind) == pytest.approx(turn)
+    assert wallclock.turn_length(3 * behind) == pytest.approx(3 * turn)
+    assert wallclock.turn_length(1000 * behind) == wallclock.TURN_BEHIND_MAX_S
+    assert wallclock.TURN_S < turn < 3 * turn <= wallclock.TURN_BEHIND_MAX_S <= 0.002
 
 
 @pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
