@@ -357,13 +357,13 @@ def main(spec_path: str, options: Options, explore: int | None = None) -> int:
               f"repeated draw runs once): {n_variants(len(spec.variants))}", file=out)
     status, rows = run_sweep(spec, options, out)
     if explore is not None and rows:
-        findings(rows, spec, out, options.timeout_s)
+        findings(rows, spec, out, options.timeout_s, said=options.progress is not False)
     out.flush()
     return status
 
 
 def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
-             timeout_s: float | None = None) -> None:
+             timeout_s: float | None = None, said: bool = True) -> None:
     """``--explore``: the failures grouped by signature (the deadlock's cycle, the stall's
     blocked processes, the first alarm's code and block), each with the variant that shows it
     in the least simulated time, and its smallest reproducer: that variant with each swept key
@@ -391,23 +391,25 @@ def findings(rows: Sequence[Row], spec: Spec, out: TextIO,
                   f"the --timeout); the variant: {command_of(variant, first['signature'])}",
                   file=out)
             continue
-        smallest = reduce(variant, verdict, first["signature"], timeout_s)
+        smallest = reduce(variant, verdict, first["signature"], timeout_s, said)
         # As the row's own command: a run past its budget stops there (--until BUDGET).
         print(f"  smallest reproducer: {command_of(smallest, first['signature'])}", file=out)
 
 
 def reduce(variant: Variant, verdict: str, signature: str,
-           timeout_s: float | None) -> Variant:
+           timeout_s: float | None, said: bool = True) -> Variant:
     """``variant`` without each swept key (its default instead) that the failure does not
     need: one key at a time, in column order, kept out when the run without it fails with
     the same verdict and signature.  Each try is a line on stderr (a try may take up to
-    ``timeout_s``), and one past the wall timeout says so: its key is kept."""
+    ``timeout_s``; not ``said`` with -q, as the progress line is not), and one past the wall
+    timeout says so (with -q too: it changes the reproducer): its key is kept."""
     from ncgate.gateway.sweep.run import run_variant
 
     for step, (key, value) in enumerate(variant.sets, 1):
-        print(f"reducing {variant.id}: trying {key} at its default, not "
-              f"{render_value(value)} ({step} of {len(variant.sets)})...", file=sys.stderr,
-              flush=True)
+        if said:
+            print(f"reducing {variant.id}: trying {key} at its default, not "
+                  f"{render_value(value)} ({step} of {len(variant.sets)})...",
+                  file=sys.stderr, flush=True)
         fewer = dataclasses.replace(variant, sets=tuple(s for s in variant.sets if s[0] != key))
         result = run_variant(fewer, timeout_s)
         if (result["verdict"], result["signature"]) == (verdict, signature):

@@ -139,3 +139,9 @@ def test_explore_says_each_reduction_step_and_a_step_past_the_timeout(
         f"reducing {variant.id}: nc.feed_override at its default ran past the --timeout of "
         "0.25 s: nc.feed_override kept",
         f"reducing {variant.id}: trying plc.scan_ms at its default, not 7 (2 of 2)..."], err
+    # -q: no "trying" lines (the progress line's kind), the kept key still said
+    tried.clear()
+    assert sweep_main.reduce(variant, "stall", "stall P1", 0.25, said=False) == smallest
+    assert capsys.readouterr().err.splitlines() == [
+        f"reducing {variant.id}: nc.feed_override at its default ran past the --timeout of "
+        "0.25 s: nc.feed_override kept"]
