@@ -125,6 +125,7 @@ class Spec:
     files: list[Path] = field(default_factory=list)
     draws: tuple[int, int] | None = None  # random draws made, and the distinct ones kept
     explore: int | None = None  # --explore N's N
+    digests: dict[str, str] = field(default_factory=dict)  # each file's: what --resume names
 
 
 def render_value(value: Value) -> str:
@@ -232,10 +233,13 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
         raise fail("sweep", f"two variants are the same run (id {dup}): a program, script "
                    "or value is given twice")
     digest = hashlib.sha256()
+    each: dict[str, str] = {}
     for f in sorted(files):
-        digest.update(str(f).encode() + b"\0" + f.read_bytes() + b"\0")
+        data = f.read_bytes()
+        digest.update(str(f).encode() + b"\0" + data + b"\0")
+        each[str(f)] = hashlib.sha256(data).hexdigest()
     return Spec(file, variants, keys, digest.hexdigest(), seed,
-                sorted(files), (draws, len(samples)) if draws else None, explore)
+                sorted(files), (draws, len(samples)) if draws else None, explore, each)
 
 
 class Variants(Sequence[Variant]):

@@ -174,6 +174,24 @@ def _one_type(values: list[Any]) -> list[Any]:
     return values
 
 
+def _files_changed(then: Any, now: dict[str, str]) -> str:
+    """The files whose content differs between two manifests' ``files`` (path -> digest),
+    in words: a resumed sweep's refusal names them (a log written beside the programs, as
+    MP0 reads a .txt, changed "the spec or a file it names" and nobody could tell which).
+    "" when the stopped sweep's manifest has none (an older one)."""
+    if not isinstance(then, dict):
+        return ""
+    changed = [p for p in sorted(now) if p in then and then[p] != now[p]]
+    added = [p for p in sorted(now) if p not in then]
+    gone = [p for p in sorted(then) if p not in now]
+    words = [f"{p} (changed)" for p in changed] + [f"{p} (new)" for p in added] + [
+        f"{p} (gone)" for p in gone]
+    if not words:
+        return ""
+    more = f" and {len(words) - 3} more" if len(words) > 3 else ""
+    return ", ".join(words[:3]) + more
+
+
 class Parts:
     """``OUTPUT.parts/``: the rows finished so far, in whole files."""
 
@@ -185,7 +203,7 @@ class Parts:
     def manifest(self) -> dict[str, Any]:
         return {"format": PARTS_FORMAT, "spec": str(self.spec.file.resolve()),
                 "fingerprint": self.spec.fingerprint, "variants": len(self.spec.variants),
-                "explore": self.spec.explore}
+                "explore": self.spec.explore, "files": self.spec.digests}
 
     def changed(self, found: dict[str, Any]) -> str | None:
         """What differs between the stopped sweep's manifest ``found`` and this one's, said
@@ -193,6 +211,11 @@ class Parts:
         has no such key: the count of variants tells.)"""
         now = self.manifest()
         if any(found.get(k) != now[k] for k in ("format", "spec", "fingerprint")):
+            said = _files_changed(found.get("files"), now["files"])
+            if said:
+                return (f"what the sweep reads is not what the sweep in {self.folder} read "
+                        f"(the spec, its programs, configs and scripts, every program file "
+                        f"on their storage: a .txt beside the programs is one): {said}")
             return f"the spec or a file it names changed since the sweep in {self.folder} " \
                    "was stopped"
         was = found.get("explore", now["explore"])

@@ -915,8 +915,29 @@ def test_resume_refuses_a_changed_file_the_runs_read(monkeypatch: pytest.MonkeyP
     file = tmp_path / "sub" / changed
     file.write_text(file.read_text().replace("G4X1", "G4X2").replace("+ 1", "+ 2"))
     done = ncgate("sweep", "spec.toml", "--resume", cwd=tmp_path)
-    assert done.returncode == 2 and "changed since" in done.stderr, done.stdout + done.stderr
+    # The refusal names the file (it said "the spec or a file it names changed", and a
+    # user whose log beside the programs was the change could not tell).
+    assert done.returncode == 2 and f"{file.resolve()} (changed)" in done.stderr, \
+        done.stdout + done.stderr
     assert (tmp_path / "spec.csv").read_bytes() == table  # no row of the new version in it
+
+
+def test_resume_names_a_program_file_new_beside_the_programs(tmp_path: Path) -> None:
+    """A .txt beside the programs is a program file on MP0 (NC-110 reads it): a log written
+    there between the runs changes what the sweep reads, and the refusal names it."""
+    (tmp_path / "OK.nc").write_text(LOOPS["OK"])
+    (tmp_path / "spec.toml").write_text('[sweep]\nprograms = ["OK.nc"]\n[grid]\n'
+                                        '"nc.feed_override" = [50, 100]\n')
+    assert ncgate("sweep", "spec.toml", cwd=tmp_path).returncode == 0
+    (tmp_path / "spec.csv").unlink()
+    from ncgate.gateway.sweep.spec import load_spec
+    from ncgate.gateway.sweep.table import Parts
+
+    Parts(tmp_path / "spec.csv", load_spec(tmp_path / "spec.toml")).start(resume=False)
+    (tmp_path / "run.txt").write_text("the sweep's log\n")
+    done = ncgate("sweep", "spec.toml", "--resume", cwd=tmp_path)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert f"{(tmp_path / 'run.txt').resolve()} (new)" in done.stderr, done.stderr
 
 
 def test_resume_knows_the_spec_by_another_spelling_of_its_path(
