@@ -11,8 +11,28 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from pathlib import Path
+
+
+def shell_mode(path: Path) -> int:
+    """An existing file's permissions, else a new file's (0o666 less the umask), as a shell's
+    ``>`` gives: not mkstemp's 0o600 (a table or a JUnit file another user's CI reads)."""
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except OSError:
+        mask = os.umask(0o022)
+        os.umask(mask)
+        return 0o666 & ~mask
+
+
+def write_output(path: Path, data: bytes) -> None:
+    """An output a user named (a sweep's table, a JUnit file), whole or not at all: through
+    its symbolic links (the file they reach is replaced, not the link), with the mode a
+    shell's ``>`` gives."""
+    target = path.resolve()
+    write_atomic(target, data, shell_mode(target))
 
 
 def write_atomic(path: Path, data: bytes, mode: int | None = None) -> None:

@@ -29,7 +29,7 @@ from typing import TextIO
 from ncgate.config import ConfigError
 from ncgate.config.script import Expect, Script
 from ncgate.errors import InputRefused
-from ncgate.gateway.atomic import write_atomic
+from ncgate.gateway.atomic import write_output
 from ncgate.gateway.wiring import Runtime, parse_condition
 from ncgate.inputs import Var
 from ncgate.interpreter.diagnostics import did_you_mean
@@ -398,10 +398,11 @@ def _bytes(area: str, index: int, view: str) -> tuple[str, int, int]:
 def save_junit(path: Path, verdicts: Sequence[tuple[str, list[Verdict]]],
                notes: Mapping[str, str] | None = None) -> None:
     """:func:`write_junit` into ``path``, whole or not at all (a CI reading a half-written
-    file after a kill would see an XML error, or fewer failures than there were)."""
+    file after a kill would see an XML error, or fewer failures than there were), through
+    its links and with a shell's ``>`` mode (``atomic.write_output``)."""
     out = io.StringIO()
     write_junit(verdicts, out, notes)
-    write_atomic(path, out.getvalue().encode("utf-8"))
+    write_output(path, out.getvalue().encode("utf-8"))
 
 
 def write_junit(verdicts: Sequence[tuple[str, list[Verdict]]], out: TextIO,

@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import signal
+import stat
 import sys
 import traceback
 from collections.abc import Callable, Coroutine, Iterable, Sequence
@@ -414,6 +415,8 @@ def _sim(args: argparse.Namespace) -> int:
                          ("--gantt", args.gantt)):
         if file:  # before the run (or the suite, or the replay), not after it
             _check_output_folder(option, file)
+    if args.junit:
+        _check_replaced_whole("--junit", args.junit)
     if args.replay:
         return _replay(args)
     if args.until is not None and args.until < 0:
@@ -509,6 +512,20 @@ def _check_output_folder(option: str, file: str) -> None:
         raise UsageError(f"{option} {file}: no folder {str(folder)!r} to write it in")
     if not os.access(folder, os.W_OK):
         raise UsageError(f"{option} {file}: the folder {str(folder)!r} cannot be written")
+
+
+def _check_replaced_whole(option: str, file: str) -> None:
+    """A file written whole (a temporary file renamed over it) is a regular file, or none
+    yet: a FIFO or a device would be replaced, not written to."""
+    try:
+        mode = os.stat(file).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise UsageError(f"{option} {file}: {exc.strerror}") from None
+    if not stat.S_ISREG(mode):
+        raise UsageError(f"{option} {file}: not a regular file (it is written whole, a "
+                         "temporary file renamed over it)")
 
 
 def _relative(path: Path, base: Path, prefix: str = "") -> str:
@@ -735,6 +752,7 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
         if not args.script:
             raise UsageError("--junit goes with --script: it writes the scenario's verdicts")
         _check_output_folder("--junit", args.junit)
+        _check_replaced_whole("--junit", args.junit)
         junit = (Path(args.junit).resolve(), _relative(Path(args.script), Path.cwd()))
     record = str(Path(args.record).resolve()) if args.record else None
     if record is not None and Path(record).is_dir():

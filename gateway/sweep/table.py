@@ -107,20 +107,9 @@ def output_path(output: Path, inputs: Iterable[Path] = ()) -> Path:
     return target
 
 
-def _file_mode(path: Path) -> int:
-    """An existing file's permissions, else a new file's (0o666 less the umask), as a shell's
-    ``>`` gives: not mkstemp's 0o600."""
-    try:
-        return stat.S_IMODE(path.stat().st_mode)
-    except OSError:
-        mask = os.umask(0o022)
-        os.umask(mask)
-        return 0o666 & ~mask
-
-
 def write_atomic(path: Path, data: bytes) -> None:
     """The file whole or not at all (ncgate.gateway.atomic), with a table's permissions."""
-    atomic.write_atomic(path, data, _file_mode(path))
+    atomic.write_atomic(path, data, atomic.shell_mode(path))
 
 
 def csv_bytes(rows: Iterable[Row], keys: Sequence[str]) -> bytes:
