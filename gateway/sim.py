@@ -326,13 +326,15 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
             single_block: bool = False, breaks: Sequence[str] = (),
             keep_going: bool = False, at: str | None = None,
             with_calc: bool = False,
-            before_time: Callable[[float], None] | None = None) -> SimResult:
+            before_time: Callable[[float], None] | None = None,
+            warn: bool = True) -> SimResult:
     """Run a closed simulation: ``main`` in process 1, or each of several programs in its own
     process (1, 2, 3, ... as the operator's SPG starts them, manual section 4 (2)); in the ISG
     dialect one sectioned file starts each section in its channel.
 
     ``before_time`` is called with each time the clock is about to move to (``ncgate sweep``
-    stops a variant past its virtual-time budget by raising from it).
+    stops a variant past its virtual-time budget by raising from it).  ``warn``: say the
+    cell's SW006 (a scenario suite says them with its first scenario only).
 
     Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
     ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
@@ -398,9 +400,10 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     drivers = [started[1] for started in (
         start_plc(config, runtime, door, closed=True, leap=leap),
         start_plant_logic(config, runtime, door, closed=True, leap=leap)) if started]
-    plant_logic = runtime.plant.logic if runtime.plant is not None else None
-    warn_shared_writes(config, runtime.plc.logic if runtime.plc else None,
-                       plant_logic.logic if plant_logic else None)
+    if warn:
+        plant_logic = runtime.plant.logic if runtime.plant is not None else None
+        warn_shared_writes(config, runtime.plc.logic if runtime.plc else None,
+                           plant_logic.logic if plant_logic else None)
 
     def logic_runs() -> bool:
         """An ST task runs (the PLC's, or the plant's: either may press NC.START)."""

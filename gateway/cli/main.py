@@ -462,14 +462,15 @@ def _sim(args: argparse.Namespace) -> int:
     # `sim | head -1`: a reader that goes early stops neither the scenarios nor the files
     # written after them, and the status is still what the simulation found.
     output = stdout()
-    for script in scripts:  # each an independent scenario, on a runtime of its own
+    for i, script in enumerate(scripts):  # each an independent scenario, on a runtime of its own
         name = shown.get(script.file) or _relative(Path(script.file), Path.cwd())
         if len(scripts) > 1:
             print(f"== {name}", file=output)
         try:
             result = run_sim(config, mains, script, args.until, signals=True,
                              single_block=args.single_block, breaks=args.breaks,
-                             keep_going=args.keep_going, at=args.at, with_calc=args.with_calc)
+                             keep_going=args.keep_going, at=args.at, with_calc=args.with_calc,
+                             warn=i == 0)  # (one cell: its SW006 once, not a scenario each)
         except ProgramError as exc:
             print(str(exc), file=sys.stderr)
             storage = storage_of(config)

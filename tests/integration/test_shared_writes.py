@@ -131,6 +131,20 @@ def test_sim_says_sw006_in_its_log(tmp_path: Path, caplog: pytest.LogCaptureFixt
     assert len(said) == 5 and "plc.st:4:1: warning SW006: SA30 (clamp_closed)" in said[3], said
 
 
+def test_a_suite_of_scenarios_says_its_cells_sw006_once(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """One cell, three scenarios: its five warnings once, not fifteen."""
+    _cell(tmp_path)
+    for name in ("a", "b", "c"):
+        (tmp_path / f"{name}.toml").write_text('[[expect]]\nname = "x"\ncond = "P1 IDLE"\n'
+                                               "by = 0.2\n")
+    with contextlib.chdir(tmp_path), caplog.at_level(logging.WARNING, logger="ncgate"):
+        main(["sim", "--config", "ncgate.toml", "--script", "a.toml", "--script", "b.toml",
+              "--script", "c.toml"])
+    said = [r.getMessage() for r in caplog.records if "SW006" in r.getMessage()]
+    assert len(said) == 5, said
+
+
 async def test_run_says_sw006_in_its_log_before_it_serves(
         tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     config = load_config(_cell(tmp_path), overrides={"modbus.port": 0,
