@@ -48,10 +48,18 @@ def header_refusal(header: bytes, max_chunk: int) -> tuple[int, str] | None:
     return None
 
 
+# OPC 10000-6 7.1.2.3: a Hello's body is 5 UInt32 and the EndpointUrl's length at least.
+HELLO_MIN = HEADER.size + 24
+
+
 class _Protocol(OPCUAProtocol):
-    """asyncua's protocol, which sees only headers it can take."""
+    """asyncua's protocol, which sees only headers it can take, in the order OPC 10000-6
+    7.1.3 gives: a Hello first, and one."""
 
     refused = False
+    hello = False  # the Hello came
+    _received = 0  # bytes received on the connection
+    _judged = -1  # where the last header judged starts, counted as _received is
 
     def data_received(self, data: bytes) -> None:
         if self.refused or self.transport is None:
@@ -59,14 +67,36 @@ class _Protocol(OPCUAProtocol):
         # asyncua's data_received adds the bytes to _buffer and takes every whole message
         # from its front, so _buffer holds at most the start of one: the headers from there.
         self._buffer += data
+        self._received += len(data)
         buffer, at = self._buffer, 0
+        base = self._received - len(buffer)  # where the buffer starts on the connection
         while len(buffer) - at >= HEADER.size:
-            refusal = header_refusal(buffer[at:at + HEADER.size], self.limits.max_recv_buffer)
-            if refusal is not None:
-                self._refuse(*refusal)
-                return
-            at += HEADER.unpack_from(buffer, at)[2]
+            header = buffer[at:at + HEADER.size]
+            size = HEADER.unpack(header)[2]
+            if base + at > self._judged:  # (a header seen before, still whole, is not again)
+                self._judged = base + at
+                refusal = header_refusal(header, self.limits.max_recv_buffer) or self._order(
+                    header[:3], size)
+                if refusal is not None:
+                    self._refuse(*refusal)
+                    return
+            at += size
         super().data_received(b"")  # (b"" adds nothing to _buffer, and copies nothing)
+
+    def _order(self, kind: bytes, size: int) -> tuple[int, str] | None:
+        """A message out of order: anything before the Hello, a Hello too short to hold its
+        fields, a second Hello (asyncua raised on the first two in its message loop -- a
+        traceback, the connection left open unanswered -- and answered the third)."""
+        if not self.hello:
+            if kind != b"HEL":
+                return StatusCodes.BadTcpMessageTypeInvalid, f"{kind.decode()} before Hello"
+            if size < HELLO_MIN:
+                return StatusCodes.BadDecodingError, f"a Hello of {size} bytes"
+            self.hello = True
+            return None
+        if kind == b"HEL":
+            return StatusCodes.BadTcpMessageTypeInvalid, "a second Hello"
+        return None
 
     def _refuse(self, code: int, what: str) -> None:
         """OPC 10000-6 7.1.5: an Error message, then the connection is closed."""
