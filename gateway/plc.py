@@ -203,8 +203,20 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
         text = var_name(area, index, view)
         return f"{text} ({name})" if name else text
 
+    def ran(logic: Logic, section: str) -> dict[tuple[str, int], tuple[str, int, int]]:
+        """What the PROGRAMs the section runs write, and what they reach does."""
+        try:
+            order: list[str] | None = program_order(logic, config, section)
+        except ConfigError:  # (said where the config is checked)
+            order = None
+        return logic.image_writes(order)
+
+    writes = {id(logic): ran(logic, section) for logic, section in ((plc, "plc"),
+                                                                       (plant, "plant"))
+              if logic is not None}
+
     def diagnostic(logic: Logic, key: tuple[str, int], message: str) -> StDiagnostic:
-        file, line, column = logic.image_writes[key]
+        file, line, column = writes[id(logic)][key]
         text = next((f.line(line) for f in logic.files if f.path == file), "")
         return StDiagnostic(StCode.SHARED_OUTPUT, message, Span(file, line, column), text)
 
@@ -221,7 +233,8 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
             except (InputRefused, ValueError):
                 continue  # (the plant refuses it, naming the key)
             for logic, _ in logics:
-                hit = next((k for k in _storage(*var.address) if k in logic.image_writes), None)
+                hit = next((k for k in _storage(*var.address) if k in writes[id(logic)]),
+                           None)
                 if hit is not None:
                     out.append(diagnostic(logic, hit, (
                         f"{shown(*var.address)} is written here and by plant model "
@@ -229,10 +242,11 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
                         "is the machine's answer: read it, or drop the model)")))
     if plc is not None and plant is not None:
         told: set[tuple[int, int, int]] = set()
-        for place in sorted(plant.image_writes.keys() & plc.image_writes.keys()):
+        plant_writes, plc_writes = writes[id(plant)], writes[id(plc)]
+        for place in sorted(plant_writes.keys() & plc_writes.keys()):
             area, index = place
-            where = plant.image_writes[place]
-            at = plc.image_writes[place]
+            where = plant_writes[place]
+            at = plc_writes[place]
             if (where[1], at[1], at[2]) in told:
                 continue  # (the 8 bits of one byte written by both: said once)
             told.add((where[1], at[1], at[2]))

@@ -983,9 +983,11 @@ def _plant_logic_row(config: Config) -> dict[str, Any]:
             out.append(f"{text} ({name})" if name else text)
         return out
 
+    order = prepared.order  # (what the PROGRAMs run reach: a block with no instance is not)
+    computed_reads, computed_writes = logic.computed(order)
     for key, places, computed in (
-            ("reads", logic.image_reads, logic.computed_reads),
-            ("writes", logic.image_writes, logic.computed_writes)):
+            ("reads", logic.image_reads(order), computed_reads),
+            ("writes", logic.image_writes(order), computed_writes)):
         row[key] = [*named(places), *(f"{area}[…]" for area in sorted(computed))]
     return row
 

@@ -234,7 +234,7 @@ def _writing(c: Compiler, place: Place, keys: tuple[tuple[str, int], ...],
 
     def noted(value: str) -> str:
         for key in keys:
-            c.image_writes.setdefault(key, span)
+            c.image_writes.setdefault(c.pou_key, {}).setdefault(key, span)
         return store(value)
 
     return replace(place, store=noted)
@@ -348,10 +348,14 @@ class Compiler:
         # ("SA", bit), ("SK", byte), ("SYVAR", n) -> the write's span (SW006: another writer
         # of the cell writes it too, gateway/plc.py's shared_writes).  A write at a place it
         # computes is not known here.
-        self.image_writes: dict[tuple[str, int], n.Span] = {}
-        self.image_reads: dict[tuple[str, int], n.Span] = {}  # likewise, what it reads
-        self.computed_reads: set[str] = set()  # the areas it reads, writes at a place it
-        self.computed_writes: set[str] = set()  # computes (ncgate map's plant logic)
+        # Each by the POU whose code does it (pou_key: the one being compiled), so that what
+        # no PROGRAM run reaches is not counted (Logic.reached: uses).
+        self.image_writes: dict[str, dict[tuple[str, int], n.Span]] = {}
+        self.image_reads: dict[str, dict[tuple[str, int], n.Span]] = {}  # what it reads
+        self.computed_reads: dict[str, set[str]] = {}  # the areas it reads, writes at a place
+        self.computed_writes: dict[str, set[str]] = {}  # it computes (ncgate map)
+        self.pou_key = ""
+        self.uses: dict[str, set[str]] = {}  # a POU -> the FBs it has instances of, calls
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -814,6 +818,7 @@ class Compiler:
                 if call in self.pous:
                     found.add(call)
             uses[key] = found
+        self.uses = uses
         for start in uses:
             stack, seen = [start], set()
             while stack:
@@ -848,10 +853,12 @@ class Compiler:
         out.indent -= 2
         out.emit("_G = _Globals()", None)
         for key, info in self.pous.items():
+            self.pou_key = key
             if info.pou.kind == "FUNCTION":
                 self._function(key, info)
             else:
                 self._class(key, info)
+        self.pou_key = ""
         for helper in self.helpers:
             out.lines += helper.lines
             out.spans += helper.spans
@@ -2603,7 +2610,7 @@ class Scope:
             c.image_keys.update((("SK", index), ("SK", index + 1)))
             if not write:
                 for key in (("SK", index), ("SK", index + 1)):
-                    c.image_reads.setdefault(key, var.span)
+                    c.image_reads.setdefault(c.pou_key, {}).setdefault(key, var.span)
             place = _writing(c, Place(
                 f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)", "INT",
                 lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535).to_bytes(2, "
@@ -2631,7 +2638,7 @@ class Scope:
         written = ("SA", index * 8 + sel.bit) if area == "SAB" else (
             ("SK", index) if area == "SK" else ("SYVAR", index))
         if not write:
-            c.image_reads.setdefault(written, var.span)
+            c.image_reads.setdefault(c.pou_key, {}).setdefault(written, var.span)
         return _writing(c, Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
             wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type))),
             (written,), var.span)
@@ -2658,7 +2665,8 @@ class Scope:
         const = i.const
         if const is None:
             c.image_areas.add(area)
-            (c.computed_writes if write else c.computed_reads).add(area)
+            (c.computed_writes if write else c.computed_reads).setdefault(
+                c.pou_key, set()).add(area)
         else:
             c.image_keys.add((area, const >> 3 if key == "SA" else const))
             keys: tuple[tuple[str, int], ...] = (
@@ -2667,7 +2675,7 @@ class Scope:
                 ((area, const),))
             if not write and noted:
                 for place in keys:
-                    c.image_reads.setdefault(place, var.span)
+                    c.image_reads.setdefault(c.pou_key, {}).setdefault(place, var.span)
             if noted:
                 return _writing(c, self._image_at(key, i, size), keys, var.span)
         return self._image_at(key, i, size)

@@ -14,7 +14,7 @@ import math
 import threading
 import time
 import types as pytypes
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -76,13 +76,15 @@ class Logic:
         self.reads_et = compiler.reads_et
         self.image_keys = frozenset(compiler.image_keys)  # (see Compiler.image_keys)
         self.image_areas = frozenset(compiler.image_areas)
-        # What of the image it writes at a constant place -> where it first does (file,
-        # line, column): Compiler.image_writes
-        self.image_writes = {key: (s.file, s.line, s.column)
-                             for key, s in compiler.image_writes.items()}
-        self.image_reads = frozenset(compiler.image_reads)  # (ncgate map's plant logic)
-        self.computed_reads = frozenset(compiler.computed_reads)
-        self.computed_writes = frozenset(compiler.computed_writes)
+        # What of the image each POU writes and reads at a constant place -> where it first
+        # does (file, line, column), and the areas it writes and reads at a place it
+        # computes: Compiler.image_writes ... (see image_writes, image_reads, computed).
+        self._writes = {pou: {key: (s.file, s.line, s.column) for key, s in found.items()}
+                        for pou, found in compiler.image_writes.items()}
+        self._reads = {pou: frozenset(found) for pou, found in compiler.image_reads.items()}
+        self._computed = ({pou: frozenset(a) for pou, a in compiler.computed_reads.items()},
+                          {pou: frozenset(a) for pou, a in compiler.computed_writes.items()})
+        self.uses = {pou: frozenset(used) for pou, used in compiler.uses.items()}
         # plc.strict = false: what loaded only because CODESYS accepts it (SW codes)
         self.warnings = tuple(sorted(compiler.warnings, key=lambda d: (
             d.span.file, d.span.line, d.span.column)))
@@ -123,6 +125,42 @@ class Logic:
                           v.qualifier == "CONSTANT")
             for k, v in compiler.globals.items() if v.image is None}
         self.enums = dict(compiler.enums)
+
+
+    def reached(self, programs: Iterable[str] | None = None) -> set[str]:
+        """The POUs whose code runs: ``programs`` (PROGRAM names; None: every one), the
+        function blocks they have instances of and the functions they call, and so on
+        (a FUNCTION_BLOCK with no instance, a PROGRAM not run, is not reached)."""
+        stack = [p.upper() for p in (self.programs if programs is None else programs)]
+        reached = {""}  # (what is not inside a POU: the globals)
+        while stack:
+            pou = stack.pop()
+            if pou not in reached:
+                reached.add(pou)
+                stack.extend(self.uses.get(pou, ()))
+        return reached
+
+    def image_writes(self, programs: Iterable[str] | None = None
+                     ) -> dict[tuple[str, int], tuple[str, int, int]]:
+        """What of the image the code ``programs`` reach writes at a constant place:
+        ("SA", bit), ("SK", byte), ("SYVAR", n) -> where it first does (SW006)."""
+        out: dict[tuple[str, int], tuple[str, int, int]] = {}
+        for pou in self.reached(programs):
+            for key, where in self._writes.get(pou, {}).items():
+                if key not in out or where < out[key]:
+                    out[key] = where
+        return out
+
+    def image_reads(self, programs: Iterable[str] | None = None) -> set[tuple[str, int]]:
+        """Likewise, what it reads (ncgate map's plant logic)."""
+        return {key for pou in self.reached(programs) for key in self._reads.get(pou, ())}
+
+    def computed(self, programs: Iterable[str] | None = None) -> tuple[set[str], set[str]]:
+        """The areas the code ``programs`` reach reads, and writes, at a place it computes."""
+        reached = self.reached(programs)
+        reads, writes = self._computed
+        return ({a for pou in reached for a in reads.get(pou, ())},
+                {a for pou in reached for a in writes.get(pou, ())})
 
     def reset_globals(self) -> None:
         """The VAR_GLOBALs at their initial values (a cold start of the logic)."""

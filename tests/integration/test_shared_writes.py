@@ -170,3 +170,23 @@ def test_map_lists_what_the_plant_logic_reads_and_writes(
         assert main(["map", "--config", "ncgate.toml"]) == 0
         assert ("| (logic) | st: plant.st, every 10 ms | SA20, SA50, SYVAR[…] | "
                 "SA30 (clamp_closed), SA33, SYVAR5 |") in capsys.readouterr().out
+
+
+def test_sw006_counts_only_the_code_the_programs_run_reach(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A PROGRAM that plc.programs leaves out, and a FUNCTION_BLOCK with no instance, write
+    nothing: no SW006 of theirs.  A block that the PROGRAM run has an instance of does."""
+    config = _cell(tmp_path, "PROGRAM main\nVAR d : doer; END_VAR\nd();\nEND_PROGRAM\n"
+                   "PROGRAM spare\nSA[31] := TRUE;\nEND_PROGRAM\n"
+                   "FUNCTION_BLOCK doer\nSA[51] := TRUE;\nEND_FUNCTION_BLOCK\n"
+                   "FUNCTION_BLOCK unused\nSA[49] := TRUE;\nEND_FUNCTION_BLOCK\n",
+                   "PROGRAM machine\nEND_PROGRAM\n")
+    config.write_text(config.read_text().replace('logic = "plc.st"\n',
+                                                 'logic = "plc.st"\nprograms = ["main"]\n'))
+    with contextlib.chdir(tmp_path):
+        assert main(["check", "--config", "ncgate.toml"]) == 0
+    out = capsys.readouterr().out
+    said = [line.replace(f"{tmp_path}/", "") for line in out.splitlines() if "SW006" in line]
+    assert said == ["plc.st:9:1: warning SW006: SA51 is written here and by plant model lamp "
+                    "(output): each overwrites the other (a model's output is the machine's "
+                    "answer: read it, or drop the model)"], out
