@@ -180,14 +180,15 @@ def test_an_engine_behind_the_clock_gets_a_fieldbus_rounds_turn(
 def test_the_further_behind_the_longer_the_turn_up_to_a_poll_s_bound() -> None:
     """Under a flood on a host where the cell's own work took 2/3 of a core, 0.5 ms turns left
     the engine behind for good (the PLC scan 116-300 ms late): a turn grows with the lag,
-    TURN_BEHIND_S for each BEHIND_S, and stops at TURN_BEHIND_MAX_S (what a poll may wait)."""
+    TURN_BEHIND_S for each BEHIND_S, and stops at TURN_BEHIND_MAX_S (what a poll may wait:
+    2 ms put the poller's p99 over 5 ms)."""
     behind, turn = wallclock.BEHIND_S, wallclock.TURN_BEHIND_S
     assert wallclock.turn_length(0.0) == wallclock.turn_length(0.99 * behind) == \
         wallclock.TURN_S
     assert wallclock.turn_length(behind) == pytest.approx(turn)
-    assert wallclock.turn_length(3 * behind) == pytest.approx(3 * turn)
+    assert wallclock.turn_length(1.5 * behind) == pytest.approx(1.5 * turn)
     assert wallclock.turn_length(1000 * behind) == wallclock.TURN_BEHIND_MAX_S
-    assert wallclock.TURN_S < turn < 3 * turn <= wallclock.TURN_BEHIND_MAX_S <= 0.002
+    assert wallclock.TURN_S < turn < 1.5 * turn <= wallclock.TURN_BEHIND_MAX_S <= 0.001
 
 
 @pytest.mark.parametrize("kind", ["asyncio", "uvloop"])
