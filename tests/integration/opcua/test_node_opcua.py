@@ -30,10 +30,14 @@ PROGRAM = 'N10 (DIS,"close the door")\nN20 (WAI,SA10=1)\nN30 G1X10F6000\nN40 (SN
 
 
 def cell(tmp_path: Path, record: Path | None = None, **overrides: Any) -> Gateway:
-    write_cell(tmp_path, '[nc]\nmain = "A"\nprocesses = 2\n[nc.storage]\nMP0 = "."\n'
+    # In a folder named ncgate: an ncgate.toml's machine is named after its folder
+    # (docs/opcua.md), and the browse paths below name Machines/ncgate.
+    folder = tmp_path / "ncgate"
+    folder.mkdir()
+    write_cell(folder, '[nc]\nmain = "A"\nprocesses = 2\n[nc.storage]\nMP0 = "."\n'
                '[symbols]\ndoor_closed = { var = "SA10", comment = "the guard door" }\n',
                {"A": PROGRAM})
-    config = ncgate_test_config(tmp_path / "ncgate.toml",
+    config = ncgate_test_config(folder / "ncgate.toml",
                                 **{"opcua.enabled": True, "opcua.port": 0,
                                    "canopen.enabled": False, **overrides})
     return Gateway(config, console=True, record=record)

@@ -15,7 +15,8 @@ from .conftest import DI, MACHINERY, NCGATE, UaClient
 
 async def start_run(tmp_path: Path, new_group: bool = False
                     ) -> tuple[asyncio.subprocess.Process, int, list[str]]:
-    config = tmp_path / "ncgate.toml"
+    (tmp_path / "ncgate").mkdir()  # (an ncgate.toml's machine is named after its folder)
+    config = tmp_path / "ncgate" / "ncgate.toml"
     config.write_text("[modbus]\nport = 0\n[canopen]\nenabled = false\n")
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "ncgate", "run", "--config", str(config), "--no-web",
