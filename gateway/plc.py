@@ -195,13 +195,8 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
     from ncgate.gateway.wiring import image_var
     from ncgate.plc.st.nodes import Span
 
-    symbols = {name.upper(): (name, image_var(text)) for name, text in config.symbols.items()}
-    named = {var.address: name for name, var in symbols.values()}
-
-    def shown(area: str, index: int, view: str) -> str:
-        name = named.get((area, index, view))
-        text = var_name(area, index, view)
-        return f"{text} ({name})" if name else text
+    symbols = {name.upper(): image_var(text) for name, text in config.symbols.items()}
+    shown = io_namer(config)
 
     def ran(logic: Logic, section: str) -> dict[tuple[str, int], tuple[str, int, int]]:
         """What the PROGRAMs the section runs write, and what they reach does."""
@@ -221,18 +216,17 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
         return StDiagnostic(StCode.SHARED_OUTPUT, message, Span(file, line, column), text)
 
     out: list[StDiagnostic] = []
-    logics = [(logic, what) for logic, what in ((plc, "the PLC's"), (plant, "the plant's"))
-              if logic is not None]
+    logics = [logic for logic in (plc, plant) if logic is not None]
     for model in config.plant.model:
         for key, text in model.keys.items():
             if MODEL_KEYS[model.kind][key][0] != "out" or not isinstance(text, str):
                 continue
             found = symbols.get(text.strip().upper())
             try:
-                var = found[1] if found is not None else image_var(text)
+                var = found if found is not None else image_var(text)
             except (InputRefused, ValueError):
                 continue  # (the plant refuses it, naming the key)
-            for logic, _ in logics:
+            for logic in logics:
                 hit = next((k for k in _storage(*var.address) if k in writes[id(logic)]),
                            None)
                 if hit is not None:
@@ -250,13 +244,31 @@ def shared_writes(config: Config, plc: Logic | None, plant: Logic | None
             if (where[1], at[1], at[2]) in told:
                 continue  # (the 8 bits of one byte written by both: said once)
             told.add((where[1], at[1], at[2]))
-            shown_key = shown(area, index, "bit" if area == "SA" else "BY" if area == "SK"
-                              else "IN")
             out.append(diagnostic(plant, place, (
-                f"{shown_key} is written here and by the PLC's logic at {at[0]}:{at[1]}:"
-                f"{at[2]}: each overwrites the other (the plant's logic models the machine: "
-                "it reads what the PLC writes)")))
+                f"{shown(area, index, PLACE_VIEW[area])} is written here and by the PLC's "
+                f"logic at {at[0]}:{at[1]}:{at[2]}: each overwrites the other (the plant's "
+                "logic models the machine: it reads what the PLC writes)")))
     return sorted(out, key=lambda d: (d.span.file, d.span.line, d.span.column))
+
+
+# The view of the variable a place of Logic.image_writes / image_reads is: ("SA", bit),
+# ("SK", byte), ("SYVAR", n).
+PLACE_VIEW = {"SA": "bit", "SK": "BY", "SYVAR": "IN"}
+
+
+def io_namer(config: Config) -> Callable[[str, int, str], str]:
+    """A variable's name as a diagnostic or ``ncgate map`` shows it: ``SA30 (clamp_closed)``
+    when an I/O name of [symbols] names it, else ``SA30``."""
+    from ncgate.gateway.wiring import image_var
+
+    named = {image_var(text).address: name for name, text in config.symbols.items()}
+
+    def shown(area: str, index: int, view: str) -> str:
+        name = named.get((area, index, view))
+        text = var_name(area, index, view)
+        return f"{text} ({name})" if name else text
+
+    return shown
 
 
 def warn_shared_writes(config: Config, plc: Logic | None, plant: Logic | None) -> None:

@@ -955,9 +955,7 @@ def _plant_logic_row(config: Config) -> dict[str, Any]:
     """The plant's ST logic as a row of the plant's table: the image variables it reads and
     writes at constant places (a computed place: the area, ``SA[…]``)."""
     from ncgate.config import ConfigError
-    from ncgate.gateway.plc import prepare_logic
-    from ncgate.gateway.wiring import image_var
-    from ncgate.inputs import var_name
+    from ncgate.gateway.plc import PLACE_VIEW, io_namer, prepare_logic
     from ncgate.plc.st.diagnostics import LogicError
 
     files = ", ".join(path.name for path in config.plant.logic)
@@ -971,17 +969,11 @@ def _plant_logic_row(config: Config) -> dict[str, Any]:
     assert prepared is not None
     logic = prepared.logic
 
-    symbols = {image_var(text).address: name for name, text in config.symbols.items()}
+    shown = io_namer(config)
 
     def named(places: Iterable[tuple[str, int]]) -> list[str]:
-        view = {"SA": "bit", "SK": "BY", "SYVAR": "IN"}
-        out = []
-        for area, index in sorted(places, key=lambda p: (("SA", "SK", "SYVAR").index(p[0]),
-                                                         p[1])):
-            name = symbols.get((area, index, view[area]))
-            text = var_name(area, index, view[area])
-            out.append(f"{text} ({name})" if name else text)
-        return out
+        return [shown(area, index, PLACE_VIEW[area]) for area, index in sorted(
+            places, key=lambda p: (list(PLACE_VIEW).index(p[0]), p[1]))]
 
     order = prepared.order  # (what the PROGRAMs run reach: a block with no instance is not)
     computed_reads, computed_writes = logic.computed(order)

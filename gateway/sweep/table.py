@@ -109,7 +109,7 @@ def output_path(output: Path, inputs: Iterable[Path] = ()) -> Path:
 
 def write_atomic(path: Path, data: bytes) -> None:
     """The file whole or not at all (ncgate.gateway.atomic), with a table's permissions."""
-    atomic.write_atomic(path, data, atomic.shell_mode(path))
+    atomic.write_output(path, data)
 
 
 def csv_bytes(rows: Iterable[Row], keys: Sequence[str]) -> bytes:

@@ -346,16 +346,20 @@ class Compiler:
         self.image_areas: set[str] = set()
         # What of the image the logic writes at a constant place, and where it first does:
         # ("SA", bit), ("SK", byte), ("SYVAR", n) -> the write's span (SW006: another writer
-        # of the cell writes it too, gateway/plc.py's shared_writes).  A write at a place it
-        # computes is not known here.
-        # Each by the POU whose code does it (pou_key: the one being compiled), so that what
-        # no PROGRAM run reaches is not counted (Logic.reached: uses).
+        # of the cell writes it too, gateway/plc.py's shared_writes); a write at a place it
+        # computes is not known here.  Each by the POU whose code does it (pou_key: the one
+        # being compiled), so that what no PROGRAM run reaches is not counted (Logic.reached:
+        # uses).  Likewise what it reads (ncgate map).
         self.image_writes: dict[str, dict[tuple[str, int], n.Span]] = {}
-        self.image_reads: dict[str, dict[tuple[str, int], n.Span]] = {}  # what it reads
+        self.image_reads: dict[str, set[tuple[str, int]]] = {}
         self.computed_reads: dict[str, set[str]] = {}  # the areas it reads, writes at a place
         self.computed_writes: dict[str, set[str]] = {}  # it computes (ncgate map)
         self.pou_key = ""
         self.uses: dict[str, set[str]] = {}  # a POU -> the FBs it has instances of, calls
+
+    def note_reads(self, keys: Iterable[tuple[str, int]]) -> None:
+        """The POU being compiled reads these places of the image (image_reads)."""
+        self.image_reads.setdefault(self.pou_key, set()).update(keys)
 
     # -- reporting --------------------------------------------------------------------------
 
@@ -2609,8 +2613,7 @@ class Scope:
         if area == "SKIN":
             c.image_keys.update((("SK", index), ("SK", index + 1)))
             if not write:
-                for key in (("SK", index), ("SK", index + 1)):
-                    c.image_reads.setdefault(c.pou_key, {}).setdefault(key, var.span)
+                c.note_reads((("SK", index), ("SK", index + 1)))
             place = _writing(c, Place(
                 f"((((_SK[{index}] | _SK[{index + 1}] << 8)) ^ 32768) - 32768)", "INT",
                 lambda val: f"_SK[{index}:{index + 2}] = (({val}) & 65535).to_bytes(2, "
@@ -2638,7 +2641,7 @@ class Scope:
         written = ("SA", index * 8 + sel.bit) if area == "SAB" else (
             ("SK", index) if area == "SK" else ("SYVAR", index))
         if not write:
-            c.image_reads.setdefault(c.pou_key, {}).setdefault(written, var.span)
+            c.note_reads((written,))
         return _writing(c, Place(f"(({read} >> {sel.bit}) & 1 == 1)", "BOOL", lambda val: store(
             wrap_code(f"({read} | {mask}) if {val} else ({read} & {~mask})", place.type))),
             (written,), var.span)
@@ -2674,8 +2677,7 @@ class Scope:
                 tuple(("SA", const * 8 + bit) for bit in range(8)) if key == "SAB" else
                 ((area, const),))
             if not write and noted:
-                for place in keys:
-                    c.image_reads.setdefault(c.pou_key, {}).setdefault(place, var.span)
+                c.note_reads(keys)
             if noted:
                 return _writing(c, self._image_at(key, i, size), keys, var.span)
         return self._image_at(key, i, size)
