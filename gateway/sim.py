@@ -210,7 +210,7 @@ class ScriptPlayer:
                 return True
         return False
 
-    def arm(self, at_once: bool = False) -> None:
+    def arm(self, at_once: bool = False, settle: Callable[[], None] | None = None) -> None:
         """Arm every entry on the clock, late: it acts after every other timer of its time
         (a PLC scan of that instant, the plant's tick), as a replay of the session applies
         it, a recorded input (docs/decisions.md).  An entry due as it is armed (its ``at``
@@ -218,7 +218,8 @@ class ScriptPlayer:
         scenario's t = 0) acts as the scenario starts, before any scan sees the program
         run, as in a replay.  ``at_once`` applies it here and now, in the file's order, not
         on the clock's next turn (``run --script``: a fault at the scenario's 0 is in force
-        before a fieldbus client's first request is served); without, it is a plain timer
+        before a fieldbus client's first request is served), ``settle`` then running what
+        each made runnable before the next acts; without, it is a plain timer
         of now, armed before the PLC's first scan (``run_sim`` arms the player before it
         starts the PLC), which fires once what the start made runnable has run."""
         engine = self.runtime.engine
@@ -228,6 +229,8 @@ class ScriptPlayer:
                 self.due += 1
                 if at_once and entry.at <= engine.now:
                     self._fire(entry)
+                    if settle is not None:
+                        settle()
                     continue
                 engine.call_at(entry.at, functools.partial(self._fire, entry),
                                late=entry.at > engine.now)

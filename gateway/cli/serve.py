@@ -267,19 +267,25 @@ class _Scenario:
 
         undo = runtime.trace.subscribe(on_start)
         try:
-            for number in starts:  # (read at start-up: each acts at once)
-                await gw.apply_async(Start(main, number, source))
+            for number in starts:  # each read first: the starts then act at one instant
+                await gw.prepare(Start(main, number, source))
+            for number in starts:
+                await gw.apply_async(Start(main, number, source), settle=False)
         finally:
             undo()
         t0 = started[0] if started else engine.now
-        # Watched from the start on: what the program did at once is the state at t = 0.
+        # Watched from the start itself, before the programs' first blocks run, as sim
+        # watches: a state a program leaves at once (RUNNING up to its first dwell) held
+        # at t = 0 in both.
         self.expectations.start(t0)
+        gw.settle()
         entries = tuple(e if e.at is None else dataclasses.replace(e, at=t0 + e.at)
                         for e in script.entries)
-        # Its inputs at its 0 (a fault from the start) in force before a client is heard.
+        # Its inputs at its 0 (a fault from the start) in force before a client is heard,
+        # each followed by what it made runnable, as sim and a replay of the session run
+        # them (one after the other, they acted on a cell that had not moved between).
         ScriptPlayer(runtime, dataclasses.replace(script, entries=entries), gw.door).arm(
-            at_once=True)
-        gw.settle()  # (what they made runnable, at once, as after any input)
+            at_once=True, settle=gw.settle)
         where = f"P{starts[0]} {main}" if len(starts) == 1 else f"{main} in " + ", ".join(
             f"P{n}" for n in starts)
         log.info("scenario %s: %d expectations; %s started at %.3f s of machine time, the "

@@ -1,0 +1,88 @@
+"""A scenario's t = 0 is the same instant in `ncgate run --script` as in `ncgate sim
+--script`: its expectations watch from the start itself, before the program's first blocks
+run, and its entries due at 0 act one after the other, each followed by what it made
+runnable -- as sim runs them, and as a replay of the session applies the recorded inputs.
+The same file gives the same verdicts in both."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from pathlib import Path
+
+import pytest
+
+from ncgate.gateway.cli.main import main
+
+from .test_cli_run import start_run
+
+CELL = """[nc]
+processes = 2
+main = "O1"
+[[nc.process]]
+number = 2
+external = true
+[nc.storage]
+MP0 = "."
+[modbus]
+port = 0
+[canopen]
+enabled = false
+[web]
+enabled = false
+"""
+
+
+async def _run_script(folder: Path) -> tuple[int, str]:
+    """`ncgate run --script scenario.toml` on the cell in ``folder``: it ends by itself at
+    the scenario's end; its exit status and its whole output."""
+    proc, _, lines = await start_run(folder / "ncgate.toml", "--script",
+                                     str(folder / "scenario.toml"))
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):
+        rest = (await proc.stdout.read()).decode()
+        code = await proc.wait()
+    return code, "".join(lines) + rest
+
+
+def _verdicts(text: str) -> list[str]:
+    return re.findall(r"^(?:PASS|FAIL) .*$", text, re.MULTILINE)
+
+
+async def _both(folder: Path, program: str, scenario: str,
+                capsys: pytest.CaptureFixture[str]) -> tuple[list[str], str]:
+    (folder / "ncgate.toml").write_text(CELL)
+    (folder / "O1.nc").write_text(program)
+    (folder / "scenario.toml").write_text(scenario)
+    capsys.readouterr()
+    sim_code = main(["sim", "--config", str(folder / "ncgate.toml"), "--script",
+                     str(folder / "scenario.toml")])
+    sim = _verdicts(capsys.readouterr().out)
+    code, log = await _run_script(folder)
+    assert (code, _verdicts(log)) == (sim_code, sim), log
+    return sim, log
+
+
+async def test_a_state_the_program_leaves_at_once_holds_at_t0_in_run_as_in_sim(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # P1 is RUNNING from its start until its first dwell begins, at the same instant: sim
+    # saw that state at t = 0, run (which watched only after the first blocks) did not.
+    verdicts, _ = await _both(
+        tmp_path, "N10 (DLY,0.2)\nN20 M30\n",
+        '[[expect]]\nname = "runs at once"\ncond = "P1 RUNNING"\nwithin = [0.0, 0.1]\n'
+        '[[expect]]\nname = "ends"\ncond = "P1 IDLE"\nby = 1.0\n', capsys)
+    assert verdicts == ["PASS runs at once: P1 RUNNING at 0.000 s",
+                        "PASS ends: P1 IDLE at 0.200 s"]
+
+
+async def test_entries_at_t0_act_one_after_the_other_in_run_as_in_sim(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # Two SNDs at 0 to a program that waits for two: with P1 run between them, each finds
+    # P1 waiting for it.  Applied back to back, the second came while P1 had not yet
+    # passed its first WAI, and was latched with a hazard that sim never raised.
+    verdicts, log = await _both(
+        tmp_path, "N10 (WAI,2)\nN20 (WAI,2)\nN30 M30\n",
+        '[[snd]]\nat = 0\nfrom = 2\nto = 1\n[[snd]]\nat = 0\nfrom = 2\nto = 1\n'
+        '[[expect]]\nname = "both heard"\ncond = "P1 IDLE"\nby = 0.5\n', capsys)
+    assert verdicts == ["PASS both heard: P1 IDLE at 0.000 s"]
+    assert "hazard" not in log, log
