@@ -50,7 +50,7 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.events import PlcReload
 from ncgate.interpreter.engine.states import WAITING_STATES
-from ncgate.interpreter.engine.timers import Timer
+from ncgate.interpreter.engine.timers import Timer, due_time
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
@@ -689,11 +689,11 @@ class ScanDriver:
         left and no stall to come, nothing changes any more, and the scans go on until the
         run's end -- ``--until``, a scenario's horizon -- leapt over in steps that double),
         at the very time the scans one after the other would have given it (each is armed
-        from the time the one before ran, and ``now + (t - now)`` need not be ``t``), so the
-        trace is the same to the bit.  The scans leapt over are counted.  ``later``: when
-        the next other timer is due (None: there is none).  ``until``: the last scan was
-        timed still (PlcRuntime.still_until): the first scan at or after this time (ms)
-        sees a running timer's Q change, and is armed if nothing comes first."""
+        from the time the one before ran: ``due_time``), so the trace is the same to the
+        bit.  The scans leapt over are counted.  ``later``: when the next other timer is due
+        (None: there is none).  ``until``: the last scan was timed still
+        (PlcRuntime.still_until): the first scan at or after this time (ms) sees a running
+        timer's Q change, and is armed if nothing comes first."""
         engine, period = self.engine, self.period
         stalls = later is None and engine.stalled
         reach = LEAP_SCANS
@@ -704,7 +704,7 @@ class ScanDriver:
         start = now = engine.now
         k = self.k
         for _ in range(reach):
-            due = now + max(0.0, self.t0 + k * period - now)  # the time call_at would give
+            due = due_time(self.t0 + k * period, now)  # the time call_at would give
             if until is not None and self._ms(k) >= until:
                 break  # scan k sees a timer's Q change
             if (due >= later) if later is not None else stalls and (
@@ -713,10 +713,10 @@ class ScanDriver:
             now = due
             k += 1
         else:
-            due = now + max(0.0, self.t0 + k * period - now)
+            due = due_time(self.t0 + k * period, now)
         # The one timer the leap arms, from the time now: at the time worked out, or the
         # scans go on one at a time.
-        if k > self.k and start + max(0.0, due - start) == due:
+        if k > self.k and due_time(due, start) == due:
             self._leapt, self._leapt_from = k - self.k, start
             self.k = k
             self._timer = engine.call_at(due, self._scan)
@@ -738,7 +738,7 @@ class ScanDriver:
         """How many of the scans the leap in progress passes the clock has passed."""
         t, engine = self._leapt_from, self.engine
         for n, k in enumerate(range(self.k - self._leapt, self.k)):
-            t += max(0.0, self.t0 + k * self.period - t)
+            t = due_time(self.t0 + k * self.period, t)
             if t > engine.now:
                 return n
         return self._leapt

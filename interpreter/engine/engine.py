@@ -65,7 +65,7 @@ from ncgate.interpreter.engine.states import (
     describe_where,
 )
 from ncgate.interpreter.engine.sync import Sync, first_line
-from ncgate.interpreter.engine.timers import Timer, TimerHeap
+from ncgate.interpreter.engine.timers import Timer, TimerHeap, due_time
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.motion import Modal
 from ncgate.interpreter.settings import RuntimeSettings
@@ -533,9 +533,11 @@ class Engine:
         return self._unfinished
 
     def call_at(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
-        """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic); ``late``: after
-        every other timer of that time (a script's entry: ``TimerHeap.push``)."""
-        return self._schedule(max(0.0, t - self.now), callback, late)
+        """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic), or at once if
+        it has; ``late``: after every other timer of that time (a script's entry:
+        ``TimerHeap.push``).  The timer's time is ``t`` on the nanosecond grid (``due_time``),
+        so an instant worked out two ways is one time, its timers in the order armed."""
+        return self._arm(due_time(t, self.now), callback, late)
 
     def set_time(self, t: float) -> None:
         """The wall-clock driver tells the engine what time it is before outside events."""
@@ -773,12 +775,13 @@ class Engine:
 
     kick = _kick  # sync.SyncHost
 
-    def _schedule(self, delay: float, callback: Callable[[], None],
-                  late: bool = False) -> Timer:
-        t = self.now + delay
+    def _schedule(self, delay: float, callback: Callable[[], None]) -> Timer:
+        return self._arm(self.now + delay, callback)
+
+    def _arm(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
         timer = self._timers.push(t, callback, late)
         if self.on_timer is not None:
-            self.on_timer(t)
+            self.on_timer(timer.time)  # (on the grid: the time it fires at)
         return timer
 
     # ---- state --------------------------------------------------------------------------

@@ -5,13 +5,35 @@ engine says what time it is (the virtual clock, or the wall clock in the gateway
 Timers of one time fire in the order they were armed, but a *late* timer fires after every
 other timer of its time, those armed while its time's timers fire included: a script's entry,
 which a replay of the session applies as a recorded input, after every timer of its time
-(docs/decisions.md, "Script entries act after the timers of their instant")."""
+(docs/decisions.md, "Script entries act after the timers of their instant").
+
+A timer's time is snapped to the nanosecond (:func:`snapped`) as it enters the heap: an instant
+worked out two ways -- a PLC scan at ``t0 + k * period``, a relay's switch point at ``now +
+ms / 1000`` -- is two floats a hair apart (``201 * 0.01 + 0.2`` is ``2.2100000000000004``,
+``221 * 0.01`` is ``2.21``), and which of its timers came first would be float noise, not the
+arm order the rule above gives them."""
 
 from __future__ import annotations
 
 import heapq
 import itertools
 from collections.abc import Callable
+
+NS_PER_S = 1_000_000_000  # the resolution of machine time: one nanosecond
+
+
+def snapped(t: float) -> float:
+    """``t`` on the nanosecond grid: the one float every computation of an instant that
+    differs from it by float noise (far less than half a nanosecond) gives."""
+    return round(t * NS_PER_S) / NS_PER_S
+
+
+def due_time(t: float, now: float) -> float:
+    """The time a timer asked for at ``t`` is armed at when the clock reads ``now``: ``t``,
+    or now if ``t`` has passed, on the grid -- an off-grid now (the wall clock's) may give a
+    hair before it, a timer due at once (``Engine.call_at``; a PLC's leap works out with it
+    the times its scans one by one would have been armed at)."""
+    return snapped(t if t > now else now)
 
 
 class Timer:
@@ -36,7 +58,9 @@ class TimerHeap:
         self._order = itertools.count()  # equal times fire in the order they were armed
 
     def push(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
-        """Arm ``callback`` at ``t``; ``late``: after every other timer of ``t``."""
+        """Arm ``callback`` at ``t`` (on the grid: :func:`snapped`); ``late``: after every
+        other timer of that time."""
+        t = snapped(t)
         timer = Timer(t, callback)
         order = next(self._order)
         if late:

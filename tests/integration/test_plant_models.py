@@ -522,3 +522,18 @@ def test_plant_programs_name_programs_of_the_plant_logic(tmp_path: Path) -> None
     with pytest.raises(ConfigError) as caught:
         run_sim(load_config(tmp_path / "ncgate.toml"), "O1", load_script(None))
     assert "plant.programs[0]: no PROGRAM pump in plant.logic" in str(caught.value)
+
+
+def test_a_relay_switched_by_a_scan_is_seen_by_the_scan_on_ms_later(tmp_path: Path) -> None:
+    """docs/plant.md: a delay's output switches on_ms after its input, and the PLC's first
+    scan at or after that sees it.  The PLC sets the coil at its scan at 2.01 s (201 * 0.01 s
+    as a float is 2.0100000000000002); the relay's 200 ms end at the scan at 2.21 s, which
+    sees the contact -- not the one after: as floats the relay's 2.01 + 0.2 is a hair past the
+    scan's 221 * 0.01, and the nanosecond grid makes them one instant."""
+    (tmp_path / "plc.st").write_text(
+        "PROGRAM ctl\nSA[20] := SA[19];\nSA[21] := SA[30];\nEND_PROGRAM\n")
+    events = _sim(tmp_path, DELAY, '[[write]]\nat = 2.005\nset = "SA19=1"\n',
+                  extra='[plc]\nlogic = "plc.st"\n')
+    assert _edges(events, "SA20")[-1] == (2.01, 1)  # the coil, by the scan after the write
+    assert _edges(events, "SA30")[-1] == (2.21, 1)  # the contact, 200 ms on
+    assert _edges(events, "SA21")[-1] == (2.21, 1)  # seen by the scan of that instant

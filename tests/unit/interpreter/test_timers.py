@@ -5,7 +5,7 @@ instant")."""
 
 from __future__ import annotations
 
-from ncgate.interpreter.engine.timers import TimerHeap
+from ncgate.interpreter.engine.timers import TimerHeap, due_time, snapped
 
 
 def fire_all(heap: TimerHeap, t: float) -> None:
@@ -64,3 +64,36 @@ def test_a_cancelled_late_timer_does_not_fire() -> None:
     assert heap.live() == 1
     fire_all(heap, 1.0)
     assert fired == ["plain"] and heap.next_time() is None
+
+
+def test_one_instant_worked_out_two_ways_is_one_time_its_timers_in_arm_order() -> None:
+    """A relay switched by the scan at 2.01 s (201 * 0.01) that waits 200 ms is due at
+    2.2100000000000004; the scan at 2.21 s (221 * 0.01) is 2.21.  On the nanosecond grid they
+    are one time, and the relay, armed first, fires first: the scan sees it."""
+    assert 201 * 0.01 + 0.2 != 221 * 0.01  # (the float noise the grid takes out)
+    heap = TimerHeap()
+    fired: list[str] = []
+    heap.push(201 * 0.01 + 0.2, lambda: fired.append("relay"))
+    heap.push(221 * 0.01, lambda: fired.append("scan"))
+    assert heap.next_time() == 2.21
+    fire_all(heap, 2.21)
+    assert fired == ["relay", "scan"]
+
+
+def test_a_late_timer_of_an_instant_worked_out_two_ways_comes_after_its_scan() -> None:
+    """A script's entry 1 s after a scan at 3.27 s is due with the scan at 4.27 s, whichever
+    float each came to: the entry acts after the scan (late), the next scan sees it."""
+    heap = TimerHeap()
+    fired: list[str] = []
+    heap.push(327 * 0.01 + 1.0, lambda: fired.append("entry"), late=True)
+    heap.push(427 * 0.01, lambda: fired.append("scan"))
+    fire_all(heap, 4.27)
+    assert fired == ["scan", "entry"]
+
+
+def test_due_time_is_on_the_grid_and_never_before_a_now_on_it() -> None:
+    assert due_time(2.2100000000000004, 2.01) == snapped(2.21) == 2.21
+    assert due_time(1.0, 2.21) == 2.21  # passed: now
+    # An off-grid now (the wall clock's) may give a hair before it: due at once.
+    now = 1.0000000002
+    assert due_time(now, now) == 1.0 <= now
