@@ -27,7 +27,8 @@ The record is JSON Lines, in the order things happened:
   too;
 - ``{"plant": "cut" | "stretch", "t", "n"}``: what the wall clock's budget decided at the
   plant's tick at ``t`` -- the tick cut short after ``n`` models, the tick's period stretched
-  to ``n`` scans -- which the replay decides the same;
+  to ``n`` scans -- which the replay decides the same (a line at no tick of the plant, or an
+  ``n`` the budget never decides, is refused: :func:`check_plant_lines`);
 - on a clean stop, ``{"stop": t}``.
 
 An input's line is written before the events it causes, and lines are written whole
@@ -61,6 +62,7 @@ from ncgate.config.plant import fault_input
 from ncgate.errors import InputRefused
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
+from ncgate.gateway.plant.plant import MAX_STRETCH
 from ncgate.gateway.plc import OnlineChange, start_plant_logic, start_plc
 from ncgate.gateway.tracefile import TraceFile
 from ncgate.gateway.wiring import Runtime, build_runtime, start_plant
@@ -196,8 +198,8 @@ def _field(item: dict[str, Any], name: str, kinds: type | tuple[type, ...], what
 
 def _time(item: dict[str, Any], name: str) -> float:
     t = _field(item, name, (int, float), "a time in seconds")
-    if not math.isfinite(t) or t < 0:
-        raise ValueError(f'"{name}": expected a time >= 0, got {t}')
+    if not math.isfinite(t) or t < 0:  # (json.loads reads NaN and Infinity: said so)
+        raise ValueError(f'"{name}": expected a time >= 0, got {json.dumps(t)}')
     return float(t)
 
 
@@ -407,6 +409,8 @@ class Recording:
     # The plant's tick budget's decisions: "cut" / "stretch" -> the tick's time -> n.
     plant: dict[str, dict[float, int]] = field(
         default_factory=lambda: {"cut": {}, "stretch": {}})
+    # Each decision's line, for the checks that need the config (check_plant_lines).
+    plant_lines: dict[tuple[str, float], int] = field(default_factory=dict)
     stop: float | None = None  # None: the session did not stop cleanly (killed)
 
     @property
@@ -488,10 +492,10 @@ def read_record(path: str | Path) -> Recording:
                     raise ValueError(f'"plant": expected "cut" or "stretch", got '
                                      f"{json.dumps(kind)}")
                 n = _field(item, "n", int, "a number of models or scans")
-                if n < 1 or (kind == "stretch" and n & (n - 1)):
-                    raise ValueError(f'"n" {n}: not a ' + ("number of models (>= 1)"
-                                     if kind == "cut" else "stretch (a power of 2)"))
-                recording.plant[kind][round(_time(item, "t"), 6)] = n
+                t = round(_time(item, "t"), 6)
+                _check_decision(recording, kind, t, n)
+                recording.plant[kind][t] = n
+                recording.plant_lines[kind, t] = number
             elif "stop" in item:
                 recording.stop = _time(item, "stop")
             else:
@@ -517,6 +521,71 @@ def read_record(path: str | Path) -> Recording:
             raise RecordError(f"{path}:{len(lines)}: the stop at t={recording.stop} comes "
                               f"before what was recorded (t={latest})")
     return recording
+
+
+def _check_decision(recording: Recording, kind: str, t: float, n: int) -> None:
+    """What a line of the plant's tick budget can be (``Plant._on_tick``), as far as the
+    record alone says: ValueError otherwise.  A decision the replay's plant never meets would
+    be dropped in silence, and the replay's ticks would not be the session's."""
+    decided = recording.plant[kind]
+    if kind == "cut":
+        # The loop breaks before model n, n >= 1: the first model of a tick is always written.
+        if n < 1:
+            raise ValueError(f'"n" {n}: not a number of models (a tick is cut after 1 '
+                             "or more)")
+    elif n < 1 or n > MAX_STRETCH or n & (n - 1):
+        raise ValueError(f'"n" {n}: not a stretch (a power of 2 from 1 to {MAX_STRETCH} '
+                         "scans)")
+    if t <= 0:  # the first tick is armed one period after the time it is armed at
+        raise ValueError(f'"t" {json.dumps(t)}: no tick of the plant is at 0')
+    last = next(reversed(decided), None)  # (in time order, as checked line by line)
+    if last is not None and t <= last:
+        raise ValueError(f"a {kind} at t={t} after one at t={last}: the plant decides "
+                         "tick by tick, in time order, once a tick")
+    if kind == "stretch" and last is not None:
+        # The budget halves or doubles the period, a step a tick, and says only a change.
+        # (The first line has nothing before it to compare with: a record started from the
+        # console may begin while the tick is stretched.)
+        before = decided[last]
+        steps = [s for s in (before // 2, before * 2) if 1 <= s <= MAX_STRETCH]
+        if n not in steps:
+            raise ValueError(f'"n" {n}: the stretch was {before}: the budget doubles or '
+                             f"halves it ({' or '.join(map(str, steps))})")
+
+
+def check_plant_lines(recording: Recording, scan_ms: int, models: int) -> None:
+    """The plant's tick-budget lines against the config the replay runs: each at a tick
+    of the plant -- every ``scan_ms`` from 0, times the stretch in force -- and no cut
+    past the models.  RecordError naming the line.
+
+    The stretch in force is the record's last stretch before the tick; before the record's
+    first stretch it is known only to be a power of 2 (a record started from the console may
+    begin while the tick is stretched), so those ticks are checked on the grid of
+    ``scan_ms`` alone."""
+    scan_s = scan_ms / 1000.0
+    stretch: int | None = None
+    # At one tick the cut comes before the stretch (the budget decides after the models).
+    for (kind, t), line in sorted(recording.plant_lines.items(),
+                                  key=lambda x: (x[0][1], x[0][0] == "stretch")):
+        n = recording.plant[kind][t]
+        where = f"{recording.path}:{line}: a {kind} at t={t}"
+        if not models:
+            raise RecordError(f"{where}: the config's plant has no model (it never ticks)")
+        period = scan_s * (stretch or 1)
+        k = round(t / period)
+        if k < 1 or abs(t - k * period) > 1e-6:  # (the record rounds to the microsecond)
+            near = max(1, math.floor(t / period))
+            grid = (f"plant.scan_ms {scan_ms}" if stretch is None
+                    else f"plant.scan_ms {scan_ms} x the stretch {stretch} in force")
+            raise RecordError(f"{where}: not a tick of the plant (every {grid} from 0: "
+                              f"t={round(near * period, 6)}, {round((near + 1) * period, 6)}, "
+                              "...)")
+        if kind == "cut" and n >= models:
+            raise RecordError(f"{where}: after {n} model{'s' if n > 1 else ''}, but the "
+                              f"config's plant has {models} model{'s' if models > 1 else ''} "
+                              "(a cut leaves one at least to the next tick)")
+        if kind == "stretch":
+            stretch = n
 
 
 # -- replaying ----------------------------------------------------------------------------------
@@ -572,6 +641,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     except ConfigError as exc:
         hint = "" if config is not None else " (a record taken elsewhere: give --config)"
         raise UsageError(f"the recorded config: {exc}{hint}") from None
+    check_plant_lines(recording, cfg.plant.scan_ms, len(cfg.plant.model))
     runtime = build_runtime(cfg, closed=False)  # as in `run`: the fieldbus may start programs
     engine = runtime.engine
     door = Door(runtime, lambda: runtime.plc)
