@@ -157,17 +157,21 @@ def _kept_parse(path: str, text: str) -> SourceFile:
 
 
 def load_logic(files: tuple[Path, ...], config: Config,
-               sources: Sources | None = None, section: str = "plc") -> Logic:
+               sources: Sources | None = None, section: str = "plc", *,
+               warn: bool = True) -> Logic:
     """Parse and check every file (Structured Text, or PLCopen XML by its .xml suffix) --
     from ``sources`` when given (a replay runs the logic its record carries); raises
     LogicError with all the diagnostics.  ``section``: ``plant`` warns of its RETAIN
-    (SW005)."""
+    (SW005).  ``warn``: log the warnings (a scenario suite loads the same logic for each
+    scenario, and says them with its first only)."""
     from ncgate.plc.st.compiler import compile_logic
     from ncgate.plc.st.plcopen import read_logic_file
 
     parsed = ([read_logic_file(path) for path in files] if sources is None else
               [parsed_logic(path, text) for path, text in sources.items()])
     logic = compile_logic(parsed, logic_context(config))
+    if not warn:
+        return logic
     for warning in (*logic.warnings,  # plc.strict = false: what IEC would refuse
                     *(retain_in_plant(parsed) if section == "plant" else ())):
         log.warning("%s", warning.render())
@@ -771,17 +775,18 @@ class Prepared:
     order: tuple[str, ...]
 
 
-def prepare_logic(config: Config, section: str, sources: Sources | None = None
-                  ) -> Prepared | None:
+def prepare_logic(config: Config, section: str, sources: Sources | None = None, *,
+                  warn: bool = True) -> Prepared | None:
     """``section``'s (``plc``, ``plant``) logic read (or ``sources``: a replay's), compiled
     and its PROGRAMs chosen: LogicError or ConfigError now.  ``run`` prepares both before its
-    fieldbus serves: a PLC connected saw the CANopen node boot, then go, for a typo."""
+    fieldbus serves: a PLC connected saw the CANopen node boot, then go, for a typo.
+    ``warn``: :func:`load_logic`'s."""
     files = getattr(config, section).logic
     if not files:
         return None
     if sources is None:
         sources = read_sources(files, config, section)
-    logic = load_logic(files, config, sources, section)
+    logic = load_logic(files, config, sources, section, warn=warn)
     return Prepared(sources, logic, tuple(program_order(logic, config, section)))
 
 

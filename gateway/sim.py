@@ -22,7 +22,12 @@ from ncgate.config.script import Script, ScriptEntry
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.door import Door
 from ncgate.gateway.errors import UsageError
-from ncgate.gateway.plc import start_plant_logic, start_plc, warn_shared_writes
+from ncgate.gateway.plc import (
+    prepare_logic,
+    start_plant_logic,
+    start_plc,
+    warn_shared_writes,
+)
 from ncgate.gateway.scenario import Expectations, Verdict, never_changes
 from ncgate.gateway.wiring import (
     ImageVar,
@@ -337,7 +342,8 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
 
     ``before_time`` is called with each time the clock is about to move to (``ncgate sweep``
     stops a variant past its virtual-time budget by raising from it).  ``warn``: say the
-    cell's SW006 (a scenario suite says them with its first scenario only).
+    warnings of the cell's logic, SW001..SW006 (a scenario suite says them with its first
+    scenario only).
 
     Ctrl-C (KeyboardInterrupt) ends the run early with what happened so far; with
     ``signals`` (the command line, in the main thread) SIGTERM does the same for the run.
@@ -401,8 +407,10 @@ def run_sim(config: Config, main: str | Sequence[str], script: Script,
     # under before_time, which hears each time the clock moves to (a budget acts there).
     leap = before_time is None
     drivers = [started[1] for started in (
-        start_plc(config, runtime, door, closed=True, leap=leap),
-        start_plant_logic(config, runtime, door, closed=True, leap=leap)) if started]
+        start_plc(config, runtime, door, closed=True, leap=leap,
+                  prepared=prepare_logic(config, "plc", warn=warn)),
+        start_plant_logic(config, runtime, door, closed=True, leap=leap,
+                          prepared=prepare_logic(config, "plant", warn=warn))) if started]
     if warn:
         plant_logic = runtime.plant.logic if runtime.plant is not None else None
         warn_shared_writes(config, runtime.plc.logic if runtime.plc else None,

@@ -470,7 +470,7 @@ def _sim(args: argparse.Namespace) -> int:
             result = run_sim(config, mains, script, args.until, signals=True,
                              single_block=args.single_block, breaks=args.breaks,
                              keep_going=args.keep_going, at=args.at, with_calc=args.with_calc,
-                             warn=i == 0)  # (one cell: its SW006 once, not a scenario each)
+                             warn=i == 0)  # (one cell: its logic's warnings once, not per scenario)
         except ProgramError as exc:
             print(str(exc), file=sys.stderr)
             storage = storage_of(config)
