@@ -77,6 +77,13 @@ class Model:
         """A continuous output of it moves now: the plant's tick writes it."""
         return False
 
+    def quiet_until(self, now: float, written: dict[str, int]) -> float:
+        """While it is sampled: a time before which its outputs, as the tick writes them,
+        stay ``written`` (what was written last) -- so the ticks before it would write nothing
+        and need not come.  Never later than the first change: early is only a tick that
+        writes nothing.  ``now``: the next tick is due as ever."""
+        return now
+
     @property
     def free_running(self) -> bool:
         """It never stands still by itself (a generator, an axis switch)."""
@@ -385,6 +392,21 @@ class Lag(Model):
     @property
     def sampled(self) -> bool:
         return self.a0 != self.target
+
+    def quiet_until(self, now: float, written: dict[str, int]) -> float:
+        """The settling tail moves the value by less than a unit a tick: the rounded value
+        changes when the lag crosses the next half unit towards the target, at
+        ``t_ref - tau * ln((edge - target) / (a0 - target))`` -- less a microsecond, so that
+        float noise never puts it past the tick that changes it (an early one writes
+        nothing, and the next is worked out from there)."""
+        value = written.get("actual")
+        if value is None or self.a0 == self.target or abs(value) >= 32767:
+            return now
+        edge = value + (0.5 if self.target > self.a0 else -0.5)
+        ratio = (edge - self.target) / (self.a0 - self.target)
+        if not 0.0 < ratio < 1.0:
+            return now  # the edge is past the target (it settles first) or behind it
+        return min(self.t_ref - self._tau() * math.log(ratio), self._settle_at()) - 1e-6
 
     def outputs(self, now: float) -> dict[str, int]:
         return {"actual": max(-32768, min(32767, round(self._a(now))))}

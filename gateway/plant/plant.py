@@ -270,20 +270,35 @@ class Plant:
                 nxt, functools.partial(self._advance, model, nxt))
         if model.sampled:
             self._sampling[model] = None
+            now = self.runtime.engine.now if t is None else t
             if self._tick is None:
-                self._arm_tick(self.runtime.engine.now if t is None else t)
+                self._arm_tick(now)
+            elif self._tick.time > self._next_tick(now):  # (the ticks skipped a quiet tail)
+                self._tick.cancel()
+                self._arm_tick(now)
         else:
             self._sampling.pop(model, None)
 
     # -- the tick: what moves continuously, sampled -----------------------------------------
 
-    def _arm_tick(self, after: float) -> None:
+    def _next_tick(self, after: float, quiet: float | None = None) -> float:
         """The next tick on the scan grid after ``after`` (every scan_ms from 0, times the
-        stretch the budget asks for in run)."""
+        stretch the budget asks for in run), or the first at or after ``quiet``, when every
+        model sampled writes nothing new before then (Model.quiet_until)."""
         period = self.scan_s * self.stretch
         k = math.floor(after / period + 1e-9) + 1
-        t = k * period
-        self._tick = self.runtime.engine.call_at(t, functools.partial(self._on_tick, t))
+        if quiet is not None and quiet > k * period:
+            k = math.ceil(quiet / period - 1e-9)
+        return k * period
+
+    def _arm_tick(self, after: float, quiet: float | None = None) -> None:
+        """Arm the next tick (:meth:`_next_tick`).  It is *early*: it samples before any other
+        timer of its instant (a PLC scan, a model's switch point) reads or writes, whenever it
+        was armed -- so a tick armed past a quiet tail stands where a tick of every period
+        would, and a scan of the tick's instant reads what it sampled."""
+        t = self._next_tick(after, quiet)
+        self._tick = self.runtime.engine.call_at(t, functools.partial(self._on_tick, t),
+                                                 early=True)
 
     def _on_tick(self, t: float) -> None:
         self._tick = None
@@ -322,10 +337,12 @@ class Plant:
             self.stretch = decided["stretch"].get(round(t, 6), self.stretch)
         if self._sampling:
             # From its own time, also when it came late: the ticks armed are the ones a
-            # replay arms, in the same order beside the PLC scan at equal times (armed from
-            # the wall clock's now, a late tick swapped the two, and a replay diverged;
-            # docs/decisions.md).
-            self._arm_tick(t)
+            # replay arms (armed from the wall clock's now, a late tick came at other times
+            # than the replay's, which diverged; docs/decisions.md).  Past the ticks that
+            # would write nothing (a lag's settling tail), when every model was written.
+            quiet = None if self._next_in_turn else min(
+                model.quiet_until(t, self._written[model.name]) for model in self._sampling)
+            self._arm_tick(t, quiet)
 
     def _budget(self, spent: float) -> None:
         """On the wall clock the tick takes at most BUDGET of the loop's time: a tick that

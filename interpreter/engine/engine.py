@@ -532,12 +532,14 @@ class Engine:
         self.run_until_blocked(blocks)
         return self._unfinished
 
-    def call_at(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
+    def call_at(self, t: float, callback: Callable[[], None], late: bool = False,
+                early: bool = False) -> Timer:
         """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic), or at once if
         it has; ``late``: after every other timer of that time (a script's entry:
-        ``TimerHeap.push``).  The timer's time is ``t`` on the nanosecond grid (``due_time``),
-        so an instant worked out two ways is one time, its timers in the order armed."""
-        return self._arm(due_time(t, self.now), callback, late)
+        ``TimerHeap.push``); ``early``: before every other (the plant's tick).  The timer's
+        time is ``t`` on the nanosecond grid (``due_time``), so an instant worked out two ways
+        is one time, its timers in the order armed."""
+        return self._arm(due_time(t, self.now), callback, late, early)
 
     def set_time(self, t: float) -> None:
         """The wall-clock driver tells the engine what time it is before outside events."""
@@ -778,8 +780,9 @@ class Engine:
     def _schedule(self, delay: float, callback: Callable[[], None]) -> Timer:
         return self._arm(self.now + delay, callback)
 
-    def _arm(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
-        timer = self._timers.push(t, callback, late)
+    def _arm(self, t: float, callback: Callable[[], None], late: bool = False,
+             early: bool = False) -> Timer:
+        timer = self._timers.push(t, callback, late, early)
         if self.on_timer is not None:
             self.on_timer(timer.time)  # (on the grid: the time it fires at)
         return timer

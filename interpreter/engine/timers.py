@@ -48,7 +48,8 @@ class Timer:
 
 
 # Added to a late timer's order: past any count of timers ever armed, so that a late timer
-# comes after every other timer of its time, and the late ones among themselves in arm order.
+# comes after every other timer of its time, and the late ones among themselves in arm order;
+# taken from an early timer's, which comes before every other timer of its time.
 LATE = 1 << 62
 
 
@@ -57,14 +58,18 @@ class TimerHeap:
         self._heap: list[tuple[float, int, Timer]] = []
         self._order = itertools.count()  # equal times fire in the order they were armed
 
-    def push(self, t: float, callback: Callable[[], None], late: bool = False) -> Timer:
+    def push(self, t: float, callback: Callable[[], None], late: bool = False,
+             early: bool = False) -> Timer:
         """Arm ``callback`` at ``t`` (on the grid: :func:`snapped`); ``late``: after every
-        other timer of that time."""
+        other timer of that time; ``early``: before every other (the plant's tick, which
+        samples what moves before anything else of its instant reads it)."""
         t = snapped(t)
         timer = Timer(t, callback)
         order = next(self._order)
         if late:
             order += LATE
+        elif early:
+            order -= LATE
         heapq.heappush(self._heap, (t, order, timer))
         return timer
 

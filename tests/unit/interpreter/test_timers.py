@@ -97,3 +97,17 @@ def test_due_time_is_on_the_grid_and_never_before_a_now_on_it() -> None:
     # An off-grid now (the wall clock's) may give a hair before it: due at once.
     now = 1.0000000002
     assert due_time(now, now) == 1.0 <= now
+
+
+def test_early_timers_fire_before_every_other_timer_of_their_time_in_arm_order() -> None:
+    """The plant's tick is early: armed long before (its cadence) or just now (past a
+    quiet tail), it fires before the scan of its instant, and early ones in arm order."""
+    heap = TimerHeap()
+    fired: list[str] = []
+    heap.push(2.0, lambda: fired.append("scan"))
+    heap.push(2.0, lambda: fired.append("entry"), late=True)
+    heap.push(2.0, lambda: fired.append("tick"), early=True)
+    heap.push(1.0, lambda: fired.append("plain before"))
+    heap.push(2.0, lambda: fired.append("tick 2"), early=True)
+    fire_all(heap, 2.0)
+    assert fired == ["plain before", "tick", "tick 2", "scan", "entry"]
