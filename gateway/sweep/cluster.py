@@ -33,7 +33,7 @@ import math
 import queue
 import time
 import uuid
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 from ncgate.gateway.errors import ClusterLost
@@ -185,12 +185,16 @@ class _Tasks:
         self.unclaimed.clear()
 
 
-def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | None,
+def run_dask(variants: Iterable[Variant], scheduler: str, timeout_s: float | None,
              runner: Runner = run_variant, client: Any = None) -> Iterator[tuple[Variant, Result]]:
     """Each variant's result as its chunk comes back; ``client``: one already connected (the
     caller closes it), else one of ``scheduler``'s, closed at the end.  ClusterLost when the
-    scheduler has had no worker for ``WORKERLESS_S``: the results before it were yielded."""
-    if not variants:
+    scheduler has had no worker for ``WORKERLESS_S``: the results before it were yielded.
+
+    Every variant is taken at the start: the chunks are all submitted at once (the
+    scheduler shares them out), so the size of a chunk is known from their count."""
+    taken = list(variants)
+    if not taken:
         return
     own = client is None
     if own:
@@ -202,13 +206,13 @@ def run_dask(variants: Sequence[Variant], scheduler: str, timeout_s: float | Non
     try:
         threads = sum(client.nthreads().values())
         tasks = _Tasks(client, scheduler, threads)
-        size = chunk_size(len(variants), threads)
+        size = chunk_size(len(taken), threads)
         chunks: dict[str, list[Variant]] = {}
-        for i in range(0, len(variants), size):
-            chunk = list(variants[i:i + size])
+        for i in range(0, len(taken), size):
+            chunk = taken[i:i + size]
             future = tasks.submit(chunk, timeout_s, runner,
                                   key=f"ncgate-sweep-{run}-{chunk[0].id}-{len(chunk)}-{i}",
-                                  unfinished=lambda: len(variants))
+                                  unfinished=lambda: len(taken))
             chunks[future.key] = chunk
         suspects: list[Variant] = []
 

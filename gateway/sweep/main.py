@@ -15,7 +15,7 @@ import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -101,7 +101,7 @@ def check_options(options: Options) -> None:
                              "address, scheme://host:port (tcp://10.0.0.5:8786)")
 
 
-def execute(variants: Sequence[Variant], options: Options,
+def execute(variants: Iterable[Variant], options: Options,
             client: object = None) -> Iterator[tuple[Variant, Result]]:
     if options.scheduler:
         from ncgate.gateway.sweep.cluster import run_dask
@@ -186,25 +186,19 @@ def _output(spec: Spec, options: Options) -> Iterator[Path]:
 def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                out: TextIO, stops: _Stops) -> tuple[int, list[Row]]:
     parts = Parts(output, spec)
-    done = parts.start(options.resume)
     rows: dict[str, Row] = {}
-    for key, row in done.items():  # Parts.start kept only the rows of this spec's ids
-        variant = spec.variants.find(key)
-        assert variant is not None
-        rows[key] = shown_again(row, variant)
-    # The variants are made one at a time as they go out (a spec of a million: no list).
-    todo: Sequence[Variant] = (spec.variants if not rows else
-                               [v for v in spec.variants if v.id not in rows])
-    if done:
-        print(f"resuming: {len(done)} of {len(spec.variants)} variants done, {len(todo)} to run",
+    todo = _Remaining(spec, parts.start(options.resume), rows, stops)
+    total = len(spec.variants)
+    if todo.done:
+        print(f"resuming: {len(todo.done)} of {total} variants done, {todo.count} to run",
               file=out)
     elif options.resume:  # nothing to go on from: said, not run again unsaid
-        print(f"resuming: no rows kept in {parts.folder}: all {n_variants(len(todo))} to run",
+        print(f"resuming: no rows kept in {parts.folder}: all {n_variants(todo.count)} to run",
               file=out)
     show = options.progress
     if show is None:
         show = sys.stderr.isatty() and not os.environ.get("CI")
-    progress = Progress(len(todo)) if show else None
+    progress = Progress(todo.count) if show else None
     pending: list[Row] = []
     last = time.monotonic()
     stops.started = True
@@ -212,6 +206,8 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
         for variant, result in execute(todo, options, client):
             with stops.held():
                 row = make_row(variant, result, spec.keys)
+                # The twin was taken before this one finished (both were running).
+                _refuse_twin(spec, rows, variant)
                 rows[variant.id] = row
                 pending.append(row)
                 if progress is not None:
@@ -220,11 +216,15 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
                     parts.add(pending)
                     pending = []
                     last = time.monotonic()
+    except SpecError:  # two variants of one id
+        parts.add(pending)
+        raise
     except (KeyboardInterrupt, ClusterLost) as exc:  # Ctrl-C, SIGTERM, the cluster lost:
         parts.add(pending)  # what is done is kept, for --resume
         if progress is not None:
             progress.close()
-        count = f"{len(rows)} of {len(spec.variants)} variants done"
+        # The kept rows the stream has not passed yet are done too.
+        count = f"{len(rows) + len(todo.done)} of {total} variants done"
         if isinstance(exc, ClusterLost):
             why, later = f": the Dask scheduler at {exc.scheduler} {exc.why}", exc.resume
         else:
@@ -239,7 +239,9 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     parts.add(pending)
     if progress is not None:
         progress.close()
-    ordered = [rows[key] for key in spec.variants.ids()]  # sorted by id
+    # Every variant is in ``rows`` now, run or kept (the stream was taken to its end); a
+    # kept row the stream never met was no variant of this spec's, and is left out.
+    ordered = [rows[key] for key in sorted(rows)]  # by id: 12 lowercase hex digits each
     data = (parquet_bytes(ordered, spec.keys) if options.format == "parquet"
             else csv_bytes(ordered, spec.keys))
     if table_to_stdout(options):
@@ -250,6 +252,54 @@ def _run_sweep(spec: Spec, options: Options, output: Path, client: object,
     summary(ordered, spec.keys, out)
     print(f"wrote {options.output or '-'}", file=out)
     return (EXIT_OK if all(r["verdict"] == "ok" for r in ordered) else EXIT_FAILED), ordered
+
+
+class _Remaining:
+    """The variants a sweep runs, taken once: the spec's, in its order (each made, and its
+    id hashed, as it is taken), without those whose rows a stopped sweep's parts hold.
+
+    A kept row is matched to its variant as the stream passes it, and goes into ``rows``
+    then, shown as this run shows it (``shown_again``); ``done`` holds the kept rows the
+    stream has not passed yet.  Nothing else is kept per variant: a resume of a spec of a
+    million starts its first variant as soon as the stream has passed the kept ones.
+
+    Every id taken is checked against the rows before it: two variants of one id (a
+    collision of the ids' 48 bits, spec.ID_LENGTH) would be one row, and one of them could
+    be taken for done.  The spec refuses a run given twice before anything runs
+    (``Variants.duplicate``); this is the rest, checked as the variants go."""
+
+    def __init__(self, spec: Spec, done: dict[str, Row], rows: dict[str, Row],
+                 stops: _Stops) -> None:
+        self.spec = spec
+        self.done = done
+        self.rows = rows
+        self.stops = stops
+        # Exact but for a kept row of no variant of this spec (parts edited by hand).
+        self.count = max(0, len(spec.variants) - len(done))
+        self._stream = self._take()
+
+    def __iter__(self) -> Iterator[Variant]:
+        return self._stream
+
+    def _take(self) -> Iterator[Variant]:
+        for variant in self.spec.variants.in_spec_order():
+            _refuse_twin(self.spec, self.rows, variant)
+            row = self.done.get(variant.id)
+            if row is None:
+                yield variant
+                continue
+            with self.stops.held():  # in one or the other, for the count a stop says
+                self.rows[variant.id] = shown_again(row, variant)
+                del self.done[variant.id]
+
+
+def _refuse_twin(spec: Spec, rows: dict[str, Row], variant: Variant) -> None:
+    """SpecError when a row of another variant has ``variant``'s id."""
+    twin = rows.get(variant.id)
+    if twin is not None:
+        raise SpecError(f"{spec.file}: two variants have the id {variant.id} (the ids are "
+                        f"a hash's first {len(variant.id)} hex digits): {twin['command']} "
+                        f"and {variant.command()}; split the spec")
 
 
 def _stopped_status(stop: BaseException) -> int:

@@ -10,11 +10,12 @@ imported the simulator once (``forkserver``), so a new one is cheap.
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
@@ -59,17 +60,20 @@ def default_workers() -> int:
         os.cpu_count() or 1)
 
 
-def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None,
+def run_local(variants: Iterable[Variant], workers: int, timeout_s: float | None,
               runner: Runner = run_variant) -> Iterator[tuple[Variant, Result]]:
-    """Each variant's result, in the order they finish.  ``runner`` (a module-level function,
-    for the workers to import) runs one variant."""
-    if not variants:
+    """Each variant's result, in the order they finish.  ``variants`` are taken one at a
+    time, as a worker is free (a spec's are made as they are taken), and are not counted:
+    the first ``workers`` of them say how many workers start.  ``runner`` (a module-level
+    function, for the workers to import) runs one variant."""
+    rest = iter(variants)
+    # The first ones, then a dead worker's variant given back: it runs again first.
+    todo: deque[Variant] = deque(itertools.islice(rest, max(1, workers)))
+    if not todo:
         return
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["ncgate.gateway.sweep.worker_signals",
                                     "ncgate.gateway.sweep.run", "ncgate.gateway.sim"])
-    todo: deque[Variant] = deque()  # given back: a dead worker's variant runs again first
-    rest = iter(variants)  # made one at a time (a spec's Variants are lazy)
     deaths: dict[str, int] = {}
     pool: list[_Worker] = []
 
@@ -105,7 +109,7 @@ def run_local(variants: Sequence[Variant], workers: int, timeout_s: float | None
         pool.remove(worker)
 
     try:
-        for _ in range(min(workers, len(variants))):
+        for _ in range(len(todo)):
             pool.append(spawn())
         for worker in pool:
             give(worker)

@@ -61,7 +61,10 @@ EXPLORE_RANGES: dict[str, list[Value]] = {
     "nc.feed_override": [50, 150], "nc.block_time_ms": [0.0, 20.0], "plc.scan_ms": [1, 50],
     "sim.input_delay_scale": [0.5, 2.0], "sim.input_jitter_ms": [0.0, 100.0],
     "sim.seed": [0, 1_000_000]}
-ID_LENGTH = 12  # hex digits of the sha-256: 48 bits, no collision in any sweep one runs
+# Hex digits of the sha-256: 48 bits.  Two of n distinct variants share an id with a chance
+# of about n ** 2 / 2 ** 49: 1 in 56,000 for 100,000 variants, 1 in 560 for 1,000,000.  A
+# sweep refuses such a pair when it takes the second one (main.py: the rows are by id).
+ID_LENGTH = 12
 # The most variants a spec may give (programs x scripts x grid x samples): counted before any
 # is made, so that a grid of 20 ** 8 combinations is a spec error, not a MemoryError.
 MAX_VARIANTS = 1_000_000
@@ -118,7 +121,7 @@ class Variant:
 @dataclass
 class Spec:
     file: Path
-    variants: Variants  # sorted by id, made lazily
+    variants: Variants  # made as taken: in the spec's order, or sorted by id
     keys: list[str]  # the swept keys, one column each
     fingerprint: str  # the spec and the files it names: a resumed sweep must match it
     seed: int | None = None
@@ -243,13 +246,18 @@ def load_spec(path: str | Path, explore: int | None = None) -> Spec:
 
 
 class Variants(Sequence[Variant]):
-    """A spec's variants, sorted by id, each made when it is asked for.
+    """A spec's variants, each made when it is taken.
 
     What is the same for every variant of a run -- its files' paths as shown, as hashed and
     as read -- is worked out once per run, and each swept value's JSON once per value: a
-    variant's own work is its id's hash (all are hashed here, to sort them and to find a run
-    given twice) and, when it is taken, one small object.  A spec of 1,000,000 variants is
-    two arrays of numbers here (made in seconds), not a list of a million objects."""
+    variant's own work, when it is taken, is its id's hash and one small object.  Nothing
+    is hashed here: a spec of 1,000,000 variants is ready once it is counted.
+
+    Two orders.  ``in_spec_order()`` streams the variants in the spec's order (run, then
+    grid combination, then sample), each id hashed as the variant is taken: what a sweep
+    runs.  As a sequence (index, iteration, ``ids()``, ``find()``) they are sorted by id,
+    the table's order: that needs every id, so the first such use hashes them all and keeps
+    them sorted (two arrays of numbers, seconds for a million)."""
 
     def __init__(self, runs: Sequence[_Run], base: Path, until: float | None, budget: float,
                  grid_keys: Sequence[str], lists: Sequence[Sequence[Value]],
@@ -261,22 +269,20 @@ class Variants(Sequence[Variant]):
                                                                          strict=True)]
         self._samples = [tuple(s.items()) for s in samples]
         self._per_run = math.prod(len(v) for v in lists) * max(1, len(samples))
-        # The ids, as 48-bit numbers, sorted; and each one's place in the spec's order
-        # (run, then grid combination, then sample).
-        found = [(number << 20) | place for place, number in enumerate(self._numbers())]
-        found.sort()
-        self._ids = array.array("Q", (f >> 20 for f in found))
-        self._order = array.array("L", (f & 0xFFFFF for f in found))
-        del found
+        self._count = len(self._runs) * self._per_run
+        # Sorted by id, made on the first use as a sequence: the ids as 48-bit numbers, and
+        # each one's place in the spec's order.
+        self._sorted: tuple[array.array[int], array.array[int]] | None = None
 
-    def _numbers(self) -> Iterator[int]:
-        """Each variant's id, as a number, in the spec's order: the JSON ``variant_id``
-        hashes, put together from its parts (the same bytes as ``json.dumps``)."""
+    def _numbers(self, first_run: int = 0) -> Iterator[int]:
+        """Each variant's id, as a number, in the spec's order from the run ``first_run``:
+        the JSON ``variant_id`` hashes, put together from its parts (the same bytes as
+        ``json.dumps``)."""
         pieces = [[_json([k, v]) for k, v in values] for values in self._grid]
         tails: list[str | None] = [",".join(_json([k, v]) for k, v in s)
                                    for s in self._samples] or [None]
         sha = hashlib.sha256
-        for run in self._runs:
+        for run in self._runs[first_run:]:
             head, end = run.json_head, run.json_end
             for combo in itertools.product(*pieces):
                 sets = ",".join(combo)
@@ -286,15 +292,36 @@ class Variants(Sequence[Variant]):
                     yield int.from_bytes(digest[:ID_LENGTH // 2], "big")
 
     def duplicate(self) -> str | None:
-        """An id two variants have (the same run given twice), else None."""
-        ids = self._ids
-        for i in range(1, len(ids)):
-            if ids[i] == ids[i - 1]:
-                return f"{ids[i]:0{ID_LENGTH}x}"
+        """An id two variants have because the spec gives one run twice (a program matched
+        by two globs), else None -- the id of that run's first variant.
+
+        Told by the runs alone, no id hashed: two variants are the same run exactly when
+        their runs' files and their swept values are.  Within one run the values of two
+        variants always differ: a [grid] list may not give a value twice, a key is swept
+        once (by [grid] or by [random]), and a repeated draw is left out.  So a run is
+        given twice exactly when two runs have the same files as the id sees them."""
+        seen: set[tuple[str, str]] = set()
+        for i, run in enumerate(self._runs):
+            if (run.json_head, run.json_end) in seen:
+                number = next(self._numbers(i))
+                return f"{number:0{ID_LENGTH}x}"
+            seen.add((run.json_head, run.json_end))
         return None
 
+    def in_spec_order(self) -> Iterator[Variant]:
+        """Every variant in the spec's order, its id hashed as it is taken."""
+        return (self._make(place, number) for place, number in enumerate(self._numbers()))
+
+    def _index(self) -> tuple[array.array[int], array.array[int]]:
+        if self._sorted is None:
+            found = [(number << 20) | place for place, number in enumerate(self._numbers())]
+            found.sort()
+            self._sorted = (array.array("Q", (f >> 20 for f in found)),
+                            array.array("L", (f & 0xFFFFF for f in found)))
+        return self._sorted
+
     def __len__(self) -> int:
-        return len(self._ids)
+        return self._count
 
     @overload
     def __getitem__(self, index: int) -> Variant: ...
@@ -304,19 +331,19 @@ class Variants(Sequence[Variant]):
 
     def __getitem__(self, index: int | slice) -> Variant | list[Variant]:
         if isinstance(index, slice):
-            return [self._make(i) for i in range(*index.indices(len(self)))]
+            return [self._sorted_at(i) for i in range(*index.indices(len(self)))]
         if index < 0:
             index += len(self)
         if not 0 <= index < len(self):
             raise IndexError("variant index out of range")
-        return self._make(index)
+        return self._sorted_at(index)
 
     def __iter__(self) -> Iterator[Variant]:
-        return (self._make(i) for i in range(len(self)))
+        return (self._sorted_at(i) for i in range(len(self)))
 
     def ids(self) -> Iterator[str]:
-        """The ids, in order, without making the variants."""
-        return (f"{number:0{ID_LENGTH}x}" for number in self._ids)
+        """The ids, sorted, without making the variants."""
+        return (f"{number:0{ID_LENGTH}x}" for number in self._index()[0])
 
     def find(self, id: str) -> Variant | None:
         """The variant of this id, or None."""
@@ -324,13 +351,18 @@ class Variants(Sequence[Variant]):
             number = int(id, 16)
         except ValueError:
             return None
-        i = bisect.bisect_left(self._ids, number)
-        if len(id) != ID_LENGTH or i == len(self) or self._ids[i] != number:
+        ids, _ = self._index()
+        i = bisect.bisect_left(ids, number)
+        if len(id) != ID_LENGTH or i == len(self) or ids[i] != number:
             return None
-        return self._make(i)
+        return self._sorted_at(i)
 
-    def _make(self, index: int) -> Variant:
-        place = self._order[index]
+    def _sorted_at(self, index: int) -> Variant:
+        ids, order = self._index()
+        return self._make(order[index], ids[index])
+
+    def _make(self, place: int, number: int) -> Variant:
+        """The variant at ``place`` in the spec's order, whose id is ``number``."""
         run = self._runs[place // self._per_run]
         rest = place % self._per_run
         if self._samples:
@@ -342,7 +374,7 @@ class Variants(Sequence[Variant]):
         sets.reverse()
         if self._samples:
             sets += self._samples[sample]
-        return Variant(f"{self._ids[index]:0{ID_LENGTH}x}", run.program, run.main, run.config,
+        return Variant(f"{number:0{ID_LENGTH}x}", run.program, run.main, run.config,
                        run.script, self._until, tuple(sets), self._budget, run.storage,
                        run.config_file, run.script_file)
 

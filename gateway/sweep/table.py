@@ -219,7 +219,10 @@ class Parts:
         return None
 
     def start(self, resume: bool) -> dict[str, Row]:
-        """The rows of a stopped sweep (``resume``), else none: the parts are cleared."""
+        """The rows of a stopped sweep (``resume``) by id, else none: the parts are cleared.
+        The ids are not looked up here (that would hash every variant's): the sweep matches
+        each row to its variant as it takes the variants, and leaves out a row it never
+        meets."""
         done: dict[str, Row] = {}
         if resume and self.folder.is_dir():
             manifest = self.folder / "manifest.json"
@@ -236,8 +239,7 @@ class Parts:
                 self.count = max(self.count, int(number) if number.isdigit() else 0)
                 for line in part.read_text(encoding="utf-8").splitlines():
                     row = json.loads(line)
-                    if self.spec.variants.find(row["id"]) is not None:
-                        done[row["id"]] = row
+                    done[row["id"]] = row
             for tmp in self.folder.glob(".*.tmp"):
                 tmp.unlink()
         else:
