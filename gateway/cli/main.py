@@ -766,8 +766,8 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
     # a program being read: a thread that wants the GIL gets it within GIL_SWITCH_S (0.2 ms),
     # not CPython's default 5 ms, so none of them makes another late (measured with
     # bench/storm.py: the flood, storm and load phases); and the young generation's size
-    # (lifecycle.GC_YOUNG_OBJECTS).
-    tune_interpreter()
+    # (lifecycle.GC_YOUNG_OBJECTS).  Put back when it returns: `main(["run", ...])` in a
+    # test left them to every test after it in that process.
     loop = args.loop
     if loop == "auto":
         loop = "uvloop" if importlib.util.find_spec("uvloop") is not None else "asyncio"
@@ -791,9 +791,15 @@ def _before_serving(args: argparse.Namespace) -> Callable[[], int] | None:
         script = load_script(args.script)
         check_scenario(config, script, sim=False)  # on the cell, before anything serves:
         # a PLC that connected at once wrote to a gateway that then refused its script
-    return lambda: run(serve(config, cold=args.cold, record=record, overrides=overrides,
-                             watch=args.watch, checked=checked, script=script,
-                             junit=junit))
+
+    def tuned() -> int:
+        restore = tune_interpreter()
+        try:
+            return run(serve(config, cold=args.cold, record=record, overrides=overrides,
+                             watch=args.watch, checked=checked, script=script, junit=junit))
+        finally:
+            restore()
+    return tuned
 
 
 def _programs_ready(config: Config) -> tuple[CheckedFile, ...] | None:

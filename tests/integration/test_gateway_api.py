@@ -290,6 +290,27 @@ async def test_a_gateway_tunes_the_collector_and_leaves_the_switch_interval(
     assert sys.getswitchinterval() == before and gc.get_threshold() == threshold
 
 
+def test_run_in_process_gives_back_the_switch_interval_and_the_collector(
+        tmp_path: Path) -> None:
+    """`main(["run", ...])` takes run's switch interval and young generation while it serves
+    and puts them back when it returns: a test that ran a gateway so left them to every test
+    after it in its process (this file's test above then failed, by the order xdist chose)."""
+    import gc
+    import sys
+
+    from ncgate.gateway.cli.main import main
+
+    (tmp_path / "O1.nc").write_text("N10 (DLY,0.05)\nN20 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nmain = "O1"\n[modbus]\nport = 0\n[canopen]\nenabled = false\n'
+        '[web]\nenabled = false\n')
+    (tmp_path / "s.toml").write_text('[[expect]]\nname = "ends"\ncond = "P1 IDLE"\nby = 0.3\n')
+    before = (sys.getswitchinterval(), gc.get_threshold())
+    assert main(["run", "--config", str(tmp_path / "ncgate.toml"), "--script",
+                 str(tmp_path / "s.toml")]) == 0
+    assert (sys.getswitchinterval(), gc.get_threshold()) == before
+
+
 async def test_a_write_storm_does_not_slow_the_machine(tmp_path: Path) -> None:
     """Inputs bring the engine to now by running what was due before them, each at its own
     time: a dwell loop under a storm of writes keeps exactly its 10 ms a round (machine
