@@ -495,12 +495,9 @@ class Gateway:
         if self._driver is not None:
             self._driver.changed.set()  # a waiter on "every process idle" looks again
 
-    async def apply_async(self, item: Input, *, settle: bool = True) -> None:
+    async def apply_async(self, item: Input) -> None:
         """:meth:`apply`, after reading a program it starts off the loop: a refusal is
-        raised here (the console's and :meth:`start`'s way).  ``settle=False``: what the
-        input made runnable has not run yet when this returns, and the caller calls
-        :meth:`settle` (``run --script`` watches its expectations from the very instant
-        of the start, as ``sim`` does, before the program's first blocks)."""
+        raised here (the console's and :meth:`start`'s way)."""
         if type(item) is Command and item.kind is CommandKind.RELOAD_PLC:
             await self._reload(item)
             return
@@ -510,17 +507,19 @@ class Gateway:
             await self._load(*load)  # and reads ahead of its EXEs
         starts = self._program_of(item) if load is None else None
         self.door.apply(item)
-        if settle:
-            self.settle()
+        self.settle()
         self._read_ahead(starts)
 
     async def prepare(self, item: Input) -> None:
-        """Read and check, off the loop, the program ``item`` would start, so that
-        :meth:`apply_async` of it then acts at once (several starts at one instant, with
-        nothing run between them: ``run --script``'s sections of one ISG file)."""
+        """Read and check, off the loop, the program ``item`` would start (and, in a thread,
+        what its EXEs start), so that applying it later acts at once: ``run --script``
+        starts its programs from an engine timer, at a scan's instant."""
+        self.door.precheck(item)
         load = self._load_needed(item)
         if load is not None:
             await self._load(*load)
+        else:
+            self._read_ahead(self._program_of(item))
 
     def _program_of(self, item: Input) -> tuple[str, int] | None:
         """(program, process) when ``item`` would start a program now."""

@@ -57,7 +57,9 @@ if TYPE_CHECKING:
     from ncgate.gateway.wiring import Runtime
     from ncgate.plc.scan import PlcRuntime
 
-Recorder = Callable[[Input, float], None]
+# The record's writer: (input, machine time, first -- applied before the timers of its
+# instant: ``Door.apply_first``).
+Recorder = Callable[[Input, float, bool], None]
 E = TypeVar("E", bound=enum.IntEnum)
 
 
@@ -160,6 +162,7 @@ class Door:
         self._plc = plc
         self._sync = sync
         self.recorder: Recorder | None = None  # run --record: told before the effect
+        self._first = False  # (apply_first)
         # The online change of the PLC logic (gateway.plc.OnlineChange), given the source.
         self.reload_plc: Callable[[str], object] | None = None
         self._hold_input = next((var for what, var in runtime.interlocks
@@ -183,6 +186,17 @@ class Door:
             self._dispatch(item)
         finally:
             self._sync = sync
+
+    def apply_first(self, item: Input) -> None:
+        """:meth:`apply_on_time` from an *early* engine timer, before the other timers of its
+        instant (a PLC scan of it): ``run --script``'s start at a scan's instant, as ``sim``
+        starts before its first scan.  The record says so, and its replay applies it before
+        that instant's timers, where it applies other inputs after them."""
+        self._first = True
+        try:
+            self.apply_on_time(item)
+        finally:
+            self._first = False
 
     def _dispatch(self, item: Input) -> None:
         if type(item) is Writes:  # the fieldbus's every request: before the match, whose
@@ -227,7 +241,7 @@ class Door:
         if self._sync is not None:
             self._sync()
         if self.recorder is not None and item.source.kind not in _NOT_RECORDED:
-            self.recorder(item, self.runtime.engine.now)
+            self.recorder(item, self.runtime.engine.now, self._first)
 
     # -- each kind ------------------------------------------------------------------------------
 

@@ -19,7 +19,9 @@ The record is JSON Lines, in the order things happened:
   null for the cell),
   ``"snd"`` (``from``, ``to``), ``"start"`` (``prog``, ``proc``), ``"alarm"`` (``code``: the
   alarm number, ``message``).  The PLC logic's inputs are not recorded: the replay runs the
-  same logic;
+  same logic.  An input applied before the other timers of its instant (``"first": true``:
+  ``run --script``'s start and its entries at the scenario's 0, at a scan's instant) is
+  replayed there; any other after them;
 - every trace event of spec 4.4, as in a trace file (the lines with ``"seq"``);
 - ``{"skipped": "plc" | "plant", "k", "n", "t"}``: scans ``k`` .. ``k + n - 1`` of the PLC
   logic (or of the plant's) that the session did not run -- those due while the fieldbus
@@ -338,9 +340,13 @@ class SessionRecorder:
         """A trace listener."""
         self._file.write(event)
 
-    def input(self, item: Input, t: float) -> None:
-        """The door's recorder: called after validation, before the effect."""
-        self._file.append(json.dumps(input_line(item, t)) + "\n")
+    def input(self, item: Input, t: float, first: bool = False) -> None:
+        """The door's recorder: called after validation, before the effect.  ``first``:
+        applied before the other timers of its instant (``Door.apply_first``)."""
+        line = input_line(item, t)
+        if first:
+            line["first"] = True
+        self._file.append(json.dumps(line) + "\n")
 
     def program(self, path: Path) -> None:
         """A program file the session read (ProgramStore.loaded)."""
@@ -394,6 +400,7 @@ class RecordedInput:
     line: int  # in the record file, for messages
     t: float
     input: Input
+    first: bool = False  # applied before the other timers of its instant (Door.apply_first)
 
 
 @dataclass
@@ -460,7 +467,8 @@ def read_record(path: str | Path) -> Recording:
                 raise ValueError("a line after the stop")
             if "input" in item:
                 t, parsed = parse_input(item)
-                recording.inputs.append(RecordedInput(number, t, parsed))
+                first = _field(item, "first", bool, "true or false", optional=True)
+                recording.inputs.append(RecordedInput(number, t, parsed, bool(first)))
             elif "seq" in item:
                 _check_event(item)
                 recording.events.append(item)
@@ -701,7 +709,7 @@ def replay(path: str | Path, config: str | Path | None = None,
     refused: tuple[float, str] | None = None
     for recorded in sorted(recording.inputs, key=lambda i: i.t):  # stable: same-time order
         t = recorded.t
-        run_through(engine, t)
+        run_through(engine, t, first=recorded.first)
         try:
             door.apply(recorded.input)
         except InputRefused as exc:

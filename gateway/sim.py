@@ -215,37 +215,34 @@ class ScriptPlayer:
                 return True
         return False
 
-    def arm(self, at_once: bool = False, settle: Callable[[], None] | None = None) -> None:
+    def arm(self, first: bool = False) -> None:
         """Arm every entry on the clock, late: it acts after every other timer of its time
         (a PLC scan of that instant, the plant's tick), as a replay of the session applies
         it, a recorded input (docs/decisions.md).  An entry due as it is armed (its ``at``
         not past the engine's now, or its ``when`` holding with no ``after``: the
         scenario's t = 0) acts as the scenario starts, before any scan sees the program
-        run, as in a replay.  ``at_once`` applies it here and now, in the file's order, not
-        on the clock's next turn (``run --script``: a fault at the scenario's 0 is in force
-        before a fieldbus client's first request is served), ``settle`` then running what
-        each made runnable before the next acts; without, it is a plain timer
-        of now, armed before the PLC's first scan (``run_sim`` arms the player before it
-        starts the PLC), which fires once what the start made runnable has run."""
+        run, as in a replay: a plain timer of now, armed before the PLC's first scan
+        (``run_sim`` arms the player before it starts the PLC), which fires once what the
+        start made runnable has run.  ``first`` (``run --script``, armed by the early timer
+        that starts the program at a scan's instant): an early timer, applied first
+        (``Door.apply_first``), so that it acts before that scan -- as its record's replay
+        applies it."""
         engine = self.runtime.engine
         self._unfired = list(self.entries)
         for entry in self.entries:
             if entry.at is not None:
                 self.due += 1
-                if at_once and entry.at <= engine.now:
-                    self._fire(entry)
-                    if settle is not None:
-                        settle()
-                    continue
-                engine.call_at(entry.at, functools.partial(self._fire, entry),
-                               late=entry.at > engine.now)
+                now = entry.at <= engine.now
+                engine.call_at(entry.at, functools.partial(self._fire, entry, first and now),
+                               late=not now, early=first and now)
                 continue
             trigger = self._parse_when(entry)
             if isinstance(trigger, StateTrigger):
                 if engine.processes[trigger.process].state is trigger.state:
                     # (holds already: it fires now, and once -- watched too, it fired again
                     # as the process came back to the state)
-                    self._triggered(entry, late=entry.after > 0)
+                    self._triggered(entry, late=entry.after > 0,
+                                    first=first and entry.after == 0)
                 else:
                     self._state_watch.append((trigger, entry))
             else:
@@ -254,7 +251,8 @@ class ScriptPlayer:
                                                  comparison(trigger.op, trigger.value),
                                                  functools.partial(self._triggered, entry))
                 if handle is None:  # (holds already: due as armed, as an `at` of now)
-                    self._triggered(entry, late=entry.after > 0)
+                    self._triggered(entry, late=entry.after > 0,
+                                    first=first and entry.after == 0)
 
     def _on_state(self, process: Process, old: ProcessState) -> None:
         for watch in list(self._state_watch):
@@ -263,11 +261,11 @@ class ScriptPlayer:
                 self._state_watch.remove(watch)
                 self._triggered(entry)
 
-    def _triggered(self, entry: ScriptEntry, late: bool = True) -> None:
+    def _triggered(self, entry: ScriptEntry, late: bool = True, first: bool = False) -> None:
         engine = self.runtime.engine
         self.due += 1
-        engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry),
-                       late=late)
+        engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry, first),
+                       late=late, early=first)
 
     def _write(self, entry: ScriptEntry) -> Write:
         """The entry's ``set`` as an input, checked against the image (not applied)."""
@@ -276,7 +274,7 @@ class ScriptPlayer:
         self.door.image_changes(((item.var, item.value),))
         return item
 
-    def _fire(self, entry: ScriptEntry) -> None:
+    def _fire(self, entry: ScriptEntry, first: bool = False) -> None:
         self.due -= 1
         if entry in self._unfired:
             self._unfired.remove(entry)
@@ -284,7 +282,7 @@ class ScriptPlayer:
         try:
             # At the entry's own time, on the wall clock too (run --script): a scenario's
             # times are the machine's, as in sim.
-            apply = self.door.apply_on_time
+            apply = self.door.apply_first if first else self.door.apply_on_time
             if entry.set is not None:
                 apply(self._write(entry))
             elif entry.fault is not None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
+import math
 import signal
 import sys
 from collections.abc import Sequence
@@ -35,6 +36,15 @@ from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.states import WaitKind, describe_where
 
 log = logging.getLogger("ncgate")
+
+
+def scan_grid_s(config: Config) -> float | None:
+    """The period (machine seconds) on whose multiples every scan of the cell falls: the PLC
+    logic's, the plant's (its ticks and its logic), both (their least common multiple); None
+    when nothing scans."""
+    periods = ([config.plc.scan_ms] if config.plc.logic else []) + (
+        [config.plant.scan_ms] if config.plant.model or config.plant.logic else [])
+    return math.lcm(*periods) / 1000.0 if periods else None
 
 
 def _on(on: object) -> str:
@@ -259,33 +269,39 @@ class _Scenario:
                                "scenario starts the main program, and nc.main names none")
         starts = runtime.store.channels(main) or (1,)  # an ISG file: each section's channel
         source = Source(SourceKind.SCRIPT, "start")
-        started: list[float] = []
+        for number in starts:  # each read first: the starts then act at one instant
+            await gw.prepare(Start(main, number, source))
+        begun: asyncio.Future[float] = asyncio.get_running_loop().create_future()
 
-        def on_start(event: Event) -> None:
-            if isinstance(event, ev.Start) and not started:
-                started.append(event.t)
+        def begin() -> None:
+            """At a scan's instant, before its scan (an early timer), as sim's t = 0: the
+            programs start, the expectations watch from there, and the entries due at 0
+            act -- each first at the instant, after what the one before made runnable."""
+            if begun.done():  # (the gateway stopped meanwhile)
+                return
+            try:
+                for number in starts:
+                    gw.door.apply_first(Start(main, number, source))
+            except InputRefused as exc:
+                begun.set_exception(exc)
+                return
+            t0 = engine.now
+            self.expectations.start(t0)
+            entries = tuple(e if e.at is None else dataclasses.replace(e, at=t0 + e.at)
+                            for e in script.entries)
+            ScriptPlayer(runtime, dataclasses.replace(script, entries=entries),
+                         gw.door).arm(first=True)
+            begun.set_result(t0)
 
-        undo = runtime.trace.subscribe(on_start)
-        try:
-            for number in starts:  # each read first: the starts then act at one instant
-                await gw.prepare(Start(main, number, source))
-            for number in starts:
-                await gw.apply_async(Start(main, number, source), settle=False)
-        finally:
-            undo()
-        t0 = started[0] if started else engine.now
-        # Watched from the start itself, before the programs' first blocks run, as sim
-        # watches: a state a program leaves at once (RUNNING up to its first dwell) held
-        # at t = 0 in both.
-        self.expectations.start(t0)
-        gw.settle()
-        entries = tuple(e if e.at is None else dataclasses.replace(e, at=t0 + e.at)
-                        for e in script.entries)
-        # Its inputs at its 0 (a fault from the start) in force before a client is heard,
-        # each followed by what it made runnable, as sim and a replay of the session run
-        # them (one after the other, they acted on a cell that had not moved between).
-        ScriptPlayer(runtime, dataclasses.replace(script, entries=entries), gw.door).arm(
-            at_once=True, settle=gw.settle)
+        # The scenario's 0 is the next instant the cell's scans share (sim's 0 is one), so
+        # that each PLC reaction comes the scans after it that it comes in sim: started
+        # between two scans, a reaction came 0..10 ms later than sim's, and a window sim
+        # passed at its edge failed.
+        grid = scan_grid_s(runtime.config)
+        now = engine.read_time()
+        at = now if grid is None else (math.floor(now / grid + 1e-9) + 1) * grid
+        engine.call_at(at, begin, early=True)
+        t0 = await begun
         where = f"P{starts[0]} {main}" if len(starts) == 1 else f"{main} in " + ", ".join(
             f"P{n}" for n in starts)
         log.info("scenario %s: %d expectations; %s started at %.3f s of machine time, the "

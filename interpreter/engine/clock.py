@@ -41,17 +41,21 @@ def _run_virtual(engine: Engine, until: float | None,
         engine.advance_to(t)
 
 
-def run_through(engine: Engine, until: float) -> None:
+def run_through(engine: Engine, until: float, first: bool = False) -> None:
     """Let the virtual clock run to ``until`` as ``run``'s wall clock does (a replay of a
     session): every timer due by then fires in time order -- the PLC logic's scans, the
     plant's moves and ticks, the processes' motion -- whether or not a process has a
-    program, and the clock then stands at ``until``.
+    program, and the clock then stands at ``until``.  ``first``: of the timers due at
+    ``until`` only the early ones fire (an input the session applied before the others:
+    ``Door.apply_first``).
 
     (``run_virtual`` stops as soon as every process is idle: the clock would leap over an idle
     gap, the scans and the plant due in it then ran late, all at once, at the next input's
     time, and the logic's timers saw the leap.)"""
     with gc_paused():
         engine.run_until_blocked()
-        while (t := engine.next_timer()) is not None and t <= until:
+        while (t := engine.next_timer()) is not None and (t < until if first else t <= until):
             engine.advance_to(t)
+        if first:
+            engine.fire_early(until)
         engine.set_time(until)

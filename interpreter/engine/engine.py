@@ -532,6 +532,19 @@ class Engine:
         self.run_until_blocked(blocks)
         return self._unfinished
 
+    def fire_early(self, t: float) -> None:
+        """Fire the timers due before ``t`` and the early ones at ``t``, each followed by what
+        it made runnable, and not the others of ``t`` (a replay's input applied first at
+        ``t``: ``record.replay``)."""
+        while (timer := self._timers.pop_early(t)) is not None:
+            callback = timer.callback
+            assert callback is not None
+            if timer.time > self.now:
+                self.now = timer.time
+            timer.callback = None
+            callback()
+            self.run_until_blocked()
+
     def call_at(self, t: float, callback: Callable[[], None], late: bool = False,
                 early: bool = False) -> Timer:
         """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic), or at once if

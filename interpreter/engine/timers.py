@@ -84,6 +84,16 @@ class TimerHeap:
             heapq.heappop(heap)
         return heap[0][0] if heap else None
 
+    def pop_early(self, t: float) -> Timer | None:
+        """The next live timer due before ``t``, or early at ``t`` (taken off the heap), or
+        None: what fires before an input applied first at ``t`` (a replay)."""
+        heap = self._heap
+        while heap and (heap[0][0] < t or (heap[0][0] == t and heap[0][1] < 0)):
+            _, _, timer = heapq.heappop(heap)
+            if timer.callback is not None:
+                return timer
+        return None
+
     def pop_due(self, t: float) -> Timer | None:
         """The next live timer due at or before ``t`` (taken off the heap), or None."""
         heap = self._heap
