@@ -50,7 +50,7 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.events import PlcReload
 from ncgate.interpreter.engine.states import WAITING_STATES
-from ncgate.interpreter.engine.timers import Timer, due_time
+from ncgate.interpreter.engine.timers import NS_PER_S, Timer, due_time
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
@@ -706,9 +706,10 @@ class ScanDriver:
             # one for nothing)
             reach, self._reach = self._reach, min(LEAP_SCANS, 2 * self._reach)
         start = now = engine.now
-        k = self.k
+        k, t0 = self.k, self.t0
         for _ in range(reach):
-            due = due_time(self.t0 + k * period, now)  # the time call_at would give
+            due = t0 + k * period  # the time call_at would give (due_time, inline: a leap
+            due = round((due if due > now else now) * NS_PER_S) / NS_PER_S  # runs it a lot)
             if until is not None and self._ms(k) >= until:
                 break  # scan k sees a timer's Q change
             if (due >= later) if later is not None else stalls and (

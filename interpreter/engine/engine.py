@@ -65,7 +65,7 @@ from ncgate.interpreter.engine.states import (
     describe_where,
 )
 from ncgate.interpreter.engine.sync import Sync, first_line
-from ncgate.interpreter.engine.timers import Timer, TimerHeap, due_time
+from ncgate.interpreter.engine.timers import Timer, TimerHeap
 from ncgate.interpreter.engine.trace import Trace
 from ncgate.interpreter.motion import Modal
 from ncgate.interpreter.settings import RuntimeSettings
@@ -552,7 +552,8 @@ class Engine:
         ``TimerHeap.push``); ``early``: before every other (the plant's tick).  The timer's
         time is ``t`` on the nanosecond grid (``due_time``), so an instant worked out two ways
         is one time, its timers in the order armed."""
-        return self._arm(due_time(t, self.now), callback, late, early)
+        now = self.now  # (the heap snaps it: due_time, the time a leap works out)
+        return self._arm(t if t > now else now, callback, late, early)
 
     def set_time(self, t: float) -> None:
         """The wall-clock driver tells the engine what time it is before outside events."""

@@ -63,7 +63,7 @@ class TimerHeap:
         """Arm ``callback`` at ``t`` (on the grid: :func:`snapped`); ``late``: after every
         other timer of that time; ``early``: before every other (the plant's tick, which
         samples what moves before anything else of its instant reads it)."""
-        t = snapped(t)
+        t = round(t * NS_PER_S) / NS_PER_S  # (snapped, inline: every timer comes here)
         timer = Timer(t, callback)
         order = next(self._order)
         if late:
