@@ -33,6 +33,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -107,7 +108,7 @@ async def one_round(models: int, seconds: float, spread: bool = False
                 await proc.wait()
 
 
-def quantile(values: list[float], q: float) -> float:
+def quantile(values: Sequence[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
@@ -158,18 +159,23 @@ def main() -> int:
             rtts, late = asyncio.run(one_round(models, args.seconds, args.spread))
             results[name][0].extend(rtts)
             results[name][1].extend(late)
-    print(f"{'':8} {'poll p50 ms':>12} {'p99 ms':>8} {'max ms':>8} {'PLC late max ms':>16}"
-          f" {'polls':>6}")
+    print(f"{'':8} {'poll p50 ms':>12} {'p99 ms':>8} {'max ms':>8} {'PLC late p99 ms':>16}"
+          f" {'max ms':>8} {'polls':>6}")
     figures = {}
     for name, (rtts, late) in results.items():
         p50, p99 = quantile(rtts, 0.5) * 1e3, quantile(rtts, 0.99) * 1e3
         late_max = max(late) / 1e3 if late else 0.0
-        figures[name] = (p99, late_max)
-        print(f"{name:8} {p50:12.2f} {p99:8.2f} {max(rtts) * 1e3:8.2f} {late_max:16.2f}"
-              f" {len(rtts):6}")
-    (q99, qlate), (p99, plate) = figures["quiet"], figures["plant"]
+        late_p99 = quantile(late, 0.99) / 1e3 if late else 0.0
+        figures[name] = (p99, late_max, late_p99)
+        print(f"{name:8} {p50:12.2f} {p99:8.2f} {max(rtts) * 1e3:8.2f} {late_p99:16.2f}"
+              f" {late_max:8.2f} {len(rtts):6}")
+    (q99, qlate, qlate99), (p99, plate, plate99) = figures["quiet"], figures["plant"]
+    # The lateness is sampled by the poller (the last scan's, 200 times a second): its max is
+    # one scan, which a neighbour's burst on a shared machine sets as often as the plant; its
+    # p99 is printed beside it.
     print(f"ratio plant/quiet: poll p99 {p99 / q99:.2f}x, PLC lateness max "
-          f"{plate / max(qlate, 0.001):.2f}x (target <= 1.2x)")
+          f"{plate / max(qlate, 0.001):.2f}x, p99 {plate99 / max(qlate99, 0.001):.2f}x "
+          "(target <= 1.2x)")
     found = sim_throughput(args.passes)
     if found is None:
         print("sim throughput: no machine example installed")
