@@ -9,12 +9,25 @@ them against the image and names the dotted key of one that is not in it.  Stdli
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 Fail = Callable[[str, str], Exception]  # (dotted key, message) -> the error to raise
+
+
+def shown(value: object) -> str:
+    """A value of a config, script or record as its file spells it, for a message: ``true``,
+    ``null``, ``"text"`` (JSON and TOML alike), not Python's ``True``, ``None``, ``'text'``;
+    what JSON cannot spell (a TOML date, ``nan``, ``inf``) as Python writes it, which is how
+    TOML does."""
+    try:
+        return json.dumps(value, ensure_ascii=False, allow_nan=False)
+    except (TypeError, ValueError):
+        return repr(value)
+
 
 # Roles of a key: "in" a variable the model reads, "out" one it writes, "ms" a time in ms > 0,
 # "num" a number, "pct" a percentage, "choice:a|b" one of the words, "axis" an axis "P1.X".
@@ -60,6 +73,7 @@ VARIABLE_FAULTS: Final = frozenset({"stuck", "wire_break", "chatter"})  # on wha
 MODBUS_FAULTS: Final = frozenset({"exception", "delay", "no_reply"})
 CANOPEN_FAULTS: Final = frozenset({"heartbeat_stop", "emcy", "pdo_stop"})
 WHEN_KEYS: Final = ("at", "when", "for_s")
+CLEAR_KEYS: Final = ("target", "clear", "at", "when", "after")  # a script's clearing [[fault]]
 # Bounds of what a fault or a generator may ask: a period shorter than a millisecond would
 # make the clock take billions of steps per simulated second (a hang, not a machine), a delay
 # or period over an hour or a slowing over 1,000x is no fault a commissioning rehearses.
@@ -110,12 +124,14 @@ def read_models(raw: Any, key: str, fail: Fail) -> tuple[PlantModelConfig, ...]:
             raise fail(item, "expected a table")
         name, kind = table.get("name"), table.get("kind")
         if not isinstance(name, str) or not name.strip() or not name.replace("_", "a").isalnum():
-            raise fail(f"{item}.name", f"expected a name of letters, digits and _, got {name!r}")
+            raise fail(f"{item}.name", "expected a name of letters, digits and _, got "
+                       f"{shown(name)}")
         if name in names:
-            raise fail(f"{item}.name", f"{name!r} is the name of another model")
+            raise fail(f"{item}.name", f"{shown(name)} is the name of another model")
         names.add(name)
         if kind not in MODEL_KEYS:
-            raise fail(f"{item}.kind", f"expected one of {', '.join(MODEL_KEYS)}, got {kind!r}")
+            raise fail(f"{item}.kind", f"expected one of {', '.join(MODEL_KEYS)}, got "
+                       f"{shown(kind)}")
         spec = MODEL_KEYS[kind]
         values: dict[str, Any] = {}
         for k, v in table.items():
@@ -146,31 +162,31 @@ def _value(role: str, v: Any, key: str, fail: Fail) -> Any:
     number = not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
     if role in ("in", "out"):
         if not isinstance(v, str) or not v.strip():
-            raise fail(key, f"expected a variable such as \"SA30\" or an I/O name, got {v!r}")
+            raise fail(key, f"expected a variable such as \"SA30\" or an I/O name, got {shown(v)}")
         return v.strip()
     if role == "axis":
         parts = v.split(".") if isinstance(v, str) else []
         if (len(parts) != 2 or parts[0][:1].upper() != "P" or not parts[0][1:].isdigit()
                 or len(parts[1]) != 1 or parts[1].upper() not in "XYZUVWABC"):
-            raise fail(key, f"expected a process's axis such as \"P1.X\", got {v!r}")
+            raise fail(key, f"expected a process's axis such as \"P1.X\", got {shown(v)}")
         return f"P{int(parts[0][1:])}.{parts[1].upper()}"
     if role.startswith("choice:"):
         choices = role[7:].split("|")
         if v not in choices:
-            raise fail(key, f"expected one of {', '.join(choices)}, got {v!r}")
+            raise fail(key, f"expected one of {', '.join(choices)}, got {shown(v)}")
         return v
     if not number:
-        raise fail(key, f"expected a number, got {v!r}")
+        raise fail(key, f"expected a number, got {shown(v)}")
     if role == "ms" and v <= 0:
-        raise fail(key, f"expected a time in ms > 0, got {v!r}")
+        raise fail(key, f"expected a time in ms > 0, got {shown(v)}")
     if role == "period" and not MIN_PERIOD_MS <= v <= MAX_MS:
-        raise fail(key, f"expected a period of {MIN_PERIOD_MS:g} ms .. 1 h (ms), got {v!r}")
+        raise fail(key, f"expected a period of {MIN_PERIOD_MS:g} ms .. 1 h (ms), got {shown(v)}")
     if (role in ("ms0", "pos") and v < 0) or (role == "pos" and v == 0):
-        raise fail(key, f"expected a number {'> 0' if role == 'pos' else '>= 0'}, got {v!r}")
+        raise fail(key, f"expected a number {'> 0' if role == 'pos' else '>= 0'}, got {shown(v)}")
     if role == "pct" and not 0 <= v <= 100:
-        raise fail(key, f"expected a percentage 0..100, got {v!r}")
+        raise fail(key, f"expected a percentage 0..100, got {shown(v)}")
     if role == "frac" and not 0 < v < 1:
-        raise fail(key, f"expected a fraction between 0 and 1, got {v!r}")
+        raise fail(key, f"expected a fraction between 0 and 1, got {shown(v)}")
     return float(v)
 
 
@@ -193,38 +209,49 @@ def read_fault(table: Any, key: str, fail: Fail, *, script: bool = False) -> Fau
     if not isinstance(clear, bool) or (clear and not script):
         raise fail(f"{key}.clear", "true clears the target's faults (a script's [[fault]] "
                    "only)" if script else "unknown key")
+    targets = ("a model, a model's output (clamp.extended), a variable or I/O name, "
+               "\"modbus\" or \"canopen\"")
+    if target is None:
+        raise fail(f"{key}.target", f"missing ({targets})")
     if not isinstance(target, str) or not target.strip():
-        raise fail(f"{key}.target", "expected a model, a model's output (clamp.extended), a "
-                   f"variable or I/O name, \"modbus\" or \"canopen\"; got {target!r}")
+        raise fail(f"{key}.target", f"expected {targets}; got {shown(target)}")
     if clear:
         if target == "all":
             target = "*"
-        known = {"target", "clear", "at", "when", "after"}
+        for name in table:
+            if name not in CLEAR_KEYS:
+                # A clear ends every fault of its target, whatever their kind: a kind or a
+                # kind's key on it would say it clears only those, which it does not.
+                raise fail(f"{key}.{name}", f"a clear takes no {name}: it clears every fault "
+                           f"of its target (its keys: {', '.join(CLEAR_KEYS)})")
     else:
+        if kind is None:
+            raise fail(f"{key}.kind", f"missing (one of {', '.join(FAULT_KEYS)}"
+                       + (", or clear = true" if script else "") + ")")
         if kind not in FAULT_KEYS:
-            raise fail(f"{key}.kind", f"expected one of {', '.join(FAULT_KEYS)}, got {kind!r}")
+            raise fail(f"{key}.kind", f"expected one of {', '.join(FAULT_KEYS)}, "
+                       f"got {shown(kind)}")
         known = {"target", "kind", "at", "when", "after", "for_s", *FAULT_KEYS[kind]}
         if script:
             known.add("clear")
-    for name in table:
-        if name not in known:
-            raise fail(f"{key}.{name}", "unknown key" + (
-                f" for a {kind} fault (its keys: {', '.join(FAULT_KEYS[kind]) or 'none'})"
-                if kind in FAULT_KEYS else ""))
+        for name in table:
+            if name not in known:
+                raise fail(f"{key}.{name}", f"unknown key for a {kind} fault (its keys: "
+                           f"{', '.join(FAULT_KEYS[kind]) or 'none'})")
     at, when, after = table.get("at"), table.get("when"), table.get("after", 0)
     if at is not None and when is not None:
         raise fail(key, "give at most one of 'at' and 'when'")
     for name, v in (("at", at), ("after", after), ("for_s", table.get("for_s"))):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
                               or not math.isfinite(v) or v < 0):
-            raise fail(f"{key}.{name}", f"expected a time in seconds >= 0, got {v!r}")
+            raise fail(f"{key}.{name}", f"expected a time in seconds >= 0, got {shown(v)}")
     for_s = table.get("for_s")
     if for_s is not None and not 0 < for_s < MAX_FOR_S:
         raise fail(f"{key}.for_s", f"expected a time in seconds > 0 and < {MAX_FOR_S:g}, "
-                   f"got {for_s!r}")
+                   f"got {shown(for_s)}")
     if when is not None and (not isinstance(when, str) or not when.strip()):
         raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P1 "
-                   f"WAIT_COND\", got {when!r}")
+                   f"WAIT_COND\", got {shown(when)}")
     if "after" in table and when is None:
         raise fail(f"{key}.after", "only with 'when'")
     params = [] if clear or kind is None else fault_params(kind, table, key, fail)
@@ -240,10 +267,10 @@ def fault_input(kind: object, params: Mapping[str, Any], for_s: object,
     plant's check, and a record's reader before a replay: what needs no cell): its
     parameters, checked and with their defaults; ``refuse(message)`` the error otherwise."""
     if not isinstance(kind, str) or kind not in FAULT_KEYS:
-        raise refuse(f"fault kind {kind!r}: one of {', '.join(FAULT_KEYS)}")
+        raise refuse(f"fault kind {shown(kind)}: one of {', '.join(FAULT_KEYS)}")
     if for_s is not None and (isinstance(for_s, bool) or not isinstance(
             for_s, int | float) or not 0 < for_s < MAX_FOR_S):
-        raise refuse(f"for_s: a time in seconds > 0 and < {MAX_FOR_S:g}, not {for_s!r}")
+        raise refuse(f"for_s: a time in seconds > 0 and < {MAX_FOR_S:g}, not {shown(for_s)}")
     unknown = sorted(set(params) - set(FAULT_KEYS[kind]))
     if unknown:
         raise refuse(f"a {kind} fault takes {', '.join(FAULT_KEYS[kind]) or 'no parameter'}, "
@@ -264,7 +291,7 @@ def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
             if v is None:
                 raise fail(where, "missing (the value the variable is stuck at)")
             if isinstance(v, bool) or not isinstance(v, int):
-                raise fail(where, f"expected a whole number, got {v!r}")
+                raise fail(where, f"expected a whole number, got {shown(v)}")
         elif name in ("period_ms", "factor", "ms"):
             default = {"period_ms": 100.0, "factor": 2.0, "ms": 100.0}[name]
             # A slow fault's factor is 1 or more: below 1 it sped a model up, and shrank a
@@ -275,31 +302,31 @@ def fault_params(kind: str, table: Mapping[str, Any], key: str, fail: Fail
             v = default if v is None else v
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
                     or v <= 0 or not low <= v <= high:
-                raise fail(where, f"expected a number > 0 and <= {high:g}, got {v!r}"
-                           if not low else f"expected {low:g}..{high:g}, got {v!r}")
+                raise fail(where, f"expected a number > 0 and <= {high:g}, got {shown(v)}"
+                           if not low else f"expected {low:g}..{high:g}, got {shown(v)}")
             v = float(v)
         elif name == "live_zero":
             v = 0 if v is None else v
             if isinstance(v, bool) or not isinstance(v, int):
-                raise fail(where, f"expected a whole number, got {v!r}")
+                raise fail(where, f"expected a whole number, got {shown(v)}")
         elif name == "code":
             default = 6 if kind == "exception" else 0x1000
             v = default if v is None else v
             hi = 255 if kind == "exception" else 0xFFFF
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= hi:
-                raise fail(where, f"expected a code 1..{hi}, got {v!r}")
+                raise fail(where, f"expected a code 1..{hi}, got {shown(v)}")
         elif name == "unit":
             if v is None:
                 continue
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:
-                raise fail(where, f"expected a unit id 0..255, got {v!r}")
+                raise fail(where, f"expected a unit id 0..255, got {shown(v)}")
         elif name == "addresses":
             if v is None:
                 continue
             if (not isinstance(v, list | tuple) or len(v) != 2
                     or any(isinstance(a, bool) or not isinstance(a, int) or not 0 <= a <= 65535
                            for a in v) or v[0] > v[1]):
-                raise fail(where, f"expected [first, last] protocol addresses, got {v!r}")
+                raise fail(where, f"expected [first, last] protocol addresses, got {shown(v)}")
             v = (v[0], v[1])
         out[name] = v
     return sorted(out.items())

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from ncgate.config.plant import FaultConfig, read_fault
+from ncgate.config.plant import FaultConfig, read_fault, shown
 from ncgate.config.reader import read_toml
 from ncgate.config.schema import ConfigError
 
@@ -112,7 +112,7 @@ def load_script(path: str | Path | None) -> Script:
     named: dict[str, str] = {}
     for expect in found:  # a verdict line is known by its name
         if expect.name in named:
-            raise fail(f"{expect.key}.name", f"{expect.name!r} is {named[expect.name]}'s name "
+            raise fail(f"{expect.key}.name", f"{shown(expect.name)} is {named[expect.name]}'s name "
                        "too: each expectation's verdict is told by its name")
         named[expect.name] = expect.key
     for entry in entries:  # a script fault's end is where the scenario runs to
@@ -154,14 +154,14 @@ def _expect(table: Any, key: str, fail: Any) -> Expect:
             raise fail(f"{key}.{name}", "unknown key (name, cond, within, by, always)")
     name, cond = table.get("name", key), table.get("cond")
     if not isinstance(name, str) or not name.strip():
-        raise fail(f"{key}.name", f"expected a name, got {name!r}")
+        raise fail(f"{key}.name", f"expected a name, got {shown(name)}")
     if not name.isprintable():
         # A newline forged a verdict line of its own on the console, and a control character
         # made --junit's XML unreadable (XML 1.0 has no way to write one).
-        raise fail(f"{key}.name", f"a name is one line of printable characters, got {name!r}")
+        raise fail(f"{key}.name", f"a name is one line of printable characters, got {shown(name)}")
     if not isinstance(cond, str) or not cond.strip():
         raise fail(f"{key}.cond", "expected a condition such as \"SA30=1\", \"P1 IDLE\", "
-                   f"\"alarm AL145\", \"alarm\" or \"no alarm\"; got {cond!r}")
+                   f"\"alarm AL145\", \"alarm\" or \"no alarm\"; got {shown(cond)}")
     given = [k for k in ("within", "by", "always") if k in table]
     if len(given) != 1:
         raise fail(key, "give exactly one of within = [from, to], by = T and always = true")
@@ -171,13 +171,13 @@ def _expect(table: Any, key: str, fail: Any) -> Expect:
         if (not isinstance(w, list) or len(w) != 2 or not all(_time(x) for x in w)
                 or w[0] > w[1]):
             raise fail(f"{key}.within", f"expected [from, to] in seconds, 0 <= from <= to <= "
-                       f"{MAX_SCENARIO_S:g} (a day), got {w!r}")
+                       f"{MAX_SCENARIO_S:g} (a day), got {shown(w)}")
         window = (float(w[0]), float(w[1]))
     elif "by" in table:
         b = table["by"]
         if not _time(b):
             raise fail(f"{key}.by", f"expected a time in seconds, 0 .. {MAX_SCENARIO_S:g} (a "
-                       f"day), got {b!r}")
+                       f"day), got {shown(b)}")
         window = (0.0, float(b))
     elif table["always"] is not True:
         raise fail(f"{key}.always", "expected true")
@@ -199,27 +199,28 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         raise fail(key, "give exactly one of 'at' and 'when'")
     if at is not None and not _time(at):
         raise fail(f"{key}.at", f"expected a time in seconds, 0 .. {MAX_SCENARIO_S:g} (a day), "
-                   f"got {at!r}")
+                   f"got {shown(at)}")
     if when is not None and (not isinstance(when, str) or not when.strip()):
         raise fail(f"{key}.when", f"expected a condition such as \"SA10=1\" or \"P3 WAIT_PROC\", "
-                   f"got {when!r}")
+                   f"got {shown(when)}")
     after = table.get("after", 0)
     if not _time(after):
         raise fail(f"{key}.after", f"expected a delay in seconds, 0 .. {MAX_SCENARIO_S:g} (a "
-                   f"day), got {after!r}")
+                   f"day), got {shown(after)}")
     if at is not None and "after" in table:
         raise fail(f"{key}.after", "only with 'when'")
     if section == "write":
         value = table.get("set")
         if not isinstance(value, str) or "=" not in value:
-            raise fail(f"{key}.set", f"expected an assignment such as \"SA10=1\", got {value!r}")
+            raise fail(f"{key}.set", "expected an assignment such as \"SA10=1\", got "
+                       f"{shown(value)}")
         return ScriptEntry(key, _f(at), when, float(after), set=value)
     if section == "override":
         values = {}
         for name in ("feed", "rapid", "process"):
             value = table.get(name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
-                raise fail(f"{key}.{name}", f"expected a whole number, got {value!r}")
+                raise fail(f"{key}.{name}", f"expected a whole number, got {shown(value)}")
             values[name] = value
         if values["feed"] is None and values["rapid"] is None:
             raise fail(key, "give feed, rapid or both (percent)")
@@ -229,25 +230,25 @@ def _entry(table: Any, key: str, section: str, fail: Any) -> ScriptEntry:
         point, on = table.get("point"), table.get("on", True)
         if not isinstance(point, str) or not point.strip():
             raise fail(f"{key}.point", f"expected a breakpoint such as \"PROG92:8\", \"N40\", "
-                       f"\"P2 wait\" or \"sync\", got {point!r}")
+                       f"\"P2 wait\" or \"sync\", got {shown(point)}")
         if not isinstance(on, bool):
-            raise fail(f"{key}.on", f"expected true (set) or false (clear), got {on!r}")
+            raise fail(f"{key}.on", f"expected true (set) or false (clear), got {shown(on)}")
         return ScriptEntry(key, _f(at), when, float(after), point=point, on=on)
     if section == "command":
         name = table.get("command")
         if not isinstance(name, str) or not name:
             raise fail(f"{key}.command", f"expected a command such as \"step\" or "
-                       f"\"cycle_start\", got {name!r}")
+                       f"\"cycle_start\", got {shown(name)}")
         process = table.get("process")
         if process is not None and (isinstance(process, bool) or not isinstance(process, int)
                                     or process < 1):
-            raise fail(f"{key}.process", f"expected a process number, got {process!r}")
+            raise fail(f"{key}.process", f"expected a process number, got {shown(process)}")
         return ScriptEntry(key, _f(at), when, float(after), command=name, process=process)
     ends = []
     for name in ("from", "to"):
         value = table.get(name)
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise fail(f"{key}.{name}", f"expected a process number, got {value!r}")
+            raise fail(f"{key}.{name}", f"expected a process number, got {shown(value)}")
         ends.append(value)
     return ScriptEntry(key, _f(at), when, float(after), sender=ends[0], target=ends[1])
 

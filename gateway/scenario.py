@@ -21,10 +21,10 @@ from __future__ import annotations
 import html
 import io
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TextIO
+from typing import Final, TextIO
 
 from ncgate.config import ConfigError
 from ncgate.config.script import Expect, Script
@@ -32,6 +32,7 @@ from ncgate.errors import InputRefused
 from ncgate.gateway.atomic import write_output
 from ncgate.gateway.wiring import Runtime, parse_condition
 from ncgate.inputs import Var
+from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.diagnostics import did_you_mean
 from ncgate.interpreter.dialects import comparison
 from ncgate.interpreter.engine import Process, ProcessState
@@ -50,6 +51,49 @@ def never_changes(image: IOImage, address: tuple[str, int, str], value: int) -> 
     except ImageValueError as exc:
         return f"{exc}: the condition could never change"
     return None
+
+
+def unknown_name(text: str, symbols: Iterable[str]) -> str | None:
+    """What to say of a condition (an expectation's ``cond``, an entry's ``when``) whose
+    left side is a word that names nothing: that it is no I/O name of ``[symbols]``, and the
+    closest that is; None when its left side is no such word."""
+    name = re.split(r"[=#<>]", text, maxsplit=1)[0].strip()
+    if not re.fullmatch(r"[A-Za-z_]\w*", name) or re.fullmatch(
+            r"(?i)(SA|SK|SYVAR|K)\d+", name):
+        return None
+    names = list(symbols)
+    if name.upper() in {n.upper() for n in names}:
+        return None
+    close = did_you_mean(name, names)
+    hint = f" (did you mean {close}?)" if close else ""
+    return (f"{name!r} is neither an image variable (SA30, SK4, SYVAR10) nor an I/O name "
+            f"of [symbols]{hint}")
+
+
+# Every alarm the trace can hold has one of these codes: the NC's, the PLC's (AL160) and
+# the fieldbus's (AL150) alike -- neither dialect has an alarm a program raises with a code
+# of its own, and the door refuses a fieldbus alarm of any other code.  A code outside them
+# is a typo whose "alarm" could never pass and whose "no alarm" could never fail.
+_ALARM_CODES: Final = frozenset(int(code) for code in AlarmCode)
+
+
+def _no_such_alarm(word: str) -> str:
+    """What to say of an alarm code no alarm has: the codes one digit away (one dropped,
+    added, changed or two swapped), as a typo makes them, when there are a few, and where
+    the codes are listed."""
+    digits = word.upper().removeprefix("AL")
+    near = {digits[:i] + digits[i + 1:] for i in range(len(digits))}
+    near |= {digits[:i] + digits[i + 1] + digits[i] + digits[i + 2:]
+             for i in range(len(digits) - 1)}
+    near |= {digits[:i] + d + digits[i + j:] for i in range(len(digits) + 1)
+             for d in "0123456789" for j in (0, 1)}
+    close = [code.label for code in AlarmCode if str(int(code)) in near - {digits}]
+    # (more than three is a guess in a crowd: the range says as much)
+    hint = ("" if not close or len(close) > 3 else f" (did you mean {close[0]}?)"
+            if len(close) == 1 else f" (did you mean {', '.join(close[:-1])} or {close[-1]}?)")
+    labels = [code.label for code in AlarmCode]
+    return (f"no alarm has the code AL{digits}{hint}: the alarms' codes are those "
+            f"docs/diagnostics.md lists, {labels[0]} .. {labels[-1]}")
 
 
 class ScenarioError(ConfigError):
@@ -132,6 +176,8 @@ class Expectations:
                     raise self._fail(expect, f"expected \"alarm\", \"alarm AL145\" or \"no "
                                      f"alarm\", got {text!r}")
                 code = int(number)
+                if code not in _ALARM_CODES:
+                    raise self._fail(expect, _no_such_alarm(rest[0]))
             return _Watch(expect, "no alarm" if negative else "alarm", holds=negative,
                           code=code)
         if len(words) == 2 and words[0][:1].upper() == "P" and words[0][1:].isdigit():
@@ -148,26 +194,12 @@ class Expectations:
             var = Var(area, index, view)
             self.runtime.image.read(area, index, view)
         except (ValueError, PlcError, InputRefused) as exc:
-            raise self._fail(expect, self._unknown_name(text) or str(exc)) from None
+            raise self._fail(expect, unknown_name(text, self.runtime.config.symbols)
+                             or str(exc)) from None
         never = never_changes(self.runtime.image, (area, index, view), value)
         if never is not None:
             raise self._fail(expect, never)
         return _Watch(expect, "var", var=var, test=comparison(op, value))
-
-    def _unknown_name(self, text: str) -> str | None:
-        """What to say of a condition whose left side is a word that names nothing: that it
-        is no I/O name of ``[symbols]``, and the closest that is."""
-        name = re.split(r"[=#<>]", text, maxsplit=1)[0].strip()
-        if not re.fullmatch(r"[A-Za-z_]\w*", name) or re.fullmatch(
-                r"(?i)(SA|SK|SYVAR|K)\d+", name):
-            return None
-        names = list(self.runtime.config.symbols)
-        if name.upper() in {n.upper() for n in names}:
-            return None
-        close = did_you_mean(name, names)
-        hint = f" (did you mean {close}?)" if close else ""
-        return (f"{name!r} is neither an image variable (SA30, SK4, SYVAR10) nor an I/O name "
-                f"of [symbols]{hint}")
 
     def start(self, t0: float | None = None) -> None:
         """Watch from now on: each condition as it is now, then every change.  ``t0``: the

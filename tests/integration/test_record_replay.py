@@ -346,7 +346,7 @@ MALFORMED = [
     # A fault no plant takes, whatever the cell (a hostile try's hand edits: each replayed
     # as a divergence "560 ms apart", the refusal only a hazard in the replay's trace).
     ({"input": "fault", **GOOD, "target": "clamp", "kind": "melt", "params": {}},
-     "fault kind 'melt': one of stuck, wire_break"),
+     'fault kind "melt": one of stuck, wire_break'),
     ({"input": "fault", **GOOD, "target": "SA30", "kind": "stuck", "params": {"value": 1,
                                                                           "ms": 3}},
      "a stuck fault takes value, not ms"),

@@ -52,7 +52,7 @@ to = 3
          "expect[0].within: expected [from, to] in seconds, 0 <= from <= to <= 86400"),
         ("[[expect]]\nname = \"a\"\ncond = \"SA1=1\"\nby = 1\n"
          "[[expect]]\nname = \"a\"\ncond = \"SA2=1\"\nby = 2",
-         "expect[1].name: 'a' is expect[0]'s name too"),
+         'expect[1].name: "a" is expect[0]\'s name too'),
         ("[[fault]]\ntarget = \"SA1\"\nkind = \"stuck\"\nvalue = 1\nat = 10\n"
          "for_s = 100000", "fault[0].for_s: ends at 100010 s, past 86400 s"),
         ("[[write]]\nat = 1\nset = \"SA1\"", "write[0].set: expected an assignment"),
