@@ -28,7 +28,7 @@ from ncgate.gateway.plc import (
     start_plc,
     warn_shared_writes,
 )
-from ncgate.gateway.scenario import Expectations, Verdict, never_changes
+from ncgate.gateway.scenario import Expectations, Verdict, never_changes, unknown_name
 from ncgate.gateway.wiring import (
     ImageVar,
     Runtime,
@@ -194,7 +194,8 @@ class ScriptPlayer:
             var, op, value = parse_condition(self.runtime.resolve(text))
             self.runtime.image.read(*var)
         except (ValueError, PlcError) as exc:
-            raise self._fail(entry, "when", str(exc)) from None
+            raise self._fail(entry, "when", unknown_name(text, self.runtime.config.symbols)
+                             or str(exc)) from None
         never = never_changes(self.runtime.image, var, value)
         if never is not None:
             raise self._fail(entry, "when", never)

@@ -113,3 +113,20 @@ def test_an_alarm_that_exists_is_taken(cell: Path, tmp_path: Path) -> None:
     path.write_text('[[expect]]\nname = "x"\ncond = "no alarm AL145"\nby = 0.1\n'
                     '[[expect]]\nname = "y"\ncond = "alarm al160"\nby = 0.1\n')
     assert main(["sim", "--config", str(cell), "--script", str(path), "O1"]) == 1
+
+@pytest.mark.parametrize(
+    ("section", "when", "message"),
+    [
+        ("write", "nosuch=1", "write[0].when: 'nosuch' is neither an image variable (SA30, SK4, "
+         "SYVAR10) nor an I/O name of [symbols]"),
+        ("write", "clamp_vlave=1", "write[0].when: 'clamp_vlave' is neither an image variable "
+         "(SA30, SK4, SYVAR10) nor an I/O name of [symbols] (did you mean clamp_valve?)"),
+        ("fault", "clamp_vlave=1", "fault[0].when: 'clamp_vlave' is neither"),
+    ],
+)
+def test_a_when_on_a_name_that_names_nothing_says_i_o_names_are_taken_too(
+        cell: Path, capsys: pytest.CaptureFixture[str], section: str, when: str,
+        message: str) -> None:
+    body = 'set = "SA20=1"' if section == "write" else 'target = "clamp"\nkind = "never"'
+    err = sim_error(cell, f'[[{section}]]\nwhen = "{when}"\n{body}\n', capsys)
+    assert f"s.toml: {message}" in err, err
