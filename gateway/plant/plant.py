@@ -82,6 +82,17 @@ class ActiveFault:
         return self.kind
 
 
+def _grid_index(t: float, period: float, side: Callable[[float], int]) -> int:
+    """The index of the grid point (every ``period`` from 0) that ``t`` is on, within a
+    nanosecond (or the float's own step, far out); else of the one ``side`` (math.floor:
+    before, math.ceil: after) of it.  (An epsilon added to ``t / period`` is lost in the
+    float far out -- a 1 ms tick at 32,769 s -- and a tick due at k * period found its next
+    at k again, for ever: the clock stood still.)"""
+    x = t / period
+    k = round(x)
+    return k if abs(t - k * period) <= 1e-9 + abs(t) * 1e-15 else side(x)
+
+
 class Plant:
     """The models of ``[[plant.model]]`` and the faults in force, on one runtime."""
 
@@ -286,9 +297,9 @@ class Plant:
         stretch the budget asks for in run), or the first at or after ``quiet``, when every
         model sampled writes nothing new before then (Model.quiet_until)."""
         period = self.scan_s * self.stretch
-        k = math.floor(after / period + 1e-9) + 1
+        k = _grid_index(after, period, math.floor) + 1
         if quiet is not None and quiet > k * period:
-            k = math.ceil(quiet / period - 1e-9)
+            k = _grid_index(quiet, period, math.ceil)
         return k * period
 
     def _arm_tick(self, after: float, quiet: float | None = None) -> None:

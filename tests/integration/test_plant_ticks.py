@@ -9,6 +9,7 @@ The expected values and times are worked out here from the lag's documented law,
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 from typing import Any
@@ -95,3 +96,23 @@ def test_a_scan_at_a_ticks_instant_reads_what_the_tick_sampled(tmp_path: Path) -
     assert rise and math.isclose(rise[0], tick, abs_tol=1e-9), (rise[:1], tick)
     first = next(t for t, v in _writes(events, "SYVAR2") if v >= 500)
     assert math.isclose(first, tick, abs_tol=1e-9)
+
+
+def test_the_ticks_go_on_far_out_in_machine_time(tmp_path: Path) -> None:
+    # 32,769 s in: 1 ms ticks at t / period ~ 3.3e7, where an epsilon added to it is lost in
+    # the float; a tick due at k * period found its next at k again, for ever, and the clock
+    # stood still (a shift's run at time_scale 10 gets there in under an hour).
+    (tmp_path / "O1.nc").write_text("N10 (DLY,0.1)\nN20 M30\n")
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\n[plant]\nscan_ms = 1\n[[plant.model]]\n'
+        'name = "spindle"\nkind = "motor"\nrun = "SA1"\nspeed = "SYVAR2"\nrated_rpm = 6000\n'
+        'ramp_rpm_s = 12000\n')
+    (tmp_path / "s.toml").write_text('[[write]]\nat = 32769.39\nset = "SA1=1"\n')
+    result = run_sim(load_config(tmp_path / "ncgate.toml"), "O1",
+                     load_script(tmp_path / "s.toml"), 32769.5)
+    speeds = [(t, v) for t, v in _writes(result.events, "SYVAR2") if t > 32769.0]
+    # Run up at 12,000 rpm/s from 32,769.39 s, sampled every 1 ms: 12 rpm a tick, each tick
+    # once, to 1,320 rpm at 32,769.5 (0.11 s of it).
+    assert speeds[:3] == [(32769.391, 12), (32769.392, 24), (32769.393, 36)], speeds[:3]
+    assert all(round(b[0] - a[0], 6) == 0.001 for a, b in itertools.pairwise(speeds))
+    assert speeds[-1] == (32769.5, 1320)
