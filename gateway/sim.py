@@ -224,8 +224,8 @@ class ScriptPlayer:
         scenario's t = 0) acts as the scenario starts, before any scan sees the program
         run, as in a replay: a plain timer of now, armed before the PLC's first scan
         (``run_sim`` arms the player before it starts the PLC), which fires once what the
-        start made runnable has run.  ``first`` (``run --script``, armed by the early timer
-        that starts the program at a scan's instant): an early timer, applied first
+        start made runnable has run.  ``first`` (``run --script``, armed by the timer that
+        starts the program at a scan's instant): a *first* timer, applied first
         (``Door.apply_first``), so that it acts before that scan -- as its record's replay
         applies it."""
         engine = self.runtime.engine
@@ -235,7 +235,7 @@ class ScriptPlayer:
                 self.due += 1
                 now = entry.at <= engine.now
                 engine.call_at(entry.at, functools.partial(self._fire, entry, first and now),
-                               late=not now, early=first and now)
+                               late=not now, first=first and now)
                 continue
             trigger = self._parse_when(entry)
             if isinstance(trigger, StateTrigger):
@@ -266,7 +266,7 @@ class ScriptPlayer:
         engine = self.runtime.engine
         self.due += 1
         engine.call_at(engine.now + entry.after, functools.partial(self._fire, entry, first),
-                       late=late, early=first)
+                       late=late, first=first)
 
     def _write(self, entry: ScriptEntry) -> Write:
         """The entry's ``set`` as an input, checked against the image (not applied)."""

@@ -38,13 +38,21 @@ from ncgate.interpreter.engine.states import WaitKind, describe_where
 log = logging.getLogger("ncgate")
 
 
+GRID_WAIT_MS = 1000  # the longest shared period a scenario's start waits for (machine ms)
+
+
 def scan_grid_s(config: Config) -> float | None:
     """The period (machine seconds) on whose multiples every scan of the cell falls: the PLC
     logic's, the plant's (its ticks and its logic), both (their least common multiple); None
     when nothing scans."""
     periods = ([config.plc.scan_ms] if config.plc.logic else []) + (
         [config.plant.scan_ms] if config.plant.model or config.plant.logic else [])
-    return math.lcm(*periods) / 1000.0 if periods else None
+    if not periods:
+        return None
+    shared = math.lcm(*periods)
+    # Periods that share an instant only now and then (97 and 100 ms: every 9.7 s) would keep
+    # the scenario waiting: the PLC's grid alone then, its reactions being what a window sees.
+    return (shared if shared <= GRID_WAIT_MS else periods[0]) / 1000.0
 
 
 def _on(on: object) -> str:
@@ -254,6 +262,7 @@ class _Scenario:
         self.expectations = Expectations(gw.runtime, script)
         self.horizon = script.horizon if script.expects else None
         self.reached = False
+        self.started = False  # (a stop while it waited for its instant: it never started)
         self._end: Any = None
 
     async def start(self) -> None:
@@ -274,10 +283,11 @@ class _Scenario:
         begun: asyncio.Future[float] = asyncio.get_running_loop().create_future()
 
         def begin() -> None:
-            """At a scan's instant, before its scan (an early timer), as sim's t = 0: the
-            programs start, the expectations watch from there, and the entries due at 0
-            act -- each first at the instant, after what the one before made runnable."""
-            if begun.done():  # (the gateway stopped meanwhile)
+            """At a scan's instant, after the plant's tick and before the scan (a *first*
+            timer), as sim's t = 0: the programs start, the expectations watch from there,
+            and the entries due at 0 act -- each first at the instant, after what the one
+            before made runnable."""
+            if begun.done():  # (stopped meanwhile: cancelled)
                 return
             try:
                 for number in starts:
@@ -296,12 +306,25 @@ class _Scenario:
         # The scenario's 0 is the next instant the cell's scans share (sim's 0 is one), so
         # that each PLC reaction comes the scans after it that it comes in sim: started
         # between two scans, a reaction came 0..10 ms later than sim's, and a window sim
-        # passed at its edge failed.
+        # passed at its edge failed.  A stop meanwhile (Ctrl-C, SIGTERM) starts nothing.
         grid = scan_grid_s(runtime.config)
         now = engine.read_time()
-        at = now if grid is None else (math.floor(now / grid + 1e-9) + 1) * grid
-        engine.call_at(at, begin, early=True)
-        t0 = await begun
+        at = now if grid is None else (math.floor(round(now / grid, 6)) + 1) * grid
+        timer = engine.call_at(at, begin, first=True)
+        log.info("scenario %s: starts at %.3f s of machine time, the next instant its scans "
+                 "share", script.file, at)
+        stopped = asyncio.ensure_future(self.stop.wait())
+        try:
+            await asyncio.wait((begun, stopped), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            stopped.cancel()
+        if not begun.done():
+            timer.cancel()
+            begun.cancel()
+            log.info("scenario %s: stopped before its start", script.file)
+            return
+        t0 = begun.result()
+        self.started = True
         where = f"P{starts[0]} {main}" if len(starts) == 1 else f"{main} in " + ", ".join(
             f"P{n}" for n in starts)
         log.info("scenario %s: %d expectations; %s started at %.3f s of machine time, the "
@@ -320,6 +343,8 @@ class _Scenario:
     def finish(self) -> int:
         if self._end is not None:
             self._end.cancel()
+        if not self.started:  # judged over nothing: each window "not reached", at t = 0
+            self.expectations.start()
         self.expectations.stop()
         # Judged up to the scenario's end when the run got there (the loop may take a moment
         # more to stop), else up to where it was stopped.

@@ -533,9 +533,11 @@ class Engine:
         return self._unfinished
 
     def fire_early(self, t: float) -> None:
-        """Fire the timers due before ``t`` and the early ones at ``t``, each followed by what
+        """Fire the timers due before ``t`` and the early ones at ``t`` (the plant's tick, not
+        the *first* ones, which the replay's inputs stand for), each followed by what
         it made runnable, and not the others of ``t`` (a replay's input applied first at
-        ``t``: ``record.replay``)."""
+        ``t``: ``record.replay``).  (The body of advance_to's loop, which keeps it inline:
+        every timer of a simulation passes there, a replay's few inputs here.)"""
         while (timer := self._timers.pop_early(t)) is not None:
             callback = timer.callback
             assert callback is not None
@@ -546,14 +548,15 @@ class Engine:
             self.run_until_blocked()
 
     def call_at(self, t: float, callback: Callable[[], None], late: bool = False,
-                early: bool = False) -> Timer:
+                early: bool = False, first: bool = False) -> Timer:
         """Run ``callback`` when the clock reaches ``t`` (scripts, PLC logic), or at once if
         it has; ``late``: after every other timer of that time (a script's entry:
-        ``TimerHeap.push``); ``early``: before every other (the plant's tick).  The timer's
+        ``TimerHeap.push``); ``early``: before every other (the plant's tick); ``first``:
+        after the early ones, before the rest (``run --script``'s start).  The timer's
         time is ``t`` on the nanosecond grid (``due_time``), so an instant worked out two ways
         is one time, its timers in the order armed."""
         now = self.now  # (the heap snaps it: due_time, the time a leap works out)
-        return self._arm(t if t > now else now, callback, late, early)
+        return self._arm(t if t > now else now, callback, late, early, first)
 
     def set_time(self, t: float) -> None:
         """The wall-clock driver tells the engine what time it is before outside events."""
@@ -795,8 +798,8 @@ class Engine:
         return self._arm(self.now + delay, callback)
 
     def _arm(self, t: float, callback: Callable[[], None], late: bool = False,
-             early: bool = False) -> Timer:
-        timer = self._timers.push(t, callback, late, early)
+             early: bool = False, first: bool = False) -> Timer:
+        timer = self._timers.push(t, callback, late, early, first)
         if self.on_timer is not None:
             self.on_timer(timer.time)  # (on the grid: the time it fires at)
         return timer

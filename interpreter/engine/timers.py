@@ -49,8 +49,11 @@ class Timer:
 
 # Added to a late timer's order: past any count of timers ever armed, so that a late timer
 # comes after every other timer of its time, and the late ones among themselves in arm order;
-# taken from an early timer's, which comes before every other timer of its time.
+# taken from an early timer's, which comes before every other timer of its time.  A *first*
+# timer's order less FIRST puts it after the early ones and before the rest: an input applied
+# first at its instant (run --script's start), after the plant's tick of that instant.
 LATE = 1 << 62
+FIRST = 1 << 61
 
 
 class TimerHeap:
@@ -59,10 +62,11 @@ class TimerHeap:
         self._order = itertools.count()  # equal times fire in the order they were armed
 
     def push(self, t: float, callback: Callable[[], None], late: bool = False,
-             early: bool = False) -> Timer:
+             early: bool = False, first: bool = False) -> Timer:
         """Arm ``callback`` at ``t`` (on the grid: :func:`snapped`); ``late``: after every
         other timer of that time; ``early``: before every other (the plant's tick, which
-        samples what moves before anything else of its instant reads it)."""
+        samples what moves before anything else of its instant reads it); ``first``: after
+        the early ones, before the others (an input applied first: ``Door.apply_first``)."""
         t = round(t * NS_PER_S) / NS_PER_S  # (snapped, inline: every timer comes here)
         timer = Timer(t, callback)
         order = next(self._order)
@@ -70,6 +74,8 @@ class TimerHeap:
             order += LATE
         elif early:
             order -= LATE
+        elif first:
+            order -= FIRST
         heapq.heappush(self._heap, (t, order, timer))
         return timer
 
@@ -88,7 +94,7 @@ class TimerHeap:
         """The next live timer due before ``t``, or early at ``t`` (taken off the heap), or
         None: what fires before an input applied first at ``t`` (a replay)."""
         heap = self._heap
-        while heap and (heap[0][0] < t or (heap[0][0] == t and heap[0][1] < 0)):
+        while heap and (heap[0][0] < t or (heap[0][0] == t and heap[0][1] < -FIRST)):
             _, _, timer = heapq.heappop(heap)
             if timer.callback is not None:
                 return timer

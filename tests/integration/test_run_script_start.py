@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import asyncio
 import re
+import signal
 from pathlib import Path
 
 import pytest
 
 from ncgate.gateway.cli.main import main
 
-from .test_cli_run import start_run
+from .test_cli_run import start_run, stop_run
 
 CELL = """[nc]
 processes = 2
@@ -143,3 +144,52 @@ async def test_a_plc_reaction_lands_on_the_scan_it_lands_on_in_sim(
         # inputs are, the PLC's reactions came a scan later).
         assert main(["sim", "--replay", str(tmp_path / "r.jsonl"), "--tolerance-ms",
                      "0"]) == 0, capsys.readouterr().out
+
+
+async def test_the_start_comes_after_the_plants_tick_of_its_instant_in_run_and_replay(
+        tmp_path: Path) -> None:
+    # The scans share an instant every 20 ms (PLC 5 ms, plant 4 ms); the start at one comes
+    # after the plant's tick of it (the sample first at its instant) and before the scan, in
+    # the session and in its replay alike.  Armed before the tick, the start came first live
+    # and after the tick in the replay: the program's first WAI read another ramp value and
+    # the replay diverged, 6 runs of 6.
+    (tmp_path / "ncgate.toml").write_text(
+        '[nc]\nprocesses = 1\nmain = "O1"\nlookahead = 0\n[nc.storage]\nMP0 = "."\n'
+        '[plc]\nlogic = "plc.st"\nscan_ms = 5\n[plant]\nscan_ms = 4\n[[plant.model]]\n'
+        'name = "ramp"\nkind = "generator"\nshape = "ramp"\noutput = "SYVAR2"\n'
+        'period_ms = 20\nlow = 0\nhigh = 1000\n'
+        '[modbus]\nport = 0\n[canopen]\nenabled = false\n[web]\nenabled = false\n')
+    (tmp_path / "plc.st").write_text("PROGRAM main\nSA[1] := TRUE;\nEND_PROGRAM\n")
+    (tmp_path / "O1.nc").write_text("N10 (WAI,SYVAR2<100)\nN20 (DLY,0.05)\nN30 M30\n")
+    (tmp_path / "scenario.toml").write_text(
+        '[[expect]]\nname = "ends"\ncond = "P1 IDLE"\nwithin = [0, 0.5]\n')
+    for i in range(3):
+        record = tmp_path / f"r{i}.jsonl"
+        code, log = await _run_script(tmp_path, "--record", str(record))
+        assert code == 0, log
+        assert main(["sim", "--replay", str(record), "--tolerance-ms", "0"]) == 0
+
+
+async def test_a_stop_while_the_scenario_waits_for_its_instant_starts_nothing(
+        tmp_path: Path) -> None:
+    # At a time scale of 0.0002 the next scan's instant is up to 50 s of the wall clock away;
+    # Ctrl-C meanwhile stops the gateway at once, and the program never starts (it waited,
+    # deaf to the signal, and then started the part program on a stopping gateway).
+    (tmp_path / "ncgate.toml").write_text(PLC_CELL.replace(
+        '[nc]\n', '[nc]\ntime_scale = 0.0002\n'))
+    (tmp_path / "O1.nc").write_text("N10 (DLY,0.1)\nN20 M30\n")
+    (tmp_path / "plc.st").write_text("PROGRAM main\nSA[20] := FALSE;\nEND_PROGRAM\n")
+    (tmp_path / "scenario.toml").write_text(
+        '[[expect]]\nname = "ends"\ncond = "P1 IDLE"\nwithin = [0.1, 0.2]\n')
+    proc, _, lines = await start_run(tmp_path / "ncgate.toml", "--script",
+                                     str(tmp_path / "scenario.toml"))
+    assert proc.stdout is not None
+    async with asyncio.timeout(20):
+        while "the next instant its scans share" not in lines[-1]:
+            line = (await proc.stdout.readline()).decode()
+            assert line, "".join(lines)
+            lines.append(line)
+    code, log = await stop_run(proc, lines, signal.SIGINT, timeout_s=10.0)
+    assert "stopped before its start" in log, log
+    assert "starts O1" not in log, log
+    assert code == 1 and "FAIL ends: not reached" in log, log

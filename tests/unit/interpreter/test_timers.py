@@ -111,3 +111,21 @@ def test_early_timers_fire_before_every_other_timer_of_their_time_in_arm_order()
     heap.push(2.0, lambda: fired.append("tick 2"), early=True)
     fire_all(heap, 2.0)
     assert fired == ["plain before", "tick", "tick 2", "scan", "entry"]
+
+
+def test_first_timers_come_after_the_early_ones_and_before_the_rest() -> None:
+    """run --script's start at a scan's instant: after the plant's tick of that instant,
+    however long before the tick it was armed, and before the scan; pop_early (a replay,
+    applying the recorded start first) takes the early ones only."""
+    heap = TimerHeap()
+    fired: list[str] = []
+    heap.push(2.0, lambda: fired.append("start"), first=True)
+    heap.push(2.0, lambda: fired.append("scan"))
+    heap.push(2.0, lambda: fired.append("tick"), early=True)
+    heap.push(2.0, lambda: fired.append("entry at 0"), first=True)
+    while (timer := heap.pop_early(2.0)) is not None:
+        assert timer.callback is not None
+        timer.callback()
+    assert fired == ["tick"]
+    fire_all(heap, 2.0)
+    assert fired == ["tick", "start", "entry at 0", "scan"]
