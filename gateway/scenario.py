@@ -42,6 +42,17 @@ from ncgate.interpreter.engine.timers import Timer
 from ncgate.plc.image import Change, ImageValueError, IOImage, PlcError
 
 
+def seconds(t: float) -> str:
+    """A time as the verdicts print it: to the millisecond, or with the digits it was given
+    when they are finer, up to the microsecond (``--until 3.3999`` is 3.3999, not 3.400
+    beside a window that ends at 3.4; a wall clock's 4.5193847 is 4.519)."""
+    shown = f"{t:.3f}"
+    if abs(t - float(shown)) < 1e-9:
+        return shown
+    fine = f"{t:.6f}".rstrip("0")
+    return fine if abs(t - float(fine)) < 1e-9 else shown
+
+
 def never_changes(image: IOImage, address: tuple[str, int, str], value: int) -> str | None:
     """Why a condition comparing the variable at ``address`` with ``value`` could never
     change -- a value the variable cannot hold: ``SA40=2`` never holds, ``SA40#2`` never
@@ -322,7 +333,7 @@ class Expectations:
         # A window the run ended inside is judged on what was seen of it: a moment it held
         # passes, but the moment it would have held after the end is not there to be seen.
         closed = end + EPS >= b
-        short = (f"not reached: the run ended at {end:.3f} s, before the window {window} "
+        short = (f"not reached: the run ended at {seconds(end)} s, before the window {window} "
                  + ("opened" if end + EPS < a else "closed"))
         if w.kind in ("alarm", "no alarm"):
             inside = [(t, text) for t, text in w.alarms if a - EPS <= t <= min(b, end) + EPS]
@@ -350,8 +361,8 @@ class Expectations:
                                + self._now(w, broken[0]))
             if not self._whole(end):
                 return self._v(e, False, self._unfinished(end) + f" ({cond} held from 0.000 "
-                               f"to {end:.3f} s)")
-            return self._v(e, True, f"{cond} held from 0.000 to {end:.3f} s")
+                               f"to {seconds(end)} s)")
+            return self._v(e, True, f"{cond} held from 0.000 to {seconds(end)} s")
         if end + EPS < a:
             return self._v(e, False, short)
         holds_at_a = changes[0][1]
@@ -374,8 +385,9 @@ class Expectations:
         return horizon is None or end + EPS >= horizon
 
     def _unfinished(self, end: float) -> str:
-        return (f"not reached: the run ended at {end:.3f} s, before the scenario's end at "
-                f"{self.horizon:.3f} s")
+        assert self.horizon is not None  # (said only when the run ended before it: _whole)
+        return (f"not reached: the run ended at {seconds(end)} s, before the scenario's end at "
+                f"{seconds(self.horizon)} s")
 
     @staticmethod
     def _at(w: _Watch, t: float) -> tuple[float, int | str, str | None]:
@@ -394,9 +406,9 @@ class Expectations:
             note = w.note
             if note is None and self.runtime.plant is not None and t + EPS >= self.now:
                 note = self.runtime.plant.explain(w.var.address)  # (what it does now)
-            return f"{w.var} still {value} at {t:.3f} s{by}" + (f"; {note}" if note else "")
+            return f"{w.var} still {value} at {seconds(t)} s{by}" + (f"; {note}" if note else "")
         wanted = w.state.name if w.state is not None else "?"
-        return f"P{w.process} {value}, not {wanted}, at {t:.3f} s (since {when:.3f} s)"
+        return f"P{w.process} {value}, not {wanted}, at {seconds(t)} s (since {when:.3f} s)"
 
     def _now(self, w: _Watch, t: float) -> str:
         """How it stood when it stopped holding (``t``)."""

@@ -28,7 +28,13 @@ from ncgate.gateway.plc import (
     start_plc,
     warn_shared_writes,
 )
-from ncgate.gateway.scenario import Expectations, Verdict, never_changes, unknown_name
+from ncgate.gateway.scenario import (
+    Expectations,
+    Verdict,
+    never_changes,
+    seconds,
+    unknown_name,
+)
 from ncgate.gateway.wiring import (
     ImageVar,
     Runtime,
@@ -579,7 +585,7 @@ def report(result: SimResult, out: TextIO) -> None:
                "interrupted": f"interrupted ({result.interrupted_by})"}[result.outcome]
     if alarms and result.outcome != "alarm":
         verdict += f", {alarms} alarm{'s' if alarms > 1 else ''}"
-    out.write(f"simulated {engine.now:.3f} s: {verdict}\n")
+    out.write(f"simulated {seconds(engine.now)} s: {verdict}\n")
     for v in result.verdicts:
         out.write(v.line() + "\n")
 

@@ -193,3 +193,23 @@ async def test_a_stop_while_the_scenario_waits_for_its_instant_starts_nothing(
     assert "stopped before its start" in log, log
     assert "starts O1" not in log, log
     assert code == 1 and "FAIL ends: not reached" in log, log
+
+
+def test_an_until_finer_than_a_millisecond_is_printed_as_given(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # `--until 0.15999` printed as 0.160: "the run ended at 0.160 s, before the window
+    # [0.1, 0.2] s closed" read as if the run had gone past 0.16.
+    (tmp_path / "ncgate.toml").write_text('[nc]\nmain = "O1"\n[nc.storage]\nMP0 = "."\n')
+    (tmp_path / "O1.nc").write_text("N10 (DLY,0.5)\nN20 M30\n")
+    (tmp_path / "s.toml").write_text(
+        '[[expect]]\nname = "w"\ncond = "P1 IDLE"\nwithin = [0.1, 0.2]\n')
+    args = ["sim", "--config", str(tmp_path / "ncgate.toml"), "--script",
+            str(tmp_path / "s.toml"), "--until"]
+    capsys.readouterr()
+    assert main([*args, "0.15999"]) == 1
+    out = capsys.readouterr().out
+    assert "simulated 0.15999 s: stopped at --until" in out, out
+    assert "the run ended at 0.15999 s, before the window [0.1, 0.2] s closed" in out, out
+    assert "P1 DWELL, not IDLE, at 0.15999 s" in out, out
+    assert main([*args, "0.15"]) == 1  # a millisecond's time as ever
+    assert "the run ended at 0.150 s" in capsys.readouterr().out
