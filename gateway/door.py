@@ -188,10 +188,10 @@ class Door:
             self._sync = sync
 
     def apply_first(self, item: Input) -> None:
-        """:meth:`apply_on_time` from an *early* engine timer, before the other timers of its
-        instant (a PLC scan of it): ``run --script``'s start at a scan's instant, as ``sim``
-        starts before its first scan.  The record says so, and its replay applies it before
-        that instant's timers, where it applies other inputs after them."""
+        """:meth:`apply_on_time` from a *first* engine timer, after the plant's tick of its
+        instant and before its other timers (a PLC scan of it): ``run --script``'s start at a
+        scan's instant, as ``sim`` starts before its first scan.  The record says so, and its
+        replay applies it there, where it applies other inputs after that instant's timers."""
         self._first = True
         try:
             self.apply_on_time(item)

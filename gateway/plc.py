@@ -50,7 +50,7 @@ from ncgate.interpreter.codes import AlarmCode
 from ncgate.interpreter.engine import Engine, ProcessState
 from ncgate.interpreter.engine.events import PlcReload
 from ncgate.interpreter.engine.states import WAITING_STATES
-from ncgate.interpreter.engine.timers import NS_PER_S, Timer, due_time
+from ncgate.interpreter.engine.timers import NS_PER_S, Timer, due_time, grid_index
 from ncgate.plc.retain import RetainStore, default_path
 from ncgate.plc.scan import NcSnapshot, PlcRuntime, PlcState, PlcStatus
 from ncgate.plc.st.diagnostics import LogicError, StCode, StDiagnostic
@@ -637,7 +637,7 @@ class ScanDriver:
                 # of their grid (t0 + k * period, t0 the time the PLC started) at or before
                 # now, not from now itself, so that they stay on the grid a replay of the
                 # session scans on (``sim --replay``, which cannot know how late that was).
-                self.k = max(0, math.floor((now - self.t0) / period + 1e-9))
+                self.k = max(0, grid_index(now - self.t0, period, math.floor))
                 if self.k and self.on_skip is not None:
                     self.on_skip(0, self.k)
                 lateness = 0

@@ -34,6 +34,7 @@ from ncgate.interpreter.diagnostics import fmt_number
 from ncgate.interpreter.engine import events as ev
 from ncgate.interpreter.engine.events import Event
 from ncgate.interpreter.engine.states import WaitKind, describe_where
+from ncgate.interpreter.engine.timers import grid_index
 
 log = logging.getLogger("ncgate")
 
@@ -309,7 +310,7 @@ class _Scenario:
         # passed at its edge failed.  A stop meanwhile (Ctrl-C, SIGTERM) starts nothing.
         grid = scan_grid_s(runtime.config)
         now = engine.read_time()
-        at = now if grid is None else (math.floor(round(now / grid, 6)) + 1) * grid
+        at = now if grid is None else (grid_index(now, grid, math.floor) + 1) * grid
         timer = engine.call_at(at, begin, first=True)
         log.info("scenario %s: starts at %.3f s of machine time, the next instant its scans "
                  "share", script.file, at)

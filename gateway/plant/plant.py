@@ -34,7 +34,7 @@ from ncgate.config.plant import (
 from ncgate.errors import InputRefused, Reason
 from ncgate.gateway.plant.models import KINDS, Model
 from ncgate.inputs import ClearFault, Fault, Source, SourceKind, Var, Writes
-from ncgate.interpreter.engine.timers import Timer
+from ncgate.interpreter.engine.timers import Timer, grid_index
 from ncgate.interpreter.settings import AXES
 from ncgate.plc.image import ImageValueError, overlap, value_range
 
@@ -80,17 +80,6 @@ class ActiveFault:
         if self.kind in VARIABLE_FAULTS:
             return "value"
         return self.kind
-
-
-def _grid_index(t: float, period: float, side: Callable[[float], int]) -> int:
-    """The index of the grid point (every ``period`` from 0) that ``t`` is on, within a
-    nanosecond (or the float's own step, far out); else of the one ``side`` (math.floor:
-    before, math.ceil: after) of it.  (An epsilon added to ``t / period`` is lost in the
-    float far out -- a 1 ms tick at 32,769 s -- and a tick due at k * period found its next
-    at k again, for ever: the clock stood still.)"""
-    x = t / period
-    k = round(x)
-    return k if abs(t - k * period) <= 1e-9 + abs(t) * 1e-15 else side(x)
 
 
 class Plant:
@@ -297,9 +286,9 @@ class Plant:
         stretch the budget asks for in run), or the first at or after ``quiet``, when every
         model sampled writes nothing new before then (Model.quiet_until)."""
         period = self.scan_s * self.stretch
-        k = _grid_index(after, period, math.floor) + 1
+        k = grid_index(after, period, math.floor) + 1
         if quiet is not None and quiet > k * period:
-            k = _grid_index(quiet, period, math.ceil)
+            k = grid_index(quiet, period, math.ceil)
         return k * period
 
     def _arm_tick(self, after: float, quiet: float | None = None) -> None:

@@ -28,6 +28,17 @@ def snapped(t: float) -> float:
     return round(t * NS_PER_S) / NS_PER_S
 
 
+def grid_index(t: float, period: float, side: Callable[[float], int]) -> int:
+    """The index of the point of a grid (every ``period`` from 0) that ``t`` is on, within a
+    nanosecond (or the float's own step, far out); else of the one ``side`` (math.floor:
+    before, math.ceil: after) of it.  (An epsilon added to ``t / period`` is lost in the
+    float far out -- a 1 ms plant tick at 32,769 s -- and a tick due at k * period found its
+    next at k again, for ever: the clock stood still.)"""
+    x = t / period
+    k = round(x)
+    return k if abs(t - k * period) <= 1e-9 + abs(t) * 1e-15 else side(x)
+
+
 def due_time(t: float, now: float) -> float:
     """The time a timer asked for at ``t`` is armed at when the clock reads ``now``: ``t``,
     or now if ``t`` has passed, on the grid -- an off-grid now (the wall clock's) may give a
